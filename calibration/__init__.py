@@ -1,0 +1,1 @@
+"""Raw readings -> BSDF values -> model parameters; calibration files and exports."""

@@ -1,0 +1,1 @@
+"""Client-side device drivers: transports and protocols, bytes only, no physics."""

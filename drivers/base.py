@@ -1,0 +1,84 @@
+"""The small interface every driver gives the scan engine, and the errors it raises.
+
+An engine only ever sees `Axis` and `Detector`; which protocol and transport sit
+behind them is the config's business.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+
+class DriverError(Exception):
+    """Base of every driver failure; the message names the device."""
+
+
+class DeviceError(DriverError):
+    """The device reported an error (its own code and text are in the message)."""
+
+    def __init__(self, device: str, code: int | str, text: str):
+        self.device, self.code, self.text = device, code, text
+        super().__init__(f"{device}: device error {code}: {text}")
+
+
+class DeviceTimeout(DriverError):
+    """No complete reply within the named timeout."""
+
+    def __init__(self, device: str, what: str, timeout_s: float):
+        self.device, self.what, self.timeout_s = device, what, timeout_s
+        super().__init__(f"{device}: timeout after {timeout_s:g} s waiting for {what}")
+
+
+class ProtocolError(DriverError):
+    """A reply arrived but was garbled or not what the protocol allows."""
+
+
+@runtime_checkable
+class Axis(Protocol):
+    """One rotation axis, positions in degrees."""
+
+    name: str
+
+    def move_to(self, position_deg: float) -> None:
+        """Start an absolute move and return at once (never blocks for the motion)."""
+
+    def position(self) -> float:
+        """Actual position now, degrees."""
+
+    def is_moving(self) -> bool:
+        """True while a move or home is in progress."""
+
+    def wait(self, timeout_s: float) -> float:
+        """Block until motion is done (DeviceTimeout past timeout_s); return the final position."""
+
+    def stop(self) -> None:
+        """Decelerate to a stop (safe to call at any time)."""
+
+    def home(self) -> None:
+        """Start a homing move; wait() waits for it."""
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One detector reading: optical power in W and what the device said about it."""
+
+    power_w: float
+    range_w: float
+    saturated: bool = False
+
+
+@runtime_checkable
+class Detector(Protocol):
+    """An optical power detector."""
+
+    name: str
+
+    def configure(self, wavelength_nm: float, averaging: int, range_w: float | None) -> None:
+        """Set the correction wavelength, samples averaged per reading, and a fixed range (None = auto)."""
+
+    def read(self) -> Reading:
+        """Take one (averaged) reading."""
+
+    def zero(self) -> None:
+        """Run the device's dark-zero adjustment."""

@@ -1,0 +1,1 @@
+"""gonio: the instrument — configs, plans, scan engine, run store, geometry and CLI."""

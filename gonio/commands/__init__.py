@@ -1,0 +1,1 @@
+"""CLI verbs, one module each; gonio.cli discovers them from COMMANDS."""

@@ -1,0 +1,1 @@
+"""The virtual world: BSDF model, optical bench and device emulators."""

@@ -1,0 +1,1 @@
+"""The emulated optical bench: source, sample, hemisphere, detector aperture and detector model."""

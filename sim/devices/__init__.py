@@ -1,0 +1,1 @@
+"""Emulated devices speaking the real protocols over ptys and loopback TCP."""

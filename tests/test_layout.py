@@ -1,0 +1,44 @@
+"""The import rules of docs/architecture.md: drivers and sim stay independent."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+FORBIDDEN = {
+    "drivers": {"sim", "gonio", "calibration"},
+    "sim": {"drivers", "gonio", "calibration"},
+}
+
+
+def imported_packages(path: Path) -> set[str]:
+    """Top-level package names a source file imports."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+@pytest.mark.parametrize("package", sorted(FORBIDDEN))
+def test_package_does_not_import_forbidden(package):
+    offenders = {
+        str(path.relative_to(ROOT)): sorted(imported_packages(path) & FORBIDDEN[package])
+        for path in (ROOT / package).rglob("*.py")
+    }
+    assert {k: v for k, v in offenders.items() if v} == {}
+
+
+def test_gonio_imports_sim_in_one_place_only():
+    allowed = {"gonio/simulate.py"}
+    users = {
+        str(path.relative_to(ROOT))
+        for path in (ROOT / "gonio").rglob("*.py")
+        if "sim" in imported_packages(path)
+    }
+    assert users <= allowed
