@@ -41,12 +41,11 @@ class ReducedData:
     @property
     def theta_o_deg(self) -> np.ndarray:
         """Signed in-plane outgoing angle, degrees: the angle of wo from +z (reflection)
-        or from -z (transmission), negative on the same side as the source."""
+        or from -z (transmission), positive on the forward (specular / refracted) side."""
         cos_o = np.where(self.transmission, -self.wo[:, 2], self.wo[:, 2])
         theta = np.degrees(np.arccos(np.clip(cos_o, -1.0, 1.0)))
-        same_side = self.wo[:, 0] * self.wi[:, 0] > 0
-        flip = np.where(self.transmission, ~same_side, same_side)
-        return np.where(flip, -theta, theta)
+        same_side_as_source = self.wo[:, 0] * self.wi[:, 0] > 0
+        return np.where(same_side_as_source, -theta, theta)
 
     def subset(self, keep: np.ndarray) -> ReducedData:
         """The entries selected by a boolean mask or index array."""
