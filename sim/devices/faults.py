@@ -1,0 +1,131 @@
+"""Seeded fault injection for emulated devices: latency, dropped or corrupted bytes, bad CRC,
+stalled replies and disconnects, configured per device by a `[sim.faults.<device>]` table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import random
+import threading
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+
+class FaultConfigError(ValueError):
+    """A fault table with an unknown key or a value out of range (the message names it)."""
+
+
+_PROBABILITIES = ("drop_prob", "corrupt_prob", "bad_crc_prob", "stall_prob")
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """What goes wrong on one device's replies, and how often (all off by default).
+
+    latency_s: added delay before every reply; *_prob: per-reply probabilities of one
+    dropped byte, one corrupted byte (high bit flipped: not valid ASCII, so a host can
+    tell), a wrong Modbus CRC, a stalled (never sent) reply; disconnect_after: the
+    device hangs up after this many replies (None = never); seed: the RNG seed.
+    """
+
+    latency_s: float = 0.0
+    drop_prob: float = 0.0
+    corrupt_prob: float = 0.0
+    bad_crc_prob: float = 0.0
+    stall_prob: float = 0.0
+    disconnect_after: int | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.latency_s, int | float) and 0.0 <= self.latency_s < math.inf):
+            raise FaultConfigError(
+                f"faults: latency_s must be a number >= 0, got {self.latency_s!r}"
+            )
+        for name in _PROBABILITIES:
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+                raise FaultConfigError(f"faults: {name} must be in [0, 1], got {value!r}")
+        n = self.disconnect_after
+        if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
+            raise FaultConfigError(f"faults: disconnect_after must be an integer >= 0, got {n!r}")
+        if not (isinstance(self.seed, int) and not isinstance(self.seed, bool)):
+            raise FaultConfigError(f"faults: seed must be an integer, got {self.seed!r}")
+
+    @classmethod
+    def from_dict(cls, table: Mapping[str, Any], device: str = "") -> FaultSpec:
+        """Build from a config table; an unknown key raises FaultConfigError naming it."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        where = f"sim.faults.{device}" if device else "faults"
+        for key in table:
+            if key not in known:
+                raise FaultConfigError(
+                    f"{where}: unknown key {key!r} (known: {', '.join(sorted(known))})"
+                )
+        try:
+            return cls(**dict(table))
+        except FaultConfigError as exc:
+            raise FaultConfigError(str(exc).replace("faults:", f"{where}:", 1)) from None
+
+    @property
+    def active(self) -> bool:
+        """True when any fault is switched on."""
+        return (
+            self.latency_s > 0.0
+            or any(getattr(self, name) > 0.0 for name in _PROBABILITIES)
+            or self.disconnect_after is not None
+        )
+
+
+class FaultInjector:
+    """Applies a FaultSpec to a device's replies with a seeded, thread-safe RNG.
+
+    Each reply draws its faults in a fixed order (stall, drop, corrupt, bad CRC), so a
+    given seed and reply sequence always gives the same faults.
+    """
+
+    def __init__(self, spec: FaultSpec | None = None):
+        self.spec = spec or FaultSpec()
+        self._rng = random.Random(self.spec.seed)
+        self._lock = threading.Lock()
+        self.replies = 0
+        self.counts = {"stall": 0, "drop": 0, "corrupt": 0, "bad_crc": 0}
+
+    def delay(self) -> float:
+        """Seconds (real) to wait before sending a reply."""
+        return self.spec.latency_s
+
+    def should_disconnect(self) -> bool:
+        """True once the device has sent disconnect_after replies."""
+        n = self.spec.disconnect_after
+        return n is not None and self.replies >= n
+
+    def reply(self, data: bytes, keep_tail: int = 0, crc_bytes: int = 0) -> bytes | None:
+        """The bytes actually sent for a reply, or None for a stalled reply.
+
+        keep_tail: trailing bytes (a line terminator) that drop/corrupt leave alone;
+        crc_bytes: trailing CRC bytes that a bad-CRC fault alters (0 = no CRC).
+        """
+        spec = self.spec
+        with self._lock:
+            self.replies += 1
+            if self._hit(spec.stall_prob, "stall"):
+                return None
+            out = bytearray(data)
+            body = len(out) - keep_tail
+            if body > 0 and self._hit(spec.drop_prob, "drop"):
+                del out[self._rng.randrange(body)]
+                body -= 1
+            if body > 0 and self._hit(spec.corrupt_prob, "corrupt"):
+                out[self._rng.randrange(body)] ^= 0x80
+            if 0 < crc_bytes <= len(out) and self._hit(spec.bad_crc_prob, "bad_crc"):
+                out[-1] ^= self._rng.randrange(1, 256)
+            return bytes(out)
+
+    def _hit(self, prob: float, kind: str) -> bool:
+        if prob <= 0.0:
+            return False
+        hit = self._rng.random() < prob
+        self.counts[kind] += hit
+        return hit

@@ -1,0 +1,325 @@
+"""Virtual clock and trapezoidal-profile axis shared by every emulated motion device.
+
+A `VirtualClock` maps real time to virtual time (scaled, or infinitely fast: moves
+complete at once but the clock still advances by their duration); a `TrapezoidAxis`
+plans accelerate / cruise / decelerate moves on it and reports the actual position.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+
+class MotionError(ValueError):
+    """A motion request the axis refuses; emulators map it to the device's own error code."""
+
+
+class LimitError(MotionError):
+    """A target outside the software travel limits (`side` is "positive" or "negative")."""
+
+    def __init__(self, target: float, limits: tuple[float, float]):
+        self.target, self.limits = target, limits
+        self.side = "positive" if target > limits[1] else "negative"
+        super().__init__(
+            f"target {target:g} outside the {self.side} software limit "
+            f"(limits {limits[0]:g} .. {limits[1]:g})"
+        )
+
+
+class VirtualClock:
+    """Virtual seconds = offset + real seconds * time_scale (0 = only `advance` moves it).
+
+    With time_scale = math.inf, real time does not count; moves jump the clock to their
+    end instead (`advance_to`), so a move "takes" its full duration at once.
+    """
+
+    def __init__(self, time_scale: float = 1.0):
+        if not (time_scale >= 0.0):
+            raise ValueError(f"time_scale must be >= 0 (or inf), got {time_scale!r}")
+        self.time_scale = float(time_scale)
+        self._lock = threading.Lock()
+        self._real0 = time.monotonic()
+        self._offset = 0.0
+
+    @property
+    def instant(self) -> bool:
+        """True when moves complete at once (infinite time scale)."""
+        return math.isinf(self.time_scale)
+
+    def now(self) -> float:
+        """Virtual time in seconds since the clock was made."""
+        with self._lock:
+            return self._now_locked()
+
+    def _now_locked(self) -> float:
+        if self.instant or self.time_scale == 0.0:
+            return self._offset
+        return self._offset + (time.monotonic() - self._real0) * self.time_scale
+
+    def advance(self, dt: float) -> float:
+        """Jump the clock forward by dt virtual seconds; returns the new time."""
+        if not (dt >= 0.0 and math.isfinite(dt)):
+            raise ValueError(f"clock can only advance by a finite dt >= 0, got {dt!r}")
+        with self._lock:
+            self._offset += dt
+            return self._now_locked()
+
+    def advance_to(self, t: float) -> float:
+        """Jump the clock forward to virtual time t if it is still earlier; returns now."""
+        with self._lock:
+            now = self._now_locked()
+            if t > now:
+                self._offset += t - now
+            return self._now_locked()
+
+    def real_seconds(self, virtual_s: float) -> float:
+        """Real seconds that virtual_s virtual seconds take (0 if instant, inf if frozen)."""
+        if self.instant:
+            return 0.0
+        if self.time_scale == 0.0:
+            return math.inf
+        return virtual_s / self.time_scale
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """Constant-acceleration piece of a profile: starts at t0 with p0, v0; lasts dt."""
+
+    t0: float
+    dt: float
+    p0: float
+    v0: float
+    a: float
+
+    def at(self, t: float) -> tuple[float, float]:
+        """Position and velocity at virtual time t (clamped to the segment)."""
+        tau = min(max(t - self.t0, 0.0), self.dt)
+        return self.p0 + self.v0 * tau + 0.5 * self.a * tau * tau, self.v0 + self.a * tau
+
+    @property
+    def t_end(self) -> float:
+        return self.t0 + self.dt
+
+
+def trapezoid_times(distance: float, speed: float, accel: float) -> tuple[float, float]:
+    """Accelerating and cruising time of a rest-to-rest move over |distance|.
+
+    Trapezoid when |d| >= v^2/a (t_acc = v/a, t_cruise = (|d| - v^2/a)/v), otherwise a
+    triangle with t_acc = sqrt(|d|/a) and no cruise.
+    """
+    d = abs(distance)
+    if d * accel >= speed * speed:
+        return speed / accel, (d - speed * speed / accel) / speed
+    return math.sqrt(d / accel), 0.0
+
+
+def _positive(name: str, value: float) -> float:
+    value = float(value)
+    if not (value > 0.0 and math.isfinite(value)):
+        raise MotionError(f"{name} must be a finite number > 0, got {value!r}")
+    return value
+
+
+class TrapezoidAxis:
+    """One axis moving rest-to-rest with trapezoidal velocity profiles on a VirtualClock.
+
+    Thread-safe. Positions are in the caller's unit (degrees for rotation stages).
+    """
+
+    def __init__(
+        self,
+        clock: VirtualClock,
+        speed: float,
+        accel: float,
+        limits: tuple[float, float] = (-math.inf, math.inf),
+        position: float = 0.0,
+    ):
+        lo, hi = float(limits[0]), float(limits[1])
+        if not lo < hi:
+            raise MotionError(f"limits must be (lo, hi) with lo < hi, got {limits!r}")
+        self.clock = clock
+        self._speed = _positive("speed", speed)
+        self._accel = _positive("accel", accel)
+        self._limits = (lo, hi)
+        self._lock = threading.RLock()
+        self._segments: list[_Segment] = []
+        self._rest = float(position)
+        self._homing_done_at: float | None = None
+        self._homed = False
+
+    # -- parameters -------------------------------------------------------------
+    @property
+    def speed(self) -> float:
+        """Cruise speed (units/s) used by the next move."""
+        return self._speed
+
+    @speed.setter
+    def speed(self, value: float) -> None:
+        self._speed = _positive("speed", value)
+
+    @property
+    def accel(self) -> float:
+        """Acceleration = deceleration (units/s^2) used by the next move or stop."""
+        return self._accel
+
+    @accel.setter
+    def accel(self, value: float) -> None:
+        self._accel = _positive("accel", value)
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        """Software travel limits (lo, hi)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, value: tuple[float, float]) -> None:
+        lo, hi = float(value[0]), float(value[1])
+        if not lo < hi:
+            raise MotionError(f"limits must be (lo, hi) with lo < hi, got {value!r}")
+        self._limits = (lo, hi)
+
+    def duration(self, distance: float) -> float:
+        """Virtual seconds a rest-to-rest move over `distance` takes at the current settings."""
+        t_acc, t_cruise = trapezoid_times(distance, self._speed, self._accel)
+        return 2.0 * t_acc + t_cruise
+
+    # -- state ------------------------------------------------------------------
+    def _state(self, t: float) -> tuple[float, float]:
+        """Position and velocity at time t; drops finished segments."""
+        while self._segments and self._segments[0].t_end <= t:
+            self._segments.pop(0)
+        if not self._segments:
+            return self._rest, 0.0
+        return self._segments[0].at(t)
+
+    def _settle_homing(self, t: float) -> None:
+        if self._homing_done_at is not None and t >= self._homing_done_at:
+            self._homing_done_at = None
+            self._homed = True
+
+    def position(self) -> float:
+        """Actual position at clock.now()."""
+        with self._lock:
+            t = self.clock.now()
+            self._settle_homing(t)
+            return self._state(t)[0]
+
+    def velocity(self) -> float:
+        """Actual velocity at clock.now()."""
+        with self._lock:
+            return self._state(self.clock.now())[1]
+
+    def target(self) -> float:
+        """Where the current motion ends (the position when at rest)."""
+        with self._lock:
+            self._state(self.clock.now())
+            if not self._segments:
+                return self._rest
+            last = self._segments[-1]
+            return last.at(last.t_end)[0]
+
+    def is_moving(self) -> bool:
+        """True while a move, stop or home is still under way."""
+        with self._lock:
+            t = self.clock.now()
+            self._settle_homing(t)
+            self._state(t)
+            return bool(self._segments)
+
+    @property
+    def homed(self) -> bool:
+        """True once a home() has completed (and no abort interrupted it)."""
+        with self._lock:
+            self._settle_homing(self.clock.now())
+            return self._homed
+
+    # -- commands ---------------------------------------------------------------
+    def move_to(self, target: float) -> float:
+        """Start an absolute move; returns its end time. A moving axis first decelerates.
+
+        Raises LimitError (target outside limits) or MotionError (target not finite).
+        """
+        target = float(target)
+        if not math.isfinite(target):
+            raise MotionError(f"target must be finite, got {target!r}")
+        lo, hi = self._limits
+        if not lo <= target <= hi:
+            raise LimitError(target, self._limits)
+        with self._lock:
+            self._homing_done_at = None
+            return self._plan(target)
+
+    def move_by(self, delta: float) -> float:
+        """Start a relative move from the current target; returns its end time."""
+        return self.move_to(self.target() + float(delta))
+
+    def _plan(self, target: float) -> float:
+        t = self.clock.now()
+        t_start, p_start = self._decelerate(t)
+        dist = target - p_start
+        if dist != 0.0:
+            sign = math.copysign(1.0, dist)
+            t_acc, t_cruise = trapezoid_times(dist, self._speed, self._accel)
+            v_peak = self._accel * t_acc
+            a = sign * self._accel
+            p1 = p_start + 0.5 * a * t_acc * t_acc
+            p2 = p1 + sign * v_peak * t_cruise
+            self._segments += [
+                _Segment(t_start, t_acc, p_start, 0.0, a),
+                _Segment(t_start + t_acc, t_cruise, p1, sign * v_peak, 0.0),
+                _Segment(t_start + t_acc + t_cruise, t_acc, p2, sign * v_peak, -a),
+            ]
+            self._segments = [s for s in self._segments if s.dt > 0.0]
+            self._rest = target  # at rest exactly on target, no rounding drift
+        return self._finish()
+
+    def _decelerate(self, t: float) -> tuple[float, float]:
+        """Replace any motion by a deceleration to rest from time t; return (t_rest, p_rest)."""
+        p, v = self._state(t)
+        self._segments = []
+        if v == 0.0:
+            self._rest = p
+            return t, p
+        a = -math.copysign(self._accel, v)
+        dt = abs(v) / self._accel
+        seg = _Segment(t, dt, p, v, a)
+        self._segments.append(seg)
+        self._rest = seg.at(seg.t_end)[0]
+        return seg.t_end, self._rest
+
+    def _finish(self) -> float:
+        """End time of the planned motion; an instant clock jumps straight to it."""
+        t_end = self._segments[-1].t_end if self._segments else self.clock.now()
+        if self.clock.instant:
+            self.clock.advance_to(t_end)
+        return t_end
+
+    def stop(self) -> None:
+        """Decelerate to rest at the current acceleration (no-op at rest); cancels homing."""
+        with self._lock:
+            self._homing_done_at = None
+            self._decelerate(self.clock.now())
+            self._finish()
+
+    def abort(self) -> None:
+        """Stop at once where the axis is now (no deceleration); cancels homing."""
+        with self._lock:
+            self._homing_done_at = None
+            p, _ = self._state(self.clock.now())
+            self._segments = []
+            self._rest = p
+
+    def home(self) -> float:
+        """Move to 0 and set `homed` when it arrives; returns the end time."""
+        with self._lock:
+            self._homed = False
+            lo, hi = self._limits
+            if not lo <= 0.0 <= hi:
+                raise LimitError(0.0, self._limits)
+            t_end = self._plan(0.0)
+            self._homing_done_at = t_end
+            self._settle_homing(self.clock.now())
+            return t_end
