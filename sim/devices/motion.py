@@ -104,16 +104,22 @@ class _Segment:
         return self.t0 + self.dt
 
 
-def trapezoid_times(distance: float, speed: float, accel: float) -> tuple[float, float]:
-    """Accelerating and cruising time of a rest-to-rest move over |distance|.
+def profile_times(
+    distance: float, speed: float, accel: float, decel: float | None = None
+) -> tuple[float, float, float]:
+    """Accelerating, cruising and decelerating times of a rest-to-rest move over |distance|.
 
-    Trapezoid when |d| >= v^2/a (t_acc = v/a, t_cruise = (|d| - v^2/a)/v), otherwise a
-    triangle with t_acc = sqrt(|d|/a) and no cruise.
+    Full speed is reached when |d| >= v^2/(2a) + v^2/(2b) (b = decel, default a): then
+    t_acc = v/a, t_dec = v/b, t_cruise = (|d| - v^2/(2a) - v^2/(2b))/v. Otherwise a
+    triangle with peak speed v_p = sqrt(2|d| a b / (a + b)) and no cruise.
     """
+    b = accel if decel is None else decel
     d = abs(distance)
-    if d * accel >= speed * speed:
-        return speed / accel, (d - speed * speed / accel) / speed
-    return math.sqrt(d / accel), 0.0
+    ramps = 0.5 * speed * speed * (1.0 / accel + 1.0 / b)
+    if d >= ramps:
+        return speed / accel, (d - ramps) / speed, speed / b
+    v_peak = math.sqrt(2.0 * d * accel * b / (accel + b))
+    return v_peak / accel, 0.0, v_peak / b
 
 
 def _positive(name: str, value: float) -> float:
@@ -126,7 +132,8 @@ def _positive(name: str, value: float) -> float:
 class TrapezoidAxis:
     """One axis moving rest-to-rest with trapezoidal velocity profiles on a VirtualClock.
 
-    Thread-safe. Positions are in the caller's unit (degrees for rotation stages).
+    Thread-safe. Positions are in the caller's unit (degrees for rotation stages); decel
+    defaults to accel (a symmetric profile).
     """
 
     def __init__(
@@ -136,6 +143,7 @@ class TrapezoidAxis:
         accel: float,
         limits: tuple[float, float] = (-math.inf, math.inf),
         position: float = 0.0,
+        decel: float | None = None,
     ):
         lo, hi = float(limits[0]), float(limits[1])
         if not lo < hi:
@@ -143,6 +151,7 @@ class TrapezoidAxis:
         self.clock = clock
         self._speed = _positive("speed", speed)
         self._accel = _positive("accel", accel)
+        self._decel = _positive("decel", accel if decel is None else decel)
         self._limits = (lo, hi)
         self._lock = threading.RLock()
         self._segments: list[_Segment] = []
@@ -162,12 +171,21 @@ class TrapezoidAxis:
 
     @property
     def accel(self) -> float:
-        """Acceleration = deceleration (units/s^2) used by the next move or stop."""
+        """Acceleration (units/s^2) used by the next move."""
         return self._accel
 
     @accel.setter
     def accel(self, value: float) -> None:
         self._accel = _positive("accel", value)
+
+    @property
+    def decel(self) -> float:
+        """Deceleration (units/s^2) used by the next move's end and by stop()."""
+        return self._decel
+
+    @decel.setter
+    def decel(self, value: float) -> None:
+        self._decel = _positive("decel", value)
 
     @property
     def limits(self) -> tuple[float, float]:
@@ -183,8 +201,7 @@ class TrapezoidAxis:
 
     def duration(self, distance: float) -> float:
         """Virtual seconds a rest-to-rest move over `distance` takes at the current settings."""
-        t_acc, t_cruise = trapezoid_times(distance, self._speed, self._accel)
-        return 2.0 * t_acc + t_cruise
+        return sum(profile_times(distance, self._speed, self._accel, self._decel))
 
     # -- state ------------------------------------------------------------------
     def _state(self, t: float) -> tuple[float, float]:
@@ -262,15 +279,14 @@ class TrapezoidAxis:
         dist = target - p_start
         if dist != 0.0:
             sign = math.copysign(1.0, dist)
-            t_acc, t_cruise = trapezoid_times(dist, self._speed, self._accel)
-            v_peak = self._accel * t_acc
-            a = sign * self._accel
-            p1 = p_start + 0.5 * a * t_acc * t_acc
-            p2 = p1 + sign * v_peak * t_cruise
+            t_acc, t_cruise, t_dec = profile_times(dist, self._speed, self._accel, self._decel)
+            v_peak = sign * self._accel * t_acc
+            p1 = p_start + 0.5 * v_peak * t_acc
+            p2 = p1 + v_peak * t_cruise
             self._segments += [
-                _Segment(t_start, t_acc, p_start, 0.0, a),
-                _Segment(t_start + t_acc, t_cruise, p1, sign * v_peak, 0.0),
-                _Segment(t_start + t_acc + t_cruise, t_acc, p2, sign * v_peak, -a),
+                _Segment(t_start, t_acc, p_start, 0.0, sign * self._accel),
+                _Segment(t_start + t_acc, t_cruise, p1, v_peak, 0.0),
+                _Segment(t_start + t_acc + t_cruise, t_dec, p2, v_peak, -sign * self._decel),
             ]
             self._segments = [s for s in self._segments if s.dt > 0.0]
             self._rest = target  # at rest exactly on target, no rounding drift
@@ -283,8 +299,8 @@ class TrapezoidAxis:
         if v == 0.0:
             self._rest = p
             return t, p
-        a = -math.copysign(self._accel, v)
-        dt = abs(v) / self._accel
+        a = -math.copysign(self._decel, v)
+        dt = abs(v) / self._decel
         seg = _Segment(t, dt, p, v, a)
         self._segments.append(seg)
         self._rest = seg.at(seg.t_end)[0]
@@ -311,6 +327,21 @@ class TrapezoidAxis:
             p, _ = self._state(self.clock.now())
             self._segments = []
             self._rest = p
+
+    def define_position(self, position: float) -> None:
+        """Redefine the current (resting) position as `position` and mark the axis homed.
+
+        Raises MotionError while moving or for a non-finite value.
+        """
+        position = float(position)
+        if not math.isfinite(position):
+            raise MotionError(f"position must be finite, got {position!r}")
+        with self._lock:
+            if self.is_moving():
+                raise MotionError("cannot redefine the position while moving")
+            self._rest = position
+            self._homing_done_at = None
+            self._homed = True
 
     def home(self) -> float:
         """Move to 0 and set `homed` when it arrives; returns the end time."""

@@ -161,3 +161,28 @@ def test_accelerated_time_scale_runs_in_real_time():
     time.sleep(0.05)
     rate = (clock.now() - v0) / (time.monotonic() - r0)
     assert rate == pytest.approx(1000.0, rel=0.05)
+
+
+def test_asymmetric_deceleration_profile():
+    clock, axis = manual_axis(speed=10.0, accel=40.0, decel=10.0)
+    # ramps: 100/80 + 100/20 = 6.25 deg; cruise (50 - 6.25)/10 = 4.375 s
+    end = axis.move_to(50.0)
+    assert end == pytest.approx(0.25 + 4.375 + 1.0)
+    clock.advance_to(0.25 + 4.375 + 0.5)  # half-way through the 1 s deceleration
+    assert axis.position() == pytest.approx(50.0 - 0.5 * 10.0 * 0.5**2)
+    # a short move with a != b: peak sqrt(2 d a b / (a + b)) and d = vp^2/2a + vp^2/2b
+    clock2, short = manual_axis(speed=100.0, accel=40.0, decel=10.0)
+    vp = math.sqrt(2 * 2.0 * 40.0 * 10.0 / 50.0)
+    assert short.move_to(2.0) == pytest.approx(vp / 40.0 + vp / 10.0)
+    clock2.advance_to(vp / 40.0)
+    assert short.velocity() == pytest.approx(vp)
+    assert short.position() == pytest.approx(vp**2 / 80.0)
+
+
+def test_define_position_rebases_and_marks_homed():
+    clock, axis = manual_axis(position=12.0)
+    axis.define_position(0.0)
+    assert axis.position() == 0.0 and axis.homed
+    axis.move_to(5.0)
+    with pytest.raises(MotionError, match="while moving"):
+        axis.define_position(1.0)
