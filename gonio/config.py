@@ -1,0 +1,268 @@
+"""Instrument configs (TOML): devices, axes, detector, safety zones, beam/dark positions, [sim].
+
+`load_config(path)` parses and validates a file into an `InstrumentConfig`; every error is a
+one-line ConfigError naming the file and the field. The raw (path-resolved) dict is kept for
+the run store and for the emulators, which read the [sim] section themselves.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomllib
+
+from gonio.errors import ConfigError
+from gonio.fields import Fields
+
+PROTOCOLS = ("esp", "pm100", "modbus-stage", "modbus-detector")
+STAGE_PROTOCOLS = ("esp", "modbus-stage")
+DETECTOR_PROTOCOLS = ("pm100", "modbus-detector")
+ROLES = ("sample", "arm", "azimuth", "elevation")
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """One physical controller, drive or meter and how to reach it."""
+
+    name: str
+    protocol: str
+    port: str | None = None
+    baudrate: int = 19200
+    timeout_s: float = 1.0
+    transport: str | None = None  # modbus: "tcp" | "rtu"
+    host: str | None = None
+    tcp_port: int = 502
+    unit: int = 1
+    register_map: str | None = None  # absolute path
+
+    @property
+    def endpoint(self) -> str:
+        """Where the device is reached: a serial port or host:port."""
+        if self.transport == "tcp":
+            return f"{self.host}:{self.tcp_port}"
+        return str(self.port)
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    """One rotation axis in a role (sample, arm, azimuth, elevation) and its motion profile."""
+
+    role: str
+    device: str
+    axis: int
+    limits_deg: tuple[float, float]
+    speed_deg_s: float
+    accel_deg_s2: float
+    settle_s: float = 0.0
+    home: bool = False
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """The detector, its correction wavelength, averaging and range policy (None = auto)."""
+
+    device: str
+    wavelength_nm: float
+    averaging: int = 1
+    range_w: float | None = None
+
+
+@dataclass(frozen=True)
+class Position:
+    """A fixed stage position (for beam and dark readings), degrees."""
+
+    sample_deg: float
+    arm_deg: float
+
+
+@dataclass(frozen=True)
+class InstrumentConfig:
+    """A validated instrument config; `raw` is the TOML dict with paths made absolute."""
+
+    name: str
+    path: Path | None
+    devices: dict[str, DeviceConfig]
+    axes: dict[str, AxisConfig]
+    detector: DetectorConfig
+    beam_clearance_deg: float
+    arm_forbidden_deg: tuple[tuple[float, float], ...]
+    beam: Position | None
+    dark: Position | None
+    raw: dict[str, Any] = field(repr=False)
+
+    @property
+    def sim(self) -> dict[str, Any]:
+        """The [sim] section (empty if none)."""
+        return self.raw.get("sim", {})
+
+
+def load_config(path: str | Path) -> InstrumentConfig:
+    """Read and validate an instrument config file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read instrument config ({exc.strerror})") from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    return parse_config(raw, path)
+
+
+def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> InstrumentConfig:
+    """Validate a config dict; relative register-map paths resolve against `path`'s folder."""
+    path = Path(path) if path is not None else None
+    where = str(path) if path else "config"
+    raw = copy.deepcopy(raw)
+    top = Fields(raw, where, ConfigError)
+    name = top.string("name", default=path.stem if path else "instrument")
+    devices = _devices(top.table_of("devices"), path)
+    axes = _axes(top.table_of("axes"), devices)
+    detector = _detector(top.table_of("detector"), devices)
+    safety = top.table_of("safety")
+    clearance = safety.number("beam_clearance_deg", default=5.0, low=0.0, high=90.0)
+    forbidden = _zones(safety)
+    safety.done()
+    beam = _position(top, "beam")
+    dark = _position(top, "dark")
+    if top.has("sim") and not isinstance(raw["sim"], dict):
+        raise ConfigError(f"{where}.sim: must be a table")
+    top.done()
+    for dev in devices.values():  # write resolved paths back for the store and emulators
+        if dev.register_map:
+            raw["devices"][dev.name]["register_map"] = dev.register_map
+    return InstrumentConfig(name, path, devices, axes, detector, clearance, forbidden,
+                            beam, dark, raw)
+
+
+def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
+    if not f.table:
+        raise ConfigError(f"{f.where}: at least one device is needed")
+    out = {}
+    for name in f.table:
+        d = f.table_of(name)
+        protocol = d.string("protocol", choices=PROTOCOLS)
+        kw: dict[str, Any] = {"timeout_s": d.number("timeout_s", 1.0, low=0.0, low_open=True)}
+        if protocol.startswith("modbus"):
+            transport = d.string("transport", choices=("tcp", "rtu"))
+            kw["transport"] = transport
+            kw["unit"] = d.number("unit", 1, low=0, high=247, integer=True)
+            reg = d.string("register_map")
+            base = path.parent if path else Path.cwd()
+            reg_path = (base / reg).resolve()
+            if not reg_path.is_file():
+                raise d.fail("register_map", f"no such file {str(reg_path)!r}")
+            kw["register_map"] = str(reg_path)
+            if transport == "tcp":
+                kw["host"] = d.string("host")
+                kw["tcp_port"] = d.number("tcp_port", 502, low=1, high=65535, integer=True)
+            else:
+                kw["port"] = d.string("port")
+                kw["baudrate"] = d.number("baudrate", 19200, low=1, integer=True)
+        else:
+            kw["port"] = d.string("port")
+            kw["baudrate"] = d.number("baudrate", 19200, low=1, integer=True)
+        d.done()
+        out[name] = DeviceConfig(name=name, protocol=protocol, **kw)
+    f.done()
+    return out
+
+
+def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
+    for role in f.table:
+        if role not in ROLES:
+            raise ConfigError(f"{f.where}: unknown axis role {role!r} (roles: {', '.join(ROLES)})")
+    for role in ("sample", "arm"):
+        if role not in f.table:
+            raise ConfigError(f"{f.where}: the {role!r} axis is required")
+    out, used = {}, {}
+    for role in ROLES:
+        if role not in f.table:
+            continue
+        a = f.table_of(role)
+        device = a.string("device")
+        if device not in devices:
+            raise a.fail("device", f"no device {device!r} under [devices]")
+        if devices[device].protocol not in STAGE_PROTOCOLS:
+            raise a.fail("device", f"{device!r} is a {devices[device].protocol}, not a stage")
+        axis = a.number("axis", 1, low=1, high=99, integer=True)
+        if (device, axis) in used:
+            raise a.fail("axis", f"{device} axis {axis} is already the {used[device, axis]!r} axis")
+        used[device, axis] = role
+        limits = a.pair("limits_deg")
+        out[role] = AxisConfig(
+            role=role, device=device, axis=axis, limits_deg=limits,
+            speed_deg_s=a.number("speed_deg_s", low=0.0, low_open=True),
+            accel_deg_s2=a.number("accel_deg_s2", low=0.0, low_open=True),
+            settle_s=a.number("settle_s", 0.0, low=0.0, high=3600.0),
+            home=a.boolean("home", False),
+        )
+        a.string("units", "deg", choices=("deg",))
+        a.done()
+    return out
+
+
+def _detector(f: Fields, devices: dict[str, DeviceConfig]) -> DetectorConfig:
+    device = f.string("device")
+    if device not in devices:
+        raise f.fail("device", f"no device {device!r} under [devices]")
+    if devices[device].protocol not in DETECTOR_PROTOCOLS:
+        raise f.fail("device", f"{device!r} is a {devices[device].protocol}, not a detector")
+    rng = f._get("range", "auto")
+    if rng == "auto":
+        range_w = None
+    else:
+        range_w = f.number("range", low=0.0, low_open=True)
+    det = DetectorConfig(
+        device=device,
+        wavelength_nm=f.number("wavelength_nm", low=200.0, high=2000.0),
+        averaging=f.number("averaging", 1, low=1, high=100_000, integer=True),
+        range_w=range_w,
+    )
+    f.done()
+    return det
+
+
+def _zones(f: Fields) -> tuple[tuple[float, float], ...]:
+    zones = f._get("arm_forbidden_deg", [])
+    if not isinstance(zones, list):
+        raise f.fail("arm_forbidden_deg", "must be a list of [lo, hi] pairs")
+    out = []
+    for i, zone in enumerate(zones):
+        sub = Fields({"zone": zone}, f"{f.where}.arm_forbidden_deg[{i}]", ConfigError)
+        out.append(sub.pair("zone"))
+    return tuple(out)
+
+
+def _position(top: Fields, key: str) -> Position | None:
+    if not top.has(key):
+        return None
+    f = top.table_of(key)
+    pos = Position(f.number("sample_deg", low=-360.0, high=360.0),
+                   f.number("arm_deg", low=-360.0, high=360.0))
+    f.done()
+    return pos
+
+
+def angular_distance_deg(arm_deg: Any, elevation_deg: Any = 0.0) -> Any:
+    """Angle between the detector direction and the source (+X), degrees (vectorised)."""
+    a, e = np.radians(arm_deg), np.radians(elevation_deg)
+    return np.degrees(np.arccos(np.clip(np.cos(e) * np.cos(a), -1.0, 1.0)))
+
+
+def forbidden_reason(cfg: InstrumentConfig, arm_deg: float,
+                     elevation_deg: float = 0.0) -> str | None:
+    """Why a detector position is forbidden (None if allowed)."""
+    dist = float(angular_distance_deg(arm_deg, elevation_deg))
+    if dist < cfg.beam_clearance_deg:
+        return (f"detector {dist:.3g} deg from the source, inside the beam clearance "
+                f"of {cfg.beam_clearance_deg:g} deg")
+    for lo, hi in cfg.arm_forbidden_deg:
+        if lo <= arm_deg <= hi or lo <= arm_deg - 360 <= hi or lo <= arm_deg + 360 <= hi:
+            return f"arm {arm_deg:g} deg inside the forbidden zone [{lo:g}, {hi:g}]"
+    return None

@@ -1,0 +1,160 @@
+"""Typed reading of TOML tables with one-line errors naming the file, the table and the key.
+
+Configs and plans both use it, so every bad field is reported the same way and an unknown
+key (a typo) is an error rather than silently ignored.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from gonio.errors import GonioError
+
+REQUIRED = object()
+
+
+class Fields:
+    """One TOML table being read: each accessor checks type and range, `done()` rejects extras."""
+
+    def __init__(self, table: Any, where: str, error: type[GonioError]):
+        if not isinstance(table, Mapping):
+            raise error(f"{where}: must be a table, got {_show(table)}")
+        self.table, self.where, self.error = table, where, error
+        self._used: set[str] = set()
+
+    def fail(self, key: str, message: str) -> GonioError:
+        """The error for `key` (raise it)."""
+        return self.error(f"{self.where}.{key}: {message}")
+
+    def has(self, key: str) -> bool:
+        """True if the key is present (and marks it known)."""
+        self._used.add(key)
+        return key in self.table
+
+    def _get(self, key: str, default: Any) -> Any:
+        self._used.add(key)
+        if key in self.table:
+            return self.table[key]
+        if default is REQUIRED:
+            raise self.error(f"{self.where}: missing required key {key!r}")
+        return default
+
+    def number(
+        self,
+        key: str,
+        default: Any = REQUIRED,
+        low: float = -math.inf,
+        high: float = math.inf,
+        integer: bool = False,
+        low_open: bool = False,
+    ) -> Any:
+        """A finite number (an int if `integer`) in [low, high] (or (low, high] if low_open)."""
+        value = self._get(key, default)
+        if value is default and key not in self.table:
+            return value
+        return check_number(value, self.fail, key, low, high, integer, low_open)
+
+    def string(self, key: str, default: Any = REQUIRED, choices: tuple[str, ...] = ()) -> Any:
+        """A string, one of `choices` when given."""
+        value = self._get(key, default)
+        if value is default and key not in self.table:
+            return value
+        if not isinstance(value, str):
+            raise self.fail(key, f"must be a string, got {_show(value)}")
+        if choices and value not in choices:
+            raise self.fail(key, f"must be one of {', '.join(choices)}; got {value!r}")
+        return value
+
+    def boolean(self, key: str, default: Any = REQUIRED) -> Any:
+        """A true/false value."""
+        value = self._get(key, default)
+        if not isinstance(value, bool):
+            raise self.fail(key, f"must be true or false, got {_show(value)}")
+        return value
+
+    def pair(self, key: str, default: Any = REQUIRED) -> Any:
+        """Two increasing finite numbers [lo, hi]."""
+        value = self._get(key, default)
+        if value is default and key not in self.table:
+            return value
+        if not (isinstance(value, list) and len(value) == 2):
+            raise self.fail(key, f"must be a list [lo, hi] of two numbers, got {_show(value)}")
+        lo, hi = (check_number(v, self.fail, key) for v in value)
+        if not lo < hi:
+            raise self.fail(key, f"must have lo < hi, got [{lo:g}, {hi:g}]")
+        return lo, hi
+
+    def values(self, key: str, default: Any = REQUIRED, low: float = -math.inf,
+               high: float = math.inf) -> Any:
+        """A non-empty list of numbers or a range table {start, stop, step | num}, stop included."""
+        value = self._get(key, default)
+        if value is default and key not in self.table:
+            return value
+        if isinstance(value, bool) or isinstance(value, int | float):
+            value = [value]
+        if isinstance(value, list):
+            if not value:
+                raise self.fail(key, "must not be empty")
+            return tuple(check_number(v, self.fail, key, low, high) for v in value)
+        if isinstance(value, Mapping):
+            return _range(Fields(value, f"{self.where}.{key}", self.error), low, high)
+        raise self.fail(key, f"must be a number, a list of numbers or a table "
+                             f"{{start, stop, step}}, got {_show(value)}")
+
+    def table_of(self, key: str) -> Fields:
+        """A sub-table (empty if absent)."""
+        return Fields(self._get(key, {}), f"{self.where}.{key}", self.error)
+
+    def done(self) -> None:
+        """Reject any key no accessor asked for."""
+        unknown = sorted(set(self.table) - self._used)
+        if unknown:
+            known = ", ".join(sorted(self._used)) or "none"
+            raise self.error(f"{self.where}: unknown key {unknown[0]!r} (known: {known})")
+
+
+def check_number(value: Any, fail: Any, key: str, low: float = -math.inf,
+                 high: float = math.inf, integer: bool = False, low_open: bool = False) -> Any:
+    """Check one number; `fail(key, message)` builds the error."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise fail(key, f"must be {'an integer' if integer else 'a number'}, got {_show(value)}")
+    if integer and not isinstance(value, int):
+        raise fail(key, f"must be an integer, got {value!r}")
+    if not math.isfinite(value):
+        raise fail(key, f"must be finite, got {value!r}")
+    below = value <= low if low_open else value < low
+    if below or value > high:
+        lo_br = "(" if low_open else "["
+        raise fail(key, f"must be in {lo_br}{low:g}, {high:g}], got {value!r}")
+    return value if integer else float(value)
+
+
+def _range(f: Fields, low: float, high: float) -> tuple[float, ...]:
+    start = f.number("start")
+    stop = f.number("stop")
+    has_step, has_num = f.has("step"), f.has("num")
+    if has_step == has_num:
+        raise f.error(f"{f.where}: give exactly one of 'step' or 'num'")
+    if has_step:
+        step = f.number("step", low=0.0, low_open=True)
+        n = math.floor(abs(stop - start) / step + 1e-9) + 1
+        if n > 100_000:
+            raise f.fail("step", f"gives {n} values; at most 100000")
+        vals = start + math.copysign(step, stop - start) * np.arange(n)
+    else:
+        n = f.number("num", low=1, high=100_000, integer=True)
+        vals = np.linspace(start, stop, n)
+    f.done()
+    for v in (vals[0], vals[-1]):
+        if not low <= v <= high:
+            raise f.error(f"{f.where}: values must be in [{low:g}, {high:g}], got {v:g}")
+    return tuple(float(v) for v in vals)
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."

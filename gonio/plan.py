@@ -1,0 +1,407 @@
+"""Scan plans (TOML): parse, validate against an instrument, order the points, estimate time.
+
+A plan lists sample points (grids and single points of incidence, outgoing angle in and out of
+the plane of incidence, reflection/transmission side, sample azimuth) plus repeats, dwell,
+averaging and dark/beam readings interleaved at a rate. `build_schedule` turns it into the
+exact, ordered list of readings the engine runs: every reading has an index, and the same
+plan and config always give the same schedule, which is what makes `--resume` possible.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomllib
+
+from gonio.config import InstrumentConfig, forbidden_reason
+from gonio.errors import PlanError
+from gonio.fields import Fields
+from gonio.geometry import into_limits, stage_angles
+
+SIDES = ("reflection", "transmission")
+ORDERS = ("optimal", "as-written")
+MOTION_ROLES = ("sample", "arm", "azimuth", "elevation")
+READ_OVERHEAD_S = 0.02  # estimated protocol time per reading, plus READ_PER_SAMPLE_S each sample
+READ_PER_SAMPLE_S = 0.003
+
+POINT_DTYPE = np.dtype([
+    ("source", "U24"), ("side", "U12"), ("theta_i_deg", "f8"), ("theta_o_deg", "f8"),
+    ("phi_o_deg", "f8"), ("sample_azimuth_deg", "f8"), ("skip_forbidden", "?"),
+])
+
+SCHEDULE_DTYPE = np.dtype([
+    ("index", "i8"), ("kind", "U6"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
+    ("theta_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
+    ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
+])
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A parsed plan: sample points as written plus how to run them."""
+
+    name: str
+    path: Path | None
+    instrument: Path | None
+    points: np.ndarray  # POINT_DTYPE, in the order written
+    repeats: int
+    dwell_s: float
+    averaging: int | None
+    order: str
+    dark_every: int
+    beam_every: int
+    description: str = ""
+    raw: dict[str, Any] = field(default_factory=dict, repr=False)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The validated, ordered readings of a plan on an instrument, with time estimates."""
+
+    readings: np.ndarray  # SCHEDULE_DTYPE
+    estimate_s: float
+    naive_estimate_s: float
+    nesting: tuple[str, ...]
+    skipped: int  # grid points dropped by skip_forbidden
+
+    def __len__(self) -> int:
+        return len(self.readings)
+
+
+def load_plan(path: str | Path) -> Plan:
+    """Read and parse a plan file (instrument-independent checks only)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise PlanError(f"{path}: cannot read plan ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise PlanError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise PlanError(f"{path}: not a text file") from None
+    return parse_plan(raw, path)
+
+
+def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
+    """Parse a plan dict; `instrument` resolves relative to the plan file's folder."""
+    path = Path(path) if path is not None else None
+    top = Fields(raw, str(path) if path else "plan", PlanError)
+    name = top.string("name", default=path.stem if path else "plan")
+    instrument = top.string("instrument", default=None)
+    if instrument is not None:
+        instrument = ((path.parent if path else Path.cwd()) / instrument).resolve()
+    points = [_grid(top, i, g) for i, g in enumerate(_tables(top, "grid"))]
+    points += [_single(top, i, p) for i, p in enumerate(_tables(top, "point"))]
+    if not points:
+        raise PlanError(f"{top.where}: no points; add a [[grid]] or a [[point]] table")
+    plan = Plan(
+        name=name, path=path, instrument=instrument,
+        points=np.concatenate(points),
+        repeats=top.number("repeats", 1, low=1, high=10_000, integer=True),
+        dwell_s=top.number("dwell_s", 0.0, low=0.0, high=3600.0),
+        averaging=top.number("averaging", None, low=1, high=100_000, integer=True),
+        order=top.string("order", "optimal", choices=ORDERS),
+        dark_every=_every(top, "dark"),
+        beam_every=_every(top, "beam"),
+        description=top.string("description", ""),
+        raw=raw,
+    )
+    top.done()
+    return plan
+
+
+def _tables(top: Fields, key: str) -> list[Any]:
+    value = top._get(key, [])
+    if isinstance(value, dict):
+        return [value]
+    if not isinstance(value, list):
+        raise top.fail(key, f"must be a table or an array of tables [[{key}]]")
+    return value
+
+
+def _sides(f: Fields) -> tuple[str, ...]:
+    value = f._get("side", "reflection")
+    values = value if isinstance(value, list) else [value]
+    if not values or any(v not in SIDES for v in values):
+        raise f.fail("side", "must be 'reflection', 'transmission' or a list of them; "
+                             f"got {value!r}")
+    return tuple(dict.fromkeys(values))
+
+
+def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
+    f = Fields(table, f"{top.where}: grid[{i}]", PlanError)
+    sides = _sides(f)
+    ti = f.values("theta_i_deg", low=-90.0, high=90.0)
+    to = f.values("theta_o_deg", low=-90.0, high=90.0)
+    po = f.values("phi_o_deg", (0.0,), low=-180.0, high=180.0)
+    az = f.values("sample_azimuth_deg", (0.0,), low=-360.0, high=360.0)
+    skip = f.boolean("skip_forbidden", False)
+    f.done()
+    combos = list(itertools.product(sides, az, ti, po, to))
+    if len(combos) > 1_000_000:
+        raise PlanError(f"{f.where}: {len(combos)} points; at most 1000000 per grid")
+    out = np.zeros(len(combos), POINT_DTYPE)
+    out["source"] = f"grid[{i}]"
+    out["side"] = [c[0] for c in combos]
+    out["sample_azimuth_deg"] = [c[1] for c in combos]
+    out["theta_i_deg"] = [c[2] for c in combos]
+    out["phi_o_deg"] = [c[3] for c in combos]
+    out["theta_o_deg"] = [c[4] for c in combos]
+    out["skip_forbidden"] = skip
+    return out
+
+
+def _single(top: Fields, i: int, table: Any) -> np.ndarray:
+    f = Fields(table, f"{top.where}: point[{i}]", PlanError)
+    side = f.string("side", "reflection", choices=SIDES)
+    out = np.zeros(1, POINT_DTYPE)
+    out[0] = (f"point[{i}]", side, f.number("theta_i_deg", low=-90.0, high=90.0),
+              f.number("theta_o_deg", low=-90.0, high=90.0),
+              f.number("phi_o_deg", 0.0, low=-180.0, high=180.0),
+              f.number("sample_azimuth_deg", 0.0, low=-360.0, high=360.0), False)
+    f.done()
+    return out
+
+
+def _every(top: Fields, key: str) -> int:
+    if not top.has(key):
+        return 0
+    f = top.table_of(key)
+    every = f.number("every", low=0, high=1_000_000, integer=True)
+    f.done()
+    return every
+
+
+# -- validation against the instrument --------------------------------------------------------
+
+def _describe(p: np.void) -> str:
+    return (f"{p['source']} point (side={p['side']}, theta_i={p['theta_i_deg']:g}, "
+            f"theta_o={p['theta_o_deg']:g}, phi_o={p['phi_o_deg']:g}, "
+            f"sample_azimuth={p['sample_azimuth_deg']:g})")
+
+
+def stage_targets(plan: Plan, cfg: InstrumentConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Stage targets (N, 4) in MOTION_ROLES order for the plan's points, and a keep mask.
+
+    Raises PlanError naming the first point out of travel or in a forbidden zone (unless its
+    grid says skip_forbidden, which drops it instead).
+    """
+    pts = plan.points
+    st = stage_angles(pts["theta_i_deg"], pts["theta_o_deg"], pts["phi_o_deg"],
+                      pts["side"] == "transmission", pts["sample_azimuth_deg"])
+    targets = np.stack([st.sample_deg, st.arm_deg, st.azimuth_deg, st.elevation_deg], axis=1)
+    keep = np.ones(len(pts), bool)
+    where = str(plan.path) if plan.path else "plan"
+    for j, role in enumerate(MOTION_ROLES):
+        if role in cfg.axes:
+            lim = cfg.axes[role].limits_deg
+            moved = into_limits(targets[:, j], lim) if role == "arm" else targets[:, j]
+            bad = ~((moved >= lim[0] - 1e-9) & (moved <= lim[1] + 1e-9))
+            targets[:, j] = np.where(bad, targets[:, j], moved)
+            why = [f"{role} {targets[k, j]:.6g} deg outside travel [{lim[0]:g}, {lim[1]:g}]"
+                   for k in np.flatnonzero(bad)[:1]]
+        else:
+            bad = np.abs(targets[:, j]) > 1e-9
+            why = [f"needs a {role!r} axis (it would be at {targets[k, j]:.6g} deg); "
+                   f"the instrument {cfg.name!r} has none" for k in np.flatnonzero(bad)[:1]]
+            targets[:, j] = 0.0
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise PlanError(f"{where}: {_describe(pts[k])}: {why[0]}")
+    for k in range(len(pts)):
+        reason = forbidden_reason(cfg, targets[k, 1], targets[k, 3])
+        if reason is None:
+            continue
+        if not pts[k]["skip_forbidden"]:
+            raise PlanError(f"{where}: {_describe(pts[k])}: {reason} "
+                            f"(set skip_forbidden = true in the grid to drop such points)")
+        keep[k] = False
+    if not keep.any():
+        raise PlanError(f"{where}: every point is in a forbidden zone")
+    return targets, keep
+
+
+def _fixed_position(cfg: InstrumentConfig, kind: str, where: str) -> np.ndarray:
+    pos = cfg.beam if kind == "beam" else cfg.dark
+    if pos is None:
+        raise PlanError(f"{where}: {kind}.every asks for {kind} readings but the instrument "
+                        f"{cfg.name!r} has no [{kind}] position")
+    for role, value in (("sample", pos.sample_deg), ("arm", pos.arm_deg)):
+        lo, hi = cfg.axes[role].limits_deg
+        if not lo <= value <= hi:
+            raise PlanError(f"{where}: the instrument's [{kind}] {role}_deg {value:g} is outside "
+                            f"the {role} travel [{lo:g}, {hi:g}]")
+    return np.array([pos.sample_deg, pos.arm_deg, 0.0, 0.0])
+
+
+# -- ordering and estimates -------------------------------------------------------------------
+
+def move_times(targets: np.ndarray, cfg: InstrumentConfig, start: np.ndarray | None = None
+               ) -> np.ndarray:
+    """Seconds of each move (axes together: the slowest sets it) plus settling, from `start`."""
+    targets = np.asarray(targets, dtype=np.float64)
+    start = targets[:1] if start is None else np.asarray(start, dtype=np.float64)[None]
+    delta = np.abs(np.diff(np.concatenate([start, targets]), axis=0))
+    total = np.zeros(len(targets))
+    settle = np.zeros(len(targets))
+    for j, role in enumerate(MOTION_ROLES):
+        if role not in cfg.axes:
+            continue
+        ax = cfg.axes[role]
+        v, a, d = ax.speed_deg_s, ax.accel_deg_s2, delta[:, j]
+        trapezoid = d * a >= v * v
+        t = np.where(trapezoid, v / a + d / v, 2.0 * np.sqrt(d / a))
+        total = np.maximum(total, t)
+        settle = np.maximum(settle, np.where(d > 0, ax.settle_s, 0.0))
+    return total + settle
+
+
+def serpentine(values: np.ndarray, nesting: tuple[int, ...]) -> np.ndarray:
+    """Order of rows of `values` (N, k): sorted by columns in `nesting` order, outer first,
+    each inner level alternating direction (boustrophedon) within its enclosing group."""
+    group = np.zeros(len(values), np.int64)
+    for col in nesting:
+        _, rank = np.unique(values[:, col], return_inverse=True)
+        key = np.where(group % 2 == 0, rank, -rank)
+        pairs = np.stack([group, key], axis=1)
+        _, group = np.unique(pairs, axis=0, return_inverse=True)
+        group = group.ravel()
+    return np.argsort(group, kind="stable")
+
+
+def _best_order(targets: np.ndarray, cfg: InstrumentConfig) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Cheapest serpentine over all nestings of the axes that move (arm last first tried)."""
+    moving = [j for j in range(4) if np.ptp(targets[:, j]) > 0]
+    best: tuple[float, np.ndarray, tuple[str, ...]] | None = None
+    for nesting in itertools.permutations(moving):
+        order = serpentine(targets, nesting)
+        cost = float(move_times(targets[order], cfg).sum())
+        if best is None or cost < best[0] - 1e-12:
+            best = (cost, order, tuple(MOTION_ROLES[j] for j in nesting))
+    if best is None:
+        return np.arange(len(targets)), ()
+    return best[1], best[2]
+
+
+def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, fixed: dict[str, np.ndarray]
+                ) -> list[tuple[str, int, int]]:
+    """(kind, repeat, point) for every reading: sample points with dark/beam ones interleaved."""
+    out: list[tuple[str, int, int]] = []
+    extras = [(k, n) for k, n in (("dark", plan.dark_every), ("beam", plan.beam_every)) if n]
+    for kind, _ in extras:
+        out.append((kind, 0, -1))
+    done = 0
+    for repeat, order in passes:
+        for k in order:
+            out.append(("sample", repeat, int(k)))
+            done += 1
+            for kind, every in extras:
+                if done % every == 0:
+                    out.append((kind, repeat, -1))
+    last_repeat = passes[-1][0]
+    for kind, every in extras:
+        if done % every:
+            out.append((kind, last_repeat, -1))
+    return out
+
+
+def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
+    """Validate the plan on the instrument and return its ordered readings and estimates."""
+    where = str(plan.path) if plan.path else "plan"
+    targets, keep = stage_targets(plan, cfg)
+    fixed = {k: _fixed_position(cfg, k, where) for k, n in
+             (("dark", plan.dark_every), ("beam", plan.beam_every)) if n}
+    kept = np.flatnonzero(keep)
+    naive = [(r, kept) for r in range(plan.repeats)]
+    if plan.order == "optimal":
+        order, nesting = _best_order(targets[kept], cfg)
+        order = kept[order]
+        passes = [(r, order if r % 2 == 0 else order[::-1]) for r in range(plan.repeats)]
+    else:
+        passes, nesting = naive, ()
+    readings = _assemble(_interleave(passes, plan, fixed), plan, targets, fixed)
+    naive_readings = _assemble(_interleave(naive, plan, fixed), plan, targets, fixed)
+    return Schedule(readings, estimate_seconds(readings, cfg, plan),
+                    estimate_seconds(naive_readings, cfg, plan), nesting,
+                    int(len(keep) - keep.sum()))
+
+
+def _assemble(items: list[tuple[str, int, int]], plan: Plan, targets: np.ndarray,
+              fixed: dict[str, np.ndarray]) -> np.ndarray:
+    out = np.zeros(len(items), SCHEDULE_DTYPE)
+    out["index"] = np.arange(len(items))
+    pos = np.empty((len(items), 4))
+    for i, (kind, repeat, k) in enumerate(items):
+        out[i]["kind"], out[i]["repeat"], out[i]["point"] = kind, repeat, k
+        if kind == "sample":
+            p = plan.points[k]
+            out[i]["side"] = p["side"]
+            out[i]["theta_i_deg"], out[i]["theta_o_deg"] = p["theta_i_deg"], p["theta_o_deg"]
+            out[i]["phi_o_deg"] = p["phi_o_deg"]
+            pos[i] = targets[k]
+        else:
+            out[i]["theta_i_deg"] = out[i]["theta_o_deg"] = out[i]["phi_o_deg"] = math.nan
+            pos[i] = fixed[kind]
+    for j, role in enumerate(MOTION_ROLES):
+        out[f"{role}_deg"] = pos[:, j]
+    return out
+
+
+def positions(readings: np.ndarray) -> np.ndarray:
+    """Stage targets (N, 4) of scheduled readings, in MOTION_ROLES order."""
+    return np.stack([readings[f"{r}_deg"] for r in MOTION_ROLES], axis=1)
+
+
+def estimate_seconds(readings: np.ndarray, cfg: InstrumentConfig, plan: Plan,
+                     start: np.ndarray | None = None) -> float:
+    """Estimated run time: motion profiles (axes together) + settle + dwell + read time."""
+    if len(readings) == 0:
+        return 0.0
+    averaging = plan.averaging or cfg.detector.averaging
+    per_read = plan.dwell_s + READ_OVERHEAD_S + READ_PER_SAMPLE_S * averaging
+    return float(move_times(positions(readings), cfg, start).sum() + per_read * len(readings))
+
+
+def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
+    """Human summary: what is measured, how many readings, and the time estimates."""
+    r = sched.readings
+    kinds = {k: int((r["kind"] == k).sum()) for k in ("sample", "dark", "beam")}
+    samples = r[r["kind"] == "sample"]
+    lines = [
+        f"plan {plan.name!r} on instrument {cfg.name!r}",
+        f"  sample points: {len(plan.points) - sched.skipped} x {plan.repeats} repeat(s)"
+        + (f" ({sched.skipped} in forbidden zones skipped)" if sched.skipped else ""),
+        f"  readings: {len(r)} ({kinds['sample']} sample, {kinds['dark']} dark, "
+        f"{kinds['beam']} beam)",
+    ]
+    for side in SIDES:
+        s = samples[samples["side"] == side]
+        if len(s):
+            lines.append(
+                f"  {side}: theta_i {_span(s['theta_i_deg'])}, theta_o {_span(s['theta_o_deg'])},"
+                f" phi_o {_span(s['phi_o_deg'])} deg")
+    lines += [
+        f"  dwell {plan.dwell_s:g} s, averaging {plan.averaging or cfg.detector.averaging}, "
+        f"order {plan.order}" + (f" (nesting {' > '.join(sched.nesting)})" if sched.nesting
+                                 else ""),
+        f"  estimated duration: {format_duration(sched.estimate_s)}"
+        f" (as written: {format_duration(sched.naive_estimate_s)})",
+    ]
+    return "\n".join(lines)
+
+
+def _span(values: np.ndarray) -> str:
+    u = np.unique(values)
+    return f"{u[0]:g}" if len(u) == 1 else f"{u[0]:g}..{u[-1]:g} ({len(u)} values)"
+
+
+def format_duration(seconds: float) -> str:
+    """Seconds as h:mm:ss (and the raw seconds when short)."""
+    s = int(round(seconds))
+    text = f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+    return f"{text} ({seconds:.1f} s)" if seconds < 600 else text
