@@ -82,12 +82,14 @@ class FaultInjector:
     """Applies a FaultSpec to a device's replies with a seeded, thread-safe RNG.
 
     Each reply draws its faults in a fixed order (stall, drop, corrupt, bad CRC), so a
-    given seed and reply sequence always gives the same faults.
+    given seed and reply sequence always gives the same faults. `seed` (e.g. the bench's
+    [sim] seed) is mixed with the spec's own seed when given.
     """
 
-    def __init__(self, spec: FaultSpec | None = None):
+    def __init__(self, spec: FaultSpec | None = None, seed: int | None = None):
         self.spec = spec or FaultSpec()
-        self._rng = random.Random(self.spec.seed)
+        mixed = self.spec.seed if seed is None else f"{seed}:{self.spec.seed}"
+        self._rng = random.Random(mixed)
         self._lock = threading.Lock()
         self.replies = 0
         self.counts = {"stall": 0, "drop": 0, "corrupt": 0, "bad_crc": 0}

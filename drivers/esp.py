@@ -1,0 +1,278 @@
+"""Driver for the Newport ESP300/ESP301 motion controller (RS-232 ASCII command set).
+
+Byte-level details from the ESP301 user's manual (EDH0235En1030, section 3): a command
+is `[axis]XX[parameter]` ended by CR (we send CR), replies end in CR LF, commands are
+silent and errors go to a FIFO read with TB? ("code, timestamp, MESSAGE"; axis errors are
+axis*100 + code). Every exchange appends ";TB?" so the error status comes back with it
+(queries on one line answer on one line, comma-separated). Queries are retried after a
+timeout or garble; a state-changing command is sent once, and if its status reply is lost
+the driver re-reads the device state (error buffer, target) instead of re-sending it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+
+from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.serial_transport import SerialLineTransport
+
+_TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
+
+
+def _number(text: str) -> float:
+    """Parse a numeric reply; ProtocolError if it is not one."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ProtocolError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise ProtocolError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _flag(text: str) -> bool:
+    if text.strip() not in ("0", "1"):
+        raise ProtocolError(f"expected 0 or 1, got {text!r}")
+    return text.strip() == "1"
+
+
+def _fmt(value: float) -> str:
+    """A number as the ESP reads it (plain decimal, enough digits)."""
+    if not math.isfinite(value):
+        raise ValueError(f"not a finite number: {value!r}")
+    return format(float(value), ".10g")
+
+
+class EspController:
+    """One ESP300/ESP301 on a serial port; `axis(n, name)` gives engine-facing Axis objects.
+
+    timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is how
+    often wait() asks MD?.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = 19200,
+        timeout_s: float = 1.0,
+        name: str = "esp",
+        retries: int = 2,
+        poll_s: float = 0.01,
+    ):
+        self.name = name
+        self.poll_s = poll_s
+        self.transport = SerialLineTransport(
+            port, name=name, baudrate=baudrate, write_eol=b"\r", read_eol=b"\r\n",
+            timeout_s=timeout_s, retries=retries, rtscts=False,
+        )
+        try:
+            self.errors()  # start from an empty error buffer
+            self.version = self.query("VE?")
+        except DriverError:
+            self.transport.close()
+            raise
+
+    # -- lifecycle --------------------------------------------------------------
+    def close(self) -> None:
+        """Close the serial port."""
+        self.transport.close()
+
+    def __enter__(self) -> EspController:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- error buffer -----------------------------------------------------------
+    def _parse_tb(self, text: str) -> tuple[int, str]:
+        match = _TB.fullmatch(text)
+        if match is None:
+            raise ProtocolError(f"{self.name}: garbled TB? reply {text!r}")
+        return int(match.group(1)), match.group(3)
+
+    def next_error(self) -> tuple[int, str]:
+        """Pop the oldest buffered error: (code, message); (0, ...) when empty."""
+        return self.transport.query("TB?", self._parse_tb, "TB? (error buffer)")
+
+    def errors(self) -> list[tuple[int, str]]:
+        """Drain the error buffer (at most its 10 entries)."""
+        found = []
+        for _ in range(10):
+            code, text = self.next_error()
+            if code == 0:
+                break
+            found.append((code, text))
+        return found
+
+    def _raise_if_error(self, code: int, text: str) -> None:
+        if code != 0:
+            raise DeviceError(self.name, code, text)
+
+    def query(self, line: str, parse=str):
+        """Ask a query with ";TB?" appended, so its error status comes in the same reply.
+
+        Retried on timeout or garble; a device error raises DeviceError (not retried).
+        """
+        def checked(text: str):
+            parts = text.rsplit(",", 3)
+            code, message = self._parse_tb(",".join(parts[-3:]))
+            self._raise_if_error(code, message)
+            if len(parts) != 4:
+                raise ProtocolError(f"{self.name}: no value in reply to {line!r}: {text!r}")
+            try:
+                return parse(parts[0].strip())
+            except ProtocolError as exc:
+                raise ProtocolError(f"{self.name}: reply to {line!r}: {exc}") from None
+
+        return self.transport.query(f"{line};TB?", checked, line)
+
+    def command(self, line: str, verify=None) -> None:
+        """Send a state-changing command once, with its error status in the same exchange.
+
+        If the status reply is lost or garbled, the error buffer is re-read and `verify()`
+        (if given) checks the device state; the command itself is never re-sent.
+        """
+        try:
+            reply = self.transport.exchange(f"{line};TB?", f"{line!r} status")
+            code, text = self._parse_tb(reply)
+        except (DeviceTimeout, ProtocolError) as exc:
+            self._raise_if_error(*self.next_error())
+            if verify is None or not verify():
+                raise DriverError(
+                    f"{self.name}: {line!r} not confirmed ({exc}); not re-sent"
+                ) from exc
+            return
+        self._raise_if_error(code, text)
+
+    def abort(self) -> None:
+        """AB: stop every axis at once (no deceleration)."""
+        self.command("AB")
+
+    def axis(self, number: int, name: str | None = None, enable: bool = True) -> EspAxis:
+        """The Axis object for axis `number` (1..9); enable=True switches its motor on."""
+        if not (isinstance(number, int) and 1 <= number <= 9):
+            raise ValueError(f"{self.name}: axis number must be 1..9, got {number!r}")
+        axis = EspAxis(self, number, name or f"{self.name}.{number}")
+        if enable:
+            axis.enable()
+        return axis
+
+
+class EspAxis:
+    """One ESP axis as the engine's Axis (degrees; the stage's units are set to degrees)."""
+
+    def __init__(self, controller: EspController, number: int, name: str):
+        self.controller, self.number, self.name = controller, number, name
+        self._p = str(number)
+
+    def _query(self, cmd: str, parse=_number):
+        return self.controller.query(self._p + cmd, parse)
+
+    def _command(self, cmd: str, verify=None) -> None:
+        self.controller.command(self._p + cmd, verify)
+
+    # -- Axis interface ---------------------------------------------------------
+    def move_to(self, position_deg: float) -> None:
+        """PA: start an absolute move (returns at once)."""
+        target = float(position_deg)
+        self._command(f"PA{_fmt(target)}", lambda: abs(self.target() - target) < 1e-4)
+
+    def move_by(self, delta_deg: float) -> None:
+        """PR: start a move relative to the current target."""
+        goal = self.target() + float(delta_deg)
+        self._command(f"PR{_fmt(delta_deg)}", lambda: abs(self.target() - goal) < 1e-4)
+
+    def position(self) -> float:
+        """TP?: actual position, degrees."""
+        return self._query("TP?")
+
+    def target(self) -> float:
+        """PA?: the position the current (or last) move goes to."""
+        return self._query("PA?")
+
+    def is_moving(self) -> bool:
+        """MD?: 0 while a move or home is under way."""
+        return not self._query("MD?", _flag)
+
+    def wait(self, timeout_s: float) -> float:
+        """Poll MD? until the motion is done; DeviceTimeout after timeout_s. Returns TP?."""
+        deadline = time.monotonic() + timeout_s
+        while self.is_moving():
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(self.name, "motion done (MD?)", timeout_s)
+            time.sleep(self.controller.poll_s)
+        return self.position()
+
+    def stop(self) -> None:
+        """ST: decelerate to a stop."""
+        self._command("ST")
+
+    def home(self) -> None:
+        """OR: start a home search."""
+        self._command("OR")
+
+    def define_position(self, position_deg: float = 0.0) -> None:
+        """DH: call the current position `position_deg` (defines home)."""
+        self._command(f"DH{_fmt(position_deg)}")
+
+    # -- settings ---------------------------------------------------------------
+    def enable(self) -> None:
+        """MO: motor on, units degrees (SN7)."""
+        self._command("MO", lambda: self.enabled)
+        self._command("SN7", lambda: self._query("SN?") == 7)
+
+    def disable(self) -> None:
+        """MF: motor off."""
+        self._command("MF", lambda: not self.enabled)
+
+    @property
+    def enabled(self) -> bool:
+        """MO?: motor on."""
+        return self._query("MO?", _flag)
+
+    def _setting(self, cmd: str, value: float) -> None:
+        self._command(f"{cmd}{_fmt(value)}", lambda: abs(self._query(f"{cmd}?") - value) < 1e-6)
+
+    @property
+    def speed_deg_s(self) -> float:
+        """VA?: velocity of the next move."""
+        return self._query("VA?")
+
+    @speed_deg_s.setter
+    def speed_deg_s(self, value: float) -> None:
+        self._setting("VA", value)
+
+    @property
+    def accel_deg_s2(self) -> float:
+        """AC?: acceleration."""
+        return self._query("AC?")
+
+    @accel_deg_s2.setter
+    def accel_deg_s2(self, value: float) -> None:
+        self._setting("AC", value)
+
+    @property
+    def decel_deg_s2(self) -> float:
+        """AG?: deceleration."""
+        return self._query("AG?")
+
+    @decel_deg_s2.setter
+    def decel_deg_s2(self, value: float) -> None:
+        self._setting("AG", value)
+
+    @property
+    def limits_deg(self) -> tuple[float, float]:
+        """(SL?, SR?): software travel limits."""
+        return self._query("SL?"), self._query("SR?")
+
+    @limits_deg.setter
+    def limits_deg(self, value: tuple[float, float]) -> None:
+        lo, hi = float(value[0]), float(value[1])
+        if not lo < hi:
+            raise ValueError(f"{self.name}: limits must be (lo, hi) with lo < hi, got {value!r}")
+        cur_lo, _ = self.limits_deg
+        # order the two commands so the pair stays valid (SL < SR) in between
+        for cmd, v in ((("SR", hi), ("SL", lo)) if lo >= cur_lo else (("SL", lo), ("SR", hi))):
+            self._setting(cmd, v)
