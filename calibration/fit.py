@@ -1,0 +1,378 @@
+"""Fit microfacet model parameters to reduced BSDF data by weighted least squares.
+
+The model is `sim.bsdf.RoughDielectric` (distribution, alpha or (alpha_x, alpha_y), eta,
+masking form) times an optional scale factor. Fits run on a chosen subset (by default normal
+incidence only, as Walter et al. 2007 did) and the fitted model then predicts the rest, so
+the held-out chi-square tests the model rather than the fit. See docs/fitting.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from calibration.reduced import ReducedData
+from gonio.errors import GonioError
+
+DISTRIBUTIONS = ("beckmann", "ggx", "phong")
+MASKINGS = ("separable", "correlated")
+
+ALPHA_BOUNDS = (1e-4, 4.0)
+ETA_BOUNDS = (1.001, 4.0)
+SCALE_BOUNDS = (1e-3, 1e3)
+# Singular-value ratio of the weighted Jacobian beyond which a parameter is unconstrained.
+MAX_CONDITION = 1e6
+# A distribution is "preferred" only if it beats the next by this chi-square (2 sigma for one
+# extra degree of freedom); otherwise the result says the data cannot tell them apart.
+PREFERENCE_DELTA_CHI2 = 4.0
+
+
+class FitError(GonioError):
+    """A fit failed, is ill-conditioned, or was asked of data that cannot support it."""
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """What to fit: the candidate distributions and masking forms (the best is reported),
+    which parameters are free, and which points form the fitted subset."""
+
+    distributions: tuple[str, ...] = DISTRIBUTIONS
+    maskings: tuple[str, ...] = ("separable",)
+    anisotropic: bool = False
+    fit_eta: bool = False
+    fit_scale: bool = False
+    eta: float | None = None  # fixed (or starting) eta; None: the data's meta["eta"]
+    fit_incidence_deg: tuple[float, ...] | None = (0.0,)  # None: fit every valid point
+    incidence_tol_deg: float = 0.5
+    aperture_half_angle_deg: float | None = None  # None: meta's, if any; 0: point model
+    aperture_order: int = 3
+
+    def __post_init__(self) -> None:
+        for name, given, known in (("distribution", self.distributions, DISTRIBUTIONS),
+                                   ("masking", self.maskings, MASKINGS)):
+            if not given:
+                raise FitError(f"fit: at least one {name} is needed")
+            for value in given:
+                if value not in known:
+                    raise FitError(f"fit: unknown {name} {value!r}; known: {', '.join(known)}")
+        if self.eta is not None and not ETA_BOUNDS[0] <= self.eta <= ETA_BOUNDS[1]:
+            raise FitError(f"fit: eta must be in [{ETA_BOUNDS[0]}, {ETA_BOUNDS[1]}], "
+                           f"got {self.eta!r}")
+
+
+@dataclass
+class FitResult:
+    """The preferred fit: parameters with 1-sigma uncertainties, chi-square per degree of
+    freedom on the fitted subset and on the held-out points, and every candidate's score."""
+
+    distribution: str
+    masking: str
+    names: tuple[str, ...]
+    values: np.ndarray
+    errors: np.ndarray
+    covariance: np.ndarray
+    eta: float
+    chi2_dof_fit: float
+    n_fit: int
+    chi2_dof_heldout: float | None
+    n_heldout: int
+    preferred_by: float | None  # chi-square margin over the runner-up distribution
+    candidates: list[dict[str, Any]] = field(default_factory=list)
+    aperture_half_angle_deg: float = 0.0
+    aperture_order: int = 0
+
+    @property
+    def clearly_preferred(self) -> bool:
+        """True when the chosen distribution beats every other by PREFERENCE_DELTA_CHI2."""
+        return self.preferred_by is None or self.preferred_by >= PREFERENCE_DELTA_CHI2
+
+    def param(self, name: str) -> tuple[float, float]:
+        """(value, 1-sigma uncertainty) of one fitted parameter."""
+        k = self.names.index(name)
+        return float(self.values[k]), float(self.errors[k])
+
+    @property
+    def alpha(self) -> float | tuple[float, float]:
+        """Fitted roughness: a number, or (alpha_x, alpha_y) for an anisotropic fit."""
+        if "alpha" in self.names:
+            return self.param("alpha")[0]
+        return self.param("alpha_x")[0], self.param("alpha_y")[0]
+
+    @property
+    def scale(self) -> float:
+        """Fitted overall scale factor (1 when not fitted)."""
+        return self.param("scale")[0] if "scale" in self.names else 1.0
+
+    def model(self) -> Any:
+        """The fitted sim.bsdf.RoughDielectric (without the scale factor)."""
+        return build_model(self.distribution, self.alpha, self.eta, self.masking)
+
+    def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
+        (scale factor and aperture average included)."""
+        return self.scale * _aperture_eval(self.model(), wi, wo, self.aperture_half_angle_deg,
+                                           self.aperture_order)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready summary (what `gonio fit --json` prints)."""
+        params = {n: {"value": float(v), "sigma": float(e)}
+                  for n, v, e in zip(self.names, self.values, self.errors, strict=True)}
+        if "eta" not in params:
+            params["eta"] = {"value": self.eta, "sigma": 0.0, "fixed": True}
+        if self.distribution == "phong":
+            a = np.atleast_1d(self.alpha)
+            params["phong_exponent"] = {"value": float(2.0 / (a[0] * a[-1]) - 2.0)}
+        return {
+            "distribution": self.distribution,
+            "masking": self.masking,
+            "parameters": params,
+            "chi2_dof_fit": self.chi2_dof_fit,
+            "n_fit": self.n_fit,
+            "chi2_dof_heldout": self.chi2_dof_heldout,
+            "n_heldout": self.n_heldout,
+            "preferred_by_delta_chi2": self.preferred_by,
+            "clearly_preferred": self.clearly_preferred,
+            "aperture_half_angle_deg": self.aperture_half_angle_deg,
+            "candidates": self.candidates,
+        }
+
+
+def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
+                masking: str) -> Any:
+    """The sim.bsdf model for one parameter set (imported here so calibration loads without it)."""
+    from sim.bsdf import RoughDielectric
+
+    return RoughDielectric(distribution=distribution, alpha=alpha, eta=eta, masking=masking)
+
+
+def _aperture_eval(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: float,
+                   order: int) -> np.ndarray:
+    """The model averaged over the detector aperture (a cap about wo), or at wo if no aperture."""
+    if half_angle_deg <= 0.0 or order <= 0:
+        return model.eval(wi, wo)
+    from sim.bench.quadrature import cap_rule
+
+    nodes, weights = cap_rule(wo, math.radians(half_angle_deg), order)
+    f = model.eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
+    return f @ weights / weights.sum()
+
+
+def fit_subset_mask(data: ReducedData, options: FitOptions) -> np.ndarray:
+    """Which points the fit uses: valid, finite, positive sigma, at a chosen incidence."""
+    usable = (data.valid & np.isfinite(data.bsdf) & np.isfinite(data.sigma)
+              & (data.sigma > 0))
+    if options.fit_incidence_deg is None:
+        return usable
+    theta_i = data.theta_i_deg
+    near = np.zeros(len(theta_i), bool)
+    for angle in options.fit_incidence_deg:
+        near |= np.abs(theta_i - abs(angle)) <= options.incidence_tol_deg
+    return usable & near
+
+
+def initial_alpha(data: ReducedData, eta: float) -> float:
+    """Roughness from the peak width: the slope of ln f against tan^2 of the half-vector angle
+    over the lobe's core (f > 1 % of the peak), which is -1/alpha^2 for Beckmann."""
+    h = np.where(data.transmission[:, None], -(data.wi + eta * data.wo), data.wi + data.wo)
+    h = h / np.linalg.norm(h, axis=1, keepdims=True)
+    h = np.where(h[:, 2:3] < 0, -h, h)
+    tan2 = (h[:, 0] ** 2 + h[:, 1] ** 2) / np.maximum(h[:, 2] ** 2, 1e-12)
+    f = data.bsdf
+    core = f > 0.01 * f.max()
+    if core.sum() >= 2 and np.ptp(tan2[core]) > 0:
+        slope = np.polyfit(tan2[core], np.log(f[core]), 1)[0]
+        if slope < 0:
+            return float(np.clip(1.0 / math.sqrt(-slope), *ALPHA_BOUNDS))
+    spread = np.sqrt(tan2[f > 0.5 * f.max()].max()) if core.any() else 0.1
+    return float(np.clip(max(spread, 1e-3), *ALPHA_BOUNDS))
+
+
+class _Problem:
+    """One candidate (distribution, masking) as a least-squares problem in internal parameters:
+    log alpha (one or two), eta (if free), log scale (if free)."""
+
+    def __init__(self, data: ReducedData, distribution: str, masking: str, options: FitOptions,
+                 eta0: float, aperture_deg: float):
+        self.data, self.distribution, self.masking = data, distribution, masking
+        self.options, self.eta0, self.aperture_deg = options, eta0, aperture_deg
+        names = ["alpha_x", "alpha_y"] if options.anisotropic else ["alpha"]
+        lo = [math.log(ALPHA_BOUNDS[0])] * len(names)
+        hi = [math.log(ALPHA_BOUNDS[1])] * len(names)
+        if options.fit_eta:
+            names.append("eta")
+            lo.append(ETA_BOUNDS[0])
+            hi.append(ETA_BOUNDS[1])
+        if options.fit_scale:
+            names.append("scale")
+            lo.append(math.log(SCALE_BOUNDS[0]))
+            hi.append(math.log(SCALE_BOUNDS[1]))
+        self.names, self.lower, self.upper = tuple(names), np.array(lo), np.array(hi)
+
+    def unpack(self, x: np.ndarray) -> tuple[Any, float, float]:
+        """(alpha, eta, scale) from internal parameters."""
+        k = 2 if self.options.anisotropic else 1
+        alpha = (math.exp(x[0]), math.exp(x[1])) if k == 2 else math.exp(x[0])
+        eta = float(x[k]) if self.options.fit_eta else self.eta0
+        scale = math.exp(x[-1]) if self.options.fit_scale else 1.0
+        return alpha, eta, scale
+
+    def external(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Parameter values and d(external)/d(internal) on the diagonal."""
+        values, deriv = np.empty(len(x)), np.empty(len(x))
+        for k, name in enumerate(self.names):
+            log_param = name != "eta"
+            values[k] = math.exp(x[k]) if log_param else x[k]
+            deriv[k] = values[k] if log_param else 1.0
+        return values, deriv
+
+    def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
+        alpha, eta, scale = self.unpack(x)
+        model = build_model(self.distribution, alpha, eta, self.masking)
+        f = _aperture_eval(model, data.wi, data.wo, self.aperture_deg, self.options.aperture_order)
+        return scale * f
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        r = (self.predict(x, self.data) - self.data.bsdf) / self.data.sigma
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def start(self, alpha0: float) -> np.ndarray:
+        """Best of a coarse log-alpha grid about the peak-width estimate (a guard against a
+        poor estimate trapping the optimiser in a local minimum)."""
+        grid = alpha0 * np.exp(np.linspace(-2.5, 2.5, 11))
+        grid = np.clip(grid, *ALPHA_BOUNDS)
+        rest = []
+        if self.options.fit_eta:
+            rest.append(self.eta0)
+        if self.options.fit_scale:
+            rest.append(0.0)
+        k = 2 if self.options.anisotropic else 1
+        trials = [np.array([math.log(a)] * k + rest) for a in grid]
+        costs = [float(np.sum(self.residuals(x) ** 2)) for x in trials]
+        return np.clip(trials[int(np.argmin(costs))], self.lower + 1e-9, self.upper - 1e-9)
+
+
+def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
+    """Run one candidate's fit; returns its parameters, covariance and chi-square."""
+    x0 = problem.start(alpha0)
+    sol = least_squares(problem.residuals, x0, bounds=(problem.lower, problem.upper),
+                        method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                        max_nfev=400)
+    if not np.all(np.isfinite(sol.x)) or sol.status <= 0:
+        raise FitError(f"fit {problem.distribution}: the optimiser did not converge "
+                       f"({sol.message})")
+    n, p = len(sol.fun), len(sol.x)
+    chi2 = float(np.sum(sol.fun ** 2))
+    dof = n - p
+    jac = sol.jac
+    _check_conditioning(jac, problem.names, problem.distribution)
+    cov_internal = np.linalg.inv(jac.T @ jac)
+    values, deriv = problem.external(sol.x)
+    margin = np.minimum(sol.x - problem.lower, problem.upper - sol.x)
+    at_bound = [nm for nm, m, xv in zip(problem.names, margin, sol.x, strict=True)
+                if m < 1e-6 * max(1.0, abs(xv))]
+    chi2_dof = chi2 / dof
+    cov = cov_internal * np.outer(deriv, deriv) * max(1.0, chi2_dof)
+    return {"x": sol.x, "values": values, "cov": cov, "chi2": chi2, "chi2_dof": chi2_dof,
+            "at_bound": at_bound}
+
+
+def _check_conditioning(jac: np.ndarray, names: tuple[str, ...], distribution: str) -> None:
+    """Raise FitError naming the parameter(s) the data do not constrain."""
+    norms = np.linalg.norm(jac, axis=0)
+    dead = [n for n, v in zip(names, norms, strict=True) if not v > 0]
+    if dead:
+        raise FitError(f"fit {distribution}: the data do not constrain {', '.join(dead)} "
+                       "(the model does not change with it at any fitted point)")
+    _, s, vt = np.linalg.svd(jac / norms, full_matrices=False)
+    if s[-1] <= 0 or s[0] / s[-1] > MAX_CONDITION:
+        worst = np.abs(vt[-1])
+        involved = [n for n, w in zip(names, worst, strict=True) if w > 0.3]
+        raise FitError(f"fit {distribution}: ill-conditioned (condition number "
+                       f"{s[0] / max(s[-1], 1e-300):.1e}); the data cannot separate "
+                       f"{', '.join(involved)}; fix one of them or add data that constrains it")
+
+
+def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
+    """Fit every candidate (distribution x masking) on the chosen subset, keep the lowest
+    chi-square, and score the fitted model on the held-out valid points."""
+    options = options or FitOptions()
+    eta0 = options.eta if options.eta is not None else data.meta.get("eta")
+    if eta0 is None:
+        raise FitError("fit: the data carry no eta (meta['eta']) and none was given")
+    eta0 = float(eta0)
+    aperture = options.aperture_half_angle_deg
+    if aperture is None:
+        aperture = float(data.meta.get("aperture_half_angle_deg", 0.0))
+    in_fit = fit_subset_mask(data, options)
+    n_params = (2 if options.anisotropic else 1) + options.fit_eta + options.fit_scale
+    if in_fit.sum() <= n_params:
+        raise FitError(f"fit: only {int(in_fit.sum())} usable points at incidence "
+                       f"{_describe_subset(options)}; need more than {n_params}")
+    fit_data = data.subset(in_fit)
+    if not np.any(fit_data.bsdf > 0):
+        raise FitError("fit: no point of the fitted subset has a positive BSDF value")
+    alpha0 = initial_alpha(fit_data.subset(fit_data.bsdf > 0), eta0)
+
+    scored, failures = [], []
+    for distribution in options.distributions:
+        for masking in options.maskings:
+            problem = _Problem(fit_data, distribution, masking, options, eta0, aperture)
+            try:
+                scored.append((problem, _solve(problem, alpha0)))
+            except FitError as exc:
+                failures.append(str(exc))
+    if not scored:
+        raise FitError("; ".join(failures))
+    problem, best = _preferred(scored, options.distributions)
+    if best["at_bound"]:
+        raise FitError(f"fit {problem.distribution}: {', '.join(best['at_bound'])} ended at its "
+                       "bound; the data do not support this model (check eta, the subset "
+                       "and the masked points)")
+    runner_up = min((s["chi2"] for p, s in scored if p.distribution != problem.distribution),
+                    default=None)
+    heldout = _heldout_chi2(data, ~in_fit, problem, best["x"])
+    alpha, eta, _ = problem.unpack(best["x"])
+    return FitResult(
+        distribution=problem.distribution, masking=problem.masking, names=problem.names,
+        values=best["values"], errors=np.sqrt(np.diag(best["cov"])), covariance=best["cov"],
+        eta=eta, chi2_dof_fit=best["chi2_dof"], n_fit=int(in_fit.sum()),
+        chi2_dof_heldout=heldout[0], n_heldout=heldout[1],
+        preferred_by=None if runner_up is None else runner_up - best["chi2"],
+        candidates=[{"distribution": p.distribution, "masking": p.masking,
+                     "chi2_dof_fit": s["chi2_dof"],
+                     "parameters": dict(zip(p.names, map(float, s["values"]), strict=True))}
+                    for p, s in sorted(scored, key=lambda item: item[1]["chi2"])]
+        + [{"failed": msg} for msg in failures],
+        aperture_half_angle_deg=aperture, aperture_order=options.aperture_order,
+    )
+
+
+def _preferred(scored: list[tuple[_Problem, dict[str, Any]]],
+               order: tuple[str, ...]) -> tuple[_Problem, dict[str, Any]]:
+    """The lowest chi-square; among candidates the data cannot tell apart from it (within
+    PREFERENCE_DELTA_CHI2) the first in the listed order, so a narrow Beckmann lobe is not
+    reported as its Phong approximation on a noise fluctuation."""
+    lowest = min(s["chi2"] for _, s in scored)
+    tied = [(p, s) for p, s in scored if s["chi2"] - lowest < PREFERENCE_DELTA_CHI2]
+    return min(tied, key=lambda item: (order.index(item[0].distribution), item[1]["chi2"]))
+
+
+def _heldout_chi2(data: ReducedData, rest: np.ndarray, problem: _Problem,
+                  x: np.ndarray) -> tuple[float | None, int]:
+    """Chi-square per point of the fitted model on the valid points not used by the fit."""
+    held = rest & fit_subset_mask(data, FitOptions(fit_incidence_deg=None))
+    if not held.any():
+        return None, 0
+    part = data.subset(held)
+    r = (problem.predict(x, part) - part.bsdf) / part.sigma
+    return float(np.mean(r ** 2)), int(held.sum())
+
+
+def _describe_subset(options: FitOptions) -> str:
+    if options.fit_incidence_deg is None:
+        return "any angle"
+    return ", ".join(f"{a:g}" for a in options.fit_incidence_deg) + " deg"
