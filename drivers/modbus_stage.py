@@ -1,0 +1,144 @@
+"""Rotation stage on a Modbus stepper drive (RTU or TCP), addressed through its register map.
+
+Implements drivers.base.Axis. Motion commands are written once; if the reply to one is
+lost the driver re-reads the drive's state to learn whether it was taken, instead of
+sending it again.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+from drivers.base import DeviceError, DeviceTimeout
+from drivers.modbus_transport import MappedUnit, ModbusTimeouts
+from drivers.register_map import RegisterMap
+
+STAGE_REGISTERS = ("target_position", "velocity", "acceleration", "command", "fault_code",
+                   "actual_position", "status", "limit_negative", "limit_positive")
+STAGE_COMMANDS = ("start", "stop", "home", "abort", "clear_fault")
+STAGE_BITS = ("moving", "homed", "limit", "fault")
+
+
+class ModbusStage(MappedUnit):
+    """One rotation axis on a Modbus stepper drive; positions in degrees."""
+
+    def __init__(self, transport: str, port_or_host: str, unit: int,
+                 register_map: str | Path | RegisterMap, *, name: str = "modbus-stage",
+                 tcp_port: int = 502, baudrate: int = 115200,
+                 timeouts: ModbusTimeouts | None = None, read_retries: int = 2,
+                 poll_s: float = 0.005):
+        super().__init__(transport, port_or_host, unit, register_map, name=name,
+                         tcp_port=tcp_port, baudrate=baudrate, timeouts=timeouts,
+                         read_retries=read_retries)
+        try:
+            self.map.require(STAGE_REGISTERS, STAGE_COMMANDS, STAGE_BITS)
+        except ValueError:
+            self.close()
+            raise
+        self.poll_s = poll_s
+
+    # -- state ------------------------------------------------------------------
+    def status(self) -> dict[str, bool]:
+        """The drive's status bits by name (moving, homed, limit, fault)."""
+        return self.bits(self.read_value("status"))
+
+    def position(self) -> float:
+        """Actual position now, degrees."""
+        return self.read_value("actual_position")
+
+    def is_moving(self) -> bool:
+        """True while a move, stop or home is under way."""
+        return self.status()["moving"]
+
+    def homed(self) -> bool:
+        """True once a home has completed."""
+        return self.status()["homed"]
+
+    def fault(self) -> tuple[int, str]:
+        """The drive's fault code and the map's text for it ((0, ...) = no fault)."""
+        code = int(self.read_value("fault_code"))
+        return code, "no fault" if code == 0 else self.map.fault_text(code)
+
+    def limits(self) -> tuple[float, float]:
+        """The drive's software travel limits, degrees."""
+        v = self.read_values("limit_negative", "limit_positive")
+        return v["limit_negative"], v["limit_positive"]
+
+    # -- settings ---------------------------------------------------------------
+    def set_motion(self, speed_deg_s: float, accel_deg_s2: float) -> None:
+        """Set the cruise speed and acceleration used by the next move (map range checked)."""
+        self.write_value("velocity", speed_deg_s)
+        self.write_value("acceleration", accel_deg_s2)
+
+    def motion(self) -> tuple[float, float]:
+        """(speed_deg_s, accel_deg_s2) the drive holds."""
+        v = self.read_values("velocity", "acceleration")
+        return v["velocity"], v["acceleration"]
+
+    def set_limits(self, low_deg: float, high_deg: float) -> None:
+        """Set the software travel limits (the drive checks low < high on the next move)."""
+        self.write_value("limit_negative", low_deg)
+        self.write_value("limit_positive", high_deg)
+
+    # -- motion -----------------------------------------------------------------
+    def move_to(self, position_deg: float) -> None:
+        """Start an absolute move; DeviceError if the drive refuses it (e.g. past a limit)."""
+        if not math.isfinite(position_deg):
+            raise ValueError(f"{self.name}: target must be a finite angle, got {position_deg!r}")
+        self.write_value("target_position", position_deg)
+        self._motion_command("start", position_deg)
+
+    def home(self) -> None:
+        """Start homing (a move to 0 that sets the homed bit); wait() waits for it."""
+        self._motion_command("home", 0.0)
+
+    def stop(self) -> None:
+        """Decelerate to rest; harmless at rest."""
+        self.command("stop")
+
+    def abort(self) -> None:
+        """Stop at once without deceleration."""
+        self.command("abort")
+
+    def clear_fault(self) -> None:
+        """Clear the drive's fault code and fault / limit bits."""
+        self.command("clear_fault")
+
+    def wait(self, timeout_s: float) -> float:
+        """Poll until the drive is at rest; return the final position (DeviceTimeout past
+        timeout_s, DeviceError if the drive reports a fault)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            v = self.read_values("status", "fault_code", "actual_position")
+            bits = self.bits(v["status"])
+            if bits["fault"]:
+                self._raise_fault(int(v["fault_code"]))
+            if not bits["moving"]:
+                return v["actual_position"]
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(self.name, "end of motion", timeout_s)
+            time.sleep(self.poll_s)
+
+    def _motion_command(self, command: str, target_deg: float) -> None:
+        """Write a motion command once; a lost reply is resolved by reading the state."""
+        try:
+            self.command(command)
+        except DeviceTimeout:
+            if not self._was_taken(target_deg):
+                raise
+        v = self.read_values("status", "fault_code")
+        if self.bits(v["status"])["fault"]:
+            self._raise_fault(int(v["fault_code"]))
+
+    def _was_taken(self, target_deg: float) -> bool:
+        """After a lost reply: did the drive take the command (moving, refused with a fault,
+        or already at the target)?"""
+        v = self.read_values("status", "actual_position")
+        bits = self.bits(v["status"])
+        step = 1.0 / self.map.register("actual_position").scale
+        return bits["moving"] or bits["fault"] or abs(v["actual_position"] - target_deg) <= step
+
+    def _raise_fault(self, code: int) -> None:
+        raise DeviceError(self.name, code, self.map.fault_text(code))

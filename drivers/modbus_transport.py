@@ -1,0 +1,220 @@
+"""Modbus RTU / TCP client link with bounded, named timeouts and retry of reads only.
+
+One `ModbusLink` per endpoint (serial port or host:port), shared by every unit on it:
+`open_link` hands out the same link to drivers of several units on one RTU bus or one
+TCP server, and closes it when the last user is done. Reads may be retried after a
+timeout or a garbled reply; writes never are (a write may already have acted).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from pymodbus.pdu import ExceptionResponse
+
+from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.register_map import RegisterMap
+
+MODBUS_EXCEPTIONS = {
+    1: "illegal function",
+    2: "illegal data address",
+    3: "illegal data value",
+    4: "server device failure",
+    5: "acknowledge",
+    6: "server device busy",
+    8: "memory parity error",
+    10: "gateway path unavailable",
+    11: "gateway target device failed to respond",
+}
+
+
+@dataclass(frozen=True)
+class ModbusTimeouts:
+    """Named time bounds of a link, seconds: one reply, and the pause after a failed read
+    before it is retried (lets a late reply drain instead of answering the retry)."""
+
+    reply_s: float = 0.5
+    retry_pause_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        for name in ("reply_s", "retry_pause_s"):
+            value = getattr(self, name)
+            if not 0.0 <= value < 60.0 or (name == "reply_s" and value == 0.0):
+                raise ValueError(f"ModbusTimeouts: {name} must be in (0, 60) s, got {value!r}")
+
+
+class ModbusLink:
+    """A pymodbus sync client for one endpoint, serialised by a lock, with error mapping."""
+
+    def __init__(self, transport: str, port_or_host: str, *, tcp_port: int = 502,
+                 baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
+                 read_retries: int = 2):
+        self.timeouts = timeouts or ModbusTimeouts()
+        if transport not in ("tcp", "rtu"):
+            raise ValueError(f"Modbus transport must be 'tcp' or 'rtu', got {transport!r}")
+        if not isinstance(read_retries, int) or read_retries < 0:
+            raise ValueError(f"read_retries must be an integer >= 0, got {read_retries!r}")
+        self.transport, self.read_retries = transport, read_retries
+        reply_s = self.timeouts.reply_s
+        if transport == "tcp":
+            self.endpoint = f"{port_or_host}:{tcp_port}"
+            self._client = ModbusTcpClient(port_or_host, port=tcp_port, timeout=reply_s,
+                                           retries=0)
+        else:
+            self.endpoint = port_or_host
+            self._client = ModbusSerialClient(port_or_host, baudrate=baudrate, timeout=reply_s,
+                                              retries=0)
+        self._lock = threading.Lock()
+        self.users = 0
+
+    def read(self, device: str, table: str, address: int, count: int, unit: int) -> list[int]:
+        """Read count registers of table ("holding" | "input"); retried on timeout / garble."""
+        fn = (self._client.read_holding_registers if table == "holding"
+              else self._client.read_input_registers)
+        what = f"{table} registers {address}..{address + count - 1} of unit {unit}"
+        for attempt in range(self.read_retries + 1):
+            try:
+                reply = self._call(device, what, fn, address, count=count, device_id=unit)
+            except (DeviceTimeout, ProtocolError):
+                if attempt == self.read_retries:
+                    raise
+                time.sleep(self.timeouts.retry_pause_s)
+                continue
+            if len(reply.registers) != count:
+                if attempt == self.read_retries:
+                    raise ProtocolError(f"{device}: {what}: {len(reply.registers)} registers "
+                                        f"in the reply, expected {count}")
+                continue
+            return list(reply.registers)
+        raise AssertionError("unreachable")  # the loop returns or raises
+
+    def write(self, device: str, address: int, values: list[int], unit: int) -> None:
+        """Write holding registers (function 16), once: never re-sent on a failure."""
+        what = f"reply to a write of holding registers {address}.. of unit {unit}"
+        self._call(device, what, self._client.write_registers, address, values=values,
+                   device_id=unit)
+
+    def _call(self, device: str, what: str, fn, *args, **kwargs):
+        with self._lock:
+            try:
+                reply = fn(*args, **kwargs)
+            except ModbusIOException as exc:
+                if "transaction id" in str(exc) or "device id" in str(exc):
+                    raise ProtocolError(f"{device}: {what}: mismatched reply ({exc})") from None
+                raise DeviceTimeout(device, what, self.timeouts.reply_s) from None
+            except ConnectionException as exc:
+                self._client.close()
+                raise DriverError(f"{device}: connection to {self.endpoint} failed or lost "
+                                  f"({exc})") from None
+            except ModbusException as exc:
+                raise ProtocolError(f"{device}: {what}: {exc}") from None
+        if isinstance(reply, ExceptionResponse) or reply.isError():
+            code = getattr(reply, "exception_code", 0)
+            raise DeviceError(device, f"Modbus exception {code:02d}",
+                              f"{MODBUS_EXCEPTIONS.get(code, 'unknown exception')} ({what})")
+        return reply
+
+    def close(self) -> None:
+        """Close the client connection."""
+        with self._lock:
+            self._client.close()
+
+
+_links: dict[tuple[str, str], ModbusLink] = {}
+_links_lock = threading.Lock()
+
+
+def open_link(transport: str, port_or_host: str, *, tcp_port: int = 502,
+              baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
+              read_retries: int = 2) -> ModbusLink:
+    """The shared link to an endpoint (made on first use); pair with `release_link`."""
+    key = (transport, f"{port_or_host}:{tcp_port}" if transport == "tcp" else port_or_host)
+    with _links_lock:
+        link = _links.get(key)
+        if link is None:
+            link = _links[key] = ModbusLink(transport, port_or_host, tcp_port=tcp_port,
+                                            baudrate=baudrate, timeouts=timeouts,
+                                            read_retries=read_retries)
+        link.users += 1
+        return link
+
+
+def release_link(link: ModbusLink) -> None:
+    """Drop one user of a link; the last one closes it."""
+    with _links_lock:
+        link.users -= 1
+        if link.users <= 0:
+            link.close()
+            key = (link.transport, link.endpoint)
+            if _links.get(key) is link:
+                del _links[key]
+
+
+class MappedUnit:
+    """One Modbus unit reached through a shared link and addressed by register names.
+
+    Base of the stage and detector drivers: owns the link reference, reads and writes
+    named registers through the map, closes on `close()` or leaving a `with` block.
+    """
+
+    def __init__(self, transport: str, port_or_host: str, unit: int,
+                 register_map: str | Path | RegisterMap, *, name: str, tcp_port: int = 502,
+                 baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
+                 read_retries: int = 2):
+        if isinstance(unit, bool) or not isinstance(unit, int) or not 0 <= unit <= 247:
+            raise ValueError(f"{name}: Modbus unit id must be an integer in 0..247, got {unit!r}")
+        self.name, self.unit = name, unit
+        self.map = (register_map if isinstance(register_map, RegisterMap)
+                    else RegisterMap.load(register_map))
+        self.link = open_link(transport, port_or_host, tcp_port=tcp_port, baudrate=baudrate,
+                              timeouts=timeouts, read_retries=read_retries)
+        self._closed = False
+
+    def read_values(self, *names: str) -> dict[str, float]:
+        """Engineering values of the named registers, one read per table they lie in."""
+        by_table: dict[str, list[str]] = {}
+        for n in names:
+            by_table.setdefault(self.map.register(n).table, []).append(n)
+        out = {}
+        for group in by_table.values():
+            table, first, count = self.map.block(tuple(group))
+            words = self.link.read(self.name, table, first, count, self.unit)
+            out.update({n: self.map.take(n, first, words) for n in group})
+        return out
+
+    def read_value(self, name: str) -> float:
+        """Engineering value of one named register."""
+        return self.read_values(name)[name]
+
+    def write_value(self, name: str, value: float) -> None:
+        """Write one named holding register (checked against the map first), never re-sent."""
+        reg = self.map.register(name)
+        if reg.table != "holding" or not reg.writable:
+            raise ValueError(f"{self.name}: register {name!r} is not writable in {self.map.source}")
+        self.link.write(self.name, reg.address, self.map.encode(name, value), self.unit)
+
+    def command(self, command: str) -> None:
+        """Write a named value of the map's [commands] to the command register."""
+        self.write_value("command", self.map.commands[command])
+
+    def bits(self, status: float) -> dict[str, bool]:
+        """Status register value -> {bit name: set} by the map's [status_bits]."""
+        word = int(status)
+        return {bit: bool(word >> n & 1) for bit, n in self.map.status_bits.items()}
+
+    def close(self) -> None:
+        """Release the link (the last unit on it closes the connection); idempotent."""
+        if not self._closed:
+            self._closed = True
+            release_link(self.link)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,250 @@
+"""Client-side reader of a Modbus register-map file (TOML): register layout and value codecs.
+
+A map names each register (table, 0-based address, type, scale, access, range) and the
+drive's command values, status bits and fault codes; `RegisterMap.encode` / `decode`
+turn engineering values into 16-bit words and back in the map's word order.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import tomllib
+
+_TYPES = {  # type -> (struct code of its big-endian bytes, number of registers)
+    "uint16": ("H", 1),
+    "int16": ("h", 1),
+    "uint32": ("I", 2),
+    "int32": ("i", 2),
+    "float32": ("f", 2),
+}
+_TABLES = ("holding", "input")
+_ACCESS = ("r", "rw")
+
+
+class RegisterMapError(ValueError):
+    """A register-map file that is missing a field or has a bad one (the message names it)."""
+
+
+@dataclass(frozen=True)
+class Register:
+    """One named register (or register pair) of a map."""
+
+    name: str
+    table: str
+    address: int
+    type: str
+    scale: float
+    access: str
+    unit: str
+    min: float | None
+    max: float | None
+
+    @property
+    def count(self) -> int:
+        """Number of 16-bit registers the value spans."""
+        return _TYPES[self.type][1]
+
+    @property
+    def writable(self) -> bool:
+        """True when a host may write this register."""
+        return self.access == "rw"
+
+
+@dataclass(frozen=True)
+class FaultCode:
+    """A drive fault code and its text from the map."""
+
+    name: str
+    code: int
+    text: str
+
+
+class RegisterMap:
+    """A parsed register map: registers by name, commands, status bits, fault codes."""
+
+    def __init__(self, table: Mapping, source: str = "register map"):
+        self.source = source
+        self.name = _field(table, "name", str, source)
+        self.word_order = _field(table, "word_order", str, source)
+        if self.word_order not in ("big", "little"):
+            raise RegisterMapError(
+                f"{source}: word_order must be 'big' or 'little', got {self.word_order!r}"
+            )
+        regs = _field(table, "registers", dict, source)
+        self.registers = {name: _register(name, spec, source) for name, spec in regs.items()}
+        self.commands = {
+            name: _int_field(table.get("commands", {}), name, f"{source}: commands")
+            for name in table.get("commands", {})
+        }
+        self.status_bits = {
+            name: _int_field(table.get("status_bits", {}), name, f"{source}: status_bits")
+            for name in table.get("status_bits", {})
+        }
+        self.fault_codes = {
+            spec["code"]: FaultCode(name, spec["code"], spec["text"])
+            for name, spec in _fault_table(table.get("fault_codes", {}), source).items()
+        }
+        ranges = table.get("gain_ranges", {}).get("full_scale_w", [])
+        self.gain_ranges_w = tuple(float(r) for r in ranges)
+        self._check_overlap()
+
+    @classmethod
+    def load(cls, path: str | Path) -> RegisterMap:
+        """Read and check a map file; RegisterMapError names the file and the field."""
+        path = Path(path)
+        try:
+            table = tomllib.loads(path.read_text())
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise RegisterMapError(f"{path}: cannot read register map: {exc}") from None
+        return cls(table, source=str(path))
+
+    def register(self, name: str) -> Register:
+        """The register called name (RegisterMapError if the map lacks it)."""
+        try:
+            return self.registers[name]
+        except KeyError:
+            raise RegisterMapError(f"{self.source}: no register {name!r}") from None
+
+    def require(self, registers: tuple[str, ...], commands: tuple[str, ...] = (),
+                bits: tuple[str, ...] = ()) -> None:
+        """Check that the map has what a driver needs, before any traffic."""
+        for name in registers:
+            self.register(name)
+        for group, names, have in (("commands", commands, self.commands),
+                                   ("status_bits", bits, self.status_bits)):
+            missing = [n for n in names if n not in have]
+            if missing:
+                raise RegisterMapError(f"{self.source}: [{group}] lacks {', '.join(missing)}")
+
+    def encode(self, name: str, value: float) -> list[int]:
+        """Engineering value -> register words (RegisterMapError if out of range or type)."""
+        reg = self.register(name)
+        low = -math.inf if reg.min is None else reg.min
+        high = math.inf if reg.max is None else reg.max
+        if not low <= value <= high:
+            raise RegisterMapError(
+                f"{self.source}: {name} = {value!r} outside [{reg.min}, {reg.max}] {reg.unit}"
+            )
+        code, _ = _TYPES[reg.type]
+        if reg.type == "float32":
+            raw: float | int = float(value) * reg.scale
+        else:
+            raw = round(float(value) * reg.scale) if math.isfinite(value) else value
+        try:
+            data = struct.pack(">" + code, raw)
+        except (struct.error, OverflowError, ValueError):
+            raise RegisterMapError(
+                f"{self.source}: {name} = {value!r} does not fit a {reg.type} register "
+                f"(scale {reg.scale:g})"
+            ) from None
+        return self._order([int.from_bytes(data[i:i + 2], "big") for i in range(0, len(data), 2)])
+
+    def decode(self, name: str, words: list[int]) -> float:
+        """Register words -> engineering value."""
+        reg = self.register(name)
+        if len(words) != reg.count:
+            raise RegisterMapError(f"{name} needs {reg.count} registers, got {len(words)}")
+        data = b"".join(int(w).to_bytes(2, "big") for w in self._order(list(words)))
+        (raw,) = struct.unpack(">" + _TYPES[reg.type][0], data)
+        return raw / reg.scale
+
+    def block(self, names: tuple[str, ...]) -> tuple[str, int, int]:
+        """(table, first address, count) of one read covering the named registers."""
+        regs = [self.register(n) for n in names]
+        tables = {r.table for r in regs}
+        if len(tables) != 1:
+            raise RegisterMapError(f"{self.source}: {names} are not in one table")
+        first = min(r.address for r in regs)
+        last = max(r.address + r.count for r in regs)
+        return tables.pop(), first, last - first
+
+    def take(self, name: str, first: int, words: list[int]) -> float:
+        """Decode register name out of a block read that started at address first."""
+        reg = self.register(name)
+        offset = reg.address - first
+        return self.decode(name, words[offset:offset + reg.count])
+
+    def fault_text(self, code: int) -> str:
+        """The map's text for a fault code (or 'unknown fault code')."""
+        fault = self.fault_codes.get(code)
+        return fault.text if fault else "unknown fault code"
+
+    def _order(self, words: list[int]) -> list[int]:
+        return words[::-1] if self.word_order == "little" else words
+
+    def _check_overlap(self) -> None:
+        used: dict[tuple[str, int], str] = {}
+        for reg in self.registers.values():
+            for addr in range(reg.address, reg.address + reg.count):
+                other = used.setdefault((reg.table, addr), reg.name)
+                if other != reg.name:
+                    raise RegisterMapError(
+                        f"{self.source}: registers {other!r} and {reg.name!r} overlap at "
+                        f"{reg.table} address {addr}"
+                    )
+
+
+def _field(table: Mapping, key: str, kind: type, where: str):
+    if key not in table:
+        raise RegisterMapError(f"{where}: missing field {key!r}")
+    value = table[key]
+    if not isinstance(value, kind):
+        raise RegisterMapError(f"{where}: {key} must be a {kind.__name__}, got {value!r}")
+    return value
+
+
+def _int_field(table: Mapping, key: str, where: str) -> int:
+    value = _field(table, key, int, where)
+    if isinstance(value, bool) or value < 0:
+        raise RegisterMapError(f"{where}: {key} must be an integer >= 0, got {value!r}")
+    return value
+
+
+def _number(spec: Mapping, key: str, where: str) -> float | None:
+    value = spec.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise RegisterMapError(f"{where}: {key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _register(name: str, spec: object, source: str) -> Register:
+    where = f"{source}: registers.{name}"
+    if not isinstance(spec, Mapping):
+        raise RegisterMapError(f"{where} must be a table")
+    table = _field(spec, "table", str, where)
+    kind = _field(spec, "type", str, where)
+    access = spec.get("access", "r")
+    for key, value, allowed in (("table", table, _TABLES), ("type", kind, _TYPES),
+                                ("access", access, _ACCESS)):
+        if value not in allowed:
+            raise RegisterMapError(f"{where}: {key} must be one of {', '.join(allowed)}, "
+                                   f"got {value!r}")
+    address = _int_field(spec, "address", where)
+    if address + _TYPES[kind][1] > 0x10000:
+        raise RegisterMapError(f"{where}: address {address} past the 16-bit address space")
+    scale = _number(spec, "scale", where)
+    if scale is not None and scale <= 0:
+        raise RegisterMapError(f"{where}: scale must be > 0, got {scale!r}")
+    return Register(name, table, address, kind, 1.0 if scale is None else scale, access,
+                    str(spec.get("unit", "")), _number(spec, "min", where),
+                    _number(spec, "max", where))
+
+
+def _fault_table(table: object, source: str) -> dict[str, dict]:
+    if not isinstance(table, Mapping):
+        raise RegisterMapError(f"{source}: fault_codes must be a table")
+    out = {}
+    for name, spec in table.items():
+        where = f"{source}: fault_codes.{name}"
+        if not isinstance(spec, Mapping):
+            raise RegisterMapError(f"{where} must be a table with code and text")
+        out[name] = {"code": _int_field(spec, "code", where),
+                     "text": _field(spec, "text", str, where)}
+    return out

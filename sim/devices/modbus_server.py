@@ -1,0 +1,366 @@
+"""Serve emulated Modbus units with a real pymodbus 3.16 server: TCP on 127.0.0.1 or RTU on a pty.
+
+Several units (unit ids) share one endpoint, as on one RTU bus or one TCP gateway. The
+pymodbus server does the framing; each request lands in the addressed unit's `read` /
+`write` (a `ModbusUnit`). RTU: pymodbus opens the slave side of an internal pty whose
+master a relay thread joins to a second pty; clients open that one's slave (`endpoint`).
+Faults (latency, dropped / corrupted bytes, bad CRC, stalls, disconnects) act on the
+reply frames, per unit (the unit's own injector) or for the whole endpoint.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import select
+import threading
+import tty
+from collections.abc import Mapping
+from typing import Protocol
+
+from pymodbus.constants import ExcCodes
+from pymodbus.datastore import ModbusServerContext
+from pymodbus.exceptions import NoSuchIdException
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+
+from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.register_map import (
+    ILLEGAL_FUNCTION,
+    ILLEGAL_VALUE,
+    DeviceLayout,
+    Field,
+    RegisterFile,
+    Rejected,
+)
+
+_TABLE_OF_FUNCTION = {3: "holding", 4: "input", 23: "holding"}
+_WRITE_FUNCTIONS = (6, 16, 23)
+
+
+class ModbusUnit(Protocol):  # the server's view; EmulatedUnit is the usual implementation
+    """What the server needs of an emulated unit."""
+
+    faults: FaultInjector | None
+
+    def read(self, table: str, address: int, count: int) -> list[int]:
+        """Words of a register range (Rejected -> Modbus exception reply)."""
+
+    def write(self, address: int, values: list[int]) -> None:
+        """Store holding registers and act on them (Rejected -> exception reply)."""
+
+
+class EmulatedUnit:
+    """A unit whose registers follow a map: live registers are refreshed before a read,
+    single-register settings are range-checked on write, and writes are then acted on.
+
+    Subclasses give `refresh(fields)` (update what a read is about to return) and
+    `act(fields)` (do what the written registers ask).
+    """
+
+    def __init__(self, layout: DeviceLayout, faults: FaultSpec | None = None):
+        self.layout = layout
+        self.registers = RegisterFile(layout)
+        self.faults = FaultInjector(faults) if faults is not None else None
+
+    def read(self, table: str, address: int, count: int) -> list[int]:
+        """Words of a register range, live values refreshed first."""
+        self.refresh(self.registers.fields_in(table, address, count))
+        return self.registers.read(table, address, count)
+
+    def write(self, address: int, values: list[int]) -> None:
+        """Check, store and act on a write of holding registers."""
+        touched = self.registers.fields_in("holding", address, len(values))
+        for f in touched:
+            if f.width == 1 and f.writable:
+                self.check(f, self.layout.from_words(f.name, [values[f.address - address]]))
+        self.act(self.registers.write(address, values))
+
+    def check(self, field: Field, value: float) -> None:
+        """Refuse (exception 03) a single-register setting outside the map's range, or an
+        unknown command."""
+        if field.name == "command":
+            if value not in self.layout.commands.values():
+                raise Rejected(ILLEGAL_VALUE, f"unknown command {value:g}")
+        elif not field.low <= value <= field.high:
+            raise Rejected(ILLEGAL_VALUE, f"{field.name} = {value:g} outside the map's range")
+
+    def refresh(self, fields: list[Field]) -> None:
+        """Update the live registers among fields before they are read."""
+
+    def act(self, fields: list[Field]) -> None:
+        """React to the written fields."""
+
+    def take_command(self) -> str | None:
+        """The name of the command just written (the register then reads 0 again)."""
+        value = self.registers.get("command")
+        self.registers.set("command", 0)
+        return next((n for n, v in self.layout.commands.items() if v == value), None)
+
+
+class _UnitsContext(ModbusServerContext):
+    """pymodbus datastore that hands each request to the addressed unit."""
+
+    def __init__(self, units: Mapping[int, ModbusUnit], lock: threading.Lock):
+        # The base class only keeps devices for its own datastores; ours are the units.
+        self.old_simulator = True
+        self.simdevices = []
+        self._units = dict(units)
+        self._lock = lock
+        self._echo: dict[int, list[int]] = {}
+
+    def _unit(self, device_id: int) -> ModbusUnit:
+        unit = self._units.get(device_id)
+        if unit is None:
+            raise NoSuchIdException(f"no unit {device_id}")
+        return unit
+
+    async def async_getValues(self, device_id, func_code, address, count=1):  # noqa: N802
+        unit = self._unit(device_id)
+        if func_code == 6:  # a write-single echo: the word just written
+            return self._echo.get(device_id, [0])[:1]
+        table = _TABLE_OF_FUNCTION.get(func_code)
+        if table is None:
+            return ExcCodes(ILLEGAL_FUNCTION)
+        try:
+            with self._lock:
+                return unit.read(table, address, count)
+        except Rejected as exc:
+            return ExcCodes(exc.code)
+
+    async def async_setValues(self, device_id, func_code, address, values):  # noqa: N802
+        unit = self._unit(device_id)
+        if func_code not in _WRITE_FUNCTIONS:
+            return ExcCodes(ILLEGAL_FUNCTION)
+        try:
+            with self._lock:
+                unit.write(address, list(values))
+        except Rejected as exc:
+            return ExcCodes(exc.code)
+        self._echo[device_id] = list(values)
+        return None
+
+    def device_ids(self):
+        return list(self._units)
+
+
+class _FaultyReplies:
+    """Mixin for the pymodbus servers: route each reply frame through a fault injector."""
+
+    emulator: ModbusEmulatorServer
+
+    def callback_new_connection(self):
+        handler = super().callback_new_connection()
+        handler.trace_packet = lambda sending, data: (
+            self.emulator.outgoing(handler, data) if sending else data
+        )
+        return handler
+
+
+class _TcpServer(_FaultyReplies, ModbusTcpServer):
+    pass
+
+
+class _SerialServer(_FaultyReplies, ModbusSerialServer):
+    pass
+
+
+class ModbusEmulatorServer:
+    """One Modbus endpoint (TCP server on 127.0.0.1 or RTU on a pty) serving several units.
+
+    faults: a FaultSpec for replies of units without their own injector. start() returns
+    the endpoint ("127.0.0.1:PORT", or the pty path for RTU); stop() ends it.
+    """
+
+    def __init__(self, transport: str = "tcp", units: Mapping[int, ModbusUnit] | None = None,
+                 faults: FaultSpec | None = None, *, port: int = 0, baudrate: int = 115200):
+        if transport not in ("tcp", "rtu"):
+            raise ValueError(f"Modbus transport must be 'tcp' or 'rtu', got {transport!r}")
+        if not units:
+            raise ValueError("ModbusEmulatorServer needs at least one unit")
+        for unit_id in units:
+            if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 1 <= unit_id <= 247:
+                raise ValueError(f"Modbus unit ids are integers 1..247, got {unit_id!r}")
+        self.transport = transport
+        self.units = dict(units)
+        self.faults = FaultInjector(faults)
+        self.port, self.baudrate = port, baudrate
+        self.endpoint: str | None = None
+        self.disconnected = False
+        self._lock = threading.Lock()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._server = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._relay: _PtyRelay | None = None
+
+    @property
+    def protocol(self) -> str:
+        """"modbus-tcp" or "modbus-rtu"."""
+        return f"modbus-{self.transport}"
+
+    # -- lifecycle ----------------------------------------------------------------
+    def start(self) -> str:
+        """Start serving in a background thread; returns the endpoint."""
+        if self._thread is not None:
+            raise RuntimeError("ModbusEmulatorServer already started")
+        if self.transport == "rtu":
+            self._relay = _PtyRelay()
+            self.endpoint = self._relay.client_path
+        self._thread = threading.Thread(target=self._run, name=f"{self.protocol}-server",
+                                        daemon=True)
+        self._thread.start()
+        if not self._ready.wait(10.0) or self._error is not None:
+            self.stop()
+            raise RuntimeError(f"{self.protocol} emulator failed to start: {self._error!r}")
+        return self.endpoint
+
+    def stop(self) -> None:
+        """Stop the server and close its sockets / ptys (idempotent)."""
+        loop = self._loop
+        if loop is not None and loop.is_running():
+            if self._server is not None:
+                fut = asyncio.run_coroutine_threadsafe(self._server.shutdown(), loop)
+                try:
+                    fut.result(5.0)
+                except Exception:  # noqa: BLE001 - stopping anyway
+                    pass
+            loop.call_soon_threadsafe(loop.stop)
+        if self._thread is not None:
+            self._thread.join(5.0)
+        if self._relay is not None:
+            self._relay.close()
+        self._server = None
+
+    def __enter__(self) -> ModbusEmulatorServer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        loop = self._loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(loop)
+        try:
+            loop.run_until_complete(self._listen())
+        except BaseException as exc:  # noqa: BLE001 - reported to start()
+            self._error = exc
+            self._ready.set()
+            loop.close()
+            return
+        self._ready.set()
+        loop.run_forever()
+        loop.run_until_complete(asyncio.sleep(0))
+        loop.close()
+
+    async def _listen(self) -> None:
+        context = _UnitsContext(self.units, self._lock)
+        if self.transport == "tcp":
+            server = _TcpServer(context, address=("127.0.0.1", self.port))
+        else:
+            server = _SerialServer(context, port=self._relay.server_path, baudrate=self.baudrate,
+                                   ignore_missing_devices=True)
+        server.emulator = self
+        await server.serve_forever(background=True)
+        if self.transport == "tcp":
+            if not server.transport:
+                raise RuntimeError(f"cannot listen on 127.0.0.1:{self.port}")
+            port = server.transport.sockets[0].getsockname()[1]
+            self.endpoint = f"127.0.0.1:{port}"
+        self._server = server
+
+    # -- faults --------------------------------------------------------------------
+    def outgoing(self, handler, frame: bytes) -> bytes:
+        """Called by pymodbus with each reply frame: send it through the unit's faults.
+
+        The frame goes out later from the event loop (after the injected latency), so a
+        slow unit does not block the server; pymodbus itself sends nothing.
+        """
+        unit_id = frame[0] if self.transport == "rtu" else frame[6] if len(frame) > 6 else 0
+        unit = self.units.get(unit_id)
+        faults = unit.faults if unit is not None and unit.faults is not None else self.faults
+        out = faults.reply(frame, crc_bytes=2 if self.transport == "rtu" else 0)
+        hang_up = faults.should_disconnect()
+        self._loop.call_later(faults.delay(), self._deliver, handler, out, hang_up)
+        return b""
+
+    def _deliver(self, handler, data: bytes | None, hang_up: bool) -> None:
+        transport = handler.transport
+        if transport is None or self.disconnected:
+            return
+        if data:
+            transport.write(data)
+        if hang_up:
+            if self.transport == "rtu":
+                self.disconnected = True
+                self._relay.hang_up()
+            else:
+                handler.close()
+
+
+class _PtyRelay:
+    """Two raw ptys joined master to master by a thread: the server opens `server_path`,
+    clients open `client_path`; `hang_up()` closes the client side like a pulled cable."""
+
+    def __init__(self):
+        self._server_master, self._server_slave = os.openpty()
+        self._client_master, self._client_slave = os.openpty()
+        for fd in (self._server_slave, self._client_slave):
+            tty.setraw(fd)
+        self.server_path = os.ttyname(self._server_slave)
+        self.client_path = os.ttyname(self._client_slave)
+        self._wake_r, self._wake_w = os.pipe()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._pump, name="modbus-rtu-relay", daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        peer = {self._server_master: self._client_master,
+                self._client_master: self._server_master}
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([*peer, self._wake_r], [], [])
+            except (OSError, ValueError):
+                return
+            if self._wake_r in ready:
+                return
+            for fd in ready:
+                try:
+                    data = os.read(fd, 4096)
+                    if data:
+                        os.write(peer[fd], data)
+                except OSError:
+                    return
+
+    def _halt(self) -> None:
+        self._stop.set()
+        os.write(self._wake_w, b"x")
+        if self._thread is not threading.current_thread():
+            self._thread.join(2.0)
+
+    def hang_up(self) -> None:
+        """Cut the client side (its reads fail from now on); the relay stops."""
+        if not self._stop.is_set():
+            self._halt()
+        for fd in (self._client_master, self._client_slave):
+            _close(fd)
+        self._client_master = self._client_slave = -1
+
+    def close(self) -> None:
+        """Stop relaying and close every pty fd (idempotent)."""
+        if not self._stop.is_set():
+            self._halt()
+        for fd in (self._server_master, self._server_slave, self._client_master,
+                   self._client_slave, self._wake_r, self._wake_w):
+            _close(fd)
+        self._server_master = self._server_slave = self._client_master = -1
+        self._client_slave = self._wake_r = self._wake_w = -1
+
+
+def _close(fd: int) -> None:
+    if fd >= 0:
+        try:
+            os.close(fd)
+        except OSError:
+            pass

@@ -1,0 +1,199 @@
+"""The emulators' own reader of a register-map file, and the register memory it lays out.
+
+Written apart from drivers.register_map on purpose (a driver bug cannot hide behind shared
+code). `DeviceLayout` parses the TOML; `RegisterFile` holds a unit's 16-bit words per
+table and answers reads and writes the way a device does: a Modbus exception code for an
+address outside the map or a write to a read-only register.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import tomllib
+
+# Modbus exception codes a unit answers with.
+ILLEGAL_FUNCTION = 1
+ILLEGAL_ADDRESS = 2
+ILLEGAL_VALUE = 3
+DEVICE_FAILURE = 4
+
+_FORMATS = {"uint16": ">H", "int16": ">h", "uint32": ">I", "int32": ">i", "float32": ">f"}
+
+
+class LayoutError(ValueError):
+    """A register-map file the emulator cannot use (the message names file and field)."""
+
+
+class Rejected(Exception):
+    """A request the unit answers with a Modbus exception (`code`)."""
+
+    def __init__(self, code: int, why: str):
+        self.code = code
+        super().__init__(f"exception {code}: {why}")
+
+
+@dataclass(frozen=True)
+class Field:
+    """Where a named value lives and how it is coded."""
+
+    name: str
+    table: str
+    address: int
+    fmt: str
+    scale: float
+    writable: bool
+    low: float
+    high: float
+
+    @property
+    def width(self) -> int:
+        """Registers the value occupies."""
+        return struct.calcsize(self.fmt) // 2
+
+    def span(self) -> range:
+        """The register addresses the value occupies."""
+        return range(self.address, self.address + self.width)
+
+
+@dataclass
+class DeviceLayout:
+    """A register map as the emulator sees it."""
+
+    source: str
+    swap_words: bool
+    fields: dict[str, Field]
+    commands: dict[str, int]
+    bits: dict[str, int]
+    faults: dict[str, tuple[int, str]]
+    ranges_w: tuple[float, ...] = field(default_factory=tuple)
+
+    @classmethod
+    def read(cls, path: str | Path) -> DeviceLayout:
+        """Parse a map file; LayoutError on anything the emulator cannot serve."""
+        path = Path(path)
+        try:
+            doc = tomllib.loads(path.read_text())
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise LayoutError(f"{path}: {exc}") from None
+        src = str(path)
+        order = doc.get("word_order")
+        if order not in ("big", "little"):
+            raise LayoutError(f"{src}: word_order must be big or little, got {order!r}")
+        try:
+            fields = {n: _field(n, spec) for n, spec in doc.get("registers", {}).items()}
+            faults = {n: (int(s["code"]), str(s["text"]))
+                      for n, s in doc.get("fault_codes", {}).items()}
+            ranges = tuple(float(r) for r in doc.get("gain_ranges", {}).get("full_scale_w", ()))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LayoutError(f"{src}: bad register map entry: {exc!r}") from None
+        return cls(src, order == "little", fields, dict(doc.get("commands", {})),
+                   dict(doc.get("status_bits", {})), faults, ranges)
+
+    def need(self, fields: tuple[str, ...], commands: tuple[str, ...],
+             bits: tuple[str, ...], faults: tuple[str, ...]) -> None:
+        """LayoutError naming the first thing the emulated device needs and the map lacks."""
+        for kind, names, have in (("register", fields, self.fields),
+                                  ("command", commands, self.commands),
+                                  ("status bit", bits, self.bits),
+                                  ("fault code", faults, self.faults)):
+            for name in names:
+                if name not in have:
+                    raise LayoutError(f"{self.source}: the map has no {kind} {name!r}")
+
+    def to_words(self, name: str, value: float) -> list[int]:
+        """Engineering value -> the words stored in the registers."""
+        f = self.fields[name]
+        raw = value * f.scale
+        if f.fmt != ">f":
+            raw = int(round(raw))
+            bits = struct.calcsize(f.fmt) * 8
+            lo, hi = (0, 2**bits - 1) if f.fmt.isupper() else (-(2 ** (bits - 1)),
+                                                                 2 ** (bits - 1) - 1)
+            raw = min(max(raw, lo), hi)  # a device register saturates rather than wraps
+        packed = struct.pack(f.fmt, raw)
+        words = [packed[i] << 8 | packed[i + 1] for i in range(0, len(packed), 2)]
+        return words[::-1] if self.swap_words else words
+
+    def from_words(self, name: str, words: list[int]) -> float:
+        """The words stored in the registers -> engineering value."""
+        f = self.fields[name]
+        ordered = words[::-1] if self.swap_words else words
+        packed = bytes(b for w in ordered for b in (w >> 8, w & 0xFF))
+        return struct.unpack(f.fmt, packed)[0] / f.scale
+
+
+def _field(name: str, spec: dict) -> Field:
+    kind = spec["type"]
+    if kind not in _FORMATS:
+        raise ValueError(f"register {name}: unknown type {kind!r}")
+    table = spec["table"]
+    if table not in ("holding", "input"):
+        raise ValueError(f"register {name}: unknown table {table!r}")
+    scale = float(spec.get("scale", 1.0))
+    if not scale > 0:
+        raise ValueError(f"register {name}: scale must be > 0")
+    return Field(name, table, int(spec["address"]), _FORMATS[kind], scale,
+                 spec.get("access", "r") == "rw", float(spec.get("min", -math.inf)),
+                 float(spec.get("max", math.inf)))
+
+
+class RegisterFile:
+    """A unit's register memory: words per (table, address), per the layout.
+
+    `read` and `write` raise Rejected for an address the map does not cover, or a write
+    touching a read-only register; they move words only (the device decides what they mean).
+    """
+
+    def __init__(self, layout: DeviceLayout):
+        self.layout = layout
+        self.words: dict[tuple[str, int], int] = {}
+        self.owner: dict[tuple[str, int], Field] = {}
+        for f in layout.fields.values():
+            for addr in f.span():
+                key = (f.table, addr)
+                if key in self.owner:
+                    raise LayoutError(f"{layout.source}: {f.name} overlaps "
+                                      f"{self.owner[key].name} at {f.table} {addr}")
+                self.owner[key] = f
+                self.words[key] = 0
+
+    def fields_in(self, table: str, address: int, count: int) -> list[Field]:
+        """The fields a request touches (Rejected if an address is not in the map)."""
+        touched: list[Field] = []
+        for addr in range(address, address + count):
+            f = self.owner.get((table, addr))
+            if f is None:
+                raise Rejected(ILLEGAL_ADDRESS, f"{table} register {addr} is not in the map")
+            if f not in touched:
+                touched.append(f)
+        return touched
+
+    def read(self, table: str, address: int, count: int) -> list[int]:
+        """Stored words of a range."""
+        self.fields_in(table, address, count)
+        return [self.words[(table, a)] for a in range(address, address + count)]
+
+    def write(self, address: int, values: list[int]) -> list[Field]:
+        """Store words into holding registers; returns the fields touched."""
+        touched = self.fields_in("holding", address, len(values))
+        for f in touched:
+            if not f.writable:
+                raise Rejected(ILLEGAL_ADDRESS, f"register {f.name} is read-only")
+        for offset, word in enumerate(values):
+            self.words[("holding", address + offset)] = word & 0xFFFF
+        return touched
+
+    def get(self, name: str) -> float:
+        """Engineering value of a field."""
+        f = self.layout.fields[name]
+        return self.layout.from_words(name, [self.words[(f.table, a)] for a in f.span()])
+
+    def set(self, name: str, value: float) -> None:
+        """Store an engineering value into a field (the device's own update)."""
+        f = self.layout.fields[name]
+        for addr, word in zip(f.span(), self.layout.to_words(name, value), strict=True):
+            self.words[(f.table, addr)] = word
