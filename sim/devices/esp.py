@@ -15,7 +15,7 @@ import math
 import re
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Mapping
 
 from sim.devices.faults import FaultInjector, FaultSpec
@@ -150,6 +150,7 @@ class EspEmulator:
         self.model = model
         self.version = f"{model} Version 3.0.2 (emulated)"
         self.errors: deque[tuple[int, int]] = deque(maxlen=10)
+        self.received: Counter[str] = Counter()  # commands executed, by mnemonic
         self._lock = threading.RLock()
         self._stopping = threading.Event()
         self._server = PtyServer(
@@ -217,6 +218,7 @@ class EspEmulator:
         handler = getattr(self, f"_cmd_{cmd.lower()}", None)
         if handler is None:
             raise _Fail(6)
+        self.received[cmd + (question or "")] += 1
         query = question is not None or cmd in QUERY_ONLY
         if cmd in QUERY_ONLY and param:
             raise _Fail(7)

@@ -1,0 +1,76 @@
+"""Fixtures: emulators on real ptys and drivers connected to them (stopped after each test)."""
+
+import math
+
+import pytest
+
+from drivers.esp import EspController
+from drivers.pm100 import Pm100
+from sim.devices.esp import EspEmulator
+from sim.devices.faults import FaultSpec
+from sim.devices.motion import VirtualClock
+from sim.devices.photodiode import ConstantPower
+from sim.devices.pm100 import Pm100Emulator
+
+AXES = {
+    1: {"limits_deg": (-95.0, 95.0), "speed_deg_s": 20.0, "accel_deg_s2": 80.0},
+    2: {"limits_deg": (-170.0, 170.0), "speed_deg_s": 30.0, "accel_deg_s2": 120.0},
+}
+
+
+@pytest.fixture
+def make_esp():
+    """make_esp(time_scale=inf, faults=None, axes=AXES) -> started EspEmulator."""
+    started = []
+
+    def make(time_scale=math.inf, faults=None, axes=None, seed=0):
+        emu = EspEmulator(VirtualClock(time_scale), axes or AXES,
+                          faults=FaultSpec(**faults) if faults else None, seed=seed)
+        emu.start()
+        started.append(emu)
+        return emu
+
+    yield make
+    for emu in started:
+        emu.stop()
+        assert emu.server.handler_errors == []
+
+
+@pytest.fixture
+def esp_pair(make_esp):
+    """make(time_scale, faults, timeout_s, retries) -> (emulator, controller)."""
+    controllers = []
+
+    def make(time_scale=math.inf, faults=None, timeout_s=0.3, retries=2, axes=None):
+        emu = make_esp(time_scale, faults, axes)
+        ctl = EspController(emu.endpoint, timeout_s=timeout_s, retries=retries, name="esp")
+        controllers.append(ctl)
+        return emu, ctl
+
+    yield make
+    for ctl in controllers:
+        ctl.close()
+
+
+@pytest.fixture
+def pm_pair():
+    """make(power_w, faults, timeout_s, retries, detector) -> (emulator, driver)."""
+    opened = []
+
+    def make(power_w=2e-6, faults=None, timeout_s=0.3, retries=2, detector=None, source=None):
+        emu = Pm100Emulator(source or ConstantPower(power_w),
+                            faults=FaultSpec(**faults) if faults else None,
+                            seed=3, detector=detector)
+        emu.start()
+        opened.append(emu)
+        drv = Pm100(emu.endpoint, timeout_s=timeout_s, retries=retries, name="pm100")
+        opened.append(drv)
+        return emu, drv
+
+    yield make
+    for thing in reversed(opened):
+        if isinstance(thing, Pm100Emulator):
+            thing.stop()
+            assert thing.server.handler_errors == []
+        else:
+            thing.close()
