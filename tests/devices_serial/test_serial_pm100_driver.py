@@ -1,0 +1,219 @@
+"""PM100 driver against its emulator over a real pty: SCPI commands, errors, timeouts, faults."""
+
+import time
+
+import numpy as np
+import pytest
+
+from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
+from sim.devices.faults import FaultInjector, FaultSpec
+
+QUIET = {"read_noise_fraction": 1e-3, "dark_current_a": 0.0, "bandwidth_hz": 0.0}
+
+
+def inject(emu, **spec):
+    emu.server.faults = FaultInjector(FaultSpec(**spec))
+
+
+def raw(drv, line):
+    return drv.transport.exchange(line)
+
+
+def test_identity_and_sensor(pm_pair):
+    emu, pm = pm_pair()
+    assert pm.idn.startswith("THORLABS,PM100D,")
+    s = pm.sensor()
+    assert (s.name, s.type, s.flags & 1, s.flags & 32) == ("S121C", 1, 1, 32)
+    assert raw(pm, "SYST:SENSOR:IDN?") == raw(pm, "system:sensor:idn?")
+
+
+def test_configure_and_read_back(pm_pair):
+    emu, pm = pm_pair()
+    pm.configure(wavelength_nm=850.0, averaging=16, range_w=1e-4)
+    assert (pm.wavelength_nm, pm.averaging, pm.range_w) == (850.0, 16, 1e-4)
+    assert (emu.wavelength_nm, emu.averaging, emu.autorange) == (850.0, 16, False)
+    pm.configure(632.8, 1, None)
+    assert pm.range_w is None and emu.autorange
+    assert pm.wavelength_limits_nm() == (400.0, 1100.0)
+    with pytest.raises(ValueError, match="averaging"):
+        pm.configure(632.8, 0, None)
+
+
+def test_read_autoranges_and_matches_the_true_power(pm_pair):
+    emu, pm = pm_pair(power_w=3.3e-6, detector=QUIET)
+    reading = pm.read()
+    assert isinstance(reading, Reading)
+    assert reading.range_w == 1e-5 and not reading.saturated
+    assert reading.power_w == pytest.approx(3.3e-6, abs=5e-8)
+    assert pm.measure() == pytest.approx(3.3e-6, abs=5e-8)
+
+
+def test_fixed_range_saturates(pm_pair):
+    emu, pm = pm_pair(power_w=5e-6, detector=QUIET)
+    pm.configure(632.8, 1, 1e-6)
+    reading = pm.read()
+    assert reading.saturated and reading.range_w == 1e-6
+    assert reading.power_w == pytest.approx(1.1e-6)  # the ADC clips at 1.1 x full scale
+
+
+def test_averaging_reduces_noise_as_one_over_sqrt_n(pm_pair):
+    emu, pm = pm_pair(power_w=5e-6, detector={"read_noise_fraction": 5e-3})
+    pm.configure(632.8, 1, 1e-5)
+    single = np.std([pm.read().power_w for _ in range(150)])
+    pm.averaging = 16
+    averaged = np.std([pm.read().power_w for _ in range(150)])
+    assert single / averaged == pytest.approx(4.0, rel=0.35)
+
+
+def test_zero_removes_the_dark_offset(pm_pair):
+    dark = {**QUIET, "dark_current_a": 1e-8}  # 1e-8 A / ~0.42 A/W = 2.4e-8 W offset
+    emu, pm = pm_pair(power_w=0.0, detector=dark)
+    pm.configure(632.8, 64, 1e-6)
+    assert pm.read().power_w == pytest.approx(1e-8 / emu.photodiode.responsivity_a_w(632.8),
+                                              rel=0.05)
+    pm.zero()
+    assert pm.zero_offset_w() > 2e-8
+    assert abs(pm.read().power_w) < 2e-9
+
+
+def test_init_fetch_and_conf(pm_pair):
+    emu, pm = pm_pair(power_w=1e-6, detector=QUIET)
+    assert pm.query("CONF?") == ["POW"]
+    with pytest.raises(DeviceError, match="-230: Data corrupt or stale"):
+        pm.query("CONF:POW;FETC?")
+    (value,) = pm.query("INIT;FETC?")
+    assert float(value) == pytest.approx(1e-6, abs=5e-8)  # 5 sigma of the read noise
+    assert pm.query("FETCH?") == [value]  # fetch returns the same, stored reading
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        "SENS:CORR:WAV 633",
+        "SENSE:CORRECTION:WAVELENGTH 633",
+        "sens:corr:wav 6.33e2",
+        "Sense:Corr:Wavelength 633.0",
+        "CORR:WAV 633",  # [SENSe] is optional
+        ":SENS:CORR:WAV MIN;:SENS:CORR:WAV 633",
+    ],
+)
+def test_short_long_and_case_forms(pm_pair, message):
+    emu, pm = pm_pair()
+    pm.query(message)
+    assert emu.wavelength_nm == 633.0
+
+
+def test_compound_header_path_rule(pm_pair):
+    emu, pm = pm_pair()
+    assert pm.query("SENS:CORR:WAV 700;WAV?;:SENS:POW:RANG:AUTO 0;AUTO?") == [
+        "7.000000E+02", "0"]
+    assert pm.query("MEAS:POW?;SYST:ERR?")[1] == '0,"No error"'  # root fallback
+
+
+@pytest.mark.parametrize(
+    "message, code",
+    [
+        ("SENS:CORR:WAV 300", -222),  # below the sensor's range
+        ("SENS:CORR:WAV abc", -104),
+        ("SENS:CORR:WAV", -109),
+        ("SENS:CORR:WAV 633,1", -108),
+        ("SENS:AVER:COUN 2.5", -222),
+        ("SENS:POW:RANG:AUTO MAYBE", -104),
+        ("SENS:CORR:WAV? LOUD", -224),
+        ("SENS:BOGUS 1", -113),
+        ("SENSORS:CORR:WAV 633", -113),  # neither short nor long form
+        ("*IDN? 3", -108),
+        ("SENS::CORR:WAV 633", -102),
+    ],
+)
+def test_scpi_error_codes(pm_pair, message, code):
+    emu, pm = pm_pair()
+    with pytest.raises(DeviceError) as err:
+        pm.query(message)
+    assert err.value.code == code and err.value.device == "pm100"
+
+
+def test_error_queue_overflow_and_cls(pm_pair):
+    emu, pm = pm_pair()
+    for _ in range(12):
+        pm.transport.send("BOGUS")
+    time.sleep(0.05)
+    errors = pm.errors()
+    assert len(errors) == 10 and errors[-1] == (-350, "Queue overflow")
+    pm.transport.send("BOGUS")
+    pm.query("*CLS")
+    assert pm.errors() == []
+
+
+def test_overlong_line_and_invalid_character(pm_pair):
+    emu, pm = pm_pair()
+    pm.transport.send("SENS:CORR:WAV " + "1" * 600)
+    assert pm.errors() == [(-363, "Input buffer overrun")]
+    pm.transport._serial.write(b"\xff\xfe\n")
+    assert pm.errors() == [(-101, "Invalid character")]
+
+
+def test_rst_restores_defaults(pm_pair):
+    emu, pm = pm_pair()
+    pm.configure(900.0, 8, 1e-3)
+    pm.query("*RST")
+    assert (pm.wavelength_nm, pm.averaging, pm.range_w) == (632.8, 1, None)
+
+
+def test_source_failure_is_a_device_error_not_a_crash(pm_pair):
+    emu, pm = pm_pair(source=lambda: float("nan"))
+    with pytest.raises(DeviceError, match="-230"):
+        pm.read()
+
+
+def test_stalled_reply_timeout_is_named_and_bounded(pm_pair):
+    emu, pm = pm_pair(timeout_s=0.1, retries=1)
+    inject(emu, stall_prob=1.0)
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeout, match="pm100: timeout after 0.1 s waiting for :READ"):
+        pm.read()
+    assert time.monotonic() - t0 == pytest.approx(0.2, abs=0.1)
+
+
+def test_lost_setting_status_is_checked_not_resent(pm_pair):
+    emu, pm = pm_pair(timeout_s=0.1, retries=3)
+    inject(emu, stall_prob=0.3, seed=4)
+    for wl in (500.0, 600.0, 700.0, 800.0, 900.0):
+        try:
+            pm.wavelength_nm = wl
+        except DriverError:
+            continue
+        assert emu.wavelength_nm == wl
+    assert emu.server.faults.counts["stall"] > 0
+
+
+def test_corrupted_and_dropped_replies(pm_pair):
+    emu, pm = pm_pair(retries=0, detector=QUIET)
+    inject(emu, corrupt_prob=1.0)
+    with pytest.raises(ProtocolError, match="pm100: garbled reply"):
+        pm.read()
+    inject(emu, corrupt_prob=0.5, seed=9)
+    pm.transport.retries = 8
+    assert all(r.range_w == 1e-5 for r in (pm.read() for _ in range(10)))
+    pm.transport.retries = 0
+    inject(emu, drop_prob=1.0, seed=1)
+    caught = 0
+    for _ in range(30):
+        try:
+            pm.read()
+        except (ProtocolError, DeviceError):
+            caught += 1
+    assert caught > 0 and emu.server.faults.counts["drop"] == 30
+
+
+def test_latency_and_disconnect(pm_pair):
+    emu, pm = pm_pair(timeout_s=0.5)
+    inject(emu, latency_s=0.05)
+    t0 = time.monotonic()
+    pm.read()
+    assert time.monotonic() - t0 >= 0.05
+    inject(emu, disconnect_after=1)
+    pm.read()
+    with pytest.raises(DriverError, match="pm100: serial connection .* lost"):
+        for _ in range(3):
+            pm.read()
