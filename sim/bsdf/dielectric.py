@@ -1,0 +1,162 @@
+"""RoughDielectric: Walter et al. 2007 rough dielectric interface, reflection and transmission.
+
+Light may arrive from either side. Internally each pair is mirrored so that wi is on the upper
+side, with relative index e = eta_o / eta_i (eta or 1/eta) and e - 1 kept exact, so an
+index-matched interface (eta = 1 +- 1e-12) keeps full accuracy. Transmission is Walter's eq. 21
+(radiance BTDF, with the eta_o^2 factor)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim.bsdf.fresnel import dielectric_reflectance_transmittance
+from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
+from sim.bsdf.vectors import dot
+
+LOBES = ("reflection", "transmission")
+
+
+class RoughDielectric(MicrofacetModel):
+    """Rough dielectric interface, eta = n_interior / n_exterior, +z on the exterior side.
+
+    lobes restricts the model to one lobe: the other is then neither evaluated nor sampled.
+    At eta == 1 exactly the transmission is a Dirac delta along -wi: eval and pdf give 0 for
+    it, sample() returns wo = -wi with its finite weight and pdf = inf.
+    """
+
+    def __init__(
+        self,
+        distribution: str = "ggx",
+        alpha=0.394,
+        eta: float = 1.51,
+        masking: str = "separable",
+        sampling: str | None = None,
+        lobes: tuple[str, ...] = LOBES,
+        multiple_scattering: bool = False,
+    ):
+        if not (isinstance(eta, (int, float)) and math.isfinite(eta) and eta > 0):
+            raise ValueError(f"eta must be a finite number > 0, got {eta!r}")
+        lobes = tuple(lobes)
+        if not lobes or any(lobe not in LOBES for lobe in lobes) or len(set(lobes)) != len(lobes):
+            raise ValueError(f"lobes must be a non-empty subset of {LOBES}, got {lobes!r}")
+        self.eta = float(eta)
+        self.lobes = lobes
+        self.reflection = "reflection" in lobes
+        self.transmission = "transmission" in lobes
+        super().__init__(distribution, alpha, masking, sampling, multiple_scattering)
+
+    def __repr__(self) -> str:
+        return (f"RoughDielectric({self.distribution!r}, eta={self.eta}, masking={self.masking!r}, "
+                f"sampling={self.sampling!r}, lobes={self.lobes})")
+
+    # --- frame: wi on the upper side ---------------------------------------------------------
+
+    def _mirror(self, wi, wo):
+        """Mirror pairs with wi below the surface; return wi, wo, e, e - 1 and the z signs."""
+        sign = np.where(wi[..., 2] < 0, -1.0, 1.0)
+        flip = np.stack([np.ones_like(sign), np.ones_like(sign), sign], axis=-1)
+        eta = self.eta
+        e = np.where(sign < 0, 1.0 / eta, eta)
+        em1 = np.where(sign < 0, (1.0 - eta) / eta, eta - 1.0)
+        return wi * flip, None if wo is None else wo * flip, e, em1, flip
+
+    def _lobe_masks(self, wi, wo):
+        ci = wi[..., 2]
+        co = wo[..., 2]
+        live = (ci > COS_HORIZON) & (np.abs(co) > COS_HORIZON)
+        return live & (co > 0) & self.reflection, live & (co < 0) & self.transmission
+
+    def _transmission_normal(self, wi, wo, em1):
+        """Walter's transmission half vector m (m.z > 0), |wi + e wo|^2, and whether valid."""
+        v = (wi + wo) + em1[..., None] * wo
+        n2 = dot(v, v)
+        m = -v / np.sqrt(np.where(n2 > 0, n2, 1.0))[..., None]
+        m = m * np.where(m[..., 2] < 0, -1.0, 1.0)[..., None]
+        valid = (n2 > 0) & (m[..., 2] > 0) & (dot(wi, m) > 0) & (dot(wo, m) < 0)
+        return m, n2, valid
+
+    # --- eval -------------------------------------------------------------------------------
+
+    def _eval(self, wi, wo):
+        wi, wo, e, em1, _ = self._mirror(wi, wo)
+        refl, trans = self._lobe_masks(wi, wo)
+        f = np.zeros(wi.shape[:-1])
+        if refl.any():
+            f[refl] = self._eval_reflection(wi[refl], wo[refl], e[refl])
+        if trans.any():
+            f[trans] = self._eval_transmission(wi[trans], wo[trans], e[trans], em1[trans])
+        return f
+
+    def _eval_reflection(self, wi, wo, e):
+        m = half_vector(wi, wo)
+        fr, _ = dielectric_reflectance_transmittance(dot(wi, m), e)
+        return 0.25 * fr * self.distribution.D(m) * self._g2_over_cosines(wi, wo)
+
+    def _eval_transmission(self, wi, wo, e, em1):
+        m, n2, valid = self._transmission_normal(wi, wo, em1)
+        im = dot(wi, m)
+        _, ft = dielectric_reflectance_transmittance(im, e)
+        val = (im * -dot(wo, m) * e * e * ft * self.distribution.D(m)
+               * self._g2_over_cosines(wi, wo) / np.where(valid, n2, 1.0))
+        return np.where(valid, val, 0.0)
+
+    # --- pdf --------------------------------------------------------------------------------
+
+    def _pdf(self, wi, wo):
+        wi, wo, e, em1, _ = self._mirror(wi, wo)
+        refl, trans = self._lobe_masks(wi, wo)
+        p = np.zeros(wi.shape[:-1])
+        if refl.any():
+            wi_r, wo_r = wi[refl], wo[refl]
+            m = half_vector(wi_r, wo_r)
+            choice = self._choice(dot(wi_r, m), e[refl])[0]
+            p[refl] = choice * self._normal_pdf(wi_r, m) / (4.0 * dot(wo_r, m))
+        if trans.any():
+            wi_t, wo_t, e_t = wi[trans], wo[trans], e[trans]
+            m, n2, valid = self._transmission_normal(wi_t, wo_t, em1[trans])
+            choice = self._choice(dot(wi_t, m), e_t)[1]
+            val = (choice * self._normal_pdf(wi_t, m) * e_t * e_t * -dot(wo_t, m)
+                   / np.where(valid, n2, 1.0))
+            p[trans] = np.where(valid, val, 0.0)
+        return p
+
+    def _choice(self, cos_im, e):
+        """Probabilities of choosing reflection and transmission at a facet (F, 1 - F or 1)."""
+        fr, ft = dielectric_reflectance_transmittance(cos_im, e)
+        if self.reflection and self.transmission:
+            return fr, ft
+        return np.ones_like(fr), np.ones_like(ft)
+
+    # --- sample -----------------------------------------------------------------------------
+
+    def _sample(self, wi, u):
+        wi, _, e, em1, flip = self._mirror(wi, None)
+        m = self._sample_normal(wi, u[:, 0], u[:, 1])
+        c = dot(wi, m)
+        fr, ft = dielectric_reflectance_transmittance(c, e)
+        if self.reflection and self.transmission:
+            reflected = u[:, 2] < fr
+        else:
+            reflected = np.full(c.shape, self.reflection)
+        # refraction with e - 1 kept exact: wo = -wi / e + (c - e cos_t) / e m, where
+        # c - e cos_t = (1 - e^2) / (c + e cos_t)
+        s2 = np.maximum((1.0 - c) * (1.0 + c), 0.0)
+        e_ct = np.sqrt(np.maximum((e - np.sqrt(s2)) * (e + np.sqrt(s2)), 0.0))
+        gap = -em1 * (e + 1.0) / np.where(c + e_ct > 0, c + e_ct, 1.0)  # c - e cos_t
+        wo_t = (-wi + gap[:, None] * m) / e[:, None]
+        wo = np.where(reflected[:, None], reflect(wi, m), wo_t)
+        lobe_p = np.where(reflected, fr, ft) if self.reflection and self.transmission else 1.0
+        lobe_f = 1.0 if self.reflection and self.transmission else np.where(reflected, fr, ft)
+        co = wo[:, 2]
+        ok = (c > 0) & (m[:, 2] > 0) & (wi[:, 2] > COS_HORIZON) & (np.abs(co) > COS_HORIZON)
+        ok &= np.where(reflected, co > 0, (co < 0) & (ft > 0))
+        jac = np.where(reflected, 1.0 / (4.0 * np.abs(c)),
+                       e * e_ct / np.where(gap != 0, gap * gap, 1.0))  # e^2 |o.m| / (i.m + e o.m)^2
+        pdf = lobe_p * self._normal_pdf(wi, m) * jac
+        pdf = np.where(~reflected & (gap == 0), np.inf, pdf)  # eta == 1: Dirac transmission
+        weight = lobe_f * self._sampling_weight(wi, wo, m)
+        ok &= pdf > 0
+        return (np.where(ok[:, None], wo * flip, 0.0), np.where(ok, weight, 0.0),
+                np.where(ok, pdf, 0.0))

@@ -1,0 +1,310 @@
+"""Microfacet normal distributions (Beckmann, GGX, Phong): D, exact Smith Lambda and G1, sampling.
+
+Methods take local-frame unit vectors (..., 3), +z the macro-surface normal, and broadcast
+over leading dimensions; alpha_x and alpha_y may be arrays that broadcast the same way.
+A direction w below the surface (w.z < 0) is treated through its mirror image (w.z -> |w.z|),
+i.e. the surface seen from w's own side."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.special import erfc, erfinv
+
+from sim.bsdf.vectors import dot
+
+SQRT_PI = math.sqrt(math.pi)
+#: Beckmann a*Lambda(a) switches from the closed form to a continued fraction at this a.
+BECKMANN_CF_FROM = 2.0
+#: Terms of the erfc continued fraction; enough for full float64 accuracy for a >= 2.
+BECKMANN_CF_TERMS = 60
+
+
+def beckmann_a_lambda(a: np.ndarray) -> np.ndarray:
+    """a * Lambda(a) for the Beckmann Smith function, accurate to ~1e-16 for every a >= 0.
+
+    Lambda(a) = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2 cancels for large a; there
+    1 - a sqrt(pi) erfcx(a) = t / (a + t) with t the tail of the erfc continued fraction.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    small = a < BECKMANN_CF_FROM
+    a_s = np.where(small, a, 0.0)
+    direct = 0.5 * (np.exp(-a_s * a_s) / SQRT_PI - a_s * erfc(a_s))
+    a_l = np.where(small, BECKMANN_CF_FROM, a)
+    t = np.zeros_like(a_l)
+    for k in range(BECKMANN_CF_TERMS, 0, -1):
+        t = 0.5 * k / (a_l + t)
+    with np.errstate(over="ignore", invalid="ignore"):
+        tail = np.exp(-a_l * a_l) * t / (2.0 * SQRT_PI * (a_l + t))
+    tail = np.where(np.isfinite(a_l), tail, 0.0)
+    return np.where(small, direct, tail)
+
+
+def _positive(alpha, what: str) -> np.ndarray:
+    a = np.asarray(alpha, dtype=np.float64)
+    if not np.all(np.isfinite(a) & (a > 0)):
+        raise ValueError(f"{what} must be finite and > 0, got {alpha!r}")
+    return a
+
+
+class Distribution:
+    """Common part of the anisotropic slope-space distributions; subclasses give D and Lambda."""
+
+    name = ""
+
+    def __init__(self, alpha_x, alpha_y=None):
+        self.alpha_x = _positive(alpha_x, "alpha")
+        self.alpha_y = self.alpha_x if alpha_y is None else _positive(alpha_y, "alpha_y")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(alpha_x={self.alpha_x}, alpha_y={self.alpha_y})"
+
+    def scaled(self, k) -> Distribution:
+        """The same distribution with both roughnesses multiplied by k (array or scalar)."""
+        return type(self)(self.alpha_x * k, self.alpha_y * k)
+
+    def _tangent_q(self, w: np.ndarray) -> np.ndarray:
+        """(alpha_x w_x)^2 + (alpha_y w_y)^2 = (alpha tan theta cos theta)^2 along w."""
+        return (self.alpha_x * w[..., 0]) ** 2 + (self.alpha_y * w[..., 1]) ** 2
+
+    def _slope_q(self, m: np.ndarray) -> np.ndarray:
+        """(m_x / alpha_x)^2 + (m_y / alpha_y)^2."""
+        return (m[..., 0] / self.alpha_x) ** 2 + (m[..., 1] / self.alpha_y) ** 2
+
+    def cos_lambda(self, w: np.ndarray) -> np.ndarray:
+        """|w.z| Lambda(w): finite (alpha_w sin / 2 for GGX) even at exactly grazing w."""
+        raise NotImplementedError
+
+    def D(self, m: np.ndarray) -> np.ndarray:
+        """Microfacet normal density D(m) per unit solid angle (0 for m.z <= 0)."""
+        raise NotImplementedError
+
+    def Lambda(self, w: np.ndarray) -> np.ndarray:
+        """Smith Lambda(w); +inf at exactly grazing w."""
+        c = np.abs(w[..., 2])
+        cl = self.cos_lambda(w)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(c > 0, cl / np.where(c > 0, c, 1.0), np.inf)
+
+    def G1(self, w: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """Smith masking G1(w, m) = chi+(w.m / w.z) / (1 + Lambda(w))."""
+        c = np.abs(w[..., 2])
+        facing = dot(w, m) * w[..., 2] > 0
+        den = c + self.cos_lambda(w)
+        return np.where(facing & (den > 0), c / np.where(den > 0, den, 1.0), 0.0)
+
+    def pdf_normal(self, m: np.ndarray) -> np.ndarray:
+        """Density of sample_normal over solid angle: D(m) max(m.z, 0)."""
+        return self.D(m) * np.maximum(m[..., 2], 0.0)
+
+    def pdf_visible(self, w: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """Density of sample_visible: G1(w, m) max(0, w.m) D(m) / w.z (w taken on its side)."""
+        w = _upper(w)
+        c = w[..., 2]
+        wm = dot(w, m)
+        den = c + self.cos_lambda(w)
+        ok = (wm > 0) & (den > 0)
+        return np.where(ok, wm * self.D(m) / np.where(ok, den, 1.0), 0.0)
+
+    def sample_normal(self, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        """Normals with density D(m) m.z over solid angle, from uniforms u1, u2 in [0, 1)."""
+        r = self._unit_slope_radius(np.asarray(u1, dtype=np.float64))
+        phi = 2.0 * math.pi * np.asarray(u2, dtype=np.float64)
+        return _normal_from_slopes(self.alpha_x * r * np.cos(phi), self.alpha_y * r * np.sin(phi))
+
+    def sample_visible(self, w: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        """Normals distributed as the visible normals D_w(m) seen from w (Heitz 2014/2018)."""
+        raise NotImplementedError
+
+    def _unit_slope_radius(self, u: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+
+def _upper(w: np.ndarray) -> np.ndarray:
+    """w mirrored to the upper hemisphere (z -> |z|)."""
+    return np.concatenate([w[..., :2], np.abs(w[..., 2:3])], axis=-1)
+
+
+def _normal_from_slopes(sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    """Unit normal (-sx, -sy, 1) / |.| of a facet with slopes (sx, sy)."""
+    inv = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
+    return np.stack([-sx * inv, -sy * inv, inv], axis=-1)
+
+
+def _stretched_frame(w: np.ndarray, ax, ay):
+    """cos, sin of theta and cos, sin of phi of w stretched to unit roughness (ax wx, ay wy, wz)."""
+    w = _upper(w)
+    sx = ax * w[..., 0]
+    sy = ay * w[..., 1]
+    r = np.hypot(sx, sy)
+    n = np.hypot(r, w[..., 2])
+    has_phi = r > 0
+    r1 = np.where(has_phi, r, 1.0)
+    return w[..., 2] / n, r / n, np.where(has_phi, sx / r1, 1.0), np.where(has_phi, sy / r1, 0.0)
+
+
+class GGX(Distribution):
+    """Trowbridge-Reitz (GGX) distribution, anisotropic, with its closed-form Smith Lambda."""
+
+    name = "ggx"
+
+    def D(self, m):
+        mz = m[..., 2]
+        den = mz * mz + self._slope_q(m)
+        return np.where(mz > 0, 1.0 / (math.pi * self.alpha_x * self.alpha_y * den * den), 0.0)
+
+    def cos_lambda(self, w):
+        q = self._tangent_q(w)
+        c = np.abs(w[..., 2])
+        return q / (2.0 * (np.sqrt(c * c + q) + c))
+
+    def _unit_slope_radius(self, u):
+        return np.sqrt(u / (1.0 - u))
+
+    def sample_visible(self, w, u1, u2):
+        u1 = np.asarray(u1, dtype=np.float64)
+        u2 = np.asarray(u2, dtype=np.float64)
+        w = _upper(w)
+        vh = np.stack([self.alpha_x * w[..., 0], self.alpha_y * w[..., 1], w[..., 2]], axis=-1)
+        vh = vh / np.sqrt(dot(vh, vh))[..., None]
+        lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
+        has = lensq > 0
+        inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
+        t1 = np.stack([np.where(has, -vh[..., 1] * inv, 1.0),
+                       np.where(has, vh[..., 0] * inv, 0.0), np.zeros_like(lensq)], axis=-1)
+        t2 = np.cross(vh, t1)
+        r = np.sqrt(u1)
+        phi = 2.0 * math.pi * u2
+        p1 = r * np.cos(phi)
+        p2 = r * np.sin(phi)
+        s = 0.5 * (1.0 + vh[..., 2])
+        p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
+        p3 = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
+        nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
+        ne = np.stack([self.alpha_x * nh[..., 0], self.alpha_y * nh[..., 1],
+                       np.maximum(nh[..., 2], 0.0)], axis=-1)
+        return ne / np.sqrt(dot(ne, ne))[..., None]
+
+
+class Beckmann(Distribution):
+    """Beckmann distribution, anisotropic, with the exact erfc-based Smith Lambda."""
+
+    name = "beckmann"
+
+    #: Newton-bisection iterations of the visible-slope inversion (converges to ~1e-15).
+    VISIBLE_ITERATIONS = 40
+
+    def D(self, m):
+        mz = m[..., 2]
+        pos = mz > 0
+        mz1 = np.where(pos, mz, 1.0)
+        expo = -self._slope_q(m) / (mz1 * mz1) - 4.0 * np.log(mz1)
+        return np.where(pos, np.exp(expo) / (math.pi * self.alpha_x * self.alpha_y), 0.0)
+
+    def cos_lambda(self, w):
+        r = np.sqrt(self._tangent_q(w))
+        c = np.abs(w[..., 2])
+        with np.errstate(divide="ignore"):
+            a = np.where(r > 0, c / np.where(r > 0, r, 1.0), np.inf)
+        return r * beckmann_a_lambda(a)
+
+    def _unit_slope_radius(self, u):
+        return np.sqrt(-np.log1p(-u))
+
+    def sample_visible(self, w, u1, u2):
+        u1 = np.asarray(u1, dtype=np.float64)
+        u2 = np.asarray(u2, dtype=np.float64)
+        cos_t, sin_t, cos_p, sin_p = _stretched_frame(w, self.alpha_x, self.alpha_y)
+        x, y = self._visible_unit_slopes(cos_t, sin_t, u1, u2)
+        sx = cos_p * x - sin_p * y
+        sy = sin_p * x + cos_p * y
+        return _normal_from_slopes(self.alpha_x * sx, self.alpha_y * sy)
+
+    def _visible_unit_slopes(self, cos_t, sin_t, u1, u2):
+        """Slopes of unit-roughness visible normals for incidence theta along +x.
+
+        The CDF of the x slope, in the variable b = erf(x), is
+        C(b) ~ cos_t (1 + b) + sin_t exp(-erfinv(b)^2) / sqrt(pi), for b up to erf(cot_t);
+        it is inverted by safeguarded Newton iteration in b (after Jakob's Mitsuba sampler).
+        """
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cot_t = np.where(sin_t > 0, cos_t / np.where(sin_t > 0, sin_t, 1.0), np.inf)
+        # both sides multiplied by cos_t so that grazing incidence (tan = inf) stays finite
+        erf_cot = 1.0 - erfc(cot_t)
+        norm = cos_t * (1.0 + erf_cot) + sin_t * np.exp(-cot_t * cot_t) / SQRT_PI
+        lo = np.full_like(u1, -1.0)
+        hi = erf_cot.copy()
+        b = 0.5 * (lo + hi)
+        target = u1 * norm
+        for _ in range(self.VISIBLE_ITERATIONS):
+            x = erfinv(b)
+            value = cos_t * (1.0 + b) + sin_t * np.exp(-x * x) / SQRT_PI - target
+            deriv = cos_t - x * sin_t  # d/db, using d exp(-x^2)/db = -x sqrt(pi)
+            hi = np.where(value > 0, b, hi)
+            lo = np.where(value > 0, lo, b)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = b - value / deriv
+            inside = np.isfinite(step) & (step > lo) & (step < hi)
+            b = np.where(inside, step, 0.5 * (lo + hi))
+        x = erfinv(np.clip(b, -1.0, 1.0))
+        y = erfinv(2.0 * u2 - 1.0)
+        return np.where(np.isfinite(x), x, 0.0), np.where(np.isfinite(y), y, 0.0)
+
+
+class Phong(Distribution):
+    """Phong distribution, exponent alpha_p = 2 / alpha^2 - 2 (Walter's mapping from Beckmann).
+
+    alpha is the Beckmann-equivalent roughness; Lambda and G1 are Beckmann's at that alpha
+    (Walter 2007, sec. 5.2), so the projected-area identity holds only approximately.
+    Isotropic only; no visible-normal sampling (no exact Smith G1 to build it on).
+    """
+
+    name = "phong"
+
+    def __init__(self, alpha_x, alpha_y=None):
+        super().__init__(alpha_x, alpha_y)
+        if alpha_y is not None and not np.array_equal(self.alpha_x, self.alpha_y):
+            raise ValueError("phong is isotropic: alpha must be a single value")
+        self.exponent = 2.0 / self.alpha_x**2 - 2.0
+        self._beckmann = Beckmann(self.alpha_x)
+
+    def D(self, m):
+        mz = m[..., 2]
+        pos = mz > 0
+        p = self.exponent
+        with np.errstate(over="ignore"):
+            val = (p + 2.0) / (2.0 * math.pi) * np.exp(p * np.log(np.where(pos, mz, 1.0)))
+        return np.where(pos, val, 0.0)
+
+    def cos_lambda(self, w):
+        return self._beckmann.cos_lambda(w)
+
+    def sample_normal(self, u1, u2):
+        u1 = np.asarray(u1, dtype=np.float64)
+        phi = 2.0 * math.pi * np.asarray(u2, dtype=np.float64)
+        log_cos = np.log1p(-u1) / (self.exponent + 2.0)  # 1 - u1 is uniform in (0, 1]
+        cos_t = np.exp(log_cos)
+        sin_t = np.sqrt(-np.expm1(2.0 * log_cos))
+        return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
+
+    def sample_visible(self, w, u1, u2):
+        raise ValueError("phong has no visible-normal sampling (its G1 is Beckmann's by Walter's "
+                         "mapping, not its own exact Smith G1); use sampling='walter'")
+
+
+DISTRIBUTIONS = {cls.name: cls for cls in (Beckmann, GGX, Phong)}
+
+
+def make_distribution(name: str, alpha) -> Distribution:
+    """Build a distribution by name: 'beckmann', 'ggx' or 'phong'; alpha a float or a pair."""
+    try:
+        cls = DISTRIBUTIONS[name]
+    except (KeyError, TypeError):
+        raise ValueError(
+            f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {name!r}") from None
+    if isinstance(alpha, (tuple, list)):
+        if len(alpha) != 2:
+            raise ValueError(f"alpha must be a float or (alpha_x, alpha_y), got {alpha!r}")
+        return cls(alpha[0], alpha[1])
+    return cls(alpha)

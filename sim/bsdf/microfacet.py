@@ -1,0 +1,136 @@
+"""What rough dielectrics and conductors share: parameters, the normal-sampling schemes and their
+densities, masking, input handling and the multiple-scattering switch.
+
+Sampling schemes: 'visible' draws normals from the visible-normal distribution D_wi(m);
+'walter' draws D(m) m.z with Walter's widened roughness (1.2 - 0.2 sqrt|cos i|) alpha."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.bsdf.distributions import make_distribution
+from sim.bsdf.masking import check_masking, g2_over_cosines
+from sim.bsdf.vectors import directions, dot
+
+SAMPLINGS = ("visible", "walter")
+#: Directions with |cos theta| at or below this count as grazing: eval returns 0 there (the
+#: cosine-weighted value is 0; f itself may diverge for correlated masking at double grazing).
+COS_HORIZON = 1e-100
+
+
+def walter_widening(cos_i: np.ndarray) -> np.ndarray:
+    """Walter's (2007, eq. 47) roughness scale for sampling: 1.2 - 0.2 sqrt|cos i|."""
+    return 1.2 - 0.2 * np.sqrt(np.abs(cos_i))
+
+
+class MicrofacetModel:
+    """Base of RoughDielectric and RoughConductor: distribution, masking, sampling, MS switch."""
+
+    def __init__(self, distribution, alpha, masking, sampling, multiple_scattering):
+        self.distribution = make_distribution(distribution, alpha)
+        self.masking = check_masking(masking)
+        if sampling is None:
+            sampling = "walter" if self.distribution.name == "phong" else "visible"
+        if sampling not in SAMPLINGS:
+            raise ValueError(f"sampling must be one of {SAMPLINGS}, got {sampling!r}")
+        if sampling == "visible" and self.distribution.name == "phong":
+            raise ValueError("sampling='visible' is not available for phong; use 'walter'")
+        self.sampling = sampling
+        self.multiple_scattering = bool(multiple_scattering)
+        self._random_walk = None
+        if self.multiple_scattering:
+            from sim.bsdf.multiple_scattering import RandomWalkBSDF
+
+            self._random_walk = RandomWalkBSDF(self)
+
+    # --- public contract -------------------------------------------------------------
+
+    def eval(self, wi, wo, rng: np.random.Generator | None = None) -> np.ndarray:
+        """BSDF value f(wi, wo) in 1/sr, no cosine factor; wi, wo (..., 3) broadcast."""
+        if self._random_walk is not None:
+            return self._random_walk.eval(wi, wo, self._need_rng(rng))
+        return self._flat(self._eval, wi, wo)
+
+    def pdf(self, wi, wo, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Density over solid angle of wo of the directions sample() returns (valid ones)."""
+        if self._random_walk is not None:
+            return self._random_walk.pdf(wi, wo, self._need_rng(rng))
+        return self._flat(self._pdf, wi, wo)
+
+    def sample(self, wi, u, rng: np.random.Generator | None = None):
+        """(wo, weight, pdf) from uniforms u (..., 3); weight = f |cos o| / pdf.
+
+        A failed sample (facet turned away, direction on the wrong side of the surface,
+        total internal reflection in a transmission-only model) has wo = 0, weight 0, pdf 0.
+        """
+        if self._random_walk is not None:
+            return self._random_walk.sample(wi, u, self._need_rng(rng))
+        u = np.asarray(u, dtype=np.float64)
+        if u.ndim == 0 or u.shape[-1] != 3:
+            raise ValueError(f"u must have shape (..., 3), got {u.shape}")
+        (wi,) = directions(wi)
+        wi, u = np.broadcast_arrays(wi, u)
+        shape = wi.shape[:-1]
+        wo, weight, pdf = self._sample(wi.reshape(-1, 3), u.reshape(-1, 3))
+        return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
+
+    # --- shared pieces -----------------------------------------------------------------
+
+    def _need_rng(self, rng):
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError("multiple_scattering=True needs rng= (a numpy.random.Generator)")
+        return rng
+
+    @staticmethod
+    def _flat(fn, wi, wo):
+        wi, wo = directions(wi, wo)
+        shape = wi.shape[:-1]
+        return fn(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(shape)
+
+    def _g2_over_cosines(self, wi, wo):
+        """G2(wi, wo) / (|cos i| |cos o|), finite at grazing (facet sides checked by callers)."""
+        d = self.distribution
+        ci = np.abs(wi[..., 2])
+        co = np.abs(wo[..., 2])
+        return g2_over_cosines(self.masking, ci, co, d.cos_lambda(wi), d.cos_lambda(wo))
+
+    def _sampling_distribution(self, wi_up):
+        return self.distribution.scaled(walter_widening(wi_up[..., 2]))
+
+    def _normal_pdf(self, wi_up, m):
+        """Density over solid angle of the normal m drawn for wi_up (wi_up.z >= 0)."""
+        if self.sampling == "visible":
+            return self.distribution.pdf_visible(wi_up, m)
+        return self._sampling_distribution(wi_up).pdf_normal(m)
+
+    def _sample_normal(self, wi_up, u1, u2):
+        if self.sampling == "visible":
+            return self.distribution.sample_visible(wi_up, u1, u2)
+        return self._sampling_distribution(wi_up).sample_normal(u1, u2)
+
+    def _sampling_weight(self, wi_up, wo, m):
+        """f |cos o| / pdf without the Fresnel and lobe-choice factors, for normal m.
+
+        visible: G2 / G1(wi); walter: D / D_s * (wi.m) G2 / (|cos i| m.z).
+        """
+        ci = wi_up[..., 2]
+        co = np.abs(wo[..., 2])
+        g2oc = self._g2_over_cosines(wi_up, wo)
+        if self.sampling == "visible":
+            return co * (ci + self.distribution.cos_lambda(wi_up)) * g2oc
+        d_s = self._sampling_distribution(wi_up).D(m)
+        ok = (d_s > 0) & (m[..., 2] > 0)
+        d_s = np.where(ok, d_s, 1.0)
+        mz = np.where(ok, m[..., 2], 1.0)
+        return np.where(ok, self.distribution.D(m) / d_s * dot(wi_up, m) * co * g2oc / mz, 0.0)
+
+
+def reflect(w: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Mirror direction of w about the normal m."""
+    return 2.0 * dot(w, m)[..., None] * m - w
+
+
+def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """Reflection half vector, unit, on the side of wi + wo."""
+    h = wi + wo
+    return h / np.sqrt(dot(h, h))[..., None]
