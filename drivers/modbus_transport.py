@@ -103,16 +103,19 @@ class ModbusLink:
         with self._lock:
             try:
                 reply = fn(*args, **kwargs)
-            except ModbusIOException as exc:
-                if "transaction id" in str(exc) or "device id" in str(exc):
-                    raise ProtocolError(f"{device}: {what}: mismatched reply ({exc})") from None
-                raise DeviceTimeout(device, what, self.timeouts.reply_s) from None
             except ConnectionException as exc:
                 self._client.close()
                 raise DriverError(f"{device}: connection to {self.endpoint} failed or lost "
                                   f"({exc})") from None
             except ModbusException as exc:
-                raise ProtocolError(f"{device}: {what}: {exc}") from None
+                if self.transport == "tcp":  # a late or partial reply must not answer the next
+                    self._client.close()
+                if isinstance(exc, ModbusIOException) and not (
+                    "transaction id" in str(exc) or "device id" in str(exc)
+                ):
+                    raise DeviceTimeout(device, what, self.timeouts.reply_s) from None
+                raise ProtocolError(f"{device}: {what}: garbled or mismatched reply "
+                                    f"({exc})") from None
         if isinstance(reply, ExceptionResponse) or reply.isError():
             code = getattr(reply, "exception_code", 0)
             raise DeviceError(device, f"Modbus exception {code:02d}",

@@ -1,0 +1,94 @@
+"""Fixtures: Modbus emulators (TCP on 127.0.0.1, RTU on a real pty) with drivers connected."""
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from drivers.modbus_detector import ModbusDetector
+from drivers.modbus_stage import ModbusStage
+from drivers.modbus_transport import ModbusTimeouts
+from sim.devices.faults import FaultSpec
+from sim.devices.modbus_detector import ModbusDetectorEmulator
+from sim.devices.modbus_server import ModbusEmulatorServer
+from sim.devices.modbus_stage import ModbusStageEmulator
+from sim.devices.motion import VirtualClock
+from sim.devices.photodiode import ConstantPower
+
+MAPS = Path(__file__).resolve().parents[2] / "examples" / "registermaps"
+STAGE_MAP = MAPS / "stepper-drive.toml"
+DETECTOR_MAP = MAPS / "photodiode-adc.toml"
+STAGE_UNIT, DETECTOR_UNIT, SECOND_STAGE_UNIT = 1, 2, 3
+
+
+def with_word_order(src: Path, order: str, folder: Path) -> Path:
+    """A copy of a shipped map with its word_order replaced."""
+    text = src.read_text().replace('word_order = "big"', f'word_order = "{order}"')
+    out = folder / f"{src.stem}-{order}.toml"
+    out.write_text(text)
+    return out
+
+
+def endpoint_args(server: ModbusEmulatorServer) -> tuple[str, str, dict]:
+    """(transport, port_or_host, keyword args) for a driver of this server."""
+    if server.transport == "tcp":
+        host, port = server.endpoint.rsplit(":", 1)
+        return "tcp", host, {"tcp_port": int(port)}
+    return "rtu", server.endpoint, {}
+
+
+@dataclass
+class Rig:
+    """Emulators on one endpoint and the drivers talking to them."""
+
+    server: ModbusEmulatorServer
+    stage_emu: ModbusStageEmulator
+    second_emu: ModbusStageEmulator
+    detector_emu: ModbusDetectorEmulator
+    stage: ModbusStage
+    second: ModbusStage
+    detector: ModbusDetector
+    stage_map: Path
+    detector_map: Path
+
+
+@pytest.fixture
+def rig(tmp_path):
+    """make(transport, word_order, time_scale, stage_faults, server_faults, source, reply_s,
+    read_retries, detector) -> Rig; everything is stopped after the test."""
+    made = []
+
+    def make(transport="tcp", word_order="big", time_scale=math.inf, stage_faults=None,
+             server_faults=None, detector_faults=None, source=None, reply_s=0.2,
+             read_retries=2, detector=None):
+        stage_map = with_word_order(STAGE_MAP, word_order, tmp_path)
+        detector_map = with_word_order(DETECTOR_MAP, word_order, tmp_path)
+        clock = VirtualClock(time_scale)
+        stage_emu = ModbusStageEmulator(clock, stage_map, (-95.0, 95.0), 20.0, 80.0,
+                                        faults=stage_faults and FaultSpec(**stage_faults))
+        second_emu = ModbusStageEmulator(clock, stage_map, (-170.0, 170.0), 30.0, 120.0)
+        detector_emu = ModbusDetectorEmulator(
+            source or ConstantPower(1e-5), detector_map,
+            faults=detector_faults and FaultSpec(**detector_faults), seed=3, detector=detector)
+        server = ModbusEmulatorServer(
+            transport, {STAGE_UNIT: stage_emu, DETECTOR_UNIT: detector_emu,
+                        SECOND_STAGE_UNIT: second_emu},
+            faults=server_faults and FaultSpec(**server_faults))
+        server.start()
+        kind, where, kw = endpoint_args(server)
+        timeouts = ModbusTimeouts(reply_s=reply_s)
+        common = dict(timeouts=timeouts, read_retries=read_retries, **kw)
+        rig = Rig(server, stage_emu, second_emu, detector_emu,
+                  ModbusStage(kind, where, STAGE_UNIT, stage_map, name="sample", **common),
+                  ModbusStage(kind, where, SECOND_STAGE_UNIT, stage_map, name="arm", **common),
+                  ModbusDetector(kind, where, DETECTOR_UNIT, detector_map, name="det", **common),
+                  stage_map, detector_map)
+        made.append(rig)
+        return rig
+
+    yield make
+    for r in made:
+        for drv in (r.stage, r.second, r.detector):
+            drv.close()
+        r.server.stop()
