@@ -195,24 +195,11 @@ def stage_targets(plan: Plan, cfg: InstrumentConfig) -> tuple[np.ndarray, np.nda
     st = stage_angles(pts["theta_i_deg"], pts["theta_o_deg"], pts["phi_o_deg"],
                       pts["side"] == "transmission", pts["sample_azimuth_deg"])
     targets = np.stack([st.sample_deg, st.arm_deg, st.azimuth_deg, st.elevation_deg], axis=1)
-    keep = np.ones(len(pts), bool)
     where = str(plan.path) if plan.path else "plan"
-    for j, role in enumerate(MOTION_ROLES):
-        if role in cfg.axes:
-            lim = cfg.axes[role].limits_deg
-            moved = into_limits(targets[:, j], lim) if role == "arm" else targets[:, j]
-            bad = ~((moved >= lim[0] - 1e-9) & (moved <= lim[1] + 1e-9))
-            targets[:, j] = np.where(bad, targets[:, j], moved)
-            why = [f"{role} {targets[k, j]:.6g} deg outside travel [{lim[0]:g}, {lim[1]:g}]"
-                   for k in np.flatnonzero(bad)[:1]]
-        else:
-            bad = np.abs(targets[:, j]) > 1e-9
-            why = [f"needs a {role!r} axis (it would be at {targets[k, j]:.6g} deg); "
-                   f"the instrument {cfg.name!r} has none" for k in np.flatnonzero(bad)[:1]]
-            targets[:, j] = 0.0
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise PlanError(f"{where}: {_describe(pts[k])}: {why[0]}")
+    if "arm" in cfg.axes:
+        moved = into_limits(targets[:, 1], cfg.axes["arm"].limits_deg)
+        targets[:, 1] = np.where(np.isnan(moved), targets[:, 1], moved)
+    keep = np.ones(len(pts), bool)
     for k in range(len(pts)):
         reason = forbidden_reason(cfg, targets[k, 1], targets[k, 3])
         if reason is None:
@@ -223,6 +210,20 @@ def stage_targets(plan: Plan, cfg: InstrumentConfig) -> tuple[np.ndarray, np.nda
         keep[k] = False
     if not keep.any():
         raise PlanError(f"{where}: every point is in a forbidden zone")
+    for j, role in enumerate(MOTION_ROLES):
+        if role in cfg.axes:
+            lo, hi = cfg.axes[role].limits_deg
+            bad = keep & ~((targets[:, j] >= lo - 1e-9) & (targets[:, j] <= hi + 1e-9))
+            why = f"outside travel [{lo:g}, {hi:g}]"
+        else:
+            bad = keep & (np.abs(targets[:, j]) > 1e-9)
+            why = f"needs a {role!r} axis; the instrument {cfg.name!r} has none"
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise PlanError(f"{where}: {_describe(pts[k])}: {role} at {targets[k, j]:.6g} deg "
+                            f"{why}")
+        if role not in cfg.axes:
+            targets[:, j] = 0.0
     return targets, keep
 
 
@@ -241,6 +242,13 @@ def _fixed_position(cfg: InstrumentConfig, kind: str, where: str) -> np.ndarray:
 
 # -- ordering and estimates -------------------------------------------------------------------
 
+def profile_seconds(distance: Any, speed: float, accel: float) -> np.ndarray:
+    """Rest-to-rest trapezoidal move time: v/a + d/v if d >= v^2/a, else 2 sqrt(d/a)."""
+    d = np.abs(np.asarray(distance, dtype=np.float64))
+    return np.where(d * accel >= speed * speed, speed / accel + d / speed,
+                    2.0 * np.sqrt(d / accel))
+
+
 def move_times(targets: np.ndarray, cfg: InstrumentConfig, start: np.ndarray | None = None
                ) -> np.ndarray:
     """Seconds of each move (axes together: the slowest sets it) plus settling, from `start`."""
@@ -253,11 +261,8 @@ def move_times(targets: np.ndarray, cfg: InstrumentConfig, start: np.ndarray | N
         if role not in cfg.axes:
             continue
         ax = cfg.axes[role]
-        v, a, d = ax.speed_deg_s, ax.accel_deg_s2, delta[:, j]
-        trapezoid = d * a >= v * v
-        t = np.where(trapezoid, v / a + d / v, 2.0 * np.sqrt(d / a))
-        total = np.maximum(total, t)
-        settle = np.maximum(settle, np.where(d > 0, ax.settle_s, 0.0))
+        total = np.maximum(total, profile_seconds(delta[:, j], ax.speed_deg_s, ax.accel_deg_s2))
+        settle = np.maximum(settle, np.where(delta[:, j] > 0, ax.settle_s, 0.0))
     return total + settle
 
 
@@ -325,10 +330,23 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
     else:
         passes, nesting = naive, ()
     readings = _assemble(_interleave(passes, plan, fixed), plan, targets, fixed)
+    _check_sweeps(readings, where)
     naive_readings = _assemble(_interleave(naive, plan, fixed), plan, targets, fixed)
     return Schedule(readings, estimate_seconds(readings, cfg, plan),
                     estimate_seconds(naive_readings, cfg, plan), nesting,
                     int(len(keep) - keep.sum()))
+
+
+def _check_sweeps(readings: np.ndarray, where: str) -> None:
+    """No arm move may sweep through the source (arm = 0 mod 360) on its way."""
+    arm = readings["arm_deg"]
+    lo, hi = np.minimum(arm[:-1], arm[1:]), np.maximum(arm[:-1], arm[1:])
+    crossing = np.ceil(lo / 360.0) <= np.floor(hi / 360.0)
+    if crossing.any():
+        k = int(np.flatnonzero(crossing)[0])
+        raise PlanError(f"{where}: between readings {k} and {k + 1} the arm would sweep through "
+                        f"the source ({arm[k]:g} -> {arm[k + 1]:g} deg); give the arm travel "
+                        f"limits that exclude 0, e.g. limits_deg = [6, 354]")
 
 
 def _assemble(items: list[tuple[str, int, int]], plan: Plan, targets: np.ndarray,

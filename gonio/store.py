@@ -34,10 +34,12 @@ READING_DTYPE = np.dtype([
     ("index", "i8"), ("kind", "U6"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
     ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
     ("theta_i_deg", "f8"), ("phi_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
+    ("plan_theta_i_deg", "f8"), ("plan_theta_o_deg", "f8"), ("plan_phi_o_deg", "f8"),
     ("power_w", "f8"), ("range_w", "f8"), ("saturated", "?"), ("t_s", "f8"), ("flags", "U64"),
 ])
 """Fields of `Run.readings()`: angles in degrees (stage angles as the stages reported them,
-sample-frame spherical angles computed from those), power and range in W, t_s seconds since
+sample-frame spherical angles computed from those; plan_* the nominal plan angles, NaN for
+dark and beam readings), power and range in W, t_s seconds since
 the run's first start (wall clock), flags a comma-separated list (e.g. "retried")."""
 
 

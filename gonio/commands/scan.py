@@ -1,0 +1,66 @@
+"""`gonio scan PLAN`: run a plan on an instrument (real, emulated, or mixed) into a run directory.
+
+The run directory is the last line printed on stdout, whatever the outcome.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from gonio.errors import GonioError
+
+
+def _sim_names(value: str) -> list[str]:
+    return [v for v in value.split(",") if v]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `scan` verb."""
+    p = subparsers.add_parser("scan", help="run a scan plan and record it",
+                              description=__doc__)
+    p.add_argument("plan", nargs="?", help="plan TOML file (not with --resume)")
+    p.add_argument("--instrument", metavar="CFG",
+                   help="instrument config (default: the plan's `instrument`)")
+    p.add_argument("--sim", nargs="?", const=True, default=None, type=_sim_names,
+                   metavar="NAMES",
+                   help="emulate every device, or only the named devices/roles "
+                        "(comma-separated, e.g. --sim detector)")
+    p.add_argument("--out", default="runs", metavar="DIR",
+                   help="where run directories go (default: ./runs)")
+    p.add_argument("--resume", metavar="RUN", help="continue an interrupted run")
+    p.add_argument("--no-plot", action="store_true", help="do not write plot.png")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _plot(run_dir) -> None:
+    try:
+        from calibration.plot import plot_run
+    except ImportError:
+        from gonio.quicklook import write_quicklook as plot_run
+    plot_run(run_dir)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Start or resume the scan; exit 0 when it completed."""
+    from gonio.runner import new_scan, resume_scan
+
+    progress = False if args.no_progress else None
+    if args.resume:
+        if args.plan:
+            raise GonioError("give either PLAN or --resume RUN, not both")
+        result = resume_scan(args.resume, args.instrument, args.sim, progress=progress)
+    else:
+        if not args.plan:
+            raise GonioError("a PLAN file is needed (or --resume RUN)")
+        result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
+                          progress=progress)
+    outcome = result.outcome
+    if not args.no_plot and outcome.done:
+        _plot(result.path)
+    if outcome.status != "completed":
+        print(f"gonio scan: run {outcome.status} after {outcome.done} readings: "
+              f"{outcome.reason}", file=sys.stderr)
+    print(result.path, flush=True)
+    return {"completed": 0, "aborted": 130}.get(outcome.status, 1)

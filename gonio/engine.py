@@ -1,0 +1,223 @@
+"""The scan engine: for each scheduled reading move the axes together, wait, settle, read, record.
+
+Failures: a device that reports an error (DeviceError) is not retried; a timeout, garbled reply
+or lost connection is retried (the whole point: absolute moves and reads are safe to repeat)
+up to `retries` times, after which the run stops cleanly with the reason recorded. Ctrl-C once
+pauses at the next point (resume or abort at the prompt); a second Ctrl-C aborts at once; an
+abort stops every axis.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drivers.base import DeviceError, DriverError
+from gonio.geometry import sample_angles
+from gonio.instrument import Instrument, real_seconds
+from gonio.plan import MOTION_ROLES, Plan, profile_seconds
+from gonio.progress import Progress
+from gonio.store import RunWriter
+
+WAIT_FACTOR = 2.0  # motion timeout = WAIT_FACTOR x profile time + WAIT_MARGIN_S
+WAIT_MARGIN_S = 5.0
+RETRY_PAUSE_S = 0.05
+
+
+class StopRun(Exception):
+    """The run cannot go on; the message is the reason recorded in meta.json."""
+
+
+class Aborted(Exception):
+    """The user aborted the run."""
+
+
+@dataclass
+class Outcome:
+    """How a run (session) ended."""
+
+    status: str  # completed | aborted | failed
+    reason: str
+    done: int  # readings stored in total
+
+
+def ask_resume() -> bool:
+    """Default pause prompt on the terminal: True to resume, False to abort."""
+    while True:
+        answer = input("paused: [r]esume or [a]bort? ").strip().lower()
+        if answer in ("r", "resume", ""):
+            return True
+        if answer in ("a", "abort"):
+            return False
+
+
+class PauseControl:
+    """Ctrl-C handling: the first SIGINT asks for a pause at the next point, the second aborts."""
+
+    def __init__(self, prompt: Callable[[], bool] = ask_resume,
+                 notify: Callable[[str], Any] = print):
+        self.prompt, self.notify = prompt, notify
+        self.pause_requested = False
+        self._previous: Any = None
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        self.pause_requested = True
+        self.notify("pausing after this point (Ctrl-C again to abort)")
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def __enter__(self) -> PauseControl:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def checkpoint(self, on_pause: Callable[[str], None]) -> None:
+        """Between points: if a pause was asked for, prompt; raise Aborted to abort."""
+        if not self.pause_requested:
+            return
+        on_pause("paused")
+        try:
+            resume = self.prompt()
+        except (KeyboardInterrupt, EOFError):
+            resume = False
+        if not resume:
+            raise Aborted("aborted by the user")
+        self.pause_requested = False
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._on_sigint)
+        on_pause("running")
+
+
+class Engine:
+    """Runs the remaining readings of a schedule on an instrument into a run writer."""
+
+    def __init__(self, instrument: Instrument, plan: Plan, schedule: np.ndarray,
+                 writer: RunWriter, *, retries: int = 2, progress: Progress | None = None,
+                 control: PauseControl | None = None, t0_epoch: float | None = None):
+        self.inst, self.plan, self.schedule, self.writer = instrument, plan, schedule, writer
+        self.retries = retries
+        self.progress = progress
+        self.control = control or PauseControl()
+        self.t0 = t0_epoch if t0_epoch is not None else time.time()
+        self._commanded: dict[str, float | None] = {role: None for role in instrument.axes}
+        self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
+        cfg = instrument.config
+        self._settle = {role: cfg.axes[role].settle_s for role in instrument.axes}
+
+    # -- one reading ------------------------------------------------------------
+    def _wait_timeout(self, role: str, target: float) -> float:
+        ax = self.inst.config.axes[role]
+        profile = float(profile_seconds(target - self._reported[role], ax.speed_deg_s,
+                                        ax.accel_deg_s2))
+        return WAIT_FACTOR * real_seconds(self.inst, profile) + WAIT_MARGIN_S
+
+    def _move(self, row: np.void) -> list[str]:
+        """Start every axis that must move, then wait for each; returns the roles moved."""
+        targets = {role: float(row[f"{role}_deg"]) for role in self.inst.axes}
+        moved = [r for r, t in targets.items() if self._commanded[r] != t]
+        for role in moved:
+            self._commanded[role] = None  # unknown until the move is confirmed done
+            self.inst.axes[role].move_to(targets[role])
+        for role in moved:
+            self._reported[role] = self.inst.axes[role].wait(self._wait_timeout(role,
+                                                                                targets[role]))
+            self._commanded[role] = targets[role]
+        self.inst.last_positions.update(self._reported)
+        return moved
+
+    def _measure(self, row: np.void, flags: list[str]) -> dict[str, Any]:
+        moved = self._move(row)
+        pause = max((self._settle[r] for r in moved), default=0.0) + self.plan.dwell_s
+        if pause > 0:
+            time.sleep(real_seconds(self.inst, pause))
+        reading = self.inst.detector.read()
+        pos = self._reported
+        ang = sample_angles(pos["sample"], pos["arm"], pos["elevation"], pos["azimuth"])
+        return {
+            "index": int(row["index"]), "kind": str(row["kind"]), "side": str(row["side"]),
+            "repeat": int(row["repeat"]), "point": int(row["point"]),
+            **{f"{r}_deg": pos[r] for r in MOTION_ROLES},
+            "theta_i_deg": float(ang.theta_i_deg), "phi_i_deg": float(ang.phi_i_deg),
+            "theta_o_deg": float(ang.theta_o_deg), "phi_o_deg": float(ang.phi_o_deg),
+            "plan_theta_i_deg": float(row["theta_i_deg"]),
+            "plan_theta_o_deg": float(row["theta_o_deg"]),
+            "plan_phi_o_deg": float(row["phi_o_deg"]),
+            "power_w": float(reading.power_w), "range_w": float(reading.range_w),
+            "saturated": bool(reading.saturated), "t_s": time.time() - self.t0,
+            "flags": ",".join(flags),
+        }
+
+    def _with_retries(self, row: np.void) -> dict[str, Any]:
+        where = f"reading {int(row['index'])} ({row['kind']})"
+        flags: list[str] = []
+        for attempt in range(self.retries + 1):
+            try:
+                return self._measure(row, flags)
+            except DeviceError as exc:
+                raise StopRun(f"{where}: {exc}") from exc
+            except (DriverError, OSError) as exc:
+                last = exc
+                if "retried" not in flags:
+                    flags.append("retried")
+                self._commanded = dict.fromkeys(self._commanded)
+                if attempt < self.retries:
+                    time.sleep(RETRY_PAUSE_S)
+        raise StopRun(f"{where}: {last} (after {self.retries + 1} attempts)")
+
+    # -- the run ----------------------------------------------------------------
+    def _prepare(self) -> None:
+        cfg = self.inst.config
+        det = cfg.detector
+        try:
+            self.inst.detector.configure(det.wavelength_nm, self.plan.averaging or det.averaging,
+                                         det.range_w)
+            for role, ax in cfg.axes.items():
+                if ax.home:
+                    self.inst.axes[role].home()
+                    self.inst.axes[role].wait(WAIT_FACTOR * real_seconds(self.inst, 600.0)
+                                              + WAIT_MARGIN_S)
+        except DriverError as exc:
+            raise StopRun(f"preparing the instrument: {exc}") from exc
+
+    def run(self) -> Outcome:
+        """Measure every reading not yet stored; always leaves meta.json with the outcome."""
+        status, reason = "completed", ""
+        try:
+            with self.control:
+                self._prepare()
+                for row in self.schedule[self.writer.next_index:]:
+                    self.control.checkpoint(self._paused)
+                    record = self._with_retries(row)
+                    self.writer.append(record)
+                    if self.progress:
+                        self.progress.update(record)
+        except StopRun as exc:
+            status, reason = "failed", str(exc)
+        except (Aborted, KeyboardInterrupt) as exc:
+            status, reason = "aborted", str(exc) or "aborted by the user (Ctrl-C)"
+        except BaseException as exc:
+            self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
+            raise
+        self._finish(status, reason)
+        return Outcome(status, reason, self.writer.next_index)
+
+    def _paused(self, status: str) -> None:
+        self.writer.set_status(status, "paused by the user" if status == "paused" else "")
+
+    def _finish(self, status: str, reason: str) -> None:
+        if status != "completed":
+            failed = self.inst.stop_all()
+            if failed:
+                reason += f"; could not stop: {'; '.join(failed)}"
+        if self.progress:
+            self.progress.close()
+        self.writer.set_status(status, reason)

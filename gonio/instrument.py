@@ -1,0 +1,144 @@
+"""Build an instrument (Axis and Detector drivers) from a validated config.
+
+The config names each device's protocol; this module is the one place that maps a protocol
+to its driver class, pushes the config's motion settings and travel limits to the devices,
+and closes everything again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from drivers.base import Axis, Detector, DriverError
+from gonio.config import AxisConfig, DeviceConfig, InstrumentConfig
+from gonio.errors import ConfigError
+
+
+@dataclass
+class Instrument:
+    """Live drivers for a config: axes by role, the detector, and how to close them.
+
+    time_scale: virtual seconds per real second of the devices (1 on a real bench; the
+    emulators' scale under --sim), so that settle and dwell waits shrink with it.
+    last_positions: the stage positions last reported, {role: deg} (what an emulated
+    detector sees when the stages are real).
+    """
+
+    config: InstrumentConfig
+    axes: dict[str, Axis]
+    detector: Detector
+    closers: list[Callable[[], None]] = field(default_factory=list)
+    time_scale: float = 1.0
+    last_positions: dict[str, float] = field(default_factory=dict)
+
+    def stop_all(self) -> list[str]:
+        """Ask every axis to stop; returns the errors of those that could not be told."""
+        failed = []
+        for role, axis in self.axes.items():
+            try:
+                axis.stop()
+            except (DriverError, OSError) as exc:
+                failed.append(f"{role}: {exc}")
+        return failed
+
+    def close(self) -> None:
+        """Close every device connection (errors while closing are ignored)."""
+        _close_all(self.closers)
+
+    def __enter__(self) -> Instrument:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _close_all(closers: list[Callable[[], None]]) -> None:
+    for close in reversed(closers):
+        with contextlib.suppress(Exception):
+            close()
+    closers.clear()
+
+
+def _modbus_kwargs(dev: DeviceConfig) -> dict[str, Any]:
+    from drivers.modbus_transport import ModbusTimeouts
+
+    kw: dict[str, Any] = {"name": dev.name, "timeouts": ModbusTimeouts(reply_s=dev.timeout_s)}
+    if dev.transport == "tcp":
+        return {**kw, "tcp_port": dev.tcp_port}
+    return {**kw, "baudrate": dev.baudrate}
+
+
+def _host(dev: DeviceConfig) -> str:
+    return str(dev.host if dev.transport == "tcp" else dev.port)
+
+
+def _open(dev: DeviceConfig, make: Callable[[], Any]) -> Any:
+    try:
+        return make()
+    except DriverError:
+        raise
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"devices.{dev.name}: cannot open {dev.protocol} at "
+                          f"{dev.endpoint}: {exc}") from None
+
+
+def _stage(dev: DeviceConfig, ax: AxisConfig, controllers: dict[str, Any],
+           closers: list[Callable[[], None]]) -> Axis:
+    """An Axis driver for a role, with the config's speed, acceleration and limits set."""
+    if dev.protocol == "esp":
+        if dev.name not in controllers:
+            esp = importlib.import_module("drivers.esp")
+            controllers[dev.name] = _open(dev, lambda: esp.EspController(
+                dev.port, baudrate=dev.baudrate, timeout_s=dev.timeout_s, name=dev.name))
+            closers.append(controllers[dev.name].close)
+        axis = controllers[dev.name].axis(ax.axis, name=f"{dev.name}.{ax.role}")
+        axis.speed_deg_s = ax.speed_deg_s
+        axis.accel_deg_s2 = ax.accel_deg_s2
+        axis.limits_deg = ax.limits_deg
+        return axis
+    stage_mod = importlib.import_module("drivers.modbus_stage")
+    stage = _open(dev, lambda: stage_mod.ModbusStage(
+        dev.transport, _host(dev), dev.unit, dev.register_map, **_modbus_kwargs(dev)))
+    closers.append(stage.close)
+    stage.set_motion(ax.speed_deg_s, ax.accel_deg_s2)
+    stage.set_limits(*ax.limits_deg)
+    return stage
+
+
+def _detector(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Detector:
+    if dev.protocol == "pm100":
+        pm100 = importlib.import_module("drivers.pm100")
+        det = _open(dev, lambda: pm100.Pm100(dev.port, baudrate=dev.baudrate,
+                                             timeout_s=dev.timeout_s, name=dev.name))
+    else:
+        mod = importlib.import_module("drivers.modbus_detector")
+        det = _open(dev, lambda: mod.ModbusDetector(
+            dev.transport, _host(dev), dev.unit, dev.register_map, **_modbus_kwargs(dev)))
+    closers.append(det.close)
+    return det
+
+
+def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrument:
+    """Open every device of the config and return the instrument (close it when done)."""
+    if not time_scale > 0:
+        raise ValueError(f"time_scale must be > 0 (or inf), got {time_scale!r}")
+    closers: list[Callable[[], None]] = []
+    controllers: dict[str, Any] = {}
+    try:
+        axes = {role: _stage(cfg.devices[ax.device], ax, controllers, closers)
+                for role, ax in cfg.axes.items()}
+        detector = _detector(cfg.devices[cfg.detector.device], closers)
+    except BaseException:
+        _close_all(closers)
+        raise
+    return Instrument(cfg, axes, detector, closers, time_scale=float(time_scale))
+
+
+def real_seconds(instrument: Instrument, seconds: float) -> float:
+    """Real seconds a device-time wait lasts on this instrument (0 when time is instant)."""
+    return 0.0 if math.isinf(instrument.time_scale) else seconds / instrument.time_scale

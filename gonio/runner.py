@@ -1,0 +1,131 @@
+"""Start or resume a scan: plan + config -> schedule -> (emulators) -> drivers -> engine -> store.
+
+What `gonio scan` does, as a function the tests and bench scripts call too. Validation of
+plan and config happens before any device is opened.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gonio.config import InstrumentConfig, load_config, parse_config
+from gonio.engine import Engine, Outcome, PauseControl
+from gonio.errors import PlanError, RunError
+from gonio.instrument import build_instrument
+from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan, positions
+from gonio.progress import Progress
+from gonio.store import RunWriter, open_run
+
+
+@dataclass
+class ScanResult:
+    """Where a scan went and how it ended."""
+
+    path: Path
+    outcome: Outcome
+
+
+def instrument_path(plan: Plan, instrument: str | Path | None) -> Path:
+    """--instrument, else the plan's own `instrument`, else a PlanError."""
+    if instrument is not None:
+        return Path(instrument)
+    if plan.instrument is None:
+        raise PlanError(f"{plan.path}: no instrument: give --instrument CFG or set "
+                        f"`instrument = \"...\"` in the plan")
+    return plan.instrument
+
+
+@contextmanager
+def _devices(cfg: InstrumentConfig, sim: list[str] | None | bool
+             ) -> Iterator[tuple[InstrumentConfig, float, list[str], dict[str, float]]]:
+    """The config to open (pointed at emulators when sim) and its time scale."""
+    if sim is False:
+        yield cfg, 1.0, [], {}
+        return
+    from gonio.simulate import simulation  # only --sim touches sim
+
+    with simulation(cfg, None if sim is True else sim) as s:
+        yield s.config, s.time_scale, s.devices, s.positions
+
+
+def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
+         sim: list[str] | None | bool, progress: bool | None, control: PauseControl | None
+         ) -> Outcome:
+    with _devices(cfg, sim) as (opened, scale, emulated, shared):
+        writer.start_session(sim=emulated, endpoints={n: d.endpoint for n, d in
+                                                      opened.devices.items()})
+        try:
+            inst = build_instrument(opened, scale)
+        except BaseException as exc:
+            writer.set_status("failed", f"opening the instrument: {exc}")
+            raise
+        with inst:
+            inst.last_positions = shared
+            bar = Progress(len(sched), writer.next_index, plan.name,
+                           disable=None if progress is None else not progress)
+            engine = Engine(inst, plan, sched.readings, writer, progress=bar, control=control,
+                            t0_epoch=writer.meta["t0_epoch"])
+            return engine.run()
+
+
+def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
+             sim: list[str] | bool = False, out: str | Path = "runs",
+             progress: bool | None = None, control: PauseControl | None = None) -> ScanResult:
+    """Validate plan and config, create a run directory and measure the plan into it.
+
+    sim: False (real devices), True (emulate every device) or a list of device / role names.
+    """
+    plan = load_plan(plan_path)
+    cfg_path = instrument_path(plan, instrument)
+    cfg = load_config(cfg_path)
+    sched = build_schedule(plan, cfg)
+    seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
+    meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
+            "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
+            "sim": sim if isinstance(sim, list) else bool(sim), "seeds": seeds,
+            "time_scale": cfg.sim.get("time_scale", 1.0) if sim is not False else 1.0,
+            "calibration": None, "t0_epoch": time.time()}
+    writer = RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw, cfg.raw, meta)
+    try:
+        return ScanResult(writer.path, _run(writer, plan, cfg, sched, sim, progress, control))
+    finally:
+        writer.close()
+
+
+def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
+                sim: list[str] | bool | None = None, progress: bool | None = None,
+                control: PauseControl | None = None) -> ScanResult:
+    """Continue a run after its last stored reading, with the plan and config it started with.
+
+    instrument: a config to use instead of the stored one (e.g. new endpoints); it must give
+    exactly the same schedule. sim: None = as the run was started.
+    """
+    run = open_run(run_dir)
+    plan = parse_plan(run.plan, run.path / "plan.toml")
+    stored = parse_config(run.config, run.path / "instrument.toml")
+    cfg = stored if instrument is None else load_config(instrument)
+    sched = build_schedule(plan, cfg)
+    if instrument is not None:
+        same = build_schedule(plan, stored)
+        if len(same) != len(sched) or not np.allclose(positions(same.readings),
+                                                      positions(sched.readings)):
+            raise RunError(f"{run.path}: {instrument} gives a different schedule than the "
+                           f"config the run started with; cannot resume on it")
+    if sim is None:
+        sim = run.meta.get("sim", False)
+    writer = RunWriter.resume(run.path)
+    if writer.next_index >= len(sched):
+        with contextlib.closing(writer):
+            writer.set_status("completed", "")
+        return ScanResult(writer.path, Outcome("completed", "", writer.next_index))
+    try:
+        return ScanResult(writer.path, _run(writer, plan, cfg, sched, sim, progress, control))
+    finally:
+        writer.close()

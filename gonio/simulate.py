@@ -1,0 +1,94 @@
+"""The one gonio module that imports `sim`: start emulated devices and point a config at them.
+
+Used by `gonio scan --sim` (all devices, or the named devices/roles: hardware in the loop)
+and by `gonio emulate` (serve a config's devices for another process to use).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+from gonio.config import InstrumentConfig, parse_config
+from gonio.errors import ConfigError
+from sim.emulate import EmulatedBench, start, time_scale_of
+
+
+@dataclass
+class Simulation:
+    """A running emulation: the config pointed at it, its time scale, what is emulated.
+
+    positions: the dict the emulated detector reads real stages' positions from (the
+    engine keeps it current: hand it to Instrument.last_positions).
+    """
+
+    config: InstrumentConfig
+    time_scale: float
+    devices: list[str]
+    positions: dict[str, float]
+    bench: EmulatedBench
+
+
+def resolve_devices(cfg: InstrumentConfig, names: list[str] | None) -> list[str]:
+    """Device names for `--sim [NAMES]`: None = all; a name may be a device or a role
+    (sample, arm, azimuth, elevation, detector)."""
+    if names is None:
+        return list(cfg.devices)
+    out = []
+    for name in names:
+        if name in cfg.devices:
+            dev = name
+        elif name in cfg.axes:
+            dev = cfg.axes[name].device
+        elif name == "detector":
+            dev = cfg.detector.device
+        else:
+            roles = ", ".join([*cfg.axes, "detector"])
+            raise ConfigError(f"--sim {name}: no such device or role (devices: "
+                              f"{', '.join(cfg.devices)}; roles: {roles})")
+        if dev not in out:
+            out.append(dev)
+    return out
+
+
+def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConfig:
+    """A copy of the config whose named devices' ports / hosts are the given endpoints."""
+    raw = copy.deepcopy(cfg.raw)
+    for name, endpoint in endpoints.items():
+        dev = raw["devices"][name]
+        if cfg.devices[name].transport == "tcp":
+            host, port = endpoint.rsplit(":", 1)
+            dev["host"], dev["tcp_port"] = host, int(port)
+        else:
+            dev["port"] = endpoint
+    return parse_config(raw, cfg.path)
+
+
+def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float]
+           ) -> EmulatedBench:
+    try:
+        return start(cfg.raw, devices, lambda: positions)
+    except ValueError as exc:
+        raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
+
+
+@contextmanager
+def simulation(cfg: InstrumentConfig, names: list[str] | None = None) -> Iterator[Simulation]:
+    """Run the emulators of a config for the duration of a `with` block."""
+    devices = resolve_devices(cfg, names)
+    positions: dict[str, float] = {}
+    bench = _start(cfg, devices, positions)
+    try:
+        pointed = point_at(cfg, {n: e.endpoint for n, e in bench.endpoints.items()})
+        stages_emulated = all(ax.device in devices for ax in cfg.axes.values())
+        scale = time_scale_of(cfg.sim) if stages_emulated else 1.0
+        yield Simulation(pointed, scale, devices, positions, bench)
+    finally:
+        bench.stop()
+
+
+def serve(cfg: InstrumentConfig) -> EmulatedBench:
+    """Start every device of a config (for `gonio emulate`); the caller stops the bench."""
+    return _start(cfg, list(cfg.devices), {})

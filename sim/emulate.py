@@ -1,0 +1,229 @@
+"""Start every emulated device of an instrument config, and the optical bench behind them.
+
+`start(config)` takes the config as a plain dict (the parsed TOML) and serves each device
+on a real pty (serial, Modbus RTU) or loopback TCP socket (Modbus TCP), with motion on one
+VirtualClock and the detectors' light from the bench at the stages' positions. It returns
+the endpoints, so a caller can point the config's ports at them. `devices` limits it to
+some of the devices (hardware in the loop); then `positions()` must say where the real
+stages are.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from sim.bench import build_power_source
+from sim.devices.esp import EspEmulator
+from sim.devices.faults import FaultSpec
+from sim.devices.modbus_detector import ModbusDetectorEmulator
+from sim.devices.modbus_server import ModbusEmulatorServer
+from sim.devices.modbus_stage import ModbusStageEmulator
+from sim.devices.motion import VirtualClock
+from sim.devices.photodiode import SimConfigError
+from sim.devices.pm100 import Pm100Emulator
+
+SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "detector",
+            "faults")
+ROLES = ("sample", "arm", "azimuth", "elevation")
+DETECTORS = ("pm100", "modbus-detector")
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """Where one emulated device listens: a pty path or 127.0.0.1:PORT."""
+
+    name: str
+    protocol: str
+    endpoint: str
+
+    @property
+    def line(self) -> str:
+        """`NAME PROTOCOL ENDPOINT`, as `gonio emulate` prints it."""
+        return f"{self.name} {self.protocol} {self.endpoint}"
+
+
+@dataclass
+class EmulatedBench:
+    """Running emulators: endpoints by device name, the shared clock, what to stop."""
+
+    clock: VirtualClock
+    endpoints: dict[str, Endpoint] = field(default_factory=dict)
+    emulators: dict[str, Any] = field(default_factory=dict)
+    _stops: list[Callable[[], None]] = field(default_factory=list)
+
+    def stop(self) -> None:
+        """Stop every emulator (idempotent)."""
+        while self._stops:
+            self._stops.pop()()
+
+    def __enter__(self) -> EmulatedBench:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def time_scale_of(sim: Mapping[str, Any]) -> float:
+    """The [sim] time_scale: virtual seconds per real second (a number > 0 or "inf")."""
+    value = sim.get("time_scale", 1.0)
+    if value == "inf":
+        return math.inf
+    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+        raise SimConfigError(f'[sim] time_scale must be a number > 0 or "inf", got {value!r}')
+    return float(value)
+
+
+def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
+    sim = config.get("sim", {})
+    if not isinstance(sim, Mapping):
+        raise SimConfigError("[sim] must be a table")
+    unknown = sorted(set(sim) - set(SIM_KEYS))
+    if unknown:
+        raise SimConfigError(f"[sim] unknown key {unknown[0]!r}; known: {', '.join(SIM_KEYS)}")
+    seed = sim.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise SimConfigError(f"[sim] seed must be an integer, got {seed!r}")
+    faults = sim.get("faults", {})
+    if not isinstance(faults, Mapping) or any(d not in config.get("devices", {}) for d in faults):
+        raise SimConfigError("[sim.faults] must hold one table per device of [devices]")
+    return dict(sim)
+
+
+def _home(limits: Any) -> float:
+    """Where an emulated stage powers up: 0, or the nearest limit if 0 is outside travel."""
+    return min(max(0.0, float(limits[0])), float(limits[1]))
+
+
+def _axis_table(axis: Mapping[str, Any]) -> dict[str, Any]:
+    """The emulated ESP axis's settings from a config [axes.<role>] table."""
+    return {"limits_deg": tuple(axis["limits_deg"]), "speed_deg_s": axis["speed_deg_s"],
+            "accel_deg_s2": axis["accel_deg_s2"], "position_deg": _home(axis["limits_deg"])}
+
+
+def _modbus_group(dev: Mapping[str, Any]) -> tuple[str, str]:
+    """Devices sharing a bus or a TCP endpoint share one emulated server."""
+    if dev["transport"] == "tcp":
+        return "tcp", f"{dev['host']}:{dev.get('tcp_port', 502)}"
+    return "rtu", str(dev["port"])
+
+
+class _Builder:
+    """Creates the emulators of one config, stages first, then the bench and the detectors."""
+
+    def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
+                 bench: EmulatedBench):
+        self.config, self.sim, self.bench = config, sim, bench
+        self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
+        self.chosen = chosen
+        self.seed = sim.get("seed", 0)
+        self.readers: dict[str, Callable[[], float]] = {}
+        self.modbus: dict[tuple[str, str], dict[int, tuple[str, Any]]] = {}
+
+    def _seed(self, name: str) -> int:
+        return self.seed + list(self.devices).index(name)
+
+    def _faults(self, name: str) -> FaultSpec | None:
+        table = self.sim.get("faults", {}).get(name)
+        if table is None:
+            return None
+        return FaultSpec.from_dict({"seed": self._seed(name), **table}, name)
+
+    def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
+        return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
+
+    def _add_modbus(self, name: str, unit: Any) -> None:
+        dev = self.devices[name]
+        units = self.modbus.setdefault(_modbus_group(dev), {})
+        units[dev.get("unit", 1)] = (name, unit)
+
+    def stages(self) -> None:
+        for name in self.chosen:
+            dev, roles = self.devices[name], self._roles(name)
+            if dev["protocol"] == "esp":
+                tables = {ax.get("axis", 1): _axis_table(ax) for ax in roles.values()}
+                emu = EspEmulator(self.bench.clock, tables, self._faults(name), self._seed(name))
+                _serve(self.bench, name, emu)
+                for role, ax in roles.items():
+                    self.readers[role] = _esp_reader(emu, ax.get("axis", 1))
+            elif dev["protocol"] == "modbus-stage":
+                for role, ax in roles.items():
+                    emu = ModbusStageEmulator(self.bench.clock, dev["register_map"],
+                                              tuple(ax["limits_deg"]), ax["speed_deg_s"],
+                                              ax["accel_deg_s2"], self._faults(name),
+                                              _home(ax["limits_deg"]))
+                    self._add_modbus(name, emu)
+                    self.readers[role] = emu.axis.position
+
+    def detectors(self, source: Any) -> None:
+        light_nm = self.sim.get("source", {}).get("wavelength_nm")
+        detector = self.sim.get("detector")
+        for name in self.chosen:
+            dev = self.devices[name]
+            if dev["protocol"] == "pm100":
+                emu = Pm100Emulator(source, faults=self._faults(name), seed=self._seed(name),
+                                    detector=detector, light_wavelength_nm=light_nm)
+                _serve(self.bench, name, emu)
+            elif dev["protocol"] == "modbus-detector":
+                self._add_modbus(name, ModbusDetectorEmulator(
+                    source, dev["register_map"], self._faults(name), self._seed(name),
+                    detector, light_nm))
+
+    def serve_modbus(self) -> None:
+        for (transport, _), units in self.modbus.items():
+            server = ModbusEmulatorServer(transport, {u: emu for u, (_, emu) in units.items()})
+            endpoint = server.start()
+            self.bench._stops.append(server.stop)
+            for name, _ in units.values():
+                self.bench.emulators[name] = server
+                self.bench.endpoints[name] = Endpoint(name, server.protocol, endpoint)
+
+
+def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
+          positions: Callable[[], Mapping[str, float]] | None = None) -> EmulatedBench:
+    """Serve the config's devices (all, or those named) and return the running bench.
+
+    positions: where the stages that are not emulated are ({role: deg}); needed when a
+    detector is emulated but some stage is real.
+    """
+    sim = _sim_table(config)
+    all_devices = config["devices"]
+    chosen = list(all_devices) if devices is None else list(devices)
+    for name in chosen:
+        if name not in all_devices:
+            raise SimConfigError(f"no device {name!r} to emulate (devices: "
+                                 f"{', '.join(all_devices)})")
+    bench = EmulatedBench(VirtualClock(time_scale_of(sim)))
+    build = _Builder(config, sim, chosen, bench)
+    try:
+        build.stages()
+        missing = set(config["axes"]) - set(build.readers)
+        detectors = [n for n in chosen if all_devices[n]["protocol"] in DETECTORS]
+        if missing and positions is None and detectors:
+            raise SimConfigError(f"emulating {detectors[0]!r} without the stages "
+                                 f"{', '.join(sorted(missing))} needs their positions")
+
+        def stage_positions() -> dict[str, float]:
+            real = dict(positions()) if missing else {}
+            return {role: (build.readers[role]() if role in build.readers else
+                           float(real.get(role, 0.0))) for role in ROLES}
+
+        build.detectors(build_power_source(sim, stage_positions, bench.clock.now))
+        build.serve_modbus()
+    except BaseException:
+        bench.stop()
+        raise
+    return bench
+
+
+def _esp_reader(emu: EspEmulator, number: int) -> Callable[[], float]:
+    return lambda: emu.axis_position_deg(number)
+
+
+def _serve(bench: EmulatedBench, name: str, emu: Any) -> None:
+    endpoint = emu.start()
+    bench._stops.append(emu.stop)
+    bench.emulators[name] = emu
+    bench.endpoints[name] = Endpoint(name, emu.protocol, endpoint)
