@@ -1,0 +1,93 @@
+"""Bad bytes into the ESP and PM100 emulators (random, truncated, over-long, wrong
+terminator) give an error reply or silence, never a crash: hypothesis fuzzing, both on the
+command interpreter and through the real pty."""
+
+import math
+
+import pytest
+import serial
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from sim.devices.esp import EspEmulator
+from sim.devices.motion import VirtualClock
+from sim.devices.photodiode import ConstantPower
+from sim.devices.pm100 import Pm100Emulator
+
+ESP_WORDS = ["PA", "PR", "TP", "MD", "MO", "MF", "OR", "DH", "VA", "AC", "AG", "ST", "AB",
+             "SL", "SR", "SN", "TE", "TB", "VE", "*IDN", "WS"]
+SCPI_WORDS = ["*IDN", "*RST", "*CLS", "SYST", "SYSTEM", "ERR", "SENS", "SENSOR", "IDN",
+              "MEAS", "MEASURE", "POW", "CONF", "INIT", "FETC", "READ", "CORR", "WAV",
+              "RANG", "AUTO", "AVER", "COUN", "COLL", "ZERO", "MIN", "MAX"]
+NUMBERS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(-10**12, 10**12).map(str),
+    st.sampled_from(["", "-", ".", "e5", "1e", "+-1", "1..2", "0x10", "1,2", "?"]),
+)
+
+
+def esp_units():
+    unit = st.tuples(st.sampled_from(["", "0", "1", "2", "9", "12"]), st.sampled_from(ESP_WORDS),
+                     st.sampled_from(["", "?"]), NUMBERS).map("".join)
+    return st.lists(unit, max_size=6).map(";".join)
+
+
+def scpi_units():
+    header = st.lists(st.sampled_from(SCPI_WORDS), min_size=1, max_size=5).map(":".join)
+    unit = st.tuples(st.sampled_from(["", ":"]), header, st.sampled_from(["", "?"]),
+                     st.sampled_from(["", " "]), NUMBERS).map("".join)
+    return st.lists(unit, max_size=5).map(";".join)
+
+
+FAST = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+@FAST
+@given(st.one_of(st.binary(max_size=400), esp_units().map(str.encode)))
+def test_esp_interpreter_never_raises(line):
+    emu = EspEmulator(VirtualClock(math.inf), {1: {"motor_on": True}, 2: {}})
+    reply = emu.handle_line(line)
+    assert reply is None or (reply.endswith(b"\r\n") and reply.isascii())
+    assert len(emu.errors) <= 10
+
+
+@FAST
+@given(st.one_of(st.binary(max_size=400), scpi_units().map(str.encode)))
+def test_pm100_interpreter_never_raises(line):
+    emu = Pm100Emulator(ConstantPower(1e-6), seed=0)
+    reply = emu.handle_line(line)
+    assert reply is None or (reply.endswith(b"\n") and reply.isascii())
+    assert len(emu.errors) <= 10
+
+
+def stays_alive(emu, probe: bytes, eol: bytes, reply_eol: bytes, expect: bytes, garbage_strategy):
+    """Write garbage (with any or no terminator), then check the probe is still answered."""
+    with serial.Serial(emu.endpoint, 115200, timeout=2.0) as port:
+
+        @settings(max_examples=25, deadline=None)
+        @given(garbage_strategy, st.sampled_from([b"", b"\r", b"\n", b"\r\n", b"\n\r"]))
+        def run(garbage, ending):
+            port.write(garbage + ending + eol)  # the final eol ends any truncated line
+            port.reset_input_buffer()
+            port.write(probe + eol)
+            for _ in range(50):  # skip answers the garbage itself asked for
+                line = port.read_until(reply_eol)
+                assert line, "emulator went silent"
+                if line.lstrip().startswith(expect):
+                    return
+            pytest.fail("probe never answered")
+
+        run()
+    assert emu.server.handler_errors == []
+
+
+def test_esp_pty_survives_garbage():
+    with EspEmulator(VirtualClock(math.inf), {1: {}}) as emu:
+        stays_alive(emu, b"VE?", b"\r", b"\r\n", b"ESP301",
+                    st.one_of(st.binary(max_size=700), esp_units().map(str.encode)))
+
+
+def test_pm100_pty_survives_garbage():
+    with Pm100Emulator(ConstantPower(1e-6)) as emu:
+        stays_alive(emu, b"*IDN?", b"\n", b"\n", b"THORLABS",
+                    st.one_of(st.binary(max_size=700), scpi_units().map(str.encode)))
