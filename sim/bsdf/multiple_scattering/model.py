@@ -1,0 +1,153 @@
+"""RandomWalkBSDF: the multiple-scattering BSDF of a rough conductor, dielectric or diffuse surface.
+
+Built from a single-scattering model (RoughDielectric / RoughConductor build it themselves when
+constructed with multiple_scattering=True) or from a Microsurface description. Values follow
+DESIGN.md: 1/sr, no cosine, Walter's eq. 21 for transmission; they are unbiased Monte Carlo
+estimates, each the mean of `walks` independent random walks per direction pair.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.bsdf.distributions import Distribution, make_distribution
+from sim.bsdf.multiple_scattering.heights import make_heights
+from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric, MicroDiffuse
+from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+from sim.bsdf.multiple_scattering.walk import Walker
+from sim.bsdf.vectors import directions
+
+KINDS = ("dielectric", "conductor", "diffuse")
+
+
+@dataclass(frozen=True)
+class Microsurface:
+    """A microsurface by parameters, for kinds that have no single-scattering class (diffuse).
+
+    Carries the attributes RandomWalkBSDF reads from a parent model: distribution, eta,
+    eta_complex (conductor; None means F = 1), albedo (diffuse facets) and kind.
+    """
+
+    distribution: str | Distribution
+    alpha: float | tuple[float, float] = 0.5
+    kind: str = "dielectric"
+    eta: float = 1.5
+    eta_complex: complex | None = None
+    albedo: float = 1.0
+
+
+@dataclass
+class Estimate:
+    """A Monte Carlo estimate per direction pair: value, its standard error, and the energy the
+    order cap left inside the surface (0 without a cap; an upper bound of the cap's bias
+    integrated over all outgoing directions with the cosine)."""
+
+    value: np.ndarray
+    stderr: np.ndarray
+    truncated_energy: np.ndarray
+
+
+def _distribution(parent) -> Distribution:
+    dist = parent.distribution
+    if isinstance(dist, str):
+        return make_distribution(dist, parent.alpha)
+    return dist
+
+
+def _micro(parent):
+    kind = getattr(parent, "kind", None)
+    if kind is None:
+        kind = "conductor" if hasattr(parent, "eta_complex") else "dielectric"
+    if kind not in KINDS:
+        raise ValueError(f"micro-BSDF kind must be one of {KINDS}, got {kind!r}")
+    if kind == "conductor":
+        return MicroConductor(parent.eta_complex)
+    if kind == "diffuse":
+        return MicroDiffuse(parent.albedo)
+    eta = float(parent.eta)
+    if not (np.isfinite(eta) and eta > 0.0):
+        raise ValueError(f"eta must be positive and finite, got {parent.eta!r}")
+    return MicroDielectric(eta)
+
+
+class RandomWalkBSDF:
+    """Stochastic multiple-scattering BSDF: eval, pdf and sample by random walks (Heitz 2016).
+
+    walks: walks per direction pair in eval/pdf; max_order: optional cap on scattering orders
+    (biased; the bias bound is reported by `estimate`); height: "uniform" or "gaussian" height
+    distribution, which changes the recorded heights and nothing else (Smith microsurface).
+    """
+
+    def __init__(self, parent, *, walks: int = 256, max_order: int | None = None,
+                 height: str = "uniform"):
+        if int(walks) != walks or walks < 1:
+            raise ValueError(f"walks must be a positive integer, got {walks!r}")
+        if max_order is not None and (int(max_order) != max_order or max_order < 1):
+            raise ValueError(f"max_order must be None or a positive integer, got {max_order!r}")
+        self.parent = parent
+        self.slopes = SlopeDistribution(_distribution(parent))
+        self.micro = _micro(parent)
+        self.heights = make_heights(height)
+        self.walks = int(walks)
+        self.max_order = None if max_order is None else int(max_order)
+        self._walker = Walker(self.slopes, self.micro)
+
+    def _pairs(self, wi, wo, order, unit, rng, walks) -> tuple[np.ndarray, ...]:
+        wi, wo = directions(wi, wo)
+        shape = wi.shape[:-1]
+        wi2 = np.repeat(wi.reshape(-1, 3), walks, axis=0)
+        wo2 = np.repeat(wo.reshape(-1, 3), walks, axis=0)
+        if order is not None and (int(order) != order or order < 1):
+            raise ValueError(f"order must be None or a positive integer, got {order!r}")
+        cap = self.max_order if order is None else None
+        res = self._walker.run(wi2, rng, wo2, order=order, max_order=cap, unit=unit)
+        per = res.value.reshape(-1, walks)
+        trunc = res.truncated.reshape(-1, walks).mean(axis=1)
+        cos_o = np.abs(wo.reshape(-1, 3)[:, 2])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(cos_o > 0.0, 1.0 / cos_o, 0.0)
+        mean = per.mean(axis=1) * scale
+        err = per.std(axis=1, ddof=1) / np.sqrt(walks) * scale if walks > 1 else np.full_like(
+            mean, np.inf)
+        return mean.reshape(shape), err.reshape(shape), trunc.reshape(shape)
+
+    def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
+                 walks: int | None = None) -> Estimate:
+        """BSDF estimate with its standard error and the order cap's leftover energy."""
+        value, err, trunc = self._pairs(wi, wo, order, False, rng, walks or self.walks)
+        return Estimate(value, err, trunc)
+
+    def eval(self, wi, wo, rng: np.random.Generator, *, order: int | None = None) -> np.ndarray:
+        """BSDF value f(wi, wo) in 1/sr, no cosine; order=k gives the k-th scattering order only."""
+        return self._pairs(wi, wo, order, False, rng, self.walks)[0]
+
+    def pdf(self, wi, wo, rng: np.random.Generator) -> np.ndarray:
+        """Density over solid angle of sample()'s wo: the walk's direction density, estimated."""
+        wi_, wo_ = directions(wi, wo)
+        f_unit = self._pairs(wi_, wo_, None, True, rng, self.walks)[0]
+        return f_unit * np.abs(wo_[..., 2])
+
+    def sample(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Follow one walk from wi: (wo, weight = f |cos o| / pdf, pdf estimate at wo).
+
+        u (..., 3) drives the first scattering event (height, visible normal); later events use
+        rng. The weight is the walk's throughput (1 for a dielectric and for F = 1).
+        """
+        (wi,) = directions(wi)
+        u = np.asarray(u, dtype=np.float64)
+        shape = wi.shape[:-1]
+        u = np.broadcast_to(u, shape + (3,)).reshape(-1, 3)
+        res = self._walker.run(wi.reshape(-1, 3), rng, u_first=u, max_order=self.max_order)
+        ok = np.isfinite(res.exit_direction[:, 0])
+        wo = np.where(ok[:, None], res.exit_direction, np.array([0.0, 0.0, 1.0]))
+        weight = np.where(ok, res.weight, 0.0)
+        pdf = np.where(ok, self.pdf(wi.reshape(-1, 3), wo, rng), 0.0)
+        return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
+
+    def first_heights(self, wi, rng: np.random.Generator, walks: int) -> np.ndarray:
+        """Heights of the first scattering event of `walks` walks from wi (nan: none)."""
+        (wi,) = directions(wi)
+        res = self._walker.run(np.repeat(wi.reshape(1, 3), walks, axis=0), rng, max_order=1)
+        return self.heights.inv_log_cdf(res.first_log_cdf)

@@ -1,0 +1,148 @@
+"""Vectorised random walk on the Smith microsurface (Heitz, Hanika, d'Eon, Dachsbacher 2016).
+
+The microsurface is a random medium: a ray travelling along d from a point whose height has
+CDF value u = C1(h) meets the surface again at u' with u'/u = exp(E / Lambda(d)), E ~ Exp(1)
+(survival (C1(h0)/C1(h))^Lambda upward, (C1(h)/C1(h0))^(1+Lambda(-d)) downward), and leaves
+when u' >= 1, which happens with probability G1 = u^Lambda(d). The walk is carried out in
+log u (and log(1 - u) for the mirrored world below a dielectric), so it is exact at both tails
+for any height distribution; the Smith BSDF does not depend on P1, heights are only reported.
+
+All walks of a batch advance together (one numpy step per scattering order, on the walks still
+alive); next-event estimation adds, at each scattering event, the phase function towards wo
+times the probability G1 that wo escapes from there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.bsdf.multiple_scattering.heights import log1mexp
+from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+
+
+def flip(w: np.ndarray) -> np.ndarray:
+    """Mirror a direction through the mean plane (z -> -z): the frame of the world below."""
+    return w * np.array([1.0, 1.0, -1.0])
+
+
+@dataclass
+class WalkResult:
+    """Per-walk outputs of a batch: NEE sums, exit direction and weight, truncation, heights."""
+
+    value: np.ndarray  # (n,) sum of NEE contributions (f |cos o| estimate); zeros when sampling
+    exit_direction: np.ndarray  # (n, 3) world direction the walk left along (nan if it did not)
+    weight: np.ndarray  # (n,) throughput when leaving (0 if it did not leave)
+    truncated: np.ndarray  # (n,) energy still inside the surface when the order cap stopped it
+    orders: np.ndarray  # (n,) scattering events of the walk
+    first_log_cdf: np.ndarray  # (n,) log C1(h) of the first scattering event (nan if none)
+
+
+class Walker:
+    """Runs batches of walks for one slope distribution and one micro-BSDF."""
+
+    def __init__(self, slopes: SlopeDistribution, micro):
+        self.slopes = slopes
+        self.micro = micro
+
+    def _escape_probability(self, d: np.ndarray, log_u: np.ndarray) -> np.ndarray:
+        """G1 = u^Lambda(d) of leaving from log C1 = log_u along local direction d."""
+        lam = self.slopes.lambda_(d)
+        with np.errstate(invalid="ignore", over="ignore"):
+            g = np.exp(lam * log_u)
+        return np.where(lam <= 0.0, np.where(lam == 0.0, 1.0, 0.0), np.nan_to_num(g))
+
+    def run(
+        self,
+        wi: np.ndarray,
+        rng: np.random.Generator,
+        wo: np.ndarray | None = None,
+        *,
+        order: int | None = None,
+        max_order: int | None = None,
+        unit: bool = False,
+        u_first: np.ndarray | None = None,
+    ) -> WalkResult:
+        """Walk once from each row of wi (n, 3); with wo, accumulate NEE towards wo (n, 3).
+
+        order: count only that scattering order (the walk stops after it); max_order: stop after
+        that many events and report the energy still inside; unit: direction density instead of
+        energy; u_first (n, 3): uniforms for the first event (height, normal), for stratification.
+        """
+        n = wi.shape[0]
+        slopes, micro = self.slopes, self.micro
+        outside = wi[:, 2] > 0.0
+        d = -np.where(outside[:, None], wi, flip(wi))
+        log_u = np.where(outside, 0.0, -np.inf)  # log C1(h): h = +inf above, -inf below
+        log_v = np.where(outside, -np.inf, 0.0)  # log(1 - C1(h))
+        beta = np.ones(n)
+        alive = micro.transmits | outside
+        value = np.zeros(n)
+        exit_dir = np.full((n, 3), np.nan)
+        weight = np.zeros(n)
+        truncated = np.zeros(n)
+        orders = np.zeros(n, dtype=np.int64)
+        first = np.full(n, np.nan)
+        stop_after = order if order is not None else max_order
+        idx = np.flatnonzero(alive)
+        k = 0
+        while idx.size:
+            k += 1
+            out = outside[idx]
+            dk = d[idx]
+            if k == 1 and u_first is not None:
+                u = u_first[idx].T
+            else:
+                u = rng.random((3, idx.size))
+            e = -np.log1p(-u[0])
+            lam = slopes.lambda_(dk)
+            cur = np.where(out, log_u[idx], log_v[idx])
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                new = cur + np.where(lam == 0.0, np.inf, e / lam)
+            leaves = ~(new < 0.0)
+            if leaves.any():
+                gone = idx[leaves]
+                exit_dir[gone] = np.where(out[leaves, None], dk[leaves], flip(dk[leaves]))
+                weight[gone] = beta[gone]
+            keep = ~leaves
+            idx, out, dk, new, u = idx[keep], out[keep], dk[keep], new[keep], u[:, keep]
+            if not idx.size:
+                break
+            other = log1mexp(new)
+            log_u[idx] = np.where(out, new, other)
+            log_v[idx] = np.where(out, other, new)
+            orders[idx] = k
+            if k == 1:
+                first[idx] = log_u[idx]
+            w_in = -dk
+            m = slopes.sample_visible(w_in, u[1], u[2])
+            if wo is not None and (order is None or order == k):
+                value[idx] += beta[idx] * self._next_event(w_in, m, out, wo[idx], new, other, unit)
+            w_next, factor, crossed = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)),
+                                                    unit)
+            beta[idx] *= factor
+            outside[idx] = out ^ crossed
+            d[idx] = np.where(crossed[:, None], flip(w_next), w_next)
+            if stop_after is not None and k >= stop_after:
+                side_log = np.where(outside[idx], log_u[idx], log_v[idx])
+                hit = 1.0 - self._escape_probability(d[idx], side_log)
+                truncated[idx] = beta[idx] * hit
+                break
+        return WalkResult(value, exit_dir, weight, truncated, orders, first)
+
+    def _next_event(self, w_in, m, out, wo, log_here, log_there, unit) -> np.ndarray:
+        """Phase function towards wo times the probability that wo escapes from this event."""
+        slopes, micro = self.slopes, self.micro
+        wl = np.where(out[:, None], wo, flip(wo))  # wo in the local frame of this side
+        same = wl[:, 2] > 0.0
+        result = np.zeros(out.shape)
+        if same.any():
+            s = same
+            phase = micro.phase_reflect(slopes, w_in[s], wl[s], out[s], m[s], unit)
+            result[s] = phase * self._escape_probability(wl[s], log_here[s])
+        if micro.transmits and (~same).any():
+            s = ~same
+            phase = micro.phase_transmit(slopes, w_in[s], wl[s], out[s], unit)
+            result[s] = phase * self._escape_probability(flip(wl[s]), log_there[s])
+        return result
