@@ -195,11 +195,22 @@ class MappedUnit:
         return self.read_values(name)[name]
 
     def write_value(self, name: str, value: float) -> None:
-        """Write one named holding register (checked against the map first), never re-sent."""
+        """Write one named holding register (checked against the map first), never re-sent.
+
+        If the reply to a setting's write is lost, the register is read back: holding the
+        written words means the write was taken. (Commands are resolved by the caller.)
+        """
         reg = self.map.register(name)
         if reg.table != "holding" or not reg.writable:
             raise ValueError(f"{self.name}: register {name!r} is not writable in {self.map.source}")
-        self.link.write(self.name, reg.address, self.map.encode(name, value), self.unit)
+        words = self.map.encode(name, value)
+        try:
+            self.link.write(self.name, reg.address, words, self.unit)
+        except DeviceTimeout:
+            if name == "command" or self.link.read(
+                self.name, "holding", reg.address, reg.count, self.unit
+            ) != words:
+                raise
 
     def command(self, command: str) -> None:
         """Write a named value of the map's [commands] to the command register."""

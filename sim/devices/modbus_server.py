@@ -5,15 +5,21 @@ pymodbus server does the framing; each request lands in the addressed unit's `re
 `write` (a `ModbusUnit`). RTU: pymodbus opens the slave side of an internal pty whose
 master a relay thread joins to a second pty; clients open that one's slave (`endpoint`).
 Faults (latency, dropped / corrupted bytes, bad CRC, stalls, disconnects) act on the
-reply frames, per unit (the unit's own injector) or for the whole endpoint.
+reply frames, per unit (the unit's own injector) or for the whole endpoint. On TCP the
+payload is guarded by TCP's own checksums, so dropped and corrupted bytes hit the 7-byte
+MBAP header only, and a bad CRC does not apply.
 """
 
 from __future__ import annotations
 
 import asyncio
+import fcntl
 import os
 import select
+import sys
+import termios
 import threading
+import time
 import tty
 from collections.abc import Mapping
 from typing import Protocol
@@ -35,6 +41,7 @@ from sim.devices.register_map import (
 
 _TABLE_OF_FUNCTION = {3: "holding", 4: "input", 23: "holding"}
 _WRITE_FUNCTIONS = (6, 16, 23)
+_MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
 
 
 class ModbusUnit(Protocol):  # the server's view; EmulatedUnit is the usual implementation
@@ -280,7 +287,10 @@ class ModbusEmulatorServer:
         unit_id = frame[0] if self.transport == "rtu" else frame[6] if len(frame) > 6 else 0
         unit = self.units.get(unit_id)
         faults = unit.faults if unit is not None and unit.faults is not None else self.faults
-        out = faults.reply(frame, crc_bytes=2 if self.transport == "rtu" else 0)
+        if self.transport == "rtu":
+            out = faults.reply(frame, crc_bytes=2)
+        else:  # TCP checksums guard the payload: dropped / corrupted bytes hit the MBAP header
+            out = faults.reply(frame, keep_tail=max(len(frame) - _MBAP_BYTES, 0))
         hang_up = faults.should_disconnect()
         self._loop.call_later(faults.delay(), self._deliver, handler, out, hang_up)
         return b""
@@ -340,7 +350,21 @@ class _PtyRelay:
             self._thread.join(2.0)
 
     def hang_up(self) -> None:
-        """Cut the client side (its reads fail from now on); the relay stops."""
+        """Cut the client side once the host has read what was sent (a hangup would flush
+        it); its reads fail from then on. Returns at once, the cut happens in a thread."""
+        threading.Thread(target=self._hang_up_when_read, name="modbus-rtu-hangup",
+                         daemon=True).start()
+
+    def _hang_up_when_read(self, patience_s: float = 1.0) -> None:
+        start = time.monotonic()
+        seen = False
+        while time.monotonic() - start < patience_s and self._client_slave >= 0:
+            waiting = fcntl.ioctl(self._client_slave, termios.TIOCINQ, b"\0\0\0\0")
+            if int.from_bytes(waiting, sys.byteorder):
+                seen = True
+            elif seen or time.monotonic() - start > 0.05:
+                break
+            time.sleep(0.001)
         if not self._stop.is_set():
             self._halt()
         for fd in (self._client_master, self._client_slave):

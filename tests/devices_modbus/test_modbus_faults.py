@@ -1,0 +1,143 @@
+"""Each injected fault type against the Modbus drivers, over TCP and RTU on a pty: the driver
+either recovers (reads are retried) or fails with a named, bounded error; a motion command
+is never sent twice."""
+
+import time
+
+import pytest
+
+from drivers.base import DeviceTimeout, DriverError
+from sim.devices.faults import FaultInjector, FaultSpec
+
+TRANSPORTS = ["tcp", "rtu"]
+
+
+class StallWriteReplies(FaultInjector):
+    """Swallows every reply to a write (function 16): the write acts, its answer is lost."""
+
+    def reply(self, data, keep_tail=0, crc_bytes=0):
+        function = data[1] if crc_bytes else data[7]
+        return None if function == 16 else super().reply(data, keep_tail, crc_bytes)
+
+
+def count_commands(emulator):
+    """Record the commands a stage emulator acts on (a spy on the device, not the link)."""
+    seen = []
+    act = emulator.act
+
+    def spy(fields):
+        if "command" in {f.name for f in fields}:
+            seen.append(emulator.registers.get("command"))
+        act(fields)
+
+    emulator.act = spy
+    return seen
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_latency_below_the_timeout_only_slows_replies(rig, transport):
+    r = rig(transport, stage_faults={"latency_s": 0.03}, reply_s=0.3)
+    t0 = time.monotonic()
+    assert r.stage.position() == 0.0
+    assert time.monotonic() - t0 >= 0.03
+    t0 = time.monotonic()
+    r.detector.read()  # another unit on the endpoint is not delayed
+    assert time.monotonic() - t0 < 0.03
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_latency_past_the_timeout_is_a_bounded_named_timeout(rig, transport):
+    r = rig(transport, stage_faults={"latency_s": 0.3}, reply_s=0.05, read_retries=1)
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeout, match="sample: timeout after 0.05 s waiting for holding"):
+        r.stage.position()
+    assert time.monotonic() - t0 < 0.5
+    time.sleep(0.35)  # let the late replies arrive; they must not answer the next query
+    assert r.detector.read().range_w == 1e-4
+
+
+@pytest.mark.parametrize("transport, kind", [
+    ("tcp", "drop_prob"), ("tcp", "corrupt_prob"), ("tcp", "stall_prob"),
+    ("rtu", "drop_prob"), ("rtu", "corrupt_prob"), ("rtu", "stall_prob"),
+    ("rtu", "bad_crc_prob")])
+def test_reads_recover_from_garbled_or_lost_replies(rig, transport, kind):
+    r = rig(transport, stage_faults={kind: 0.3, "seed": 11}, reply_s=0.05, read_retries=6)
+    r.stage.move_to(12.5)  # instant clock: done at once (a write: may fail only if unlucky)
+    values = [r.stage.position() for _ in range(25)]
+    assert values == [12.5] * 25  # never a wrong value, whatever the fault
+    counts = r.stage_emu.faults.counts
+    assert counts[kind.removesuffix("_prob")] > 0
+
+
+def test_bad_crc_means_nothing_on_tcp(rig):
+    r = rig("tcp", stage_faults={"bad_crc_prob": 1.0}, read_retries=0)
+    assert [r.stage.position() for _ in range(5)] == [0.0] * 5
+    assert r.stage_emu.faults.counts["bad_crc"] == 0
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_every_reply_bad_crc_or_stalled_gives_a_timeout(rig, transport):
+    kind = "bad_crc_prob" if transport == "rtu" else "stall_prob"
+    r = rig(transport, stage_faults={kind: 1.0}, reply_s=0.05, read_retries=2)
+    with pytest.raises(DeviceTimeout, match="sample: timeout after 0.05 s"):
+        r.stage.position()
+    assert r.stage_emu.faults.replies == 3  # the first try and two retries, no more
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_lost_reply_to_a_move_is_resolved_by_reading_state_not_resending(rig, transport):
+    r = rig(transport, reply_s=0.05)
+    seen = count_commands(r.stage_emu)
+    r.stage_emu.faults = StallWriteReplies(FaultSpec())
+    r.stage.move_to(42.0)  # target write and start: both replies lost, both acted on
+    assert r.stage.wait(1.0) == 42.0
+    assert seen == [r.stage.map.commands["start"]]  # sent exactly once
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_lost_reply_to_stop_is_reported_not_resent(rig, transport):
+    r = rig(transport, reply_s=0.05, time_scale=1.0)
+    r.stage.move_to(90.0)
+    seen = count_commands(r.stage_emu)
+    r.stage_emu.faults = StallWriteReplies(FaultSpec())
+    with pytest.raises(DeviceTimeout, match="waiting for reply to a write"):
+        r.stage.stop()
+    assert seen == [r.stage.map.commands["stop"]]
+
+
+def test_tcp_disconnect_is_a_named_error_and_the_next_query_reconnects(rig):
+    r = rig("tcp", stage_faults={"disconnect_after": 2})
+    assert r.stage.position() == 0.0
+    assert r.stage.position() == 0.0  # the second reply arrives, then the drive hangs up
+    with pytest.raises(DriverError, match=r"sample: connection to 127.0.0.1:\d+ failed or lost"):
+        r.stage.position()
+    assert r.stage.position() == 0.0  # a new connection (which it hangs up again)
+
+
+def test_rtu_disconnect_cuts_the_line_for_good(rig):
+    r = rig("rtu", server_faults={"disconnect_after": 1}, reply_s=0.05)
+    assert r.stage.position() == 0.0
+    for _ in range(2):
+        with pytest.raises(DriverError, match="sample: connection to /dev/pts/"):
+            r.stage.position()
+    assert r.server.disconnected
+
+
+def test_server_wide_faults_hit_units_without_their_own(rig):
+    r = rig("rtu", server_faults={"corrupt_prob": 1.0}, stage_faults={"latency_s": 0.0},
+            reply_s=0.05, read_retries=0)
+    assert r.stage.position() == 0.0  # the stage has its own (harmless) injector
+    with pytest.raises((DeviceTimeout, DriverError)):
+        r.detector.read()
+    assert r.server.faults.counts["corrupt"] == 1
+
+
+def test_fault_sequence_is_reproducible_from_the_seed(rig):
+    runs = []
+    for _ in range(2):
+        r = rig("tcp", stage_faults={"drop_prob": 0.5, "seed": 5}, reply_s=0.05,
+                read_retries=8)
+        for _ in range(10):
+            r.stage.position()
+        runs.append((r.stage_emu.faults.replies, dict(r.stage_emu.faults.counts)))
+    assert runs[0] == runs[1]
