@@ -1,0 +1,15 @@
+"""Real-time split-sum lookup tables baked from the rough-dielectric model, and validated.
+
+`TableSpec` says what to bake, `bake` computes it tile by tile (in-process or on a Dask
+cluster, bitwise identical either way), `Table` stores, loads and interpolates it, and
+`validate` measures its error against converged integrals. See docs/lut.md.
+"""
+
+from sim.lut.axes import Axis, axes_for
+from sim.lut.bake import bake, integrate_points
+from sim.lut.spec import TableSpec, parse_size
+from sim.lut.table import Table, load_table
+from sim.lut.validate import validate
+
+__all__ = ["Axis", "Table", "TableSpec", "axes_for", "bake", "integrate_points", "load_table",
+           "parse_size", "validate"]

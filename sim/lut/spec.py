@@ -1,0 +1,89 @@
+"""What a table is: kind, shape, storage dtype, Monte Carlo budget, seed, tiling and model.
+
+Everything that changes a single bit of the baked table is in the spec (and is written into
+the table file); the worker layout is not, because it does not change the result.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from sim.lut.axes import Axis, axes_for
+
+KINDS = ("reflection", "transmission")
+DTYPES = ("float16", "float32", "float64")
+CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",)}
+DIMENSIONS = {"reflection": 2, "transmission": 3}
+
+
+def parse_size(text: str) -> tuple[int, ...]:
+    """'64x64x32' -> (64, 64, 32); each size an integer >= 2."""
+    try:
+        shape = tuple(int(part) for part in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"size {text!r} is not like 64x64 or 64x64x32") from None
+    if not all(n >= 2 for n in shape):
+        raise ValueError(f"size {text!r}: every axis needs at least 2 nodes")
+    return shape
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """A split-sum table to bake: see docs/lut.md for the meaning of every field."""
+
+    kind: str = "transmission"
+    shape: tuple[int, ...] = (64, 64, 32)
+    dtype: str = "float16"
+    samples: int = 1024
+    seed: int = 0
+    tile_entries: int = 128
+    distribution: str = "ggx"
+    masking: str = "correlated"
+    multiple_scattering: bool = False
+    reflection_eta: float = 1.5
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"kind {self.kind!r} is not one of {', '.join(KINDS)}")
+        if len(self.shape) != DIMENSIONS[self.kind]:
+            raise ValueError(
+                f"a {self.kind} table has {DIMENSIONS[self.kind]} axes "
+                f"({' x '.join(a.name for a in axes_for(self.kind, (2, 2, 2)))}), "
+                f"got size {'x'.join(map(str, self.shape))}")
+        if any(int(n) != n or n < 2 for n in self.shape):
+            raise ValueError(f"size {self.shape}: every axis needs at least 2 nodes")
+        if self.dtype not in DTYPES:
+            raise ValueError(f"dtype {self.dtype!r} is not one of {', '.join(DTYPES)}")
+        if self.samples < 2 or self.samples & (self.samples - 1):
+            raise ValueError(f"samples must be a power of two >= 2 (Sobol points), "
+                             f"got {self.samples}")
+        if self.tile_entries < 1:
+            raise ValueError(f"tile_entries must be >= 1, got {self.tile_entries}")
+        if not 0 <= self.seed < 2**63:
+            raise ValueError(f"seed must be in [0, 2^63), got {self.seed}")
+        if not self.reflection_eta > 1.0:
+            raise ValueError(f"reflection_eta must be > 1, got {self.reflection_eta}")
+        if self.kind == "reflection" and self.multiple_scattering:
+            raise ValueError("the reflection table's F0 split holds for single scattering only; "
+                             "multiple scattering is available for --kind transmission")
+
+    @property
+    def axes(self) -> tuple[Axis, ...]:
+        """The table's axes, in index order."""
+        return axes_for(self.kind, self.shape)
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """Names of the values stored per entry (the last table dimension)."""
+        return CHANNELS[self.kind]
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields."""
+        d = asdict(self)
+        d["shape"] = list(self.shape)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TableSpec:
+        """Inverse of to_dict."""
+        return cls(**{**d, "shape": tuple(d["shape"])})

@@ -1,0 +1,112 @@
+"""A baked table: values in the stored dtype, its spec and model, npz storage and lookups.
+
+Lookups interpolate multilinearly in texture coordinates with clamp-to-edge, exactly what a
+GPU's linear sampler does with the same array uploaded as a texture.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.lut.spec import TableSpec
+
+FORMAT = "gonio-lut/1"
+
+DEFINITIONS = {
+    "reflection": {
+        "scale": "integral over the reflected hemisphere of (f_r / F) * (1 - (1 - v.h)^5) * "
+                 "|cos o| d o; albedo ~= F0 * scale + bias (Schlick split, single scattering)",
+        "bias": "integral over the reflected hemisphere of (f_r / F) * (1 - v.h)^5 * |cos o| d o",
+    },
+    "transmission": {
+        "transmittance": "integral over the transmitted hemisphere of f_t(v, o) * |cos o| d o "
+                         "(radiance BTDF, eta_o^2 factor included, so values may exceed 1)",
+    },
+}
+
+
+@dataclass
+class Table:
+    """Baked values `data` (axes..., channels) in spec.dtype, with how they were made."""
+
+    spec: TableSpec
+    data: np.ndarray
+    bake_seconds: float = float("nan")
+    model: str = ""
+
+    def metadata(self) -> dict:
+        """Everything needed to read and trust the table, as JSON-ready values."""
+        return {
+            "format": FORMAT,
+            "kind": self.spec.kind,
+            "channels": list(self.spec.channels),
+            "definitions": DEFINITIONS[self.spec.kind],
+            "axes": [{"name": a.name, "size": a.size, "parameterisation": a.parameterisation,
+                      "nodes": "texel centres t = (k + 0.5) / size, clamp to edge",
+                      "first": float(a.values()[0]), "last": float(a.values()[-1])}
+                     for a in self.spec.axes],
+            "index_order": [a.name for a in self.spec.axes] + ["channel"],
+            "spec": self.spec.to_dict(),
+            "model": self.model,
+            "bake_seconds": self.bake_seconds,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write an .npz: `table`, one `axis_<name>` array of node values per axis and a
+        JSON `metadata` string (readable with numpy.load(allow_pickle=False))."""
+        path = Path(path)
+        axes = {f"axis_{a.name}": a.values() for a in self.spec.axes}
+        with open(path, "wb") as fh:
+            np.savez(fh, table=self.data, metadata=np.array(json.dumps(self.metadata())),
+                     **axes)
+        return path
+
+    def lookup(self, *params: np.ndarray) -> np.ndarray:
+        """Interpolated channels (..., channels) at parameter values (cos_theta, alpha[, eta])."""
+        if len(params) != len(self.spec.axes):
+            raise ValueError(f"a {self.spec.kind} table takes {len(self.spec.axes)} parameters "
+                             f"({', '.join(a.name for a in self.spec.axes)}), got {len(params)}")
+        arrays = np.broadcast_arrays(*params)
+        coords = [a.to_coord(p) for a, p in zip(self.spec.axes, arrays, strict=True)]
+        return interpolate(self.data.astype(np.float64), coords)
+
+
+def interpolate(data: np.ndarray, coords: list[np.ndarray]) -> np.ndarray:
+    """Multilinear interpolation of data (n_1, ..., n_d, channels) at texture coordinates
+    (each (...,)) with texel-centre nodes and clamp-to-edge."""
+    shape = np.shape(coords[0])
+    result = np.zeros(shape + data.shape[-1:])
+    lows, fracs = [], []
+    for t, n in zip(coords, data.shape[:-1], strict=True):
+        x = np.clip(np.asarray(t, dtype=np.float64) * n - 0.5, 0.0, n - 1.0)
+        low = np.minimum(np.floor(x).astype(np.intp), n - 2)
+        lows.append(low)
+        fracs.append(x - low)
+    for corner in np.ndindex(*(2,) * len(coords)):
+        weight = np.ones(shape)
+        index = []
+        for bit, low, frac in zip(corner, lows, fracs, strict=True):
+            weight = weight * (frac if bit else 1.0 - frac)
+            index.append(low + bit)
+        result += weight[..., None] * data[tuple(index)]
+    return result
+
+
+def load_table(path: str | Path) -> Table:
+    """Read a table written by Table.save; a file that is not one is a clear ValueError."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            meta = json.loads(str(f["metadata"]))
+            data = f["table"]
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a gonio lookup table ({exc})") from None
+    if meta.get("format") != FORMAT:
+        raise ValueError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
+    spec = TableSpec.from_dict(meta["spec"])
+    if data.shape != (*spec.shape, len(spec.channels)) or data.dtype != np.dtype(spec.dtype):
+        raise ValueError(f"{path}: table {data.shape} {data.dtype} does not match its metadata")
+    return Table(spec=spec, data=data, bake_seconds=meta["bake_seconds"], model=meta["model"])
