@@ -14,10 +14,13 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Callable
+from typing import TypeVar
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
 from drivers.serial_transport import SerialLineTransport
 
+T = TypeVar("T")
 _TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
 
 
@@ -110,12 +113,12 @@ class EspController:
         if code != 0:
             raise DeviceError(self.name, code, text)
 
-    def query(self, line: str, parse=str):
+    def query(self, line: str, parse: Callable[[str], T] = str) -> T:
         """Ask a query with ";TB?" appended, so its error status comes in the same reply.
 
         Retried on timeout or garble; a device error raises DeviceError (not retried).
         """
-        def checked(text: str):
+        def checked(text: str) -> T:
             parts = text.rsplit(",", 3)
             code, message = self._parse_tb(",".join(parts[-3:]))
             self._raise_if_error(code, message)
@@ -128,7 +131,7 @@ class EspController:
 
         return self.transport.query(f"{line};TB?", checked, line)
 
-    def command(self, line: str, verify=None) -> None:
+    def command(self, line: str, verify: Callable[[], bool] | None = None) -> None:
         """Send a state-changing command once, with its error status in the same exchange.
 
         If the status reply is lost or garbled, the error buffer is re-read and `verify()`
@@ -167,10 +170,10 @@ class EspAxis:
         self.controller, self.number, self.name = controller, number, name
         self._p = str(number)
 
-    def _query(self, cmd: str, parse=_number):
+    def _query(self, cmd: str, parse: Callable[[str], T] = _number) -> T:
         return self.controller.query(self._p + cmd, parse)
 
-    def _command(self, cmd: str, verify=None) -> None:
+    def _command(self, cmd: str, verify: Callable[[], bool] | None = None) -> None:
         self.controller.command(self._p + cmd, verify)
 
     # -- Axis interface ---------------------------------------------------------

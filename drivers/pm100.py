@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
@@ -111,7 +112,7 @@ class Pm100:
 
         return self.transport.query(f"{message};:SYST:ERR?", parse, message)
 
-    def command(self, message: str, check) -> None:
+    def command(self, message: str, check: Callable[[], bool]) -> None:
         """Send a setting command once; if its status is lost, `check()` re-reads the setting."""
         try:
             self._split(message, self.transport.exchange(f"{message};:SYST:ERR?", message))

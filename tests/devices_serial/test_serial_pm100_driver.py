@@ -5,7 +5,14 @@ import time
 import numpy as np
 import pytest
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
+from drivers.base import (
+    Detector,
+    DeviceError,
+    DeviceTimeout,
+    DriverError,
+    ProtocolError,
+    Reading,
+)
 from sim.devices.faults import FaultInjector, FaultSpec
 
 QUIET = {"read_noise_fraction": 1e-3, "dark_current_a": 0.0, "bandwidth_hz": 0.0}
@@ -21,6 +28,7 @@ def raw(drv, line):
 
 def test_identity_and_sensor(pm_pair):
     emu, pm = pm_pair()
+    assert isinstance(pm, Detector) and pm.name == "pm100"
     assert pm.idn.startswith("THORLABS,PM100D,")
     s = pm.sensor()
     assert (s.name, s.type, s.flags & 1, s.flags & 32) == ("S121C", 1, 1, 32)
