@@ -1,0 +1,119 @@
+"""Build a calibration from the readings of calibration runs (examples/plans/calib-*.toml).
+
+What each part needs in the readings (several runs may be given together):
+- detector: dark readings on every range used; for gains, the same points read with the
+  detector fixed on different ranges (the calib-detector plan run once per range);
+- angles: a transmission scan across the refracted peak at normal incidence and a reflection
+  scan across the specular peak at one or more sample angles, each point repeated (the scatter
+  of repeats is the readings' noise);
+- beam: the interleaved straight-through readings (a summary of drift and noise).
+
+Angle equations (architecture.md geometry, true = reported + offset, eta of the sample): the
+transmitted peak at reported sample 0 sits at reported arm 180 + ds (1 - 1/eta) - da, the
+specular peak at reported sample S at 2 (S + ds) - da; two peaks give ds and da.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration import angles as angle_cal
+from calibration.beam import beam_power
+from calibration.calfile import Calibration
+from calibration.detector import correct_power, dark_offsets, gain_ratios
+from calibration.values import CalibrationError, Measured, weighted_mean
+
+
+@dataclass
+class PeakScan:
+    """One scan across a peak: arm angles, mean power of the repeats and its standard error."""
+
+    sample_deg: float
+    arm_deg: np.ndarray
+    power_w: np.ndarray
+    sigma_w: np.ndarray
+
+
+def averaged_points(rows: np.ndarray) -> PeakScan:
+    """Average the repeats of each plan point (at least two each) of one scan."""
+    points = np.unique(rows["point"])
+    arm, mean, sem = [], [], []
+    for p in points:
+        sel = rows[rows["point"] == p]
+        if len(sel) < 2:
+            raise CalibrationError(f"point {int(p)}: angle calibration needs repeated readings "
+                                   "(set repeats >= 2 in the plan) to know their noise")
+        m = weighted_mean(sel["power_w"])
+        arm.append(float(sel["arm_deg"].mean()))
+        mean.append(m.value)
+        sem.append(max(m.sigma, 1e-300))
+    return PeakScan(float(rows["sample_deg"].mean()), np.array(arm), np.array(mean),
+                    np.array(sem))
+
+
+def angle_offsets(readings: np.ndarray, eta: float, seed: int = 0) -> tuple[Measured, Measured]:
+    """(sample offset, arm offset) in degrees from the transmitted peak at normal incidence and
+    the specular peak(s) in the readings (sample readings; powers already dark-corrected),
+    by weighted least squares over the peak equations (linear in the offsets to O(ds^3))."""
+    rows = readings[readings["kind"] == "sample"]
+    trans = rows[(rows["side"] == "transmission") & (np.abs(rows["sample_deg"]) < 0.5)]
+    refl = rows[rows["side"] == "reflection"]
+    if len(trans) == 0 or len(refl) == 0:
+        raise CalibrationError("angle calibration needs a transmission scan at normal incidence "
+                               "and a reflection scan across the specular peak")
+    k_t = 1.0 - 1.0 / eta
+    t_scan = averaged_points(trans)
+    c_t = angle_cal.peak_centre(t_scan.arm_deg, t_scan.power_w, t_scan.sigma_w, seed=seed)
+    # rows of [coefficient of ds, coefficient of da], right-hand side, sigma
+    eqs = [([k_t, -1.0], c_t.value - 180.0 - k_t * t_scan.sample_deg, c_t.sigma)]
+    for s in np.unique(np.round(refl["sample_deg"], 3)):
+        scan = averaged_points(refl[np.abs(refl["sample_deg"] - s) < 1e-3])
+        c_r = angle_cal.peak_centre(scan.arm_deg, scan.power_w, scan.sigma_w, seed=seed)
+        eqs.append(([2.0, -1.0], c_r.value - 2.0 * scan.sample_deg, c_r.sigma))
+    a = np.array([e[0] for e in eqs]) / np.array([[max(e[2], 1e-12)] for e in eqs])
+    b = np.array([e[1] / max(e[2], 1e-12) for e in eqs])
+    coef, *_ = np.linalg.lstsq(a, b, rcond=None)
+    cov = np.linalg.inv(a.T @ a)
+    return (Measured(float(coef[0]), float(math.sqrt(cov[0, 0]))),
+            Measured(float(coef[1]), float(math.sqrt(cov[1, 1]))))
+
+
+def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
+                 gains: dict[str, Measured] | None) -> dict[str, float] | None:
+    """Mean, relative drift and noise of the (corrected) beam readings, if there are any."""
+    beam = readings[readings["kind"] == "beam"]
+    if len(beam) == 0:
+        return None
+    power = beam["power_w"]
+    if darks is not None:
+        power = correct_power(power, beam["range_w"], darks, gains)
+    model = beam_power(beam["t_s"], power)
+    return {"readings": int(len(beam)), "mean_w": model.mean_w, "drift_rms": model.drift_rms,
+            "noise_w": model.noise_w, "interpolation_rel": model.interp_rel}
+
+
+def build(readings: np.ndarray, created_utc: str, source_runs: list[str],
+          eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
+          seed: int = 0) -> Calibration:
+    """Everything the readings can determine: darks always; gains when several ranges were
+    read; angle offsets when eta is given and the peak scans are present; the beam summary."""
+    darks = dark_offsets(readings)
+    cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
+    sample_rows = readings[(readings["kind"] == "sample") & ~readings["saturated"]]
+    if len(np.unique(sample_rows["range_w"])) >= 2:
+        gains = gain_ratios(readings, darks)
+        cal.gains, cal.gain_reference = gains.gains, gains.reference
+        cal.linearity = {"chi2_dof": gains.chi2_dof, "max_deviation": gains.max_deviation,
+                         "exponents": {k: v.to_json() for k, v in gains.exponents.items()}}
+    if eta is not None:
+        corrected = readings.copy()
+        corrected["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks,
+                                             cal.gains)
+        cal.sample_offset_deg, cal.arm_offset_deg = angle_offsets(corrected, eta, seed)
+    if aperture is not None:
+        cal.aperture_solid_angle_sr, cal.aperture_half_angle_deg, cal.aperture_method = aperture
+    cal.beam = beam_summary(readings, darks, cal.gains)
+    return cal

@@ -1,0 +1,203 @@
+"""Calibration from synthetic raw readings with known dark offsets, gains, drift, angle offsets
+and aperture: each recovered within its uncertainty; files round-trip; bad files are named."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from calibration import aperture, calfile, detector
+from calibration.beam import beam_power
+from calibration.calibrate import angle_offsets, build
+from calibration.values import CalibrationError, Measured
+from gonio.geometry import sample_angles
+from gonio.store import READING_DTYPE
+
+RANGES = (1e-7, 1e-6, 1e-5)
+DARKS = {1e-7: 3.1e-10, 1e-6: -2.2e-9, 1e-5: 1.4e-8}
+GAINS = {1e-7: 1.031, 1e-6: 0.987, 1e-5: 1.0}
+
+
+def readings(n: int, **fields) -> np.ndarray:
+    out = np.zeros(n, READING_DTYPE)
+    out["index"] = np.arange(n)
+    for name, value in fields.items():
+        out[name] = value
+    return out
+
+
+def detector_runs(rng: np.random.Generator, exponent: float = 1.0) -> np.ndarray:
+    """The calib-detector plan run once per fixed range: 8 darks and 12 points x 8 repeats;
+    `exponent` makes the 1e-6 W range read P^exponent (a non-linear amplifier stage)."""
+    powers = np.geomspace(2e-9, 8e-6, 12)
+    runs = []
+    for r in RANGES:
+        noise = 2e-4 * r
+        dark = readings(8, kind="dark", range_w=r, point=-1,
+                        power_w=DARKS[r] + noise * rng.standard_normal(8))
+        point = np.repeat(np.arange(12), 8)
+        true = powers[point]
+        gamma = exponent if r == 1e-6 else 1.0  # a range-dependent non-linearity
+        m = GAINS[r] * true * (true / 1e-7) ** (gamma - 1.0) + DARKS[r]
+        m = m + noise * rng.standard_normal(len(m)) + 1e-3 * m * rng.standard_normal(len(m))
+        sample = readings(len(m), kind="sample", side="reflection", range_w=r, point=point,
+                          power_w=np.minimum(m, 1.1 * r), saturated=m > 1.1 * r)
+        runs += [dark, sample]
+    return np.concatenate(runs)
+
+
+def test_dark_offsets_and_gains_recovered_within_uncertainty():
+    data = detector_runs(np.random.default_rng(1))
+    darks = detector.dark_offsets(data)
+    for r, truth in DARKS.items():
+        assert abs(darks[detector.range_key(r)].pull(truth)) < 3.0
+    gains = detector.gain_ratios(data, darks)
+    assert gains.reference == detector.range_key(1e-5)
+    for r, truth in GAINS.items():
+        g = gains.gains[detector.range_key(r)]
+        assert abs(g.value - truth) < 3.0 * g.sigma + 1e-12
+        assert g.sigma < 0.01
+    assert 0.3 < gains.chi2_dof < 3.0  # sigmas are estimated from 8 repeats per cell
+    for gamma in gains.exponents.values():
+        assert abs(gamma.pull(1.0)) < 3.0
+
+
+def test_nonlinear_detector_is_flagged_by_the_linearity_check():
+    data = detector_runs(np.random.default_rng(2), exponent=1.02)
+    gains = detector.gain_ratios(data, detector.dark_offsets(data))
+    # both signs of non-linearity: the joint gain model fits badly, and the 1e-6 W range's
+    # power-law exponent against the reference range departs from 1
+    assert gains.chi2_dof > 3.0
+    assert abs(gains.exponents["1e-06"].pull(1.0)) > 3.0
+
+
+def test_one_range_only_gives_a_clear_error():
+    data = detector_runs(np.random.default_rng(3))
+    data = data[data["range_w"] == 1e-6]
+    with pytest.raises(CalibrationError, match="at least two ranges"):
+        detector.gain_ratios(data, detector.dark_offsets(data))
+
+
+def peak_scan_readings(rng, ds: float, da: float, eta: float, s_refl=(10.0, 20.0)):
+    """Repeated arm scans across the transmitted (sample 0) and specular peaks of a bench whose
+    true angles are reported + (ds, da); the peaks are smooth and symmetric about the truth."""
+    blocks, point = [], 0
+    scans = [("transmission", 0.0)] + [("reflection", s) for s in s_refl]
+    for side, s in scans:
+        s_true = s + ds
+        if side == "transmission":
+            centre_true = 180.0 + s_true - math.degrees(math.asin(math.sin(math.radians(s_true))
+                                                                  / eta))
+        else:
+            centre_true = 2.0 * s_true
+        centre_reported = centre_true - da
+        arm = np.round(centre_reported) + np.arange(-3.0, 3.01, 0.25)
+        for a in arm:
+            true_offset = a + da - centre_true
+            p = 1e-6 * np.exp(-0.5 * (true_offset / 0.7) ** 2) + 1e-9
+            m = p * (1 + 3e-3 * rng.standard_normal(3)) + 2e-10 * rng.standard_normal(3)
+            blocks.append(readings(3, kind="sample", side=side, point=point, sample_deg=s,
+                                   arm_deg=a, power_w=m, range_w=1e-5))
+            point += 1
+    return np.concatenate(blocks)
+
+
+def test_angle_offsets_recovered_within_uncertainty():
+    rng = np.random.default_rng(4)
+    ds_true, da_true = 0.37, -0.21
+    ds, da = angle_offsets(peak_scan_readings(rng, ds_true, da_true, 1.51), eta=1.51)
+    assert abs(ds.pull(ds_true)) < 3.0 and abs(da.pull(da_true)) < 3.0
+    assert 0 < ds.sigma < 0.01 and 0 < da.sigma < 0.01
+
+
+def test_angle_calibration_without_repeats_is_refused():
+    data = peak_scan_readings(np.random.default_rng(5), 0.1, 0.1, 1.51)
+    with pytest.raises(CalibrationError, match="repeated readings"):
+        angle_offsets(data[::3], eta=1.51)
+
+
+def test_beam_drift_interpolated_within_its_uncertainty():
+    rng = np.random.default_rng(6)
+    t_beam = np.linspace(0.0, 1800.0, 31)
+
+    def truth(t):
+        return 1e-3 * (1.0 + 0.05 * np.sin(2 * np.pi * t / 3600.0))
+
+    measured = truth(t_beam) + 2e-7 * rng.standard_normal(len(t_beam))
+    model = beam_power(t_beam, measured)
+    t = rng.uniform(0.0, 1800.0, 500)
+    power, sigma = model.at(t)
+    pulls = (power - truth(t)) / sigma
+    assert np.all(np.abs(pulls) < 4.0)
+    assert 0.3 < np.sqrt(np.mean(pulls ** 2)) < 1.5
+    assert model.noise_w == pytest.approx(2e-7, rel=0.35)
+    true_drift = truth(t_beam)
+    assert model.drift_rms == pytest.approx(true_drift.std() / true_drift.mean(), rel=0.05)
+
+
+def overlap_scan_monte_carlo(rng, a: float, b: float, offsets: np.ndarray) -> np.ndarray:
+    """Fraction of a uniform beam disk (radius b) inside an aperture disk (radius a) whose centre
+    is offset along x: an independent Monte Carlo route to the scan profile."""
+    r = b * np.sqrt(rng.uniform(size=40000))
+    phi = rng.uniform(0, 2 * np.pi, size=40000)
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    return np.array([np.mean((x - u) ** 2 + y ** 2 <= a * a) for u in offsets])
+
+
+@pytest.mark.parametrize("beam_fraction", [0.0, 0.4])
+def test_aperture_from_beam_scan_matches_geometry(beam_fraction):
+    rng = np.random.default_rng(7)
+    radius_m, distance_m = 5e-3, 0.5
+    a, b = radius_m / distance_m, beam_fraction * radius_m / distance_m
+    arm = 180.0 + np.degrees(np.arange(-1.6 * a, 1.6 * a, a / 40))
+    offset = np.tan(np.radians(arm - 180.0))
+    profile = (overlap_scan_monte_carlo(rng, a, b, offset) if b > 0
+               else (np.abs(offset) <= a).astype(float))
+    power = 1e-3 * profile
+    sigma = np.full(len(power), 1e-3 * 2e-3)
+    omega, half = aperture.from_beam_scan(arm, power, sigma, beam_radius_rad=b)
+    expected = aperture.from_geometry(radius_m, distance_m)
+    # the sampling step (a/40) limits the width to about a step: the stated sigma covers noise
+    assert omega.value == pytest.approx(expected, rel=0.03)
+    assert half.value == pytest.approx(math.degrees(math.atan(a)), rel=0.015)
+
+
+def test_calibration_file_round_trip_and_apply(tmp_path):
+    rng = np.random.default_rng(8)
+    data = detector_runs(rng)
+    cal = build(data, "2026-11-23T12:00:00Z", ["runs/a"])
+    cal.sample_offset_deg, cal.arm_offset_deg = Measured(0.3, 0.01), Measured(-0.2, 0.01)
+    path = calfile.save(cal, tmp_path / "cal.json")
+    back = calfile.load(path)
+    assert back.to_json() == cal.to_json()
+    raw = readings(2, kind="sample", side="reflection", sample_deg=[10.0, 30.0],
+                   arm_deg=[20.0, 150.0], range_w=1e-6, power_w=[1e-7, 5e-7])
+    out = calfile.apply(raw, back)
+    expected = (raw["power_w"] - back.dark_offsets_w["1e-06"].value) / back.gains["1e-06"].value
+    np.testing.assert_allclose(out["power_w"], expected)
+    np.testing.assert_allclose(out["sample_deg"], [10.3, 30.3])
+    angles = sample_angles([10.3, 30.3], [19.8, 149.8])
+    np.testing.assert_allclose(out["theta_o_deg"], angles.theta_o_deg)
+    meta = {"calibration": calfile.reference(path)}
+    assert calfile.used_by(meta).to_json() == cal.to_json()
+    path.write_text(path.read_text().replace("2026-11-23", "2026-11-24"))
+    with pytest.raises(CalibrationError, match="changed after the run"):
+        calfile.used_by(meta)
+
+
+def test_bad_calibration_file_names_the_field(tmp_path):
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({"format": calfile.FORMAT,
+                                "angles": {"arm_offset_deg": {"value": "x", "sigma": 1}}}))
+    with pytest.raises(CalibrationError, match="angles.arm_offset_deg"):
+        calfile.load(path)
+    path.write_text("{}")
+    with pytest.raises(CalibrationError, match="not a gonio calibration file"):
+        calfile.load(path)
+
+
+def test_missing_range_in_calibration_is_named():
+    darks = {"1e-06": Measured(0.0, 0.0)}
+    with pytest.raises(CalibrationError, match="no dark offset for range 1e-05"):
+        detector.correct_power(np.array([1.0]), np.array([1e-5]), darks, None)
