@@ -6,7 +6,8 @@ command reference in section 3.7, error list in Appendix A): commands are
 are separated by ';'. Commands do not answer; queries answer with one line ended by CR LF
 (several queries on one line: their answers joined by ',' on one line - our reading).
 Errors are not answered either: they go into a 10-deep FIFO read with TE? (code) and TB?
-("code, timestamp, MESSAGE"); axis errors are numbered axis*100 + code.
+("code, timestamp, MESSAGE", the timestamp in 400 us servo ticks since reset: ESP300
+manual, TB command, p. 3-138); axis errors are numbered axis*100 + code.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ AXIS_ERRORS = {
 ANGULAR_UNITS = {7: 1.0, 8: 400.0 / 360.0, 9: math.pi / 180.0, 10: 1e3 * math.pi / 180.0,
                  11: 1e6 * math.pi / 180.0}
 DEGREE = 7
+SERVO_TICK_S = 400e-6  # TB? timestamps count servo interrupts (400 us by default)
 
 AXIS_KEYS = {
     "limits_deg": (-170.0, 170.0),
@@ -202,11 +204,17 @@ class EspEmulator:
                 try:
                     reply = self._execute(unit)
                 except _Fail as fail:
-                    self.errors.append((fail.code, int(self.clock.now() * 1000.0)))
+                    self._log_error(fail.code)
                     continue
                 if reply is not None:
                     replies.append(reply)
         return (",".join(replies) + "\r\n").encode("ascii") if replies else None
+
+    def _ticks(self) -> int:
+        return int(self.clock.now() / SERVO_TICK_S)
+
+    def _log_error(self, code: int) -> None:
+        self.errors.append((code, self._ticks()))
 
     def _execute(self, unit: str) -> str | None:
         if unit.upper() == "*IDN?":
@@ -392,7 +400,7 @@ class EspEmulator:
             target.motion.stop()
             target.homing = False
             if aborted_home:
-                self.errors.append((target.number * 100 + 20, int(self.clock.now() * 1000.0)))
+                self._log_error(target.number * 100 + 20)
         return None
 
     def _cmd_ab(self, axis: None, query: bool, param: str) -> str | None:
@@ -430,8 +438,8 @@ class EspEmulator:
         return str(self.errors.popleft()[0]) if self.errors else "0"
 
     def _cmd_tb(self, axis: None, query: bool, param: str) -> str:
-        """TB?: oldest error as "code, timestamp (ms), MESSAGE"; reading removes it."""
-        code, stamp = self.errors.popleft() if self.errors else (0, int(self.clock.now() * 1e3))
+        """TB?: oldest error as "code, timestamp (servo ticks), MESSAGE"; reading removes it."""
+        code, stamp = self.errors.popleft() if self.errors else (0, self._ticks())
         if code >= 100:
             text = AXIS_ERRORS.get(code % 100, "UNKNOWN ERROR")
         else:

@@ -319,3 +319,11 @@ def test_disconnect_is_a_named_driver_error(esp_pair):
 def test_open_failure_names_port():
     with pytest.raises(DriverError, match="cannot open serial port '/dev/nonexistent-esp'"):
         EspController("/dev/nonexistent-esp", name="stages")
+
+
+def test_tb_timestamp_counts_400us_servo_ticks(esp_pair):
+    emu, ctl = esp_pair()
+    ctl.axis(1).move_to(40.0)  # instant clock: advances by the move's 2.25 s
+    code, stamp, text = raw(ctl, "1PA500;TB?").split(", ")
+    assert (code, text) == ("106", "POSITIVE SOFTWARE LIMIT DETECTED")
+    assert int(stamp) == int(sum(profile_times(40.0, 20.0, 80.0)) / 400e-6)
