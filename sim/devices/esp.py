@@ -310,7 +310,8 @@ class EspEmulator:
         return None
 
     def _cmd_or(self, axis: _EmulatedAxis, query: bool, param: str) -> str | None:
-        """OR[mode]: home search (modes 0..6); the stage finds home at 0 and is homed."""
+        """OR[mode]: home search (modes 0..6); the stage finds home (0, or the nearest
+        limit if 0 is outside its travel) and is homed."""
         if query:
             raise _Fail(6)
         mode = self._number(param, required=False)

@@ -133,7 +133,8 @@ class TrapezoidAxis:
     """One axis moving rest-to-rest with trapezoidal velocity profiles on a VirtualClock.
 
     Thread-safe. Positions are in the caller's unit (degrees for rotation stages); decel
-    defaults to accel (a symmetric profile).
+    defaults to accel (a symmetric profile); home_position defaults to 0, or to the nearest
+    limit when 0 is outside the travel.
     """
 
     def __init__(
@@ -144,6 +145,7 @@ class TrapezoidAxis:
         limits: tuple[float, float] = (-math.inf, math.inf),
         position: float = 0.0,
         decel: float | None = None,
+        home_position: float | None = None,
     ):
         lo, hi = float(limits[0]), float(limits[1])
         if not lo < hi:
@@ -158,6 +160,7 @@ class TrapezoidAxis:
         self._rest = float(position)
         self._homing_done_at: float | None = None
         self._homed = False
+        self._home_position = home_position
 
     # -- parameters -------------------------------------------------------------
     @property
@@ -344,13 +347,14 @@ class TrapezoidAxis:
             self._homed = True
 
     def home(self) -> float:
-        """Move to 0 and set `homed` when it arrives; returns the end time."""
+        """Move to the home position and set `homed` when it arrives; returns the end time."""
         with self._lock:
             self._homed = False
             lo, hi = self._limits
-            if not lo <= 0.0 <= hi:
-                raise LimitError(0.0, self._limits)
-            t_end = self._plan(0.0)
+            home = min(max(0.0, lo), hi) if self._home_position is None else self._home_position
+            if not lo <= home <= hi:
+                raise LimitError(home, self._limits)
+            t_end = self._plan(home)
             self._homing_done_at = t_end
             self._settle_homing(self.clock.now())
             return t_end

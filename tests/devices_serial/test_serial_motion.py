@@ -179,6 +179,18 @@ def test_asymmetric_deceleration_profile():
     assert short.position() == pytest.approx(vp**2 / 80.0)
 
 
+def test_home_position_defaults_to_nearest_limit_when_zero_is_outside():
+    clock, arm = manual_axis(limits=(6.0, 354.0), position=180.0)
+    clock.advance_to(arm.home())
+    assert arm.position() == 6.0 and arm.homed
+    clock, other = manual_axis(position=5.0, home_position=-3.0)
+    clock.advance_to(other.home())
+    assert other.position() == -3.0
+    other.limits = (0.0, 10.0)
+    with pytest.raises(LimitError):
+        other.home()
+
+
 def test_define_position_rebases_and_marks_homed():
     clock, axis = manual_axis(position=12.0)
     axis.define_position(0.0)
