@@ -1,0 +1,35 @@
+"""`gonio export RUN --format csv|netcdf|zemax|mitsuba --out FILE`: write a run's readings
+(csv, netcdf: one row per reading) or its fitted model (zemax, mitsuba: calibration.exports)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+FORMATS = ("csv", "netcdf", "zemax", "mitsuba")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `export` verb."""
+    p = subparsers.add_parser("export", help="export a run (csv, netcdf, zemax, mitsuba)",
+                              description=__doc__)
+    p.add_argument("run", help="run directory")
+    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--out", required=True, metavar="FILE", help="output file")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the file and print its path."""
+    out = Path(args.out)
+    if args.format in ("zemax", "mitsuba"):
+        from calibration.exports import write
+
+        print(write(args.run, args.format, out))
+        return 0
+    from gonio.export import write_csv, write_netcdf
+    from gonio.store import open_run
+
+    writer = write_csv if args.format == "csv" else write_netcdf
+    print(writer(open_run(args.run), out))
+    return 0

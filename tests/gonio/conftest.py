@@ -1,0 +1,133 @@
+"""Helpers for the gonio tests: example configs made fast (instant motion, cheap aperture
+integral), a small TOML writer, and running the real `gonio` CLI in a subprocess."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import tomllib
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples"
+
+
+def toml_value(value) -> str:
+    """One TOML value (numbers, strings, booleans, arrays, inline tables)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value) if value == value and abs(value) != float("inf") else (
+            "nan" if value != value else ("inf" if value > 0 else "-inf"))
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"cannot write {value!r} as TOML")
+
+
+def dump_toml(data: dict, prefix: str = "", inline_dicts: bool = False) -> str:
+    """A dict as TOML text: dicts become [tables], lists of dicts [[arrays of tables]]
+    (whose own dict values are written inline)."""
+    lines, tables = [], []
+    for key, value in data.items():
+        is_table = isinstance(value, dict) and not inline_dicts
+        is_array = isinstance(value, list) and value and all(isinstance(v, dict) for v in value)
+        if is_table or is_array:
+            tables.append((key, value))
+        else:
+            lines.append(f"{json.dumps(key)} = {toml_value(value)}")
+    text = "".join(line + "\n" for line in lines)
+    for key, value in tables:
+        name = f"{prefix}{json.dumps(key)}"
+        if isinstance(value, list):
+            for item in value:
+                text += f"\n[[{name}]]\n" + dump_toml(item, name + ".", inline_dicts=True)
+        else:
+            text += f"\n[{name}]\n" + dump_toml(value, name + ".")
+    return text
+
+
+def load_example(name: str) -> dict:
+    """An example instrument config as a dict, register maps made absolute."""
+    cfg = tomllib.loads((EXAMPLES / "instruments" / f"{name}.toml").read_text())
+    for dev in cfg["devices"].values():
+        if "register_map" in dev:
+            dev["register_map"] = str((EXAMPLES / "instruments" / dev["register_map"]).resolve())
+    return cfg
+
+
+def fast_config(name: str = "sim-serial", *, elevation: bool = False, time_scale="inf",
+                faults: dict | None = None, **device_overrides) -> dict:
+    """An example config with instant motion, a cheap aperture rule and optional extras."""
+    cfg = load_example(name)
+    cfg["sim"]["time_scale"] = time_scale
+    cfg["sim"].setdefault("aperture", {})["order"] = [1, 1]
+    if elevation:
+        if "esp" in cfg["devices"]:
+            cfg["axes"]["elevation"] = {"device": "esp", "axis": 3, "limits_deg": [-60.0, 60.0],
+                                        "speed_deg_s": 10.0, "accel_deg_s2": 40.0,
+                                        "settle_s": 0.01}
+        else:
+            drive = dict(cfg["devices"]["arm_drive"], unit=4)
+            cfg["devices"]["elevation_drive"] = drive
+            cfg["axes"]["elevation"] = {"device": "elevation_drive",
+                                        "limits_deg": [-60.0, 60.0], "speed_deg_s": 10.0,
+                                        "accel_deg_s2": 40.0, "settle_s": 0.01}
+    for dev, changes in device_overrides.items():
+        cfg["devices"][dev].update(changes)
+    if faults:
+        cfg["sim"]["faults"] = faults
+    return cfg
+
+
+def write_toml(path: Path, data: dict) -> Path:
+    """Write a dict as a TOML file and check it reads back the same."""
+    text = dump_toml(data)
+    assert tomllib.loads(text) == data, text
+    path.write_text(text)
+    return path
+
+
+def gonio_cli(*args, timeout: float = 120.0, input: str | None = None, cwd=None
+              ) -> subprocess.CompletedProcess:
+    """Run `python -m gonio.cli ARGS` and return the completed process (text output)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "gonio.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, input=input,
+                          cwd=cwd or ROOT, env=env)
+
+
+def run_dir_of(proc: subprocess.CompletedProcess) -> Path:
+    """The run directory: the last line of a scan's stdout."""
+    lines = proc.stdout.strip().splitlines()
+    assert lines, f"no stdout; stderr:\n{proc.stderr}"
+    return Path(lines[-1])
+
+
+def one_line_error(stderr: str) -> str:
+    """Assert stderr is exactly one `gonio VERB: error: ...` line without a traceback."""
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, stderr
+    assert "Traceback" not in stderr
+    assert re.match(r"gonio \w+: error: \S", lines[0]), lines[0]
+    return lines[0]
+
+
+@pytest.fixture
+def plan_file(tmp_path):
+    """Write a plan dict (with its instrument) to tmp_path and return the plan's path."""
+    def make(plan: dict, config: dict | None = None, name: str = "plan") -> Path:
+        plan = dict(plan)
+        if config is not None:
+            write_toml(tmp_path / f"{name}-instrument.toml", config)
+            plan["instrument"] = f"{name}-instrument.toml"
+        return write_toml(tmp_path / f"{name}.toml", plan)
+    return make

@@ -1,0 +1,80 @@
+"""The run store: append-only readings, torn last lines, resume without duplicates."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gonio.errors import RunError
+from gonio.store import READING_DTYPE, RunWriter, open_run
+
+
+def row(i, **kw):
+    base = {name: 0.0 for name in READING_DTYPE.names}
+    base.update(index=i, kind="sample", side="reflection", repeat=0, point=i, flags="",
+                saturated=False, power_w=1e-6 * (i + 1), plan_theta_i_deg=math.nan)
+    base.update(kw)
+    return base
+
+
+@pytest.fixture
+def writer(tmp_path):
+    w = RunWriter.create(tmp_path / "runs", "t", None, None, {"name": "t"}, {"name": "c"},
+                         {"plan_name": "t"})
+    w.start_session()
+    yield w
+    w.close()
+
+
+def test_append_and_read_back(writer):
+    for i in range(5):
+        writer.append(row(i))
+    run = open_run(writer.path)
+    r = run.readings()
+    assert r.dtype == READING_DTYPE
+    assert list(r["index"]) == list(range(5))
+    np.testing.assert_allclose(r["power_w"], 1e-6 * np.arange(1, 6))
+    assert np.isnan(r["plan_theta_i_deg"]).all()  # NaN is stored as JSON null
+    assert "NaN" not in (writer.path / "readings.jsonl").read_text()
+    assert run.plan == {"name": "t"} and run.config == {"name": "c"}
+    assert run.meta["status"] == "running" and run.meta["versions"]["numpy"] == np.__version__
+
+
+def test_out_of_order_append_is_refused(writer):
+    writer.append(row(0))
+    with pytest.raises(RunError, match="out of order"):
+        writer.append(row(2))
+
+
+@pytest.mark.parametrize("tail", [b'{"index": 3, "kind": "sam', b'{"index": 3}garbage\n',
+                                  b'{"index": 7, "kind": "sample"}\n', b"\x00\x00\x00"])
+def test_torn_or_bad_tail_is_ignored_and_cut_on_resume(writer, tail):
+    for i in range(3):
+        writer.append(row(i))
+    writer.close()
+    with open(writer.path / "readings.jsonl", "ab") as fh:
+        fh.write(tail)
+    assert len(open_run(writer.path)) == 3
+    resumed = RunWriter.resume(writer.path)
+    assert resumed.next_index == 3
+    resumed.append(row(3))
+    resumed.close()
+    r = open_run(writer.path).readings()
+    assert list(r["index"]) == [0, 1, 2, 3]
+    lines = (writer.path / "readings.jsonl").read_bytes().splitlines()
+    assert [json.loads(x)["index"] for x in lines] == [0, 1, 2, 3]
+
+
+def test_completed_run_cannot_be_resumed(writer):
+    writer.append(row(0))
+    writer.set_status("completed", "")
+    with pytest.raises(RunError, match="already completed"):
+        RunWriter.resume(writer.path)
+    meta = open_run(writer.path).meta
+    assert meta["sessions"][-1]["status"] == "completed" and meta["stopped_utc"]
+
+
+def test_not_a_run_directory(tmp_path):
+    with pytest.raises(RunError, match="not a run directory"):
+        open_run(tmp_path)
