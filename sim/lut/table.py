@@ -37,6 +37,7 @@ class Table:
     data: np.ndarray
     bake_seconds: float = float("nan")
     model: str = ""
+    validation: dict | None = None
 
     def metadata(self) -> dict:
         """Everything needed to read and trust the table, as JSON-ready values."""
@@ -53,6 +54,7 @@ class Table:
             "spec": self.spec.to_dict(),
             "model": self.model,
             "bake_seconds": self.bake_seconds,
+            "validation": self.validation,
         }
 
     def save(self, path: str | Path) -> Path:
@@ -109,4 +111,5 @@ def load_table(path: str | Path) -> Table:
     spec = TableSpec.from_dict(meta["spec"])
     if data.shape != (*spec.shape, len(spec.channels)) or data.dtype != np.dtype(spec.dtype):
         raise ValueError(f"{path}: table {data.shape} {data.dtype} does not match its metadata")
-    return Table(spec=spec, data=data, bake_seconds=meta["bake_seconds"], model=meta["model"])
+    return Table(spec=spec, data=data, bake_seconds=meta["bake_seconds"], model=meta["model"],
+                 validation=meta.get("validation"))

@@ -1,0 +1,81 @@
+"""`gonio lut`: bake a real-time split-sum lookup table from gonio's rough-dielectric model
+(transmission: N.V x roughness x eta; reflection: N.V x roughness, F0 scale and bias) into an
+.npz with its axes, parameterisation and model, optionally validated. See docs/lut.md."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from gonio.errors import GonioError
+
+DEFAULT_SIZE = {"transmission": "64x64x32", "reflection": "64x64"}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `lut` verb."""
+    p = subparsers.add_parser("lut", help="bake and validate split-sum lookup tables",
+                              description=__doc__)
+    p.add_argument("--kind", choices=("transmission", "reflection"), required=True)
+    p.add_argument("--size", help="nodes per axis, e.g. 64x64x32 (transmission: N.V x "
+                   "roughness x eta) or 64x64 (reflection); default per kind as shown")
+    p.add_argument("--dtype", choices=("float16", "float32", "float64"), default="float16")
+    p.add_argument("--out", required=True, metavar="FILE", help="output .npz")
+    p.add_argument("--samples", type=int, default=1024,
+                   help="Sobol points per entry, a power of two (default 1024)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tile-entries", type=int, default=128,
+                   help="entries per tile, the unit of parallel work and of seeding")
+    p.add_argument("--distribution", choices=("ggx", "beckmann"), default="ggx")
+    p.add_argument("--masking", choices=("correlated", "separable"), default="correlated")
+    p.add_argument("--multiple-scattering", action="store_true",
+                   help="include multiple scattering (Heitz 2016 random walk; transmission)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="bake on a local Dask cluster of N worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="bake on an existing Dask cluster, e.g. tcp://host:8786")
+    p.add_argument("--validate", action="store_true",
+                   help="check entries and random lookups against converged integrals and "
+                        "write the errors into the file")
+    p.add_argument("--validate-entries", type=int, default=2048, metavar="K",
+                   help="entries checked (a random subset when the table has more)")
+    p.add_argument("--validate-points", type=int, default=1000, metavar="P",
+                   help="random lookup points checked")
+    p.add_argument("--reference-samples", type=int, default=2**14, metavar="S",
+                   help="Sobol points of each of the two reference integrals")
+    p.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bake (and validate) the table and write it; one line per result on stdout."""
+    # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
+    from sim.lut import TableSpec, bake, parse_size, validate
+    from sim.lut.cluster import dask_client, describe
+
+    try:
+        spec = TableSpec(kind=args.kind, shape=parse_size(args.size or DEFAULT_SIZE[args.kind]),
+                         dtype=args.dtype, samples=args.samples, seed=args.seed,
+                         tile_entries=args.tile_entries, distribution=args.distribution,
+                         masking=args.masking, multiple_scattering=args.multiple_scattering)
+        if args.validate and min(args.validate_entries, args.validate_points) < 1:
+            raise ValueError("--validate-entries and --validate-points must be >= 1")
+        with dask_client(args.workers, args.scheduler) as client:
+            table = bake(spec, client=client, progress=args.progress)
+            layout = describe(args.workers, args.scheduler)
+            print(f"baked {spec.kind} {'x'.join(map(str, spec.shape))} {spec.dtype}, "
+                  f"{spec.samples} samples/entry, in {table.bake_seconds:.2f} s ({layout})")
+            if args.validate:
+                report = validate(table, entries=args.validate_entries,
+                                  points=args.validate_points,
+                                  reference_samples=args.reference_samples, client=client)
+                table.validation = report.to_dict()
+                print("validation " + json.dumps(table.validation))
+        path = table.save(args.out)
+    except ValueError as exc:
+        raise GonioError(str(exc)) from None
+    except OSError as exc:
+        raise GonioError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    print(path)
+    return 0

@@ -1,0 +1,42 @@
+"""Where Dask work runs: in-process threads (no client), a fresh local cluster of N worker
+processes, or an existing cluster by scheduler address. Bakes and sweeps share this."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+@contextmanager
+def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
+    """Yield None (threaded scheduler in this process), or a distributed Client on a local
+    cluster of `workers` single-threaded processes, or on the cluster at `scheduler`."""
+    if workers is not None and scheduler is not None:
+        raise ValueError("give --workers or --scheduler, not both")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    if workers is None and scheduler is None:
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ValueError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from None
+        with client:
+            yield client
+        return
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        yield client
+
+
+def describe(workers: int | None, scheduler: str | None) -> str:
+    """The layout in words, for output and metadata."""
+    if scheduler is not None:
+        return f"Dask cluster at {scheduler}"
+    if workers is not None:
+        return f"local Dask cluster, {workers} worker process(es)"
+    return "in-process (Dask threaded scheduler)"
