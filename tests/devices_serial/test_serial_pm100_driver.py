@@ -116,6 +116,7 @@ def test_compound_header_path_rule(pm_pair):
     assert pm.query("SENS:CORR:WAV 700;WAV?;:SENS:POW:RANG:AUTO 0;AUTO?") == [
         "7.000000E+02", "0"]
     assert pm.query("MEAS:POW?;SYST:ERR?")[1] == '0,"No error"'  # root fallback
+    pm.range_w = None  # autorange again (the fixed 10 mW range is too coarse for 2 uW)
     long_form = pm.query("MEASURE:POWER?;:SYSTEM:ERROR?;:MEASURE:SCALAR:POWER?")
     assert float(long_form[0]) > 0 and long_form[1] == '0,"No error"' and float(long_form[2]) > 0
 
