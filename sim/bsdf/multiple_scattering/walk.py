@@ -84,7 +84,6 @@ class Walker:
         truncated = np.zeros(n)
         orders = np.zeros(n, dtype=np.int64)
         first = np.full(n, np.nan)
-        stop_after = order if order is not None else max_order
         idx = np.flatnonzero(alive)
         k = 0
         while idx.size:
@@ -124,7 +123,9 @@ class Walker:
             beta[idx] *= factor
             outside[idx] = out ^ crossed
             d[idx] = np.where(crossed[:, None], flip(w_next), w_next)
-            if stop_after is not None and k >= stop_after:
+            if order is not None and k >= order:
+                break
+            if max_order is not None and k >= max_order:
                 side_log = np.where(outside[idx], log_u[idx], log_v[idx])
                 hit = 1.0 - self._escape_probability(d[idx], side_log)
                 truncated[idx] = beta[idx] * hit

@@ -1,0 +1,96 @@
+"""Smith slope distributions on the whole sphere: signed Lambda, projected area, visible normals."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+
+CASES = [("ggx", 0.3), ("ggx", (1.0, 0.4)), ("beckmann", 0.3), ("beckmann", (0.5, 1.2))]
+
+
+def direction(theta, phi=0.7):
+    return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+
+
+def hemisphere_grid(n=600):
+    """Midpoint grid over the upper hemisphere in (cos theta, phi), with solid-angle weights."""
+    z = (np.arange(n) + 0.5) / n
+    phi = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
+    zz, pp = np.meshgrid(z, phi, indexing="ij")
+    r = np.sqrt(1 - zz * zz)
+    m = np.stack([r * np.cos(pp), r * np.sin(pp), zz], axis=-1)
+    return m, (1.0 / n) * (np.pi / n)
+
+
+@pytest.mark.parametrize("name,alpha", CASES)
+@pytest.mark.parametrize("theta", [0.2, 1.2, 1.5707, 1.9, 2.8])
+def test_projected_area_is_the_integral_of_visible_cosines(name, alpha, theta):
+    s = SlopeDistribution.named(name, alpha)
+    m, dw = hemisphere_grid()
+    w = direction(theta)
+    numeric = np.sum(np.maximum(m @ w, 0.0) * s.D(m)) * dw
+    assert s.projected_area(w[None])[0] == pytest.approx(numeric, rel=2e-3, abs=1e-12)
+
+
+@pytest.mark.parametrize("name,alpha", CASES)
+def test_lambda_of_the_opposite_direction(name, alpha):
+    s = SlopeDistribution.named(name, alpha)
+    w = np.array([direction(t, p) for t in np.linspace(0.01, 1.56, 20) for p in (0.0, 1.0, 2.5)])
+    assert np.allclose(s.lambda_(-w), -1.0 - s.lambda_(w), rtol=1e-13, atol=1e-13)
+    assert np.all(s.lambda_(w) >= 0.0)
+
+
+@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+def test_lambda_is_finite_and_monotone_at_extremes(name):
+    s = SlopeDistribution.named(name, 0.5)
+    theta = np.concatenate([[0.0, 1e-12, 1e-6], np.linspace(0.1, 1.5, 30),
+                            [np.pi / 2 - 1e-6, np.pi / 2 - 1e-12]])
+    w = np.stack([np.sin(theta), 0 * theta, np.cos(theta)], axis=-1)
+    lam = s.lambda_(w)
+    assert np.all(np.isfinite(lam)) and lam[0] == 0.0
+    assert np.all(np.diff(lam) >= 0.0)
+    horizontal = s.lambda_(np.array([[1.0, 0.0, 0.0]]))
+    assert horizontal[0] == np.inf
+    assert np.isfinite(s.projected_area(np.array([[1.0, 0.0, 0.0]]))[0])
+
+
+@pytest.mark.parametrize("name,alpha", CASES)
+@pytest.mark.parametrize("theta", [0.4, 1.3, 1.75, 2.6])
+def test_visible_normal_sampling_matches_its_density(name, alpha, theta):
+    """Chi-square test of sampled normals against D_visible binned in (m_z, phi), w above or
+    below the horizon."""
+    s = SlopeDistribution.named(name, alpha)
+    w = direction(theta)
+    rng = np.random.default_rng(11)
+    n = 40000
+    u = rng.random((2, n))
+    m = s.sample_visible(np.broadcast_to(w, (n, 3)), u[0], u[1])
+    assert np.allclose(np.linalg.norm(m, axis=-1), 1.0) and np.all(m[:, 2] >= 0.0)
+    assert np.all(m @ w >= -1e-12)
+    nz, nphi = 8, 8
+    grid, dw = hemisphere_grid(400)
+    dens = s.D_visible(np.broadcast_to(w, grid.shape), grid) * dw
+    zb = np.minimum((grid[..., 2] * nz).astype(int), nz - 1)
+    azimuth = np.mod(np.arctan2(grid[..., 1], grid[..., 0]), 2 * np.pi)
+    pb = (azimuth / (2 * np.pi) * nphi).astype(int)
+    expected = np.bincount((zb * nphi + pb).ravel(), dens.ravel(), nz * nphi)
+    assert expected.sum() == pytest.approx(1.0, abs=0.01)
+    zs = np.minimum((m[:, 2] * nz).astype(int), nz - 1)
+    ps = np.minimum((np.mod(np.arctan2(m[:, 1], m[:, 0]), 2 * np.pi) / (2 * np.pi) * nphi)
+                    .astype(int), nphi - 1)
+    observed = np.bincount(zs * nphi + ps, minlength=nz * nphi)
+    keep = expected * n > 20
+    exp_counts = expected[keep] / expected[keep].sum() * observed[keep].sum()
+    chi2 = np.sum((observed[keep] - exp_counts) ** 2 / exp_counts)
+    assert observed[~keep].sum() <= max(30, 3 * expected[~keep].sum() * n)
+    assert stats.chi2.sf(chi2, keep.sum() - 1) > 1e-4
+
+
+def test_phong_and_array_alpha_are_refused():
+    from sim.bsdf.distributions import make_distribution
+
+    with pytest.raises(ValueError, match="beckmann' or 'ggx"):
+        SlopeDistribution(make_distribution("phong", 0.3))
+    with pytest.raises(ValueError, match="scalar alpha"):
+        SlopeDistribution(make_distribution("ggx", np.array([0.1, 0.2])))
