@@ -27,6 +27,7 @@ from typing import Protocol
 from pymodbus.constants import ExcCodes
 from pymodbus.datastore import ModbusServerContext
 from pymodbus.exceptions import NoSuchIdException
+from pymodbus.pdu import ExceptionResponse
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from sim.devices.faults import FaultInjector, FaultSpec
@@ -41,6 +42,7 @@ from sim.devices.register_map import (
 
 _TABLE_OF_FUNCTION = {3: "holding", 4: "input", 23: "holding"}
 _WRITE_FUNCTIONS = (6, 16, 23)
+RTU_FRAME_GAP_S = 0.005  # silence that ends an RTU frame (3.5 characters, floored for ptys)
 _MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
 
 
@@ -160,7 +162,39 @@ class _FaultyReplies:
         handler.trace_packet = lambda sending, data: (
             self.emulator.outgoing(handler, data) if sending else data
         )
+        handler.trace_pdu = lambda sending, pdu: pdu if sending else _refuse_reply_codes(pdu)
+        if self.emulator.transport == "rtu":
+            handler.data_received = _after_silence_new_frame(handler)
         return handler
+
+
+def _refuse_reply_codes(request):
+    """A request whose function code has the exception bit (>= 0x80) is decoded by pymodbus
+    as an exception reply; a device answers it with exception 01 (illegal function)."""
+    if isinstance(request, ExceptionResponse):
+        code = request.function_code
+
+        async def illegal_function(_context, _device_id):
+            return ExceptionResponse(code, ExcCodes(ILLEGAL_FUNCTION))
+
+        request.datastore_update = illegal_function
+    return request
+
+
+def _after_silence_new_frame(handler, gap_s: float = RTU_FRAME_GAP_S):
+    """RTU's framing rule: a silent interval ends a frame, so leftovers of a truncated or
+    garbled frame are dropped before the bytes after the silence are parsed."""
+    receive = handler.data_received
+    last = [0.0]
+
+    def data_received(data: bytes) -> None:
+        now = time.monotonic()
+        if now - last[0] > gap_s:
+            handler.recv_buffer = b""
+        last[0] = now
+        receive(data)
+
+    return data_received
 
 
 class _TcpServer(_FaultyReplies, ModbusTcpServer):
@@ -286,6 +320,8 @@ class ModbusEmulatorServer:
         """
         unit_id = frame[0] if self.transport == "rtu" else frame[6] if len(frame) > 6 else 0
         unit = self.units.get(unit_id)
+        if unit is None and self.transport == "rtu":
+            return b""  # pymodbus answers garbled requests for any id; absent units are silent
         faults = unit.faults if unit is not None and unit.faults is not None else self.faults
         if self.transport == "rtu":
             out = faults.reply(frame, crc_bytes=2)
