@@ -46,6 +46,7 @@ class FitOptions:
     fit_eta: bool = False
     fit_scale: bool = False
     eta: float | None = None  # fixed (or starting) eta; None: the data's meta["eta"]
+    k: float | None = None  # conductor extinction (fixed); None: meta["k"] if > 0, else dielectric
     fit_incidence_deg: tuple[float, ...] | None = (0.0,)  # None: fit every valid point
     incidence_tol_deg: float = 0.5
     aperture_half_angle_deg: float | None = None  # None: meta's, if any; 0: point model
@@ -76,6 +77,7 @@ class FitResult:
     errors: np.ndarray
     covariance: np.ndarray
     eta: float
+    k: float | None  # conductor extinction coefficient, None for a dielectric
     chi2_dof_fit: float
     n_fit: int
     chi2_dof_heldout: float | None
@@ -109,7 +111,7 @@ class FitResult:
 
     def model(self) -> Any:
         """The fitted sim.bsdf.RoughDielectric (without the scale factor)."""
-        return build_model(self.distribution, self.alpha, self.eta, self.masking)
+        return build_model(self.distribution, self.alpha, self.eta, self.masking, self.k)
 
     def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
@@ -123,6 +125,8 @@ class FitResult:
                   for n, v, e in zip(self.names, self.values, self.errors, strict=True)}
         if "eta" not in params:
             params["eta"] = {"value": self.eta, "sigma": 0.0, "fixed": True}
+        if self.k is not None:
+            params["k"] = {"value": self.k, "sigma": 0.0, "fixed": True}
         if self.distribution == "phong":
             a = np.atleast_1d(self.alpha)
             params["phong_exponent"] = {"value": float(2.0 / (a[0] * a[-1]) - 2.0)}
@@ -142,10 +146,14 @@ class FitResult:
 
 
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
-                masking: str) -> Any:
-    """The sim.bsdf model for one parameter set (imported here so calibration loads without it)."""
-    from sim.bsdf import RoughDielectric
+                masking: str, k: float | None = None) -> Any:
+    """The sim.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
+    complex index eta + i k when k is given (imported here so calibration loads without it)."""
+    from sim.bsdf import RoughConductor, RoughDielectric
 
+    if k is not None:
+        return RoughConductor(distribution=distribution, alpha=alpha,
+                              eta_complex=complex(eta, k), masking=masking)
     return RoughDielectric(distribution=distribution, alpha=alpha, eta=eta, masking=masking)
 
 
@@ -196,9 +204,9 @@ class _Problem:
     log alpha (one or two), eta (if free), log scale (if free)."""
 
     def __init__(self, data: ReducedData, distribution: str, masking: str, options: FitOptions,
-                 eta0: float, aperture_deg: float):
+                 eta0: float, k: float | None, aperture_deg: float):
         self.data, self.distribution, self.masking = data, distribution, masking
-        self.options, self.eta0, self.aperture_deg = options, eta0, aperture_deg
+        self.options, self.eta0, self.k, self.aperture_deg = options, eta0, k, aperture_deg
         names = ["alpha_x", "alpha_y"] if options.anisotropic else ["alpha"]
         lo = [math.log(ALPHA_BOUNDS[0])] * len(names)
         hi = [math.log(ALPHA_BOUNDS[1])] * len(names)
@@ -231,7 +239,7 @@ class _Problem:
 
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         alpha, eta, scale = self.unpack(x)
-        model = build_model(self.distribution, alpha, eta, self.masking)
+        model = build_model(self.distribution, alpha, eta, self.masking, self.k)
         f = _aperture_eval(model, data.wi, data.wo, self.aperture_deg, self.options.aperture_order)
         return scale * f
 
@@ -304,6 +312,10 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     if eta0 is None:
         raise FitError("fit: the data carry no eta (meta['eta']) and none was given")
     eta0 = float(eta0)
+    k = options.k if options.k is not None else data.meta.get("k")
+    k = float(k) if k else None
+    if k is not None and options.fit_eta:
+        raise FitError("fit: eta of a conductor is held fixed (give it with k); drop fit_eta")
     aperture = options.aperture_half_angle_deg
     if aperture is None:
         aperture = float(data.meta.get("aperture_half_angle_deg", 0.0))
@@ -320,11 +332,13 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     scored, failures = [], []
     for distribution in options.distributions:
         for masking in options.maskings:
-            problem = _Problem(fit_data, distribution, masking, options, eta0, aperture)
+            problem = _Problem(fit_data, distribution, masking, options, eta0, k, aperture)
             try:
                 scored.append((problem, _solve(problem, alpha0)))
             except FitError as exc:
                 failures.append(str(exc))
+            except ValueError as exc:  # the model refuses the combination (anisotropic phong)
+                failures.append(f"fit {distribution}: {exc}")
     if not scored:
         raise FitError("; ".join(failures))
     problem, best = _preferred(scored, options.distributions)
@@ -339,7 +353,7 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     return FitResult(
         distribution=problem.distribution, masking=problem.masking, names=problem.names,
         values=best["values"], errors=np.sqrt(np.diag(best["cov"])), covariance=best["cov"],
-        eta=eta, chi2_dof_fit=best["chi2_dof"], n_fit=int(in_fit.sum()),
+        eta=eta, k=k, chi2_dof_fit=best["chi2_dof"], n_fit=int(in_fit.sum()),
         chi2_dof_heldout=heldout[0], n_heldout=heldout[1],
         preferred_by=None if runner_up is None else runner_up - best["chi2"],
         candidates=[{"distribution": p.distribution, "masking": p.masking,

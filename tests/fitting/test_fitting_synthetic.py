@@ -89,6 +89,9 @@ def test_anisotropic_in_plane_fit_and_its_degeneracy_with_scale():
     for name in ("alpha_x", "alpha_y"):
         value, sigma = result.param(name)
         assert abs(value - 0.394) < 3.0 * sigma
+    default = fit(data, FitOptions(anisotropic=True))  # Phong is isotropic: reported, skipped
+    assert default.distribution == "ggx"
+    assert any("phong" in c.get("failed", "") for c in default.candidates)
     with pytest.raises(FitError, match="ill-conditioned.*alpha_y, scale"):
         fit(data, FitOptions(distributions=("ggx",), anisotropic=True, fit_scale=True))
 

@@ -1,0 +1,87 @@
+"""Exports of a run's fitted model: Zemax tabular BSDF and Mitsuba 3 material.
+
+`write(run_dir, fmt, out_path)` is what `gonio export --format zemax|mitsuba` calls: it reduces
+and fits the run (calibration.pipeline) and writes the file(s)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from calibration.exports.mitsuba import material_parameters, write_mitsuba
+from calibration.exports.zemax import tabulate, write_zemax
+from calibration.fit import FitResult
+from calibration.reduced import ReducedData
+from calibration.values import CalibrationError
+
+FORMATS = ("zemax", "mitsuba")
+
+
+def _notes(result: FitResult, source: str) -> list[str]:
+    params = ", ".join(f"{n} = {v:.6g} +- {e:.2g}"
+                       for n, v, e in zip(result.names, result.values, result.errors, strict=True))
+    held = ("n/a" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.3g}")
+    return [f"gonio fit of {source}: {result.distribution} ({result.masking} masking), {params}, "
+            f"eta = {result.eta:.6g}; chi2/dof fitted {result.chi2_dof_fit:.3g} "
+            f"({result.n_fit} points), held out {held} ({result.n_heldout} points)"]
+
+
+def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
+                source: str = "") -> list[Path]:
+    """Tabulate the fitted model (at a point, no aperture average) at the data's incidence
+    angles: one file per measured side,
+    the BTDF at out_path when transmission was measured, else the BRDF; the other side goes
+    next to it as <stem>-BRDF<suffix>."""
+    out_path = Path(out_path)
+    theta_i = np.unique(np.round(data.theta_i_deg[data.valid], 3))
+    if len(theta_i) == 0:
+        raise CalibrationError("zemax: the data have no valid point to take incidences from")
+    sides = [s for s, present in (("BTDF", data.transmission[data.valid].any()),
+                                  ("BRDF", (~data.transmission[data.valid]).any())) if present]
+    alpha = np.atleast_1d(result.alpha)
+    width_deg = math.degrees(float(alpha.min()))
+    notes = _notes(result, source) + [
+        "AngleOfIncidence = specular reflection angle (BRDF) or refracted direct-transmission "
+        "angle asin(sin(theta_i)/eta) (BTDF); incidence angles theta_i: "
+        + " ".join(f"{t:g}" for t in theta_i)]
+    model = result.model()
+
+    def point_model(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return result.scale * model.eval(wi, wo)
+
+    paths = []
+    for k, side in enumerate(sides):
+        path = out_path if k == 0 else out_path.with_name(f"{out_path.stem}-{side}"
+                                                           f"{out_path.suffix}")
+        table = tabulate(point_model, side, theta_i, result.eta, width_deg,
+                         isotropic=alpha.size == 1 or alpha[0] == alpha[-1], comments=notes)
+        paths.append(write_zemax(table, path))
+    return paths
+
+
+def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "") -> Path:
+    """The fitted material as a Mitsuba 3 scene fragment."""
+    notes = _notes(result, source)
+    if result.distribution == "phong":
+        notes.append("Mitsuba 3 has no Phong distribution: written as Beckmann of the same alpha "
+                     "(Walter's mapping)")
+    if result.masking != "separable":
+        notes.append(f"the fit preferred {result.masking} masking; Mitsuba uses separable Smith")
+    material = material_parameters(result.distribution, result.alpha, result.eta, result.scale,
+                                   result.k)
+    return write_mitsuba(material, out_path, notes)
+
+
+def write(run_dir: str | Path, fmt: str, out_path: str | Path) -> Path:
+    """Reduce and fit a run, then write its model as `fmt` (zemax | mitsuba); returns the path
+    (for zemax with both sides measured, the main file; the other side sits beside it)."""
+    from calibration.pipeline import fit_run
+
+    if fmt not in FORMATS:
+        raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    data, result = fit_run(run_dir)
+    if fmt == "zemax":
+        return zemax_files(data, result, out_path, source=str(run_dir))[0]
+    return mitsuba_file(result, out_path, source=str(run_dir))

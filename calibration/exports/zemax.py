@@ -1,0 +1,233 @@
+"""Zemax tabular BSDF files (the Radiant/Zemax "BSDF data interchange" text format): writer of a
+fitted model tabulated about the specular direction, and a reader that parses it back.
+
+File layout (one scatter type per file): `Source Measured`, `Symmetry PlaneSymmetrical |
+Asymmetrical`, `SpectralContent Monochrome`, `ScatterType BRDF | BTDF`, then the counts and
+values of `SampleRotation`, `AngleOfIncidence`, `ScatterAzimuth`, `ScatterRadial`, an empty
+line, `Monochrome`, `DataBegin`, and for each sample rotation and angle a `TIS <value>` line
+followed by one row per azimuth of BSDF values (1/sr) at the radial angles, then `DataEnd`.
+
+Angles as the format defines them: `AngleOfIncidence` is the direction of the specular
+reflection (BRDF) or of the direct transmission (BTDF: the refracted angle asin(sin i / eta)
+inside the medium for the hemisphere geometry); the radial angle is the angle between the
+scattered direction and that specular direction; azimuth 0 points from the specular direction
+toward the sample normal, azimuth 90 toward the sample frame's +y. TIS is the integral of
+f |cos theta_o| over the side's hemisphere (the scattered fraction of the incident power).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calibration.values import CalibrationError
+
+SCATTER_TYPES = ("BRDF", "BTDF")
+SYMMETRIES = ("PlaneSymmetrical", "Asymmetrical")
+
+
+@dataclass
+class ZemaxTable:
+    """The content of one tabular BSDF file; data[rotation, angle, azimuth, radial] in 1/sr."""
+
+    scatter_type: str
+    symmetry: str
+    sample_rotation_deg: np.ndarray
+    angle_deg: np.ndarray  # specular (BRDF) or direct-transmission (BTDF) angles
+    azimuth_deg: np.ndarray
+    radial_deg: np.ndarray
+    data: np.ndarray
+    tis: np.ndarray  # [rotation, angle]
+    comments: list[str] = field(default_factory=list)
+
+
+def specular_frame(angle_deg: float, scatter_type: str) -> tuple[np.ndarray, ...]:
+    """(c, e0, e90): the specular direction in the sample frame, the unit vector from it toward
+    the normal on its side (azimuth 0) and +y (azimuth 90)."""
+    t = math.radians(angle_deg)
+    side = 1.0 if scatter_type == "BRDF" else -1.0
+    c = np.array([math.sin(t), 0.0, side * math.cos(t)])
+    e0 = np.array([-math.cos(t), 0.0, side * math.sin(t)])
+    return c, e0, np.array([0.0, 1.0, 0.0])
+
+
+def scatter_directions(angle_deg: float, scatter_type: str, azimuth_deg: np.ndarray,
+                       radial_deg: np.ndarray) -> np.ndarray:
+    """Unit vectors (n_azimuth, n_radial, 3) of the table's grid for one angle."""
+    c, e0, e90 = specular_frame(angle_deg, scatter_type)
+    phi = np.radians(azimuth_deg)[:, None, None]
+    r = np.radians(radial_deg)[None, :, None]
+    return np.cos(r) * c + np.sin(r) * (np.cos(phi) * e0 + np.sin(phi) * e90)
+
+
+def on_side(wo: np.ndarray, scatter_type: str) -> np.ndarray:
+    """True where a direction lies in the hemisphere of the scatter type."""
+    return wo[..., 2] > 0 if scatter_type == "BRDF" else wo[..., 2] < 0
+
+
+def hemisphere_integral(f: Callable[[np.ndarray], np.ndarray], scatter_type: str,
+                        angle_deg: float, width_deg: float) -> float:
+    """Integral of f(wo) |cos theta_o| over the side's hemisphere, on polar coordinates about
+    the specular direction (Gauss-Legendre in the radial angle, split at a few lobe widths so a
+    narrow peak is resolved; trapezoid in azimuth)."""
+    edges = np.unique(np.clip([0.0, 2 * width_deg, 8 * width_deg, 30 * width_deg, 180.0],
+                              0.0, 180.0))
+    x, w = np.polynomial.legendre.leggauss(48)
+    radial, weight = [], []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        radial.append(lo + (hi - lo) * 0.5 * (x + 1))
+        weight.append(w * 0.5 * math.radians(hi - lo))
+    radial_deg, w_r = np.concatenate(radial), np.concatenate(weight)
+    n_az = 128
+    azimuth_deg = (np.arange(n_az) + 0.5) * 360.0 / n_az
+    wo = scatter_directions(angle_deg, scatter_type, azimuth_deg, radial_deg)
+    inside = on_side(wo, scatter_type)
+    value = np.where(inside, f(wo) * np.abs(wo[..., 2]), 0.0)
+    area = np.sin(np.radians(radial_deg)) * w_r * (2.0 * math.pi / n_az)
+    return float(np.sum(value * area[None, :]))
+
+
+def radial_grid(width_deg: float, n: int = 48) -> np.ndarray:
+    """Radial angles from 0 to 180 deg: fine across a lobe of the given width, coarser beyond."""
+    start = max(width_deg / 10.0, 1e-3)
+    return np.unique(np.round(np.concatenate([[0.0], np.geomspace(start, 180.0, n)]), 6))
+
+
+def tabulate(model_eval: Callable[[np.ndarray, np.ndarray], np.ndarray], scatter_type: str,
+             incidence_deg: np.ndarray, eta: float, width_deg: float,
+             isotropic: bool = True, comments: list[str] | None = None) -> ZemaxTable:
+    """Tabulate model_eval(wi, wo) (1/sr) at the given incidence angles on the format's grid."""
+    if scatter_type not in SCATTER_TYPES:
+        raise CalibrationError(f"zemax: scatter type must be BRDF or BTDF, got {scatter_type!r}")
+    incidence_deg = np.asarray(incidence_deg, dtype=np.float64)
+    if scatter_type == "BRDF":
+        angles = incidence_deg
+    else:
+        angles = np.degrees(np.arcsin(np.sin(np.radians(incidence_deg)) / eta))
+    azimuth = np.arange(0.0, 180.1, 10.0) if isotropic else np.arange(0.0, 360.0, 10.0)
+    radial = radial_grid(width_deg)
+    data = np.zeros((1, len(angles), len(azimuth), len(radial)))
+    tis = np.zeros((1, len(angles)))
+    for k, (theta_i, angle) in enumerate(zip(incidence_deg, angles, strict=True)):
+        ti = math.radians(theta_i)
+        wi = np.array([-math.sin(ti), 0.0, math.cos(ti)])
+
+        def f(wo: np.ndarray, wi: np.ndarray = wi) -> np.ndarray:
+            return model_eval(np.broadcast_to(wi, wo.shape), wo)
+
+        wo = scatter_directions(angle, scatter_type, azimuth, radial)
+        data[0, k] = np.where(on_side(wo, scatter_type), f(wo), 0.0)
+        tis[0, k] = hemisphere_integral(f, scatter_type, angle, width_deg)
+    return ZemaxTable(scatter_type, "PlaneSymmetrical" if isotropic else "Asymmetrical",
+                      np.zeros(1), angles, azimuth, radial, data, tis, list(comments or []))
+
+
+def _numbers(values: np.ndarray) -> str:
+    return "\t".join(f"{v:.10g}" for v in values)
+
+
+def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
+    """Write the table in the Zemax tabular BSDF format."""
+    path = Path(path)
+    lines = [f"# {c}" for c in table.comments]
+    lines += [
+        "Source  Measured",
+        f"Symmetry  {table.symmetry}",
+        "SpectralContent  Monochrome",
+        f"ScatterType  {table.scatter_type}",
+        f"SampleRotation  {len(table.sample_rotation_deg)}", _numbers(table.sample_rotation_deg),
+        f"AngleOfIncidence  {len(table.angle_deg)}", _numbers(table.angle_deg),
+        f"ScatterAzimuth  {len(table.azimuth_deg)}", _numbers(table.azimuth_deg),
+        f"ScatterRadial  {len(table.radial_deg)}", _numbers(table.radial_deg),
+        "", "Monochrome", "DataBegin",
+    ]
+    for r in range(len(table.sample_rotation_deg)):
+        for a in range(len(table.angle_deg)):
+            lines.append(f"TIS  {table.tis[r, a]:.6g}")
+            lines += ["\t".join(f"{v:.6e}" for v in row) for row in table.data[r, a]]
+    lines.append("DataEnd")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def read_zemax(path: str | Path) -> ZemaxTable:
+    """Parse a Zemax tabular BSDF file (monochrome); errors name the line that is wrong."""
+    path = Path(path)
+    lines = [(n + 1, ln.strip()) for n, ln in enumerate(path.read_text().splitlines())]
+    comments = [ln[1:].strip() for _, ln in lines if ln.startswith("#")]
+    body = [(n, ln) for n, ln in lines if ln and not ln.startswith("#")]
+    pos = 0
+
+    def fail(msg: str) -> CalibrationError:
+        line_no = body[min(pos, len(body) - 1)][0] if body else 0
+        return CalibrationError(f"{path}:{line_no}: {msg}")
+
+    def keyword(name: str) -> str:
+        nonlocal pos
+        if pos >= len(body):
+            raise fail(f"expected {name}, found end of file")
+        parts = body[pos][1].split()
+        if parts[0] != name or len(parts) != 2:
+            raise fail(f"expected '{name} <value>', found {body[pos][1]!r}")
+        pos += 1
+        return parts[1]
+
+    def enumeration(name: str) -> np.ndarray:
+        nonlocal pos
+        count = int(keyword(name))
+        values = np.array([float(v) for v in body[pos][1].split()])
+        if len(values) != count:
+            raise fail(f"{name}: {count} values announced, {len(values)} given")
+        pos += 1
+        return values
+
+    if keyword("Source") != "Measured":
+        raise fail("Source must be Measured")
+    symmetry = keyword("Symmetry")
+    if symmetry not in SYMMETRIES:
+        raise fail(f"Symmetry {symmetry!r} not supported ({', '.join(SYMMETRIES)})")
+    if keyword("SpectralContent") != "Monochrome":
+        raise fail("only Monochrome spectral content is supported")
+    scatter_type = keyword("ScatterType")
+    if scatter_type not in SCATTER_TYPES:
+        raise fail(f"ScatterType must be BRDF or BTDF, got {scatter_type!r}")
+    rotation, angle = enumeration("SampleRotation"), enumeration("AngleOfIncidence")
+    azimuth, radial = enumeration("ScatterAzimuth"), enumeration("ScatterRadial")
+    for expected in ("Monochrome", "DataBegin"):
+        if pos >= len(body) or body[pos][1] != expected:
+            raise fail(f"expected {expected}")
+        pos += 1
+    data = np.zeros((len(rotation), len(angle), len(azimuth), len(radial)))
+    tis = np.zeros((len(rotation), len(angle)))
+    for r in range(len(rotation)):
+        for a in range(len(angle)):
+            tis[r, a] = float(keyword("TIS"))
+            for z in range(len(azimuth)):
+                row = body[pos][1].split() if pos < len(body) else []
+                if len(row) != len(radial):
+                    raise fail(f"data row needs {len(radial)} values, has {len(row)}")
+                data[r, a, z] = [float(v) for v in row]
+                pos += 1
+    if pos >= len(body) or body[pos][1] != "DataEnd":
+        raise fail("expected DataEnd")
+    return ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data, tis, comments)
+
+
+def table_tis(table: ZemaxTable, rotation: int, angle: int) -> float:
+    """TIS recomputed from the tabulated values alone (trapezoid rule over the grid, mirrored
+    for plane-symmetric data): a reader's consistency check of the TIS line."""
+    f = table.data[rotation, angle]
+    wo = scatter_directions(table.angle_deg[angle], table.scatter_type, table.azimuth_deg,
+                            table.radial_deg)
+    r = np.radians(table.radial_deg)
+    integrand = f * np.abs(wo[..., 2]) * np.sin(r)[None, :]
+    over_r = np.trapezoid(integrand, r, axis=1)
+    phi = np.radians(table.azimuth_deg)
+    if table.symmetry == "PlaneSymmetrical":
+        return float(2.0 * np.trapezoid(over_r, phi))
+    closed = np.append(phi, 2 * math.pi)
+    return float(np.trapezoid(np.append(over_r, over_r[0]), closed))
