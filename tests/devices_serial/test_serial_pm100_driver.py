@@ -183,7 +183,7 @@ def test_stalled_reply_timeout_is_named_and_bounded(pm_pair):
     t0 = time.monotonic()
     with pytest.raises(DeviceTimeout, match="pm100: timeout after 0.1 s waiting for :READ"):
         pm.read()
-    assert time.monotonic() - t0 == pytest.approx(0.2, abs=0.1)
+    assert 0.2 - 0.01 <= time.monotonic() - t0 < 0.2 + 2.0  # 1 + 1 retry, bounded
 
 
 def test_lost_setting_status_is_checked_not_resent(pm_pair):
