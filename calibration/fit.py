@@ -184,18 +184,24 @@ def fit_subset_mask(data: ReducedData, options: FitOptions) -> np.ndarray:
 
 def initial_alpha(data: ReducedData, eta: float) -> float:
     """Roughness from the peak width: the slope of ln f against tan^2 of the half-vector angle
-    over the lobe's core (f > 1 % of the peak), which is -1/alpha^2 for Beckmann."""
+    over the core of the lobe holding the largest value, which is -1/alpha^2 for Beckmann. The
+    core is the points above 1 % of the peak, widened to 0.1 % and 0.01 % when fewer than three
+    distinct angles fall in it (a narrow peak sampled coarsely)."""
     h = np.where(data.transmission[:, None], -(data.wi + eta * data.wo), data.wi + data.wo)
     h = h / np.linalg.norm(h, axis=1, keepdims=True)
     h = np.where(h[:, 2:3] < 0, -h, h)
     tan2 = (h[:, 0] ** 2 + h[:, 1] ** 2) / np.maximum(h[:, 2] ** 2, 1e-12)
     f = data.bsdf
-    core = f > 0.01 * f.max()
-    if core.sum() >= 2 and np.ptp(tan2[core]) > 0:
-        slope = np.polyfit(tan2[core], np.log(f[core]), 1)[0]
-        if slope < 0:
-            return float(np.clip(1.0 / math.sqrt(-slope), *ALPHA_BOUNDS))
-    spread = np.sqrt(tan2[f > 0.5 * f.max()].max()) if core.any() else 0.1
+    k = int(np.argmax(f))
+    same_lobe = ((data.transmission == data.transmission[k])
+                 & (np.abs(data.theta_i_deg - data.theta_i_deg[k]) < 0.5))
+    for level in (1e-2, 1e-3, 1e-4):
+        core = same_lobe & (f > level * f[k])
+        if len(np.unique(np.round(tan2[core], 12))) >= 3:
+            slope = np.polyfit(tan2[core], np.log(f[core]), 1)[0]
+            if slope < 0:
+                return float(np.clip(1.0 / math.sqrt(-slope), *ALPHA_BOUNDS))
+    spread = np.sqrt(tan2[same_lobe & (f > 0.5 * f[k])].max())
     return float(np.clip(max(spread, 1e-3), *ALPHA_BOUNDS))
 
 
@@ -250,7 +256,7 @@ class _Problem:
     def start(self, alpha0: float) -> np.ndarray:
         """Best of a coarse log-alpha grid about the peak-width estimate (a guard against a
         poor estimate trapping the optimiser in a local minimum)."""
-        grid = alpha0 * np.exp(np.linspace(-2.5, 2.5, 11))
+        grid = alpha0 * np.exp(np.linspace(-2.5, 2.5, 21))
         grid = np.clip(grid, *ALPHA_BOUNDS)
         rest = []
         if self.options.fit_eta:
