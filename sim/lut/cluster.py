@@ -8,7 +8,8 @@ from contextlib import contextmanager
 
 
 @contextmanager
-def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
+def dask_client(workers: int | None = None, scheduler: str | None = None,
+                connect_timeout_s: float = 10.0) -> Iterator:
     """Yield None (threaded scheduler in this process), or a distributed Client on a local
     cluster of `workers` single-threaded processes, or on the cluster at `scheduler`."""
     if workers is not None and scheduler is not None:
@@ -22,7 +23,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
 
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=connect_timeout_s)
         except (OSError, TimeoutError, ValueError) as exc:
             raise ValueError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from None
         with client:

@@ -92,11 +92,12 @@ class ModelEstimator:
         eta = float(row[2]) if self.kind == "transmission" else self.reflection_eta
         if alpha < ALPHA_DELTA:
             return smooth_limit(self.kind, mu, eta)
-        v = view_direction(mu)
+        v = np.broadcast_to(view_direction(mu), u.shape)
         if self.kind == "reflection":
             wo, weight, _ = self.model(alpha, eta).sample(v, u)
             h = wo + v
-            cos_vh = np.clip(h @ v / np.sqrt(np.einsum("ij,ij->i", h, h)), 0.0, 1.0)
+            cos_vh = np.clip(np.einsum("ij,ij->i", h, v) / np.sqrt(np.einsum("ij,ij->i", h, h)),
+                             0.0, 1.0)
             f = fresnel_dielectric(cos_vh, eta)
             unit_fresnel = np.where(weight > 0, weight / f, 0.0)
             s5 = (1.0 - cos_vh) ** 5
