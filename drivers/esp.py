@@ -52,7 +52,8 @@ class EspController:
     """One ESP300/ESP301 on a serial port; `axis(n, name)` gives engine-facing Axis objects.
 
     timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is how
-    often wait() asks MD?.
+    often wait() asks MD?; rtscts: the ESP's RS-232 port (19200 8N1) uses RTS/CTS
+    hardware handshake.
     """
 
     def __init__(
@@ -63,12 +64,13 @@ class EspController:
         name: str = "esp",
         retries: int = 2,
         poll_s: float = 0.01,
+        rtscts: bool = True,
     ):
         self.name = name
         self.poll_s = poll_s
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\r", read_eol=b"\r\n",
-            timeout_s=timeout_s, retries=retries, rtscts=False,
+            timeout_s=timeout_s, retries=retries, rtscts=rtscts,
         )
         try:
             self.errors()  # start from an empty error buffer

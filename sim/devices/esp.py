@@ -327,9 +327,9 @@ class EspEmulator:
         return None
 
     def _cmd_dh(self, axis: _EmulatedAxis, query: bool, param: str) -> str | None:
-        """DH[pos]: define the current position as home (pos, default 0); DH? gives it."""
+        """DH[pos]: define the current position as home (pos, default 0)."""
         if query:
-            return self._fmt(0.0)
+            raise _Fail(6)
         value = self._number(param, required=False) or 0.0
         if axis.moving():
             raise axis.fail(26)

@@ -91,3 +91,37 @@ def test_pm100_pty_survives_garbage():
     with Pm100Emulator(ConstantPower(1e-6)) as emu:
         stays_alive(emu, b"*IDN?", b"\n", b"\n", b"THORLABS",
                     st.one_of(st.binary(max_size=700), scpi_units().map(str.encode)))
+
+
+def test_drivers_raise_only_driver_errors_on_hostile_replies():
+    """A device answering anything at all: the drivers return or raise a DriverError."""
+    from drivers.base import DriverError
+    from drivers.esp import EspController
+    from drivers.pm100 import Pm100
+
+    with EspEmulator(VirtualClock(math.inf), {1: {}}) as esp, \
+            Pm100Emulator(ConstantPower(1e-6)) as pm, \
+            EspController(esp.endpoint, timeout_s=0.05, retries=0) as ctl, \
+            Pm100(pm.endpoint, timeout_s=0.05, retries=0) as meter:
+        axis = ctl.axis(1)
+        calls = [axis.position, axis.is_moving, axis.target, lambda: axis.move_to(1.0),
+                 lambda: axis.limits_deg, axis.stop, meter.read, meter.sensor,
+                 lambda: meter.range_w, lambda: meter.configure(633.0, 2, None)]
+        reply = st.one_of(st.binary(max_size=60),
+                          st.lists(st.sampled_from(["0", "1", "12.5", "-3e2", "nan", "x", "",
+                                                    " NO ERROR DETECTED", '"No error"',
+                                                    "106", "S121C"]),
+                                   max_size=6).map(lambda p: ",".join(p).encode()),
+                          st.lists(st.sampled_from(['0,"No error"', "1E-6", "1", "x", ""]),
+                                   max_size=4).map(lambda p: ";".join(p).encode()))
+
+        @settings(max_examples=60, deadline=None)
+        @given(reply, st.sampled_from([b"\r\n", b"\n", b""]), st.sampled_from(range(len(calls))))
+        def run(body, eol, which):
+            esp.server.handler = pm.server.handler = lambda line: body + eol
+            try:
+                calls[which]()
+            except DriverError:
+                pass
+
+        run()
