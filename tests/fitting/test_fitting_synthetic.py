@@ -115,3 +115,17 @@ def test_result_is_json_ready():
     assert back["parameters"]["alpha"]["value"] == pytest.approx(result.alpha)
     assert back["parameters"]["eta"]["fixed"] is True
     assert back["n_fit"] == result.n_fit
+
+
+def test_fit_overlay_figure_and_model_curve(tmp_path):
+    from calibration.fitplot import model_curve, plot_fit
+
+    data = synthesize("ggx", 0.394, seed=2, incidences_deg=(0.0, 60.0))
+    result = fit(data)
+    angle, curve = model_curve(result, 60.0, True, n=7)
+    theta = np.radians(angle)
+    wo = np.stack([np.sin(theta), 0 * theta, -np.cos(theta)], axis=1)
+    wi = np.broadcast_to([-np.sin(np.pi / 3), 0.0, np.cos(np.pi / 3)], wo.shape)
+    np.testing.assert_allclose(curve, result.model().eval(wi, wo))
+    png = plot_fit(data, result, tmp_path / "fit.png", title="ground glass")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000

@@ -1,0 +1,79 @@
+"""The fit overlay of `gonio plot RUN --fit`: per incidence angle, the measured BSDF with its
+error bars against the signed outgoing angle (log scale), the fitted model through it, and the
+normalised residuals (data - model) / sigma below, fitted and held-out points told apart."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from calibration.fit import FitOptions, FitResult, fit_subset_mask
+from calibration.reduced import ReducedData
+
+
+def model_curve(result: FitResult, theta_i_deg: float, transmission: bool,
+                n: int = 721) -> tuple[np.ndarray, np.ndarray]:
+    """(signed outgoing angle deg, model BSDF) along the plane of incidence on one side, in the
+    ReducedData.theta_o_deg convention (positive on the forward side)."""
+    theta = np.radians(np.linspace(-89.5, 89.5, n))
+    ti = np.radians(theta_i_deg)
+    wi = np.broadcast_to([-np.sin(ti), 0.0, np.cos(ti)], (n, 3))
+    z = -np.cos(theta) if transmission else np.cos(theta)
+    wo = np.stack([np.sin(theta), np.zeros(n), z], axis=1)
+    return np.degrees(theta), result.predict(wi, wo)
+
+
+def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
+             options: FitOptions | None = None, title: str = "") -> Path:
+    """Write the overlay figure (a column per incidence, BSDF and residual rows per measured side)
+    as a PNG; returns its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    options = options or FitOptions()
+    fitted = fit_subset_mask(data, options)
+    valid = data.valid & np.isfinite(data.bsdf) & (data.sigma > 0)
+    theta_i = np.round(data.theta_i_deg, 1)
+    incidences = list(np.unique(theta_i[valid]))
+    sides = [side for side in (False, True) if np.any(valid & (data.transmission == side))]
+    fig, axes = plt.subplots(2 * len(sides), len(incidences), squeeze=False, sharex="col",
+                             figsize=(3.4 * len(incidences), 3.6 * len(sides)),
+                             gridspec_kw={"height_ratios": [3, 1] * len(sides)})
+    residual = (result.predict(data.wi, data.wo) - data.bsdf) / data.sigma
+    for row, side in enumerate(sides):
+        for col, t in enumerate(incidences):
+            top, bottom = axes[2 * row, col], axes[2 * row + 1, col]
+            sel = valid & (theta_i == t) & (data.transmission == side)
+            for mask, style, label in ((sel & fitted, "o", "fitted"),
+                                       (sel & ~fitted, "s", "held out")):
+                if mask.any():
+                    top.errorbar(data.theta_o_deg[mask], data.bsdf[mask], data.sigma[mask],
+                                 fmt=style, ms=3, lw=0.8, label=label)
+                    bottom.plot(data.theta_o_deg[mask], -residual[mask], style, ms=3)
+            angle, curve = model_curve(result, float(t), bool(side))
+            top.plot(angle, curve, "k-", lw=1, label=f"{result.distribution} fit")
+            top.set_yscale("log")
+            positive = data.bsdf[sel][data.bsdf[sel] > 0]
+            if positive.size:
+                top.set_ylim(max(positive.min() / 3, curve.max() * 1e-8), curve.max() * 3)
+            top.set_title(f"θi = {t:g}°, {'BTDF' if side else 'BRDF'}", fontsize=9)
+            bottom.axhline(0.0, color="k", lw=0.6)
+            bottom.set_xlabel("θo (deg)")
+            if col == 0:
+                top.set_ylabel("BSDF (1/sr)")
+                bottom.set_ylabel("(data − model)/σ", fontsize=8)
+            if sel.any():
+                top.legend(fontsize=7)
+    a = np.atleast_1d(result.alpha)
+    held = "–" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.2f}"
+    fig.suptitle(f"{title} {result.distribution} α = {', '.join(f'{v:.4g}' for v in a)}, "
+                 f"η = {result.eta:.4g}; χ²/dof fitted {result.chi2_dof_fit:.2f}, "
+                 f"held out {held}", fontsize=10)
+    fig.tight_layout()
+    out_png = Path(out_png)
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return out_png
