@@ -91,8 +91,9 @@ class ModbusStage(MappedUnit):
         self._motion_command("start", position_deg)
 
     def home(self) -> None:
-        """Start homing (a move to 0 that sets the homed bit); wait() waits for it."""
-        self._motion_command("home", 0.0)
+        """Start homing (a move to 0, or the drive's nearest limit, that sets the homed bit);
+        wait() waits for it."""
+        self._motion_command("home", None)
 
     def stop(self) -> None:
         """Decelerate to rest; harmless at rest."""
@@ -121,7 +122,7 @@ class ModbusStage(MappedUnit):
                 raise DeviceTimeout(self.name, "end of motion", timeout_s)
             time.sleep(self.poll_s)
 
-    def _motion_command(self, command: str, target_deg: float) -> None:
+    def _motion_command(self, command: str, target_deg: float | None) -> None:
         """Write a motion command once; a lost reply is resolved by reading the state."""
         try:
             self.command(command)
@@ -132,13 +133,17 @@ class ModbusStage(MappedUnit):
         if self.bits(v["status"])["fault"]:
             self._raise_fault(int(v["fault_code"]))
 
-    def _was_taken(self, target_deg: float) -> bool:
+    def _was_taken(self, target_deg: float | None) -> bool:
         """After a lost reply: did the drive take the command (moving, refused with a fault,
-        or already at the target)?"""
+        or already there: at the target, or homed for a home)?"""
         v = self.read_values("status", "actual_position")
         bits = self.bits(v["status"])
-        step = 1.0 / self.map.register("actual_position").scale
-        return bits["moving"] or bits["fault"] or abs(v["actual_position"] - target_deg) <= step
+        if target_deg is None:
+            there = bits["homed"]
+        else:
+            step = 1.0 / self.map.register("actual_position").scale
+            there = abs(v["actual_position"] - target_deg) <= step
+        return bits["moving"] or bits["fault"] or there
 
     def _raise_fault(self, code: int) -> None:
         raise DeviceError(self.name, code, self.map.fault_text(code))

@@ -103,7 +103,7 @@ class ModbusLink:
         with self._lock:
             try:
                 reply = fn(*args, **kwargs)
-            except ConnectionException as exc:
+            except (ConnectionException, OSError) as exc:  # refused, reset, hung up
                 self._client.close()
                 raise DriverError(f"{device}: connection to {self.endpoint} failed or lost "
                                   f"({exc})") from None

@@ -39,7 +39,7 @@ class ModbusStageEmulator(EmulatedUnit):
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         super().__init__(layout, faults)
         self.axis = TrapezoidAxis(clock, speed_deg_s, accel_deg_s2, tuple(limits_deg),
-                                  position_deg, home_position=0.0)  # refused if 0 is off-travel
+                                  position_deg)  # homes to 0, or the nearest limit
         for name, value in (("velocity", speed_deg_s), ("acceleration", accel_deg_s2),
                             ("limit_negative", limits_deg[0]), ("limit_positive", limits_deg[1]),
                             ("target_position", position_deg)):

@@ -94,6 +94,16 @@ def test_lost_reply_to_a_move_is_resolved_by_reading_state_not_resending(rig, tr
     assert seen == [r.stage.map.commands["start"]]  # sent exactly once
 
 
+def test_lost_reply_to_home_is_resolved_by_the_homed_bit(rig):
+    r = rig("rtu", reply_s=0.05)
+    r.stage.move_to(20.0)
+    seen = count_commands(r.stage_emu)
+    r.stage_emu.faults = StallWriteReplies(FaultSpec())
+    r.stage.home()
+    assert r.stage.wait(1.0) == 0.0 and r.stage.homed()
+    assert seen == [r.stage.map.commands["home"]]
+
+
 @pytest.mark.parametrize("transport", TRANSPORTS)
 def test_lost_reply_to_stop_is_reported_not_resent(rig, transport):
     r = rig(transport, reply_s=0.05, time_scale=1.0)

@@ -114,11 +114,12 @@ def test_inverted_limits_refuse_home(rig):
         r.stage.home()
 
 
-def test_home_refused_when_zero_outside_limits(rig):
+def test_home_goes_to_the_nearest_limit_when_zero_is_outside_them(rig):
     r = rig("tcp")
-    r.stage.set_limits(5.0, 50.0)
-    with pytest.raises(DeviceError, match="device error 1"):
-        r.stage.home()
+    r.stage.set_limits(-30.0, -6.0)
+    r.stage.home()
+    assert r.stage.wait(1.0) == -6.0
+    assert r.stage.homed()
 
 
 @pytest.mark.parametrize("transport", ["tcp", "rtu"])

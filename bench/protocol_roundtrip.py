@@ -1,0 +1,174 @@
+"""Round trips per second of a position query through each driver and emulator, beside the
+bare transport's echo round trip measured in the same run (the floor no protocol can beat).
+
+- ESP300/301 over a pty: EspAxis.position() (a "1TP?" query) vs a pty echo of the same bytes
+  through pyserial.
+- Modbus TCP on 127.0.0.1: ModbusStage.position() (function 03, two registers) vs a TCP echo
+  of a 12-byte request on a plain socket.
+- Modbus RTU over a pty: the same driver call vs the pty echo (the RTU endpoint is a
+  two-pty relay, so its path has one more hop than the echo).
+
+Run: python bench/protocol_roundtrip.py [--seconds 1.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import select
+import socket
+import threading
+import time
+import tty
+from collections.abc import Callable
+from pathlib import Path
+
+import serial
+
+from drivers.esp import EspController
+from drivers.modbus_stage import ModbusStage
+from sim.devices.esp import EspEmulator
+from sim.devices.modbus_server import ModbusEmulatorServer
+from sim.devices.modbus_stage import ModbusStageEmulator
+from sim.devices.motion import VirtualClock
+
+STAGE_MAP = Path(__file__).resolve().parents[1] / "examples" / "registermaps" / "stepper-drive.toml"
+ESP_QUERY = b"1TP?\r"
+MODBUS_TCP_REQUEST = bytes.fromhex("000100000006010300080002")  # read holding 8..9 of unit 1
+
+
+def rate(call: Callable[[], object], seconds: float) -> float:
+    """Calls per second of call() over about `seconds` (after a few warm-up calls)."""
+    for _ in range(20):
+        call()
+    n, t0 = 0, time.perf_counter()
+    while (elapsed := time.perf_counter() - t0) < seconds:
+        for _ in range(20):
+            call()
+        n += 20
+    return n / elapsed
+
+
+class PtyEcho:
+    """A thread echoing every byte written to a pty back to the writer (the pty floor)."""
+
+    def __init__(self):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.path = os.ttyname(self.slave)
+        self._wake_r, self._wake_w = os.pipe()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            ready, _, _ = select.select([self.master, self._wake_r], [], [])
+            if self._wake_r in ready:
+                return
+            os.write(self.master, os.read(self.master, 4096))
+
+    def close(self) -> None:
+        os.write(self._wake_w, b"x")
+        self._thread.join(2.0)
+        for fd in (self.master, self.slave, self._wake_r, self._wake_w):
+            os.close(fd)
+
+
+class TcpEcho:
+    """A thread echoing one TCP connection on 127.0.0.1 (the socket floor)."""
+
+    def __init__(self):
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self._listener.getsockname()[1]
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        conn, _ = self._listener.accept()
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with conn:
+            while data := conn.recv(4096):
+                conn.sendall(data)
+
+    def close(self) -> None:
+        self._listener.close()
+        self._thread.join(2.0)
+
+
+def pty_echo_rate(payload: bytes, seconds: float) -> float:
+    """Echo round trips per second of payload through a pty, pyserial on the host side."""
+    echo = PtyEcho()
+    port = serial.Serial(echo.path, 115200, timeout=1.0)
+    try:
+        return rate(lambda: (port.write(payload), port.read(len(payload))), seconds)
+    finally:
+        port.close()
+        echo.close()
+
+
+def tcp_echo_rate(payload: bytes, seconds: float) -> float:
+    """Echo round trips per second of payload over TCP on 127.0.0.1."""
+    echo = TcpEcho()
+    sock = socket.create_connection(("127.0.0.1", echo.port))
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def once() -> None:
+        sock.sendall(payload)
+        got = b""
+        while len(got) < len(payload):
+            got += sock.recv(4096)
+
+    try:
+        return rate(once, seconds)
+    finally:
+        sock.close()
+        echo.close()
+
+
+def esp_rate(seconds: float) -> float:
+    """EspAxis.position() round trips per second on the ESP emulator over a pty."""
+    emulator = EspEmulator(VirtualClock(math.inf), {1: {}})
+    emulator.start()
+    try:
+        with EspController(emulator.endpoint, timeout_s=1.0) as controller:
+            axis = controller.axis(1, "bench")
+            return rate(axis.position, seconds)
+    finally:
+        emulator.stop()
+
+
+def modbus_rate(transport: str, seconds: float) -> float:
+    """ModbusStage.position() round trips per second on the Modbus emulator."""
+    unit = ModbusStageEmulator(VirtualClock(math.inf), STAGE_MAP, (-95.0, 95.0), 20.0, 80.0)
+    server = ModbusEmulatorServer(transport, {1: unit})
+    endpoint = server.start()
+    host, port = endpoint.rsplit(":", 1) if transport == "tcp" else (endpoint, "502")
+    try:
+        with ModbusStage(transport, host, 1, STAGE_MAP, tcp_port=int(port)) as stage:
+            return rate(stage.position, seconds)
+    finally:
+        server.stop()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
+    args = parser.parse_args()
+    s = args.seconds
+    rows = [
+        ("ESP TP? over pty (EspAxis.position)", esp_rate(s),
+         "pty echo, 5 bytes", pty_echo_rate(ESP_QUERY, s)),
+        ("Modbus TCP read 2 regs (ModbusStage.position)", modbus_rate("tcp", s),
+         "TCP echo, 12 bytes", tcp_echo_rate(MODBUS_TCP_REQUEST, s)),
+        ("Modbus RTU read 2 regs over pty relay", modbus_rate("rtu", s),
+         "pty echo, 8 bytes", pty_echo_rate(MODBUS_TCP_REQUEST[6:] + b"\0\0", s)),
+    ]
+    print(f"{'protocol round trip':48s} {'per s':>9s}   {'floor (same run)':20s} {'per s':>9s}"
+          f"  {'ratio':>6s}")
+    for name, value, floor_name, floor in rows:
+        print(f"{name:48s} {value:9.0f}   {floor_name:20s} {floor:9.0f}  {value / floor:6.3f}")
+
+
+if __name__ == "__main__":
+    main()
