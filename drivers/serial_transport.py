@@ -8,6 +8,7 @@ exactly once and its outcome is re-read by the driver instead.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -83,21 +84,30 @@ class SerialLineTransport:
     def read_line(self, what: str, timeout_s: float | None = None) -> str:
         """Read one reply line (terminator stripped).
 
-        Raises DeviceTimeout(what) when no complete line arrives in time, ProtocolError
-        when it holds bytes that are not printable ASCII.
+        Reads whatever has arrived in one call rather than pyserial's byte-at-a-time
+        read_until; bytes after the terminator are dropped (a line protocol sends one
+        reply per request). Raises DeviceTimeout(what) when no complete line arrives in
+        time, ProtocolError when it holds bytes that are not printable ASCII.
         """
         timeout = self.timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout
+        data = bytearray()
         with self.lock:
             try:
-                self._serial.timeout = timeout
-                data = self._serial.read_until(self.read_eol)
+                while self.read_eol not in data:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        raise DeviceTimeout(self.name, what, timeout)
+                    self._serial.timeout = left
+                    chunk = self._serial.read(max(1, self._serial.in_waiting))
+                    if not chunk:
+                        raise DeviceTimeout(self.name, what, timeout)
+                    data += chunk
             except (serial.SerialException, OSError) as exc:
                 raise self._lost(exc) from None
-        if not data.endswith(self.read_eol):
-            raise DeviceTimeout(self.name, what, timeout)
-        body = data[: -len(self.read_eol)]
+        body = bytes(data[: data.index(self.read_eol)])
         if any(b < 0x20 or b > 0x7E for b in body):
-            raise ProtocolError(f"{self.name}: garbled reply to {what}: {data!r}")
+            raise ProtocolError(f"{self.name}: garbled reply to {what}: {bytes(data)!r}")
         return body.decode("ascii")
 
     def exchange(self, line: str, what: str | None = None) -> str:
