@@ -20,6 +20,8 @@ from sim.bsdf.multiple_scattering.walk import Walker
 from sim.bsdf.vectors import directions
 
 KINDS = ("dielectric", "conductor", "diffuse")
+#: Walks advanced together in one vectorised batch (bounded so the arrays stay in cache).
+BATCH = 1 << 15
 
 
 @dataclass(frozen=True)
@@ -95,23 +97,30 @@ class RandomWalkBSDF:
         self._walker = Walker(self.slopes, self.micro)
 
     def _pairs(self, wi, wo, order, unit, rng, walks) -> tuple[np.ndarray, ...]:
+        """Mean, standard error and truncated energy per pair, walking in batches of BATCH."""
         wi, wo = directions(wi, wo)
-        shape = wi.shape[:-1]
-        wi2 = np.repeat(wi.reshape(-1, 3), walks, axis=0)
-        wo2 = np.repeat(wo.reshape(-1, 3), walks, axis=0)
         if order is not None and (int(order) != order or order < 1):
             raise ValueError(f"order must be None or a positive integer, got {order!r}")
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
         cap = self.max_order if order is None else None
-        res = self._walker.run(wi2, rng, wo2, order=order, max_order=cap, unit=unit)
-        per = res.value.reshape(-1, walks)
-        trunc = res.truncated.reshape(-1, walks).mean(axis=1)
-        cos_o = np.abs(wo.reshape(-1, 3)[:, 2])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(cos_o > 0.0, 1.0 / cos_o, 0.0)
-        mean = per.mean(axis=1) * scale
-        err = per.std(axis=1, ddof=1) / np.sqrt(walks) * scale if walks > 1 else np.full_like(
-            mean, np.inf)
-        return mean.reshape(shape), err.reshape(shape), trunc.reshape(shape)
+        total = np.zeros((3, wi.shape[0]))  # sum, sum of squares, truncated energy
+        per_round = max(1, BATCH // max(1, wi.shape[0]))
+        done = 0
+        while done < walks:
+            k = min(per_round, walks - done)
+            res = self._walker.run(np.repeat(wi, k, axis=0), rng, np.repeat(wo, k, axis=0),
+                                   order=order, max_order=cap, unit=unit)
+            v = res.value.reshape(-1, k)
+            total += [v.sum(axis=1), (v * v).sum(axis=1), res.truncated.reshape(-1, k).sum(axis=1)]
+            done += k
+        mean = total[0] / walks
+        var = np.maximum(total[1] / walks - mean * mean, 0.0) * walks / max(walks - 1, 1)
+        cos_o = np.abs(wo[:, 2])
+        scale = np.where(cos_o > 0.0, 1.0 / np.where(cos_o > 0.0, cos_o, 1.0), 0.0)
+        err = np.sqrt(var / walks) * scale if walks > 1 else np.full(mean.shape, np.inf)
+        return ((mean * scale).reshape(shape), err.reshape(shape),
+                (total[2] / walks).reshape(shape))
 
     def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
                  walks: int | None = None) -> Estimate:

@@ -21,6 +21,9 @@ import numpy as np
 from sim.bsdf.multiple_scattering.heights import log1mexp
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 
+#: Weight below which an evaluating walk plays Russian roulette (survivors carry this weight).
+ROULETTE = 0.1
+
 
 def flip(w: np.ndarray) -> np.ndarray:
     """Mirror a direction through the mean plane (z -> -z): the frame of the world below."""
@@ -69,6 +72,10 @@ class Walker:
         order: count only that scattering order (the walk stops after it); max_order: stop after
         that many events and report the energy still inside; unit: direction density instead of
         energy; u_first (n, 3): uniforms for the first event (height, normal), for stratification.
+        When evaluating (wo given) every step is forced to hit the surface, the walk's weight
+        taking the hit probability 1 - G1; this bounds the NEE weight D / A(w_in) of rare hits
+        along nearly vertical upward rays (the analog walk's heavy tail), and Russian roulette
+        ends the walks. Sampling (no wo) runs the analog walk, which exits.
         """
         n = wi.shape[0]
         slopes, micro = self.slopes, self.micro
@@ -85,6 +92,7 @@ class Walker:
         orders = np.zeros(n, dtype=np.int64)
         first = np.full(n, np.nan)
         idx = np.flatnonzero(alive)
+        forced = wo is not None
         k = 0
         while idx.size:
             k += 1
@@ -94,13 +102,19 @@ class Walker:
                 u = u_first[idx].T
             else:
                 u = rng.random((3, idx.size))
-            e = -np.log1p(-u[0])
             lam = slopes.lambda_(dk)
             cur = np.where(out, log_u[idx], log_v[idx])
+            if forced:  # hit for sure, weighted by the hit probability 1 - u^Lambda
+                with np.errstate(invalid="ignore", over="ignore"):
+                    p_hit = np.nan_to_num(np.where(lam > 0.0, -np.expm1(lam * cur), 1.0), nan=1.0)
+                beta[idx] *= p_hit
+                e = -np.log1p(-u[0] * p_hit)
+            else:
+                e = -np.log1p(-u[0])
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 new = cur + np.where(lam == 0.0, np.inf, e / lam)
             leaves = ~(new < 0.0)
-            if leaves.any():
+            if leaves.any() and not forced:
                 gone = idx[leaves]
                 exit_dir[gone] = np.where(out[leaves, None], dk[leaves], flip(dk[leaves]))
                 weight[gone] = beta[gone]
@@ -123,6 +137,11 @@ class Walker:
             beta[idx] *= factor
             outside[idx] = out ^ crossed
             d[idx] = np.where(crossed[:, None], flip(w_next), w_next)
+            if forced:  # Russian roulette on low weights keeps the estimate unbiased
+                b = beta[idx]
+                low = b < ROULETTE
+                beta[idx] = np.where(low, np.where(rng.random(idx.size) * ROULETTE < b,
+                                                   ROULETTE, 0.0), b)
             if order is not None and k >= order:
                 break
             if max_order is not None and k >= max_order:
@@ -130,6 +149,7 @@ class Walker:
                 hit = 1.0 - self._escape_probability(d[idx], side_log)
                 truncated[idx] = beta[idx] * hit
                 break
+            idx = idx[beta[idx] > 0.0]
         return WalkResult(value, exit_dir, weight, truncated, orders, first)
 
     def _next_event(self, w_in, m, out, wo, log_here, log_there, unit) -> np.ndarray:
