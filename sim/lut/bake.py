@@ -80,9 +80,10 @@ def integrate_points(params: np.ndarray, estimator: Estimator, *, samples: int, 
 
 
 def grid_points(spec: TableSpec) -> np.ndarray:
-    """Parameter values of every table entry, C order: (entries, axes)."""
-    grids = np.meshgrid(*(axis.values() for axis in spec.axes), indexing="ij")
-    return np.stack([g.ravel() for g in grids], axis=-1)
+    """Parameter values (N.V, alpha[, eta]) of every entry, in the stored array's C order
+    (N.V fastest): (entries, axes)."""
+    grids = np.meshgrid(*(axis.values() for axis in spec.axes[::-1]), indexing="ij")
+    return np.stack([g.ravel() for g in grids[::-1]], axis=-1)
 
 
 def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
@@ -97,6 +98,6 @@ def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
                               seed=spec.seed, tile_entries=spec.tile_entries, client=client,
                               progress=progress)
     seconds = time.perf_counter() - start
-    exact = values.reshape(*spec.shape, len(spec.channels))
+    exact = values.reshape(spec.array_shape)
     return Table(spec=spec, data=exact.astype(spec.dtype), bake_seconds=seconds,
                  model=getattr(estimator, "description", repr(estimator)))

@@ -21,10 +21,10 @@ from sim.lut.spec import CHANNELS, TableSpec
 ALPHA_DELTA = 1e-7
 
 
-def view_direction(mu: float) -> np.ndarray:
-    """Unit view vector at cos(theta) = mu in the x-z plane (mu clipped to [0, 1])."""
-    mu = min(max(float(mu), 0.0), 1.0)
-    return np.array([np.sqrt((1.0 - mu) * (1.0 + mu)), 0.0, mu])
+def view_direction(mu: np.ndarray | float) -> np.ndarray:
+    """Unit view vectors (..., 3) at cos(theta) = mu in the x-z plane (mu clipped to [0, 1])."""
+    mu = np.clip(np.asarray(mu, dtype=np.float64), 0.0, 1.0)
+    return np.stack([np.sqrt((1.0 - mu) * (1.0 + mu)), np.zeros_like(mu), mu], axis=-1)
 
 
 def smooth_limit(kind: str, mu: np.ndarray, eta: np.ndarray | float) -> np.ndarray:
@@ -73,39 +73,52 @@ class ModelEstimator:
                 f"multiple_scattering={self.multiple_scattering}); {eta}; "
                 f"importance sampling by {walk}; alpha < {ALPHA_DELTA:g}: smooth limit")
 
-    def model(self, alpha: float, eta: float) -> RoughDielectric:
-        """The single-lobe model at one (alpha, eta)."""
+    def model(self, alpha: float | np.ndarray, eta: float) -> RoughDielectric:
+        """The single-lobe model at one eta (alpha may be an array matching the directions)."""
         return RoughDielectric(self.distribution, alpha=alpha, eta=eta, masking=self.masking,
                                lobes=(self.kind,))
 
     def __call__(self, params: np.ndarray, u: np.ndarray,
                  rng: np.random.Generator) -> np.ndarray:
-        """Channels (m, channels) at params (m, 2 or 3) from the shared uniforms u (n, 3)."""
+        """Channels (m, channels) at params (m, 2 or 3) from the shared uniforms u (n, 3):
+        smooth limits where alpha < ALPHA_DELTA, else one vectorised model per eta value."""
+        params = np.asarray(params, dtype=np.float64)
+        mu, alpha = params[:, 0], params[:, 1]
+        eta = params[:, 2] if self.kind == "transmission" else np.full(len(mu),
+                                                                       self.reflection_eta)
         out = np.empty((len(params), len(self.channels)))
-        for j, row in enumerate(params):
-            out[j] = self.entry(row, u, rng)
+        smooth = alpha < ALPHA_DELTA
+        out[smooth] = smooth_limit(self.kind, mu[smooth], eta[smooth])
+        if self.multiple_scattering:
+            for j in np.flatnonzero(~smooth):
+                out[j] = self._walks(mu[j], alpha[j], eta[j], u, rng)
+            return out
+        for e in np.unique(eta[~smooth]):
+            rows = np.flatnonzero(~smooth & (eta == e))
+            out[rows] = self._single(mu[rows], alpha[rows], float(e), u)
         return out
 
-    def entry(self, row: np.ndarray, u: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Channels at one point (mu, alpha[, eta])."""
-        mu, alpha = float(row[0]), float(row[1])
-        eta = float(row[2]) if self.kind == "transmission" else self.reflection_eta
-        if alpha < ALPHA_DELTA:
-            return smooth_limit(self.kind, mu, eta)
+    def _single(self, mu: np.ndarray, alpha: np.ndarray, eta: float,
+                u: np.ndarray) -> np.ndarray:
+        """Single-scattering channels (k, channels) at k points sharing eta."""
+        k, n = len(mu), len(u)
+        v = np.repeat(view_direction(mu), n, axis=0)
+        wo, weight, _ = self.model(np.repeat(alpha, n), eta).sample(v, np.tile(u, (k, 1)))
+        if self.kind == "transmission":
+            return (weight.reshape(k, n).mean(axis=1) / (eta * eta))[:, None]
+        h = wo + v
+        cos_vh = np.clip(np.einsum("ij,ij->i", h, v) / np.sqrt(np.einsum("ij,ij->i", h, h)),
+                         0.0, 1.0)
+        unit_fresnel = np.where(weight > 0, weight / fresnel_dielectric(cos_vh, eta), 0.0)
+        s5 = (1.0 - cos_vh) ** 5
+        return np.stack([(unit_fresnel * (1.0 - s5)).reshape(k, n).mean(axis=1),
+                         (unit_fresnel * s5).reshape(k, n).mean(axis=1)], axis=-1)
+
+    def _walks(self, mu: float, alpha: float, eta: float, u: np.ndarray,
+               rng: np.random.Generator) -> np.ndarray:
+        """Multiple-scattering transmission at one point: the share of random walks from v
+        leaving through the far side, times their throughput, over eta^2."""
         v = np.broadcast_to(view_direction(mu), u.shape)
-        if self.kind == "reflection":
-            wo, weight, _ = self.model(alpha, eta).sample(v, u)
-            h = wo + v
-            cos_vh = np.clip(np.einsum("ij,ij->i", h, v) / np.sqrt(np.einsum("ij,ij->i", h, h)),
-                             0.0, 1.0)
-            f = fresnel_dielectric(cos_vh, eta)
-            unit_fresnel = np.where(weight > 0, weight / f, 0.0)
-            s5 = (1.0 - cos_vh) ** 5
-            return np.array([np.mean(unit_fresnel * (1.0 - s5)), np.mean(unit_fresnel * s5)])
-        if self.multiple_scattering:
-            walk = RandomWalkBSDF(self.model(alpha, eta), walks=1)
-            wo, weight, _ = walk.sample(v, u, rng)
-            weight = np.where(wo[:, 2] < 0, weight, 0.0)
-        else:
-            wo, weight, _ = self.model(alpha, eta).sample(v, u)
-        return np.array([np.mean(weight) / (eta * eta)])
+        walk = RandomWalkBSDF(self.model(alpha, eta), walks=1)
+        wo, weight, _ = walk.sample(v, u, rng)
+        return np.array([np.mean(np.where(wo[:, 2] < 0, weight, 0.0)) / (eta * eta)])

@@ -73,6 +73,13 @@ class TableSpec:
         return axes_for(self.kind, self.shape)
 
     @property
+    def array_shape(self) -> tuple[int, ...]:
+        """Shape of the stored array: axes in reverse (eta, alpha, N.V), then channels, so
+        that in C order N.V runs fastest: the texture layout with x = N.V, y = roughness,
+        z = eta, uploadable as is."""
+        return (*self.shape[::-1], len(self.channels))
+
+    @property
     def channels(self) -> tuple[str, ...]:
         """Names of the values stored per entry (the last table dimension)."""
         return CHANNELS[self.kind]

@@ -31,7 +31,8 @@ DEFINITIONS = {
 
 @dataclass
 class Table:
-    """Baked values `data` (axes..., channels) in spec.dtype, with how they were made."""
+    """Baked values `data` (spec.array_shape: reversed axes, channels) in spec.dtype, with
+    how they were made."""
 
     spec: TableSpec
     data: np.ndarray
@@ -50,7 +51,7 @@ class Table:
                       "nodes": "texel centres t = (k + 0.5) / size, clamp to edge",
                       "first": float(a.values()[0]), "last": float(a.values()[-1])}
                      for a in self.spec.axes],
-            "index_order": [a.name for a in self.spec.axes] + ["channel"],
+            "index_order": [a.name for a in self.spec.axes[::-1]] + ["channel"],
             "spec": self.spec.to_dict(),
             "model": self.model,
             "bake_seconds": self.bake_seconds,
@@ -74,7 +75,7 @@ class Table:
                              f"({', '.join(a.name for a in self.spec.axes)}), got {len(params)}")
         arrays = np.broadcast_arrays(*params)
         coords = [a.to_coord(p) for a, p in zip(self.spec.axes, arrays, strict=True)]
-        return interpolate(self.data.astype(np.float64), coords)
+        return interpolate(self.data.astype(np.float64), coords[::-1])
 
 
 def interpolate(data: np.ndarray, coords: list[np.ndarray]) -> np.ndarray:
@@ -109,7 +110,7 @@ def load_table(path: str | Path) -> Table:
     if meta.get("format") != FORMAT:
         raise ValueError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
     spec = TableSpec.from_dict(meta["spec"])
-    if data.shape != (*spec.shape, len(spec.channels)) or data.dtype != np.dtype(spec.dtype):
+    if data.shape != spec.array_shape or data.dtype != np.dtype(spec.dtype):
         raise ValueError(f"{path}: table {data.shape} {data.dtype} does not match its metadata")
     return Table(spec=spec, data=data, bake_seconds=meta["bake_seconds"], model=meta["model"],
                  validation=meta.get("validation"))

@@ -2,8 +2,8 @@
 random points against direct integration there; max and RMS absolute errors.
 
 The reference is two independent estimates with `reference_samples` Sobol points each (seeds
-unrelated to the table's); their mean is the reference and their spread is reported as the
-reference's own noise, so an error figure near that noise means "no error detectable".
+unrelated to the table's); their mean is the reference and their half difference is reported
+as the reference's own noise, so an error near that noise means "no error detectable".
 """
 
 from __future__ import annotations
@@ -14,10 +14,13 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from sim.lut.bake import Estimator, grid_points, integrate_points
+from sim.lut.spec import TableSpec
 from sim.lut.table import Table
 
-#: Offset added to the table's seed for the two reference estimates (never a baking seed).
-REFERENCE_SEEDS = (0x5EED_0001, 0x5EED_0002)
+#: Seeds of the two reference estimates (never used for baking: tables use small seeds).
+REFERENCE_SEEDS = (0x5EED_0001_0000, 0x5EED_0002_0000)
+#: Points per reference tile.
+REFERENCE_TILE = 64
 
 
 @dataclass(frozen=True)
@@ -39,16 +42,32 @@ class ValidationReport:
         return asdict(self)
 
 
-def _reference(params: np.ndarray, estimator: Estimator, table: Table, samples: int,
-               client) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of two independent converged estimates, and their half difference."""
-    a, b = (integrate_points(params, estimator, samples=samples, seed=table.spec.seed + s,
-                             tile_entries=table.spec.tile_entries, client=client)
+def reference(params: np.ndarray, estimator: Estimator, samples: int,
+              client=None) -> tuple[np.ndarray, np.ndarray]:
+    """Converged values at params (m, d): mean of two independent estimates, and their half
+    difference (the reference's own noise)."""
+    a, b = (integrate_points(params, estimator, samples=samples, seed=s,
+                             tile_entries=REFERENCE_TILE, client=client)
             for s in REFERENCE_SEEDS)
     return 0.5 * (a + b), 0.5 * (a - b)
 
 
-def _max_rms(err: np.ndarray) -> tuple[float, float]:
+def random_points(spec: TableSpec, count: int, seed: int) -> np.ndarray:
+    """count parameter points (count, d), uniform in texture coordinates over the domain."""
+    t = np.random.default_rng(seed).random((count, len(spec.axes)))
+    return np.stack([a.to_value(t[:, k]) for k, a in enumerate(spec.axes)], axis=-1)
+
+
+def chosen_entries(spec: TableSpec, entries: int | None, seed: int) -> np.ndarray:
+    """Flat indices of the entries to check: all, or a seeded random subset."""
+    total = int(np.prod(spec.shape))
+    if entries is None or entries >= total:
+        return np.arange(total)
+    return np.sort(np.random.default_rng(seed).choice(total, size=entries, replace=False))
+
+
+def max_rms(err: np.ndarray) -> tuple[float, float]:
+    """Largest absolute error and root-mean-square error."""
     return float(np.max(np.abs(err))), float(np.sqrt(np.mean(err * err)))
 
 
@@ -62,19 +81,14 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
 
         estimator = ModelEstimator.for_spec(table.spec)
     start = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    grid = grid_points(table.spec)
-    stored = table.data.astype(np.float64).reshape(len(grid), -1)
-    if entries is not None and entries < len(grid):
-        chosen = np.sort(rng.choice(len(grid), size=entries, replace=False))
-        grid, stored = grid[chosen], stored[chosen]
-    t = rng.random((points, len(table.spec.axes)))
-    params = np.stack([a.to_value(t[:, k]) for k, a in enumerate(table.spec.axes)], axis=-1)
-    reference, noise = _reference(np.concatenate([grid, params]), estimator, table,
-                                  reference_samples, client)
-    entry_err = stored - reference[: len(grid)]
-    lookup_err = table.lookup(*params.T) - reference[len(grid):]
+    index = chosen_entries(table.spec, entries, seed)
+    grid = grid_points(table.spec)[index]
+    stored = table.data.astype(np.float64).reshape(-1, len(table.spec.channels))[index]
+    params = random_points(table.spec, points, seed)
+    ref, noise = reference(np.concatenate([grid, params]), estimator, reference_samples, client)
+    entry_err = stored - ref[: len(grid)]
+    lookup_err = table.lookup(*params.T) - ref[len(grid):]
     return ValidationReport(
-        len(grid), *_max_rms(entry_err), points, *_max_rms(lookup_err),
+        len(grid), *max_rms(entry_err), points, *max_rms(lookup_err),
         float(np.sqrt(np.mean(noise * noise))), reference_samples,
         time.perf_counter() - start)

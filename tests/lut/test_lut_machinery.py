@@ -100,7 +100,7 @@ def test_interpolation_is_exact_for_multilinear_data_and_clamps_to_edge():
 
 def test_bake_converges_to_the_exact_integral():
     table = bake(SPEC, StandIn())
-    exact = StandIn.exact(*grid_points(SPEC).T).reshape(SPEC.shape)
+    exact = StandIn.exact(*grid_points(SPEC).T).reshape(SPEC.shape[::-1])
     err = np.abs(table.data[..., 0] - exact)
     assert err.max() < 2e-3  # Sobol, 256 points, plus the 1e-3/sqrt(12)/16 jitter
     assert table.data.dtype == np.float32 and np.isfinite(table.data).all()
@@ -133,7 +133,9 @@ def test_npz_round_trip_keeps_bits_axes_and_metadata(tmp_path):
         meta = json.loads(str(f["metadata"]))
         assert np.allclose(f["axis_alpha"], ((np.arange(3) + 0.5) / 3) ** 2)
         assert set(f.files) == {"table", "metadata", "axis_cos_theta", "axis_alpha"}
-    assert meta["channels"] == ["scale", "bias"] and meta["index_order"][-1] == "channel"
+    assert meta["channels"] == ["scale", "bias"]
+    assert meta["index_order"] == ["alpha", "cos_theta", "channel"]
+    assert loaded.data.shape == (3, 4, 2)  # N.V runs fastest: texture x
     assert "sqrt(alpha)" in meta["axes"][1]["parameterisation"]
     bad = tmp_path / "bad.npz"
     np.savez(bad, x=np.zeros(3))
@@ -165,7 +167,7 @@ def test_validation_separates_interpolation_error_from_noise(client):
 
 
 def test_lookup_rejects_the_wrong_number_of_parameters():
-    table = Table(spec=SPEC, data=np.zeros((*SPEC.shape, 1), np.float32))
+    table = Table(spec=SPEC, data=np.zeros(SPEC.array_shape, np.float32))
     with pytest.raises(ValueError, match="takes 3 parameters"):
         table.lookup(0.5, 0.1)
     assert math.isfinite(table.lookup(0.5, 0.1, 1.5)[0])

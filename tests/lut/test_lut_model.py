@@ -135,7 +135,8 @@ def test_extreme_inputs_give_finite_bounded_values(mu, alpha, eta):
     assert np.isfinite(t) and 0 <= t <= 1 / eta**2 + 1e-12
     scale, bias = REFLECTION(np.array([[mu, alpha]]), U[:256], RNG)[0]
     assert np.isfinite([scale, bias]).all() and scale >= 0 and bias >= 0
-    assert scale + bias <= 1 + 1e-12
+    # f_r / F divides by F at the half vector recomputed from wo: ~1e-10 at 1e-40 grazing
+    assert scale + bias <= 1 + 1e-9
 
 
 def test_multiple_scattering_adds_transmitted_energy():
