@@ -5,9 +5,12 @@ is never sent twice."""
 import time
 
 import pytest
+from conftest import STAGE_MAP, endpoint_args  # noqa: I001
 
-from drivers.base import DeviceTimeout, DriverError
+from drivers.base import DeviceTimeout, DriverError, ProtocolError
+from drivers.modbus_stage import ModbusStage
 from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.modbus_server import ModbusEmulatorServer
 
 TRANSPORTS = ["tcp", "rtu"]
 
@@ -151,3 +154,35 @@ def test_fault_sequence_is_reproducible_from_the_seed(rig):
             r.stage.position()
         runs.append((r.stage_emu.faults.replies, dict(r.stage_emu.faults.counts)))
     assert runs[0] == runs[1]
+
+
+class WrongCountUnit:
+    """A broken device: answers every read with one register too many."""
+
+    faults = None
+
+    def __init__(self):
+        self.reads = 0
+
+    def read(self, table, address, count):
+        self.reads += 1
+        return [0] * (count + 1)
+
+    def write(self, address, values):
+        pass
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_reply_with_the_wrong_register_count_is_a_protocol_error(transport, tmp_path):
+    unit = WrongCountUnit()
+    server = ModbusEmulatorServer(transport, {1: unit})
+    server.start()
+    transport, where, kw = endpoint_args(server)
+    try:
+        with ModbusStage(transport, where, 1, STAGE_MAP, name="odd", read_retries=1, **kw) as st:
+            with pytest.raises(ProtocolError, match="odd: holding registers 8..9 of unit 1: 3 "
+                                                    "registers in the reply, expected 2"):
+                st.position()
+        assert unit.reads == 2  # a query: tried once more, then reported
+    finally:
+        server.stop()
