@@ -110,6 +110,7 @@ class _EmulatedAxis:
         self.homing = False
 
     def fail(self, code: int) -> _Fail:
+        """This axis's error `code` as the controller numbers it (axis * 100 + code)."""
         return _Fail(self.number * 100 + code)
 
     @property
@@ -118,6 +119,7 @@ class _EmulatedAxis:
         return ANGULAR_UNITS[self.units]
 
     def moving(self) -> bool:
+        """True while in motion; a finished home search stops counting as homing."""
         moving = self.motion.is_moving()
         if not moving:
             self.homing = False

@@ -101,6 +101,7 @@ class _Segment:
 
     @property
     def t_end(self) -> float:
+        """Virtual time the segment ends."""
         return self.t0 + self.dt
 
 
