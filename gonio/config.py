@@ -58,6 +58,7 @@ class AxisConfig:
     speed_deg_s: float
     accel_deg_s2: float
     settle_s: float = 0.0
+    tolerance_deg: float = 0.01
     home: bool = False
 
 
@@ -200,6 +201,7 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
             speed_deg_s=a.number("speed_deg_s", low=0.0, low_open=True),
             accel_deg_s2=a.number("accel_deg_s2", low=0.0, low_open=True),
             settle_s=a.number("settle_s", 0.0, low=0.0, high=3600.0),
+            tolerance_deg=a.number("tolerance_deg", 0.01, low=0.0, high=10.0, low_open=True),
             home=a.boolean("home", False),
         )
         a.string("units", "deg", choices=("deg",))

@@ -10,6 +10,7 @@ abort stops every axis.
 from __future__ import annotations
 
 import signal
+import termios
 import threading
 import time
 from collections.abc import Callable
@@ -25,6 +26,9 @@ from gonio.plan import MOTION_ROLES, Plan, profile_seconds
 from gonio.progress import Progress
 from gonio.store import RunWriter
 
+# Failures worth retrying: driver timeouts/garbles and lost connections (pyserial lets
+# termios.error, which is no OSError, through when a pty or USB port goes away).
+TRANSIENT = (DriverError, OSError, termios.error)
 WAIT_FACTOR = 2.0  # motion timeout = WAIT_FACTOR x profile time + WAIT_MARGIN_S
 WAIT_MARGIN_S = 5.0
 RETRY_PAUSE_S = 0.05
@@ -32,6 +36,10 @@ RETRY_PAUSE_S = 0.05
 
 class StopRun(Exception):
     """The run cannot go on; the message is the reason recorded in meta.json."""
+
+
+class PositionMismatch(DriverError):
+    """An axis reports a position other than the target it was sent to (twice running)."""
 
 
 class Aborted(Exception):
@@ -102,12 +110,15 @@ class Engine:
 
     def __init__(self, instrument: Instrument, plan: Plan, schedule: np.ndarray,
                  writer: RunWriter, *, retries: int = 2, progress: Progress | None = None,
-                 control: PauseControl | None = None, t0_epoch: float | None = None):
+                 control: PauseControl | None = None, t0_epoch: float | None = None,
+                 session_info: Callable[[], dict[str, Any]] | None = None):
         self.inst, self.plan, self.schedule, self.writer = instrument, plan, schedule, writer
         self.retries = retries
         self.progress = progress
         self.control = control or PauseControl()
         self.t0 = t0_epoch if t0_epoch is not None else time.time()
+        self.session_info = session_info
+        self._doing = "starting"
         self._commanded: dict[str, float | None] = {role: None for role in instrument.axes}
         self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
         cfg = instrument.config
@@ -126,19 +137,35 @@ class Engine:
         moved = [r for r, t in targets.items() if self._commanded[r] != t]
         for role in moved:
             self._commanded[role] = None  # unknown until the move is confirmed done
+            self._doing = f"moving the {role} axis ({self.inst.axes[role].name})"
             self.inst.axes[role].move_to(targets[role])
         for role in moved:
-            self._reported[role] = self.inst.axes[role].wait(self._wait_timeout(role,
-                                                                                targets[role]))
-            self._commanded[role] = targets[role]
+            axis, target = self.inst.axes[role], targets[role]
+            self._doing = f"waiting for the {role} axis ({axis.name})"
+            self._reported[role] = self._arrived(role, axis.wait(self._wait_timeout(role, target)),
+                                                 target)
+            self._commanded[role] = target
         self.inst.last_positions.update(self._reported)
         return moved
+
+    def _arrived(self, role: str, position: float, target: float) -> float:
+        """The reported position, read again if it is off target (a garbled reply can be a
+        plausible number); PositionMismatch if the second reading is off too."""
+        tol = self.inst.config.axes[role].tolerance_deg
+        if abs(position - target) <= tol:
+            return position
+        again = self.inst.axes[role].position()
+        if abs(again - target) <= tol:
+            return again
+        raise PositionMismatch(f"{role} axis at {again:.6g} deg, not at its target "
+                               f"{target:.6g} deg (tolerance {tol:g})")
 
     def _measure(self, row: np.void, flags: list[str]) -> dict[str, Any]:
         moved = self._move(row)
         pause = max((self._settle[r] for r in moved), default=0.0) + self.plan.dwell_s
         if pause > 0:
             time.sleep(real_seconds(self.inst, pause))
+        self._doing = f"reading the detector ({self.inst.detector.name})"
         reading = self.inst.detector.read()
         pos = self._reported
         ang = sample_angles(pos["sample"], pos["arm"], pos["elevation"], pos["azimuth"])
@@ -163,15 +190,15 @@ class Engine:
             try:
                 return self._measure(row, flags)
             except DeviceError as exc:
-                raise StopRun(f"{where}: {exc}") from exc
-            except (DriverError, OSError) as exc:
+                raise StopRun(f"{where}: {self._doing}: {exc}") from exc
+            except TRANSIENT as exc:
                 last = exc
                 if "retried" not in flags:
                     flags.append("retried")
                 self._commanded = dict.fromkeys(self._commanded)
                 if attempt < self.retries:
                     time.sleep(RETRY_PAUSE_S)
-        raise StopRun(f"{where}: {last} (after {self.retries + 1} attempts)")
+        raise StopRun(f"{where}: {self._doing}: {last} (after {self.retries + 1} attempts)")
 
     # -- the run ----------------------------------------------------------------
     def _prepare(self) -> None:
@@ -220,4 +247,6 @@ class Engine:
                 reason += f"; could not stop: {'; '.join(failed)}"
         if self.progress:
             self.progress.close()
+        if self.session_info and self.writer.meta["sessions"]:
+            self.writer.meta["sessions"][-1].update(self.session_info())
         self.writer.set_status(status, reason)

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -42,36 +42,48 @@ def instrument_path(plan: Plan, instrument: str | Path | None) -> Path:
     return plan.instrument
 
 
+@dataclass
+class _Devices:
+    """What to open: the config (pointed at emulators under --sim), its time scale, the
+    emulated devices, the shared stage-position dict and the emulators' fault counter."""
+
+    config: InstrumentConfig
+    time_scale: float = 1.0
+    emulated: tuple[str, ...] = ()
+    positions: dict[str, float] = field(default_factory=dict)
+    fault_counts: Callable[[], dict] = dict
+
+
 @contextmanager
-def _devices(cfg: InstrumentConfig, sim: list[str] | None | bool
-             ) -> Iterator[tuple[InstrumentConfig, float, list[str], dict[str, float]]]:
-    """The config to open (pointed at emulators when sim) and its time scale."""
+def _devices(cfg: InstrumentConfig, sim: list[str] | bool) -> Iterator[_Devices]:
     if sim is False:
-        yield cfg, 1.0, [], {}
+        yield _Devices(cfg)
         return
     from gonio.simulate import simulation  # only --sim touches sim
 
     with simulation(cfg, None if sim is True else sim) as s:
-        yield s.config, s.time_scale, s.devices, s.positions
+        yield _Devices(s.config, s.time_scale, tuple(s.devices), s.positions,
+                       s.bench.fault_counts)
 
 
 def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
-         sim: list[str] | None | bool, progress: bool | None, control: PauseControl | None
+         sim: list[str] | bool, progress: bool | None, control: PauseControl | None
          ) -> Outcome:
-    with _devices(cfg, sim) as (opened, scale, emulated, shared):
-        writer.start_session(sim=emulated, endpoints={n: d.endpoint for n, d in
-                                                      opened.devices.items()})
+    with _devices(cfg, sim) as dev:
+        writer.start_session(sim=list(dev.emulated), endpoints={
+            n: d.endpoint for n, d in dev.config.devices.items()})
         try:
-            inst = build_instrument(opened, scale)
+            inst = build_instrument(dev.config, dev.time_scale)
         except BaseException as exc:
             writer.set_status("failed", f"opening the instrument: {exc}")
             raise
         with inst:
-            inst.last_positions = shared
+            inst.last_positions = dev.positions
             bar = Progress(len(sched), writer.next_index, plan.name,
                            disable=None if progress is None else not progress)
             engine = Engine(inst, plan, sched.readings, writer, progress=bar, control=control,
-                            t0_epoch=writer.meta["t0_epoch"])
+                            t0_epoch=writer.meta["t0_epoch"],
+                            session_info=lambda: {"faults_injected": dev.fault_counts()})
             return engine.run()
 
 

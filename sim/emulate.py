@@ -17,7 +17,7 @@ from typing import Any
 
 from sim.bench import build_power_source
 from sim.devices.esp import EspEmulator
-from sim.devices.faults import FaultSpec
+from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.modbus_detector import ModbusDetectorEmulator
 from sim.devices.modbus_server import ModbusEmulatorServer
 from sim.devices.modbus_stage import ModbusStageEmulator
@@ -52,7 +52,19 @@ class EmulatedBench:
     clock: VirtualClock
     endpoints: dict[str, Endpoint] = field(default_factory=dict)
     emulators: dict[str, Any] = field(default_factory=dict)
+    injectors: dict[str, list[FaultInjector]] = field(default_factory=dict)
     _stops: list[Callable[[], None]] = field(default_factory=list)
+
+    def fault_counts(self) -> dict[str, dict[str, int]]:
+        """Faults injected so far, by device and kind (devices with faults configured)."""
+        out = {}
+        for name, injectors in self.injectors.items():
+            totals: dict[str, int] = {}
+            for inj in injectors:
+                for kind, n in inj.counts.items():
+                    totals[kind] = totals.get(kind, 0) + n
+            out[name] = totals
+        return out
 
     def stop(self) -> None:
         """Stop every emulator (idempotent)."""
@@ -138,6 +150,8 @@ class _Builder:
         dev = self.devices[name]
         units = self.modbus.setdefault(_modbus_group(dev), {})
         units[dev.get("unit", 1)] = (name, unit)
+        if unit.faults is not None:
+            self.bench.injectors.setdefault(name, []).append(unit.faults)
 
     def stages(self) -> None:
         for name in self.chosen:
@@ -223,6 +237,8 @@ def _esp_reader(emu: EspEmulator, number: int) -> Callable[[], float]:
 
 
 def _serve(bench: EmulatedBench, name: str, emu: Any) -> None:
+    if emu.server.faults.spec.active:
+        bench.injectors.setdefault(name, []).append(emu.server.faults)
     endpoint = emu.start()
     bench._stops.append(emu.stop)
     bench.emulators[name] = emu

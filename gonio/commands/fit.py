@@ -1,0 +1,90 @@
+"""`gonio fit RUN [--json]`: fit the microfacet model to a run's reduced BSDF (by default at
+normal incidence only, as Walter et al. did) and score it on the other incidences."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def _list(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(",") if part.strip())
+
+
+def _angles(text: str) -> tuple[float, ...] | None:
+    if text == "all":
+        return None
+    try:
+        return tuple(float(part) for part in _list(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected 'all' or degrees like 0,30; got {text!r}") from None
+
+
+def add_fit_options(p: argparse.ArgumentParser) -> None:
+    """The model and subset options `fit` shares with `plot --fit`."""
+    p.add_argument("--distribution", type=_list, default=("beckmann", "ggx", "phong"),
+                   metavar="D[,D...]", help="candidates: beckmann, ggx, phong (default: all)")
+    p.add_argument("--masking", type=_list, default=("separable",), metavar="M[,M...]",
+                   help="candidates: separable, correlated (default: separable)")
+    p.add_argument("--anisotropic", action="store_true", help="fit alpha_x and alpha_y")
+    p.add_argument("--fit-eta", action="store_true", help="fit eta too (else fixed)")
+    p.add_argument("--fit-scale", action="store_true", help="fit an overall scale factor")
+    p.add_argument("--eta", type=float, help="eta (default: the run's sample eta)")
+    p.add_argument("--incidence", type=_angles, default=(0.0,), metavar="DEG[,DEG...]|all",
+                   help="incidence angles of the fitted subset (default 0; 'all' for every point)")
+    p.add_argument("--calibration", metavar="FILE",
+                   help="calibration file to apply (default: the one the run records)")
+
+
+def options_from(args: argparse.Namespace):  # -> calibration.fit.FitOptions
+    """FitOptions from parsed arguments."""
+    from calibration.fit import FitOptions
+
+    return FitOptions(distributions=args.distribution, maskings=args.masking,
+                      anisotropic=args.anisotropic, fit_eta=args.fit_eta,
+                      fit_scale=args.fit_scale, eta=args.eta,
+                      fit_incidence_deg=args.incidence)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `fit` verb."""
+    p = subparsers.add_parser("fit", help="fit the BSDF model to a run", description=__doc__)
+    p.add_argument("run", help="run directory")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    add_fit_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit and print the result (a summary, or one JSON object with --json)."""
+    from calibration.pipeline import fit_run
+
+    data, result = fit_run(args.run, options_from(args), args.calibration)
+    out = result.to_dict()
+    out["run"] = str(args.run)
+    out["calibration"] = data.meta.get("calibration")
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(summary(out))
+    return 0
+
+
+def summary(out: dict) -> str:
+    """Human-readable lines of a fit result dict."""
+    lines = [f"run {out['run']}: {out['distribution']} ({out['masking']} masking)"]
+    for name, p in out["parameters"].items():
+        fixed = " (fixed)" if p.get("fixed") else ""
+        sigma = f" +- {p['sigma']:.3g}" if "sigma" in p and not p.get("fixed") else ""
+        lines.append(f"  {name:<15} {p['value']:.6g}{sigma}{fixed}")
+    held = out["chi2_dof_heldout"]
+    lines.append(f"  chi2/dof fitted {out['chi2_dof_fit']:.3f} ({out['n_fit']} points); held out "
+                 + ("n/a" if held is None else f"{held:.3f} ({out['n_heldout']} points)"))
+    others = ", ".join(f"{c['distribution']}/{c['masking']} {c['chi2_dof_fit']:.3g}"
+                       for c in out["candidates"] if "distribution" in c)
+    verdict = ("clearly preferred" if out["clearly_preferred"]
+               else "not distinguishable from the runner-up")
+    lines.append(f"  candidates chi2/dof: {others} -> {verdict}")
+    lines += [f"  skipped: {c['failed']}" for c in out["candidates"] if "failed" in c]
+    return "\n".join(lines)

@@ -1,0 +1,100 @@
+"""End to end through the `gonio` CLI in a subprocess: emulators on real ptys and loopback
+TCP, real drivers, the engine and the store; in-plane and out-of-plane, ESP and Modbus."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import EXAMPLES, fast_config, gonio_cli, run_dir_of
+
+from gonio.config import parse_config
+from gonio.geometry import stage_angles
+from gonio.plan import build_schedule, parse_plan
+from gonio.store import open_run
+
+IN_PLANE = {"name": "in-plane", "dark": {"every": 10}, "beam": {"every": 10}, "grid": [
+    {"side": "reflection", "theta_i_deg": [0.0, 45.0],
+     "theta_o_deg": {"start": -70.0, "stop": 70.0, "step": 20.0}, "skip_forbidden": True},
+    {"side": "transmission", "theta_i_deg": [20.0], "theta_o_deg": [-10.0, 0.0, 13.0, 40.0]}]}
+
+OUT_OF_PLANE = {"name": "out-of-plane", "grid": [
+    {"side": ["reflection", "transmission"], "theta_i_deg": [30.0],
+     "theta_o_deg": [20.0, 40.0], "phi_o_deg": [0.0, 30.0, 60.0, 120.0]}]}
+
+
+def check_run(run_dir, plan_raw, cfg_raw):
+    run = open_run(run_dir)
+    assert run.meta["status"] == "completed", run.meta["reason"]
+    sched = build_schedule(parse_plan(plan_raw), parse_config(cfg_raw))
+    r = run.readings()
+    assert list(r["index"]) == list(range(len(sched)))
+    np.testing.assert_array_equal(r["kind"], sched.readings["kind"])
+    for role in ("sample", "arm", "elevation"):  # stages went where the plan said
+        np.testing.assert_allclose(r[f"{role}_deg"], sched.readings[f"{role}_deg"], atol=2e-3)
+    s = r[r["kind"] == "sample"]
+    # the recorded sample-frame angles are those of the plan's points
+    trans = s["side"] == "transmission"
+    theta_side = np.where(trans, 180.0 - s["theta_o_deg"], s["theta_o_deg"])
+    np.testing.assert_allclose(theta_side, np.abs(s["plan_theta_o_deg"]), atol=2e-3)
+    np.testing.assert_allclose(s["theta_i_deg"], np.abs(s["plan_theta_i_deg"]), atol=2e-3)
+    assert (s["power_w"] > 0).any() and np.isfinite(r["power_w"]).all()
+    beam, dark = r[r["kind"] == "beam"], r[r["kind"] == "dark"]
+    if len(beam):
+        assert beam["power_w"].min() > 100 * max(dark["power_w"].max(), 1e-12)
+    return run
+
+
+@pytest.mark.parametrize("instrument", ["sim-serial", "sim-modbus"])
+@pytest.mark.parametrize("plan", [IN_PLANE, OUT_OF_PLANE], ids=["in-plane", "out-of-plane"])
+def test_scan_end_to_end(plan_file, instrument, plan):
+    cfg = fast_config(instrument, elevation=plan is OUT_OF_PLANE)
+    path = plan_file(plan, cfg)
+    proc = gonio_cli("scan", path, "--sim", "--out", path.parent / "runs", "--no-plot")
+    assert proc.returncode == 0, proc.stderr
+    run = check_run(run_dir_of(proc), plan, cfg)
+    if plan is OUT_OF_PLANE:
+        s = run.readings()
+        s = s[s["kind"] == "sample"]
+        expected = stage_angles(s["plan_theta_i_deg"], s["plan_theta_o_deg"],
+                                s["plan_phi_o_deg"], s["side"] == "transmission")
+        np.testing.assert_allclose(s["elevation_deg"], expected.elevation_deg, atol=2e-3)
+        assert np.ptp(s["elevation_deg"]) > 30.0
+
+
+def test_readme_demo_under_a_minute(tmp_path):
+    """The README's first command, as shipped (time scale 50, full aperture integral)."""
+    proc = gonio_cli("scan", EXAMPLES / "plans" / "demo.toml", "--sim", "--out", tmp_path,
+                     timeout=60.0)
+    assert proc.returncode == 0, proc.stderr
+    run_dir = run_dir_of(proc)
+    assert run_dir.parent == tmp_path
+    run = open_run(run_dir)
+    assert run.meta["status"] == "completed"
+    assert len(run) == run.meta["planned"] == 66
+    png = (run_dir / "plot.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_export_csv_and_netcdf_round_trip(plan_file, tmp_path):
+    cfg = fast_config()
+    path = plan_file({"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [20.0, 30.0]}],
+                      "beam": {"every": 1}}, cfg)
+    run_dir = run_dir_of(gonio_cli("scan", path, "--sim", "--out", tmp_path, "--no-plot"))
+    r = open_run(run_dir).readings()
+    assert gonio_cli("export", run_dir, "--format", "csv", "--out", tmp_path / "r.csv"
+                     ).returncode == 0
+    import csv
+    lines = [ln for ln in (tmp_path / "r.csv").read_text().splitlines() if not ln.startswith("#")]
+    rows = list(csv.DictReader(lines))
+    assert len(rows) == len(r)
+    np.testing.assert_allclose([float(x["power_w"]) for x in rows], r["power_w"], rtol=0)
+    assert [x["kind"] for x in rows] == list(r["kind"])
+    assert all(math.isnan(v) for v in r["plan_theta_o_deg"][r["kind"] == "beam"])
+    assert gonio_cli("export", run_dir, "--format", "netcdf", "--out", tmp_path / "r.nc"
+                     ).returncode == 0
+    import netCDF4
+    with netCDF4.Dataset(tmp_path / "r.nc") as ds:
+        np.testing.assert_array_equal(ds["power_w"][:], r["power_w"])
+        np.testing.assert_array_equal(ds["arm_deg"][:], r["arm_deg"])
+        assert list(ds["kind"][:]) == list(r["kind"])
+        assert ds["arm_deg"].units == "degree" and ds.status == "completed"
