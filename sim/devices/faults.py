@@ -20,6 +20,10 @@ class FaultConfigError(ValueError):
 _PROBABILITIES = ("drop_prob", "corrupt_prob", "bad_crc_prob", "stall_prob")
 
 
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class FaultSpec:
     """What goes wrong on one device's replies, and how often (all off by default).
@@ -39,13 +43,13 @@ class FaultSpec:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.latency_s, int | float) and 0.0 <= self.latency_s < math.inf):
+        if not (_is_number(self.latency_s) and 0.0 <= self.latency_s < math.inf):
             raise FaultConfigError(
                 f"faults: latency_s must be a number >= 0, got {self.latency_s!r}"
             )
         for name in _PROBABILITIES:
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+            if not (_is_number(value) and 0.0 <= value <= 1.0):
                 raise FaultConfigError(f"faults: {name} must be in [0, 1], got {value!r}")
         n = self.disconnect_after
         if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):

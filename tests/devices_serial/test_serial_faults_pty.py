@@ -22,6 +22,8 @@ def test_faultspec_unknown_key_is_named():
         ({"latency_s": -1}, "latency_s"),
         ({"disconnect_after": 2.5}, "disconnect_after"),
         ({"seed": "x"}, "seed"),
+        ({"latency_s": True}, "latency_s"),
+        ({"drop_prob": "0.1"}, "drop_prob"),
     ],
 )
 def test_faultspec_bad_values_are_named(table, field):
