@@ -7,6 +7,8 @@ bare transport's echo round trip measured in the same run (the floor no protocol
   of a 12-byte request on a plain socket.
 - Modbus RTU over a pty: the same driver call vs the pty echo (the RTU endpoint is a
   two-pty relay, so its path has one more hop than the echo).
+- Both Modbus rows also time the bare pymodbus client on the same emulator, which separates
+  what the driver layer costs from what pymodbus (client and server) costs.
 
 Run: python bench/protocol_roundtrip.py [--seconds 1.0]
 """
@@ -25,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import serial
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from drivers.esp import EspController
 from drivers.modbus_stage import ModbusStage
@@ -138,15 +141,24 @@ def esp_rate(seconds: float) -> float:
         emulator.stop()
 
 
-def modbus_rate(transport: str, seconds: float) -> float:
-    """ModbusStage.position() round trips per second on the Modbus emulator."""
+def modbus_rates(transport: str, seconds: float) -> tuple[float, float]:
+    """Round trips per second on the Modbus emulator: ModbusStage.position(), and the bare
+    pymodbus client reading the same two registers (what the driver layer itself costs)."""
     unit = ModbusStageEmulator(VirtualClock(math.inf), STAGE_MAP, (-95.0, 95.0), 20.0, 80.0)
     server = ModbusEmulatorServer(transport, {1: unit})
     endpoint = server.start()
     host, port = endpoint.rsplit(":", 1) if transport == "tcp" else (endpoint, "502")
     try:
         with ModbusStage(transport, host, 1, STAGE_MAP, tcp_port=int(port)) as stage:
-            return rate(stage.position, seconds)
+            driver = rate(stage.position, seconds)
+        client = (ModbusTcpClient(host, port=int(port)) if transport == "tcp"
+                  else ModbusSerialClient(host, baudrate=115200))
+        client.connect()
+        try:
+            bare = rate(lambda: client.read_holding_registers(8, count=2, device_id=1), seconds)
+        finally:
+            client.close()
+        return driver, bare
     finally:
         server.stop()
 
@@ -156,13 +168,21 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
     args = parser.parse_args()
     s = args.seconds
+    tcp_driver, tcp_bare = modbus_rates("tcp", s)
+    tcp_echo = tcp_echo_rate(MODBUS_TCP_REQUEST, s)
+    rtu_driver, rtu_bare = modbus_rates("rtu", s)
+    rtu_echo = pty_echo_rate(MODBUS_TCP_REQUEST[6:] + b"\0\0", s)
     rows = [
         ("ESP TP? over pty (EspAxis.position)", esp_rate(s),
          "pty echo, 5 bytes", pty_echo_rate(ESP_QUERY, s)),
-        ("Modbus TCP read 2 regs (ModbusStage.position)", modbus_rate("tcp", s),
-         "TCP echo, 12 bytes", tcp_echo_rate(MODBUS_TCP_REQUEST, s)),
-        ("Modbus RTU read 2 regs over pty relay", modbus_rate("rtu", s),
-         "pty echo, 8 bytes", pty_echo_rate(MODBUS_TCP_REQUEST[6:] + b"\0\0", s)),
+        ("Modbus TCP read 2 regs (ModbusStage.position)", tcp_driver,
+         "TCP echo, 12 bytes", tcp_echo),
+        ("Modbus TCP read 2 regs (bare pymodbus client)", tcp_bare, "TCP echo, 12 bytes",
+         tcp_echo),
+        ("Modbus RTU read 2 regs (ModbusStage.position)", rtu_driver,
+         "pty echo, 8 bytes", rtu_echo),
+        ("Modbus RTU read 2 regs (bare pymodbus client)", rtu_bare, "pty echo, 8 bytes",
+         rtu_echo),
     ]
     print(f"{'protocol round trip':48s} {'per s':>9s}   {'floor (same run)':20s} {'per s':>9s}"
           f"  {'ratio':>6s}")
