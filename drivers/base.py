@@ -75,7 +75,7 @@ class Detector(Protocol):
     name: str
 
     def configure(self, wavelength_nm: float, averaging: int, range_w: float | None) -> None:
-        """Set the correction wavelength, samples averaged per reading, and a fixed range (None = auto)."""
+        """Set the correction wavelength, samples per reading, and a fixed range (None = auto)."""
 
     def read(self) -> Reading:
         """Take one (averaged) reading."""

@@ -34,8 +34,10 @@ def test_package_does_not_import_forbidden(package):
     assert {k: v for k, v in offenders.items() if v} == {}
 
 
-def test_gonio_imports_sim_in_one_place_only():
-    allowed = {"gonio/simulate.py"}
+def test_gonio_imports_sim_only_where_documented():
+    # --sim and `gonio emulate` go through gonio/simulate.py; the model-only verbs
+    # (lut, sweep) hand their work to sim.lut (docs/architecture.md, departures).
+    allowed = {"gonio/simulate.py", "gonio/commands/lut.py", "gonio/commands/sweep.py"}
     users = {
         str(path.relative_to(ROOT))
         for path in (ROOT / "gonio").rglob("*.py")
