@@ -8,13 +8,13 @@ workers, threads or machines. Each tile integrates with one scrambled Sobol poin
 
 from __future__ import annotations
 
-import sys
 import time
 from typing import Protocol
 
 import numpy as np
 from scipy.stats import qmc
 
+from sim.lut.cluster import map_tasks
 from sim.lut.spec import TableSpec
 from sim.lut.table import Table
 
@@ -48,35 +48,12 @@ def integrate_tile(params: np.ndarray, estimator: Estimator, samples: int, seed:
 
 def integrate_points(params: np.ndarray, estimator: Estimator, *, samples: int, seed: int,
                      tile_entries: int, client=None, progress: bool = False) -> np.ndarray:
-    """Estimates (m, channels) at parameter points (m, d), tiled and computed by Dask:
-    the threaded scheduler when client is None, else the given distributed Client."""
+    """Estimates (m, channels) at parameter points (m, d), one Dask task per tile: the
+    threaded scheduler when client is None, else the given distributed Client."""
     params = np.ascontiguousarray(params, dtype=np.float64)
-    starts = range(0, len(params), tile_entries)
-    chunks = [params[s:s + tile_entries] for s in starts]
-    if client is None:
-        import dask
-        from dask.diagnostics import ProgressBar
-
-        tasks = [dask.delayed(integrate_tile, pure=True)(c, estimator, samples, seed, k)
-                 for k, c in enumerate(chunks)]
-        if progress:
-            with ProgressBar(out=sys.stderr):
-                results = dask.compute(*tasks, scheduler="threads")
-        else:
-            results = dask.compute(*tasks, scheduler="threads")
-    else:
-        n = len(chunks)
-        futures = client.map(integrate_tile, chunks, [estimator] * n, [samples] * n,
-                             [seed] * n, range(n), pure=True)
-        if progress:
-            from distributed import as_completed
-            from tqdm import tqdm
-
-            for _ in tqdm(as_completed(futures), total=len(futures), file=sys.stderr,
-                          desc="tiles"):
-                pass
-        results = client.gather(futures)
-    return np.concatenate(results, axis=0)
+    tiles = [(params[s:s + tile_entries], estimator, samples, seed, k)
+             for k, s in enumerate(range(0, len(params), tile_entries))]
+    return np.concatenate(map_tasks(integrate_tile, tiles, client, progress), axis=0)
 
 
 def grid_points(spec: TableSpec) -> np.ndarray:

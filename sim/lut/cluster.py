@@ -3,7 +3,8 @@ processes, or an existing cluster by scheduler address. Bakes and sweeps share t
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import sys
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 
 
@@ -41,3 +42,26 @@ def describe(workers: int | None, scheduler: str | None) -> str:
     if workers is not None:
         return f"local Dask cluster, {workers} worker process(es)"
     return "in-process (Dask threaded scheduler)"
+
+
+def map_tasks(fn: Callable, arguments: Sequence[tuple], client=None,
+              progress: bool = False) -> list:
+    """[fn(*args) for args in arguments], each call one Dask task: the threaded scheduler in
+    this process when client is None, else the distributed Client. Results keep their order."""
+    if client is None:
+        import dask
+        from dask.diagnostics import ProgressBar
+
+        tasks = [dask.delayed(fn, pure=True)(*args) for args in arguments]
+        if not progress:
+            return list(dask.compute(*tasks, scheduler="threads"))
+        with ProgressBar(out=sys.stderr):
+            return list(dask.compute(*tasks, scheduler="threads"))
+    futures = client.map(fn, *zip(*arguments, strict=True), pure=True)
+    if progress:
+        from distributed import as_completed
+        from tqdm import tqdm
+
+        for _ in tqdm(as_completed(futures), total=len(futures), file=sys.stderr, desc="tasks"):
+            pass
+    return client.gather(futures)
