@@ -77,21 +77,23 @@ class ModbusLink:
         fn = (self._client.read_holding_registers if table == "holding"
               else self._client.read_input_registers)
         what = f"{table} registers {address}..{address + count - 1} of unit {unit}"
-        for attempt in range(self.read_retries + 1):
+        attempt = 0
+        while True:
             try:
-                reply = self._call(device, what, fn, address, count=count, device_id=unit)
+                return self._read_once(device, what, fn, address, count, unit)
             except (DeviceTimeout, ProtocolError):
                 if attempt == self.read_retries:
                     raise
+                attempt += 1
                 time.sleep(self.timeouts.retry_pause_s)
-                continue
-            if len(reply.registers) != count:
-                if attempt == self.read_retries:
-                    raise ProtocolError(f"{device}: {what}: {len(reply.registers)} registers "
-                                        f"in the reply, expected {count}")
-                continue
-            return list(reply.registers)
-        raise AssertionError("unreachable")  # the loop returns or raises
+
+    def _read_once(self, device: str, what: str, fn, address: int, count: int,
+                   unit: int) -> list[int]:
+        reply = self._call(device, what, fn, address, count=count, device_id=unit)
+        if len(reply.registers) != count:
+            raise ProtocolError(f"{device}: {what}: {len(reply.registers)} registers in the "
+                                f"reply, expected {count}")
+        return list(reply.registers)
 
     def write(self, device: str, address: int, values: list[int], unit: int) -> None:
         """Write holding registers (function 16), once: never re-sent on a failure."""

@@ -77,20 +77,15 @@ class RegisterMap:
             )
         regs = _field(table, "registers", dict, source)
         self.registers = {name: _register(name, spec, source) for name, spec in regs.items()}
-        self.commands = {
-            name: _int_field(table.get("commands", {}), name, f"{source}: commands")
-            for name in table.get("commands", {})
-        }
-        self.status_bits = {
-            name: _int_field(table.get("status_bits", {}), name, f"{source}: status_bits")
-            for name in table.get("status_bits", {})
-        }
+        commands = _section(table, "commands", source)
+        self.commands = {n: _int_field(commands, n, f"{source}: commands") for n in commands}
+        bits = _section(table, "status_bits", source)
+        self.status_bits = {n: _int_field(bits, n, f"{source}: status_bits") for n in bits}
         self.fault_codes = {
             spec["code"]: FaultCode(name, spec["code"], spec["text"])
-            for name, spec in _fault_table(table.get("fault_codes", {}), source).items()
+            for name, spec in _fault_table(_section(table, "fault_codes", source), source).items()
         }
-        ranges = table.get("gain_ranges", {}).get("full_scale_w", [])
-        self.gain_ranges_w = tuple(float(r) for r in ranges)
+        self.gain_ranges_w = _gain_ranges(_section(table, "gain_ranges", source), source)
         self._check_overlap()
 
     @classmethod
@@ -237,9 +232,26 @@ def _register(name: str, spec: object, source: str) -> Register:
                     _number(spec, "max", where))
 
 
-def _fault_table(table: object, source: str) -> dict[str, dict]:
-    if not isinstance(table, Mapping):
-        raise RegisterMapError(f"{source}: fault_codes must be a table")
+def _section(table: Mapping, key: str, source: str) -> Mapping:
+    """An optional sub-table of the map (empty when absent)."""
+    value = table.get(key, {})
+    if not isinstance(value, Mapping):
+        raise RegisterMapError(f"{source}: [{key}] must be a table, got {value!r}")
+    return value
+
+
+def _gain_ranges(table: Mapping, source: str) -> tuple[float, ...]:
+    ranges = table.get("full_scale_w", [])
+    ok = isinstance(ranges, list) and all(
+        isinstance(r, int | float) and not isinstance(r, bool) and r > 0 for r in ranges
+    ) and all(a < b for a, b in zip(ranges, ranges[1:], strict=False))
+    if not ok:
+        raise RegisterMapError(f"{source}: gain_ranges.full_scale_w must be increasing powers "
+                               f"> 0 W, got {ranges!r}")
+    return tuple(float(r) for r in ranges)
+
+
+def _fault_table(table: Mapping, source: str) -> dict[str, dict]:
     out = {}
     for name, spec in table.items():
         where = f"{source}: fault_codes.{name}"

@@ -88,10 +88,11 @@ class DeviceLayout:
             faults = {n: (int(s["code"]), str(s["text"]))
                       for n, s in doc.get("fault_codes", {}).items()}
             ranges = tuple(float(r) for r in doc.get("gain_ranges", {}).get("full_scale_w", ()))
-        except (KeyError, TypeError, ValueError) as exc:
+            commands = {str(n): int(v) for n, v in doc.get("commands", {}).items()}
+            bits = {str(n): int(v) for n, v in doc.get("status_bits", {}).items()}
+        except (AttributeError, KeyError, TypeError, ValueError) as exc:
             raise LayoutError(f"{src}: bad register map entry: {exc!r}") from None
-        return cls(src, order == "little", fields, dict(doc.get("commands", {})),
-                   dict(doc.get("status_bits", {})), faults, ranges)
+        return cls(src, order == "little", fields, commands, bits, faults, ranges)
 
     def need(self, fields: tuple[str, ...], commands: tuple[str, ...],
              bits: tuple[str, ...], faults: tuple[str, ...]) -> None:

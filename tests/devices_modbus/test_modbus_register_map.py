@@ -129,6 +129,8 @@ BROKEN = [
     ("scale = 1000.0\nunit = \"deg/s\"", "scale = -1.0\nunit = \"deg/s\"", "scale must be > 0"),
     ("code = 1,", 'code = "one",', "code must be a int"),
     ("start = 1 ", "start = -1 ", "start must be an integer >= 0"),
+    ("[status_bits]    #", "[gain_ranges]\nfull_scale_w = [1e-3, 1e-4]\n[status_bits] #",
+     "full_scale_w must be increasing powers"),
 ]
 
 
@@ -151,6 +153,13 @@ def test_emulator_reader_refuses_broken_maps(tmp_path, text):
     with pytest.raises(LayoutError, match=str(path)):
         DeviceLayout.read(path)
     with pytest.raises(RegisterMapError, match=str(path)):
+        RegisterMap.load(path)
+
+
+def test_a_section_that_is_not_a_table_is_named(tmp_path):
+    path = tmp_path / "flat.toml"
+    path.write_text('name = "x"\nword_order = "big"\ncommands = 5\n[registers]\n')
+    with pytest.raises(RegisterMapError, match=r"\[commands\] must be a table, got 5"):
         RegisterMap.load(path)
 
 
