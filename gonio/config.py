@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import tomllib
 
+from drivers.register_map import RegisterMap
 from gonio.errors import ConfigError
 from gonio.fields import Fields
 
@@ -129,6 +130,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     clearance = safety.number("beam_clearance_deg", default=5.0, low=0.0, high=90.0)
     forbidden = _zones(safety)
     safety.done()
+    _check_register_ranges(devices, axes, where)
     beam = _position(top, "beam")
     dark = _position(top, "dark")
     if top.has("sim") and not isinstance(raw["sim"], dict):
@@ -207,6 +209,30 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
         a.string("units", "deg", choices=("deg",))
         a.done()
     return out
+
+
+def _check_register_ranges(devices: dict[str, DeviceConfig], axes: dict[str, AxisConfig],
+                           where: str) -> None:
+    """Modbus maps bound what a drive accepts: check the config's values fit, before motion."""
+    maps: dict[str, RegisterMap] = {}
+    for dev in devices.values():
+        if dev.register_map:
+            try:
+                maps[dev.name] = RegisterMap.load(dev.register_map)
+            except (OSError, ValueError) as exc:
+                raise ConfigError(f"{where}.devices.{dev.name}.register_map: {exc}") from None
+    for ax in axes.values():
+        if devices[ax.device].protocol != "modbus-stage":
+            continue
+        for key, register, value in (("speed_deg_s", "velocity", ax.speed_deg_s),
+                                     ("accel_deg_s2", "acceleration", ax.accel_deg_s2),
+                                     ("limits_deg", "limit_negative", ax.limits_deg[0]),
+                                     ("limits_deg", "limit_positive", ax.limits_deg[1])):
+            try:
+                maps[ax.device].encode(register, value)
+            except (KeyError, ValueError) as exc:
+                raise ConfigError(f"{where}.axes.{ax.role}.{key}: the drive's register map "
+                                  f"refuses it ({exc})") from None
 
 
 def _detector(f: Fields, devices: dict[str, DeviceConfig]) -> DetectorConfig:

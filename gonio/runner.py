@@ -98,6 +98,10 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     cfg_path = instrument_path(plan, instrument)
     cfg = load_config(cfg_path)
     sched = build_schedule(plan, cfg)
+    if isinstance(sim, list):
+        from gonio.simulate import resolve_devices
+
+        resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
     meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,

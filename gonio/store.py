@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import shutil
 import sys
 from dataclasses import dataclass
@@ -173,6 +174,7 @@ class RunWriter:
         """Make a new run directory under root (name + UTC timestamp, unique)."""
         root.mkdir(parents=True, exist_ok=True)
         stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        name = re.sub(r"[^A-Za-z0-9._-]", "_", name)[:60].lstrip(".") or "run"
         for n in range(1000):
             path = root / (f"{stamp}-{name}" + (f"-{n}" if n else ""))
             try:
