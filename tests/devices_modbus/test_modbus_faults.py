@@ -39,13 +39,13 @@ def count_commands(emulator):
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
 def test_latency_below_the_timeout_only_slows_replies(rig, transport):
-    r = rig(transport, stage_faults={"latency_s": 0.03}, reply_s=0.3)
+    r = rig(transport, stage_faults={"latency_s": 0.25}, reply_s=1.0)
     t0 = time.monotonic()
     assert r.stage.position() == 0.0
-    assert time.monotonic() - t0 >= 0.03
+    assert time.monotonic() - t0 >= 0.25
     t0 = time.monotonic()
     r.detector.read()  # another unit on the endpoint is not delayed
-    assert time.monotonic() - t0 < 0.03
+    assert time.monotonic() - t0 < 0.2
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
@@ -54,7 +54,7 @@ def test_latency_past_the_timeout_is_a_bounded_named_timeout(rig, transport):
     t0 = time.monotonic()
     with pytest.raises(DeviceTimeout, match="sample: timeout after 0.05 s waiting for holding"):
         r.stage.position()
-    assert time.monotonic() - t0 < 0.5
+    assert time.monotonic() - t0 < 1.0  # two tries of 0.05 s and a pause, with load margin
     time.sleep(0.35)  # let the late replies arrive; they must not answer the next query
     assert r.detector.read().range_w == 1e-4
 
@@ -84,6 +84,10 @@ def test_every_reply_bad_crc_or_stalled_gives_a_timeout(rig, transport):
     r = rig(transport, stage_faults={kind: 1.0}, reply_s=0.05, read_retries=2)
     with pytest.raises(DeviceTimeout, match="sample: timeout after 0.05 s"):
         r.stage.position()
+    deadline = time.monotonic() + 2.0  # the server may still be busy with the last request
+    while r.stage_emu.faults.replies < 3 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.05)
     assert r.stage_emu.faults.replies == 3  # the first try and two retries, no more
 
 
