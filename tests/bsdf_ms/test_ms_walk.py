@@ -224,6 +224,10 @@ def test_energy_loss_against_an_integral_of_the_single_scattering_model():
     assert energy_loss("ggx", 1.0, None, np.radians(40)) == pytest.approx(
         mc_loss, abs=4.5 * terms.std() / np.sqrt(n))
     assert energy_loss("ggx", 1.0, 1.5, 0.0) == pytest.approx(0.107, abs=0.003)
+    glass = RoughDielectric("ggx", 1.0, 1.51, masking="separable")
+    terms = glass.eval(direction(85), wo) * np.abs(z) * 4 * np.pi
+    assert energy_loss("ggx", 1.0, 1.51, np.radians(85), masking="separable") == pytest.approx(
+        1 - terms.mean(), abs=4.5 * terms.std() / np.sqrt(n))
     assert energy_loss("beckmann", 0.05, 1.5, 0.3) < 1e-3
 
 

@@ -13,6 +13,7 @@ from scipy.special import betaln
 
 from sim.bsdf.distributions import make_distribution
 from sim.bsdf.fresnel import dielectric_reflectance_transmittance
+from sim.bsdf.masking import check_masking
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 from sim.bsdf.multiple_scattering.walk import flip
 
@@ -23,14 +24,17 @@ def _gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def single_scattering_energy(
-    distribution: str, alpha, eta: float | None, theta: float, nodes: int = 48
+    distribution: str, alpha, eta: float | None, theta: float, masking: str = "correlated",
+    nodes: int = 48,
 ) -> float:
     """Energy (R + T) that single scattering returns at incidence theta (radians), lossless facets.
 
     eta None (or complex) means a mirror conductor (F = 1): the upper bound of what a conductor
-    loses. Order-1 energy per visible normal m: reflection (1 + Li)/(1 + Li + Lo), transmission
-    (1 + Li) B(1 + Li, 1 + Lo) (height-correlated Smith masking, reflected / refracted w_o).
+    loses. Energy per visible normal m, with Lo the Lambda of the reflected / refracted w_o:
+    "correlated" (height-correlated Smith, = order 1 of the walk): reflection
+    (1 + Li)/(1 + Li + Lo), transmission (1 + Li) B(1 + Li, 1 + Lo); "separable": 1/(1 + Lo).
     """
+    check_masking(masking)
     if not 0.0 <= theta < 0.5 * np.pi:
         raise ValueError(f"theta must lie in [0, pi/2) radians, got {theta!r}")
     slopes = SlopeDistribution(make_distribution(distribution, alpha))
@@ -43,7 +47,9 @@ def single_scattering_energy(
     li = slopes.lambda_(wi[:1])[0]
     wr = 2.0 * c[:, None] * m - wi
     lr = slopes.lambda_(wr)
-    refl = np.where(wr[:, 2] > 0.0, (1.0 + li) / (1.0 + li + lr), 0.0)
+    correlated = masking == "correlated"
+    refl = np.where(wr[:, 2] > 0.0, (1.0 + li) / (1.0 + li + lr) if correlated else
+                    1.0 / (1.0 + lr), 0.0)
     if eta is None or np.iscomplexobj(eta):
         return float(np.sum(weights * refl))
     fr, _ = dielectric_reflectance_transmittance(c, float(eta))
@@ -53,17 +59,20 @@ def single_scattering_energy(
     wt_up = flip(wt / np.linalg.norm(wt, axis=-1, keepdims=True))
     lt = slopes.lambda_(wt_up)
     with np.errstate(invalid="ignore"):
-        trans = np.where(wt_up[:, 2] > 0.0, (1.0 + li) * np.exp(betaln(1.0 + li, 1.0 + lt)), 0.0)
+        g = (1.0 + li) * np.exp(betaln(1.0 + li, 1.0 + lt)) if correlated else 1.0 / (1.0 + lt)
+        trans = np.where(wt_up[:, 2] > 0.0, g, 0.0)
     return float(np.sum(weights * (fr * refl + (1.0 - fr) * np.nan_to_num(trans))))
 
 
-def energy_loss(distribution: str, alpha, eta: float | complex | None, theta: float) -> float:
+def energy_loss(distribution: str, alpha, eta: float | complex | None, theta: float,
+                masking: str = "correlated") -> float:
     """Fraction of the incident energy a single-scattering model loses at incidence theta.
 
-    For a dielectric it is exactly what multiple scattering adds back (R + T = 1); for a
-    conductor it is the F = 1 value, an upper bound of the multiply scattered energy.
+    For a dielectric it is exactly what the random walk adds back (R + T = 1); for a conductor
+    it is the F = 1 value, an upper bound of the multiply scattered energy. masking names the
+    single-scattering model in use ("correlated" or "separable", as in sim.bsdf).
     """
-    return 1.0 - single_scattering_energy(distribution, alpha, eta, theta)
+    return 1.0 - single_scattering_energy(distribution, alpha, eta, theta, masking)
 
 
 def albedo_estimate(model, wi: np.ndarray, rng: np.random.Generator, samples: int,
