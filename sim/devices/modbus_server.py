@@ -109,12 +109,12 @@ class EmulatedUnit:
 class _UnitsContext(ModbusServerContext):
     """pymodbus datastore that hands each request to the addressed unit."""
 
-    def __init__(self, units: Mapping[int, ModbusUnit], lock: threading.Lock):
-        # The base class only keeps devices for its own datastores; ours are the units.
+    def __init__(self, units: Mapping[int, ModbusUnit]):
+        # The base class only keeps devices for its own datastores; ours are the units, all
+        # called from the server's one event-loop thread.
         self.old_simulator = True
         self.simdevices = []
         self._units = dict(units)
-        self._lock = lock
         self._echo: dict[int, list[int]] = {}
 
     def _unit(self, device_id: int) -> ModbusUnit:
@@ -131,8 +131,7 @@ class _UnitsContext(ModbusServerContext):
         if table is None:
             return ExcCodes(ILLEGAL_FUNCTION)
         try:
-            with self._lock:
-                return unit.read(table, address, count)
+            return unit.read(table, address, count)
         except Rejected as exc:
             return ExcCodes(exc.code)
 
@@ -141,8 +140,7 @@ class _UnitsContext(ModbusServerContext):
         if func_code not in _WRITE_FUNCTIONS:
             return ExcCodes(ILLEGAL_FUNCTION)
         try:
-            with self._lock:
-                unit.write(address, list(values))
+            unit.write(address, list(values))
         except Rejected as exc:
             return ExcCodes(exc.code)
         self._echo[device_id] = list(values)
@@ -227,7 +225,6 @@ class ModbusEmulatorServer:
         self.port, self.baudrate = port, baudrate
         self.endpoint: str | None = None
         self.disconnected = False
-        self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server = None
         self._thread: threading.Thread | None = None
@@ -296,7 +293,7 @@ class ModbusEmulatorServer:
         loop.close()
 
     async def _listen(self) -> None:
-        context = _UnitsContext(self.units, self._lock)
+        context = _UnitsContext(self.units)
         if self.transport == "tcp":
             server = _TcpServer(context, address=("127.0.0.1", self.port))
         else:
