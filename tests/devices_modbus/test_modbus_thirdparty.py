@@ -119,6 +119,9 @@ def test_pymodbus_client_reads_and_writes_both_emulators(rig, link):
         bad = client.write_register(0, 99, device_id=2)  # gain range past the table
         assert bad.isError() and bad.exception_code == 3
         assert client.read_coils(0, count=1, device_id=1).exception_code == 1
+        both = client.readwrite_registers(read_address=2, read_count=1, write_address=2,
+                                          values=[16], device_id=2)  # function 23
+        assert both.registers == [16]  # averaging set and read back in one request
     finally:
         client.close()
     assert r.stage.position() == 45.25
