@@ -87,6 +87,19 @@ def test_first_hit_heights_follow_c1_to_the_power_one_plus_lambda(height):
     assert result.pvalue > 1e-3
 
 
+@pytest.mark.parametrize("height", ["uniform", "gaussian"])
+def test_density_is_the_derivative_of_the_cdf_and_inv_cdf_inverts_it(height):
+    dist = make_heights(height)
+    h = np.linspace(-0.99, 0.99, 199) * (1 if height == "uniform" else 6)
+    step = 1e-6
+    low = (dist.cdf(h + step) - dist.cdf(h - step)) / (2 * step)
+    high = (np.exp(dist.log_sf(h - step)) - np.exp(dist.log_sf(h + step))) / (2 * step)
+    numeric = np.where(h < 0, low, high)  # each from its own tail, to keep the digits
+    assert np.allclose(dist.pdf(h), numeric, rtol=1e-6, atol=1e-12)
+    u = np.linspace(1e-9, 1 - 1e-9, 101)
+    assert np.allclose(dist.cdf(dist.inv_cdf(u)), u, rtol=1e-12, atol=1e-15)
+
+
 def test_bad_height_name_is_one_clear_error():
     with pytest.raises(ValueError, match="height must be one of"):
         make_heights("lognormal")

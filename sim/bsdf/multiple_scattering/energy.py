@@ -79,8 +79,9 @@ def albedo_estimate(model, wi: np.ndarray, rng: np.random.Generator, samples: in
                     **eval_options) -> tuple[float, float]:
     """Integral of f(wi, wo) |cos o| over all wo, and its standard error, by importance sampling.
 
-    Proposal: half cosine-weighted about +z, half about -z (one sample each, combined with the
-    balance heuristic over the mixture density); model.eval(wi, wo, rng) is called once per wo.
+    Proposal: the mixture of a cosine-weighted lobe about +z and one about -z (pdf |cos o| /
+    (2 pi)), so both reflection and transmission are covered; model.eval(wi, wo, rng) is
+    called once for all the samples.
     """
     wi = np.asarray(wi, dtype=np.float64)
     u = rng.random((samples, 3))
