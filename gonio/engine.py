@@ -10,6 +10,7 @@ abort stops every axis.
 from __future__ import annotations
 
 import signal
+import sys
 import termios
 import threading
 import time
@@ -56,20 +57,30 @@ class Outcome:
 
 
 def ask_resume() -> bool:
-    """Default pause prompt on the terminal: True to resume, False to abort."""
+    """Default pause prompt (on stderr, answer on stdin): True to resume, False to abort.
+    End of input counts as abort."""
     while True:
-        answer = input("paused: [r]esume or [a]bort? ").strip().lower()
+        sys.stderr.write("paused: [r]esume or [a]bort? ")
+        sys.stderr.flush()
+        line = sys.stdin.readline()
+        if not line:
+            return False
+        answer = line.strip().lower()
         if answer in ("r", "resume", ""):
             return True
         if answer in ("a", "abort"):
             return False
 
 
+def _notify(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
 class PauseControl:
     """Ctrl-C handling: the first SIGINT asks for a pause at the next point, the second aborts."""
 
     def __init__(self, prompt: Callable[[], bool] = ask_resume,
-                 notify: Callable[[str], Any] = print):
+                 notify: Callable[[str], Any] = _notify):
         self.prompt, self.notify = prompt, notify
         self.pause_requested = False
         self._previous: Any = None

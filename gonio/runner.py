@@ -52,6 +52,7 @@ class _Devices:
     emulated: tuple[str, ...] = ()
     positions: dict[str, float] = field(default_factory=dict)
     fault_counts: Callable[[], dict] = dict
+    request_counts: Callable[[], dict] = dict
 
 
 @contextmanager
@@ -63,7 +64,7 @@ def _devices(cfg: InstrumentConfig, sim: list[str] | bool) -> Iterator[_Devices]
 
     with simulation(cfg, None if sim is True else sim) as s:
         yield _Devices(s.config, s.time_scale, tuple(s.devices), s.positions,
-                       s.bench.fault_counts)
+                       s.bench.fault_counts, s.bench.request_counts)
 
 
 def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
@@ -83,7 +84,8 @@ def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
                            disable=None if progress is None else not progress)
             engine = Engine(inst, plan, sched.readings, writer, progress=bar, control=control,
                             t0_epoch=writer.meta["t0_epoch"],
-                            session_info=lambda: {"faults_injected": dev.fault_counts()})
+                            session_info=lambda: {"faults_injected": dev.fault_counts(),
+                                                  "requests_served": dev.request_counts()})
             return engine.run()
 
 

@@ -66,6 +66,11 @@ class EmulatedBench:
             out[name] = totals
         return out
 
+    def request_counts(self) -> dict[str, int]:
+        """Requests served so far by each pty-served device (ESP, PM100)."""
+        return {name: emu.server.requests for name, emu in self.emulators.items()
+                if hasattr(emu, "server")}
+
     def stop(self) -> None:
         """Stop every emulator (idempotent)."""
         while self._stops:
