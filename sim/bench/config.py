@@ -1,0 +1,139 @@
+"""The [sim] section of an instrument config -> the emulated bench and its PowerSource.
+
+Reads the tables this package owns, [sim.source], [sim.sample], [sim.aperture] and
+[sim.alignment] (docs/bench.md has the schema); every bad field raises one SimConfigError
+naming it. [sim.detector] belongs to sim.devices.photodiode, the other keys to the emulators.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+from sim.bench.sample import DISTRIBUTIONS, KINDS, LIT_FROM, MASKINGS, Sample, SampleSpec
+from sim.bench.scene import Alignment, Bench, BenchPowerSource
+from sim.bench.source import Source
+from sim.devices.photodiode import SimConfigError
+
+Check = Callable[[str, object], object]
+
+
+def _number(low: float = -math.inf, high: float = math.inf, *, open_low: bool = False) -> Check:
+    def check(where: str, value: object) -> float:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if ok:
+            ok = math.isfinite(value) and value <= high and (value > low if open_low
+                                                              else value >= low)
+        if not ok:
+            bound = f"> {low:g}" if open_low else f">= {low:g}"
+            limit = bound if high == math.inf else f"{bound} and <= {high:g}"
+            raise SimConfigError(f"{where} must be a number {limit}, got {value!r}")
+        return float(value)
+    return check
+
+
+def _choice(options: tuple[str, ...]) -> Check:
+    def check(where: str, value: object) -> str:
+        if value not in options:
+            raise SimConfigError(f"{where} must be one of {', '.join(options)}; got {value!r}")
+        return value
+    return check
+
+
+def _alpha(where: str, value: object) -> tuple[float, float]:
+    pair = value if isinstance(value, (list, tuple)) else [value, value]
+    if len(pair) != 2:
+        raise SimConfigError(f"{where} must be a number or [alpha_x, alpha_y], got {value!r}")
+    positive = _number(0.0, 10.0, open_low=True)
+    return positive(where, pair[0]), positive(where, pair[1])
+
+
+def _order(where: str, value: object) -> tuple[int, int] | None:
+    if value == "auto":
+        return None
+    if (isinstance(value, (list, tuple)) and len(value) == 2 and all(
+            isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 64 for v in value)):
+        return int(value[0]), int(value[1])
+    raise SimConfigError(f'{where} must be "auto" or [n_beam, n_aperture] (integers 0..64), '
+                         f"got {value!r}")
+
+
+SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
+    "source": {
+        "wavelength_nm": (632.8, _number(100.0, 20000.0)),
+        "power_w": (1e-3, _number(0.0, open_low=True)),
+        "beam_diameter_mm": (2.0, _number(0.0, open_low=True)),
+        "divergence_deg": (0.0, _number(0.0, 10.0)),
+        "drift_fraction": (0.0, _number(0.0, 0.5)),
+        "drift_period_s": (3600.0, _number(0.0, open_low=True)),
+    },
+    "sample": {
+        "kind": ("hemisphere", _choice(KINDS)),
+        "distribution": ("ggx", _choice(DISTRIBUTIONS)),
+        "alpha": (0.394, _alpha),
+        "eta": (1.51, _number(0.0, 10.0, open_low=True)),
+        "k": (0.0, _number(0.0, 20.0)),
+        "masking": ("separable", _choice(MASKINGS)),
+        "lit_from": ("air", _choice(LIT_FROM)),
+        "retracted_beyond_deg": (89.0, _number(45.0, 90.0)),
+    },
+    "aperture": {
+        "diameter_mm": (10.0, _number(0.0, open_low=True)),
+        "distance_mm": (500.0, _number(0.0, open_low=True)),
+        "rtol": (1e-3, _number(1e-10, 0.1)),
+        "order": ("auto", _order),
+    },
+    "alignment": {
+        "sample_offset_deg": (0.0, _number(-10.0, 10.0)),
+        "arm_offset_deg": (0.0, _number(-10.0, 10.0)),
+    },
+}
+
+
+def read_table(sim_config: Mapping, name: str) -> dict[str, object]:
+    """Validated [sim.<name>] table with defaults filled in."""
+    table = sim_config.get(name, {})
+    if not isinstance(table, Mapping):
+        raise SimConfigError(f"[sim.{name}] must be a table, got {table!r}")
+    fields = SCHEMA[name]
+    unknown = sorted(set(table) - set(fields))
+    if unknown:
+        raise SimConfigError(
+            f"[sim.{name}] unknown key {unknown[0]!r}; known: {', '.join(fields)}")
+    return {key: check(f"[sim.{name}] {key}", table.get(key, default))
+            for key, (default, check) in fields.items()}
+
+
+def build_bench(sim_config: Mapping) -> Bench:
+    """The Bench described by a [sim] table (missing tables and keys take the defaults)."""
+    source = Source(**read_table(sim_config, "source"))
+    sample_table = read_table(sim_config, "sample")
+    aperture = read_table(sim_config, "aperture")
+    retracted = sample_table.pop("retracted_beyond_deg")
+    spec = SampleSpec(**sample_table)
+    if spec.kind != "hemisphere" and spec.lit_from != "air":
+        raise SimConfigError(f'[sim.sample] lit_from = "hemisphere" needs kind = "hemisphere", '
+                             f"not {spec.kind!r}")
+    if spec.kind != "conductor" and spec.k != 0.0:
+        raise SimConfigError(f"[sim.sample] k (extinction) applies to kind = \"conductor\" only, "
+                             f"not {spec.kind!r}")
+    if aperture["diameter_mm"] >= aperture["distance_mm"]:
+        raise SimConfigError("[sim.aperture] diameter_mm must be smaller than distance_mm")
+    return Bench(
+        source=source, sample=Sample(spec),
+        aperture_diameter_mm=aperture["diameter_mm"], distance_mm=aperture["distance_mm"],
+        rtol=aperture["rtol"], order=aperture["order"],
+        alignment=Alignment(**read_table(sim_config, "alignment")),
+        retracted_beyond_deg=retracted,
+    )
+
+
+def build_power_source(
+    sim_config: Mapping,
+    positions: Callable[[], Mapping[str, float]],
+    clock: Callable[[], float] | None = None,
+) -> BenchPowerSource:
+    """PowerSource for detector emulators: the bench of sim_config (the [sim] table) at the
+    stage positions positions() returns ({"sample", "arm", "azimuth", "elevation"}, degrees),
+    at the time clock() returns (virtual seconds; default: real seconds since now)."""
+    return BenchPowerSource(build_bench(sim_config), positions, clock)

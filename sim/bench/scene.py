@@ -1,0 +1,115 @@
+"""The bench as a whole: stage positions (+ alignment errors) -> true optical power at the detector.
+
+With the sample in the beam the detector sees the sample's scattering (the aperture integral,
+only the lobe on the detector's side evaluated); with the sample retracted (edge-on) it sees the
+direct beam, clipped by the aperture when the beam is wider or the arm is off the beam axis.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from sim.bench.aperture import ApertureIntegral
+from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
+from sim.bench.sample import Sample
+from sim.bench.source import Source
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Known mechanical errors: the true angle is the stage's reported angle plus the offset."""
+
+    sample_offset_deg: float = 0.0
+    arm_offset_deg: float = 0.0
+
+    def true_positions(self, positions: Mapping[str, float]) -> dict[str, float]:
+        """Stage positions corrected to the sample's and arm's true angles."""
+        true = {"azimuth": 0.0, "elevation": 0.0, **positions}
+        true["sample"] = positions["sample"] + self.sample_offset_deg
+        true["arm"] = positions["arm"] + self.arm_offset_deg
+        return true
+
+
+def disk_overlap_fraction(r_beam: float, r_aperture: float, offset: float) -> float:
+    """Fraction of a uniform disk of radius r_beam inside a disk of radius r_aperture whose
+    centre is offset away (the lens-shaped intersection area over the beam's area)."""
+    r1, r2, d = r_beam, r_aperture, abs(offset)
+    if d >= r1 + r2:
+        return 0.0
+    if d <= abs(r2 - r1):
+        return min(1.0, (r2 / r1) ** 2)
+    a1 = r1**2 * math.acos((d**2 + r1**2 - r2**2) / (2 * d * r1))
+    a2 = r2**2 * math.acos((d**2 + r2**2 - r1**2) / (2 * d * r2))
+    kite = 0.5 * math.sqrt((-d + r1 + r2) * (d + r1 - r2) * (d - r1 + r2) * (d + r1 + r2))
+    return (a1 + a2 - kite) / (math.pi * r1**2)
+
+
+@dataclass
+class Bench:
+    """Source, sample, aperture (diameter and distance) and alignment: `power_w(positions, t)`."""
+
+    source: Source
+    sample: Sample
+    aperture_diameter_mm: float = 10.0
+    distance_mm: float = 500.0
+    rtol: float = 1e-3
+    alignment: Alignment = field(default_factory=Alignment)
+    retracted_beyond_deg: float = 89.0
+    order: tuple[int, int] | None = None
+
+    def __post_init__(self) -> None:
+        self.integral = ApertureIntegral(
+            math.atan(0.5 * self.aperture_diameter_mm / self.distance_mm),
+            self.source.divergence_rad, self.rtol, self.order)
+
+    def retracted(self, sample_deg: float) -> bool:
+        """True when the sample is edge-on enough to be out of the beam."""
+        return abs(math.sin(math.radians(sample_deg))) >= math.sin(
+            math.radians(self.retracted_beyond_deg))
+
+    def direct_beam_fraction(self, arm_deg: float, elevation_deg: float = 0.0) -> float:
+        """Fraction of the unobstructed beam's power that enters the aperture."""
+        off_axis = float(angle_from_beam_rad(arm_deg, elevation_deg))
+        if off_axis >= math.pi / 2:
+            return 0.0
+        r_beam = 0.5 * self.source.diameter_at_mm(self.distance_mm)
+        return disk_overlap_fraction(r_beam, 0.5 * self.aperture_diameter_mm,
+                                     self.distance_mm * math.tan(off_axis))
+
+    def scattered_fraction(self, positions: Mapping[str, float]) -> float:
+        """Detector power over incident power with the sample in the beam (true positions)."""
+        wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
+        scale_i, scale_o = self.sample.lobe_scales(wi, wo)
+        return self.integral.integrate(self.sample.integrand, wi, wo, scale_i, scale_o)
+
+    def power_w(self, positions: Mapping[str, float], t_s: float = 0.0) -> float:
+        """True optical power at the detector for reported stage positions at time t_s."""
+        true = self.alignment.true_positions(positions)
+        if self.retracted(true["sample"]):
+            fraction = self.direct_beam_fraction(true["arm"], true["elevation"])
+        else:
+            fraction = self.scattered_fraction(true)
+        return self.source.power_at(t_s) * fraction
+
+
+class BenchPowerSource:
+    """The PowerSource detector emulators ask: the bench at the stages' current positions."""
+
+    def __init__(
+        self,
+        bench: Bench,
+        positions: Callable[[], Mapping[str, float]],
+        clock: Callable[[], float] | None = None,
+    ):
+        self.bench = bench
+        self._positions = positions
+        t0 = time.monotonic()
+        self._clock = clock or (lambda: time.monotonic() - t0)
+
+    def power_w(self) -> float:
+        """True optical power at the detector now, W."""
+        return self.bench.power_w(self._positions(), self._clock())
+

@@ -1,0 +1,90 @@
+"""Cap quadrature and the order rule against closed forms and scipy's adaptive quadrature."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from sim.bench.aperture import ApertureIntegral, order_for
+from sim.bench.quadrature import cap_rule, cap_solid_angle, node_count
+
+Z = np.array([0.0, 0.0, 1.0])
+
+
+def gaussian(peak, width):
+    def g(w):
+        return np.exp(-np.arccos(np.clip(w @ peak, -1, 1)) ** 2 / (2 * width**2))
+    return g
+
+
+def cap_integral(g, beta, n):
+    nodes, weights = cap_rule(Z, beta, n)
+    return float(g(nodes) @ weights)
+
+
+def direction(theta, phi=0.3):
+    return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+
+
+@pytest.mark.parametrize("beta", [1e-4, 0.01, 0.3, 1.2])
+def test_weights_sum_to_the_solid_angle(beta):
+    for n in (0, 12):
+        assert cap_rule(Z, beta, n)[1].sum() == pytest.approx(cap_solid_angle(beta), rel=1e-12)
+    assert cap_solid_angle(beta) == pytest.approx(2 * math.pi * (1 - math.cos(beta)), rel=1e-9)
+
+
+def test_nodes_are_unit_and_inside_the_cap_for_any_centre():
+    c = np.array([0.6, -0.0, -0.8])
+    nodes, _ = cap_rule(c, 0.2, 6)
+    assert nodes.shape == (node_count(6), 3)
+    assert np.allclose(np.linalg.norm(nodes, axis=-1), 1.0)
+    assert np.all(nodes @ c >= math.cos(0.2) - 1e-12)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.004, 0.012])
+def test_off_centre_gaussian_against_scipy_dblquad(offset):
+    beta, width = 0.01, 0.004
+    g = gaussian(direction(offset), width)
+
+    def polar(rho, phi):
+        return g(direction(rho, phi)) * math.sin(rho)
+
+    ref, _ = integrate.dblquad(polar, 0, 2 * math.pi, 0, beta, epsabs=0, epsrel=1e-11)
+    assert cap_integral(g, beta, 12) == pytest.approx(ref, rel=1e-8)
+
+
+def test_order_rule_meets_its_accuracy_on_gaussian_lobes_at_any_offset():
+    """The local scale of a Gaussian lobe of width w at distance r is w^2 / (w + r)."""
+    rng = np.random.default_rng(2)
+    beta = math.radians(0.6)
+    for rtol in (1e-2, 1e-3, 1e-5):
+        worst = 0.0
+        for _ in range(150):
+            w = beta / 10 ** rng.uniform(-1.3, 1.0)
+            r = rng.uniform(0, 4) * max(beta, w)
+            g = gaussian(direction(r, rng.uniform(0, 2 * math.pi)), w)
+            n = order_for(beta * (w + r) / w**2, rtol)
+            worst = max(worst, abs(cap_integral(g, beta, n) / cap_integral(g, beta, 48) - 1))
+        assert worst < rtol, (rtol, worst)
+
+
+def test_one_point_only_when_accurate():
+    assert order_for(0.01, 1e-3) == 0 and order_for(0.05, 1e-3) > 0
+    ap = ApertureIntegral(math.radians(0.5), 0.0, 1e-3)
+    assert ap.orders(1.0, 1.0) == (0, 0)  # a lobe a radian wide: one point
+    assert ap.orders(1.0, math.radians(0.5))[1] >= 3
+
+
+def test_divergence_average_of_a_constant_is_exact():
+    ap = ApertureIntegral(0.01, 0.005, 1e-3, order=(5, 5))
+    value = ap.integrate(lambda wi, wo: np.ones(np.broadcast_shapes(wi.shape, wo.shape)[:-1]),
+                         Z, -Z, 1.0, 1.0)
+    assert value == pytest.approx(cap_solid_angle(0.01), rel=1e-12)
+
+
+@pytest.mark.parametrize("kwargs", [{"aperture_rad": 0.0}, {"aperture_rad": 0.1, "rtol": 0.0},
+                                    {"aperture_rad": 0.1, "divergence_rad": -1.0}])
+def test_bad_aperture_parameters(kwargs):
+    with pytest.raises(ValueError):
+        ApertureIntegral(**kwargs)
