@@ -91,10 +91,12 @@ def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
 
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              sim: list[str] | bool = False, out: str | Path = "runs",
-             progress: bool | None = None, control: PauseControl | None = None) -> ScanResult:
+             progress: bool | None = None, control: PauseControl | None = None,
+             calibration: dict | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
-    sim: False (real devices), True (emulate every device) or a list of device / role names.
+    sim: False (real devices), True (emulate every device) or a list of device / role names;
+    calibration: what meta.json records about the calibration file to use (or None).
     """
     plan = load_plan(plan_path)
     cfg_path = instrument_path(plan, instrument)
@@ -109,7 +111,7 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
             "sim": sim if isinstance(sim, list) else bool(sim), "seeds": seeds,
             "time_scale": cfg.sim.get("time_scale", 1.0) if sim is not False else 1.0,
-            "calibration": None, "t0_epoch": time.time()}
+            "calibration": calibration, "t0_epoch": time.time()}
     writer = RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw, cfg.raw, meta)
     try:
         return ScanResult(writer.path, _run(writer, plan, cfg, sched, sim, progress, control))

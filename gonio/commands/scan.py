@@ -29,6 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="runs", metavar="DIR",
                    help="where run directories go (default: ./runs)")
     p.add_argument("--resume", metavar="RUN", help="continue an interrupted run")
+    p.add_argument("--calibration", metavar="FILE",
+                   help="calibration file to record in the run (used by reduce and fit)")
     p.add_argument("--no-plot", action="store_true", help="do not write plot.png")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -48,14 +50,20 @@ def run(args: argparse.Namespace) -> int:
 
     progress = False if args.no_progress else None
     if args.resume:
-        if args.plan:
-            raise GonioError("give either PLAN or --resume RUN, not both")
+        if args.plan or args.calibration:
+            raise GonioError("--resume RUN continues a run as it was started: "
+                             "give no PLAN or --calibration with it")
         result = resume_scan(args.resume, args.instrument, args.sim, progress=progress)
     else:
         if not args.plan:
             raise GonioError("a PLAN file is needed (or --resume RUN)")
+        calibration = None
+        if args.calibration:
+            from calibration.calfile import reference
+
+            calibration = reference(args.calibration)
         result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
-                          progress=progress)
+                          progress=progress, calibration=calibration)
     outcome = result.outcome
     if not args.no_plot and outcome.done:
         _plot(result.path)
