@@ -197,6 +197,16 @@ def test_parent_models_forward_to_the_walk():
     assert wo_s.shape == (3,) and weight == pytest.approx(1.0) and pdf > 0
 
 
+def test_parent_lobes_restrict_the_walk():
+    only_t = RoughDielectric("ggx", 0.8, 1.5, lobes=("transmission",), multiple_scattering=True)
+    rng = np.random.default_rng(19)
+    wi = direction(40)
+    assert only_t.eval(wi, direction(30, 180), rng=rng) == 0.0
+    assert only_t.eval(wi, direction(160, 180), rng=rng) > 0.0
+    wo, weight, _ = only_t.sample(np.broadcast_to(wi, (500, 3)), rng.random((500, 3)), rng=rng)
+    assert np.all(weight[wo[:, 2] > 0] == 0.0) and np.all(weight[wo[:, 2] < 0] == 1.0)
+
+
 @pytest.mark.parametrize("alpha", [1e-3, 0.05, 3.0])
 @pytest.mark.parametrize("theta", [0.0, 89.99, 90.0 + 1e-3, 179.0])
 def test_extreme_inputs_stay_finite(alpha, theta):

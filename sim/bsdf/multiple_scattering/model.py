@@ -114,6 +114,8 @@ class RandomWalkBSDF:
             v = res.value.reshape(-1, k)
             total += [v.sum(axis=1), (v * v).sum(axis=1), res.truncated.reshape(-1, k).sum(axis=1)]
             done += k
+        keep = self._lobe_mask(wi, wo)
+        total *= keep
         mean = total[0] / walks
         var = np.maximum(total[1] / walks - mean * mean, 0.0) * walks / max(walks - 1, 1)
         cos_o = np.abs(wo[:, 2])
@@ -121,6 +123,12 @@ class RandomWalkBSDF:
         err = np.sqrt(var / walks) * scale if walks > 1 else np.full(mean.shape, np.inf)
         return ((mean * scale).reshape(shape), err.reshape(shape),
                 (total[2] / walks).reshape(shape))
+
+    def _lobe_mask(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """1 where the parent's `lobes` (reflection / transmission) include the pair, else 0."""
+        lobes = getattr(self.parent, "lobes", ("reflection", "transmission"))
+        same = (wi[..., 2] > 0.0) == (wo[..., 2] > 0.0)
+        return np.where(same, "reflection" in lobes, "transmission" in lobes).astype(float)
 
     def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
                  walks: int | None = None) -> Estimate:
@@ -151,6 +159,7 @@ class RandomWalkBSDF:
         res = self._walker.run(wi.reshape(-1, 3), rng, u_first=u, max_order=self.max_order)
         ok = np.isfinite(res.exit_direction[:, 0])
         wo = np.where(ok[:, None], res.exit_direction, np.array([0.0, 0.0, 1.0]))
+        ok &= self._lobe_mask(wi.reshape(-1, 3), wo) > 0.0
         weight = np.where(ok, res.weight, 0.0)
         pdf = np.where(ok, self.pdf(wi.reshape(-1, 3), wo, rng), 0.0)
         return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
