@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from sim.bsdf.fresnel import dielectric_reflectance_transmittance
+from sim.bsdf.fresnel import dielectric_reflectance_transmittance, dielectric_transmittance
 from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
 from sim.bsdf.vectors import dot
 
@@ -96,9 +96,9 @@ class RoughDielectric(MicrofacetModel):
 
     def _eval_transmission(self, wi, wo, e, em1):
         m, n2, valid = self._transmission_normal(wi, wo, em1)
-        im = dot(wi, m)
-        _, ft = dielectric_reflectance_transmittance(im, e)
-        val = (im * -dot(wo, m) * e * e * ft * self.distribution.D(m)
+        im, om = dot(wi, m), -dot(wo, m)
+        ft = dielectric_transmittance(im, om, e)
+        val = (im * om * e * e * ft * self.distribution.D(m)
                * self._g2_over_cosines(wi, wo) / np.where(valid, n2, 1.0))
         return np.where(valid, val, 0.0)
 
@@ -111,23 +111,19 @@ class RoughDielectric(MicrofacetModel):
         if refl.any():
             wi_r, wo_r = wi[refl], wo[refl]
             m = half_vector(wi_r, wo_r)
-            choice = self._choice(dot(wi_r, m), e[refl])[0]
+            choice = (dielectric_reflectance_transmittance(dot(wi_r, m), e[refl])[0]
+                      if self.transmission else 1.0)
             p[refl] = choice * self._normal_pdf(wi_r, m) / (4.0 * dot(wo_r, m))
         if trans.any():
             wi_t, wo_t, e_t = wi[trans], wo[trans], e[trans]
             m, n2, valid = self._transmission_normal(wi_t, wo_t, em1[trans])
-            choice = self._choice(dot(wi_t, m), e_t)[1]
-            val = (choice * self._normal_pdf(wi_t, m) * e_t * e_t * -dot(wo_t, m)
+            om = -dot(wo_t, m)
+            choice = (dielectric_transmittance(dot(wi_t, m), om, e_t)
+                      if self.reflection else 1.0)
+            val = (choice * self._normal_pdf(wi_t, m) * e_t * e_t * om
                    / np.where(valid, n2, 1.0))
             p[trans] = np.where(valid, val, 0.0)
         return p
-
-    def _choice(self, cos_im, e):
-        """Probabilities of choosing reflection and transmission at a facet (F, 1 - F or 1)."""
-        fr, ft = dielectric_reflectance_transmittance(cos_im, e)
-        if self.reflection and self.transmission:
-            return fr, ft
-        return np.ones_like(fr), np.ones_like(ft)
 
     # --- sample -----------------------------------------------------------------------------
 

@@ -25,10 +25,25 @@ def dielectric_reflectance_transmittance(
     e_ct2 = (e - s) * (e + s)  # (e cos_t)^2 = e^2 - sin_i^2, factored against cancellation
     tir = e_ct2 <= 0
     e_ct = np.sqrt(np.where(tir, 0.0, e_ct2))
+    f, t = _dielectric_from_cosines(c, e_ct, e)
+    return np.where(tir, 1.0, f), np.where(tir, 0.0, t)
+
+
+def dielectric_transmittance(cos_i: np.ndarray, cos_t: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """1 - F from both |cosines| when the refracted one is already known (transmission lobe).
+
+    e = n_t / n_i. Taking cos_t as given avoids the cancellation of sqrt(e^2 - sin_i^2) near
+    the critical angle, so f_t(i, o) and f_t(o, i) are equally accurate.
+    """
+    return _dielectric_from_cosines(cos_i, e * cos_t, e)[1]
+
+
+def _dielectric_from_cosines(c, e_ct, e):
+    """(F, T) from c = |cos_i|, e_ct = e |cos_t| and e; (1, 0) where both denominators vanish."""
     e2c = e * e * c
     den_s = c + e_ct
     den_p = e2c + e_ct
-    ok = ~tir & (den_s > 0) & (den_p > 0)
+    ok = (den_s > 0) & (den_p > 0)
     den_s = np.where(ok, den_s, 1.0)
     den_p = np.where(ok, den_p, 1.0)
     rs = (c - e_ct) / den_s
