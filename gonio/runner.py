@@ -67,18 +67,16 @@ def _devices(cfg: InstrumentConfig, sim: list[str] | bool) -> Iterator[_Devices]
                        s.bench.fault_counts, s.bench.request_counts)
 
 
-def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
-         sim: list[str] | bool, progress: bool | None, control: PauseControl | None
-         ) -> Outcome:
-    with _devices(cfg, sim) as dev:
-        writer.start_session(sim=list(dev.emulated), endpoints={
-            n: d.endpoint for n, d in dev.config.devices.items()})
+def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
+         sched: Schedule, sim: list[str] | bool, progress: bool | None,
+         control: PauseControl | None) -> ScanResult:
+    """Open the devices, then the run (so a device that cannot be opened leaves no new
+    run behind), and measure what is left of the schedule."""
+    with _devices(cfg, sim) as dev, build_instrument(dev.config, dev.time_scale) as inst:
+        writer = make_writer()
         try:
-            inst = build_instrument(dev.config, dev.time_scale)
-        except BaseException as exc:
-            writer.set_status("failed", f"opening the instrument: {exc}")
-            raise
-        with inst:
+            writer.start_session(sim=list(dev.emulated), endpoints={
+                n: d.endpoint for n, d in dev.config.devices.items()})
             inst.last_positions = dev.positions
             bar = Progress(len(sched), writer.next_index, plan.name,
                            disable=None if progress is None else not progress)
@@ -86,7 +84,9 @@ def _run(writer: RunWriter, plan: Plan, cfg: InstrumentConfig, sched: Schedule,
                             t0_epoch=writer.meta["t0_epoch"],
                             session_info=lambda: {"faults_injected": dev.fault_counts(),
                                                   "requests_served": dev.request_counts()})
-            return engine.run()
+            return ScanResult(writer.path, engine.run())
+        finally:
+            writer.close()
 
 
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
@@ -112,11 +112,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "sim": sim if isinstance(sim, list) else bool(sim), "seeds": seeds,
             "time_scale": cfg.sim.get("time_scale", 1.0) if sim is not False else 1.0,
             "calibration": calibration, "t0_epoch": time.time()}
-    writer = RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw, cfg.raw, meta)
-    try:
-        return ScanResult(writer.path, _run(writer, plan, cfg, sched, sim, progress, control))
-    finally:
-        writer.close()
+    return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
+                                         cfg.raw, meta), plan, cfg, sched, sim, progress, control)
 
 
 def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
@@ -140,12 +137,10 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                            f"config the run started with; cannot resume on it")
     if sim is None:
         sim = run.meta.get("sim", False)
-    writer = RunWriter.resume(run.path)
-    if writer.next_index >= len(sched):
-        with contextlib.closing(writer):
+    if run.status == "completed":
+        raise RunError(f"{run.path}: run already completed; nothing to resume")
+    if len(run) >= len(sched):  # killed after its last reading
+        with contextlib.closing(RunWriter.resume(run.path)) as writer:
             writer.set_status("completed", "")
-        return ScanResult(writer.path, Outcome("completed", "", writer.next_index))
-    try:
-        return ScanResult(writer.path, _run(writer, plan, cfg, sched, sim, progress, control))
-    finally:
-        writer.close()
+        return ScanResult(run.path, Outcome("completed", "", len(run)))
+    return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control)

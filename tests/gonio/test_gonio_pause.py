@@ -18,7 +18,7 @@ PLAN = {"name": "pause", "grid": [{"side": "reflection", "theta_i_deg": [20.0, 4
 
 
 def start(tmp_path):
-    cfg = fast_config(time_scale=4.0)  # slow enough to interrupt, a few seconds in all
+    cfg = fast_config(time_scale=8.0)  # slow enough to interrupt, about two seconds in all
     write_toml(tmp_path / "cfg.toml", cfg)
     plan = write_toml(tmp_path / "plan.toml", {**PLAN, "instrument": "cfg.toml"})
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
