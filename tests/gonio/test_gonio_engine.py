@@ -1,0 +1,68 @@
+"""The engine in-process on the emulated bench: a device error stops the run at once (not
+retried) with the device's own words, and a double Ctrl-C during a long move stops the axis
+where it is."""
+
+import signal
+import threading
+import time
+
+import pytest
+from conftest import fast_config
+
+from gonio.config import parse_config
+from gonio.engine import Engine, PauseControl
+from gonio.instrument import build_instrument
+from gonio.plan import build_schedule, parse_plan
+from gonio.simulate import simulation
+from gonio.store import RunWriter, open_run
+
+ONE_MOVE = {"name": "one", "grid": [{"theta_i_deg": [0.0], "theta_o_deg": [40.0, 80.0]}]}
+
+
+@pytest.fixture
+def bench(tmp_path):
+    """A running emulated sim-serial bench in real time; yields a function that runs a plan."""
+    cfg = parse_config(fast_config(time_scale=1.0))
+    with simulation(cfg) as sim, build_instrument(sim.config, sim.time_scale) as inst:
+        def run(raw_plan, control=None):
+            plan = parse_plan(raw_plan)
+            sched = build_schedule(plan, cfg)
+            writer = RunWriter.create(tmp_path, plan.name, None, None, raw_plan, cfg.raw, {})
+            writer.start_session()
+            try:
+                return Engine(inst, plan, sched.readings, writer, control=control).run(), writer
+            finally:
+                writer.close()
+        yield sim.bench.emulators["esp"], run
+
+
+def test_device_error_stops_at_once_with_the_devices_words(bench):
+    esp, run = bench
+    esp.axes[2].motion.limits = (6.0, 60.0)  # the controller's own limit, tighter than config
+    outcome, writer = run(ONE_MOVE)
+    assert outcome.status == "failed" and outcome.done == 1
+    reason = open_run(writer.path).meta["reason"]
+    assert reason.startswith("reading 1 (sample): moving the arm axis (esp.arm): esp: device "
+                             "error 206: POSITIVE SOFTWARE LIMIT")
+    assert "attempts" not in reason  # a device error is not retried
+
+
+def test_second_ctrl_c_during_a_move_stops_the_axis(bench):
+    esp, run = bench
+    arm = esp.axes[2].motion
+
+    def interrupt():
+        while arm.position() < 30.0:  # the move (6 -> 85 deg) is under way
+            time.sleep(0.005)
+        for _ in range(2):
+            signal.raise_signal(signal.SIGINT)
+            time.sleep(0.05)
+
+    far = {"name": "far", "grid": [{"theta_i_deg": [0.0], "theta_o_deg": [85.0]}]}
+    threading.Thread(target=interrupt, daemon=True).start()
+    outcome, writer = run(far, PauseControl(prompt=lambda: True, notify=lambda m: None))
+    assert outcome.status == "aborted" and outcome.done == 0
+    time.sleep(0.5)  # the stop decelerates (ST), it does not jump
+    assert not arm.is_moving()
+    assert 30.0 < arm.position() < 80.0  # stopped well short of the target
+    assert open_run(writer.path).meta["status"] == "aborted"
