@@ -75,6 +75,9 @@ def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
                               seed=spec.seed, tile_entries=spec.tile_entries, client=client,
                               progress=progress)
     seconds = time.perf_counter() - start
+    if not np.all(np.isfinite(values)):
+        bad = grid_points(spec)[~np.all(np.isfinite(values), axis=1)][0]
+        raise ValueError(f"non-finite table value at (N.V, alpha[, eta]) = {tuple(bad)}")
     exact = values.reshape(spec.array_shape)
     return Table(spec=spec, data=exact.astype(spec.dtype), bake_seconds=seconds,
                  model=getattr(estimator, "description", repr(estimator)))

@@ -171,3 +171,15 @@ def test_lookup_rejects_the_wrong_number_of_parameters():
     with pytest.raises(ValueError, match="takes 3 parameters"):
         table.lookup(0.5, 0.1)
     assert math.isfinite(table.lookup(0.5, 0.1, 1.5)[0])
+
+
+def test_a_non_finite_estimate_is_named():
+    class Broken(StandIn):
+        def __call__(self, params, u, rng):
+            out = super().__call__(params, u, rng)
+            out[params[:, 1] > 0.5] = np.nan
+            return out
+
+    spec = TableSpec(kind="transmission", shape=(2, 2, 2), samples=4)
+    with pytest.raises(ValueError, match=r"non-finite table value at \(N.V, alpha\[, eta\]\)"):
+        bake(spec, Broken())
