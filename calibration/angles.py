@@ -25,13 +25,14 @@ def _asymmetry(centre: float, x: np.ndarray, p: np.ndarray, core: np.ndarray) ->
 
 
 def symmetry_centre(x: np.ndarray, power: np.ndarray, core_fraction: float = 0.05) -> float:
-    """Centre of a single peak (x increasing) from mirror symmetry of its core (p > fraction of
-    the maximum), searched within one sample step of the maximum reading's neighbours."""
+    """Centre of a single peak from mirror symmetry of its core (p > fraction of the maximum),
+    searched where the peak is above half its maximum."""
     order = np.argsort(x)
     x, p = np.asarray(x, float)[order], np.asarray(power, float)[order]
     k = int(np.argmax(p))
     core = p > core_fraction * p[k]
-    lo, hi = x[max(k - 1, 0)], x[min(k + 1, len(x) - 1)]
+    top = x[p > 0.5 * p[k]]
+    lo, hi = top.min(), top.max()
     if core.sum() < 3 or hi <= lo:
         raise CalibrationError("the peak is sampled by fewer than three points above "
                                f"{core_fraction:.0%} of its maximum; scan it more finely")

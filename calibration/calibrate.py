@@ -23,8 +23,14 @@ import numpy as np
 from calibration import angles as angle_cal
 from calibration.beam import beam_power
 from calibration.calfile import Calibration
-from calibration.detector import correct_power, dark_offsets, gain_ratios
-from calibration.values import CalibrationError, Measured, weighted_mean
+from calibration.detector import (
+    correct_power,
+    dark_offsets,
+    gain_ratios,
+    pooled_sem,
+    ranges_read_together,
+)
+from calibration.values import CalibrationError, Measured
 
 
 @dataclass
@@ -38,20 +44,18 @@ class PeakScan:
 
 
 def averaged_points(rows: np.ndarray) -> PeakScan:
-    """Average the repeats of each plan point (at least two each) of one scan."""
-    points = np.unique(rows["point"])
-    arm, mean, sem = [], [], []
-    for p in points:
+    """Average the repeats of each plan point (at least two each) of one scan; their standard
+    errors from the noise law pooled over the scan (detector.pooled_sem)."""
+    groups, arm = [], []
+    for p in np.unique(rows["point"]):
         sel = rows[rows["point"] == p]
         if len(sel) < 2:
             raise CalibrationError(f"point {int(p)}: angle calibration needs repeated readings "
                                    "(set repeats >= 2 in the plan) to know their noise")
-        m = weighted_mean(sel["power_w"])
+        groups.append(np.asarray(sel["power_w"], dtype=np.float64))
         arm.append(float(sel["arm_deg"].mean()))
-        mean.append(m.value)
-        sem.append(max(m.sigma, 1e-300))
-    return PeakScan(float(rows["sample_deg"].mean()), np.array(arm), np.array(mean),
-                    np.array(sem))
+    mean = np.array([g.mean() for g in groups])
+    return PeakScan(float(rows["sample_deg"].mean()), np.array(arm), mean, pooled_sem(groups))
 
 
 def angle_offsets(readings: np.ndarray, eta: float, seed: int = 0) -> tuple[Measured, Measured]:
@@ -81,6 +85,20 @@ def angle_offsets(readings: np.ndarray, eta: float, seed: int = 0) -> tuple[Meas
             Measured(float(coef[1]), float(math.sqrt(cov[1, 1]))))
 
 
+def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
+                    gains: dict[str, Measured] | None) -> np.ndarray:
+    """Readings with dark- and gain-corrected power, divided by the beam power interpolated at
+    each reading's time when the run has beam readings (a drift during a peak scan would
+    otherwise skew the peak and bias its centre)."""
+    out = readings.copy()
+    out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks, gains)
+    beam = out["kind"] == "beam"
+    if beam.any():
+        model = beam_power(out["t_s"][beam], out["power_w"][beam])
+        out["power_w"] = out["power_w"] / model.at(out["t_s"])[0]
+    return out
+
+
 def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
                  gains: dict[str, Measured] | None) -> dict[str, float] | None:
     """Mean, relative drift and noise of the (corrected) beam readings, if there are any."""
@@ -102,17 +120,14 @@ def build(readings: np.ndarray, created_utc: str, source_runs: list[str],
     read; angle offsets when eta is given and the peak scans are present; the beam summary."""
     darks = dark_offsets(readings)
     cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
-    sample_rows = readings[(readings["kind"] == "sample") & ~readings["saturated"]]
-    if len(np.unique(sample_rows["range_w"])) >= 2:
+    if ranges_read_together(readings):
         gains = gain_ratios(readings, darks)
         cal.gains, cal.gain_reference = gains.gains, gains.reference
         cal.linearity = {"chi2_dof": gains.chi2_dof, "max_deviation": gains.max_deviation,
                          "exponents": {k: v.to_json() for k, v in gains.exponents.items()}}
     if eta is not None:
-        corrected = readings.copy()
-        corrected["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks,
-                                             cal.gains)
-        cal.sample_offset_deg, cal.arm_offset_deg = angle_offsets(corrected, eta, seed)
+        cal.sample_offset_deg, cal.arm_offset_deg = angle_offsets(
+            beam_normalised(readings, darks, cal.gains), eta, seed)
     if aperture is not None:
         cal.aperture_solid_angle_sr, cal.aperture_half_angle_deg, cal.aperture_method = aperture
     cal.beam = beam_summary(readings, darks, cal.gains)

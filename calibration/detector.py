@@ -175,19 +175,41 @@ def _linearity_exponents(cells: list[tuple[int, int, float, float]], ranges: lis
     return out
 
 
+def ranges_read_together(readings: np.ndarray) -> bool:
+    """True if some plan point was read (twice or more) on each of two ranges or more: what
+    gain_ratios needs. Autoranged runs read each point on one range only."""
+    rows = readings[(readings["kind"] == "sample") & ~readings["saturated"]]
+    for point in np.unique(rows["point"]):
+        ranges, counts = np.unique(rows["range_w"][rows["point"] == point], return_counts=True)
+        if np.sum(counts >= 2) >= 2:
+            return True
+    return False
+
+
+def dark_for(darks: dict[str, Measured], range_w: float) -> Measured:
+    """The dark offset of a range: its own, else that of the nearest range measured (dark
+    readings autorange to the most sensitive range; a photodiode's dark current is the same
+    power on every range, and on coarser ranges the offset is far below the signal)."""
+    key = range_key(range_w)
+    if key in darks:
+        return darks[key]
+    if not darks:
+        raise CalibrationError("the calibration has no dark offsets")
+    nearest = min(darks, key=lambda k: abs(np.log10(float(k)) - np.log10(float(range_w))))
+    return darks[nearest]
+
+
 def correct_power(power_w: np.ndarray, range_w: np.ndarray, darks: dict[str, Measured],
                   gains: dict[str, Measured] | None) -> np.ndarray:
     """Readings -> power on the reference range's scale: (m - d_r) / g_r per reading."""
     out = np.empty(len(power_w))
     for r in np.unique(range_w):
         key = range_key(r)
-        if key not in darks:
-            raise CalibrationError(f"the calibration has no dark offset for range {key} W")
         gain = 1.0
         if gains is not None:
             if key not in gains:
                 raise CalibrationError(f"the calibration has no gain for range {key} W")
             gain = gains[key].value
         sel = range_w == r
-        out[sel] = (power_w[sel] - darks[key].value) / gain
+        out[sel] = (power_w[sel] - dark_for(darks, r).value) / gain
     return out

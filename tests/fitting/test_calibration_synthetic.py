@@ -197,7 +197,13 @@ def test_bad_calibration_file_names_the_field(tmp_path):
         calfile.load(path)
 
 
-def test_missing_range_in_calibration_is_named():
-    darks = {"1e-06": Measured(0.0, 0.0)}
-    with pytest.raises(CalibrationError, match="no dark offset for range 1e-05"):
-        detector.correct_power(np.array([1.0]), np.array([1e-5]), darks, None)
+def test_ranges_without_darks_use_the_nearest_and_missing_gains_are_named():
+    darks = {"1e-06": Measured(1.0, 0.0), "1e-03": Measured(5.0, 0.0)}
+    out = detector.correct_power(np.array([3.0, 9.0]), np.array([1e-5, 1e-2]), darks, None)
+    np.testing.assert_allclose(out, [2.0, 4.0])
+    gains = {"1e-06": Measured(1.0, 0.0)}
+    with pytest.raises(CalibrationError, match="no gain for range 1e-05"):
+        detector.correct_power(np.array([1.0]), np.array([1e-5]), darks, gains)
+    autoranged = readings(4, kind="sample", point=[0, 0, 1, 1], range_w=[1e-6, 1e-6, 1e-5, 1e-5])
+    assert not detector.ranges_read_together(autoranged)
+    assert detector.ranges_read_together(detector_runs(np.random.default_rng(0)))

@@ -1,0 +1,69 @@
+"""Helpers for the emulated-bench tests of tests/fitting: write an instrument config (the
+sim-serial example with its [sim] section replaced) and a plan, and scan it with --sim."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "examples" / "instruments" / "sim-serial.toml"
+
+
+def toml_value(value: object) -> str:
+    """A TOML literal for the simple values these configs use."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + " }"
+    return repr(float(value)) if isinstance(value, float) else str(value)
+
+
+def table(name: str, values: dict) -> str:
+    return f"[{name}]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in values.items())
+
+
+def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
+               seed: int = 1) -> Path:
+    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables."""
+    text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
+    if detector:
+        for key, value in detector.items():
+            lines = text.split("\n")
+            start = lines.index("[detector]")
+            end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
+            lines = [ln for i, ln in enumerate(lines)
+                     if not (start < i < end and ln.split("=")[0].strip() == key)]
+            lines.insert(start + 1, f"{key} = {toml_value(value)}")
+            text = "\n".join(lines)
+    text += "\n" + table("sim", {"time_scale": "inf", "seed": seed})
+    for name, values in sim.items():
+        text += "\n" + table(f"sim.{name}", values)
+    path = tmp / f"instrument-{len(list(tmp.glob('instrument-*.toml')))}.toml"
+    path.write_text(text)
+    return path
+
+
+def plan(tmp: Path, name: str, grids: list[dict], repeats: int = 1, dark_every: int = 20,
+         beam_every: int = 20, averaging: int = 4) -> Path:
+    """A plan file of [[grid]] tables with dark and beam readings interleaved."""
+    text = (f'name = "{name}"\nrepeats = {repeats}\naveraging = {averaging}\n'
+            f'order = "as-written"\n')
+    for g in grids:
+        text += "\n[[grid]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in g.items())
+    text += f"\n[dark]\nevery = {dark_every}\n\n[beam]\nevery = {beam_every}\n"
+    path = tmp / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def scan(plan_path: Path, instrument_path: Path, out: Path) -> Path:
+    """Run the plan on the emulated bench; returns the run directory."""
+    from gonio.runner import new_scan
+
+    result = new_scan(plan_path, instrument_path, sim=True, out=out, progress=False)
+    assert result.outcome.status == "completed", result.outcome
+    return result.path
