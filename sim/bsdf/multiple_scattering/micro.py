@@ -43,9 +43,14 @@ class MicroConductor:
     """Specular conductor facets with complex index eta_complex (None: perfect mirror, F = 1)."""
 
     transmits = False
+    guidable = True
 
     def __init__(self, eta_complex: complex | None):
         self.eta_complex = eta_complex
+
+    def local_eta(self, outside: np.ndarray) -> np.ndarray:
+        """Relative index across the facets (unused by a conductor: ones)."""
+        return np.ones(np.shape(outside))
 
     def fresnel(self, cos: np.ndarray) -> np.ndarray:
         """Facet reflectance at the cosine `cos`."""
@@ -71,11 +76,13 @@ class MicroDielectric:
     """Smooth dielectric facets, eta = n_interior / n_exterior; paths chosen by Fresnel."""
 
     transmits = True
+    guidable = True
 
     def __init__(self, eta: float):
         self.eta = float(eta)
 
-    def _local_eta(self, outside: np.ndarray) -> np.ndarray:
+    def local_eta(self, outside: np.ndarray) -> np.ndarray:
+        """n_other / n_this for a walk on the outside (True) or inside (False)."""
         return np.where(outside, self.eta, 1.0 / self.eta)
 
     def _fresnel(self, cos: np.ndarray, eta_local: np.ndarray) -> np.ndarray:
@@ -85,12 +92,12 @@ class MicroDielectric:
 
     def phase_reflect(self, slopes, w_in, w_out, outside, m, unit):
         """F(<w_in,h>) D(h) / (4 A(w_in))."""
-        eta_l = self._local_eta(outside)
+        eta_l = self.local_eta(outside)
         return _reflect_phase(slopes, w_in, w_out, lambda c: self._fresnel(c, eta_l))
 
     def phase_transmit(self, slopes, w_in, w_out, outside, unit):
         """(1-F) D_visible(w_in,h) eta^2 |<w_out,h>| / (<w_in,h> + eta <w_out,h>)^2; w_out below."""
-        eta_l = self._local_eta(outside)
+        eta_l = self.local_eta(outside)
         h = -_normalize(w_in + eta_l[..., None] * w_out)
         h = h * np.where(h[..., 2] < 0.0, -1.0, 1.0)[..., None]
         ci = _dot(w_in, h)
@@ -109,7 +116,7 @@ class MicroDielectric:
 
     def scatter(self, slopes, w_in, m, outside, u, unit):
         """Reflect with probability F, else refract (Snell); the energy factor is 1."""
-        eta_l = self._local_eta(outside)
+        eta_l = self.local_eta(outside)
         c = np.clip(_dot(w_in, m), 0.0, 1.0)
         f = self._fresnel(c, eta_l)
         sin2_t = (1.0 - c * c) / (eta_l * eta_l)
@@ -125,6 +132,7 @@ class MicroDiffuse:
     """Lambertian facets of albedo `albedo`; the phase function is estimated with the sampled m."""
 
     transmits = False
+    guidable = False
 
     def __init__(self, albedo: float):
         if not 0.0 <= albedo <= 1.0:

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.bsdf.multiple_scattering.guiding import guided_scatter
 from sim.bsdf.multiple_scattering.heights import log1mexp
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 
@@ -45,9 +46,10 @@ class WalkResult:
 class Walker:
     """Runs batches of walks for one slope distribution and one micro-BSDF."""
 
-    def __init__(self, slopes: SlopeDistribution, micro):
+    def __init__(self, slopes: SlopeDistribution, micro, guided: bool = True):
         self.slopes = slopes
         self.micro = micro
+        self.guided = guided
 
     def _escape_probability(self, d: np.ndarray, log_u: np.ndarray) -> np.ndarray:
         """G1 = u^Lambda(d) of leaving from log C1 = log_u along local direction d."""
@@ -75,7 +77,8 @@ class Walker:
         When evaluating (wo given) every step is forced to hit the surface, the walk's weight
         taking the hit probability 1 - G1; this bounds the NEE weight D / A(w_in) of rare hits
         along nearly vertical upward rays (the analog walk's heavy tail), and Russian roulette
-        ends the walks. Sampling (no wo) runs the analog walk, which exits.
+        ends the walks; the next direction is drawn by guided_scatter (phase function or
+        backwards from wo, one-sample MIS). Sampling (no wo) runs the analog walk, which exits.
         """
         n = wi.shape[0]
         slopes, micro = self.slopes, self.micro
@@ -132,8 +135,11 @@ class Walker:
             m = slopes.sample_visible(w_in, u[1], u[2])
             if wo is not None and (order is None or order == k):
                 value[idx] += beta[idx] * self._next_event(w_in, m, out, wo[idx], new, other, unit)
-            w_next, factor, crossed = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)),
-                                                    unit)
+            scattered = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)), unit)
+            if forced and self.guided and micro.guidable:
+                scattered = guided_scatter(slopes, micro, w_in, m, out, wo[idx],
+                                           rng.random((4, idx.size)), unit, scattered)
+            w_next, factor, crossed = scattered
             beta[idx] *= factor
             outside[idx] = out ^ crossed
             d[idx] = np.where(crossed[:, None], flip(w_next), w_next)
