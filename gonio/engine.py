@@ -213,6 +213,8 @@ class Engine:
 
     # -- the run ----------------------------------------------------------------
     def _prepare(self) -> None:
+        """Configure the detector, home the axes that ask for it, learn where every axis is
+        (the first move's timeout depends on it)."""
         cfg = self.inst.config
         det = cfg.detector
         try:
@@ -223,7 +225,8 @@ class Engine:
                     self.inst.axes[role].home()
                     self.inst.axes[role].wait(WAIT_FACTOR * real_seconds(self.inst, 600.0)
                                               + WAIT_MARGIN_S)
-        except DriverError as exc:
+                self._reported[role] = self.inst.axes[role].position()
+        except TRANSIENT as exc:
             raise StopRun(f"preparing the instrument: {exc}") from exc
 
     def run(self) -> Outcome:
