@@ -43,13 +43,33 @@ def half_vector(wi: np.ndarray, wo: np.ndarray, eta_i: float, eta_o: float) -> n
     return np.where(h[..., 2:3] < 0, -h, h)
 
 
-def half_vector_jacobian(
-    wi: np.ndarray, wo: np.ndarray, h: np.ndarray, eta_i: float, eta_o: float
-) -> np.ndarray:
-    """d omega_o / d omega_h: 4 |o.h| for reflection, (eta_i i.h + eta_o o.h)^2 / (eta_o^2 |o.h|)
-    for refraction (Walter 2007, eqs. 14 and 16); swap the roles for d omega_i / d omega_h."""
-    ih, oh = np.sum(wi * h, axis=-1), np.sum(wo * h, axis=-1)
-    same_side = wi[..., 2] * wo[..., 2] > 0
-    refl = 4.0 * np.abs(oh)
-    refr = (eta_i * ih + eta_o * oh) ** 2 / np.maximum(eta_o**2 * np.abs(oh), 1e-300)
-    return np.where(same_side, refl, refr)
+def coupled_direction(w: np.ndarray, h: np.ndarray, eta_w: float, eta_other: float,
+                      reflect: bool) -> np.ndarray:
+    """The direction that microfacet normal h couples to w: its mirror image (reflect) or its
+    refraction from the medium of index eta_w into eta_other (mirror image under TIR)."""
+    c = np.sum(w * h, axis=-1, keepdims=True)
+    h = np.where(c < 0, -h, h)
+    c = np.abs(c)
+    mirror = 2.0 * c * h - w
+    if reflect:
+        return mirror
+    eta = eta_w / eta_other
+    k = 1.0 - eta**2 * (1.0 - c**2)
+    refracted = -eta * w + (eta * c - np.sqrt(np.clip(k, 0.0, None))) * h
+    return np.where(k > 0, refracted, mirror)
+
+
+def min_stretch(w: np.ndarray, other: np.ndarray, eta_w: float, eta_other: float) -> float:
+    """Smallest singular value of d(other)/dh at the h coupling w and other: the least angle
+    `other` turns per radian of microfacet tilt (where a lobe in `other` is narrowest)."""
+    reflect = bool(w[2] * other[2] > 0)
+    h = half_vector(w, other, eta_w, eta_other)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(h[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(h, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(h, e1)
+    eps = 1e-6
+    base = coupled_direction(w, h, eta_w, eta_other, reflect)
+    columns = [(coupled_direction(w, (h + eps * e) / np.linalg.norm(h + eps * e), eta_w,
+                                  eta_other, reflect) - base) / eps for e in (e1, e2)]
+    return float(np.linalg.svd(np.stack(columns, axis=-1), compute_uv=False)[-1])

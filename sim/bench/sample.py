@@ -45,6 +45,15 @@ def _slope_scale(distribution: str, alpha: float, t: np.ndarray) -> np.ndarray:
     return 0.5 * alpha**2 / (alpha / np.sqrt(2.0) + t)
 
 
+def _tir_distance(w: np.ndarray, h: np.ndarray, eta_w: float, eta_other: float) -> float:
+    """Angle (rad) by which h would have to tilt for light along w to meet total internal
+    reflection on it (inf when w is on the rarer side): near that edge 1 - F changes fast."""
+    if eta_w <= eta_other:
+        return np.inf
+    critical = np.arcsin(eta_other / eta_w)
+    return float(abs(np.arccos(min(1.0, abs(float(w @ h)))) - critical))
+
+
 def _angle_to_horizon(w: np.ndarray) -> np.ndarray:
     return np.abs(np.arcsin(np.clip(w[..., 2], -1.0, 1.0)))
 
@@ -111,12 +120,14 @@ class Sample:
         n = self.spec.eta
         w_glass = optics.air_to_glass_direction(wo, n)
         t_back = 1.0 - optics.fresnel_dielectric(w_glass[:, 2], 1.0 / n)
-        return self._eval("transmission", wi, w_glass) * t_back * cos_o / n**4
+        # power into the glass f_t cos_g d omega_g (sim.bsdf's f_t integrates to 1 - F), and
+        # cos_g d omega_g = cos_o d omega_o / n^2 across the flat back face
+        return self._eval("transmission", wi, w_glass) * t_back * cos_o / n**2
 
     def lobe_scales(self, wi: np.ndarray, wo: np.ndarray) -> tuple[float, float]:
         """Angular scales (rad) over which the integrand varies near (wi, wo), in wi and in wo:
         the distribution's local width at the coupling half vector, carried to wi and wo by the
-        half-vector Jacobians, and capped by the distance to the horizon."""
+        least stretch of the half-vector maps, and capped by the distance to the horizon."""
         s = self.spec
         eta_i = 1.0 if wi[2] > 0 else self.n_interior
         eta_o = 1.0 if wo[2] > 0 else self.n_interior
@@ -128,8 +139,10 @@ class Sample:
         h = optics.half_vector(wi, w_eval, eta_i, eta_o)
         t = np.hypot(h[0], h[1]) / max(h[2], 1e-300)
         w_h = _slope_scale(s.distribution, min(s.alpha), t) * h[2] ** 2
-        j_o = optics.half_vector_jacobian(wi, w_eval, h, eta_i, eta_o)
-        j_i = optics.half_vector_jacobian(w_eval, wi, h, eta_o, eta_i)
-        scale_o = min(w_h * np.sqrt(j_o) * stretch, _angle_to_horizon(wo))
-        scale_i = min(w_h * np.sqrt(j_i), _angle_to_horizon(wi))
+        if wi[2] * w_eval[2] < 0 and eta_i != eta_o:  # refraction: (1 - F) has a TIR edge
+            w_h = min(w_h, _tir_distance(wi, h, eta_i, eta_o))
+        stretch_o = optics.min_stretch(wi, w_eval, eta_i, eta_o)
+        stretch_i = optics.min_stretch(w_eval, wi, eta_o, eta_i)
+        scale_o = min(w_h * stretch_o * stretch, _angle_to_horizon(wo))
+        scale_i = min(w_h * stretch_i, _angle_to_horizon(wi))
         return max(float(scale_i), 1e-9), max(float(scale_o), 1e-9)
