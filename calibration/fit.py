@@ -50,7 +50,7 @@ class FitOptions:
     fit_incidence_deg: tuple[float, ...] | None = (0.0,)  # None: fit every valid point
     incidence_tol_deg: float = 0.5
     aperture_half_angle_deg: float | None = None  # None: meta's, if any; 0: point model
-    aperture_order: int = 3
+    aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
 
     def __post_init__(self) -> None:
         for name, given, known in (("distribution", self.distributions, DISTRIBUTIONS),
@@ -116,7 +116,7 @@ class FitResult:
     def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
         (scale factor and aperture average included)."""
-        return self.scale * _aperture_eval(self.model(), wi, wo, self.aperture_half_angle_deg,
+        return self.scale * aperture_average(self.model(), wi, wo, self.aperture_half_angle_deg,
                                            self.aperture_order)
 
     def to_dict(self) -> dict[str, Any]:
@@ -157,7 +157,7 @@ def build_model(distribution: str, alpha: float | tuple[float, float], eta: floa
     return RoughDielectric(distribution=distribution, alpha=alpha, eta=eta, masking=masking)
 
 
-def _aperture_eval(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: float,
+def aperture_average(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: float,
                    order: int) -> np.ndarray:
     """The model averaged over the detector aperture (a cap about wo), or at wo if no aperture."""
     if half_angle_deg <= 0.0 or order <= 0:
@@ -167,6 +167,15 @@ def _aperture_eval(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: f
     nodes, weights = cap_rule(wo, math.radians(half_angle_deg), order)
     f = model.eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
     return f @ weights / weights.sum()
+
+
+def aperture_order_for(half_angle_deg: float, alpha: float) -> int:
+    """Radial nodes of the aperture rule: enough to resolve the narrowest lobe feature (a
+    transmitted lobe is about 0.34 alpha rad wide for eta 1.5) across the aperture."""
+    if half_angle_deg <= 0.0:
+        return 0
+    ratio = math.radians(half_angle_deg) / (0.34 * alpha)
+    return int(np.clip(math.ceil(2.0 + 4.0 * ratio), 2, 12))
 
 
 def fit_subset_mask(data: ReducedData, options: FitOptions) -> np.ndarray:
@@ -210,9 +219,10 @@ class _Problem:
     log alpha (one or two), eta (if free), log scale (if free)."""
 
     def __init__(self, data: ReducedData, distribution: str, masking: str, options: FitOptions,
-                 eta0: float, k: float | None, aperture_deg: float):
+                 eta0: float, k: float | None, aperture_deg: float, aperture_order: int):
         self.data, self.distribution, self.masking = data, distribution, masking
-        self.options, self.eta0, self.k, self.aperture_deg = options, eta0, k, aperture_deg
+        self.options, self.eta0, self.k = options, eta0, k
+        self.aperture_deg, self.aperture_order = aperture_deg, aperture_order
         names = ["alpha_x", "alpha_y"] if options.anisotropic else ["alpha"]
         lo = [math.log(ALPHA_BOUNDS[0])] * len(names)
         hi = [math.log(ALPHA_BOUNDS[1])] * len(names)
@@ -246,7 +256,7 @@ class _Problem:
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         alpha, eta, scale = self.unpack(x)
         model = build_model(self.distribution, alpha, eta, self.masking, self.k)
-        f = _aperture_eval(model, data.wi, data.wo, self.aperture_deg, self.options.aperture_order)
+        f = aperture_average(model, data.wi, data.wo, self.aperture_deg, self.aperture_order)
         return scale * f
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -334,11 +344,15 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     if not np.any(fit_data.bsdf > 0):
         raise FitError("fit: no point of the fitted subset has a positive BSDF value")
     alpha0 = initial_alpha(fit_data.subset(fit_data.bsdf > 0), eta0)
+    order = options.aperture_order
+    if order is None:
+        order = aperture_order_for(aperture, alpha0)
 
     scored, failures = [], []
     for distribution in options.distributions:
         for masking in options.maskings:
-            problem = _Problem(fit_data, distribution, masking, options, eta0, k, aperture)
+            problem = _Problem(fit_data, distribution, masking, options, eta0, k, aperture,
+                               order)
             try:
                 scored.append((problem, _solve(problem, alpha0)))
             except FitError as exc:
@@ -367,7 +381,7 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
                      "parameters": dict(zip(p.names, map(float, s["values"]), strict=True))}
                     for p, s in sorted(scored, key=lambda item: item[1]["chi2"])]
         + [{"failed": msg} for msg in failures],
-        aperture_half_angle_deg=aperture, aperture_order=options.aperture_order,
+        aperture_half_angle_deg=aperture, aperture_order=order,
     )
 
 

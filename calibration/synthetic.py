@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from calibration.fit import build_model
+from calibration.fit import aperture_average, build_model
 from calibration.reduced import ReducedData
 
 
@@ -37,15 +37,19 @@ def synthesize(distribution: str, alpha: float, eta: float = 1.51,
                incidences_deg: tuple[float, ...] = (0.0, 30.0, 60.0, 75.0),
                relative_noise: float = 0.02, dynamic_range: float = 1e6, seed: int = 0,
                masking: str = "separable", n_uniform: int = 36, n_peak: int = 24,
-               sides: tuple[str, ...] = ("reflection", "transmission")) -> ReducedData:
+               sides: tuple[str, ...] = ("reflection", "transmission"),
+               aperture_half_angle_deg: float = 0.0) -> ReducedData:
     """ReducedData drawn from the model: sigma = relative_noise * f + peak / dynamic_range,
-    Gaussian noise with that sigma; points below the floor stay valid (they carry the floor)."""
+    Gaussian noise with that sigma; points below the floor stay valid (they carry the floor).
+    With an aperture, f is the model averaged over it (a converged order-16 cap rule)."""
     parts = [in_plane_directions(t, eta, alpha, n_uniform, n_peak, sides) for t in incidences_deg]
     wi, wo, transmission = (np.concatenate([p[k] for p in parts]) for k in range(3))
-    f = build_model(distribution, alpha, eta, masking).eval(wi, wo)
+    model = build_model(distribution, alpha, eta, masking)
+    f = aperture_average(model, wi, wo, aperture_half_angle_deg, 16)
     sigma = relative_noise * f + f.max() / dynamic_range
     rng = np.random.default_rng(seed)
     measured = f + sigma * rng.standard_normal(len(f))
-    meta = {"eta": eta, "synthetic": {"distribution": distribution, "alpha": alpha,
-                                      "masking": masking, "seed": seed}}
+    meta = {"eta": eta, "aperture_half_angle_deg": aperture_half_angle_deg,
+            "synthetic": {"distribution": distribution, "alpha": alpha, "masking": masking,
+                          "seed": seed}}
     return ReducedData(wi, wo, measured, sigma, np.ones(len(f), bool), transmission, meta)
