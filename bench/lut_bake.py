@@ -39,10 +39,11 @@ def bake_times(shape: tuple[int, ...], samples: int) -> None:
         raise SystemExit("layouts disagree")
 
 
-def accuracy_table(shapes: list[tuple[int, ...]], samples_list: list[int], dtypes: list[str],
-                   entries: int, points: int, reference_samples: int) -> None:
+def accuracy_table(kind: str, shapes: list[tuple[int, ...]], samples_list: list[int],
+                   dtypes: list[str], entries: int, points: int,
+                   reference_samples: int) -> None:
     """Error against bake time; one shared reference at the random points for all sizes."""
-    probe = TableSpec(kind="transmission", shape=shapes[0])
+    probe = TableSpec(kind=kind, shape=shapes[0])
     estimator = ModelEstimator.for_spec(probe)
     params = random_points(probe, points, seed=1)
     start = time.perf_counter()
@@ -53,13 +54,13 @@ def accuracy_table(shapes: list[tuple[int, ...]], samples_list: list[int], dtype
           f"{'entry rms':>10} {'lookup max':>10} {'lookup rms':>10}")
     for shape in shapes:
         for samples in samples_list:
-            spec = TableSpec(kind="transmission", shape=shape, samples=samples, dtype="float64")
+            spec = TableSpec(kind=kind, shape=shape, samples=samples, dtype="float64")
             table = bake(spec, estimator)
             index = chosen_entries(spec, entries, seed=2)
             ref_entries, _ = reference(grid_points(spec)[index], estimator, reference_samples)
             for dtype in dtypes:
                 stored = Table(spec=spec, data=table.data.astype(dtype).astype(np.float64))
-                flat = stored.data.reshape(-1, 1)[index]
+                flat = stored.data.reshape(-1, len(spec.channels))[index]
                 e_max, e_rms = max_rms(flat - ref_entries)
                 l_max, l_rms = max_rms(stored.lookup(*params.T) - ref_points)
                 print(f"{'x'.join(map(str, shape)):>10} {samples:>7} {dtype:>7} "
@@ -81,12 +82,15 @@ def main() -> None:
     bake_times(shape, args.samples)
     if args.skip_accuracy:
         return
-    print("== error against run time (transmission; errors absolute, values up to 1/eta^2)")
+    samples = [64, 256] if args.quick else [64, 256, 1024]
+    print("== error against run time, reflection (scale and bias; absolute errors)")
+    accuracy_table("reflection", [(16, 16), (32, 32), (64, 64)], samples,
+                   ["float16", "float32"], entries=500, points=1000, reference_samples=2**13)
+    print("== error against run time, transmission (absolute errors; values up to 1/eta^2)")
     shapes = [(16, 16, 8), (32, 32, 16)] if args.quick else [(16, 16, 8), (32, 32, 16),
                                                               (64, 64, 32)]
-    accuracy_table(shapes, [64, 256] if args.quick else [64, 256, 1024],
-                   ["float16", "float32"], entries=500, points=1000,
-                   reference_samples=2**13)
+    accuracy_table("transmission", shapes, samples, ["float16", "float32"], entries=500,
+                   points=1000, reference_samples=2**13)
 
 
 if __name__ == "__main__":
