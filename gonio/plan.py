@@ -272,25 +272,30 @@ def serpentine(values: np.ndarray, nesting: tuple[int, ...]) -> np.ndarray:
     group = np.zeros(len(values), np.int64)
     for col in nesting:
         _, rank = np.unique(values[:, col], return_inverse=True)
-        key = np.where(group % 2 == 0, rank, -rank)
-        pairs = np.stack([group, key], axis=1)
-        _, group = np.unique(pairs, axis=0, return_inverse=True)
-        group = group.ravel()
+        rank = rank.ravel().astype(np.int64)
+        top = int(rank.max()) + 1
+        key = np.where(group % 2 == 0, rank, top - 1 - rank)
+        _, group = np.unique(group * top + key, return_inverse=True)
+        group = group.ravel().astype(np.int64)
     return np.argsort(group, kind="stable")
 
 
-def _best_order(targets: np.ndarray, cfg: InstrumentConfig) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Cheapest serpentine over all nestings of the axes that move (arm last first tried)."""
-    moving = [j for j in range(4) if np.ptp(targets[:, j]) > 0]
-    best: tuple[float, np.ndarray, tuple[str, ...]] | None = None
-    for nesting in itertools.permutations(moving):
-        order = serpentine(targets, nesting)
-        cost = float(move_times(targets[order], cfg).sum())
-        if best is None or cost < best[0] - 1e-12:
-            best = (cost, order, tuple(MOTION_ROLES[j] for j in nesting))
-    if best is None:
-        return np.arange(len(targets)), ()
-    return best[1], best[2]
+PLAN_COORDS = ("sample_azimuth_deg", "side", "theta_i_deg", "phi_o_deg", "theta_o_deg")
+
+
+def _best_order(points: np.ndarray, targets: np.ndarray, cfg: InstrumentConfig
+                ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The cheapest of: the order as written, and serpentine orders over every nesting of the
+    moving stage axes and of the varying plan coordinates. Returns (order, nesting names)."""
+    coords = np.stack([points["side"] == "transmission" if c == "side" else points[c]
+                       for c in PLAN_COORDS], axis=1).astype(np.float64)
+    candidates: list[tuple[np.ndarray, tuple[str, ...]]] = [(np.arange(len(points)), ())]
+    for values, names in ((targets, MOTION_ROLES), (coords, PLAN_COORDS)):
+        varying = [j for j in range(values.shape[1]) if np.ptp(values[:, j]) > 0]
+        for nesting in itertools.permutations(varying):
+            candidates.append((serpentine(values, nesting), tuple(names[j] for j in nesting)))
+    costs = [float(move_times(targets[order], cfg).sum()) for order, _ in candidates]
+    return candidates[int(np.argmin(costs))]
 
 
 def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, fixed: dict[str, np.ndarray]
@@ -324,7 +329,7 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
     kept = np.flatnonzero(keep)
     naive = [(r, kept) for r in range(plan.repeats)]
     if plan.order == "optimal":
-        order, nesting = _best_order(targets[kept], cfg)
+        order, nesting = _best_order(plan.points[kept], targets[kept], cfg)
         order = kept[order]
         passes = [(r, order if r % 2 == 0 else order[::-1]) for r in range(plan.repeats)]
     else:
