@@ -1,0 +1,119 @@
+"""Round trips on the emulated bench (ptys, ESP and PM100 emulators, scan engine, run store,
+reduce): Walter's three samples measured, reduced and fitted at normal incidence; and the fit
+on a misaligned, drifting bench after calibration against the fit on an ideal bench."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("sim.bench", reason="the emulated bench (sim.bench) is not installed yet")
+pytest.importorskip("calibration.reduce", reason="reduction (calibration.reduce) is not in yet")
+
+from fitting_bench_runs import instrument, plan, scan  # noqa: E402
+
+from calibration import calfile  # noqa: E402
+from calibration.calibrate import build  # noqa: E402
+from calibration.fit import FitOptions  # noqa: E402
+from calibration.pipeline import fit_run  # noqa: E402
+from gonio.cli import main  # noqa: E402
+from gonio.store import open_run  # noqa: E402
+
+SOURCE = {"power_w": 1e-3, "beam_diameter_mm": 2.0, "divergence_deg": 0.03}
+APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0}
+
+
+def sample(distribution: str, alpha: float) -> dict:
+    return {"kind": "hemisphere", "distribution": distribution, "alpha": alpha, "eta": 1.51}
+
+
+def wide_lobe_grids() -> list[dict]:
+    """Normal incidence finely (the fit), 30 and 60 degrees coarsely (held out)."""
+    return [
+        {"side": "transmission", "theta_i_deg": 0.0,
+         "theta_o_deg": {"start": -70.0, "stop": 70.0, "step": 3.5}},
+        {"side": "reflection", "theta_i_deg": 0.0,
+         "theta_o_deg": {"start": 8.0, "stop": 80.0, "step": 6.0}},
+        {"side": "transmission", "theta_i_deg": [30.0, 60.0],
+         "theta_o_deg": {"start": -70.0, "stop": 70.0, "step": 7.0}},
+    ]
+
+
+def narrow_lobe_grids() -> list[dict]:
+    """The anti-glare peak is about half a degree wide in transmission: fine steps across it
+    (the bench's far-tail readings of such a lobe are slow, and dark-limited anyway)."""
+    return [
+        {"side": "transmission", "theta_i_deg": 0.0,
+         "theta_o_deg": {"start": -3.0, "stop": 3.0, "step": 0.15}},
+        {"side": "transmission", "theta_i_deg": 30.0,
+         "theta_o_deg": {"start": 16.5, "stop": 22.5, "step": 0.3}},
+        {"side": "reflection", "theta_i_deg": 30.0,
+         "theta_o_deg": {"start": 24.0, "stop": 36.0, "step": 0.6}},
+    ]
+
+
+@pytest.mark.parametrize("distribution,alpha", [
+    ("beckmann", 0.023), ("ggx", 0.394), ("ggx", 0.553)])
+def test_walter_samples_round_trip(distribution, alpha, tmp_path):
+    cfg = instrument(tmp_path, {"source": SOURCE, "sample": sample(distribution, alpha),
+                                "aperture": APERTURE}, seed=3)
+    grids = narrow_lobe_grids() if alpha < 0.1 else wide_lobe_grids()
+    run = scan(plan(tmp_path, f"walter-{distribution}", grids), cfg, tmp_path / "runs")
+    data, result = fit_run(run, FitOptions(distributions=("beckmann", "ggx")))
+    value, sigma = result.param("alpha")
+    assert result.distribution == distribution
+    assert abs(value - alpha) < 3.0 * sigma
+    assert abs(value / alpha - 1.0) < 0.03
+    assert 0.5 < result.chi2_dof_fit < 2.0
+    assert result.n_heldout > 10 and 0.5 < result.chi2_dof_heldout < 2.0
+    # the CLI prints the same fit as one JSON object
+    assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]) == 0
+
+
+def test_fit_json_cli(tmp_path, capsys):
+    cfg = instrument(tmp_path, {"source": SOURCE, "sample": sample("ggx", 0.394),
+                                "aperture": APERTURE})
+    run = scan(plan(tmp_path, "quick", wide_lobe_grids()[:2]), cfg, tmp_path / "runs")
+    assert main(["fit", str(run), "--json", "--distribution", "ggx"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["distribution"] == "ggx"
+    assert set(out["parameters"]["alpha"]) == {"value", "sigma"}
+    assert out["chi2_dof_heldout"] is None and out["n_fit"] > 20
+    assert main(["fit", str(run), "--incidence", "45"]) == 2  # one clear error line
+    assert "usable points at incidence 45 deg" in capsys.readouterr().err
+
+
+def test_fit_after_calibration_matches_ideal_bench(tmp_path):
+    ground_glass = sample("ggx", 0.394)
+    ideal = instrument(tmp_path, {"source": SOURCE, "sample": ground_glass,
+                                  "aperture": APERTURE}, seed=5)
+    faults = {"sample_offset_deg": 0.4, "arm_offset_deg": -0.3}
+    drifting = dict(SOURCE, drift_fraction=0.04, drift_period_s=900.0)
+    bad = instrument(tmp_path, {"source": drifting, "sample": ground_glass,
+                                "aperture": APERTURE, "alignment": faults,
+                                "detector": {"dark_current_a": 2e-10}}, seed=5)
+    antiglare = instrument(tmp_path, {"source": drifting,
+                                      "sample": sample("beckmann", 0.023),
+                                      "aperture": APERTURE, "alignment": faults,
+                                      "detector": {"dark_current_a": 2e-10}}, seed=6)
+    calib_plan = plan(tmp_path, "calib-angles", [
+        {"side": "transmission", "theta_i_deg": 0.0,
+         "theta_o_deg": {"start": -2.5, "stop": 2.5, "step": 0.25}},
+        {"side": "reflection", "theta_i_deg": 10.0,
+         "theta_o_deg": {"start": 2.0, "stop": 18.0, "step": 0.5}},
+    ], repeats=2, dark_every=12, beam_every=6)
+    calib_run = open_run(scan(calib_plan, antiglare, tmp_path / "runs"))
+    cal = build(calib_run.readings(), "2026-11-23T13:00:00Z", [str(calib_run.path)], eta=1.51)
+    cal_path = calfile.save(cal, tmp_path / "cal.json")
+    measure = plan(tmp_path, "ground-glass", wide_lobe_grids(), beam_every=10)
+    ideal_run = scan(measure, ideal, tmp_path / "runs")
+    bad_run = scan(measure, bad, tmp_path / "runs")
+    assert main(["calibrate", "use", str(bad_run), str(cal_path)]) == 0
+    options = FitOptions(distributions=("ggx",))
+    _, reference = fit_run(ideal_run, options)
+    data, calibrated = fit_run(bad_run, options)
+    assert data.meta["calibration"]["sha256"] == calfile.reference(cal_path)["sha256"]
+    a_ref, s_ref = reference.param("alpha")
+    a_cal, s_cal = calibrated.param("alpha")
+    assert abs(a_cal - a_ref) < 3.0 * np.hypot(s_ref, s_cal)
+    assert calibrated.chi2_dof_heldout < 2.0
