@@ -3,6 +3,8 @@ scan engine): a bench given known stage zero offsets, dark current and beam drif
 calibration recovers the offsets and the dark offset within their uncertainties, and beam
 normalisation removes the drift from repeated readings."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -82,3 +84,24 @@ def test_beam_normalisation_removes_the_drift(angle_run):
     # repeats of a point taken at different times disagree by the drift until normalised
     assert np.std(np.log(norm_ratio)) < 0.5 * np.std(np.log(raw_ratio))
     assert abs(np.mean(np.log(norm_ratio))) < 0.01
+
+
+def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
+    from gonio.cli import main
+
+    cal = tmp_path / "cal.json"
+    assert main(["calibrate", "build", str(angle_run.path), "--out", str(cal), "--eta", "1.51",
+                 "--aperture-geometry", "10", "500"]) == 0
+    assert capsys.readouterr().out.strip() == str(cal)
+    assert main(["calibrate", "show", str(cal)]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["source_runs"] == [str(angle_run.path)]
+    assert abs(shown["angles"]["arm_offset_deg"]["value"] - ARM_OFFSET) < 0.03
+    assert shown["aperture"]["method"] == "geometry"
+    assert shown["aperture"]["half_angle_deg"]["value"] == pytest.approx(0.5729, abs=1e-3)
+    assert main(["calibrate", "use", str(angle_run.path), str(cal)]) == 0
+    meta = json.loads((angle_run.path / "meta.json").read_text())
+    assert meta["calibration"] == calfile.reference(cal)
+    assert calfile.used_by(meta).to_json() == calfile.load(cal).to_json()
+    assert main(["calibrate", "build", str(tmp_path), "--out", str(cal)]) == 2
+    assert "not a run directory" in capsys.readouterr().err
