@@ -7,6 +7,7 @@ plan and config happens before any device is opened.
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -17,7 +18,7 @@ import numpy as np
 
 from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.engine import Engine, Outcome, PauseControl
-from gonio.errors import PlanError, RunError
+from gonio.errors import ConfigError, PlanError, RunError
 from gonio.instrument import build_instrument
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan, positions
 from gonio.progress import Progress
@@ -89,18 +90,31 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
             writer.close()
 
 
+def _scale(value: float) -> float | str:
+    """A time scale as the config writes it ("inf" for infinity)."""
+    if not value > 0:
+        raise ConfigError(f"--time-scale must be > 0 (or inf), got {value!r}")
+    return "inf" if math.isinf(value) else float(value)
+
+
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              sim: list[str] | bool = False, out: str | Path = "runs",
              progress: bool | None = None, control: PauseControl | None = None,
-             calibration: dict | None = None) -> ScanResult:
+             calibration: dict | None = None, time_scale: float | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
-    calibration: what meta.json records about the calibration file to use (or None).
+    calibration: what meta.json records about the calibration file to use (or None);
+    time_scale: replaces the config's [sim] time_scale (emulated runs only).
     """
     plan = load_plan(plan_path)
     cfg_path = instrument_path(plan, instrument)
     cfg = load_config(cfg_path)
+    if time_scale is not None:
+        if sim is False:
+            raise ConfigError("--time-scale applies to emulated devices: use it with --sim")
+        cfg = parse_config({**cfg.raw, "sim": {**cfg.sim, "time_scale": _scale(time_scale)}},
+                           cfg.path)
     sched = build_schedule(plan, cfg)
     if isinstance(sim, list):
         from gonio.simulate import resolve_devices

@@ -26,6 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    metavar="NAMES",
                    help="emulate every device, or only the named devices/roles "
                         "(comma-separated, e.g. --sim detector)")
+    p.add_argument("--time-scale", type=float, metavar="X",
+                   help="with --sim: virtual seconds per real second (inf = instant moves), "
+                        "instead of the config's [sim] time_scale")
     p.add_argument("--out", default="runs", metavar="DIR",
                    help="where run directories go (default: ./runs)")
     p.add_argument("--resume", metavar="RUN", help="continue an interrupted run")
@@ -50,9 +53,9 @@ def run(args: argparse.Namespace) -> int:
 
     progress = False if args.no_progress else None
     if args.resume:
-        if args.plan or args.calibration:
+        if args.plan or args.calibration or args.time_scale is not None:
             raise GonioError("--resume RUN continues a run as it was started: "
-                             "give no PLAN or --calibration with it")
+                             "give no PLAN, --calibration or --time-scale with it")
         result = resume_scan(args.resume, args.instrument, args.sim, progress=progress)
     else:
         if not args.plan:
@@ -63,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
 
             calibration = reference(args.calibration)
         result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
-                          progress=progress, calibration=calibration)
+                          progress=progress, calibration=calibration,
+                          time_scale=args.time_scale)
     outcome = result.outcome
     if not args.no_plot and outcome.done:
         _plot(result.path)

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, fast_config, gonio_cli, run_dir_of
+from conftest import EXAMPLES, fast_config, gonio_cli, one_line_error, run_dir_of
 
 from gonio.config import parse_config
 from gonio.geometry import stage_angles
@@ -98,3 +98,16 @@ def test_export_csv_and_netcdf_round_trip(plan_file, tmp_path):
         np.testing.assert_array_equal(ds["arm_deg"][:], r["arm_deg"])
         assert list(ds["kind"][:]) == list(r["kind"])
         assert ds["arm_deg"].units == "degree" and ds.status == "completed"
+
+
+def test_time_scale_override(plan_file, tmp_path):
+    cfg = fast_config(time_scale=0.01)  # 100 real seconds per virtual second: would crawl
+    path = plan_file({"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [30.0, 60.0]}]}, cfg)
+    proc = gonio_cli("scan", path, "--sim", "--time-scale", "inf", "--out", tmp_path,
+                     "--no-plot", timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    run = open_run(run_dir_of(proc))
+    assert run.config["sim"]["time_scale"] == "inf" and len(run) == 2
+    bad = gonio_cli("scan", path, "--time-scale", "5", "--out", tmp_path)
+    assert bad.returncode == 2
+    assert one_line_error(bad.stderr).endswith("use it with --sim")
