@@ -70,7 +70,10 @@ def run(args: argparse.Namespace) -> int:
                           time_scale=args.time_scale)
     outcome = result.outcome
     if not args.no_plot and outcome.done:
-        _plot(result.path)
+        try:
+            _plot(result.path)
+        except Exception as exc:  # the data are stored; a plot problem must not hide the run
+            print(f"gonio scan: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
     if outcome.status != "completed":
         print(f"gonio scan: run {outcome.status} after {outcome.done} readings: "
               f"{outcome.reason}", file=sys.stderr)
