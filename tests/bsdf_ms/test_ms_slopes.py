@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
@@ -94,3 +96,21 @@ def test_phong_and_array_alpha_are_refused():
         SlopeDistribution(make_distribution("phong", 0.3))
     with pytest.raises(ValueError, match="scalar alpha"):
         SlopeDistribution(make_distribution("ggx", np.array([0.1, 0.2])))
+
+
+@settings(max_examples=150, deadline=None)
+@given(name=st.sampled_from(["ggx", "beckmann"]),
+       ax=st.floats(1e-4, 5.0), ay=st.floats(1e-4, 5.0),
+       theta=st.floats(0.0, np.pi), phi=st.floats(0.0, 2 * np.pi),
+       u1=st.floats(0.0, 1.0, exclude_max=True), u2=st.floats(0.0, 1.0, exclude_max=True))
+def test_visible_normals_are_finite_unit_and_visible_for_any_input(name, ax, ay, theta, phi,
+                                                                   u1, u2):
+    s = SlopeDistribution.named(name, (ax, ay))
+    w = direction(theta, phi)[None]
+    m = s.sample_visible(w, np.array([u1]), np.array([u2]))
+    assert np.all(np.isfinite(m)) and np.isclose(np.linalg.norm(m), 1.0)
+    assert m[0, 2] >= 0.0
+    if s.projected_area(w)[0] > 1e-12:  # else nothing is visible: the walk never asks
+        assert float(m[0] @ w[0]) >= -1e-9
+    lam = s.lambda_(w)
+    assert not np.isnan(lam[0]) and np.isfinite(s.projected_area(w)[0])

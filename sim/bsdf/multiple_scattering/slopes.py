@@ -152,9 +152,9 @@ def _beckmann_visible_unit(v: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.
     u2 = np.clip(u2, 2.0**-60, 1.0 - 2.0**-53)
     x = _beckmann_visible_slope(mu, u1)
     y = ndtri(u2) / np.sqrt(2.0)
-    inv = np.where(sin_t > 0.0, 1.0 / np.where(sin_t > 0.0, sin_t, 1.0), 0.0)
-    c = np.where(sin_t > 0.0, v[..., 0] * inv, 1.0)
-    s = v[..., 1] * inv
+    safe = np.where(sin_t > 0.0, sin_t, 1.0)
+    c = np.where(sin_t > 0.0, v[..., 0] / safe, 1.0)
+    s = np.where(sin_t > 0.0, v[..., 1] / safe, 0.0)
     sx = c * x - s * y
     sy = s * x + c * y
     n = np.stack([-sx, -sy, np.ones_like(sx)], axis=-1)
