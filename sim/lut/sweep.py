@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import tomllib
 
+from sim.bench import build_power_source
+from sim.devices.photodiode import PhotodiodeModel
 from sim.lut.cluster import map_tasks
 
 #: [sim] tables a sweep may vary (owned by sim.bench and sim.devices.photodiode).
@@ -147,9 +149,6 @@ def _describe(sweep: Sweep, k: int) -> str:
 
 def _instruments(sim_config: dict, seed: int):
     """The bench's power source (positions set per call) and the detector model."""
-    from sim.bench import build_power_source
-    from sim.devices.photodiode import PhotodiodeModel
-
     where: dict[str, float] = {}
     source = build_power_source(sim_config, lambda: where, clock=lambda: 0.0)
     meter = PhotodiodeModel(sim_config.get("detector"), seed=seed)
