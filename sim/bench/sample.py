@@ -10,7 +10,6 @@ crosses), and evaluates each lobe only at the directions that lie on its side.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
@@ -35,6 +34,33 @@ class SampleSpec:
     k: float = 0.0
     masking: str = "separable"
     lit_from: str = "air"
+
+
+def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(w_eval, factor) with detector power per incident power per sr = factor * f(wi, w_eval)
+    * |cos o|, for sample-frame wi, wo (..., 3); what the bench integrates and reduce divides by.
+
+    Reflection: 1 (T_normal^2 when lit through the hemisphere). Transmission through the
+    hemisphere: DESIGN.md's T_exit / n^2 lit from air, T_enter n^2 lit from the glass
+    ((eta_i / eta_o)^2 T). Through a slab: f at the direction inside the glass that leaves the
+    polished back face along wo, times that face's transmittance / n^2. A conductor: 0.
+    """
+    wi, wo = np.broadcast_arrays(wi, wo)
+    reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
+    n = spec.eta
+    t = optics.normal_transmittance(n)
+    w_eval = wo
+    if spec.kind == "conductor":
+        transmitted = np.zeros(wo.shape[:-1])
+    elif spec.kind == "hemisphere":
+        transmitted = np.full(wo.shape[:-1], t / n**2 if spec.lit_from == "air" else t * n**2)
+    else:
+        w_glass = optics.air_to_glass_direction(wo, n)
+        w_eval = np.where(reflected[..., None], wo, w_glass)
+        transmitted = (1.0 - optics.fresnel_dielectric(w_glass[..., 2], 1.0 / n)) / n**2
+    reflected_factor = t**2 if spec.lit_from == "hemisphere" else 1.0
+    factor = np.where(reflected, reflected_factor, transmitted)
+    return w_eval, np.where(wo[..., 2] == 0, 0.0, factor)
 
 
 def _slope_scale(distribution: str, alpha: float, t: np.ndarray) -> np.ndarray:
@@ -65,7 +91,6 @@ class Sample:
         self.spec = spec
         self.flipped = spec.lit_from == "hemisphere"
         self.n_interior = spec.eta if spec.kind != "conductor" else 1.0
-        self.t_normal = optics.normal_transmittance(spec.eta) if spec.kind != "conductor" else 1.0
         self._models: dict[str, object] = {}
         self.evaluations = {"reflection": 0, "transmission": 0}
 
@@ -86,12 +111,6 @@ class Sample:
                     lobes=(lobe,))
         return self._models[lobe]
 
-    @cached_property
-    def _transmission_factor(self) -> float:
-        """T_in T_out (eta_i / eta_o)^2 for the transmitted lobe through the hemisphere."""
-        n, t = self.spec.eta, self.t_normal
-        return t / n**2 if self.spec.lit_from == "air" else t * n**2
-
     def _eval(self, lobe: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         self.evaluations[lobe] += len(wi)
         return np.asarray(self.model(lobe).eval(wi, wo), dtype=np.float64)
@@ -99,30 +118,15 @@ class Sample:
     def integrand(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Detector power per incident power per sr at (wi, wo) (..., 3) -> (...)."""
         wi, wo = np.broadcast_arrays(wi, wo)
+        w_eval, factor = exit_view(self.spec, wi, wo)
         out = np.zeros(wi.shape[:-1])
-        lit_side = wi[..., 2] > 0
-        seen = wo[..., 2] != 0
-        refl = seen & ((wo[..., 2] > 0) == lit_side)
-        if refl.any():
-            t_faces = self.t_normal**2 if self.flipped else 1.0
-            out[refl] = t_faces * self._eval("reflection", wi[refl], wo[refl]) * np.abs(
-                wo[refl][:, 2])
-        trans = seen & ~refl
-        if trans.any() and self.spec.kind != "conductor":
-            out[trans] = self._transmitted(wi[trans], wo[trans])
+        reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
+        for lobe, on_lobe in (("reflection", reflected), ("transmission", ~reflected)):
+            use = on_lobe & (factor > 0)
+            if use.any():
+                f = self._eval(lobe, wi[use], w_eval[use])
+                out[use] = factor[use] * f * np.abs(wo[use][:, 2])
         return out
-
-    def _transmitted(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        cos_o = np.abs(wo[:, 2])
-        if self.spec.kind == "hemisphere":
-            return self._transmission_factor * self._eval("transmission", wi, wo) * cos_o
-        # slab: refract back through the polished back face to the direction inside the glass
-        n = self.spec.eta
-        w_glass = optics.air_to_glass_direction(wo, n)
-        t_back = 1.0 - optics.fresnel_dielectric(w_glass[:, 2], 1.0 / n)
-        # power into the glass f_t cos_g d omega_g (sim.bsdf's f_t integrates to 1 - F), and
-        # cos_g d omega_g = cos_o d omega_o / n^2 across the flat back face
-        return self._eval("transmission", wi, w_glass) * t_back * cos_o / n**2
 
     def lobe_scales(self, wi: np.ndarray, wo: np.ndarray) -> tuple[float, float]:
         """Angular scales (rad) over which the integrand varies near (wi, wo), in wi and in wo:

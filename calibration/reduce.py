@@ -1,0 +1,168 @@
+"""Raw detector readings -> BSDF values with 1-sigma uncertainties (`gonio reduce RUN`).
+
+f = (P - dark) / (Phi(t) * Omega * factor * |cos o|): dark subtraction per range from the run's
+dark readings, the beam power Phi interpolated in time between the straight-through (beam)
+readings (calibration.beam), the aperture solid angle Omega, and the faces the light crosses
+(`factor`: the hemisphere's T_exit / n^2 on the transmitted side, as the bench applies it,
+sim.bench.sample.exit_view). Noise of a reading: the scatter of the dark readings on its range,
+scaled with the range's full scale (read noise and ADC steps scale so), plus the beam's
+relative noise; the dark level's and the beam's own uncertainties are propagated.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration.aperture import solid_angle_sr
+from calibration.beam import beam_power
+from calibration.reduced import ReducedData
+from calibration.values import CalibrationError
+
+DARK_LIMIT_SIGMAS = 3.0  # a net signal below this many sigmas is dark-limited (valid = False)
+
+
+@dataclass(frozen=True)
+class Optics:
+    """What reduction needs to know of the bench: the sample (kind, eta, k, lit_from) and the
+    aperture's half-angle; `model` is the generating model of an emulated run (for plots)."""
+
+    kind: str
+    eta: float
+    k: float
+    lit_from: str
+    aperture_half_angle_deg: float
+    wavelength_nm: float
+    model: dict | None = None
+
+    @property
+    def aperture_sr(self) -> float:
+        """Aperture solid angle."""
+        return solid_angle_sr(math.radians(self.aperture_half_angle_deg))
+
+
+def optics_of(config: dict, cal=None) -> Optics:
+    """Optics from a run's instrument config ([sim] describes the emulated bench's sample and
+    aperture) and a calibration (its measured aperture wins over the geometry)."""
+    from sim.bench.config import read_table
+    from sim.devices.photodiode import SimConfigError
+
+    sim = config.get("sim")
+    if not sim:
+        raise CalibrationError(
+            "the run's instrument config has no [sim] section describing the sample and "
+            "aperture; apply a calibration with the aperture (gonio calibrate) and give the "
+            "sample's index")
+    try:
+        sample, aperture = read_table(sim, "sample"), read_table(sim, "aperture")
+        source = read_table(sim, "source")
+    except SimConfigError as exc:
+        raise CalibrationError(f"run config: {exc}") from None
+    half_angle = math.degrees(math.atan(0.5 * aperture["diameter_mm"] / aperture["distance_mm"]))
+    if cal is not None and cal.aperture_half_angle_deg is not None:
+        half_angle = cal.aperture_half_angle_deg.value
+    alpha = sample["alpha"]
+    model = {"distribution": sample["distribution"],
+             "alpha": alpha[0] if alpha[0] == alpha[1] else list(alpha),
+             "eta": sample["eta"], "masking": sample["masking"]}
+    detector = config.get("detector", {})
+    return Optics(sample["kind"], sample["eta"], sample["k"], sample["lit_from"], half_angle,
+                  float(detector.get("wavelength_nm", source["wavelength_nm"])), model)
+
+
+def directions(theta_deg: np.ndarray, phi_deg: np.ndarray, flipped: bool) -> np.ndarray:
+    """Unit vectors (N, 3) of sample-frame spherical angles; `flipped` turns them into the frame
+    of a sample mounted the other way round (lit through the hemisphere: x, z change sign)."""
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    w = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+    return w * np.array([-1.0, 1.0, -1.0]) if flipped else w
+
+
+@dataclass(frozen=True)
+class DarkModel:
+    """Dark level and per-reading noise per range (W), from the run's dark readings."""
+
+    level: dict[float, float]
+    level_sigma: dict[float, float]
+    noise: dict[float, float]
+
+    @classmethod
+    def from_readings(cls, dark: np.ndarray) -> DarkModel:
+        """Mean, its standard error and the scatter of the dark readings on each range."""
+        if len(dark) < 2:
+            raise CalibrationError("at least two dark readings (kind 'dark') are needed to "
+                                   "subtract the dark level and estimate the noise")
+        level, level_sigma, noise = {}, {}, {}
+        for r in np.unique(dark["range_w"]):
+            x = dark["power_w"][dark["range_w"] == r]
+            if len(x) >= 2:
+                level[float(r)] = float(x.mean())
+                noise[float(r)] = float(x.std(ddof=1))
+                level_sigma[float(r)] = noise[float(r)] / math.sqrt(len(x))
+        if not noise:
+            raise CalibrationError("no range has two dark readings: the noise is unknown")
+        return cls(level, level_sigma, noise)
+
+    def at(self, range_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dark level, its sigma, one reading's noise) for readings on ranges range_w: a range
+        without dark readings takes the nearest range's level and that range's noise scaled
+        with the full scale."""
+        known = np.array(sorted(self.noise))
+        level, level_sigma, noise = (np.empty(len(range_w)) for _ in range(3))
+        for i, r in enumerate(range_w):
+            if r in self.noise:
+                level[i], level_sigma[i], noise[i] = (self.level[r], self.level_sigma[r],
+                                                      self.noise[r])
+                continue
+            near = float(known[np.argmin(np.abs(np.log(known / r)))])
+            level[i], level_sigma[i] = self.level[near], self.level_sigma[near]
+            noise[i] = self.noise[near] * r / near
+        return level, level_sigma, noise
+
+
+def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None = None
+                    ) -> ReducedData:
+    """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
+
+    run: a gonio.store.Run (its config gives the optics unless `optics` is given)."""
+    optics = optics or optics_of(run.config, cal)
+    kinds = readings["kind"]
+    dark = DarkModel.from_readings(readings[(kinds == "dark") & ~readings["saturated"]])
+    beam_rows = readings[(kinds == "beam") & ~readings["saturated"]]
+    if len(beam_rows) == 0:
+        raise CalibrationError("no unsaturated beam readings (kind 'beam') to normalise by")
+    b_level, _, b_noise = dark.at(beam_rows["range_w"])
+    beam = beam_power(beam_rows["t_s"], beam_rows["power_w"] - b_level, float(np.mean(b_noise)))
+
+    rows = readings[kinds == "sample"]
+    flipped = optics.lit_from == "hemisphere"
+    wi = directions(rows["theta_i_deg"], rows["phi_i_deg"], flipped)
+    wo = directions(rows["theta_o_deg"], rows["phi_o_deg"], flipped)
+    from sim.bench.sample import SampleSpec, exit_view
+
+    spec = SampleSpec(kind=optics.kind, eta=optics.eta, k=optics.k, lit_from=optics.lit_from)
+    w_eval, factor = exit_view(spec, wi, wo)
+    level, level_sigma, noise = dark.at(rows["range_w"])
+    phi, phi_sigma = beam.at(rows["t_s"])
+    net = rows["power_w"] - level
+    scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bsdf = np.where(scale > 0, net / scale, np.nan)
+        rel_beam = phi_sigma / phi
+        sigma = np.abs(np.where(scale > 0, np.hypot(noise, level_sigma) / scale, np.nan))
+        sigma = np.hypot(sigma, np.abs(bsdf) * rel_beam)
+    valid = (~rows["saturated"] & (scale > 0) & (net > DARK_LIMIT_SIGMAS * noise)
+             & np.isfinite(bsdf))
+    transmission = (wo[:, 2] > 0) != (wi[:, 2] > 0)
+    meta = {
+        "eta": optics.eta, "k": optics.k, "kind": optics.kind, "lit_from": optics.lit_from,
+        "wavelength_nm": optics.wavelength_nm,
+        "aperture_half_angle_deg": optics.aperture_half_angle_deg,
+        "aperture_sr": optics.aperture_sr, "run": str(getattr(run, "path", "")),
+        "beam_mean_w": beam.mean_w, "beam_drift_rms": beam.drift_rms,
+        "dark_level_w": {f"{r:.6g}": v for r, v in dark.level.items()},
+        "model": optics.model, "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
+    }
+    return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta)
