@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from sim.bsdf.fresnel import dielectric_reflectance_transmittance, dielectric_transmittance
+from sim.bsdf.fresnel import dielectric_transmittance, reflectance_transmittance_toward
 from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
 from sim.bsdf.vectors import dot
 
@@ -84,14 +84,14 @@ class RoughDielectric(MicrofacetModel):
         refl, trans = self._lobe_masks(wi, wo)
         f = np.zeros(wi.shape[:-1])
         if refl.any():
-            f[refl] = self._eval_reflection(wi[refl], wo[refl], e[refl])
+            f[refl] = self._eval_reflection(wi[refl], wo[refl], e[refl], em1[refl])
         if trans.any():
             f[trans] = self._eval_transmission(wi[trans], wo[trans], e[trans], em1[trans])
         return f
 
-    def _eval_reflection(self, wi, wo, e):
+    def _eval_reflection(self, wi, wo, e, em1):
         m = half_vector(wi, wo)
-        fr, _ = dielectric_reflectance_transmittance(dot(wi, m), e)
+        fr, _ = reflectance_transmittance_toward(dot(wi, m), e, em1)
         return 0.25 * fr * self.distribution.D(m) * self._g2_over_cosines(wi, wo)
 
     def _eval_transmission(self, wi, wo, e, em1):
@@ -111,7 +111,7 @@ class RoughDielectric(MicrofacetModel):
         if refl.any():
             wi_r, wo_r = wi[refl], wo[refl]
             m = half_vector(wi_r, wo_r)
-            choice = (dielectric_reflectance_transmittance(dot(wi_r, m), e[refl])[0]
+            choice = (reflectance_transmittance_toward(dot(wi_r, m), e[refl], em1[refl])[0]
                       if self.transmission else 1.0)
             p[refl] = choice * self._normal_pdf(wi_r, m) / (4.0 * dot(wo_r, m))
         if trans.any():
@@ -131,7 +131,7 @@ class RoughDielectric(MicrofacetModel):
         wi, _, e, em1, flip = self._mirror(wi, None)
         m = self._sample_normal(wi, u[:, 0], u[:, 1])
         c = dot(wi, m)
-        fr, ft = dielectric_reflectance_transmittance(c, e)
+        fr, ft = reflectance_transmittance_toward(np.abs(c), e, em1)
         if self.reflection and self.transmission:
             reflected = u[:, 2] < fr
         else:

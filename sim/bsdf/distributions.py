@@ -275,8 +275,12 @@ class Phong(Distribution):
         mz = m[..., 2]
         pos = mz > 0
         p = self.exponent
+        # log m.z from the small tangential part near the pole: p may be 2e8 at alpha = 1e-4
+        r2 = m[..., 0] ** 2 + m[..., 1] ** 2
+        log_mz = np.where(mz > 0.5, np.log1p(-r2 / (1.0 + np.abs(mz))),
+                          np.log(np.where(pos, mz, 1.0)))
         with np.errstate(over="ignore"):
-            val = (p + 2.0) / (2.0 * math.pi) * np.exp(p * np.log(np.where(pos, mz, 1.0)))
+            val = (p + 2.0) / (2.0 * math.pi) * np.exp(p * log_mz)
         return np.where(pos, val, 0.0)
 
     def cos_lambda(self, w):
@@ -286,12 +290,17 @@ class Phong(Distribution):
         P2(q) = (1 + q^2)^(-(p+3)/2) / B((p+2)/2, 1/2).
         """
         p = self.exponent
-        r2 = np.minimum(w[..., 0] ** 2 + w[..., 1] ** 2, 1.0)
-        c = np.abs(w[..., 2])
+        c2 = np.minimum(w[..., 2] ** 2, 1.0)
+        r2 = 1.0 - c2  # from c2 so that r2 -> 1 keeps its 1e-18 (matters when p ~ 1e8)
         k = 0.5 * (p + 2.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            finite = r2 ** (0.5 * (p + 2.0)) / ((p + 1.0) * beta(k, 0.5)) - 0.5 * c * betainc(
-                k, 0.5, r2)
+        near_pole = c2 > 0.5
+        r2 = np.where(near_pole, np.minimum(w[..., 0] ** 2 + w[..., 1] ** 2, 1.0), r2)
+        log_r2 = np.where(near_pole, np.log(np.where(r2 > 0, r2, 1.0)),
+                          np.log1p(-np.minimum(c2, 0.5)))
+        # I_{r2}(k, 1/2) = 1 - I_{c2}(1/2, k): the small side is the accurate one
+        inc = np.where(near_pole, betainc(k, 0.5, r2), 1.0 - betainc(0.5, k, c2))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            finite = np.exp(k * log_r2) / ((p + 1.0) * beta(k, 0.5)) - 0.5 * np.sqrt(c2) * inc
         return np.where(r2 == 0, 0.0, np.where(p > -1.0, np.maximum(finite, 0.0), np.inf))
 
     def sample_normal(self, u1, u2):

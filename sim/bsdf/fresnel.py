@@ -19,14 +19,34 @@ def dielectric_reflectance_transmittance(
     """
     cos_i = np.asarray(cos_i, dtype=np.float64)
     eta = np.asarray(eta, dtype=np.float64)
-    e = np.where(cos_i < 0, 1.0 / eta, eta)
-    c = np.abs(cos_i)
+    inside = cos_i < 0
+    e = np.where(inside, 1.0 / eta, eta)
+    return reflectance_transmittance_toward(np.abs(cos_i), e, np.where(inside, (1 - eta) / eta,
+                                                                       eta - 1))
+
+
+def reflectance_transmittance_toward(
+    c: np.ndarray, e: np.ndarray, e_minus_1: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 1 - F) for |cos_i| = c toward a medium of relative index e (e_minus_1 = e - 1, exact).
+
+    The amplitude numerators are written with e^2 - 1 = (e - 1)(e + 1), so F keeps full
+    relative accuracy when e = 1 +- 1e-12 (F ~ 1e-25), given an exact e - 1.
+    """
     s = np.sqrt(np.maximum((1.0 - c) * (1.0 + c), 0.0))  # sin of incidence
     e_ct2 = (e - s) * (e + s)  # (e cos_t)^2 = e^2 - sin_i^2, factored against cancellation
     tir = e_ct2 <= 0
     e_ct = np.sqrt(np.where(tir, 0.0, e_ct2))
-    f, t = _dielectric_from_cosines(c, e_ct, e)
-    return np.where(tir, 1.0, f), np.where(tir, 0.0, t)
+    e2m1 = e_minus_1 * (e + 1.0)
+    den_s = c + e_ct
+    den_p = e * e * c + e_ct
+    ok = ~tir & (den_s > 0) & (den_p > 0)
+    den_s = np.where(ok, den_s, 1.0)
+    den_p = np.where(ok, den_p, 1.0)
+    rs = -e2m1 / (den_s * den_s)  # (c - e cos_t) / (c + e cos_t)
+    rp = e2m1 * (c * c * (e * e + 1.0) - 1.0) / (den_p * den_p)
+    f = np.where(ok, 0.5 * (rs * rs + rp * rp), 1.0)
+    return f, np.where(ok, _transmittance(c, e_ct, e, den_s, den_p), 0.0)
 
 
 def dielectric_transmittance(cos_i: np.ndarray, cos_t: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -35,22 +55,17 @@ def dielectric_transmittance(cos_i: np.ndarray, cos_t: np.ndarray, e: np.ndarray
     e = n_t / n_i. Taking cos_t as given avoids the cancellation of sqrt(e^2 - sin_i^2) near
     the critical angle, so f_t(i, o) and f_t(o, i) are equally accurate.
     """
-    return _dielectric_from_cosines(cos_i, e * cos_t, e)[1]
-
-
-def _dielectric_from_cosines(c, e_ct, e):
-    """(F, T) from c = |cos_i|, e_ct = e |cos_t| and e; (1, 0) where both denominators vanish."""
-    e2c = e * e * c
-    den_s = c + e_ct
-    den_p = e2c + e_ct
+    e_ct = e * cos_t
+    den_s = cos_i + e_ct
+    den_p = e * e * cos_i + e_ct
     ok = (den_s > 0) & (den_p > 0)
-    den_s = np.where(ok, den_s, 1.0)
-    den_p = np.where(ok, den_p, 1.0)
-    rs = (c - e_ct) / den_s
-    rp = (e2c - e_ct) / den_p
-    f = np.where(ok, 0.5 * (rs * rs + rp * rp), 1.0)
-    t = np.where(ok, 2.0 * c * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p)), 0.0)
-    return f, t
+    return np.where(ok, _transmittance(cos_i, e_ct, e, np.where(ok, den_s, 1.0),
+                                       np.where(ok, den_p, 1.0)), 0.0)
+
+
+def _transmittance(c, e_ct, e, den_s, den_p):
+    """(1 - rs^2 + 1 - rp^2) / 2 = 2 c e cos_t (1 / den_s^2 + e^2 / den_p^2), no subtraction."""
+    return 2.0 * c * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p))
 
 
 def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray | float) -> np.ndarray:
@@ -68,8 +83,15 @@ def fresnel_conductor(cos_i: np.ndarray, eta_complex: complex | np.ndarray) -> n
     as |cos_i| since light reaches a conductor only from the exterior.
     """
     c = np.abs(np.asarray(cos_i, dtype=np.float64))
-    n2 = np.asarray(eta_complex, dtype=np.complex128) ** 2
-    root = np.sqrt(n2 - (1.0 - c) * (1.0 + c))  # n cos_t, principal branch (Re >= 0)
-    rs = (c - root) / (c + root)
-    rp = (n2 * c - root) / (n2 * c + root)
-    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+    n = np.asarray(eta_complex, dtype=np.complex128)
+    n2 = n * n
+    n2m1 = (n - 1.0) * (n + 1.0)  # n^2 - 1 without cancellation for n near 1
+    root = np.sqrt(n2m1 + c * c)  # n cos_t = sqrt(n^2 - sin^2), principal branch (Re >= 0)
+    den_s = c + root
+    den_p = n2 * c + root
+    ok = (den_s != 0) & (den_p != 0)  # both vanish only for n = 1 at grazing: F = 1 there
+    den_s = np.where(ok, den_s, 1.0)
+    den_p = np.where(ok, den_p, 1.0)
+    rs = -n2m1 / (den_s * den_s)  # (c - n cos_t) / (c + n cos_t)
+    rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / (den_p * den_p)
+    return np.where(ok, 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), 1.0)

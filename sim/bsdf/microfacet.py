@@ -71,7 +71,8 @@ class MicrofacetModel:
         (wi,) = directions(wi)
         wi, u = np.broadcast_arrays(wi, u)
         shape = wi.shape[:-1]
-        wo, weight, pdf = self._sample(wi.reshape(-1, 3), u.reshape(-1, 3))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # failures masked
+            wo, weight, pdf = self._sample(wi.reshape(-1, 3), u.reshape(-1, 3))
         return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
 
     # --- shared pieces -----------------------------------------------------------------
@@ -85,7 +86,8 @@ class MicrofacetModel:
     def _flat(fn, wi, wo):
         wi, wo = directions(wi, wo)
         shape = wi.shape[:-1]
-        return fn(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(shape)
+        with np.errstate(divide="ignore", invalid="ignore"):  # degenerate pairs are masked
+            return fn(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(shape)
 
     def _g2_over_cosines(self, wi, wo):
         """G2(wi, wo) / (|cos i| |cos o|), finite at grazing (facet sides checked by callers)."""
