@@ -1,5 +1,6 @@
-"""Helpers for the gonio tests: example configs made fast (instant motion, cheap aperture
-integral), a small TOML writer, and running the real `gonio` CLI in a subprocess."""
+"""Helpers for the gonio tests (a plain module, not a conftest, so its name is unique):
+example configs made fast (instant motion, cheap aperture integral), a small TOML writer,
+and running the real `gonio` CLI in a subprocess."""
 
 from __future__ import annotations
 
@@ -10,7 +11,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 import tomllib
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -121,13 +121,10 @@ def one_line_error(stderr: str) -> str:
     return lines[0]
 
 
-@pytest.fixture
-def plan_file(tmp_path):
-    """Write a plan dict (with its instrument) to tmp_path and return the plan's path."""
-    def make(plan: dict, config: dict | None = None, name: str = "plan") -> Path:
-        plan = dict(plan)
-        if config is not None:
-            write_toml(tmp_path / f"{name}-instrument.toml", config)
-            plan["instrument"] = f"{name}-instrument.toml"
-        return write_toml(tmp_path / f"{name}.toml", plan)
-    return make
+def write_plan(folder: Path, plan: dict, config: dict | None = None, name: str = "plan") -> Path:
+    """Write a plan dict (and its instrument config, named by the plan) into folder."""
+    plan = dict(plan)
+    if config is not None:
+        write_toml(folder / f"{name}-instrument.toml", config)
+        plan["instrument"] = f"{name}-instrument.toml"
+    return write_toml(folder / f"{name}.toml", plan)

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, fast_config, gonio_cli, one_line_error, run_dir_of
+from gonio_testkit import EXAMPLES, fast_config, gonio_cli, one_line_error, run_dir_of, write_plan
 
 from gonio.config import parse_config
 from gonio.geometry import stage_angles
@@ -46,9 +46,9 @@ def check_run(run_dir, plan_raw, cfg_raw):
 
 @pytest.mark.parametrize("instrument", ["sim-serial", "sim-modbus"])
 @pytest.mark.parametrize("plan", [IN_PLANE, OUT_OF_PLANE], ids=["in-plane", "out-of-plane"])
-def test_scan_end_to_end(plan_file, instrument, plan):
+def test_scan_end_to_end(tmp_path, instrument, plan):
     cfg = fast_config(instrument, elevation=plan is OUT_OF_PLANE)
-    path = plan_file(plan, cfg)
+    path = write_plan(tmp_path, plan, cfg)
     proc = gonio_cli("scan", path, "--sim", "--out", path.parent / "runs", "--no-plot")
     assert proc.returncode == 0, proc.stderr
     run = check_run(run_dir_of(proc), plan, cfg)
@@ -75,9 +75,9 @@ def test_readme_demo_under_a_minute(tmp_path):
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
 
-def test_export_csv_and_netcdf_round_trip(plan_file, tmp_path):
+def test_export_csv_and_netcdf_round_trip(tmp_path):
     cfg = fast_config()
-    path = plan_file({"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [20.0, 30.0]}],
+    path = write_plan(tmp_path, {"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [20.0, 30.0]}],
                       "beam": {"every": 1}}, cfg)
     run_dir = run_dir_of(gonio_cli("scan", path, "--sim", "--out", tmp_path, "--no-plot"))
     r = open_run(run_dir).readings()
@@ -100,9 +100,10 @@ def test_export_csv_and_netcdf_round_trip(plan_file, tmp_path):
         assert ds["arm_deg"].units == "degree" and ds.status == "completed"
 
 
-def test_time_scale_override(plan_file, tmp_path):
+def test_time_scale_override(tmp_path):
     cfg = fast_config(time_scale=0.01)  # 100 real seconds per virtual second: would crawl
-    path = plan_file({"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [30.0, 60.0]}]}, cfg)
+    plan = {"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [30.0, 60.0]}]}
+    path = write_plan(tmp_path, plan, cfg)
     proc = gonio_cli("scan", path, "--sim", "--time-scale", "inf", "--out", tmp_path,
                      "--no-plot", timeout=60)
     assert proc.returncode == 0, proc.stderr

@@ -7,7 +7,7 @@ import threading
 import time
 
 import pytest
-from conftest import fast_config
+from gonio_testkit import fast_config
 
 from gonio.config import parse_config
 from gonio.engine import Engine, PauseControl

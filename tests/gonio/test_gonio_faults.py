@@ -3,7 +3,7 @@ what is safe to retry) or stops with a clear reason; no point is lost or duplica
 
 import numpy as np
 import pytest
-from conftest import fast_config, write_toml
+from gonio_testkit import fast_config, write_toml
 
 from gonio.config import parse_config
 from gonio.plan import build_schedule, parse_plan

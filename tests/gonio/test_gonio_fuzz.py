@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 import tomllib
-from conftest import EXAMPLES, dump_toml, fast_config, one_line_error
+from gonio_testkit import EXAMPLES, dump_toml, fast_config, one_line_error
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 

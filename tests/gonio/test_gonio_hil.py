@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, gonio_cli, load_example, run_dir_of, write_toml
+from gonio_testkit import ROOT, gonio_cli, load_example, run_dir_of, write_toml
 
 from gonio.store import open_run
 

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import ROOT, fast_config, gonio_cli, run_dir_of, write_toml
+from gonio_testkit import ROOT, fast_config, gonio_cli, run_dir_of, write_toml
 
 from gonio.store import open_run
 

@@ -8,7 +8,7 @@ import subprocess
 import sys
 import time
 
-from conftest import ROOT, fast_config, gonio_cli, run_dir_of, write_toml
+from gonio_testkit import ROOT, fast_config, gonio_cli, run_dir_of, write_toml
 
 from gonio.store import open_run
 

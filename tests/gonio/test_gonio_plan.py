@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, fast_config
+from gonio_testkit import EXAMPLES, fast_config
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
