@@ -418,6 +418,19 @@ def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
     return "\n".join(lines)
 
 
+def listing(sched: Schedule) -> str:
+    """Every scheduled reading, one line each: what it measures and where the stages go."""
+    head = (f"{'index':>6} {'kind':<6} {'side':<12} {'rep':>3} {'theta_i':>8} {'theta_o':>8} "
+            f"{'phi_o':>7}  {'sample':>8} {'arm':>8} {'azimuth':>8} {'elev':>7}")
+    lines = [head]
+    for r in sched.readings:
+        lines.append(f"{r['index']:>6} {r['kind']:<6} {r['side']:<12} {r['repeat']:>3} "
+                     f"{r['theta_i_deg']:>8.3f} {r['theta_o_deg']:>8.3f} {r['phi_o_deg']:>7.2f}  "
+                     f"{r['sample_deg']:>8.3f} {r['arm_deg']:>8.3f} {r['azimuth_deg']:>8.3f} "
+                     f"{r['elevation_deg']:>7.3f}")
+    return "\n".join(lines)
+
+
 def _span(values: np.ndarray) -> str:
     u = np.unique(values)
     return f"{u[0]:g}" if len(u) == 1 else f"{u[0]:g}..{u[-1]:g} ({len(u)} values)"

@@ -13,16 +13,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("plan", help="plan TOML file")
     p.add_argument("--instrument", metavar="CFG",
                    help="instrument config (default: the plan's `instrument`)")
+    p.add_argument("--list", action="store_true",
+                   help="also print every reading in run order with its stage targets")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the summary; errors are PlanError/ConfigError lines."""
     from gonio.config import load_config
-    from gonio.plan import build_schedule, load_plan, summary
+    from gonio.plan import build_schedule, listing, load_plan, summary
     from gonio.runner import instrument_path
 
     plan = load_plan(args.plan)
     cfg = load_config(instrument_path(plan, args.instrument))
-    print(summary(plan, cfg, build_schedule(plan, cfg)))
+    sched = build_schedule(plan, cfg)
+    print(summary(plan, cfg, sched))
+    if args.list:
+        print(listing(sched))
     return 0

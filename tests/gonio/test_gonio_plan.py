@@ -154,3 +154,16 @@ def test_skip_forbidden_drops_only_forbidden_points():
     sched = build_schedule(parse_plan(raw), SERIAL)
     assert sched.skipped == 1
     assert sorted(sched.readings["theta_o_deg"]) == [-20.0, 10.0]
+
+
+def test_gonio_plan_cli_prints_summary_estimates_and_listing(capsys):
+    from gonio.cli import main
+
+    assert main(["plan", str(EXAMPLES / "plans" / "demo.toml"), "--list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "plan 'demo' on instrument 'sim-serial'"
+    assert "readings: 66 (58 sample, 4 dark, 4 beam)" in out[2]
+    estimate = next(line for line in out if "estimated duration" in line)
+    assert "(as written: " in estimate
+    table = out[out.index(next(x for x in out if x.lstrip().startswith("index"))) + 1:]
+    assert len(table) == 66 and table[0].split()[:2] == ["0", "dark"]

@@ -1,0 +1,30 @@
+"""`gonio plot RUN [--fit]`: the paper-style figure of a run (measured BSDF per incidence angle,
+log scale, with the model curve); --fit overlays a fitted model and its residuals."""
+
+from __future__ import annotations
+
+import argparse
+
+from gonio.commands.fit import add_fit_options, options_from
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `plot` verb."""
+    p = subparsers.add_parser("plot", help="plot a run's reduced BSDF (PNG)", description=__doc__)
+    p.add_argument("run", help="run directory")
+    p.add_argument("--out", metavar="PNG",
+                   help="output file (default RUN/plot.png, RUN/plot-fit.png with --fit)")
+    p.add_argument("--fit", action="store_true",
+                   help="fit the model (gonio fit's options) and overlay it with residuals")
+    add_fit_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Reduce, (fit,) plot; print the PNG's path."""
+    from calibration.plot import plot_run
+
+    out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
+                   fit_options=options_from(args) if args.fit else None)
+    print(out)
+    return 0
