@@ -1,0 +1,136 @@
+"""Paper-style plots of a run (`gonio plot RUN`): per incidence angle, the measured BSDF with its
+error bars against the signed outgoing angle on a log scale, reflection and transmission, with
+the model curve (the generating model of an emulated run, point values and aperture-averaged),
+as in Walter et al. 2007's figures. `--fit` hands over to calibration.fitplot's overlay."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from calibration.reduced import ReducedData
+from calibration.values import CalibrationError
+
+CURVE_POINTS = 721
+
+
+def signed_theta_o_deg(data: ReducedData) -> np.ndarray:
+    """In-plane outgoing angle from the normal on its side, positive on the forward side
+    (away from the source; +x at normal incidence, so both halves stay apart there)."""
+    cos_o = np.where(data.transmission, -data.wo[:, 2], data.wo[:, 2])
+    theta = np.degrees(np.arccos(np.clip(cos_o, -1.0, 1.0)))
+    forward = np.where(data.wi[:, 0] != 0.0, -np.sign(data.wi[:, 0]), 1.0)
+    return np.where(data.wo[:, 0] * forward < 0, -theta, theta)
+
+
+def in_plane_directions(theta_i_deg: float, theta_o_deg: np.ndarray, transmission: bool
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """(wi, wo) along the plane of incidence for signed outgoing angles (forward positive)."""
+    ti, to = math.radians(theta_i_deg), np.radians(theta_o_deg)
+    wi = np.broadcast_to([-math.sin(ti), 0.0, math.cos(ti)], (len(to), 3))
+    wo = np.stack([np.sin(to), np.zeros_like(to), -np.cos(to) if transmission else np.cos(to)],
+                  axis=1)
+    return wi, wo
+
+
+def model_curves(meta: dict, theta_i_deg: float, transmission: bool
+                 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{label: (signed theta_o deg, BSDF)} of the run's model ("model" in meta): point values,
+    and averaged over the aperture when meta gives its half-angle."""
+    spec = meta.get("model")
+    if not spec:
+        return {}
+    from sim.bench.aperture import order_for
+    from sim.bench.quadrature import cap_rule
+    from sim.bsdf import RoughConductor, RoughDielectric
+
+    alpha = spec["alpha"] if np.isscalar(spec["alpha"]) else tuple(spec["alpha"])
+    common = {"distribution": spec["distribution"], "alpha": alpha, "masking": spec["masking"]}
+    k = meta.get("k") or 0.0
+    model = (RoughConductor(eta_complex=complex(spec["eta"], k), **common)
+             if meta.get("kind") == "conductor" else RoughDielectric(eta=spec["eta"], **common))
+    theta = np.linspace(-89.5, 89.5, CURVE_POINTS)
+    wi, wo = in_plane_directions(theta_i_deg, theta, transmission)
+    label = f"{spec['distribution']} alpha {np.round(alpha, 4)}"
+    curves = {f"model ({label})": (theta, model.eval(wi, wo))}
+    half_angle = math.radians(float(meta.get("aperture_half_angle_deg") or 0.0))
+    if half_angle > 0:
+        # a transmitted lobe is about 0.3 alpha rad wide: resolve it across the aperture
+        order = order_for(half_angle / (0.3 * float(np.min(alpha))), 1e-3)
+        nodes, weights = cap_rule(wo, half_angle, order)
+        f = model.eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
+        curves["model through the aperture"] = (theta, f @ weights / weights.sum())
+    return curves
+
+
+def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Path:
+    """Write the figure: a column per incidence angle, a row per measured side; PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    in_plane = np.abs(data.wo[:, 1]) < 1e-6
+    if not in_plane.any():
+        raise CalibrationError("no in-plane points to plot (phi_o = 0)")
+    data = data.subset(in_plane)
+    theta_i = np.round(data.theta_i_deg, 1)
+    incidences = sorted(set(theta_i.tolist()))
+    sides = [s for s in (False, True) if (data.transmission == s).any()]
+    theta_o = signed_theta_o_deg(data)
+    fig, axes = plt.subplots(len(sides), len(incidences), squeeze=False, sharey="row",
+                             figsize=(3.4 * len(incidences) + 0.8, 3.0 * len(sides) + 0.8))
+    for col, ti in enumerate(incidences):
+        for row, transmission in enumerate(sides):
+            ax = axes[row, col]
+            sel = (theta_i == ti) & (data.transmission == transmission)
+            good = sel & data.valid & (data.bsdf > 0)
+            ax.errorbar(theta_o[good], data.bsdf[good], yerr=data.sigma[good], fmt="o", ms=3,
+                        color="k", ecolor="0.5", elinewidth=0.8, label="measured")
+            bad = sel & ~data.valid & (data.bsdf > 0)
+            if bad.any():
+                ax.plot(theta_o[bad], data.bsdf[bad], "o", ms=3, mfc="none", color="0.6",
+                        label="flagged (dark-limited / saturated)")
+            for (label, (x, y)), style in zip(model_curves(data.meta, ti, transmission).items(),
+                                              ("-", "--"), strict=False):
+                ax.plot(x, np.where(y > 0, y, np.nan), style, color="C3", lw=1.2, label=label)
+            ax.set_yscale("log")
+            ax.set_xlim(-90, 90)
+            ax.grid(True, which="both", lw=0.3, alpha=0.5)
+            side = "transmission" if transmission else "reflection"
+            ax.set_title(f"theta_i = {ti:g} deg, {side}", fontsize=9)
+            if row == len(sides) - 1:
+                ax.set_xlabel("outgoing angle (deg, forward > 0)")
+            if col == 0:
+                ax.set_ylabel("BSDF (1/sr)")
+            positive = data.bsdf[good]
+            if positive.size:
+                ax.set_ylim(max(positive.min() / 5, positive.max() * 1e-7), positive.max() * 5)
+    axes[0, 0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(title or "measured BSDF", fontsize=10)
+    fig.tight_layout()
+    out_png = Path(out_png)
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return out_png
+
+
+def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
+             calibration_file: str | Path | None = None, fit_options=None) -> Path:
+    """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
+    (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png)."""
+    from calibration.pipeline import reduce_run
+
+    run_dir = Path(run_dir)
+    data = reduce_run(run_dir, calibration_file)
+    title = f"{run_dir.name}: eta {data.meta.get('eta')}"
+    if fit:
+        from calibration.fit import fit as fit_model
+        from calibration.fitplot import plot_fit
+
+        result = fit_model(data, fit_options)
+        return plot_fit(data, result, out_png or run_dir / "plot-fit.png", fit_options,
+                        title=title)
+    return plot_reduced(data, out_png or run_dir / "plot.png", title=title)
