@@ -60,7 +60,7 @@ def test_sigkill_and_resume_keeps_every_point_once(reference, tmp_path, chain_se
     root, ref = reference
     rng = np.random.default_rng(chain_seed)
     n = len(ref)
-    kills = np.sort(rng.choice(np.arange(1, n - 5), size=3, replace=False))
+    kills = np.sort(rng.choice(np.arange(1, n - 25), size=3, replace=False))  # margin: kill first
     run_root = tmp_path / "runs"
     args = ["scan", root / "plan.toml", "--sim", "--out", run_root, "--no-plot",
             "--no-progress"]
