@@ -13,6 +13,7 @@ JSON) is ignored when reading and cut off when the run is resumed.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import platform
@@ -94,6 +95,18 @@ def _parse_lines(data: bytes) -> tuple[list[dict[str, Any]], int]:
     return rows, good
 
 
+def _locked(path: Path) -> Any:
+    """Open the readings file for appending with an exclusive lock (released when the
+    process ends, even by SIGKILL): two processes can never write one run."""
+    fh = open(path, "ab")
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        fh.close()
+        raise RunError(f"{path.parent}: the run is in use by another gonio process") from None
+    return fh
+
+
 @dataclass
 class Run:
     """A run directory opened for reading (see `open_run`)."""
@@ -166,7 +179,7 @@ class RunWriter:
         self.path = path
         self.meta = meta
         self.next_index = next_index
-        self._fh = open(path / READINGS, "ab")
+        self._fh = _locked(path / READINGS)
 
     @classmethod
     def create(cls, root: Path, name: str, plan_file: Path | None, config_file: Path | None,
@@ -201,14 +214,15 @@ class RunWriter:
         run = open_run(path)
         if run.status == "completed":
             raise RunError(f"{path}: run already completed; nothing to resume")
+        writer = cls(path, run.meta, 0)  # takes the lock before touching the file
         data = (path / READINGS).read_bytes()
         rows, good = _parse_lines(data)
         if good < len(data):
-            with open(path / READINGS, "r+b") as fh:
-                fh.truncate(good)
-                fh.flush()
-                os.fsync(fh.fileno())
-        return cls(path, run.meta, len(rows))
+            writer._fh.truncate(good)
+            writer._fh.flush()
+            os.fsync(writer._fh.fileno())
+        writer.next_index = len(rows)
+        return writer
 
     def start_session(self, **info: Any) -> None:
         """Record that a (new or resumed) session starts now."""

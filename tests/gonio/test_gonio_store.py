@@ -78,3 +78,13 @@ def test_completed_run_cannot_be_resumed(writer):
 def test_not_a_run_directory(tmp_path):
     with pytest.raises(RunError, match="not a run directory"):
         open_run(tmp_path)
+
+
+def test_a_run_has_one_writer_at_a_time(writer):
+    writer.append(row(0))
+    with pytest.raises(RunError, match="in use by another gonio process"):
+        RunWriter.resume(writer.path)
+    writer.close()
+    again = RunWriter.resume(writer.path)  # the lock went with the first writer
+    assert again.next_index == 1
+    again.close()
