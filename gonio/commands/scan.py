@@ -40,11 +40,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _plot(run_dir) -> None:
+    """plot.png: the calibrated BSDF plot (calibration.plot); for a run that cannot be reduced
+    (no beam readings, say) the quick look at raw power instead."""
+    from calibration.plot import plot_run
+
     try:
-        from calibration.plot import plot_run
-    except ImportError:
-        from gonio.quicklook import write_quicklook as plot_run
-    plot_run(run_dir)
+        plot_run(run_dir)
+    except GonioError as exc:
+        from gonio.quicklook import write_quicklook
+
+        write_quicklook(run_dir)
+        print(f"gonio scan: note: plot.png shows raw power ({exc})", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
