@@ -112,3 +112,12 @@ def test_time_scale_override(tmp_path):
     bad = gonio_cli("scan", path, "--time-scale", "5", "--out", tmp_path)
     assert bad.returncode == 2
     assert one_line_error(bad.stderr).endswith("use it with --sim")
+
+
+def test_run_that_cannot_be_reduced_gets_the_raw_quick_look(tmp_path):
+    plan = {"grid": [{"theta_i_deg": [20.0], "theta_o_deg": [10.0, 30.0, 50.0]}]}
+    proc = gonio_cli("scan", write_plan(tmp_path, plan, fast_config()), "--sim",
+                     "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "plot.png shows raw power" in proc.stderr
+    assert (run_dir_of(proc) / "plot.png").read_bytes()[:4] == b"\x89PNG"
