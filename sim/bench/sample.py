@@ -128,6 +128,21 @@ class Sample:
                 out[use] = factor[use] * f * np.abs(wo[use][:, 2])
         return out
 
+    def peak_direction(self, wi: np.ndarray, reflection: bool) -> np.ndarray | None:
+        """Where a lobe's specular peak leaves (as the detector sees it): the mirror direction,
+        the refracted one (straight through for a slab), None under total internal reflection
+        or for a conductor's transmission."""
+        if reflection:
+            return wi * np.array([-1.0, -1.0, 1.0])
+        if self.spec.kind == "conductor":
+            return None
+        if self.spec.kind == "slab":
+            return -wi
+        eta_rel = self.n_interior if wi[2] > 0 else 1.0 / self.n_interior
+        xy = -wi[:2] / eta_rel
+        z2 = 1.0 - float(xy @ xy)
+        return None if z2 <= 0 else np.array([xy[0], xy[1], -np.sign(wi[2]) * np.sqrt(z2)])
+
     def lobe_scales(self, wi: np.ndarray, wo: np.ndarray) -> tuple[float, float]:
         """Angular scales (rad) over which the integrand varies near (wi, wo), in wi and in wo:
         the distribution's local width at the coupling half vector, carried to wi and wo by the

@@ -10,12 +10,14 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
 from sim.bench.sample import Sample
 from sim.bench.source import Source
+
+NEGLIGIBLE = 1e-14  # fraction of the incident power below which a tail is not refined
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,7 @@ class Bench:
         self.integral = ApertureIntegral(
             math.atan(0.5 * self.aperture_diameter_mm / self.distance_mm),
             self.source.divergence_rad, self.rtol, self.order)
+        self.probe = replace(self.integral, order=(0, 2))
 
     def retracted(self, sample_deg: float) -> bool:
         """True when the sample is edge-on enough to be out of the beam."""
@@ -80,8 +83,19 @@ class Bench:
                                      self.distance_mm * math.tan(off_axis))
 
     def scattered_fraction(self, positions: Mapping[str, float]) -> float:
-        """Detector power over incident power with the sample in the beam (true positions)."""
+        """Detector power over incident power with the sample in the beam (true positions).
+
+        Far from the lobe's peak, a low-order probe that finds less than NEGLIGIBLE of the
+        incident power is returned as is: the order rule would spend thousands of evaluations
+        on a tail no detector can see."""
         wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
+        peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
+        reach = self.integral.aperture_rad + self.integral.divergence_rad
+        far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
+        if self.order is None and far:
+            probe = self.probe.integrate(self.sample.integrand, wi, wo, 1.0, 1.0)
+            if probe < NEGLIGIBLE:
+                return probe
         scale_i, scale_o = self.sample.lobe_scales(wi, wo)
         return self.integral.integrate(self.sample.integrand, wi, wo, scale_i, scale_o)
 
