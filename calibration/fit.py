@@ -46,11 +46,13 @@ class FitOptions:
     fit_eta: bool = False
     fit_scale: bool = False
     eta: float | None = None  # fixed (or starting) eta; None: the data's meta["eta"]
-    k: float | None = None  # conductor extinction (fixed); None: meta["k"] if > 0, else dielectric
+    k: float | None = None  # conductor extinction (fixed); None: meta["k"] if meta["kind"] is
+    #                         "conductor", else a dielectric
     fit_incidence_deg: tuple[float, ...] | None = (0.0,)  # None: fit every valid point
     incidence_tol_deg: float = 0.5
     aperture_half_angle_deg: float | None = None  # None: meta's, if any; 0: point model
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
+    beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
 
     def __post_init__(self) -> None:
         for name, given, known in (("distribution", self.distributions, DISTRIBUTIONS),
@@ -84,8 +86,7 @@ class FitResult:
     n_heldout: int
     preferred_by: float | None  # chi-square margin over the runner-up distribution
     candidates: list[dict[str, Any]] = field(default_factory=list)
-    aperture_half_angle_deg: float = 0.0
-    aperture_order: int = 0
+    optics: Smearing = field(default_factory=lambda: Smearing(0.0, 0, 0.0, 0))
 
     @property
     def clearly_preferred(self) -> bool:
@@ -116,8 +117,7 @@ class FitResult:
     def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
         (scale factor and aperture average included)."""
-        return self.scale * aperture_average(self.model(), wi, wo, self.aperture_half_angle_deg,
-                                           self.aperture_order)
+        return self.scale * self.optics.average(self.model(), wi, wo)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary (what `gonio fit --json` prints)."""
@@ -140,7 +140,8 @@ class FitResult:
             "n_heldout": self.n_heldout,
             "preferred_by_delta_chi2": self.preferred_by,
             "clearly_preferred": self.clearly_preferred,
-            "aperture_half_angle_deg": self.aperture_half_angle_deg,
+            "aperture_half_angle_deg": self.optics.aperture_deg,
+            "beam_divergence_deg": self.optics.divergence_deg,
             "candidates": self.candidates,
         }
 
@@ -157,21 +158,46 @@ def build_model(distribution: str, alpha: float | tuple[float, float], eta: floa
     return RoughDielectric(distribution=distribution, alpha=alpha, eta=eta, masking=masking)
 
 
+@dataclass(frozen=True)
+class Smearing:
+    """What the instrument averages the BSDF over: the detector aperture (a cap of half-angle
+    aperture_deg about wo, weighted by |cos o| relative to the centre, as the detector collects
+    f |cos o| dw and reduction divides by the centre's |cos o|) and the beam's divergence (a
+    cone of half-angle divergence_deg about wi), each a cap rule of the given radial order."""
+
+    aperture_deg: float
+    aperture_order: int
+    divergence_deg: float
+    divergence_order: int
+
+    def average(self, model: Any, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Model BSDF (N,) averaged over the caps about each wi (N, 3) and wo (N, 3)."""
+        from sim.bench.quadrature import cap_rule
+
+        def nodes(w: np.ndarray, deg: float, order: int) -> tuple[np.ndarray, np.ndarray]:
+            if deg <= 0.0 or order <= 0:
+                return w[:, None, :], np.ones(1)
+            x, weight = cap_rule(w, math.radians(deg), order)
+            return x, weight / weight.sum()
+
+        wi_n, wi_w = nodes(wi, self.divergence_deg, self.divergence_order)
+        wo_n, wo_w = nodes(wo, self.aperture_deg, self.aperture_order)
+        f = model.eval(np.broadcast_to(wi_n[:, :, None, :], (len(wi), len(wi_w), len(wo_w), 3)),
+                       np.broadcast_to(wo_n[:, None, :, :], (len(wo), len(wi_w), len(wo_w), 3)))
+        # the detector collects f |cos o| dw; reduction divides by |cos o| at the centre
+        cos_ratio = np.abs(wo_n[..., 2]) / np.maximum(np.abs(wo[:, None, 2]), 1e-300)
+        return np.einsum("nij,i,nj->n", f, wi_w, wo_w * cos_ratio)
+
+
 def aperture_average(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: float,
-                   order: int) -> np.ndarray:
+                     order: int) -> np.ndarray:
     """The model averaged over the detector aperture (a cap about wo), or at wo if no aperture."""
-    if half_angle_deg <= 0.0 or order <= 0:
-        return model.eval(wi, wo)
-    from sim.bench.quadrature import cap_rule
-
-    nodes, weights = cap_rule(wo, math.radians(half_angle_deg), order)
-    f = model.eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
-    return f @ weights / weights.sum()
+    return Smearing(half_angle_deg, order, 0.0, 0).average(model, wi, wo)
 
 
-def aperture_order_for(half_angle_deg: float, alpha: float) -> int:
-    """Radial nodes of the aperture rule: enough to resolve the narrowest lobe feature (a
-    transmitted lobe is about 0.34 alpha rad wide for eta 1.5) across the aperture."""
+def smearing_order(half_angle_deg: float, alpha: float) -> int:
+    """Radial nodes of a cap rule (aperture or divergence cone): enough to resolve the narrowest
+    lobe feature (a transmitted lobe is about 0.34 alpha rad wide for eta 1.5) across the cap."""
     if half_angle_deg <= 0.0:
         return 0
     ratio = math.radians(half_angle_deg) / (0.34 * alpha)
@@ -219,10 +245,10 @@ class _Problem:
     log alpha (one or two), eta (if free), log scale (if free)."""
 
     def __init__(self, data: ReducedData, distribution: str, masking: str, options: FitOptions,
-                 eta0: float, k: float | None, aperture_deg: float, aperture_order: int):
+                 eta0: float, k: float | None, optics: Smearing):
         self.data, self.distribution, self.masking = data, distribution, masking
         self.options, self.eta0, self.k = options, eta0, k
-        self.aperture_deg, self.aperture_order = aperture_deg, aperture_order
+        self.optics = optics
         names = ["alpha_x", "alpha_y"] if options.anisotropic else ["alpha"]
         lo = [math.log(ALPHA_BOUNDS[0])] * len(names)
         hi = [math.log(ALPHA_BOUNDS[1])] * len(names)
@@ -256,7 +282,7 @@ class _Problem:
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         alpha, eta, scale = self.unpack(x)
         model = build_model(self.distribution, alpha, eta, self.masking, self.k)
-        f = aperture_average(model, data.wi, data.wo, self.aperture_deg, self.aperture_order)
+        f = self.optics.average(model, data.wi, data.wo)
         return scale * f
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -328,8 +354,9 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     if eta0 is None:
         raise FitError("fit: the data carry no eta (meta['eta']) and none was given")
     eta0 = float(eta0)
-    k = options.k if options.k is not None else data.meta.get("k")
-    k = float(k) if k else None
+    k = options.k
+    if k is None and data.meta.get("kind") == "conductor":
+        k = float(data.meta.get("k", 0.0))
     if k is not None and options.fit_eta:
         raise FitError("fit: eta of a conductor is held fixed (give it with k); drop fit_eta")
     aperture = options.aperture_half_angle_deg
@@ -344,15 +371,17 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     if not np.any(fit_data.bsdf > 0):
         raise FitError("fit: no point of the fitted subset has a positive BSDF value")
     alpha0 = initial_alpha(fit_data.subset(fit_data.bsdf > 0), eta0)
+    divergence = options.beam_divergence_deg
+    if divergence is None:
+        divergence = float(data.meta.get("beam_divergence_deg", 0.0))
     order = options.aperture_order
-    if order is None:
-        order = aperture_order_for(aperture, alpha0)
+    optics = Smearing(aperture, smearing_order(aperture, alpha0) if order is None else order,
+                      divergence, smearing_order(divergence, alpha0))
 
     scored, failures = [], []
     for distribution in options.distributions:
         for masking in options.maskings:
-            problem = _Problem(fit_data, distribution, masking, options, eta0, k, aperture,
-                               order)
+            problem = _Problem(fit_data, distribution, masking, options, eta0, k, optics)
             try:
                 scored.append((problem, _solve(problem, alpha0)))
             except FitError as exc:
@@ -381,7 +410,7 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
                      "parameters": dict(zip(p.names, map(float, s["values"]), strict=True))}
                     for p, s in sorted(scored, key=lambda item: item[1]["chi2"])]
         + [{"failed": msg} for msg in failures],
-        aperture_half_angle_deg=aperture, aperture_order=order,
+        optics=optics,
     )
 
 

@@ -19,7 +19,8 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
 
 
 def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) -> ReducedData:
-    """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"])."""
+    """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"];
+    an emulated bench's beam divergence into meta["beam_divergence_deg"] for the fit)."""
     from calibration.reduce import reduce_readings
     from gonio.store import open_run
 
@@ -29,6 +30,9 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
     if cal is not None:
         readings = calfile.apply(readings, cal)
     data = reduce_readings(run, readings, cal)
+    divergence = (run.config.get("sim") or {}).get("source", {}).get("divergence_deg")
+    if divergence is not None:
+        data.meta.setdefault("beam_divergence_deg", float(divergence))
     if cal is not None:
         data.meta["calibration"] = (str(calibration_file) if calibration_file is not None
                                     else run.meta.get("calibration"))

@@ -27,8 +27,11 @@ def table(name: str, values: dict) -> str:
 
 
 def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
-               seed: int = 1) -> Path:
-    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables."""
+               seed: int = 1, time_scale: float | str = "inf") -> Path:
+    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables.
+    A drifting source needs a finite time_scale: the run records wall-clock times, which track
+    the emulated (virtual) clock that the drift follows only when that clock runs in
+    proportion to real time."""
     text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
     if detector:
         for key, value in detector.items():
@@ -39,7 +42,7 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
                      if not (start < i < end and ln.split("=")[0].strip() == key)]
             lines.insert(start + 1, f"{key} = {toml_value(value)}")
             text = "\n".join(lines)
-    text += "\n" + table("sim", {"time_scale": "inf", "seed": seed})
+    text += "\n" + table("sim", {"time_scale": time_scale, "seed": seed})
     for name, values in sim.items():
         text += "\n" + table(f"sim.{name}", values)
     path = tmp / f"instrument-{len(list(tmp.glob('instrument-*.toml')))}.toml"
