@@ -14,7 +14,9 @@ from sim.bsdf.vectors import dot
 
 
 class RoughConductor(MicrofacetModel):
-    """Rough conductor; eta_complex is n + ik relative to the exterior, None for F = 1."""
+    """Rough conductor; eta_complex is n + ik relative to the exterior, None for F = 1.
+
+    backend as for RoughDielectric (compiled kernel when available, 'numpy' the reference)."""
 
     def __init__(
         self,
@@ -24,6 +26,7 @@ class RoughConductor(MicrofacetModel):
         masking: str = "separable",
         sampling: str | None = None,
         multiple_scattering: bool = False,
+        backend: str | None = None,
     ):
         if eta_complex is not None:
             try:
@@ -36,11 +39,19 @@ class RoughConductor(MicrofacetModel):
                     and eta_complex.imag >= 0):
                 raise ValueError(f"eta_complex must have n > 0 and k >= 0, got {eta_complex!r}")
         self.eta_complex = eta_complex
-        super().__init__(distribution, alpha, masking, sampling, multiple_scattering)
+        super().__init__(distribution, alpha, masking, sampling, multiple_scattering, backend)
 
     def __repr__(self) -> str:
         return (f"RoughConductor({self.distribution!r}, eta_complex={self.eta_complex}, "
                 f"masking={self.masking!r}, sampling={self.sampling!r})")
+
+    def _kernel(self, wi, wo, want_pdf):
+        from sim.bsdf.kernels import conductor
+
+        dist, ax, ay, masking, sampling = self._kernel_codes()
+        n = 0j if self.eta_complex is None else self.eta_complex
+        return conductor(wi, wo, dist, ax, ay, self.eta_complex is not None, n, masking, sampling,
+                         want_pdf)
 
     def _fresnel(self, cos_im):
         if self.eta_complex is None:

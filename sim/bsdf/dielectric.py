@@ -22,6 +22,8 @@ class RoughDielectric(MicrofacetModel):
     """Rough dielectric interface, eta = n_interior / n_exterior, +z on the exterior side.
 
     lobes restricts the model to one lobe: the other is then neither evaluated nor sampled.
+    backend: None picks the compiled kernel when numba is installed (Beckmann, GGX), 'numpy'
+    forces the reference path.
     At eta == 1 exactly the transmission is a Dirac delta along -wi: eval and pdf give 0 for
     it, sample() returns wo = -wi with its finite weight and pdf = inf.
     """
@@ -35,6 +37,7 @@ class RoughDielectric(MicrofacetModel):
         sampling: str | None = None,
         lobes: tuple[str, ...] = LOBES,
         multiple_scattering: bool = False,
+        backend: str | None = None,
     ):
         if not (isinstance(eta, (int, float)) and math.isfinite(eta) and eta > 0):
             raise ValueError(f"eta must be a finite number > 0, got {eta!r}")
@@ -45,11 +48,18 @@ class RoughDielectric(MicrofacetModel):
         self.lobes = lobes
         self.reflection = "reflection" in lobes
         self.transmission = "transmission" in lobes
-        super().__init__(distribution, alpha, masking, sampling, multiple_scattering)
+        super().__init__(distribution, alpha, masking, sampling, multiple_scattering, backend)
 
     def __repr__(self) -> str:
         return (f"RoughDielectric({self.distribution!r}, eta={self.eta}, masking={self.masking!r}, "
                 f"sampling={self.sampling!r}, lobes={self.lobes})")
+
+    def _kernel(self, wi, wo, want_pdf):
+        from sim.bsdf.kernels import dielectric
+
+        dist, ax, ay, masking, sampling = self._kernel_codes()
+        return dielectric(wi, wo, dist, ax, ay, self.eta, masking, self.reflection,
+                          self.transmission, sampling, want_pdf)
 
     # --- frame: wi on the upper side ---------------------------------------------------------
 

@@ -277,7 +277,7 @@ class Phong(Distribution):
         p = self.exponent
         # log m.z from the small tangential part near the pole: p may be 2e8 at alpha = 1e-4
         r2 = m[..., 0] ** 2 + m[..., 1] ** 2
-        log_mz = np.where(mz > 0.5, np.log1p(-r2 / (1.0 + np.abs(mz))),
+        log_mz = np.where(mz > 0.5, np.log1p(-np.minimum(r2 / (1.0 + np.abs(mz)), 0.5)),
                           np.log(np.where(pos, mz, 1.0)))
         with np.errstate(over="ignore"):
             val = (p + 2.0) / (2.0 * math.pi) * np.exp(p * log_mz)

@@ -10,9 +10,10 @@ import numpy as np
 
 from sim.bsdf.distributions import make_distribution
 from sim.bsdf.masking import check_masking, g2_over_cosines
-from sim.bsdf.vectors import directions, dot
+from sim.bsdf.vectors import direction_arrays, directions, dot
 
 SAMPLINGS = ("visible", "walter")
+BACKENDS = ("numba", "numpy")
 #: Directions with |cos theta| at or below this count as grazing: eval returns 0 there (the
 #: cosine-weighted value is 0; f itself may diverge for correlated masking at double grazing).
 COS_HORIZON = 1e-100
@@ -26,7 +27,7 @@ def walter_widening(cos_i: np.ndarray) -> np.ndarray:
 class MicrofacetModel:
     """Base of RoughDielectric and RoughConductor: distribution, masking, sampling, MS switch."""
 
-    def __init__(self, distribution, alpha, masking, sampling, multiple_scattering):
+    def __init__(self, distribution, alpha, masking, sampling, multiple_scattering, backend):
         self.distribution = make_distribution(distribution, alpha)
         self.masking = check_masking(masking)
         if sampling is None:
@@ -36,6 +37,7 @@ class MicrofacetModel:
         if sampling == "visible" and self.distribution.name == "phong":
             raise ValueError("sampling='visible' is not available for phong; use 'walter'")
         self.sampling = sampling
+        self.backend = self._choose_backend(backend)
         self.multiple_scattering = bool(multiple_scattering)
         self._random_walk = None
         if self.multiple_scattering:
@@ -49,13 +51,13 @@ class MicrofacetModel:
         """BSDF value f(wi, wo) in 1/sr, no cosine factor; wi, wo (..., 3) broadcast."""
         if self._random_walk is not None:
             return self._random_walk.eval(wi, wo, self._need_rng(rng))
-        return self._flat(self._eval, wi, wo)
+        return self._pairs(wi, wo, want_pdf=False)
 
     def pdf(self, wi, wo, rng: np.random.Generator | None = None) -> np.ndarray:
         """Density over solid angle of wo of the directions sample() returns (valid ones)."""
         if self._random_walk is not None:
             return self._random_walk.pdf(wi, wo, self._need_rng(rng))
-        return self._flat(self._pdf, wi, wo)
+        return self._pairs(wi, wo, want_pdf=True)
 
     def sample(self, wi, u, rng: np.random.Generator | None = None):
         """(wo, weight, pdf) from uniforms u (..., 3); weight = f |cos o| / pdf.
@@ -82,12 +84,41 @@ class MicrofacetModel:
             raise ValueError("multiple_scattering=True needs rng= (a numpy.random.Generator)")
         return rng
 
-    @staticmethod
-    def _flat(fn, wi, wo):
+    def _choose_backend(self, backend):
+        """'numba' when its kernel exists and numba imports, else 'numpy' (the reference)."""
+        if backend not in (None, *BACKENDS):
+            raise ValueError(f"backend must be one of {BACKENDS} or None, got {backend!r}")
+        if backend == "numpy":
+            return "numpy"
+        from sim.bsdf import kernels
+
+        if kernels.supports(self.distribution.name):
+            return "numba"
+        if backend == "numba":
+            raise ValueError(f"backend='numba' needs numba (pip install 'gonio[fast]') and "
+                             f"distribution ggx or beckmann, got {self.distribution.name!r}")
+        return "numpy"
+
+    def _pairs(self, wi, wo, want_pdf):
+        """eval or pdf over broadcast pairs, by the compiled kernel or the numpy reference."""
+        if self.backend == "numba":
+            wi, wo = direction_arrays(wi, wo)
+            shape = wi.shape[:-1]
+            flat = (np.ascontiguousarray(a.reshape(-1, 3)) for a in (wi, wo))
+            return self._kernel(*flat, want_pdf).reshape(shape)
         wi, wo = directions(wi, wo)
         shape = wi.shape[:-1]
+        fn = self._pdf if want_pdf else self._eval
         with np.errstate(divide="ignore", invalid="ignore"):  # degenerate pairs are masked
             return fn(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(shape)
+
+    def _kernel_codes(self):
+        """Scalar parameters shared by the compiled kernels."""
+        from sim.bsdf.kernels import CODES
+
+        d = self.distribution
+        return (CODES[d.name], float(d.alpha_x), float(d.alpha_y), CODES[self.masking],
+                CODES[self.sampling])
 
     def _g2_over_cosines(self, wi, wo):
         """G2(wi, wo) / (|cos i| |cos o|), finite at grazing (facet sides checked by callers)."""

@@ -16,10 +16,15 @@ def unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)[..., None]
 
 
-def directions(*vs: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Broadcast direction arrays (..., 3) to one shape, normalised, float64."""
+def direction_arrays(*vs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Broadcast direction arrays (..., 3) to one shape, float64, not normalised."""
     arrays = [np.asarray(v, dtype=np.float64) for v in vs]
     for a in arrays:
         if a.ndim == 0 or a.shape[-1] != 3:
             raise ValueError(f"directions must have shape (..., 3), got {a.shape}")
-    return tuple(unit(a) for a in np.broadcast_arrays(*arrays))
+    return tuple(np.broadcast_arrays(*arrays))
+
+
+def directions(*vs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Broadcast direction arrays (..., 3) to one shape, normalised, float64."""
+    return tuple(unit(a) for a in direction_arrays(*vs))
