@@ -65,6 +65,14 @@ def model_curves(meta: dict, theta_i_deg: float, transmission: bool
     return curves
 
 
+def x_range(theta_deg: np.ndarray) -> tuple[float, float]:
+    """Outgoing-angle axis: the whole plane, or zoomed onto a narrow lobe's measured points."""
+    if theta_deg.size < 2 or np.ptp(theta_deg) > 40.0:
+        return -90.0, 90.0
+    margin = max(2.0, 0.3 * float(np.ptp(theta_deg)))
+    return max(-90.0, theta_deg.min() - margin), min(90.0, theta_deg.max() + margin)
+
+
 def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Path:
     """Write the figure: a column per incidence angle, a row per measured side; PNG."""
     import matplotlib
@@ -80,7 +88,7 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
     incidences = sorted(set(theta_i.tolist()))
     sides = [s for s in (False, True) if (data.transmission == s).any()]
     theta_o = signed_theta_o_deg(data)
-    fig, axes = plt.subplots(len(sides), len(incidences), squeeze=False, sharey="row",
+    fig, axes = plt.subplots(len(sides), len(incidences), squeeze=False,
                              figsize=(3.4 * len(incidences) + 0.8, 3.0 * len(sides) + 0.8))
     for col, ti in enumerate(incidences):
         for row, transmission in enumerate(sides):
@@ -97,7 +105,8 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
                                               ("-", "--"), strict=False):
                 ax.plot(x, np.where(y > 0, y, np.nan), style, color="C3", lw=1.2, label=label)
             ax.set_yscale("log")
-            ax.set_xlim(-90, 90)
+            lobe = good & (data.bsdf > 1e-5 * data.bsdf[good].max()) if good.any() else good
+            ax.set_xlim(*x_range(theta_o[lobe]))
             ax.grid(True, which="both", lw=0.3, alpha=0.5)
             side = "transmission" if transmission else "reflection"
             ax.set_title(f"theta_i = {ti:g} deg, {side}", fontsize=9)
