@@ -104,8 +104,13 @@ def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise SimConfigError(f"[sim] seed must be an integer, got {seed!r}")
     faults = sim.get("faults", {})
-    if not isinstance(faults, Mapping) or any(d not in config.get("devices", {}) for d in faults):
-        raise SimConfigError("[sim.faults] must hold one table per device of [devices]")
+    if not isinstance(faults, Mapping):
+        raise SimConfigError(f"[sim.faults] must be a table of device tables, got {faults!r}")
+    for device, table in faults.items():
+        if device not in config.get("devices", {}):
+            raise SimConfigError(f"[sim.faults.{device}]: no device {device!r} under [devices]")
+        if not isinstance(table, Mapping):
+            raise SimConfigError(f"[sim.faults.{device}] must be a table, got {table!r}")
     return dict(sim)
 
 

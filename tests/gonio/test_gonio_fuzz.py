@@ -68,7 +68,7 @@ def mutate(data, path, action, value):
     return data
 
 
-def scan(plan_text, cfg_text):
+def scan(plan_text, cfg_text, *extra):
     """Run `gonio scan` in-process on the texts; (exit code, stderr, status of runs made)."""
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -77,7 +77,7 @@ def scan(plan_text, cfg_text):
         err = io.StringIO()
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             code = main(["scan", str(tmp / "plan.toml"), "--instrument", str(tmp / "cfg.toml"),
-                         "--out", str(tmp / "runs"), "--no-plot", "--no-progress"])
+                         "--out", str(tmp / "runs"), "--no-plot", "--no-progress", *extra])
         metas = [json.loads((run / "meta.json").read_text()) for run in (tmp / "runs").glob("*")
                  ] if (tmp / "runs").exists() else []
         runs = [f"{m['status']}: {m['reason'].split(':')[0]}" for m in metas]
@@ -145,3 +145,28 @@ def test_valid_inputs_reach_the_devices():
     """The control: unmutated, the same inputs pass validation and fail only at the port."""
     code, err, runs = scan(dump_toml(PLAN), dump_toml(CONFIGS["sim-serial"]))
     assert code == 2 and opened_devices(one_line_error(err)) and runs == []
+
+
+SIM_CONFIG = fast_config("sim-serial")
+SIM_CONFIG["sim"]["faults"] = {"esp": {"latency_s": 0.0}}
+SIM_PLAN = {"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [20.0]}]}
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(data=st.data(), action=st.sampled_from(["replace", "delete", "stray"]), value=junk)
+def test_fuzzed_sim_sections(data, action, value):
+    """Bad [sim] tables under --sim: one clear error line before any run exists."""
+    path = data.draw(st.sampled_from([p for p in paths(SIM_CONFIG) if p[0] == "sim"]))
+    cfg = mutate(SIM_CONFIG, path, action, value)
+    try:
+        cfg_text = dump_toml(cfg)
+        tomllib.loads(cfg_text)
+    except (TypeError, ValueError):
+        assume(False)
+    code, err, runs = scan(dump_toml(SIM_PLAN), cfg_text, "--sim")
+    if code == 0:  # the mutation left a valid [sim]: the scan ran and completed
+        assert runs == ["completed: "]
+    else:
+        assert code == 2 and runs == []
+        one_line_error(err)
