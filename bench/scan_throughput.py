@@ -94,6 +94,7 @@ def fsync_s(folder: Path, n: int = 300) -> float:
 
 
 def main() -> None:
+    """Run the scan, measure the floors, print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=2000)
     args = parser.parse_args()

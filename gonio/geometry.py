@@ -58,6 +58,7 @@ def sample_angles(sample_deg: ArrayLike, arm_deg: ArrayLike, elevation_deg: Arra
     wi, wo = directions(sample_deg, arm_deg, elevation_deg, azimuth_deg)
 
     def spherical(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(theta, phi) in degrees; theta by atan2, accurate near the poles too."""
         theta = np.degrees(np.arctan2(np.hypot(w[..., 0], w[..., 1]), w[..., 2]))
         phi = np.degrees(np.arctan2(w[..., 1], w[..., 0]))
         return theta, np.where(phi <= -180.0, phi + 360.0, phi)

@@ -164,6 +164,7 @@ class _Builder:
             self.bench.injectors.setdefault(name, []).append(unit.faults)
 
     def stages(self) -> None:
+        """Emulators of the chosen stage devices (ESP served now, Modbus units collected)."""
         for name in self.chosen:
             dev, roles = self.devices[name], self._roles(name)
             if dev["protocol"] == "esp":
@@ -182,6 +183,7 @@ class _Builder:
                     self.readers[role] = emu.axis.position
 
     def detectors(self, source: Any) -> None:
+        """Emulators of the chosen detectors, lit by `source` (the bench's PowerSource)."""
         light_nm = self.sim.get("source", {}).get("wavelength_nm")
         detector = self.sim.get("detector")
         for name in self.chosen:
@@ -196,6 +198,7 @@ class _Builder:
                     detector, light_nm))
 
     def serve_modbus(self) -> None:
+        """One Modbus server per bus or TCP endpoint, with all its collected units."""
         for (transport, _), units in self.modbus.items():
             server = ModbusEmulatorServer(transport, {u: emu for u, (_, emu) in units.items()})
             endpoint = server.start()
@@ -230,6 +233,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
                                  f"{', '.join(sorted(missing))} needs their positions")
 
         def stage_positions() -> dict[str, float]:
+            """Emulated stages read directly, real ones from the caller's positions()."""
             real = dict(positions()) if missing else {}
             return {role: (build.readers[role]() if role in build.readers else
                            float(real.get(role, 0.0))) for role in ROLES}
