@@ -25,10 +25,6 @@ class Progress:
         self._bar.set_postfix_str(angles, refresh=False)
         self._bar.update(1)
 
-    def write(self, message: str) -> None:
-        """Print a message above the bar."""
-        tqdm.write(message, file=sys.stderr)
-
     def close(self) -> None:
         """Finish the bar."""
         self._bar.close()
