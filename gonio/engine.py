@@ -23,7 +23,7 @@ import numpy as np
 from drivers.base import DeviceError, DriverError
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
-from gonio.plan import MOTION_ROLES, Plan, profile_seconds
+from gonio.plan import MOTION_ROLES, Plan, profile_seconds, sweeps_source
 from gonio.progress import Progress
 from gonio.store import RunWriter
 
@@ -146,6 +146,9 @@ class Engine:
         """Start every axis that must move, then wait for each; returns the roles moved."""
         targets = {role: float(row[f"{role}_deg"]) for role in self.inst.axes}
         moved = [r for r, t in targets.items() if self._commanded[r] != t]
+        if "arm" in moved and sweeps_source(self._reported["arm"], targets["arm"]):
+            raise StopRun(f"reading {int(row['index'])}: the arm would sweep through the source "
+                          f"({self._reported['arm']:g} -> {targets['arm']:g} deg); not moved")
         for role in moved:
             self._commanded[role] = None  # unknown until the move is confirmed done
             self._doing = f"moving the {role} axis ({self.inst.axes[role].name})"

@@ -342,11 +342,16 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
                     int(len(keep) - keep.sum()))
 
 
+def sweeps_source(start_deg: Any, end_deg: Any) -> np.ndarray:
+    """True where an arm move from start to end passes the source (arm = 0 mod 360)."""
+    lo, hi = np.minimum(start_deg, end_deg), np.maximum(start_deg, end_deg)
+    return np.ceil(np.asarray(lo) / 360.0) <= np.floor(np.asarray(hi) / 360.0)
+
+
 def _check_sweeps(readings: np.ndarray, where: str) -> None:
-    """No arm move may sweep through the source (arm = 0 mod 360) on its way."""
+    """No arm move may sweep through the source on its way."""
     arm = readings["arm_deg"]
-    lo, hi = np.minimum(arm[:-1], arm[1:]), np.maximum(arm[:-1], arm[1:])
-    crossing = np.ceil(lo / 360.0) <= np.floor(hi / 360.0)
+    crossing = sweeps_source(arm[:-1], arm[1:])
     if crossing.any():
         k = int(np.flatnonzero(crossing)[0])
         raise PlanError(f"{where}: between readings {k} and {k + 1} the arm would sweep through "

@@ -66,3 +66,17 @@ def test_second_ctrl_c_during_a_move_stops_the_axis(bench):
     assert not arm.is_moving()
     assert 30.0 < arm.position() < 80.0  # stopped well short of the target
     assert open_run(writer.path).meta["status"] == "aborted"
+
+
+def test_the_arm_is_never_sent_through_the_source(bench):
+    esp, run = bench
+    arm = esp.axes[2].motion
+    arm.limits = (-170.0, 170.0)
+    arm.move_to(-30.0)  # left on the far side of the source by someone else
+    while arm.is_moving():
+        time.sleep(0.01)
+    outcome, writer = run(ONE_MOVE)
+    assert outcome.status == "failed" and outcome.done == 0
+    assert "sweep through the source (-30 -> 40 deg); not moved" in open_run(writer.path
+                                                                              ).meta["reason"]
+    assert arm.position() == -30.0
