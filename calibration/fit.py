@@ -198,9 +198,9 @@ def aperture_average(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg:
 def smearing_order(half_angle_deg: float, alpha: float) -> int:
     """Radial nodes of a cap rule (aperture or divergence cone): enough to resolve the narrowest
     lobe feature (a transmitted lobe is about 0.34 alpha rad wide for eta 1.5) across the cap."""
-    if half_angle_deg <= 0.0:
-        return 0
     ratio = math.radians(half_angle_deg) / (0.34 * alpha)
+    if ratio < 0.02:  # the cap changes the lobe by about ratio^2 < 4e-4: a point will do
+        return 0
     return int(np.clip(math.ceil(2.0 + 4.0 * ratio), 2, 12))
 
 

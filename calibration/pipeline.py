@@ -45,11 +45,3 @@ def fit_run(run_dir: str | Path, options: FitOptions | None = None,
     data = reduce_run(run_dir, calibration_file)
     return data, fit(data, options)
 
-
-def plot_fit_run(run_dir: str | Path, out_png: str | Path, options: FitOptions | None = None,
-                 calibration_file: str | Path | None = None) -> Path:
-    """The fit overlay figure of a run (what `gonio plot RUN --fit` draws)."""
-    from calibration.fitplot import plot_fit
-
-    data, result = fit_run(run_dir, options, calibration_file)
-    return plot_fit(data, result, out_png, options, title=Path(run_dir).name)

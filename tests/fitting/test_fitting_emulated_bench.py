@@ -14,6 +14,8 @@ from fitting_bench_runs import instrument, plan, scan  # noqa: E402
 
 from calibration import calfile  # noqa: E402
 from calibration.calibrate import build  # noqa: E402
+from calibration.exports.mitsuba import read_mitsuba  # noqa: E402
+from calibration.exports.zemax import read_zemax  # noqa: E402
 from calibration.fit import FitOptions  # noqa: E402
 from calibration.pipeline import fit_run  # noqa: E402
 from gonio.cli import main  # noqa: E402
@@ -76,10 +78,17 @@ def test_walter_samples_round_trip(distribution, alpha, tmp_path):
     assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]) == 0
 
 
-def test_fit_json_cli(tmp_path, capsys):
-    cfg = instrument(tmp_path, {"source": SOURCE, "sample": sample("ggx", 0.394),
-                                "aperture": APERTURE})
-    run = scan(plan(tmp_path, "quick", wide_lobe_grids()[:2]), cfg, tmp_path / "runs")
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    """Ground glass at normal incidence only (both sides)."""
+    tmp = tmp_path_factory.mktemp("quick")
+    cfg = instrument(tmp, {"source": SOURCE, "sample": sample("ggx", 0.394),
+                           "aperture": APERTURE})
+    return scan(plan(tmp, "quick", wide_lobe_grids()[:2]), cfg, tmp / "runs")
+
+
+def test_fit_json_cli(quick_run, capsys):
+    run = quick_run
     assert main(["fit", str(run), "--json", "--distribution", "ggx"]) == 0
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert out["distribution"] == "ggx"
@@ -125,3 +134,24 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
     a_cal, s_cal = calibrated.param("alpha")
     assert abs(a_cal - a_ref) < 3.0 * np.hypot(s_ref, s_cal)
     assert calibrated.chi2_dof_heldout < 2.0
+
+
+def test_export_and_plot_cli(quick_run, tmp_path, capsys):
+    assert main(["fit", str(quick_run), "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    alpha = fitted["parameters"]["alpha"]["value"]
+    assert main(["export", str(quick_run), "--format", "mitsuba",
+                 "--out", str(tmp_path / "glass.xml")]) == 0
+    material = read_mitsuba(tmp_path / "glass.xml")
+    assert material["type"] == "roughdielectric"
+    assert material["params"]["distribution"] == fitted["distribution"] == "ggx"
+    assert material["params"]["alpha"] == pytest.approx(alpha, rel=1e-8)
+    assert main(["export", str(quick_run), "--format", "zemax",
+                 "--out", str(tmp_path / "glass.bsdf")]) == 0
+    btdf, brdf = read_zemax(tmp_path / "glass.bsdf"), read_zemax(tmp_path / "glass-BRDF.bsdf")
+    assert (btdf.scatter_type, brdf.scatter_type) == ("BTDF", "BRDF")
+    assert list(btdf.angle_deg) == [0.0] and 0.0 < btdf.tis[0, 0] < 1.0
+    assert any(f"alpha = {alpha:.6g}" in c for c in btdf.comments)
+    assert main(["plot", str(quick_run), "--fit", "--distribution", "ggx",
+                 "--out", str(tmp_path / "fit.png")]) == 0
+    assert (tmp_path / "fit.png").read_bytes()[:4] == b"\x89PNG"
