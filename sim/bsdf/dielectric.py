@@ -82,7 +82,7 @@ class RoughDielectric(MicrofacetModel):
         """Walter's transmission half vector m (m.z > 0), |wi + e wo|^2, and whether valid."""
         v = (wi + wo) + em1[..., None] * wo
         n2 = dot(v, v)
-        m = -v / np.sqrt(np.where(n2 > 0, n2, 1.0))[..., None]
+        m = v * (-1.0 / np.sqrt(np.where(n2 > 0, n2, 1.0)))[..., None]
         m = m * np.where(m[..., 2] < 0, -1.0, 1.0)[..., None]
         valid = (n2 > 0) & (m[..., 2] > 0) & (dot(wi, m) > 0) & (dot(wo, m) < 0)
         return m, n2, valid

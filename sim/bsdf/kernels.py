@@ -99,7 +99,8 @@ if AVAILABLE:
     def _unit(x, y, z):
         n = math.sqrt(x * x + y * y + z * z)
         if n > 0.0:
-            return x / n, y / n, z / n
+            inv = 1.0 / n  # one division instead of three, as vectors.unit does
+            return x * inv, y * inv, z * inv
         return x, y, z
 
     @njit(cache=True)
@@ -150,8 +151,8 @@ if AVAILABLE:
         n2 = vx * vx + vy * vy + vz * vz
         if n2 <= 0.0:
             return 0.0
-        n = math.sqrt(n2)
-        mx, my, mz = -vx / n, -vy / n, -vz / n
+        inv = -1.0 / math.sqrt(n2)
+        mx, my, mz = vx * inv, vy * inv, vz * inv
         if mz < 0.0:
             mx, my, mz = -mx, -my, -mz
         im = ix * mx + iy * my + iz * mz

@@ -166,4 +166,4 @@ def reflect(w: np.ndarray, m: np.ndarray) -> np.ndarray:
 def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """Reflection half vector, unit, on the side of wi + wo."""
     h = wi + wo
-    return h / np.sqrt(dot(h, h))[..., None]
+    return h * (1.0 / np.sqrt(dot(h, h)))[..., None]

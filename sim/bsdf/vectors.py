@@ -13,7 +13,7 @@ def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def unit(v: np.ndarray) -> np.ndarray:
     """v scaled to unit length along the last axis (zero vectors stay zero)."""
     n = np.sqrt(dot(v, v))
-    return v / np.where(n > 0, n, 1.0)[..., None]
+    return v * (1.0 / np.where(n > 0, n, 1.0))[..., None]
 
 
 def direction_arrays(*vs: np.ndarray) -> tuple[np.ndarray, ...]:
