@@ -8,6 +8,7 @@ For scale, the issue quotes Mitsuba 3's LLVM backend at ~100 M pairs/s (float32,
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -78,7 +79,8 @@ def main() -> None:
         rows.append(("gonio numba eval (1 thread)", rate(lambda: fast.eval(wi, wo), 8)))
         numba.set_num_threads(threads)
     base = rows[0][1]
-    print(f"RoughDielectric GGX alpha={ALPHA} eta={ETA}, {N:,} random pairs, float64")
+    print(f"RoughDielectric GGX alpha={ALPHA} eta={ETA}, {N:,} random pairs, float64; "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     for name, r in rows:
         print(f"{name:42s} {r / 1e6:8.1f} M/s  ({r / base:5.2f} x baseline, "
               f"{r / MITSUBA_LLVM:5.2f} x Mitsuba 3 LLVM ~100 M/s quoted)")
