@@ -172,6 +172,8 @@ class Smearing:
 
     def average(self, model: Any, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (N,) averaged over the caps about each wi (N, 3) and wo (N, 3)."""
+        if self.aperture_order <= 0 and self.divergence_order <= 0:
+            return model.eval(wi, wo)
         from sim.bench.quadrature import cap_rule
 
         def nodes(w: np.ndarray, deg: float, order: int) -> tuple[np.ndarray, np.ndarray]:
