@@ -10,9 +10,9 @@ import pytest
 
 pytest.importorskip("sim.bench", reason="the emulated bench (sim.bench) is not installed yet")
 
-from fitting_bench_runs import instrument, plan, scan  # noqa: E402
+from fitting_bench_runs import ROOT, instrument, plan, scan  # noqa: E402
 
-from calibration import calfile  # noqa: E402
+from calibration import aperture, calfile  # noqa: E402
 from calibration.beam import beam_power  # noqa: E402
 from calibration.calibrate import build  # noqa: E402
 from calibration.detector import correct_power, range_key  # noqa: E402
@@ -105,3 +105,29 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
     assert calfile.used_by(meta).to_json() == calfile.load(cal).to_json()
     assert main(["calibrate", "build", str(tmp_path), "--out", str(cal)]) == 2
     assert "not a run directory" in capsys.readouterr().err
+
+
+def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
+    from gonio.cli import main
+
+    diameter_mm, distance_mm, beam_mm, divergence_deg = 10.0, 500.0, 2.0, 0.03
+    cfg = instrument(tmp_path, {
+        "source": {"power_w": 1e-3, "beam_diameter_mm": beam_mm,
+                   "divergence_deg": divergence_deg},
+        "sample": {"kind": "hemisphere", "distribution": "ggx", "alpha": 0.394, "eta": 1.51},
+        "aperture": {"diameter_mm": diameter_mm, "distance_mm": distance_mm},
+    })
+    plan_path = ROOT / "examples" / "plans" / "calib-aperture.toml"
+    run = scan(plan_path, cfg, tmp_path / "runs")
+    # the beam's diameter where it meets the aperture, divergence included
+    beam_at_aperture = beam_mm + 2 * distance_mm * np.tan(np.radians(divergence_deg))
+    cal = tmp_path / "cal.json"
+    assert main(["calibrate", "build", str(run), "--out", str(cal), "--aperture-scan",
+                 str(run), "--beam-diameter-mm", str(beam_at_aperture)]) == 0
+    measured = calfile.load(cal)
+    half = measured.aperture_half_angle_deg
+    truth = np.degrees(np.arctan(0.5 * diameter_mm / distance_mm))
+    assert measured.aperture_method == "beam-scan"
+    assert abs(half.value - truth) < max(3 * half.sigma, 0.002 * truth)
+    assert measured.aperture_solid_angle_sr.value == pytest.approx(
+        aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm), rel=0.005)
