@@ -101,8 +101,8 @@ def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
 
 def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
                  gains: dict[str, Measured] | None) -> dict[str, float] | None:
-    """Mean, relative drift and noise of the (corrected) beam readings, if there are any."""
-    beam = readings[readings["kind"] == "beam"]
+    """Mean, relative drift and noise of the (corrected, unsaturated) beam readings, if any."""
+    beam = readings[(readings["kind"] == "beam") & ~readings["saturated"]]
     if len(beam) == 0:
         return None
     power = beam["power_w"]

@@ -131,3 +131,26 @@ def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
     assert abs(half.value - truth) < max(3 * half.sigma, 0.002 * truth)
     assert measured.aperture_solid_angle_sr.value == pytest.approx(
         aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm), rel=0.005)
+
+
+def test_range_gains_from_fixed_range_runs(tmp_path):
+    # The emulated meter has no gain errors: the calibration must find every ratio 1 within
+    # its uncertainty, a linear detector, and a dark offset on each range.
+    runs = []
+    for range_w in (1e-7, 1e-6, 1e-5):
+        cfg = instrument(tmp_path, {
+            "source": {"power_w": 1e-3},
+            "sample": {"kind": "hemisphere", "distribution": "ggx", "alpha": 0.394, "eta": 1.51},
+            "aperture": {"diameter_mm": 10.0, "distance_mm": 500.0},
+        }, detector={"range": range_w})
+        run = scan(ROOT / "examples" / "plans" / "calib-detector.toml", cfg, tmp_path / "runs")
+        runs.append(open_run(run).readings())
+    readings = np.concatenate(runs)
+    assert {float(r) for r in readings["range_w"]} == {1e-7, 1e-6, 1e-5}
+    cal = build(readings, "", [])
+    assert set(cal.dark_offsets_w) == {"1e-07", "1e-06", "1e-05"}
+    for key, gain in cal.gains.items():
+        assert abs(gain.pull(1.0)) < 3.0 and gain.sigma < 2e-3, key
+    assert cal.linearity["chi2_dof"] < 3.0
+    for gamma in cal.linearity["exponents"].values():
+        assert abs(gamma["value"] - 1.0) < 3 * gamma["sigma"] + 1e-3
