@@ -64,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
     out = result.to_dict()
     out["run"] = str(args.run)
     out["calibration"] = data.meta.get("calibration")
+    if data.meta.get("model"):
+        out["emulated_sample"] = data.meta["model"]
     if args.json:
         print(json.dumps(out))
         return 0
@@ -87,4 +89,9 @@ def summary(out: dict) -> str:
                else "not distinguishable from the runner-up")
     lines.append(f"  candidates chi2/dof: {others} -> {verdict}")
     lines += [f"  skipped: {c['failed']}" for c in out["candidates"] if "failed" in c]
+    if out["chi2_dof_fit"] > 3.0:
+        lines.append("  warning: chi2/dof well above 1: the model does not describe the fitted "
+                     "points within their uncertainties (see gonio plot RUN --fit)")
+    if out.get("emulated_sample"):
+        lines.append(f"  emulated sample: {out['emulated_sample']}")
     return "\n".join(lines)
