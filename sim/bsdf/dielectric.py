@@ -55,9 +55,12 @@ class RoughDielectric(MicrofacetModel):
                 f"sampling={self.sampling!r}, lobes={self.lobes})")
 
     def _kernel(self, wi, wo, want_pdf):
-        from sim.bsdf.kernels import dielectric
+        from sim.bsdf.kernels import dielectric, ggx_dielectric_eval
 
         dist, ax, ay, masking, sampling = self._kernel_codes()
+        if self.distribution.name == "ggx" and not want_pdf:
+            return ggx_dielectric_eval(wi, wo, ax, ay, self.eta, masking == 1, self.reflection,
+                                       self.transmission)
         return dielectric(wi, wo, dist, ax, ay, self.eta, masking, self.reflection,
                           self.transmission, sampling, want_pdf)
 

