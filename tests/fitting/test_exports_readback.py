@@ -101,3 +101,15 @@ def test_mitsuba_phong_scaled_fit_becomes_beckmann_with_a_note(tmp_path):
     assert back["params"]["specular_reflectance"] == pytest.approx(result.scale, rel=1e-8)
     assert result.scale == pytest.approx(0.8, abs=4 * result.param("scale")[1])
     assert "no Phong distribution" in path.read_text()
+
+
+def test_anisotropic_fit_exports(tmp_path):
+    data = synthesize("ggx", 0.394, seed=6, incidences_deg=(0.0, 30.0))
+    result = fit(data, FitOptions(distributions=("ggx",), anisotropic=True))
+    ax, ay = result.alpha
+    table = read_zemax(zemax_files(data, result, tmp_path / "a.bsdf")[0])
+    assert table.symmetry == "Asymmetrical" and table.azimuth_deg[-1] == 350.0
+    assert table_tis(table, 0, 0) == pytest.approx(table.tis[0, 0], rel=0.03)
+    params = read_mitsuba(mitsuba_file(result, tmp_path / "a.xml"))["params"]
+    assert (params["alpha_u"], params["alpha_v"]) == (pytest.approx(ax), pytest.approx(ay))
+    assert "alpha" not in params
