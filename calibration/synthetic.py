@@ -8,8 +8,9 @@ import math
 
 import numpy as np
 
-from calibration.fit import aperture_average, build_model
+from calibration.fit import build_model
 from calibration.reduced import ReducedData
+from calibration.smearing import aperture_average
 
 
 def in_plane_directions(theta_i_deg: float, eta: float, alpha: float, n_uniform: int = 36,
