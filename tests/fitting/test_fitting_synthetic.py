@@ -138,8 +138,33 @@ def test_narrow_lobe_through_a_finite_aperture():
                       aperture_half_angle_deg=0.573)
     result = fit(data, FitOptions(distributions=("beckmann", "ggx")))
     value, sigma = result.param("alpha")
-    assert result.distribution == "beckmann" and result.aperture_order >= 6
+    assert result.distribution == "beckmann" and result.optics.aperture_order >= 6
     assert abs(value - 0.023) < 3.0 * sigma and abs(value / 0.023 - 1) < 0.03
     assert result.chi2_dof_fit < 1.5 and result.chi2_dof_heldout < 1.5
     point_model = fit(data, FitOptions(distributions=("beckmann",), aperture_half_angle_deg=0.0))
     assert point_model.chi2_dof_fit > 5.0  # ignoring the aperture is visibly wrong
+
+
+def test_smearing_matches_the_emulated_bench_power():
+    # An independent route: sim.bench integrates f |cos o| over the aperture and the beam cone
+    # to rtol 1e-6; dividing its power by what reduction divides by must give the smeared BSDF.
+    bench_config = pytest.importorskip("sim.bench.config", reason="sim.bench not installed")
+    from calibration.fit import build_model
+    from calibration.smearing import Smearing
+    from gonio.geometry import directions
+
+    bench = bench_config.build_bench({
+        "source": {"power_w": 1.0, "divergence_deg": 0.03},
+        "sample": {"kind": "hemisphere", "distribution": "beckmann", "alpha": 0.023,
+                   "eta": 1.51},
+        "aperture": {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-6}})
+    model = build_model("beckmann", 0.023, 1.51, "separable")
+    omega = 4 * np.pi * np.sin(0.5 * np.arctan(0.01)) ** 2
+    t_exit = 1 - ((1.51 - 1) / (1.51 + 1)) ** 2  # the hemisphere's exit face, normal incidence
+    smearing = Smearing(np.degrees(np.arctan(0.01)), 12, 0.03, 6)
+    for sample_deg, arm_deg in ((0.0, 179.6), (0.0, 180.3), (30.0, 190.1), (30.0, 191.3)):
+        power = bench.power_w({"sample": sample_deg, "arm": arm_deg, "azimuth": 0.0,
+                               "elevation": 0.0})
+        wi, wo = directions(sample_deg, arm_deg)
+        f = smearing.average(model, wi[None], wo[None])[0]
+        assert power == pytest.approx(f * abs(wo[2]) * omega * t_exit / 1.51 ** 2, rel=5e-4)
