@@ -4,6 +4,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("sim.bsdf", reason="the BSDF model (sim.bsdf) is not installed yet")
 
@@ -168,3 +170,18 @@ def test_smearing_matches_the_emulated_bench_power():
         wi, wo = directions(sample_deg, arm_deg)
         f = smearing.average(model, wi[None], wo[None])[0]
         assert power == pytest.approx(f * abs(wo[2]) * omega * t_exit / 1.51 ** 2, rel=5e-4)
+
+
+@settings(max_examples=10, deadline=None, derandomize=True)
+@given(alpha=st.floats(0.005, 1.2), distribution=st.sampled_from(["beckmann", "ggx"]),
+       theta_i=st.sampled_from([0.0, 45.0, 80.0]), seed=st.integers(0, 1000))
+def test_fit_converges_over_the_roughness_range(alpha, distribution, theta_i, seed):
+    # From nearly specular to very rough, at normal, oblique and grazing incidence: the fit on
+    # that incidence alone starts from the data's peak width and lands on the truth.
+    data = synthesize(distribution, alpha, seed=seed, incidences_deg=(theta_i,), n_uniform=24,
+                      n_peak=12)
+    result = fit(data, FitOptions(distributions=(distribution,),
+                                  fit_incidence_deg=(theta_i,)))
+    value, sigma = result.param("alpha")
+    assert abs(value - alpha) < 4.0 * sigma + 1e-3 * alpha
+    assert result.chi2_dof_fit < 2.0
