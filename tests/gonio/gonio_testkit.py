@@ -69,7 +69,7 @@ def fast_config(name: str = "sim-serial", *, elevation: bool = False, time_scale
     """An example config with instant motion, a cheap aperture rule and optional extras."""
     cfg = load_example(name)
     cfg["sim"]["time_scale"] = time_scale
-    cfg["sim"].setdefault("aperture", {})["order"] = [1, 1]
+    cfg["sim"].setdefault("aperture", {})["order"] = [0, 0]  # one node: the centre ray
     if elevation:
         if "esp" in cfg["devices"]:
             cfg["axes"]["elevation"] = {"device": "esp", "axis": 3, "limits_deg": [-60.0, 60.0],
