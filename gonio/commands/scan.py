@@ -1,6 +1,6 @@
 """`gonio scan PLAN`: run a plan on an instrument (real, emulated, or mixed) into a run directory.
 
-The run directory is the last line printed on stdout, whatever the outcome.
+Once a run directory exists it is the last line printed on stdout, whatever the outcome.
 """
 
 from __future__ import annotations
@@ -58,6 +58,9 @@ def run(args: argparse.Namespace) -> int:
     from gonio.runner import new_scan, resume_scan
 
     progress = False if args.no_progress else None
+    if args.plan is None and isinstance(args.sim, list) and len(args.sim) == 1 \
+            and args.sim[0].endswith(".toml"):
+        args.plan, args.sim = args.sim[0], True  # `gonio scan --sim PLAN`: the plan, not NAMES
     if args.resume:
         if args.plan or args.calibration or args.time_scale is not None:
             raise GonioError("--resume RUN continues a run as it was started: "
