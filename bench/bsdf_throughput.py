@@ -78,6 +78,9 @@ def main() -> None:
         threads = numba.get_num_threads()
         rows.append((f"gonio numba eval ({threads} threads)", rate(lambda: fast.eval(wi, wo), 8)))
         rows.append((f"gonio numba pdf ({threads} threads)", rate(lambda: fast.pdf(wi, wo), 8)))
+        fast.sample(wi[:10], u[:10])
+        rows.append((f"gonio numba sample ({threads} threads)",
+                     rate(lambda: fast.sample(wi, u), 8)))
         numba.set_num_threads(1)
         rows.append(("gonio numba eval (1 thread)", rate(lambda: fast.eval(wi, wo), 8)))
         numba.set_num_threads(threads)

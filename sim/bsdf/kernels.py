@@ -90,7 +90,10 @@ if AVAILABLE:
 
     @njit(cache=True, error_model="numpy")
     def _transmittance(c, ct, e):
-        e_ct = e * ct
+        return _transmittance_e(c, e * ct, e)
+
+    @njit(cache=True, error_model="numpy")
+    def _transmittance_e(c, e_ct, e):
         den_s = c + e_ct
         den_p = e * e * c + e_ct
         if den_s <= 0.0 or den_p <= 0.0:
@@ -288,3 +291,90 @@ if AVAILABLE:
             _ggx_dielectric_block(wi, wo, b * BLOCK, ax, ay, eta, correlated, refl_on,
                                   trans_on, out)
         return out
+
+    @njit(cache=True, error_model="numpy")
+    def _ggx_normal(ax, ay, sampling, ix, iy, iz, u1, u2):
+        """GGX normal for wi (iz >= 0): visible normals (Heitz 2018) or Walter's widened D m.z."""
+        phi = 2.0 * math.pi * u2
+        if sampling == 1:
+            k = 1.2 - 0.2 * math.sqrt(abs(iz))
+            r = math.sqrt(u1 / (1.0 - u1))
+            sx = ax * k * r * math.cos(phi)
+            sy = ay * k * r * math.sin(phi)
+            inv = 1.0 / math.sqrt(1.0 + sx * sx + sy * sy)
+            return -sx * inv, -sy * inv, inv
+        vx, vy, vz = ax * ix, ay * iy, iz
+        n = math.sqrt(vx * vx + vy * vy + vz * vz)
+        vx, vy, vz = vx / n, vy / n, vz / n
+        lensq = vx * vx + vy * vy
+        if lensq > 0.0:
+            inv = 1.0 / math.sqrt(lensq)
+            t1x, t1y = -vy * inv, vx * inv
+        else:
+            t1x, t1y = 1.0, 0.0
+        t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # vh x t1, t1z = 0
+        r = math.sqrt(u1)
+        p1 = r * math.cos(phi)
+        p2 = r * math.sin(phi)
+        s = 0.5 * (1.0 + vz)
+        p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
+        p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
+        nx = p1 * t1x + p2 * t2x + p3 * vx
+        ny = p1 * t1y + p2 * t2y + p3 * vy
+        nz = p2 * t2z + p3 * vz
+        ex, ey, ez = ax * nx, ay * ny, max(nz, 0.0)
+        n = math.sqrt(ex * ex + ey * ey + ez * ez)
+        return ex / n, ey / n, ez / n
+
+    @njit(cache=True, parallel=True, error_model="numpy")
+    def ggx_dielectric_sample(wi, u, ax, ay, eta, masking, refl_on, trans_on, sampling):
+        """sample() of the GGX RoughDielectric: (wo, weight, pdf), failed samples all zero."""
+        n = wi.shape[0]
+        wo = np.zeros((n, 3))
+        weight = np.zeros(n)
+        pdf = np.zeros(n)
+        both = refl_on and trans_on
+        for k in prange(n):
+            ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
+            sgn = -1.0 if iz < 0.0 else 1.0
+            iz = iz * sgn
+            e = 1.0 / eta if sgn < 0.0 else eta
+            em1 = (1.0 - eta) / eta if sgn < 0.0 else eta - 1.0
+            mx, my, mz = _ggx_normal(ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
+            c = ix * mx + iy * my + iz * mz
+            fr = _fresnel_toward(abs(c), e, em1)
+            s2 = max((1.0 - c) * (1.0 + c), 0.0)
+            e_ct = math.sqrt(max((e - math.sqrt(s2)) * (e + math.sqrt(s2)), 0.0))
+            ft = _transmittance_e(abs(c), e_ct, e) if e_ct > 0.0 else 0.0
+            reflected = u[k, 2] < fr if both else refl_on
+            if reflected:
+                ox, oy, oz = 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz
+            else:
+                gap = -em1 * (e + 1.0) / (c + e_ct if c + e_ct > 0.0 else 1.0)
+                ox, oy, oz = (-ix + gap * mx) / e, (-iy + gap * my) / e, (-iz + gap * mz) / e
+            ok = c > 0.0 and mz > 0.0 and iz > COS_HORIZON and abs(oz) > COS_HORIZON
+            ok = ok and ((oz > 0.0) if reflected else (oz < 0.0 and ft > 0.0))
+            if not ok:
+                continue
+            lobe = fr if reflected else ft
+            if reflected:
+                jac = 1.0 / (4.0 * abs(c))
+            else:
+                jac = e * e_ct / (gap * gap) if gap != 0.0 else math.inf
+            p = (lobe if both else 1.0) * _normal_pdf(0, ax, ay, sampling, ix, iy, iz, mx, my,
+                                                        mz) * jac
+            aoz = abs(oz)
+            li = _cos_lambda(0, ax, ay, ix, iy, iz)
+            g2oc = _g2oc(masking, iz, aoz, li, _cos_lambda(0, ax, ay, ox, oy, oz))
+            if sampling == 0:
+                w = aoz * (iz + li) * g2oc
+            else:
+                ks = 1.2 - 0.2 * math.sqrt(iz)
+                d_s = _d(0, ax * ks, ay * ks, mx, my, mz)
+                w = _d(0, ax, ay, mx, my, mz) / d_s * c * aoz * g2oc / mz if d_s > 0.0 else 0.0
+            if not p > 0.0:
+                continue
+            wo[k, 0], wo[k, 1], wo[k, 2] = ox, oy, oz * sgn
+            weight[k] = (1.0 if both else lobe) * w
+            pdf[k] = p
+        return wo, weight, pdf
