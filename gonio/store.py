@@ -247,7 +247,7 @@ class RunWriter:
             raise RunError(f"{self.path}: reading {row['index']} out of order "
                            f"(expected {self.next_index})")
         clean = {k: None if isinstance(v, float) and v != v else v for k, v in row.items()}
-        line = json.dumps(clean, default=_json_default, allow_nan=False).encode() + b"\n"
+        line = json.dumps(clean, default=_json_default).encode() + b"\n"  # +-inf: Infinity
         self._fh.write(line)
         self._fh.flush()
         os.fsync(self._fh.fileno())

@@ -41,6 +41,12 @@ def test_append_and_read_back(writer):
     assert run.meta["status"] == "running" and run.meta["versions"]["numpy"] == np.__version__
 
 
+def test_infinite_power_survives(writer):
+    writer.append(row(0, power_w=float("inf"), saturated=True))
+    r = open_run(writer.path).readings()
+    assert r["power_w"][0] == float("inf") and r["saturated"][0]
+
+
 def test_out_of_order_append_is_refused(writer):
     writer.append(row(0))
     with pytest.raises(RunError, match="out of order"):
