@@ -237,6 +237,9 @@ def _fixed_position(cfg: InstrumentConfig, kind: str, where: str) -> np.ndarray:
         if not lo <= value <= hi:
             raise PlanError(f"{where}: the instrument's [{kind}] {role}_deg {value:g} is outside "
                             f"the {role} travel [{lo:g}, {hi:g}]")
+    reason = forbidden_reason(cfg, pos.arm_deg)
+    if reason:
+        raise PlanError(f"{where}: the instrument's [{kind}] position: {reason}")
     return np.array([pos.sample_deg, pos.arm_deg, 0.0, 0.0])
 
 

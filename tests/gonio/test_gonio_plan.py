@@ -149,6 +149,13 @@ def test_arm_may_not_sweep_through_the_source():
     build_schedule(parse_plan(raw), SERIAL)  # limits [6, 354] keep the arm off the source
 
 
+def test_beam_and_dark_positions_are_checked_too():
+    cfg = fast_config()
+    cfg["safety"]["arm_forbidden_deg"] = [[85.0, 95.0]]
+    with pytest.raises(PlanError, match=r"\[dark\] position: arm 90 deg inside the forbidden"):
+        build_schedule(parse_plan({**grid(), "dark": {"every": 5}}), parse_config(cfg))
+
+
 def test_skip_forbidden_drops_only_forbidden_points():
     raw = grid(theta_o_deg=[-30.0, -20.0, 10.0], skip_forbidden=True)
     sched = build_schedule(parse_plan(raw), SERIAL)
