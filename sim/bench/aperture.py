@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.bench.quadrature import cap_rule, cap_solid_angle
+from sim.bench.sample import LobeScales
 
 MAX_ORDER = 40
 SAFETY = 1.5  # the BSDF's lobe scales are estimates: q is taken 1.5 times larger
@@ -30,10 +31,6 @@ def order_for(q: float, rtol: float) -> int:
         return 0
     digits = math.log10(1.0 / rtol)
     return min(MAX_ORDER, math.ceil(1.0 + digits / 3.0 + (0.7 + 0.1 * digits) * q**0.7))
-
-
-def _horizon_rad(w: np.ndarray) -> float:
-    return abs(math.asin(min(1.0, max(-1.0, float(w[2])))))
 
 
 @dataclass(frozen=True)
@@ -60,29 +57,24 @@ class ApertureIntegral:
         """The aperture's solid angle."""
         return cap_solid_angle(self.aperture_rad)
 
-    def orders(
-        self, scale_i: float, scale_o: float, wi: np.ndarray | None = None,
-        wo: np.ndarray | None = None,
-    ) -> tuple[int, int]:
-        """(n_wi, n_wo) for lobe scales in wi and wo (rad); a cap that the sample's plane cuts
-        (centre wi or wo nearer the horizon than the cap's half-angle) gets MAX_ORDER, since
-        the integrand has a kink there."""
+    def orders(self, scales: LobeScales) -> tuple[int, int]:
+        """(n_wi, n_wo) for the lobe's scales: from q = cap half-angle / width, or MAX_ORDER
+        when an edge of the lobe (a kink, where the rule converges only algebraically) lies
+        inside the cap."""
         if self.order is not None:
             return self.order
-        n_i = 0 if self.divergence_rad == 0.0 else order_for(
-            SAFETY * self.divergence_rad / scale_i, self.rtol / 2)
-        n_o = order_for(SAFETY * self.aperture_rad / scale_o, self.rtol / 2)
-        if wi is not None and n_i and _horizon_rad(wi) < self.divergence_rad:
-            n_i = MAX_ORDER
-        if wo is not None and _horizon_rad(wo) < self.aperture_rad:
-            n_o = MAX_ORDER
+        n_i = 0
+        if self.divergence_rad > 0.0:
+            n_i = (MAX_ORDER if scales.edge_i < self.divergence_rad else
+                   order_for(SAFETY * self.divergence_rad / scales.width_i, self.rtol / 2))
+        n_o = (MAX_ORDER if scales.edge_o < self.aperture_rad else
+               order_for(SAFETY * self.aperture_rad / scales.width_o, self.rtol / 2))
         return n_i, n_o
 
-    def integrate(
-        self, g: Integrand, wi: np.ndarray, wo: np.ndarray, scale_i: float, scale_o: float
-    ) -> float:
+    def integrate(self, g: Integrand, wi: np.ndarray, wo: np.ndarray,
+                  scales: LobeScales) -> float:
         """Mean over the beam cone about wi of the integral over the aperture about wo of g."""
-        n_i, n_o = self.orders(scale_i, scale_o, wi, wo)
+        n_i, n_o = self.orders(scales)
         if self.divergence_rad == 0.0:
             n_i = 0  # a collimated beam: one incident direction
         wi_nodes, wi_weights = cap_rule(wi, self.divergence_rad, n_i)

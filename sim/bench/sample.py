@@ -10,6 +10,7 @@ crosses), and evaluates each lobe only at the directions that lie on its side.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,6 +20,16 @@ KINDS = ("hemisphere", "slab", "conductor")
 LIT_FROM = ("air", "hemisphere")
 DISTRIBUTIONS = ("beckmann", "ggx", "phong")
 MASKINGS = ("separable", "correlated")
+
+
+class LobeScales(NamedTuple):
+    """Angular scales (rad) near (wi, wo): the smooth lobe's local width in wi and wo, and the
+    distance to the nearest edge (a kink: the horizon, masking's cut-off, TIR) in wi and wo."""
+
+    width_i: float
+    width_o: float
+    edge_i: float
+    edge_o: float
 
 
 @dataclass(frozen=True)
@@ -143,10 +154,11 @@ class Sample:
         z2 = 1.0 - float(xy @ xy)
         return None if z2 <= 0 else np.array([xy[0], xy[1], -np.sign(wi[2]) * np.sqrt(z2)])
 
-    def lobe_scales(self, wi: np.ndarray, wo: np.ndarray) -> tuple[float, float]:
-        """Angular scales (rad) over which the integrand varies near (wi, wo), in wi and in wo:
-        the distribution's local width at the coupling half vector, carried to wi and wo by the
-        least stretch of the half-vector maps, and capped by the distance to the horizon."""
+    def lobe_scales(self, wi: np.ndarray, wo: np.ndarray) -> LobeScales:
+        """How fast the integrand varies near (wi, wo): the distribution's local width at the
+        coupling half vector, and the distance to the lobe's edges (the horizon, a facet seen
+        edge-on, the TIR edge of 1 - F), carried to wi and wo by the least stretch of the
+        half-vector maps."""
         s = self.spec
         eta_i = 1.0 if wi[2] > 0 else self.n_interior
         eta_o = 1.0 if wo[2] > 0 else self.n_interior
@@ -158,10 +170,15 @@ class Sample:
         h = optics.half_vector(wi, w_eval, eta_i, eta_o)
         t = np.hypot(h[0], h[1]) / max(h[2], 1e-300)
         w_h = _slope_scale(s.distribution, min(s.alpha), t) * h[2] ** 2
-        if wi[2] * w_eval[2] < 0 and eta_i != eta_o:  # refraction: (1 - F) has a TIR edge
-            w_h = min(w_h, _tir_distance(wi, h, eta_i, eta_o))
-        stretch_o = optics.min_stretch(wi, w_eval, eta_i, eta_o)
+        # edges: a facet seen edge-on from wi or wo; facets standing vertical (h_z = 0), where
+        # D stops (GGX's D does not vanish there)
+        edge_h = min(abs(float(wi @ h)), abs(float(w_eval @ h)),
+                     float(np.arcsin(min(1.0, h[2]))))
+        if wi[2] * w_eval[2] < 0 and eta_i != eta_o:
+            edge_h = min(edge_h, _tir_distance(wi, h, eta_i, eta_o))
+        stretch_o = optics.min_stretch(wi, w_eval, eta_i, eta_o) * stretch
         stretch_i = optics.min_stretch(w_eval, wi, eta_o, eta_i)
-        scale_o = min(w_h * stretch_o * stretch, _angle_to_horizon(wo))
-        scale_i = min(w_h * stretch_i, _angle_to_horizon(wi))
-        return max(float(scale_i), 1e-9), max(float(scale_o), 1e-9)
+        edge_o = min(edge_h * stretch_o, _angle_to_horizon(wo))
+        edge_i = min(edge_h * stretch_i, _angle_to_horizon(wi))
+        return LobeScales(max(float(w_h * stretch_i), 1e-9), max(float(w_h * stretch_o), 1e-9),
+                          float(edge_i), float(edge_o))

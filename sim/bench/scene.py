@@ -14,9 +14,10 @@ from dataclasses import dataclass, field, replace
 
 from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
-from sim.bench.sample import Sample
+from sim.bench.sample import LobeScales, Sample
 from sim.bench.source import Source
 
+ONE_POINT = LobeScales(1.0, 1.0, 1.0, 1.0)  # scales for a probe whose order is fixed anyway
 NEGLIGIBLE = 1e-14  # fraction of the incident power below which a tail is not refined
 
 
@@ -93,11 +94,11 @@ class Bench:
         reach = self.integral.aperture_rad + self.integral.divergence_rad
         far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
         if self.order is None and far:
-            probe = self.probe.integrate(self.sample.integrand, wi, wo, 1.0, 1.0)
+            probe = self.probe.integrate(self.sample.integrand, wi, wo, ONE_POINT)
             if probe < NEGLIGIBLE:
                 return probe
-        scale_i, scale_o = self.sample.lobe_scales(wi, wo)
-        return self.integral.integrate(self.sample.integrand, wi, wo, scale_i, scale_o)
+        return self.integral.integrate(self.sample.integrand, wi, wo,
+                                       self.sample.lobe_scales(wi, wo))
 
     def power_w(self, positions: Mapping[str, float], t_s: float = 0.0) -> float:
         """True optical power at the detector for reported stage positions at time t_s."""
