@@ -145,8 +145,8 @@ class RoughDielectric(MicrofacetModel):
             from sim.bsdf.kernels import ggx_dielectric_sample
 
             _, ax, ay, masking, sampling = self._kernel_codes()
-            return ggx_dielectric_sample(wi, np.ascontiguousarray(u), ax, ay, self.eta, masking,
-                                         self.reflection, self.transmission, sampling)
+            return ggx_dielectric_sample(wi, u, ax, ay, self.eta, masking, self.reflection,
+                                         self.transmission, sampling)
         wi, _, e, em1, flip = self._mirror(wi, None)
         m = self._sample_normal(wi, u[:, 0], u[:, 1])
         c = dot(wi, m)

@@ -74,7 +74,8 @@ class MicrofacetModel:
         wi, u = np.broadcast_arrays(wi, u)
         shape = wi.shape[:-1]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # failures masked
-            wo, weight, pdf = self._sample(wi.reshape(-1, 3), u.reshape(-1, 3))
+            wo, weight, pdf = self._sample(np.ascontiguousarray(wi).reshape(-1, 3),
+                                           np.ascontiguousarray(u).reshape(-1, 3))
         return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
 
     # --- shared pieces -----------------------------------------------------------------
