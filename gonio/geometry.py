@@ -76,18 +76,20 @@ def stage_angles(theta_i_deg: ArrayLike, theta_o_deg: ArrayLike, phi_o_deg: Arra
     forward direction of the plane of incidence (0 = specular / straight-through side,
     positive toward +Z). The arm comes back in (-180, 180].
     """
-    s = np.radians(np.asarray(theta_i_deg, dtype=np.float64))
+    s_deg = np.asarray(theta_i_deg, dtype=np.float64)
     t = np.radians(np.asarray(theta_o_deg, dtype=np.float64))
     phi = np.radians(np.asarray(phi_o_deg, dtype=np.float64))
-    s, t, phi, trans, p = np.broadcast_arrays(s, t, phi, np.asarray(transmission, dtype=bool),
-                                              np.asarray(azimuth_deg, dtype=np.float64))
-    forward = np.where(s < 0.0, -1.0, 1.0)
+    s_deg, t, phi, trans, p = np.broadcast_arrays(s_deg, t, phi,
+                                                  np.asarray(transmission, dtype=bool),
+                                                  np.asarray(azimuth_deg, dtype=np.float64))
+    s = np.radians(s_deg)
+    forward = np.where(s_deg < 0.0, -1.0, 1.0)  # decided in degrees: radians may underflow
     x = forward * np.sin(t) * np.cos(phi)
     y = np.sin(t) * np.sin(phi)
     z = np.where(trans, -1.0, 1.0) * np.cos(t)
     elevation = np.degrees(np.arcsin(np.clip(y, -1.0, 1.0)))
     arm = wrap_deg(np.degrees(s + np.arctan2(x, z)))
-    return StageAngles(np.degrees(s), arm, elevation, p.astype(np.float64))
+    return StageAngles(s_deg.astype(np.float64), arm, elevation, p.astype(np.float64))
 
 
 def wrap_deg(angle_deg: ArrayLike) -> np.ndarray:

@@ -2,7 +2,7 @@
 independent implementation in sim.bench.geometry."""
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from gonio.geometry import directions, into_limits, sample_angles, stage_angles, wrap_deg
@@ -23,6 +23,7 @@ def test_in_plane_closed_forms():
     assert abs(back.arm_deg) < 1e-12
 
 
+@example(s=-5e-324, to=1.0, phi=0.0, trans=False, p=0.0)  # a denormal that underflows
 @settings(max_examples=200, deadline=None)
 @given(s=st.floats(-89.0, 89.0), to=st.floats(-89.0, 89.0), phi=st.floats(-179.0, 179.0),
        trans=st.booleans(), p=angle)
