@@ -38,7 +38,7 @@ class Calibration:
     aperture_solid_angle_sr: Measured | None = None
     aperture_half_angle_deg: Measured | None = None
     aperture_method: str | None = None  # "geometry" | "beam-scan"
-    beam: dict[str, float] | None = None  # summary of the source run's beam readings
+    beam: list[dict[str, Any]] | None = None  # per source run: its beam readings' summary
 
     def to_json(self) -> dict[str, Any]:
         """The file's content."""

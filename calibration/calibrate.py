@@ -28,6 +28,7 @@ from calibration.detector import (
     dark_offsets,
     gain_ratios,
     pooled_sem,
+    range_key,
     ranges_read_together,
 )
 from calibration.values import CalibrationError, Measured
@@ -85,13 +86,24 @@ def angle_offsets(readings: np.ndarray, eta: float, seed: int = 0) -> tuple[Meas
             Measured(float(coef[1]), float(math.sqrt(cov[1, 1]))))
 
 
+def covering(gains: dict[str, Measured] | None,
+             readings: np.ndarray) -> dict[str, Measured] | None:
+    """The gains, with gain 1 for the readings' ranges that the gain runs did not cover (the
+    best available for those ranges when building a calibration)."""
+    if gains is None:
+        return None
+    return {**{range_key(r): Measured(1.0, 0.0) for r in np.unique(readings["range_w"])},
+            **gains}
+
+
 def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
                     gains: dict[str, Measured] | None) -> np.ndarray:
-    """Readings with dark- and gain-corrected power, divided by the beam power interpolated at
-    each reading's time when the run has beam readings (a drift during a peak scan would
-    otherwise skew the peak and bias its centre)."""
+    """Readings with dark- and gain-corrected power (gain 1 on ranges the gains do not cover),
+    divided by the beam power interpolated at each reading's time when the run has beam
+    readings (a drift during a peak scan would otherwise skew the peak and bias its centre)."""
     out = readings.copy()
-    out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks, gains)
+    out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks,
+                                   covering(gains, readings))
     beam = out["kind"] == "beam"
     if beam.any():
         model = beam_power(out["t_s"][beam], out["power_w"][beam])
@@ -107,28 +119,44 @@ def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
         return None
     power = beam["power_w"]
     if darks is not None:
-        power = correct_power(power, beam["range_w"], darks, gains)
+        power = correct_power(power, beam["range_w"], darks, covering(gains, beam))
     model = beam_power(beam["t_s"], power)
     return {"readings": int(len(beam)), "mean_w": model.mean_w, "drift_rms": model.drift_rms,
             "noise_w": model.noise_w, "interpolation_rel": model.interp_rel}
 
 
-def build(readings: np.ndarray, created_utc: str, source_runs: list[str],
+def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
           eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
           seed: int = 0) -> Calibration:
-    """Everything the readings can determine: darks always; gains when several ranges were
-    read; angle offsets when eta is given and the peak scans are present; the beam summary."""
+    """Everything the runs' readings (one array per run) can determine: darks always; gains
+    when fixed-range runs read the same stage positions on several ranges;
+    angle offsets, when eta is given, from the runs holding a specular scan (each normalised by
+    its own beam readings: times restart with every run); a beam summary per run."""
+    readings = np.concatenate(runs)
     darks = dark_offsets(readings)
     cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
-    if ranges_read_together(readings):
-        gains = gain_ratios(readings, darks)
+    fixed = [run for run in runs if len(np.unique(run["range_w"][run["kind"] == "sample"])) == 1]
+    fixed_readings = np.concatenate(fixed) if fixed else readings[:0]
+    if ranges_read_together(fixed_readings):
+        gains = gain_ratios(fixed_readings, darks)
         cal.gains, cal.gain_reference = gains.gains, gains.reference
         cal.linearity = {"chi2_dof": gains.chi2_dof, "max_deviation": gains.max_deviation,
                          "exponents": {k: v.to_json() for k, v in gains.exponents.items()}}
     if eta is not None:
+        peak_runs = []
+        for k, run in enumerate(runs):
+            if np.any((run["kind"] == "sample") & (run["side"] == "reflection")):
+                normalised = beam_normalised(run, darks, cal.gains)
+                normalised["point"] += k * 10_000_000  # plan points are per run
+                peak_runs.append(normalised)
+        if not peak_runs:
+            raise CalibrationError("angle calibration (--eta) needs a run with a specular "
+                                   "scan (examples/plans/calib-angles.toml)")
         cal.sample_offset_deg, cal.arm_offset_deg = angle_offsets(
-            beam_normalised(readings, darks, cal.gains), eta, seed)
+            np.concatenate(peak_runs), eta, seed)
     if aperture is not None:
         cal.aperture_solid_angle_sr, cal.aperture_half_angle_deg, cal.aperture_method = aperture
-    cal.beam = beam_summary(readings, darks, cal.gains)
+    summaries = [dict(run=name, **summary) for name, run in zip(source_runs, runs, strict=True)
+                 if (summary := beam_summary(run, darks, cal.gains)) is not None]
+    cal.beam = summaries or None
     return cal

@@ -52,8 +52,9 @@ def gain_ratios(readings: np.ndarray, darks: dict[str, Measured],
                 reference_w: float | None = None, min_snr: float = 20.0) -> GainCalibration:
     """Joint fit of range gains, per-position powers and the dark offsets (constrained by the
     dark readings, since a dark error is common to a whole range) from sample readings of the
-    same positions (`point`) on several ranges; saturated and low-signal cells are left out."""
+    same stage positions on several ranges; saturated and low-signal cells are left out."""
     rows = readings[(readings["kind"] == "sample") & ~readings["saturated"]]
+    rows = rows[shared_positions(rows)]
     ranges = sorted({float(r) for r in rows["range_w"]})
     if len(ranges) < 2:
         raise CalibrationError("gain ratios need the same positions read on at least two ranges; "
@@ -68,9 +69,9 @@ def gain_ratios(readings: np.ndarray, darks: dict[str, Measured],
     cells = []
     for k, r in enumerate(ranges):
         on_range = rows[rows["range_w"] == r]
-        groups = [on_range["power_w"][on_range["point"] == p] for p in np.unique(on_range["point"])]
-        points = [int(p) for p, g in zip(np.unique(on_range["point"]), groups, strict=True)
-                  if len(g) >= 2]
+        where = position_key(on_range)
+        groups = [on_range["power_w"][where == p] for p in np.unique(where)]
+        points = [int(p) for p, g in zip(np.unique(where), groups, strict=True) if len(g) >= 2]
         groups = [g for g in groups if len(g) >= 2]
         if not groups:
             continue
@@ -175,15 +176,31 @@ def _linearity_exponents(cells: list[tuple[int, int, float, float]], ranges: lis
     return out
 
 
-def ranges_read_together(readings: np.ndarray) -> bool:
-    """True if some plan point was read (twice or more) on each of two ranges or more: what
-    gain_ratios needs. Autoranged runs read each point on one range only."""
-    rows = readings[(readings["kind"] == "sample") & ~readings["saturated"]]
-    for point in np.unique(rows["point"]):
-        ranges, counts = np.unique(rows["range_w"][rows["point"] == point], return_counts=True)
+def position_key(rows: np.ndarray) -> np.ndarray:
+    """An integer per distinct stage position (to 0.001 deg): readings at one position see the
+    same optical power, whichever run or plan took them."""
+    stages = np.stack([rows[n] for n in ("sample_deg", "arm_deg", "azimuth_deg",
+                                         "elevation_deg")], axis=1)
+    return np.unique(np.round(stages, 3), axis=0, return_inverse=True)[1].ravel()
+
+
+def shared_positions(rows: np.ndarray) -> np.ndarray:
+    """Mask of the readings at stage positions read (twice or more) on two ranges or more."""
+    where = position_key(rows)
+    keep = np.zeros(len(rows), bool)
+    for point in np.unique(where):
+        at = where == point
+        ranges, counts = np.unique(rows["range_w"][at], return_counts=True)
         if np.sum(counts >= 2) >= 2:
-            return True
-    return False
+            keep |= at
+    return keep
+
+
+def ranges_read_together(readings: np.ndarray) -> bool:
+    """True if some stage position was read (twice or more) on each of two ranges or more: what
+    gain_ratios needs. An autoranged run reads each position on one range only."""
+    rows = readings[(readings["kind"] == "sample") & ~readings["saturated"]]
+    return bool(shared_positions(rows).any())
 
 
 def dark_for(darks: dict[str, Measured], range_w: float) -> Measured:

@@ -49,15 +49,12 @@ def run(args: argparse.Namespace) -> int:
 def _build(args: argparse.Namespace) -> int:
     import math
 
-    import numpy as np
-
     from calibration import aperture, calfile
     from calibration.calibrate import build
     from calibration.values import Measured
     from gonio.store import open_run, utc_now
 
     runs = [open_run(r) for r in args.runs]
-    readings = np.concatenate([r.readings() for r in runs])
     ap = None
     if args.aperture_geometry:
         diameter_mm, distance_mm = args.aperture_geometry
@@ -67,7 +64,8 @@ def _build(args: argparse.Namespace) -> int:
     elif args.aperture_scan:
         ap = (*_aperture_from_scan(open_run(args.aperture_scan), args.beam_diameter_mm),
               "beam-scan")
-    cal = build(readings, utc_now(), [str(r.path) for r in runs], eta=args.eta, aperture=ap)
+    cal = build([r.readings() for r in runs], utc_now(), [str(r.path) for r in runs],
+                eta=args.eta, aperture=ap)
     print(calfile.save(cal, args.out))
     return 0
 

@@ -45,7 +45,7 @@ def angle_run(tmp_path_factory):
 
 def test_angle_offsets_and_dark_offset_recovered(angle_run, tmp_path):
     readings = angle_run.readings()
-    cal = build(readings, "2026-11-23T13:00:00Z", [str(angle_run.path)], eta=1.51)
+    cal = build([readings], "2026-11-23T13:00:00Z", [str(angle_run.path)], eta=1.51)
     assert abs(cal.sample_offset_deg.pull(SAMPLE_OFFSET)) < 3.0
     assert abs(cal.arm_offset_deg.pull(ARM_OFFSET)) < 3.0
     assert abs(cal.sample_offset_deg.value - SAMPLE_OFFSET) < 0.03
@@ -64,7 +64,7 @@ def test_angle_offsets_and_dark_offset_recovered(angle_run, tmp_path):
 
 def test_beam_normalisation_removes_the_drift(angle_run):
     r = angle_run.readings()
-    darks = build(r, "", []).dark_offsets_w
+    darks = build([r], "", ["run"]).dark_offsets_w
     power = correct_power(r["power_w"], r["range_w"], darks, None)
     beam = r["kind"] == "beam"
     model = beam_power(r["t_s"][beam], power[beam])
@@ -133,7 +133,7 @@ def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
         aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm), rel=0.005)
 
 
-def test_range_gains_from_fixed_range_runs(tmp_path):
+def test_range_gains_from_fixed_range_runs(angle_run, tmp_path):
     # The emulated meter has no gain errors: the calibration must find every ratio 1 within
     # its uncertainty, a linear detector, and a dark offset on each range.
     runs = []
@@ -147,8 +147,10 @@ def test_range_gains_from_fixed_range_runs(tmp_path):
         runs.append(open_run(run).readings())
     readings = np.concatenate(runs)
     assert {float(r) for r in readings["range_w"]} == {1e-7, 1e-6, 1e-5}
-    cal = build(readings, "", [])
-    assert set(cal.dark_offsets_w) == {"1e-07", "1e-06", "1e-05"}
+    # given together with an (autoranged) angle run, as `gonio calibrate build` allows
+    cal = build(runs + [angle_run.readings()], "", ["a", "b", "c", "angles"], eta=1.51)
+    assert abs(cal.sample_offset_deg.pull(SAMPLE_OFFSET)) < 3.0
+    assert set(cal.dark_offsets_w) == {"1e-08", "1e-07", "1e-06", "1e-05"}  # 1e-8: angle run
     for key, gain in cal.gains.items():
         assert abs(gain.pull(1.0)) < 3.0 and gain.sigma < 2e-3, key
     assert cal.linearity["chi2_dof"] < 3.0

@@ -42,7 +42,8 @@ def detector_runs(rng: np.random.Generator, exponent: float = 1.0) -> np.ndarray
         m = GAINS[r] * true * (true / 1e-7) ** (gamma - 1.0) + DARKS[r]
         m = m + noise * rng.standard_normal(len(m)) + 1e-3 * m * rng.standard_normal(len(m))
         sample = readings(len(m), kind="sample", side="reflection", range_w=r, point=point,
-                          power_w=np.minimum(m, 1.1 * r), saturated=m > 1.1 * r)
+                          arm_deg=20.0 + 5.0 * point, power_w=np.minimum(m, 1.1 * r),
+                          saturated=m > 1.1 * r)
         runs += [dark, sample]
     return np.concatenate(runs)
 
@@ -166,7 +167,8 @@ def test_aperture_from_beam_scan_matches_geometry(beam_fraction):
 def test_calibration_file_round_trip_and_apply(tmp_path):
     rng = np.random.default_rng(8)
     data = detector_runs(rng)
-    cal = build(data, "2026-11-23T12:00:00Z", ["runs/a"])
+    runs = [data[data["range_w"] == r] for r in RANGES]  # one fixed-range run per range
+    cal = build(runs, "2026-11-23T12:00:00Z", ["runs/a", "runs/b", "runs/c"])
     cal.sample_offset_deg, cal.arm_offset_deg = Measured(0.3, 0.01), Measured(-0.2, 0.01)
     path = calfile.save(cal, tmp_path / "cal.json")
     back = calfile.load(path)
@@ -204,6 +206,7 @@ def test_ranges_without_darks_use_the_nearest_and_missing_gains_are_named():
     gains = {"1e-06": Measured(1.0, 0.0)}
     with pytest.raises(CalibrationError, match="no gain for range 1e-05"):
         detector.correct_power(np.array([1.0]), np.array([1e-5]), darks, gains)
-    autoranged = readings(4, kind="sample", point=[0, 0, 1, 1], range_w=[1e-6, 1e-6, 1e-5, 1e-5])
+    autoranged = readings(4, kind="sample", point=[0, 0, 1, 1], arm_deg=[20, 20, 30, 30],
+                          range_w=[1e-6, 1e-6, 1e-5, 1e-5])
     assert not detector.ranges_read_together(autoranged)
     assert detector.ranges_read_together(detector_runs(np.random.default_rng(0)))
