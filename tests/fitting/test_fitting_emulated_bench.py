@@ -124,7 +124,8 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
          "theta_o_deg": {"start": 2.0, "stop": 18.0, "step": 0.5}},
     ], repeats=2, dark_every=12, beam_every=6)
     calib_run = open_run(scan(calib_plan, antiglare, tmp_path / "runs"))
-    cal = build(calib_run.readings(), "2026-11-23T13:00:00Z", [str(calib_run.path)], eta=1.51)
+    cal = build([calib_run.readings()], "2026-11-23T13:00:00Z", [str(calib_run.path)],
+                eta=1.51)
     cal_path = calfile.save(cal, tmp_path / "cal.json")
     measure = plan(tmp_path, "ground-glass", wide_lobe_grids(), beam_every=10)
     ideal_run = scan(measure, ideal, tmp_path / "runs")
