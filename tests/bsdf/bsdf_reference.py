@@ -58,7 +58,7 @@ def Lambda(name, alpha, w):
         return (-1 + mp.sqrt(1 + _alpha_w2(w, ax, ay) * t2)) / 2
     if name == "beckmann":
         a = 1 / mp.sqrt(_alpha_w2(w, ax, ay) * t2)
-        return (mp.erf(a) - 1) / 2 + mp.exp(-a * a) / (2 * a * mp.sqrt(mp.pi))
+        return -mp.erfc(a) / 2 + mp.exp(-a * a) / (2 * a * mp.sqrt(mp.pi))
     p = 2 / ax**2 - 2
     a = 1 / mp.sqrt(t2)
     # P2(q) ~ (1 + q^2)^(-(p+3)/2); int_a^inf q P2 is elementary, int_a^inf P2 is taken with
