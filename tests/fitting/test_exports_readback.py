@@ -113,3 +113,24 @@ def test_anisotropic_fit_exports(tmp_path):
     params = read_mitsuba(mitsuba_file(result, tmp_path / "a.xml"))["params"]
     assert (params["alpha_u"], params["alpha_v"]) == (pytest.approx(ax), pytest.approx(ay))
     assert "alpha" not in params
+
+
+def test_conductor_fit_and_roughconductor_export(tmp_path):
+    from calibration.reduced import ReducedData
+    from calibration.synthetic import in_plane_directions
+    from sim.bsdf import RoughConductor
+
+    parts = [in_plane_directions(t, 1.0, 0.2, sides=("reflection",)) for t in (0.0, 40.0)]
+    wi, wo = (np.concatenate([p[k] for p in parts]) for k in range(2))
+    f = RoughConductor("ggx", 0.2, eta_complex=complex(0.2, 3.6)).eval(wi, wo)
+    sigma = 0.02 * f + f.max() * 1e-6
+    measured = f + sigma * np.random.default_rng(3).standard_normal(len(f))
+    data = ReducedData(wi, wo, measured, sigma, np.ones(len(f), bool), np.zeros(len(f), bool),
+                       {"eta": 0.2, "k": 3.6, "kind": "conductor"})
+    result = fit(data, FitOptions(distributions=("ggx", "beckmann")))
+    value, sigma_alpha = result.param("alpha")
+    assert result.distribution == "ggx" and result.k == 3.6
+    assert abs(value - 0.2) < 3 * sigma_alpha and result.chi2_dof_heldout < 1.5
+    back = read_mitsuba(mitsuba_file(result, tmp_path / "metal.xml"))
+    assert back["type"] == "roughconductor"
+    assert (back["params"]["eta"], back["params"]["k"]) == (pytest.approx(0.2), 3.6)
