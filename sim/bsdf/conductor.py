@@ -10,7 +10,7 @@ import numpy as np
 
 from sim.bsdf.fresnel import fresnel_conductor
 from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
-from sim.bsdf.vectors import dot
+from sim.bsdf.vectors import dot, unit
 
 
 class RoughConductor(MicrofacetModel):
@@ -82,6 +82,7 @@ class RoughConductor(MicrofacetModel):
         return p
 
     def _sample(self, wi, u):
+        wi = unit(wi)
         up = wi[:, 2] > COS_HORIZON
         wi = np.where(up[:, None], wi, [0.0, 0.0, 1.0])  # below the surface: fails below
         m = self._sample_normal(wi, u[:, 0], u[:, 1])

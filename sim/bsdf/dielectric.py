@@ -13,7 +13,7 @@ import numpy as np
 
 from sim.bsdf.fresnel import dielectric_transmittance, reflectance_transmittance_toward
 from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
-from sim.bsdf.vectors import dot
+from sim.bsdf.vectors import dot, unit
 
 LOBES = ("reflection", "transmission")
 
@@ -147,7 +147,7 @@ class RoughDielectric(MicrofacetModel):
             _, ax, ay, masking, sampling = self._kernel_codes()
             return ggx_dielectric_sample(wi, u, ax, ay, self.eta, masking, self.reflection,
                                          self.transmission, sampling)
-        wi, _, e, em1, flip = self._mirror(wi, None)
+        wi, _, e, em1, flip = self._mirror(unit(wi), None)
         m = self._sample_normal(wi, u[:, 0], u[:, 1])
         c = dot(wi, m)
         fr, ft = reflectance_transmittance_toward(np.abs(c), e, em1)

@@ -70,7 +70,7 @@ class MicrofacetModel:
         u = np.asarray(u, dtype=np.float64)
         if u.ndim == 0 or u.shape[-1] != 3:
             raise ValueError(f"u must have shape (..., 3), got {u.shape}")
-        (wi,) = directions(wi)
+        (wi,) = direction_arrays(wi)  # normalised by each _sample (the kernels do it inline)
         wi, u = np.broadcast_arrays(wi, u)
         shape = wi.shape[:-1]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # failures masked
