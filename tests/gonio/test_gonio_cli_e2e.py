@@ -100,24 +100,19 @@ def test_export_csv_and_netcdf_round_trip(tmp_path):
         assert ds["arm_deg"].units == "degree" and ds.status == "completed"
 
 
-def test_time_scale_override(tmp_path):
+def test_time_scale_override_and_raw_quick_look(tmp_path):
+    """--time-scale replaces a crawling [sim] time scale; a run without dark readings cannot
+    be reduced, so its plot.png is the raw quick look; --time-scale needs --sim."""
     cfg = fast_config(time_scale=0.01)  # 100 real seconds per virtual second: would crawl
-    plan = {"grid": [{"theta_i_deg": [10.0], "theta_o_deg": [30.0, 60.0]}]}
+    plan = {"grid": [{"theta_i_deg": [20.0], "theta_o_deg": [10.0, 30.0, 50.0]}]}
     path = write_plan(tmp_path, plan, cfg)
     proc = gonio_cli("scan", path, "--sim", "--time-scale", "inf", "--out", tmp_path,
-                     "--no-plot", timeout=60)
+                     timeout=60)
     assert proc.returncode == 0, proc.stderr
     run = open_run(run_dir_of(proc))
-    assert run.config["sim"]["time_scale"] == "inf" and len(run) == 2
+    assert run.config["sim"]["time_scale"] == "inf" and len(run) == 3
+    assert "plot.png shows raw power" in proc.stderr
+    assert (run.path / "plot.png").read_bytes()[:4] == b"\x89PNG"
     bad = gonio_cli("scan", path, "--time-scale", "5", "--out", tmp_path)
     assert bad.returncode == 2
     assert one_line_error(bad.stderr).endswith("use it with --sim")
-
-
-def test_run_that_cannot_be_reduced_gets_the_raw_quick_look(tmp_path):
-    plan = {"grid": [{"theta_i_deg": [20.0], "theta_o_deg": [10.0, 30.0, 50.0]}]}
-    proc = gonio_cli("scan", write_plan(tmp_path, plan, fast_config()), "--sim",
-                     "--out", tmp_path)
-    assert proc.returncode == 0, proc.stderr
-    assert "plot.png shows raw power" in proc.stderr
-    assert (run_dir_of(proc) / "plot.png").read_bytes()[:4] == b"\x89PNG"

@@ -38,9 +38,9 @@ def write(tmp_path, cfg):
     return write_toml(tmp_path / "plan.toml", {**PLAN, "instrument": "instrument.toml"})
 
 
-def assert_contiguous_and_planned(run_dir, cfg):
+def assert_contiguous_and_planned(run_dir, cfg, plan=PLAN):
     r = open_run(run_dir).readings()
-    sched = build_schedule(parse_plan(PLAN), parse_config(cfg)).readings
+    sched = build_schedule(parse_plan(plan), parse_config(cfg)).readings
     assert list(r["index"]) == list(range(len(r)))  # nothing lost, nothing twice
     np.testing.assert_array_equal(r["kind"], sched["kind"][: len(r)])
     for role in ("sample", "arm"):  # every reading was taken where the plan said
@@ -77,18 +77,21 @@ def test_thousand_points_with_faults_complete(tmp_path, fast_store, instrument, 
 
 
 def test_disconnect_stops_cleanly_and_resume_finishes(tmp_path, fast_store):
-    cfg = fast_config("sim-serial", faults={"pm100": {"disconnect_after": 700}},
+    plan = {**PLAN, "grid": [{**PLAN["grid"][0], "theta_i_deg": [20.0]}]}  # ~260 readings
+    cfg = fast_config("sim-serial", faults={"pm100": {"disconnect_after": 150}},
                       pm100={"timeout_s": 0.5})
-    first = new_scan(write(tmp_path, cfg), sim=True, out=fast_store, progress=False)
+    write_toml(tmp_path / "instrument.toml", cfg)
+    path = write_toml(tmp_path / "plan.toml", {**plan, "instrument": "instrument.toml"})
+    first = new_scan(path, sim=True, out=fast_store, progress=False)
     assert first.outcome.status == "failed"
     meta = open_run(first.path).meta
     assert "pm100" in meta["reason"] and "attempts" in meta["reason"]
-    r, sched = assert_contiguous_and_planned(first.path, cfg)
+    r, sched = assert_contiguous_and_planned(first.path, cfg, plan)
     assert 0 < len(r) < len(sched)
     # fresh emulators: the device "reconnected"; the run continues where it stopped
     second = resume_scan(first.path, progress=False)
     assert second.outcome.status == "completed"  # fewer replies left than disconnect_after
-    r2, _ = assert_contiguous_and_planned(first.path, cfg)
+    r2, _ = assert_contiguous_and_planned(first.path, cfg, plan)
     assert len(r2) == len(sched)
     sessions = open_run(first.path).meta["sessions"]
     assert [s["status"] for s in sessions] == ["failed", "completed"]

@@ -113,7 +113,7 @@ def check_refused_before_motion(plan, cfg):
         assert check_plan(plan_text, cfg_text) == 0
 
 
-FUZZ = settings(max_examples=120, deadline=None,
+FUZZ = settings(max_examples=80, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 
 
