@@ -180,3 +180,12 @@ def test_build_power_source_follows_the_stage_positions_and_clock():
 def test_bad_sim_config_names_the_field(sim, field):
     with pytest.raises(SimConfigError, match=field):
         build_bench(sim)
+
+
+def test_far_tail_is_probed_not_integrated():
+    """Far from the narrow lobe the order rule would ask for the top order; a low-order probe
+    shows the tail carries less than 1e-14 of the beam and is returned instead."""
+    b = bench(NARROW)
+    p = b.power_w({"sample": 0.0, "arm": 110.0})  # transmission, 70 deg from the refracted peak
+    assert 0.0 <= p < 1e-14 * 1e-3
+    assert sum(b.sample.evaluations.values()) <= 12
