@@ -34,11 +34,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def config_text() -> str:
-    """sim-serial.toml with instant motion and a 1x1-node aperture rule ([sim.aperture] is
+    """sim-serial.toml with instant motion and a one-ray aperture rule ([sim.aperture] is
     the file's last table, so the added key lands in it)."""
     text = (ROOT / "examples" / "instruments" / "sim-serial.toml").read_text()
     text = text.replace("time_scale = 50.0", 'time_scale = "inf"')
-    return text + "order = [1, 1]\n"
+    return text + "order = [0, 0]\n"
 
 
 def plan_text(per_curve: int) -> str:
