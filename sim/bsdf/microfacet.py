@@ -86,18 +86,22 @@ class MicrofacetModel:
         return rng
 
     def _choose_backend(self, backend):
-        """'numba' when its kernel exists and numba imports, else 'numpy' (the reference)."""
+        """'numba' when its kernel exists, numba imports and alpha is one value (the kernels
+        take scalar roughness), else 'numpy' (the reference, which broadcasts alpha arrays)."""
         if backend not in (None, *BACKENDS):
             raise ValueError(f"backend must be one of {BACKENDS} or None, got {backend!r}")
         if backend == "numpy":
             return "numpy"
         from sim.bsdf import kernels
 
-        if kernels.supports(self.distribution.name):
+        d = self.distribution
+        scalar_alpha = np.ndim(d.alpha_x) == 0 and np.ndim(d.alpha_y) == 0
+        if kernels.supports(d.name) and scalar_alpha:
             return "numba"
         if backend == "numba":
-            raise ValueError(f"backend='numba' needs numba (pip install 'gonio[fast]') and "
-                             f"distribution ggx or beckmann, got {self.distribution.name!r}")
+            raise ValueError(f"backend='numba' needs numba (pip install 'gonio[fast]'), "
+                             f"distribution ggx or beckmann and one alpha value, got "
+                             f"{d.name!r} with alpha shape {np.shape(d.alpha_x)}")
         return "numpy"
 
     def _pairs(self, wi, wo, want_pdf):
