@@ -1,4 +1,6 @@
-"""alpha given as an array (one roughness per direction pair) matches the scalar models."""
+"""alpha given as an array (one roughness per direction pair, as the LUT baker uses it) matches
+the scalar models. Per-pair alpha is supported where every pair falls in the same lobe
+(one-lobe models, or sample()); mixed-lobe eval needs one alpha (docs/bsdf.md)."""
 
 import numpy as np
 
@@ -10,7 +12,7 @@ def test_per_pair_alpha_matches_scalar_models_for_eval_and_sample():
     alphas = np.array([0.05, 0.3, 0.8])
     wi = np.array([[0.3, 0.1, 0.9], [-0.5, 0.2, 0.6], [0.0, 0.7, 0.2]])
     wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
-    wo = np.array([[-0.2, 0.0, -0.95], [0.4, -0.1, 0.8], [0.1, -0.6, -0.3]])
+    wo = np.array([[-0.2, 0.0, -0.95], [0.4, -0.1, -0.8], [0.1, -0.6, -0.3]])
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     u = rng.random((3, 3))
     batch = RoughDielectric("ggx", alpha=alphas, eta=1.51)
