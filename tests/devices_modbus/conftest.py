@@ -5,6 +5,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from modbus_testkit import (  # noqa: I001 - the test folder's own helpers
+    DETECTOR_MAP,
+    DETECTOR_UNIT,
+    SECOND_STAGE_UNIT,
+    STAGE_MAP,
+    STAGE_UNIT,
+    endpoint_args,
+    with_word_order,
+)
 
 from drivers.modbus_detector import ModbusDetector
 from drivers.modbus_stage import ModbusStage
@@ -15,27 +24,6 @@ from sim.devices.modbus_server import ModbusEmulatorServer
 from sim.devices.modbus_stage import ModbusStageEmulator
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import ConstantPower
-
-MAPS = Path(__file__).resolve().parents[2] / "examples" / "registermaps"
-STAGE_MAP = MAPS / "stepper-drive.toml"
-DETECTOR_MAP = MAPS / "photodiode-adc.toml"
-STAGE_UNIT, DETECTOR_UNIT, SECOND_STAGE_UNIT = 1, 2, 3
-
-
-def with_word_order(src: Path, order: str, folder: Path) -> Path:
-    """A copy of a shipped map with its word_order replaced."""
-    text = src.read_text().replace('word_order = "big"', f'word_order = "{order}"')
-    out = folder / f"{src.stem}-{order}.toml"
-    out.write_text(text)
-    return out
-
-
-def endpoint_args(server: ModbusEmulatorServer) -> tuple[str, str, dict]:
-    """(transport, port_or_host, keyword args) for a driver of this server."""
-    if server.transport == "tcp":
-        host, port = server.endpoint.rsplit(":", 1)
-        return "tcp", host, {"tcp_port": int(port)}
-    return "rtu", server.endpoint, {}
 
 
 @dataclass

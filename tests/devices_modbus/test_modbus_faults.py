@@ -5,7 +5,7 @@ is never sent twice."""
 import time
 
 import pytest
-from conftest import STAGE_MAP, endpoint_args  # noqa: I001
+from modbus_testkit import STAGE_MAP, endpoint_args  # noqa: I001
 
 from drivers.base import DeviceTimeout, DriverError, ProtocolError
 from drivers.modbus_stage import ModbusStage

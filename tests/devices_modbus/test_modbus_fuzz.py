@@ -7,9 +7,9 @@ import socket
 import struct
 
 import serial
-from conftest import DETECTOR_MAP, STAGE_MAP  # noqa: I001 - the test folder's own fixtures
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from modbus_testkit import DETECTOR_MAP, STAGE_MAP  # noqa: I001 - the test folder's own fixtures
 
 from drivers.modbus_stage import ModbusStage
 from sim.devices.modbus_detector import ModbusDetectorEmulator

@@ -6,9 +6,9 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import DETECTOR_MAP, STAGE_MAP, with_word_order  # noqa: I001
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from modbus_testkit import DETECTOR_MAP, STAGE_MAP, with_word_order  # noqa: I001
 
 from drivers.register_map import RegisterMap, RegisterMapError
 from sim.devices.register_map import DeviceLayout, LayoutError, RegisterFile, Rejected
