@@ -2,14 +2,18 @@
 
 Protocol drivers send a line and read a reply line through it. Only queries are retried
 (after a timeout or a garbled reply); a command that changes the device's state is sent
-exactly once and its outcome is re-read by the driver instead.
+exactly once and its outcome is re-read by the driver instead. Every failure of the port
+itself (pyserial's SerialException, OSError, and the termios.error a vanished pty or USB
+adaptor raises) becomes a SerialPortError, so callers see only DriverError subclasses.
 """
 
 from __future__ import annotations
 
+import termios
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import TypeVar
 
 import serial
@@ -17,6 +21,27 @@ import serial
 from drivers.base import DeviceTimeout, DriverError, ProtocolError
 
 T = TypeVar("T")
+
+# What pyserial lets through when a port fails: its own exception, OSError from os.read /
+# os.write / ioctl, and termios.error (no OSError subclass) from tcflush / tcdrain / tcsetattr.
+PORT_FAILURES = (serial.SerialException, OSError, termios.error)
+
+
+class SerialPortError(DriverError):
+    """The serial port itself failed (could not be opened, or went away: unplugged USB
+    adaptor, pty whose far side closed); `action` says what the driver was doing."""
+
+    def __init__(self, device: str, port: str, action: str, cause: BaseException):
+        self.device, self.port, self.action, self.cause = device, port, action, cause
+        what = "could not be opened" if action == "opening" else f"went away ({action})"
+        super().__init__(f"{device}: serial port {port} {what}: {_describe(cause)}")
+
+
+def _describe(exc: BaseException) -> str:
+    """termios.error carries (errno, text) as a tuple; show it as OSError does."""
+    if isinstance(exc, termios.error) and len(exc.args) == 2:
+        return f"[Errno {exc.args[0]}] {exc.args[1]}"
+    return str(exc) or type(exc).__name__
 
 
 class SerialLineTransport:
@@ -51,14 +76,23 @@ class SerialLineTransport:
                 port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s,
                 rtscts=rtscts,
             )
-        except (serial.SerialException, ValueError) as exc:
-            raise DriverError(f"{name}: cannot open serial port {port!r}: {exc}") from None
-        self._serial.reset_input_buffer()
+        except (*PORT_FAILURES, ValueError) as exc:
+            raise SerialPortError(name, port, "opening", exc) from exc
+        try:
+            with self._port("discarding stale input"):
+                self._serial.reset_input_buffer()
+        except DriverError:
+            self.close()
+            raise
 
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
-        """Close the port (idempotent)."""
-        self._serial.close()
+        """Close the port (idempotent; a port that has already gone away closes quietly,
+        so closing in a `finally` never hides the error that ended the session)."""
+        try:
+            self._serial.close()
+        except PORT_FAILURES:
+            pass
 
     def __enter__(self) -> SerialLineTransport:
         return self
@@ -67,19 +101,26 @@ class SerialLineTransport:
         self.close()
 
     # -- bytes ------------------------------------------------------------------
-    def _lost(self, exc: Exception) -> DriverError:
-        return DriverError(f"{self.name}: serial connection on {self.port!r} lost: {exc}")
+    @contextmanager
+    def _port(self, action: str) -> Iterator[None]:
+        """Turn a port failure during `action` into SerialPortError (a blocked write into
+        DeviceTimeout); DriverErrors raised inside pass through unchanged."""
+        try:
+            yield
+        except serial.SerialTimeoutException:
+            raise DeviceTimeout(self.name, f"the port to take {action}", self.timeout_s) from None
+        except PORT_FAILURES as exc:
+            raise SerialPortError(self.name, self.port, action, exc) from exc
 
     def send(self, line: str) -> None:
         """Discard stale input, then write one line (terminator added)."""
         data = line.encode("ascii") + self.write_eol
         with self.lock:
-            try:
+            with self._port("discarding stale input"):
                 self._serial.reset_input_buffer()
+            with self._port(f"writing {line!r}"):
                 self._serial.write(data)
                 self._serial.flush()
-            except (serial.SerialException, OSError) as exc:
-                raise self._lost(exc) from None
 
     def read_line(self, what: str, timeout_s: float | None = None) -> str:
         """Read one reply line (terminator stripped).
@@ -92,19 +133,16 @@ class SerialLineTransport:
         timeout = self.timeout_s if timeout_s is None else timeout_s
         deadline = time.monotonic() + timeout
         data = bytearray()
-        with self.lock:
-            try:
-                while self.read_eol not in data:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        raise DeviceTimeout(self.name, what, timeout)
-                    self._serial.timeout = left
-                    chunk = self._serial.read(max(1, self._serial.in_waiting))
-                    if not chunk:
-                        raise DeviceTimeout(self.name, what, timeout)
-                    data += chunk
-            except (serial.SerialException, OSError) as exc:
-                raise self._lost(exc) from None
+        with self.lock, self._port(f"reading the reply to {what}"):
+            while self.read_eol not in data:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise DeviceTimeout(self.name, what, timeout)
+                self._serial.timeout = left
+                chunk = self._serial.read(max(1, self._serial.in_waiting))
+                if not chunk:
+                    raise DeviceTimeout(self.name, what, timeout)
+                data += chunk
         body = bytes(data[: data.index(self.read_eol)])
         if any(b < 0x20 or b > 0x7E for b in body):
             raise ProtocolError(f"{self.name}: garbled reply to {what}: {bytes(data)!r}")
