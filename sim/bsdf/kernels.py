@@ -20,11 +20,13 @@ else:
     AVAILABLE = True
 
 from sim.bsdf.distributions import BECKMANN_CF_FROM, BECKMANN_CF_TERMS
+from sim.bsdf.masking import HALF_LOG_2PI, STIRLING_FROM, STIRLING_TERMS
 from sim.bsdf.microfacet import COS_HORIZON
 
 #: Distribution and masking codes understood by the kernels.
 CODES = {"ggx": 0, "beckmann": 1, "separable": 0, "correlated": 1, "visible": 0, "walter": 1}
 SQRT_PI = math.sqrt(math.pi)
+STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
 
 
 def supports(distribution_name: str) -> bool:
@@ -67,9 +69,41 @@ if AVAILABLE:
         return math.exp(expo) / (math.pi * ax * ay)
 
     @njit(cache=True, error_model="numpy")
-    def _g2oc(masking, ci, co, li, lo):
+    def _stirling_correction(x):
+        r = 1.0 / x
+        r2 = r * r
+        s = 0.0
+        for c in STIRLING_REVERSED:
+            s = s * r2 + c
+        return s * r
+
+    @njit(cache=True, error_model="numpy")
+    def _log_beta(p, q):
+        """masking.log_beta for one pair (same three regions and formulas)."""
+        a, b = min(p, q), max(p, q)
+        s = a + b
+        frac = a / s
+        if b < STIRLING_FROM:
+            return math.log(math.gamma(a) * (math.gamma(b) / math.gamma(s)))
+        corr_b = _stirling_correction(b) - _stirling_correction(s)
+        if a < STIRLING_FROM:
+            return math.lgamma(a) + corr_b + a - a * math.log(s) + (b - 0.5) * math.log1p(-frac)
+        return (HALF_LOG_2PI - 0.5 * math.log(b) + _stirling_correction(a) + corr_b
+                + (a - 0.5) * math.log(frac) + b * math.log1p(-frac))
+
+    @njit(cache=True, error_model="numpy")
+    def _beta_oc(ci, co, li, lo):
+        """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co)."""
+        if not (ci > 0.0 and co > 0.0 and math.isfinite(li) and math.isfinite(lo)):
+            return 0.0
+        return math.exp(_log_beta(1.0 + li / ci, 1.0 + lo / co) - math.log(ci) - math.log(co))
+
+    @njit(cache=True, error_model="numpy")
+    def _g2oc(masking, ci, co, li, lo, transmitted):
         if masking == 0:
             return 1.0 / ((ci + li) * (co + lo))
+        if transmitted:
+            return _beta_oc(ci, co, li, lo)
         return 1.0 / (ci * co + co * li + ci * lo)
 
     @njit(cache=True, error_model="numpy")
@@ -147,7 +181,8 @@ if AVAILABLE:
                     4.0 * om)
             li = _cos_lambda(dist, ax, ay, ix, iy, iz)
             lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
-            return 0.25 * fr * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo)
+            return 0.25 * fr * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo,
+                                                                     False)
         if not trans:
             return 0.0
         vx = (ix + ox) + em1 * ox
@@ -172,7 +207,7 @@ if AVAILABLE:
         li = _cos_lambda(dist, ax, ay, ix, iy, iz)
         lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
         return (im * om * e * e * ft * _d(dist, ax, ay, mx, my, mz)
-                * _g2oc(masking, iz, abs(oz), li, lo) / n2)
+                * _g2oc(masking, iz, abs(oz), li, lo, True) / n2)
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def dielectric(wi, wo, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
@@ -207,7 +242,7 @@ if AVAILABLE:
                 f = 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
         li = _cos_lambda(dist, ax, ay, ix, iy, iz)
         lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
-        return 0.25 * f * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo)
+        return 0.25 * f * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo, False)
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def conductor(wi, wo, dist, ax, ay, has_f, n_c, masking, sampling, want_pdf):
@@ -270,12 +305,17 @@ if AVAILABLE:
             qo = (ax * ox) ** 2 + (ay * oy) ** 2
             lo = qo / (2.0 * (math.sqrt(aoz * aoz + qo) + aoz))
             g_sep = 1.0 / ((iz + li) * (aoz + lo))
-            g_cor = 1.0 / (iz * aoz + aoz * li + iz * lo)
+            g_cor = 1.0 / (iz * aoz + aoz * li + iz * lo) if refl else 1.0  # Beta: below
             g = g_cor if correlated else g_sep
             val = 0.25 * fr * d * g if refl else im * -om * e * e * tr * d * g / n2
             lobe = refl_on if refl else (trans_on & (im > 0.0) & (om < 0.0) & (tr > 0.0))
             ok = (iz > COS_HORIZON) & (aoz > COS_HORIZON) & (n2 > 0.0) & (mz > 0.0) & lobe
             res[j] = val if ok else 0.0
+            w[0, j], w[1, j], w[2, j], w[3, j] = iz, oz, li, lo
+        if correlated:  # transmission's Beta G2 (log-gamma, branchy): outside the SIMD loop
+            for j in range(m):
+                if w[1, j] < 0.0 and res[j] != 0.0:
+                    res[j] *= _beta_oc(w[0, j], -w[1, j], w[2, j], w[3, j])
         out[start:start + m] = res
 
     @njit(cache=True, parallel=True, error_model="numpy")
@@ -365,7 +405,7 @@ if AVAILABLE:
                                                         mz) * jac
             aoz = abs(oz)
             li = _cos_lambda(0, ax, ay, ix, iy, iz)
-            g2oc = _g2oc(masking, iz, aoz, li, _cos_lambda(0, ax, ay, ox, oy, oz))
+            g2oc = _g2oc(masking, iz, aoz, li, _cos_lambda(0, ax, ay, ox, oy, oz), not reflected)
             if sampling == 0:
                 w = aoz * (iz + li) * g2oc
             else:

@@ -126,11 +126,13 @@ class MicrofacetModel:
                 CODES[self.sampling])
 
     def _g2_over_cosines(self, wi, wo):
-        """G2(wi, wo) / (|cos i| |cos o|), finite at grazing (facet sides checked by callers)."""
+        """G2(wi, wo) / (|cos i| |cos o|), finite at grazing (facet sides checked by callers);
+        a pair on opposite sides of the surface is a transmission pair."""
         d = self.distribution
         ci = np.abs(wi[..., 2])
         co = np.abs(wo[..., 2])
-        return g2_over_cosines(self.masking, ci, co, d.cos_lambda(wi), d.cos_lambda(wo))
+        return g2_over_cosines(self.masking, ci, co, d.cos_lambda(wi), d.cos_lambda(wo),
+                               wi[..., 2] * wo[..., 2] < 0)
 
     def _sampling_distribution(self, wi_up):
         return self.distribution.scaled(walter_widening(wi_up[..., 2]))

@@ -93,9 +93,13 @@ def fresnel_conductor(c, n):
 
 
 def _g2(name, alpha, masking, wi, wo):
+    """Smith G2: separable G1 G1, or height-correlated (Heitz 2014): 1/(1 + Li + Lo) for a
+    reflected pair, the Beta function B(1 + Li, 1 + Lo) for a transmitted one."""
     li, lo = Lambda(name, alpha, wi), Lambda(name, alpha, wo)
     if masking == "separable":
         return 1 / ((1 + li) * (1 + lo))
+    if wi[2] * wo[2] < 0:
+        return mp.beta(1 + li, 1 + lo)
     return 1 / (1 + li + lo)
 
 
