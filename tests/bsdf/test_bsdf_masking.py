@@ -18,7 +18,8 @@ def test_log_beta_matches_mpmath_from_1_to_1e100():
     p, q = (a.ravel() for a in np.meshgrid(ARGS, ARGS))
     ours = log_beta(p, q)
     with mp.workdps(250):  # 1e100 + 1.3 needs more than 100 digits
-        exact = np.array([float(mp.log(mp.beta(mp.mpf(a), mp.mpf(b)))) for a, b in zip(p, q, strict=True)])
+        exact = np.array([float(mp.log(mp.beta(mp.mpf(a), mp.mpf(b))))
+                          for a, b in zip(p, q, strict=True)])
     err = np.abs(ours - exact) / np.maximum(np.abs(exact), 1.0)
     assert err.max() < 1e-15
     np.testing.assert_array_equal(ours, log_beta(q, p))  # symmetric: reciprocity
