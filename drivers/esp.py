@@ -7,6 +7,8 @@ axis*100 + code). Every exchange appends ";TB?" so the error status comes back w
 (queries on one line answer on one line, comma-separated). Queries are retried after a
 timeout or garble; a state-changing command is sent once, and if its status reply is lost
 the driver re-reads the device state (error buffer, target) instead of re-sending it.
+Numeric replies must have the controller's fixed shape (optional minus, digits, point,
+DECIMALS decimals, as in `-12.50000`); any other shape is a garbled reply (retried).
 """
 
 from __future__ import annotations
@@ -22,17 +24,27 @@ from drivers.serial_transport import SerialLineTransport
 
 T = TypeVar("T")
 _TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
+_INTEGER = re.compile(r"\d+")
+DECIMALS = 5  # the ESP301's (and the emulator's) position and rate replies: 12.50000
 
 
-def _number(text: str) -> float:
-    """Parse a numeric reply; ProtocolError if it is not one."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise ProtocolError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise ProtocolError(f"expected a finite number, got {text!r}")
-    return value
+def decimal_parser(decimals: int = DECIMALS) -> Callable[[str], float]:
+    """A strict reader of the ESP's fixed-point replies (`-?digits.<decimals digits>`)."""
+    shape = re.compile(rf"-?\d+\.\d{{{int(decimals)}}}")
+
+    def parse(text: str) -> float:
+        if shape.fullmatch(text) is None:
+            raise ProtocolError(f"garbled number {text!r} (expected {0:.{int(decimals)}f} "
+                                "form)")
+        return float(text)
+
+    return parse
+
+
+def _integer(text: str) -> int:
+    if _INTEGER.fullmatch(text) is None:
+        raise ProtocolError(f"garbled integer {text!r}")
+    return int(text)
 
 
 def _flag(text: str) -> bool:
@@ -53,7 +65,7 @@ class EspController:
 
     timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is how
     often wait() asks MD?; rtscts: the ESP's RS-232 port (19200 8N1) uses RTS/CTS
-    hardware handshake.
+    hardware handshake; decimals: how many decimals its numeric replies carry.
     """
 
     def __init__(
@@ -65,9 +77,11 @@ class EspController:
         retries: int = 2,
         poll_s: float = 0.01,
         rtscts: bool = True,
+        decimals: int = DECIMALS,
     ):
         self.name = name
         self.poll_s = poll_s
+        self.number = decimal_parser(decimals)
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\r", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries, rtscts=rtscts,
@@ -92,8 +106,11 @@ class EspController:
 
     # -- error buffer -----------------------------------------------------------
     def _parse_tb(self, text: str) -> tuple[int, str]:
+        """TB? as (code, message). Code 0 and NO ERROR DETECTED must come together: a
+        lost ',' that merged an answer "1" into the status "0" (`10, ...NO ERROR...`) is
+        garbled, not error 10."""
         match = _TB.fullmatch(text)
-        if match is None:
+        if match is None or (match.group(1) == "0") != (match.group(3) == "NO ERROR DETECTED"):
             raise ProtocolError(f"{self.name}: garbled TB? reply {text!r}")
         return int(match.group(1)), match.group(3)
 
@@ -172,8 +189,9 @@ class EspAxis:
         self.controller, self.number, self.name = controller, number, name
         self._p = str(number)
 
-    def _query(self, cmd: str, parse: Callable[[str], T] = _number) -> T:
-        return self.controller.query(self._p + cmd, parse)
+    def _query(self, cmd: str, parse: Callable[[str], T] | None = None) -> T:
+        """An axis query; numeric (the controller's fixed-point shape) unless parse is given."""
+        return self.controller.query(self._p + cmd, parse or self.controller.number)
 
     def _command(self, cmd: str, verify: Callable[[], bool] | None = None) -> None:
         self.controller.command(self._p + cmd, verify)
@@ -231,7 +249,7 @@ class EspAxis:
     def enable(self) -> None:
         """MO: motor on, units degrees (SN7)."""
         self._command("MO", lambda: self.enabled)
-        self._command("SN7", lambda: self._query("SN?") == 7)
+        self._command("SN7", lambda: self._query("SN?", _integer) == 7)
 
     def disable(self) -> None:
         """MF: motor off."""

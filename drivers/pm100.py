@@ -6,12 +6,14 @@ at the root), their answers come back joined by ';'. Errors go to the SCPI error
 (SYST:ERR? -> `code,"message"`, 0 = none). Every exchange appends ";:SYST:ERR?" so a
 device error is reported with the reply it spoiled; queries (READ?, settings) are retried
 after a timeout or garble, setting commands are sent once and then checked by reading the
-setting back.
+setting back. Numeric answers are checked against the exact shape the manual gives them
+(NR3 `1.234567E-06`: sign, one digit, point, a fixed number of decimals, `E`, signed
+two-digit exponent; NR1 integers; 0/1 flags): a reply with a byte lost or altered is a
+ProtocolError (retried like any garbled query reply), never a plausible wrong number.
 """
 
 from __future__ import annotations
 
-import math
 import re
 import time
 from collections.abc import Callable
@@ -21,16 +23,33 @@ from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError,
 from drivers.serial_transport import SerialLineTransport
 
 _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
+_NR1 = re.compile(r"[+-]?\d+")
+NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
 
 
-def _float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise ProtocolError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise ProtocolError(f"expected a finite number, got {text!r}")
-    return value
+def nr3_parser(decimals: int = NR3_DECIMALS) -> Callable[[str], float]:
+    """A strict NR3 reader: `[+-]d.<decimals digits>E[+-]dd` exactly, else ProtocolError."""
+    shape = re.compile(rf"[+-]?\d\.\d{{{int(decimals)}}}E[+-]\d\d")
+
+    def parse(text: str) -> float:
+        if shape.fullmatch(text) is None:
+            raise ProtocolError(f"garbled number {text!r} (expected NR3 like "
+                                f"{1.0:.{int(decimals)}E})")
+        return float(text)
+
+    return parse
+
+
+def _nr1(text: str) -> int:
+    if _NR1.fullmatch(text) is None:
+        raise ProtocolError(f"garbled integer {text!r}")
+    return int(text)
+
+
+def _flag(text: str) -> bool:
+    if text not in ("0", "1"):
+        raise ProtocolError(f"garbled flag {text!r} (expected 0 or 1)")
+    return text == "1"
 
 
 @dataclass(frozen=True)
@@ -56,9 +75,11 @@ class Pm100:
         name: str = "pm100",
         retries: int = 2,
         zero_timeout_s: float = 10.0,
+        nr3_decimals: int = NR3_DECIMALS,
     ):
         self.name = name
         self.zero_timeout_s = zero_timeout_s
+        self._nr3 = nr3_parser(nr3_decimals)
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
             timeout_s=timeout_s, retries=retries,
@@ -86,29 +107,45 @@ class Pm100:
     def _split(self, message: str, text: str) -> list[str]:
         """Answers before the trailing SYST:ERR? one; DeviceError if it reports one."""
         *answers, err = text.split(";")
-        match = _ERR.fullmatch(err)
-        if match is None:
-            raise ProtocolError(f"{self.name}: garbled reply to {message!r}: {text!r}")
-        code = int(match.group(1))
+        code, what = self._status(message, err, text)
         if code != 0:
-            raise DeviceError(self.name, code, match.group(2))
+            raise DeviceError(self.name, code, what)
         return answers
 
-    def query(self, message: str) -> list[str]:
+    def _status(self, message: str, err: str, text: str) -> tuple[int, str]:
+        """A SYST:ERR? answer `code,"message"` as (code, message); ProtocolError if garbled.
+
+        Code 0 and the text "No error" must come together: a lost ';' that merged an
+        answer "1" into the status "0" (`10,"No error"`) is garbled, not error 10.
+        """
+        match = _ERR.fullmatch(err)
+        if match is None or (match.group(1) in ("0", "+0")) != (
+                match.group(2).lower() == "no error"):
+            raise ProtocolError(f"{self.name}: garbled reply to {message!r}: {text!r}")
+        return int(match.group(1)), match.group(2)
+
+    def query(self, message: str, *parsers: Callable[[str], object]) -> list:
         """Send `message;:SYST:ERR?` and return the answers before the error status.
 
-        Retried after a timeout or garbled reply (use only for side-effect-free messages
-        or ones that may safely run twice, such as READ?).
+        parsers: one per answer (e.g. the NR3 reader), applied inside the retry loop so a
+        garbled answer is re-asked; without them the answers come back as text. Retried
+        after a timeout or garbled reply (use only for side-effect-free messages or ones
+        that may safely run twice, such as READ?).
         """
         n_queries = message.count("?")
 
-        def parse(text: str) -> list[str]:
+        def parse(text: str) -> list:
             answers = self._split(message, text)
             if len(answers) != n_queries:
                 raise ProtocolError(
                     f"{self.name}: {len(answers)} answers to {message!r}, expected {n_queries}"
                 )
-            return answers
+            if not parsers:
+                return answers
+            try:
+                return [read(answer) for read, answer in zip(parsers, answers, strict=True)]
+            except ProtocolError as exc:
+                raise ProtocolError(f"{self.name}: reply to {message!r}: {exc}") from None
 
         return self.transport.query(f"{message};:SYST:ERR?", parse, message)
 
@@ -127,13 +164,11 @@ class Pm100:
         """Drain the SCPI error queue; raise_first raises DeviceError for the first one."""
         found = []
         for _ in range(32):
-            text = self.transport.query(":SYST:ERR?", lambda t: t, "SYST:ERR?")
-            match = _ERR.fullmatch(text)
-            if match is None:
-                raise ProtocolError(f"{self.name}: garbled SYST:ERR? reply {text!r}")
-            if int(match.group(1)) == 0:
+            code, what = self.transport.query(
+                ":SYST:ERR?", lambda t: self._status(":SYST:ERR?", t, t), "SYST:ERR?")
+            if code == 0:
                 break
-            found.append((int(match.group(1)), match.group(2)))
+            found.append((code, what))
         if raise_first and found:
             raise DeviceError(self.name, *found[0])
         return found
@@ -150,7 +185,7 @@ class Pm100:
     @property
     def wavelength_nm(self) -> float:
         """SENS:CORR:WAV?: correction wavelength, nm."""
-        return _float(self.query(":SENS:CORR:WAV?")[0])
+        return self.query(":SENS:CORR:WAV?", self._nr3)[0]
 
     @wavelength_nm.setter
     def wavelength_nm(self, value: float) -> None:
@@ -160,13 +195,13 @@ class Pm100:
 
     def wavelength_limits_nm(self) -> tuple[float, float]:
         """SENS:CORR:WAV? MIN / MAX: the sensor's wavelength range, nm."""
-        lo, hi = self.query(":SENS:CORR:WAV? MIN;:SENS:CORR:WAV? MAX")
-        return _float(lo), _float(hi)
+        lo, hi = self.query(":SENS:CORR:WAV? MIN;:SENS:CORR:WAV? MAX", self._nr3, self._nr3)
+        return lo, hi
 
     @property
     def averaging(self) -> int:
         """SENS:AVER:COUN?: samples averaged per reading."""
-        return int(_float(self.query(":SENS:AVER:COUN?")[0]))
+        return self.query(":SENS:AVER:COUN?", _nr1)[0]
 
     @averaging.setter
     def averaging(self, value: int) -> None:
@@ -175,8 +210,8 @@ class Pm100:
     @property
     def range_w(self) -> float | None:
         """The fixed range's full scale in W, or None while autoranging."""
-        auto, upper = self.query(":SENS:POW:RANG:AUTO?;:SENS:POW:RANG?")
-        return None if auto.strip() == "1" else _float(upper)
+        auto, upper = self.query(":SENS:POW:RANG:AUTO?;:SENS:POW:RANG?", _flag, self._nr3)
+        return None if auto else upper
 
     @range_w.setter
     def range_w(self, value: float | None) -> None:
@@ -190,25 +225,25 @@ class Pm100:
 
         saturated: the reading is above the range's full scale (over range).
         """
-        power, upper = (_float(v) for v in self.query(":READ?;:SENS:POW:RANG?"))
+        power, upper = self.query(":READ?;:SENS:POW:RANG?", self._nr3, self._nr3)
         return Reading(power_w=power, range_w=upper, saturated=power > upper)
 
     def measure(self) -> float:
         """MEAS:POW?: configure for power and take one reading, W."""
-        return _float(self.query(":MEAS:POW?")[0])
+        return self.query(":MEAS:POW?", self._nr3)[0]
 
     def zero(self) -> None:
         """SENS:CORR:COLL:ZERO: dark-zero adjustment (cover the sensor first); waits for it."""
         self.command(":SENS:CORR:COLL:ZERO", lambda: True)
         deadline = time.monotonic() + self.zero_timeout_s
-        while self.query(":SENS:CORR:COLL:ZERO:STAT?")[0].strip() != "0":
+        while self.query(":SENS:CORR:COLL:ZERO:STAT?", _flag)[0]:
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, "zero adjustment", self.zero_timeout_s)
             time.sleep(0.05)
 
     def zero_offset_w(self) -> float:
         """SENS:CORR:COLL:ZERO:MAGN?: the dark offset the last zero measured, W."""
-        return _float(self.query(":SENS:CORR:COLL:ZERO:MAGN?")[0])
+        return self.query(":SENS:CORR:COLL:ZERO:MAGN?", self._nr3)[0]
 
     def sensor(self) -> SensorIdentity:
         """SYST:SENS:IDN?: name, serial number, calibration message, type, subtype, flags."""

@@ -284,7 +284,7 @@ def test_dropped_bytes_never_hang_and_are_caught_when_structure_breaks(esp_pair)
         except DeviceError as exc:  # a dropped byte turned "0," into another code
             outcomes.append(exc.code)
     assert "garbled" in outcomes
-    # the rest parsed: a byte lost from an ASCII number can go unnoticed (no checksum)
+    # the rest parsed: a lost integer digit (12.5 -> 2.5) or timestamp digit keeps every shape
     assert emu.server.faults.counts["drop"] == 40
 
 
