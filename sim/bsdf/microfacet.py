@@ -71,11 +71,12 @@ class MicrofacetModel:
         if u.ndim == 0 or u.shape[-1] != 3:
             raise ValueError(f"u must have shape (..., 3), got {u.shape}")
         (wi,) = direction_arrays(wi)  # normalised by each _sample (the kernels do it inline)
-        wi, u = np.broadcast_arrays(wi, u)
-        shape = wi.shape[:-1]
+        full = np.broadcast_shapes(wi.shape, u.shape)
+        wi, u = np.broadcast_to(wi, full), np.broadcast_to(u, full)
+        shape = full[:-1]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # failures masked
-            wo, weight, pdf = self._sample(np.ascontiguousarray(wi).reshape(-1, 3),
-                                           np.ascontiguousarray(u).reshape(-1, 3))
+            # reshape keeps broadcast (stride-0) views: one wi for many u is not copied
+            wo, weight, pdf = self._sample(wi.reshape(-1, 3), u.reshape(-1, 3))
         return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
 
     # --- shared pieces -----------------------------------------------------------------
@@ -109,7 +110,7 @@ class MicrofacetModel:
         if self.backend == "numba":
             wi, wo = direction_arrays(wi, wo)
             shape = wi.shape[:-1]
-            flat = (np.ascontiguousarray(a).reshape(-1, 3) for a in (wi, wo))
+            flat = (a.reshape(-1, 3) for a in (wi, wo))  # views, broadcast ones too: no copy
             return self._kernel(*flat, want_pdf).reshape(shape)
         wi, wo = directions(wi, wo)
         shape = wi.shape[:-1]

@@ -17,12 +17,15 @@ def unit(v: np.ndarray) -> np.ndarray:
 
 
 def direction_arrays(*vs: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Broadcast direction arrays (..., 3) to one shape, float64, not normalised."""
+    """Broadcast direction arrays (..., 3) to one shape, float64, not normalised.
+
+    Read-only views, never copies (a single direction against many stays one row in memory)."""
     arrays = [np.asarray(v, dtype=np.float64) for v in vs]
     for a in arrays:
         if a.ndim == 0 or a.shape[-1] != 3:
             raise ValueError(f"directions must have shape (..., 3), got {a.shape}")
-    return tuple(np.broadcast_arrays(*arrays))
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    return tuple(np.broadcast_to(a, shape) for a in arrays)
 
 
 def directions(*vs: np.ndarray) -> tuple[np.ndarray, ...]:
