@@ -4,7 +4,7 @@ f = (P - dark) / (Phi(t) * Omega * factor * |cos o|): dark subtraction per range
 dark readings, the beam power Phi from the straight-through (beam) readings (their mean when
 they show no drift, else interpolated in time, calibration.beam), the aperture solid angle
 Omega, and the faces the light crosses
-(`factor`: the hemisphere's T_exit / n^2 on the transmitted side, as the bench applies it,
+(`factor`: the hemisphere's T_exit on the transmitted side, as the bench applies it,
 sim.bench.sample.exit_view). Noise of a reading: the scatter of the dark readings on its range,
 scaled with the range's full scale (read noise and ADC steps scale so), plus the beam's
 relative noise; the dark level's and the beam's own uncertainties are propagated.

@@ -44,8 +44,9 @@ class ReducedData:
         or from -z (transmission), positive on the forward (specular / refracted) side."""
         cos_o = np.where(self.transmission, -self.wo[:, 2], self.wo[:, 2])
         theta = np.degrees(np.arccos(np.clip(cos_o, -1.0, 1.0)))
-        same_side_as_source = self.wo[:, 0] * self.wi[:, 0] > 0
-        return np.where(same_side_as_source, -theta, theta)
+        # forward is +x at normal incidence (wi_x = 0), else away from the source's side
+        forward = np.where(self.wi[:, 0] == 0, 1.0, -np.sign(self.wi[:, 0]))
+        return np.where(self.wo[:, 0] * forward < 0, -theta, theta)
 
     def subset(self, keep: np.ndarray) -> ReducedData:
         """The entries selected by a boolean mask or index array."""

@@ -52,9 +52,12 @@ def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndar
     * |cos o|, for sample-frame wi, wo (..., 3); what the bench integrates and reduce divides by.
 
     Reflection: 1 (T_normal^2 when lit through the hemisphere). Transmission through the
-    hemisphere: DESIGN.md's T_exit / n^2 lit from air, T_enter n^2 lit from the glass
-    ((eta_i / eta_o)^2 T). Through a slab: f at the direction inside the glass that leaves the
-    polished back face along wo, times that face's transmittance / n^2. A conductor: 0.
+    hemisphere: T, the curved face's normal-incidence transmittance, either way round (rays
+    from the centre cross it unbent, so the aperture's cone and the power in it are kept; f_t
+    of Walter's eq. 21 integrates to the transmitted flux fraction, so no n^2: see
+    docs/architecture.md, departures). Through a slab: f at the direction inside the glass
+    that leaves the polished back face along wo, times that face's transmittance / n^2 (the
+    back face widens the cone by n^2). A conductor: 0.
     """
     wi, wo = np.broadcast_arrays(wi, wo)
     reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
@@ -64,7 +67,7 @@ def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndar
     if spec.kind == "conductor":
         transmitted = np.zeros(wo.shape[:-1])
     elif spec.kind == "hemisphere":
-        transmitted = np.full(wo.shape[:-1], t / n**2 if spec.lit_from == "air" else t * n**2)
+        transmitted = np.full(wo.shape[:-1], t)
     else:
         w_glass = optics.air_to_glass_direction(wo, n)
         w_eval = np.where(reflected[..., None], wo, w_glass)
