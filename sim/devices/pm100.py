@@ -32,6 +32,9 @@ SCPI_ERRORS = {
     -108: "Parameter not allowed",
     -109: "Missing parameter",
     -113: "Undefined header",
+    -114: "Header suffix out of range",
+    -131: "Invalid suffix",
+    -138: "Suffix not allowed",
     -222: "Data out of range",
     -230: "Data corrupt or stale",
     -350: "Queue overflow",
@@ -66,28 +69,43 @@ class _Node:
     short: str
     long: str
     optional: bool
+    numbered: bool  # takes a numeric keyword suffix (SENSe1); 1 is the only channel
 
 
 def _pattern(spec: str) -> tuple[_Node, ...]:
-    """'[SENSe]:POWer[:DC]:RANGe' -> nodes with short/long forms and optional flags."""
+    """'[SENSe#]:POWer[:DC]:RANGe' -> nodes with short/long forms, optional and numbered
+    ('#') flags."""
     nodes = []
-    for opt, word in re.findall(r"(\[?):?([A-Za-z*]+)\]?", spec):
+    for opt, word, numbered in re.findall(r"(\[?):?([A-Za-z*]+)(#?)\]?", spec):
         short = "".join(ch for ch in word if ch.isupper() or ch == "*")
-        nodes.append(_Node(short, word.upper(), bool(opt)))
+        nodes.append(_Node(short, word.upper(), bool(opt), bool(numbered)))
     return tuple(nodes)
 
 
-def _matches(nodes: tuple[_Node, ...], tokens: list[str]) -> bool:
+Token = tuple[str, str]  # (keyword, numeric suffix or "")
+
+
+def _matches(nodes: tuple[_Node, ...], tokens: list[Token]) -> bool:
     if not nodes:
         return not tokens
     head, rest = nodes[0], nodes[1:]
-    if tokens and tokens[0] in (head.short, head.long) and _matches(rest, tokens[1:]):
+    if (tokens and tokens[0][0] in (head.short, head.long)
+            and (head.numbered or not tokens[0][1]) and _matches(rest, tokens[1:])):
         return True
     return head.optional and _matches(rest, tokens)
 
 
 _UNIT = re.compile(r"(:?)([A-Za-z*][A-Za-z0-9:*]*)(\?)?(?:\s+(.*))?")
-_NRF = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+_KEYWORD = re.compile(r"([A-Z*]+)(\d*)")
+_NRF = re.compile(r"([+-]?(?:\d+\.?\d*|\.\d+)(?:E[+-]?\d+)?)\s*([A-Z]*)")
+# Unit suffixes a numeric parameter may carry (upper case; SCPI reads M as milli, so MW is
+# a milliwatt), as factors to the parameter's own unit: nm for the wavelength, W for
+# ranges (bare SI multipliers too, as the manual's "M, K, or u" engineering suffixes).
+WAVELENGTH_UNITS = {"NM": 1.0, "UM": 1e3}
+POWER_UNITS = {f"{prefix}{unit}": factor
+               for prefix, factor in (("", 1.0), ("K", 1e3), ("M", 1e-3), ("U", 1e-6),
+                                      ("N", 1e-9), ("P", 1e-12))
+               for unit in ("W", "") if prefix or unit}
 
 
 def _nr3(value: float) -> str:
@@ -210,17 +228,23 @@ class Pm100Emulator:
         if match is None:
             raise _ScpiError(-102)
         rooted, header, question, params = match.groups()
-        tokens = [t.upper() for t in header.split(":")]
-        if any(not t for t in tokens):
+        words = header.upper().split(":")
+        if any(not w for w in words):
             raise _ScpiError(-102)
+        keywords = [_KEYWORD.fullmatch(w) for w in words]
+        if any(k is None for k in keywords):
+            raise _ScpiError(-113)
+        tokens = [(k.group(1), k.group(2)) for k in keywords]
+        common = tokens[0][0].startswith("*")
         query = question is not None
-        candidates = [tokens] if rooted or tokens[0].startswith("*") else [path + tokens, tokens]
+        candidates = [tokens] if rooted or common else [path + tokens, tokens]
         for full in candidates:
             for nodes, can_query, can_set, action in self._commands:
                 if _matches(nodes, full) and (can_query if query else can_set):
+                    if any(suffix and int(suffix) != 1 for _, suffix in tokens):
+                        raise _ScpiError(-114)  # one sensor channel: only suffix 1 exists
                     args = [a.strip() for a in params.split(",")] if params else []
-                    new_path = path if tokens[0].startswith("*") else full[:-1]
-                    return action(query, args), new_path
+                    return action(query, args), path if common else full[:-1]
         raise _ScpiError(-113)
 
     @staticmethod
@@ -237,14 +261,23 @@ class Pm100Emulator:
         return args[0].upper()
 
     @staticmethod
-    def _number(text: str, lo: float, hi: float) -> float:
+    def _number(text: str, lo: float, hi: float, units: Mapping[str, float] | None = None
+                ) -> float:
+        """A decimal numeric parameter (or MIN / MAX), optionally with one of `units`
+        (e.g. 633NM, 633 nm, 1.5 uW), in the parameter's own unit."""
         if text in ("MIN", "MINIMUM"):
             return lo
         if text in ("MAX", "MAXIMUM"):
             return hi
-        if _NRF.fullmatch(text) is None:
+        match = _NRF.fullmatch(text)
+        if match is None:
             raise _ScpiError(-104)
-        value = float(text)
+        number, suffix = match.groups()
+        if suffix and units is None:
+            raise _ScpiError(-138)
+        if suffix and suffix not in units:
+            raise _ScpiError(-131)
+        value = float(number) * (units[suffix] if suffix else 1.0)
         if not (math.isfinite(value) and lo <= value <= hi):
             raise _ScpiError(-222)
         return value
@@ -278,19 +311,19 @@ class Pm100Emulator:
             ("*OPC", True, False, lambda q, a: "1"),
             ("SYSTem:ERRor[:NEXT]", True, False, self._syst_err),
             ("SYSTem:SENSor:IDN", True, False, self._sensor_idn),
-            ("MEASure[:SCALar]:POWer", True, False, self._meas_pow),
-            ("CONFigure[:SCALar]:POWer", False, True, self._conf_pow),
-            ("CONFigure", True, False, self._conf_query),
-            ("INITiate[:IMMediate]", False, True, self._init),
-            ("FETCh", True, False, self._fetch),
-            ("READ", True, False, self._read),
-            ("[SENSe]:CORRection:WAVelength", True, True, self._wavelength),
-            ("[SENSe]:POWer[:DC]:RANGe:AUTO", True, True, self._range_auto),
-            ("[SENSe]:POWer[:DC]:RANGe[:UPPer]", True, True, self._range),
-            ("[SENSe]:AVERage[:COUNt]", True, True, self._average),
-            ("[SENSe]:CORRection:COLLect:ZERO[:INITiate]", False, True, self._zero),
-            ("[SENSe]:CORRection:COLLect:ZERO:STATe", True, False, lambda q, a: "0"),
-            ("[SENSe]:CORRection:COLLect:ZERO:MAGNitude", True, False,
+            ("MEASure#[:SCALar]:POWer", True, False, self._meas_pow),
+            ("CONFigure#[:SCALar]:POWer", False, True, self._conf_pow),
+            ("CONFigure#", True, False, self._conf_query),
+            ("INITiate#[:IMMediate]", False, True, self._init),
+            ("FETCh#", True, False, self._fetch),
+            ("READ#", True, False, self._read),
+            ("[SENSe#]:CORRection:WAVelength", True, True, self._wavelength),
+            ("[SENSe#]:POWer[:DC]:RANGe:AUTO", True, True, self._range_auto),
+            ("[SENSe#]:POWer[:DC]:RANGe[:UPPer]", True, True, self._range),
+            ("[SENSe#]:AVERage[:COUNt]", True, True, self._average),
+            ("[SENSe#]:CORRection:COLLect:ZERO[:INITiate]", False, True, self._zero),
+            ("[SENSe#]:CORRection:COLLect:ZERO:STATe", True, False, lambda q, a: "0"),
+            ("[SENSe#]:CORRection:COLLect:ZERO:MAGNitude", True, False,
              lambda q, a: _nr3(self.photodiode.zero_offset_w)),
         ]
         return [(_pattern(spec), q, s, action) for spec, q, s, action in table]
@@ -363,7 +396,7 @@ class Pm100Emulator:
         lo, hi = self.sensor.wavelength_min_nm, self.sensor.wavelength_max_nm
         if query:
             return self._limits_query(args, lo, hi, self.wavelength_nm)
-        self.wavelength_nm = self._number(self._one_arg(args), lo, hi)
+        self.wavelength_nm = self._number(self._one_arg(args), lo, hi, WAVELENGTH_UNITS)
         return None
 
     def _range_auto(self, query: bool, args: list[str]) -> str | None:
@@ -377,7 +410,7 @@ class Pm100Emulator:
         ranges = self.photodiode.ranges_w
         if query:
             return self._limits_query(args, ranges[0], ranges[-1], self.range_w)
-        value = self._number(self._one_arg(args), 0.0, ranges[-1])
+        value = self._number(self._one_arg(args), 0.0, ranges[-1], POWER_UNITS)
         self.range_w = self.photodiode.range_for(value)
         self.autorange = False
         return None
