@@ -118,7 +118,7 @@ class SerialLineTransport:
         with self.lock:
             with self._port("discarding stale input"):
                 self._serial.reset_input_buffer()
-            with self._port(f"writing {line!r}"):
+            with self._port(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}"):
                 self._serial.write(data)
                 self._serial.flush()
 

@@ -1,14 +1,16 @@
 """A pty whose emulator stops mid-session: every failure reaches the caller as a DriverError
 (SerialPortError naming device, port and what failed), never termios.error or OSError."""
 
+import os
 import re
 import termios
 import threading
 import time
+import tty
 
 import pytest
 
-from drivers.base import DriverError
+from drivers.base import DeviceTimeout, DriverError
 from drivers.serial_transport import SerialLineTransport, SerialPortError
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.pty_server import PtyServer
@@ -89,3 +91,20 @@ def test_transport_echo_session_then_hangup():
         server.stop()
         with pytest.raises(DriverError, match=f"echo: serial port {re.escape(port)} went away"):
             link.exchange("1TP?")
+
+
+def test_a_write_nobody_reads_times_out_by_name():
+    """A pty whose far side is open but never read fills up: the write is bounded."""
+    master, slave = os.openpty()
+    try:
+        tty.setraw(slave)
+        with SerialLineTransport(os.ttyname(slave), name="stuck", timeout_s=0.3) as link:
+            t0 = time.monotonic()
+            with pytest.raises(DeviceTimeout, match=r"stuck: timeout after 0.3 s waiting for "
+                               r"the port to take writing '(1TP\?){10}'\.\.\."):
+                for _ in range(100):
+                    link.send("1TP?" * 4000)
+            assert time.monotonic() - t0 < 2.0
+    finally:
+        os.close(master)
+        os.close(slave)
