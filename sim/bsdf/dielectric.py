@@ -157,8 +157,7 @@ class RoughDielectric(MicrofacetModel):
             reflected = np.full(c.shape, self.reflection)
         # refraction with e - 1 kept exact: wo = -wi / e + (c - e cos_t) / e m, where
         # c - e cos_t = (1 - e^2) / (c + e cos_t)
-        s2 = np.maximum((1.0 - c) * (1.0 + c), 0.0)
-        e_ct = np.sqrt(np.maximum((e - np.sqrt(s2)) * (e + np.sqrt(s2)), 0.0))
+        e_ct = np.sqrt(np.maximum(em1 * (e + 1.0) + c * c, 0.0))  # as in fresnel
         gap = -em1 * (e + 1.0) / np.where(c + e_ct > 0, c + e_ct, 1.0)  # c - e cos_t
         wo_t = (-wi + gap[:, None] * m) / e[:, None]
         wo = np.where(reflected[:, None], reflect(wi, m), wo_t)

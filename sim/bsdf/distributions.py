@@ -99,7 +99,7 @@ class Distribution:
         """Smith Lambda(w); +inf at exactly grazing w."""
         c = np.abs(w[..., 2])
         cl = self.cos_lambda(w)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(over="ignore"):  # c ~ 1e-320: Lambda beyond 1.8e308 is inf
             return np.where(c > 0, cl / np.where(c > 0, c, 1.0), np.inf)
 
     def G1(self, w: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -322,7 +322,11 @@ class Phong(Distribution):
     def sample_normal(self, u1, u2):
         u1 = np.asarray(u1, dtype=np.float64)
         phi = 2.0 * math.pi * np.asarray(u2, dtype=np.float64)
-        log_cos = np.log1p(-u1) / (self.exponent + 2.0)  # 1 - u1 is uniform in (0, 1]
+        # 1 - u1 is uniform in (0, 1]; u1 = 1 is the horizon normal (log cos = -inf), taken
+        # explicitly rather than through log1p(-1)
+        top = u1 < 1.0
+        log_cos = np.where(top, np.log1p(-np.where(top, u1, 0.0)), -np.inf) / (self.exponent
+                                                                                 + 2.0)
         cos_t = np.exp(log_cos)
         sin_t = np.sqrt(-np.expm1(2.0 * log_cos))
         return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)

@@ -33,8 +33,9 @@ def reflectance_transmittance_toward(
     The amplitude numerators are written with e^2 - 1 = (e - 1)(e + 1), so F keeps full
     relative accuracy when e = 1 +- 1e-12 (F ~ 1e-25), given an exact e - 1.
     """
-    s = np.sqrt(np.maximum((1.0 - c) * (1.0 + c), 0.0))  # sin of incidence
-    e_ct2 = (e - s) * (e + s)  # (e cos_t)^2 = e^2 - sin_i^2, factored against cancellation
+    # (e cos_t)^2 = e^2 - sin_i^2 = (e - 1)(e + 1) + c^2: no 1 - c^2 rounding to 1 at grazing
+    # (which would make a matched interface, e = 1, reflect everything below c ~ 1e-8)
+    e_ct2 = e_minus_1 * (e + 1.0) + c * c
     tir = e_ct2 <= 0
     e_ct = np.sqrt(np.where(tir, 0.0, e_ct2))
     e2m1 = e_minus_1 * (e + 1.0)
@@ -64,8 +65,11 @@ def dielectric_transmittance(cos_i: np.ndarray, cos_t: np.ndarray, e: np.ndarray
 
 
 def _transmittance(c, e_ct, e, den_s, den_p):
-    """(1 - rs^2 + 1 - rp^2) / 2 = 2 c e cos_t (1 / den_s^2 + e^2 / den_p^2), no subtraction."""
-    return 2.0 * c * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p))
+    """(1 - rs^2 + 1 - rp^2) / 2 = 2 c e cos_t (1 / den_s^2 + e^2 / den_p^2), no subtraction.
+
+    Written with the ratios c / den and e cos_t / den (each in [0, 1]), so cosines down to the
+    smallest subnormal never square to 0 and divide by it."""
+    return 2.0 * ((c / den_s) * (e_ct / den_s) + e * e * (c / den_p) * (e_ct / den_p))
 
 
 def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray | float) -> np.ndarray:
@@ -90,8 +94,10 @@ def fresnel_conductor(cos_i: np.ndarray, eta_complex: complex | np.ndarray) -> n
     den_s = c + root
     den_p = n2 * c + root
     ok = (den_s != 0) & (den_p != 0)  # both vanish only for n = 1 at grazing: F = 1 there
-    den_s = np.where(ok, den_s, 1.0)
-    den_p = np.where(ok, den_p, 1.0)
-    rs = -n2m1 / (den_s * den_s)  # (c - n cos_t) / (c + n cos_t)
-    rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / (den_p * den_p)
+    matched = n2m1 == 0  # n = 1: rs = rp = 0 exactly; no complex 0 / 1e-320 (it overflows)
+    den_s = np.where(ok & ~matched, den_s, 1.0)
+    den_p = np.where(ok & ~matched, den_p, 1.0)
+    # (c - n cos_t) / (c + n cos_t); divided twice, as den^2 underflows for den ~ 1e-300
+    rs = -n2m1 / den_s / den_s
+    rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
     return np.where(ok, 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), 1.0)

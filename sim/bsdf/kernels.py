@@ -108,8 +108,7 @@ if AVAILABLE:
 
     @njit(cache=True, error_model="numpy")
     def _fresnel_toward(c, e, em1):
-        s = math.sqrt(max((1.0 - c) * (1.0 + c), 0.0))
-        e_ct2 = (e - s) * (e + s)
+        e_ct2 = em1 * (e + 1.0) + c * c
         if e_ct2 <= 0.0:
             return 1.0
         e_ct = math.sqrt(e_ct2)
@@ -132,7 +131,7 @@ if AVAILABLE:
         den_p = e * e * c + e_ct
         if den_s <= 0.0 or den_p <= 0.0:
             return 0.0
-        return 2.0 * c * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p))
+        return 2.0 * ((c / den_s) * (e_ct / den_s) + e * e * (c / den_p) * (e_ct / den_p))
 
     @njit(cache=True, error_model="numpy")
     def _unit(x, y, z):
@@ -237,8 +236,8 @@ if AVAILABLE:
             den_s = c + root
             den_p = n2 * c + root
             if den_s != 0 and den_p != 0:
-                rs = -n2m1 / (den_s * den_s)
-                rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / (den_p * den_p)
+                rs = -n2m1 / den_s / den_s
+                rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
                 f = 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
         li = _cos_lambda(dist, ax, ay, ix, iy, iz)
         lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
@@ -288,8 +287,7 @@ if AVAILABLE:
             im = ix * mx + iy * my + iz * mz
             om = ox * mx + oy * my + oz * mz
             aoz = abs(oz)
-            sn = math.sqrt(max((1.0 - im) * (1.0 + im), 0.0))
-            e_ct2 = (e - sn) * (e + sn)
+            e_ct2 = em1 * (e + 1.0) + im * im
             e_ct = math.sqrt(max(e_ct2, 0.0)) if refl else e * -om
             den_s = im + e_ct
             den_p = e * e * im + e_ct
@@ -297,7 +295,7 @@ if AVAILABLE:
             rs = -e2m1 / (den_s * den_s)
             rp = e2m1 * (im * im * (e * e + 1.0) - 1.0) / (den_p * den_p)
             fr = 1.0 if e_ct2 <= 0.0 else 0.5 * (rs * rs + rp * rp)
-            tr = 2.0 * im * e_ct * (1.0 / (den_s * den_s) + e * e / (den_p * den_p))
+            tr = 2.0 * ((im / den_s) * (e_ct / den_s) + e * e * (im / den_p) * (e_ct / den_p))
             q = mz * mz + ((mx / ax) ** 2 + (my / ay) ** 2)
             d = 1.0 / (math.pi * ax * ay * q * q)
             qi = (ax * ix) ** 2 + (ay * iy) ** 2
@@ -383,8 +381,7 @@ if AVAILABLE:
             mx, my, mz = _ggx_normal(ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
             c = ix * mx + iy * my + iz * mz
             fr = _fresnel_toward(abs(c), e, em1)
-            s2 = max((1.0 - c) * (1.0 + c), 0.0)
-            e_ct = math.sqrt(max((e - math.sqrt(s2)) * (e + math.sqrt(s2)), 0.0))
+            e_ct = math.sqrt(max(em1 * (e + 1.0) + c * c, 0.0))
             ft = _transmittance_e(abs(c), e_ct, e) if e_ct > 0.0 else 0.0
             reflected = u[k, 2] < fr if both else refl_on
             if reflected:

@@ -43,12 +43,21 @@ def g2_over_cosines(
     correlated reflection: 1 / (1 + Lambda_i + Lambda_o) = ci co / (ci co + co li + ci lo);
     correlated transmission (transmitted True: wi, wo on opposite sides): B(1 + Li, 1 + Lo).
     """
+    ci, co, li, lo = (np.asarray(a, dtype=np.float64) for a in (ci, co, li, lo))
+    masked = np.isinf(li) | np.isinf(lo)  # infinite mean slope: fully masked, G2 = 0
+    li, lo = np.where(masked, 0.0, li), np.where(masked, 0.0, lo)
     if masking == "separable":
-        return 1.0 / ((ci + li) * (co + lo))
-    reflected = 1.0 / (ci * co + co * li + ci * lo)
+        return np.where(masked, 0.0, _reciprocal((ci + li) * (co + lo)))
+    reflected = np.where(masked, 0.0, _reciprocal(ci * co + co * li + ci * lo))
     if not np.any(transmitted):
         return reflected
     return np.where(transmitted, beta_over_cosines(ci, co, li, lo), reflected)
+
+
+def _reciprocal(den: np.ndarray) -> np.ndarray:
+    """1 / den for den >= 0, +inf where den == 0 (both directions exactly grazing, where
+    G2 / (cos cos) truly diverges), without a division by zero."""
+    return np.divide(1.0, den, out=np.full(np.shape(den), np.inf), where=den > 0)
 
 
 def beta_over_cosines(ci: np.ndarray, co: np.ndarray, li: np.ndarray, lo: np.ndarray) -> np.ndarray:
@@ -63,7 +72,8 @@ def beta_over_cosines(ci: np.ndarray, co: np.ndarray, li: np.ndarray, lo: np.nda
     ci, co = np.where(live, ci, one), np.where(live, co, one)
     p = 1.0 + np.where(live, li, 0.0) / ci
     q = 1.0 + np.where(live, lo, 0.0) / co
-    return np.where(live, np.exp(log_beta(p, q) - np.log(ci) - np.log(co)), 0.0)
+    with np.errstate(over="ignore"):  # both cosines ~1e-300: the true value exceeds 1.8e308
+        return np.where(live, np.exp(log_beta(p, q) - np.log(ci) - np.log(co)), 0.0)
 
 
 def stirling_correction(x: np.ndarray) -> np.ndarray:
