@@ -21,7 +21,7 @@ from collections.abc import Mapping
 
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.motion import LimitError, MotionError, TrapezoidAxis, VirtualClock
-from sim.devices.pty_server import PtyServer
+from sim.devices.pty_server import PtyDevice, PtyServer
 
 # General errors (ESP301 manual, Appendix A "Error messages"), the ones this emulator raises.
 GENERAL_ERRORS = {
@@ -126,7 +126,7 @@ class _EmulatedAxis:
         return moving
 
 
-class EspEmulator:
+class EspEmulator(PtyDevice):
     """An ESP300/ESP301 controller with rotary stages on a virtual clock, served on a pty.
 
     axes: {axis number: table} with keys of AXIS_KEYS (degrees); faults: injected on
@@ -163,31 +163,10 @@ class EspEmulator:
         )
 
     # -- lifecycle --------------------------------------------------------------
-    @property
-    def endpoint(self) -> str | None:
-        """The pty path hosts open (None before start)."""
-        return self._server.endpoint
-
-    @property
-    def server(self) -> PtyServer:
-        """The pty server (its handler_errors must stay empty)."""
-        return self._server
-
-    def start(self) -> str:
-        """Serve on a new pty; returns its path."""
-        return self._server.start()
-
     def stop(self) -> None:
-        """Stop serving and close the pty."""
+        """Stop serving, end any wait for motion, and close the pty."""
         self._stopping.set()
-        self._server.stop()
-
-    def __enter__(self) -> EspEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+        super().stop()
 
     def axis_position_deg(self, number: int) -> float:
         """Actual position of an axis now, degrees (for the optical bench)."""

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.photodiode import PhotodiodeModel, PowerSource
-from sim.devices.pty_server import PtyServer
+from sim.devices.pty_server import PtyDevice, PtyServer
 
 SCPI_ERRORS = {
     0: "No error",
@@ -112,7 +112,7 @@ def _nr3(value: float) -> str:
     return f"{value:.6E}"
 
 
-class Pm100Emulator:
+class Pm100Emulator(PtyDevice):
     """A PM100-series meter with a photodiode sensor, served on a pty.
 
     source: a PowerSource (or any callable returning watts) giving the true power at the
@@ -164,31 +164,6 @@ class Pm100Emulator:
         self.last_reading: float | None = None
 
     # -- lifecycle --------------------------------------------------------------
-    @property
-    def endpoint(self) -> str | None:
-        """The pty path hosts open (None before start)."""
-        return self._server.endpoint
-
-    @property
-    def server(self) -> PtyServer:
-        """The pty server (its handler_errors must stay empty)."""
-        return self._server
-
-    def start(self) -> str:
-        """Serve on a new pty; returns its path."""
-        return self._server.start()
-
-    def stop(self) -> None:
-        """Stop serving and close the pty."""
-        self._server.stop()
-
-    def __enter__(self) -> Pm100Emulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
     # -- error queue --------------------------------------------------------------
     def _push(self, code: int) -> None:
         """SCPI error queue: when full, the newest entry becomes -350 Queue overflow."""

@@ -216,3 +216,37 @@ class PtyServer:
                 time.sleep(0.001)
             except OSError:
                 return
+
+
+class PtyDevice:
+    """Lifecycle shared by the line-oriented emulators: serve on a pty, stop, context manager.
+
+    Subclasses set `self._server` (a PtyServer) and may extend `stop()`.
+    """
+
+    _server: PtyServer
+
+    @property
+    def endpoint(self) -> str | None:
+        """The pty path hosts open (None before start)."""
+        return self._server.endpoint
+
+    @property
+    def server(self) -> PtyServer:
+        """The pty server (its handler_errors must stay empty)."""
+        return self._server
+
+    def start(self) -> str:
+        """Serve on a new pty; returns its path."""
+        return self._server.start()
+
+    def stop(self) -> None:
+        """Stop serving and close the pty."""
+        self._server.stop()
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
