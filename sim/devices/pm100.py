@@ -163,7 +163,6 @@ class Pm100Emulator(PtyDevice):
         self.range_w = self.photodiode.ranges_w[-1]
         self.last_reading: float | None = None
 
-    # -- lifecycle --------------------------------------------------------------
     # -- error queue --------------------------------------------------------------
     def _push(self, code: int) -> None:
         """SCPI error queue: when full, the newest entry becomes -350 Queue overflow."""
