@@ -82,6 +82,13 @@ class RoughConductor(MicrofacetModel):
         return p
 
     def _sample(self, wi, u):
+        if self._compiled_sampling():
+            from sim.bsdf.kernels import conductor_sample
+
+            dist, ax, ay, masking, sampling = self._kernel_codes()
+            n = 0j if self.eta_complex is None else self.eta_complex
+            return conductor_sample(wi, u, dist, ax, ay, self.eta_complex is not None, n,
+                                    masking, sampling)
         wi = unit(wi)
         up = wi[:, 2] > COS_HORIZON
         wi = np.where(up[:, None], wi, [0.0, 0.0, 1.0])  # below the surface: fails below

@@ -141,12 +141,12 @@ class RoughDielectric(MicrofacetModel):
     # --- sample -----------------------------------------------------------------------------
 
     def _sample(self, wi, u):
-        if self.backend == "numba" and self.distribution.name == "ggx":
-            from sim.bsdf.kernels import ggx_dielectric_sample
+        if self._compiled_sampling():
+            from sim.bsdf.kernels import dielectric_sample
 
-            _, ax, ay, masking, sampling = self._kernel_codes()
-            return ggx_dielectric_sample(wi, u, ax, ay, self.eta, masking, self.reflection,
-                                         self.transmission, sampling)
+            dist, ax, ay, masking, sampling = self._kernel_codes()
+            return dielectric_sample(wi, u, dist, ax, ay, self.eta, masking, self.reflection,
+                                     self.transmission, sampling)
         wi, _, e, em1, flip = self._mirror(unit(wi), None)
         m = self._sample_normal(wi, u[:, 0], u[:, 1])
         c = dot(wi, m)

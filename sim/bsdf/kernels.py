@@ -1,10 +1,11 @@
-"""Compiled (numba) eval and pdf of RoughDielectric and RoughConductor for Beckmann and GGX.
+"""Compiled (numba) eval, pdf and sample of RoughDielectric and RoughConductor (GGX, Beckmann).
 
 The numpy code in the model classes is the reference; these kernels repeat the same formulas
 per pair, in the same order, and a test holds them to it. They are used automatically when
 numba imports (the gonio[fast] extra); compiled code is cached on disk. The GGX dielectric eval
 has a branch-free structure-of-arrays kernel that LLVM turns into SIMD lanes (about 3x the
-scalar kernel); the others are scalar per-pair loops."""
+scalar kernel); the others are scalar per-pair loops, all parallel over pairs (prange). sample()
+is compiled for GGX and for Beckmann with Walter's sampler."""
 
 from __future__ import annotations
 
@@ -32,6 +33,13 @@ STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
 def supports(distribution_name: str) -> bool:
     """True when a compiled kernel exists for this distribution and numba is installed."""
     return AVAILABLE and distribution_name in ("ggx", "beckmann")
+
+
+def supports_sampling(distribution_name: str, sampling: str) -> bool:
+    """True when sample() has a compiled kernel: GGX with either sampler, Beckmann with
+    Walter's (its visible-normal sampler needs erfinv, which numba lacks)."""
+    return AVAILABLE and (distribution_name == "ggx" or (distribution_name == "beckmann"
+                                                         and sampling == "walter"))
 
 
 if AVAILABLE:
@@ -218,6 +226,24 @@ if AVAILABLE:
         return out
 
     @njit(cache=True, error_model="numpy")
+    def _conductor_fresnel(c, has_f, n_c):
+        """fresnel.fresnel_conductor for one cosine; 1 when the model has no index (F = 1)."""
+        if not has_f:
+            return 1.0
+        n2 = n_c * n_c
+        n2m1 = (n_c - 1.0) * (n_c + 1.0)
+        if n2m1 == 0:
+            return 0.0 if c != 0 else 1.0
+        root = np.sqrt(n2m1 + c * c)
+        den_s = c + root
+        den_p = n2 * c + root
+        if den_s == 0 or den_p == 0:
+            return 1.0
+        rs = -n2m1 / den_s / den_s
+        rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
+        return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+
+    @njit(cache=True, error_model="numpy")
     def _conductor_one(wi, wo, k, dist, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = _unit(wo[k, 0], wo[k, 1], wo[k, 2])
@@ -228,17 +254,7 @@ if AVAILABLE:
         if want_pdf:
             return _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
                 4.0 * (ox * hx + oy * hy + oz * hz))
-        f = 1.0
-        if has_f:
-            n2 = n_c * n_c
-            n2m1 = (n_c - 1.0) * (n_c + 1.0)
-            root = np.sqrt(n2m1 + c * c)
-            den_s = c + root
-            den_p = n2 * c + root
-            if den_s != 0 and den_p != 0:
-                rs = -n2m1 / den_s / den_s
-                rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
-                f = 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+        f = _conductor_fresnel(c, has_f, n_c)
         li = _cos_lambda(dist, ax, ay, ix, iy, iz)
         lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
         return 0.25 * f * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo, False)
@@ -331,12 +347,13 @@ if AVAILABLE:
         return out
 
     @njit(cache=True, error_model="numpy")
-    def _ggx_normal(ax, ay, sampling, ix, iy, iz, u1, u2):
-        """GGX normal for wi (iz >= 0): visible normals (Heitz 2018) or Walter's widened D m.z."""
+    def _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u1, u2):
+        """Normal for wi (iz >= 0): GGX visible normals (Heitz 2018), or Walter's widened
+        D m.z for GGX or Beckmann (distributions.sample_normal on the scaled alpha)."""
         phi = 2.0 * math.pi * u2
         if sampling == 1:
             k = 1.2 - 0.2 * math.sqrt(abs(iz))
-            r = math.sqrt(u1 / (1.0 - u1))
+            r = math.sqrt(u1 / (1.0 - u1)) if dist == 0 else math.sqrt(-math.log1p(-u1))
             sx = ax * k * r * math.cos(phi)
             sy = ay * k * r * math.sin(phi)
             inv = 1.0 / math.sqrt(1.0 + sx * sx + sy * sy)
@@ -364,9 +381,50 @@ if AVAILABLE:
         n = math.sqrt(ex * ex + ey * ey + ez * ez)
         return ex / n, ey / n, ez / n
 
+    @njit(cache=True, error_model="numpy")
+    def _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz, mx, my, mz,
+                         c, transmitted):
+        """f |cos o| / pdf without Fresnel and lobe choice (MicrofacetModel._sampling_weight)."""
+        aoz = abs(oz)
+        g2oc = _g2oc(masking, iz, aoz, li, _cos_lambda(dist, ax, ay, ox, oy, oz), transmitted)
+        if sampling == 0:
+            return aoz * (iz + li) * g2oc
+        ks = 1.2 - 0.2 * math.sqrt(iz)
+        d_s = _d(dist, ax * ks, ay * ks, mx, my, mz)
+        if not (d_s > 0.0 and mz > 0.0):
+            return 0.0
+        return _d(dist, ax, ay, mx, my, mz) / d_s * c * aoz * g2oc / mz
+
     @njit(cache=True, parallel=True, error_model="numpy")
-    def ggx_dielectric_sample(wi, u, ax, ay, eta, masking, refl_on, trans_on, sampling):
-        """sample() of the GGX RoughDielectric: (wo, weight, pdf), failed samples all zero."""
+    def conductor_sample(wi, u, dist, ax, ay, has_f, n_c, masking, sampling):
+        """sample() of RoughConductor: (wo, weight, pdf), failed samples all zero."""
+        n = wi.shape[0]
+        wo = np.zeros((n, 3))
+        weight = np.zeros(n)
+        pdf = np.zeros(n)
+        for k in prange(n):
+            ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
+            if not iz > COS_HORIZON:
+                continue
+            mx, my, mz = _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
+            c = ix * mx + iy * my + iz * mz
+            ox, oy, oz = 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz
+            if not (c > 0.0 and oz > COS_HORIZON):
+                continue
+            p = _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx, my, mz) / (4.0 * c)
+            if not p > 0.0:
+                continue
+            li = _cos_lambda(dist, ax, ay, ix, iy, iz)
+            w = _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
+                                 mx, my, mz, c, False)
+            wo[k, 0], wo[k, 1], wo[k, 2] = ox, oy, oz
+            weight[k] = _conductor_fresnel(c, has_f, n_c) * w
+            pdf[k] = p
+        return wo, weight, pdf
+
+    @njit(cache=True, parallel=True, error_model="numpy")
+    def dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
+        """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero."""
         n = wi.shape[0]
         wo = np.zeros((n, 3))
         weight = np.zeros(n)
@@ -378,7 +436,7 @@ if AVAILABLE:
             iz = iz * sgn
             e = 1.0 / eta if sgn < 0.0 else eta
             em1 = (1.0 - eta) / eta if sgn < 0.0 else eta - 1.0
-            mx, my, mz = _ggx_normal(ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
+            mx, my, mz = _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
             c = ix * mx + iy * my + iz * mz
             fr = _fresnel_toward(abs(c), e, em1)
             e_ct = math.sqrt(max(em1 * (e + 1.0) + c * c, 0.0))
@@ -398,17 +456,11 @@ if AVAILABLE:
                 jac = 1.0 / (4.0 * abs(c))
             else:
                 jac = e * e_ct / (gap * gap) if gap != 0.0 else math.inf
-            p = (lobe if both else 1.0) * _normal_pdf(0, ax, ay, sampling, ix, iy, iz, mx, my,
-                                                        mz) * jac
-            aoz = abs(oz)
-            li = _cos_lambda(0, ax, ay, ix, iy, iz)
-            g2oc = _g2oc(masking, iz, aoz, li, _cos_lambda(0, ax, ay, ox, oy, oz), not reflected)
-            if sampling == 0:
-                w = aoz * (iz + li) * g2oc
-            else:
-                ks = 1.2 - 0.2 * math.sqrt(iz)
-                d_s = _d(0, ax * ks, ay * ks, mx, my, mz)
-                w = _d(0, ax, ay, mx, my, mz) / d_s * c * aoz * g2oc / mz if d_s > 0.0 else 0.0
+            p = (lobe if both else 1.0) * _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx,
+                                                        my, mz) * jac
+            li = _cos_lambda(dist, ax, ay, ix, iy, iz)
+            w = _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
+                                 mx, my, mz, c, not reflected)
             if not p > 0.0:
                 continue
             wo[k, 0], wo[k, 1], wo[k, 2] = ox, oy, oz * sgn

@@ -118,6 +118,13 @@ class MicrofacetModel:
         with np.errstate(divide="ignore", invalid="ignore"):  # degenerate pairs are masked
             return fn(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(shape)
 
+    def _compiled_sampling(self):
+        """True when sample() runs in a compiled kernel (see kernels.supports_sampling)."""
+        from sim.bsdf.kernels import supports_sampling
+
+        return self.backend == "numba" and supports_sampling(self.distribution.name,
+                                                             self.sampling)
+
     def _kernel_codes(self):
         """Scalar parameters shared by the compiled kernels."""
         from sim.bsdf.kernels import CODES

@@ -65,14 +65,38 @@ def test_phong_falls_back_to_numpy():
 @pytest.mark.parametrize("kw", [
     dict(), dict(sampling="walter", masking="correlated"),
     dict(alpha=(0.1, 0.5), lobes=("transmission",)), dict(eta=1 / 1.3, lobes=("reflection",)),
-    dict(eta=1.0),
+    dict(eta=1.0), dict(distribution="beckmann", sampling="walter"),
+    dict(distribution="beckmann", alpha=(0.1, 0.6), sampling="walter", masking="correlated",
+         eta=1 / 1.4),
 ], ids=str)
-def test_ggx_sample_kernel_matches_numpy(kw):
+def test_dielectric_sample_kernel_matches_numpy(kw):
     """Same valid samples, directions to 1e-12; weights and pdfs at rounding level except near
     the critical angle, where 1 - F ~ sqrt(e^2 - sin^2) amplifies a 1-ulp difference in m."""
+    _sample_agree(RoughDielectric, kw)
+
+
+@pytest.mark.parametrize("kw", [
+    dict(), dict(distribution="ggx", alpha=(0.1, 0.5), eta_complex=0.2 + 3.1j),
+    dict(sampling="walter", masking="correlated", eta_complex=1.5 + 0j),
+    dict(distribution="beckmann", alpha=0.4, sampling="walter"),
+    dict(distribution="beckmann", alpha=(0.2, 0.7), sampling="walter", eta_complex=0.2 + 3.1j,
+         masking="correlated"),
+], ids=str)
+def test_conductor_sample_kernel_matches_numpy(kw):
+    _sample_agree(RoughConductor, kw)
+
+
+def test_beckmann_visible_sampling_stays_numpy():
+    """Beckmann's visible-normal sampler needs erfinv (not in numba): numpy path, same model."""
+    model = RoughDielectric("beckmann", 0.3, 1.51)
+    assert model.backend == "numba" and not model._compiled_sampling()
+
+
+def _sample_agree(cls, kw):
     rng = np.random.default_rng(3)
     wi, u = rng.normal(size=(50_000, 3)), rng.random((50_000, 3))
-    fast, ref = RoughDielectric(**kw), RoughDielectric(backend="numpy", **kw)
+    fast, ref = cls(**kw), cls(backend="numpy", **kw)
+    assert fast._compiled_sampling()
     (wo_f, w_f, p_f), (wo_r, w_r, p_r) = fast.sample(wi, u), ref.sample(wi, u)
     assert np.array_equal(p_f > 0, p_r > 0) and np.array_equal(np.isinf(p_f), np.isinf(p_r))
     assert np.abs(wo_f - wo_r).max() < 1e-12
