@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from sim.bsdf import RoughDielectric
+from sim.bsdf import RoughConductor, RoughDielectric
 from sim.bsdf.kernels import AVAILABLE
 
 N = 1_000_000
@@ -47,6 +47,16 @@ def textbook_ggx_eval(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     fr = f * dg / (4 * np.abs(ci * co))
     ft = (np.abs(ih * oh / (ci * co)) * eta_o**2 * (1 - f) * dg / (eta_i * ih + eta_o * oh) ** 2)
     return np.where(refl, fr, ft)
+
+
+def model_arguments(model) -> dict:
+    """Constructor arguments of a bench model, to rebuild it on the numpy backend."""
+    d = model.distribution
+    common = dict(distribution=d.name, alpha=float(d.alpha_x), masking=model.masking,
+                  sampling=model.sampling)
+    if isinstance(model, RoughConductor):
+        return dict(common, eta_complex=model.eta_complex)
+    return dict(common, eta=model.eta)
 
 
 def rate(fn, repeats: int) -> tuple[float, float, float]:
@@ -88,6 +98,14 @@ def main() -> None:
         rows.append(("gonio numba eval (1 thread)", rate(lambda: fast.eval(wi, wo), 15)))
         rows.append(("gonio numba sample (1 thread)", rate(lambda: fast.sample(wi, u), 8)))
         numba.set_num_threads(threads)
+        for name, model in (("Beckmann walter", RoughDielectric("beckmann", ALPHA, ETA,
+                                                                 sampling="walter")),
+                            ("conductor GGX", RoughConductor("ggx", ALPHA, 0.2 + 3.1j))):
+            model.sample(wi[:10], u[:10])
+            slow = type(model)(**model_arguments(model), backend="numpy")
+            rows.append((f"{name} sample, numpy", rate(lambda m=slow: m.sample(wi, u), 3)))
+            rows.append((f"{name} sample, numba ({threads} thr)",
+                         rate(lambda m=model: m.sample(wi, u), 5)))
     base = rows[0][1][0]
     print(f"RoughDielectric GGX alpha={ALPHA} eta={ETA}, {N:,} random pairs, float64; "
           f"load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, on "
