@@ -30,6 +30,9 @@ MAX_CONDITION = 1e6
 # A distribution is "preferred" only if it beats the next by this chi-square (2 sigma for one
 # extra degree of freedom); otherwise the result says the data cannot tell them apart.
 PREFERENCE_DELTA_CHI2 = 4.0
+# The multiple-scattering table of a fit: alpha from start / SPAN to start * SPAN, NODES nodes.
+MS_TABLE_SPAN = 3.0
+MS_TABLE_NODES = 9
 
 
 class FitError(GonioError):
@@ -54,8 +57,17 @@ class FitOptions:
     aperture_half_angle_deg: float | None = None  # None: meta's, if any; 0: point model
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
     beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
+    multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
+    ms_walks: int = 1024  # walks per point and table alpha (the same seed for every alpha)
+    ms_seed: int = 0
 
     def __post_init__(self) -> None:
+        if isinstance(self.ms_walks, bool) or not isinstance(self.ms_walks, int) \
+                or self.ms_walks < 2:
+            raise FitError(f"fit: ms_walks must be an integer >= 2, got {self.ms_walks!r}")
+        if self.multiple_scattering and self.anisotropic:
+            raise FitError("fit: multiple_scattering is tabulated against one alpha; it cannot "
+                           "be combined with anisotropic")
         for name, given, known in (("distribution", self.distributions, DISTRIBUTIONS),
                                    ("masking", self.maskings, MASKINGS)):
             if not given:
@@ -88,6 +100,8 @@ class FitResult:
     preferred_by: float | None  # chi-square margin over the runner-up distribution
     candidates: list[dict[str, Any]] = field(default_factory=list)
     optics: Smearing = field(default_factory=lambda: Smearing(0.0, 0, 0.0, 0))
+    walks: int | None = None  # walks per point of the multiple-scattering term; None: off
+    seed: int = 0
 
     @property
     def clearly_preferred(self) -> bool:
@@ -112,8 +126,10 @@ class FitResult:
         return self.param("scale")[0] if "scale" in self.names else 1.0
 
     def model(self) -> Any:
-        """The fitted sim.bsdf.RoughDielectric (without the scale factor)."""
-        return build_model(self.distribution, self.alpha, self.eta, self.masking, self.k)
+        """The fitted sim.bsdf model (without the scale factor), with the multiple-scattering
+        term the fit used, if any."""
+        return build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
+                           self.walks, self.seed)
 
     def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
@@ -143,16 +159,62 @@ class FitResult:
             "clearly_preferred": self.clearly_preferred,
             "aperture_half_angle_deg": self.optics.aperture_deg,
             "beam_divergence_deg": self.optics.divergence_deg,
+            "multiple_scattering": (None if self.walks is None
+                                    else {"walks": self.walks, "seed": self.seed}),
             "candidates": self.candidates,
         }
 
 
+class _WithHigherOrders:
+    """A single-scattering model plus the random walk's orders >= 2 on the same microsurface,
+    walked from one fixed seed at every call, so the fit's objective is deterministic."""
+
+    def __init__(self, single: Any, correlated: Any, walks: int, seed: int):
+        from sim.bench.sample import HigherOrders
+
+        self.single = single
+        self.orders = HigherOrders(correlated, walks, seed, fixed_seed=True)
+
+    def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """f(wi, wo) in 1/sr: single scattering plus orders >= 2."""
+        return self.single.eval(wi, wo) + self.orders.eval(wi, wo)
+
+
+class _OrdersTable:
+    """Orders >= 2 at the fitted points, walked once per alpha of a log grid (MS_TABLE_SPAN
+    either side of the starting alpha, MS_TABLE_NODES nodes, one seed for all, so the table is
+    smooth in alpha) and interpolated linearly in log alpha (clamped at the ends): a
+    deterministic, smooth term for the optimiser, at the cost of a one-off walk."""
+
+    def __init__(self, problem: _Problem, alpha0: float):
+        o = problem.options
+        self.log_alpha = math.log(alpha0) + np.linspace(-1.0, 1.0, MS_TABLE_NODES) * math.log(
+            MS_TABLE_SPAN)
+        self.values = np.array([
+            build_model(problem.distribution, math.exp(a), problem.eta0, "correlated",
+                        problem.k, o.ms_walks, o.ms_seed).orders.eval(problem.data.wi,
+                                                                      problem.data.wo)
+            for a in self.log_alpha])
+
+    def __call__(self, alpha: float) -> np.ndarray:
+        x = float(np.clip(math.log(alpha), self.log_alpha[0], self.log_alpha[-1]))
+        j = int(np.clip(np.searchsorted(self.log_alpha, x) - 1, 0, len(self.log_alpha) - 2))
+        t = (x - self.log_alpha[j]) / (self.log_alpha[j + 1] - self.log_alpha[j])
+        return (1.0 - t) * self.values[j] + t * self.values[j + 1]
+
+
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
-                masking: str, k: float | None = None) -> Any:
+                masking: str, k: float | None = None, walks: int | None = None,
+                seed: int = 0) -> Any:
     """The sim.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
-    complex index eta + i k when k is given (imported here so calibration loads without it)."""
+    complex index eta + i k when k is given (imported here so calibration loads without it);
+    with walks, plus multiple scattering (orders >= 2, `walks` walks per pair, fixed seed)."""
     from sim.bsdf import RoughConductor, RoughDielectric
 
+    if walks is not None:
+        return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k),
+                                 build_model(distribution, alpha, eta, "correlated", k),
+                                 walks, seed)
     if k is not None:
         return RoughConductor(distribution=distribution, alpha=alpha,
                               eta_complex=complex(eta, k), masking=masking)
@@ -216,6 +278,7 @@ class _Problem:
             lo.append(math.log(SCALE_BOUNDS[0]))
             hi.append(math.log(SCALE_BOUNDS[1]))
         self.names, self.lower, self.upper = tuple(names), np.array(lo), np.array(hi)
+        self.orders: _OrdersTable | None = None
 
     def unpack(self, x: np.ndarray) -> tuple[Any, float, float]:
         """(alpha, eta, scale) from internal parameters."""
@@ -236,7 +299,11 @@ class _Problem:
 
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         alpha, eta, scale = self.unpack(x)
-        model = build_model(self.distribution, alpha, eta, self.masking, self.k)
+        if self.orders is not None and data is self.data:  # the fit: single + tabulated orders
+            model = build_model(self.distribution, alpha, eta, self.masking, self.k)
+            return scale * (self.optics.average(model, data.wi, data.wo) + self.orders(alpha))
+        model = build_model(self.distribution, alpha, eta, self.masking, self.k,
+                            *_walk_settings(self.options))
         f = self.optics.average(model, data.wi, data.wo)
         return scale * f
 
@@ -262,6 +329,8 @@ class _Problem:
 
 def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
     """Run one candidate's fit; returns its parameters, covariance and chi-square."""
+    if problem.options.multiple_scattering:
+        problem.orders = _OrdersTable(problem, alpha0)
     x0 = problem.start(alpha0)
     sol = least_squares(problem.residuals, x0, bounds=(problem.lower, problem.upper),
                         method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12,
@@ -366,7 +435,13 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
                     for p, s in sorted(scored, key=lambda item: item[1]["chi2"])]
         + [{"failed": msg} for msg in failures],
         optics=optics,
+        walks=_walk_settings(options)[0], seed=options.ms_seed,
     )
+
+
+def _walk_settings(options: FitOptions) -> tuple[int | None, int]:
+    """(walks, seed) of the multiple-scattering term; walks None when it is off."""
+    return (options.ms_walks if options.multiple_scattering else None), options.ms_seed
 
 
 def _preferred(scored: list[tuple[_Problem, dict[str, Any]]],

@@ -33,6 +33,10 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--eta", type=float, help="eta (default: the run's sample eta)")
     p.add_argument("--incidence", type=_angles, default=(0.0,), metavar="DEG[,DEG...]|all",
                    help="incidence angles of the fitted subset (default 0; 'all' for every point)")
+    p.add_argument("--multiple-scattering", action="store_true",
+                   help="add the random walk's orders >= 2 to the model (fixed seed; slower)")
+    p.add_argument("--ms-walks", type=int, default=256, metavar="N",
+                   help="walks per point for --multiple-scattering (default 256)")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to apply (default: the one the run records)")
 
@@ -44,7 +48,8 @@ def options_from(args: argparse.Namespace):  # -> calibration.fit.FitOptions
     return FitOptions(distributions=args.distribution, maskings=args.masking,
                       anisotropic=args.anisotropic, fit_eta=args.fit_eta,
                       fit_scale=args.fit_scale, eta=args.eta,
-                      fit_incidence_deg=args.incidence)
+                      fit_incidence_deg=args.incidence,
+                      multiple_scattering=args.multiple_scattering, ms_walks=args.ms_walks)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -92,6 +97,10 @@ def summary(out: dict) -> str:
     if out["chi2_dof_fit"] > 3.0:
         lines.append("  warning: chi2/dof well above 1: the model does not describe the fitted "
                      "points within their uncertainties (see gonio plot RUN --fit)")
+    if out.get("multiple_scattering"):
+        ms = out["multiple_scattering"]
+        lines.append(f"  multiple scattering: orders >= 2 by {ms['walks']} random walks per "
+                     f"point, seed {ms['seed']}")
     if out.get("emulated_sample"):
         lines.append(f"  emulated sample: {out['emulated_sample']}")
     return "\n".join(lines)

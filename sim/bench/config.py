@@ -10,10 +10,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
-from sim.bench.sample import DISTRIBUTIONS, KINDS, LIT_FROM, MASKINGS, Sample, SampleSpec
+from sim.bench.sample import (
+    DISTRIBUTIONS,
+    KINDS,
+    LIT_FROM,
+    MASKINGS,
+    Sample,
+    SampleSpec,
+)
 from sim.bench.scene import Alignment, Bench, BenchPowerSource
 from sim.bench.source import Source
-from sim.devices.photodiode import SimConfigError
+from sim.devices.photodiode import PhotodiodeModel, SimConfigError
 
 Check = Callable[[str, object], object]
 
@@ -48,6 +55,24 @@ def _alpha(where: str, value: object) -> tuple[float, float]:
     return positive(where, pair[0]), positive(where, pair[1])
 
 
+def _switch(where: str, value: object) -> bool | str:
+    if not (isinstance(value, bool) or value == "auto"):
+        raise SimConfigError(f'{where} must be true, false or "auto", got {value!r}')
+    return value
+
+
+def _optional(check: Check) -> Check:
+    def optional(where: str, value: object) -> object:
+        return None if value is None else check(where, value)
+    return optional
+
+
+def _walks(where: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 16:
+        raise SimConfigError(f"{where} must be an integer in [2, 65536], got {value!r}")
+    return value
+
+
 def _order(where: str, value: object) -> tuple[int, int] | None:
     if value == "auto":
         return None
@@ -76,6 +101,12 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "masking": ("separable", _choice(MASKINGS)),
         "lit_from": ("air", _choice(LIT_FROM)),
         "retracted_beyond_deg": (89.0, _number(45.0, 90.0)),
+        "multiple_scattering": (False, _switch),
+        "diffraction": ("auto", _switch),
+        "rms_height_nm": (None, _optional(_number(0.0, 1e6, open_low=True))),
+        "correlation_length_um": (None, _optional(_number(0.0, 1e6, open_low=True))),
+        "psd_exponent": (2.0, _number(1.0, 10.0, open_low=True)),
+        "ms_walks": (1024, _walks),
     },
     "aperture": {
         "diameter_mm": (10.0, _number(0.0, open_low=True)),
@@ -119,13 +150,42 @@ def build_bench(sim_config: Mapping) -> Bench:
                              f"not {spec.kind!r}")
     if aperture["diameter_mm"] >= aperture["distance_mm"]:
         raise SimConfigError("[sim.aperture] diameter_mm must be smaller than distance_mm")
+    _check_switches(spec)
+    sample = Sample(spec, source.wavelength_nm, _visible_fraction(sim_config, source, aperture),
+                    seed=int(sim_config.get("seed", 0) or 0))
     return Bench(
-        source=source, sample=Sample(spec),
+        source=source, sample=sample,
         aperture_diameter_mm=aperture["diameter_mm"], distance_mm=aperture["distance_mm"],
         rtol=aperture["rtol"], order=aperture["order"],
         alignment=Alignment(**read_table(sim_config, "alignment")),
         retracted_beyond_deg=retracted,
     )
+
+
+def _check_switches(spec: SampleSpec) -> None:
+    """What multiple_scattering = true and diffraction = true need from the rest of the table."""
+    if spec.multiple_scattering is True and spec.distribution == "phong":
+        raise SimConfigError('[sim.sample] multiple_scattering = true needs distribution '
+                             '"beckmann" or "ggx" (the random walk has no phong microsurface)')
+    surface = {"rms_height_nm": spec.rms_height_nm,
+               "correlation_length_um": spec.correlation_length_um}
+    missing = [key for key, value in surface.items() if value is None]
+    if len(missing) == 1:
+        raise SimConfigError(f"[sim.sample] {missing[0]} is needed with "
+                             f"{({*surface} - {missing[0]}).pop()} (the nano-roughness PSD)")
+    if spec.diffraction is True and missing:
+        raise SimConfigError("[sim.sample] rms_height_nm and correlation_length_um are needed "
+                             "by diffraction = true (the nano-roughness PSD)")
+
+
+def _visible_fraction(sim_config: Mapping, source: Source, aperture: Mapping) -> float:
+    """Share of the incident power, spread like a Lambertian lobe, whose part in the aperture
+    equals the detector's noise floor (one sample at zero light on its most sensitive range):
+    the "auto" switches compute no effect smaller than this."""
+    meter = PhotodiodeModel(sim_config.get("detector"), seed=0)
+    floor_w = meter.expected_sigma_w(0.0, meter.ranges_w[0], 1, source.wavelength_nm)
+    cap = (0.5 * aperture["diameter_mm"] / aperture["distance_mm"]) ** 2  # Omega_d / pi
+    return floor_w / (source.power_w * cap)
 
 
 def build_power_source(

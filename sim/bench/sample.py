@@ -5,11 +5,15 @@ opaque conductor; the power reaching the detector per unit incident power and so
 T_in * T_out * (eta_i / eta_o)^2 * f(wi, wo) * |cos o| (power BSDF times the faces the light
 crosses), and evaluates each lobe only at the directions that lie on its side.
 `Sample.lobe_scales` estimates how fast that integrand varies, to choose quadrature orders.
+Multiple scattering (orders >= 2 of the Heitz 2016 random walk) and diffraction
+(Holzschuch-Pacanowski 2017, reflection) are added where the spec asks for them, or with "auto"
+only where their share of the light exceeds `visible_fraction` (the detector's noise floor).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -20,6 +24,10 @@ KINDS = ("hemisphere", "slab", "conductor")
 LIT_FROM = ("air", "hemisphere")
 DISTRIBUTIONS = ("beckmann", "ggx", "phong")
 MASKINGS = ("separable", "correlated")
+#: Pairs within this many alpha of their centroid share one multiple-scattering value.
+SMOOTH_WIDTH = 0.05
+#: Points of the diffraction lobe integral per direction pair (TwoScaleDiffraction samples).
+DIFFRACTION_SAMPLES = 256
 
 
 class LobeScales(NamedTuple):
@@ -45,6 +53,12 @@ class SampleSpec:
     k: float = 0.0
     masking: str = "separable"
     lit_from: str = "air"
+    multiple_scattering: bool | str = False  # True | False | "auto"
+    diffraction: bool | str = "auto"  # True | False | "auto"
+    rms_height_nm: float | None = None  # nano-roughness (K-correlation PSD) for diffraction
+    correlation_length_um: float | None = None
+    psd_exponent: float = 2.0
+    ms_walks: int = 1024  # random walks per direction pair for the multiple-scattering term
 
 
 def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,36 +112,167 @@ def _angle_to_horizon(w: np.ndarray) -> np.ndarray:
     return np.abs(np.arcsin(np.clip(w[..., 2], -1.0, 1.0)))
 
 
-class Sample:
-    """A sample and the BSDF models of its lobes (each built on first use, one lobe each)."""
+class HigherOrders:
+    """Scattering orders >= 2 of the random walk on a model's microsurface (Heitz 2016): what a
+    single-scattering model leaves out, to add to it. Each chunk of pairs is walked twice from
+    the same seed, all orders and order 1 alone, so order 1 (and its noise) cancels exactly.
 
-    def __init__(self, spec: SampleSpec):
+    correlated: the model with height-correlated masking (the walk's own order 1); walks: walks
+    per pair; seed: fixed_seed=True uses the same random numbers at every call (a deterministic
+    objective for fits), otherwise each call draws fresh ones from (seed, call number).
+    """
+
+    def __init__(self, correlated, walks: int, seed: int, fixed_seed: bool = False):
+        from sim.bsdf.multiple_scattering import RandomWalkBSDF
+
+        self.walk = RandomWalkBSDF(correlated, walks=walks)
+        self.seed, self.fixed_seed, self.calls = int(seed), fixed_seed, 0
+
+    def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Orders >= 2 of f(wi, wo) in 1/sr, no cosine; wi, wo (..., 3) broadcast."""
+        from sim.bsdf.multiple_scattering.model import BATCH
+
+        wi, wo = np.broadcast_arrays(np.asarray(wi, np.float64), np.asarray(wo, np.float64))
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        key = [self.seed] if self.fixed_seed else [self.seed, self.calls]
+        self.calls += 1
+        chunk = max(1, BATCH // self.walk.walks)
+        starts = range(0, len(wi), chunk)
+        seeds = np.random.SeedSequence(key).spawn(len(starts))
+        out = np.empty(len(wi))
+        for start, seq in zip(starts, seeds, strict=True):
+            part = slice(start, start + chunk)
+            every = self.walk.eval(wi[part], wo[part], np.random.default_rng(seq))
+            first = self.walk.eval(wi[part], wo[part], np.random.default_rng(seq), order=1)
+            out[part] = every - first
+        return out.reshape(shape)
+
+
+def _unit(w: np.ndarray) -> np.ndarray:
+    return w / np.linalg.norm(w)
+
+
+@lru_cache(maxsize=4096)
+def _lost_energy(distribution: str, alpha: tuple[float, float], eta: float | complex,
+                 theta: float) -> float:
+    from sim.bsdf.multiple_scattering import energy_loss
+
+    return energy_loss(distribution, alpha if alpha[0] != alpha[1] else alpha[0], eta, theta,
+                       masking="correlated")
+
+
+class Sample:
+    """A sample and the BSDF models of its lobes (each built on first use, one lobe each).
+
+    wavelength_nm: the source's; visible_fraction: share of the incident power, spread over
+    the hemisphere, below which an "auto" effect is not computed (the detector's noise floor
+    over Phi (aperture radius / distance)^2); seed: the random walks' seed, fixed for the
+    sample's life so the bench stays a deterministic function of the stage positions.
+    """
+
+    def __init__(self, spec: SampleSpec, wavelength_nm: float = 632.8,
+                 visible_fraction: float = 1e-3, seed: int = 0):
         self.spec = spec
         self.flipped = spec.lit_from == "hemisphere"
         self.n_interior = spec.eta if spec.kind != "conductor" else 1.0
-        self._models: dict[str, object] = {}
-        self.evaluations = {"reflection": 0, "transmission": 0}
+        self.wavelength_m = wavelength_nm * 1e-9
+        self.visible_fraction = visible_fraction
+        self.seed = seed
+        self._models: dict[tuple, object] = {}
+        self.evaluations = {"reflection": 0, "transmission": 0, "random_walk": 0,
+                            "diffraction": 0}
 
-    def model(self, lobe: str):
-        """The sim.bsdf model that computes one lobe ("reflection" or "transmission") only."""
-        if lobe not in self._models:
+    def model(self, lobe: str, masking: str | None = None):
+        """The single-scattering sim.bsdf model of one lobe ("reflection" or "transmission")
+        only, with the spec's masking unless another is named."""
+        key = (lobe, masking or self.spec.masking)
+        if key not in self._models:
             from sim.bsdf import RoughConductor, RoughDielectric
 
             s = self.spec
             alpha = s.alpha if s.alpha[0] != s.alpha[1] else s.alpha[0]
             if s.kind == "conductor":
-                self._models[lobe] = RoughConductor(
+                self._models[key] = RoughConductor(
                     distribution=s.distribution, alpha=alpha, eta_complex=complex(s.eta, s.k),
-                    masking=s.masking)
+                    masking=key[1])
             else:
-                self._models[lobe] = RoughDielectric(
-                    distribution=s.distribution, alpha=alpha, eta=s.eta, masking=s.masking,
+                self._models[key] = RoughDielectric(
+                    distribution=s.distribution, alpha=alpha, eta=s.eta, masking=key[1],
                     lobes=(lobe,))
-        return self._models[lobe]
+        return self._models[key]
+
+    def _extra(self, name: str, lobe: str):
+        """The lobe's multiple-scattering (HigherOrders) or diffraction model, built once."""
+        key = (name, lobe)
+        if key not in self._models:
+            s = self.spec
+            if name == "random_walk":
+                self._models[key] = HigherOrders(self.model(lobe, "correlated"), s.ms_walks,
+                                                 self.seed, fixed_seed=True)
+            else:
+                from sim.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
+
+                psd = KCorrelationPSD(s.rms_height_nm * 1e-9, s.correlation_length_um * 1e-6,
+                                      s.psd_exponent)
+                self._models[key] = TwoScaleDiffraction(self.model(lobe), psd,
+                                                        DIFFRACTION_SAMPLES)
+        return self._models[key]
+
+    def multiple_scattering_on(self, theta_i: float) -> bool:
+        """Whether orders >= 2 are added at incidence theta_i (rad from the normal): the spec's
+        switch, or with "auto" the energy single scattering loses (energy_loss, correlated
+        masking) above visible_fraction."""
+        s = self.spec
+        if s.multiple_scattering != "auto":
+            return bool(s.multiple_scattering)
+        if s.distribution == "phong" or theta_i >= 0.5 * np.pi:
+            return False
+        eta = complex(s.eta, s.k) if s.kind == "conductor" else (
+            1.0 / s.eta if self.flipped else s.eta)
+        loss = _lost_energy(s.distribution, s.alpha, eta, round(float(theta_i), 4))
+        return loss > self.visible_fraction
+
+    def diffraction_on(self, theta_i: float) -> bool:
+        """Whether the reflected lobe is the two-scale diffraction model at incidence theta_i:
+        the spec's switch, or with "auto" when the Harvey-Shack diffracted share 1 - A exceeds
+        visible_fraction while the specular share A does too (a surface far rougher than the
+        wavelength scatters by geometric optics alone, which the microfacet model is)."""
+        s = self.spec
+        if s.diffraction != "auto":
+            return bool(s.diffraction)
+        if s.rms_height_nm is None or self.flipped:
+            return False
+        from sim.bsdf.diffraction import diffraction_fraction
+
+        moved = diffraction_fraction(s.rms_height_nm * 1e-9, self.wavelength_m, theta_i)
+        return self.visible_fraction < moved < 1.0 - self.visible_fraction
 
     def _eval(self, lobe: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         self.evaluations[lobe] += len(wi)
-        return np.asarray(self.model(lobe).eval(wi, wo), dtype=np.float64)
+        theta_i = float(np.arccos(min(1.0, abs(float(np.mean(wi[:, 2]))))))
+        if lobe == "reflection" and self.diffraction_on(theta_i):
+            self.evaluations["diffraction"] += len(wi)
+            f = self._extra("diffraction", lobe).eval(wi, wo, self.wavelength_m)
+        else:
+            f = np.asarray(self.model(lobe).eval(wi, wo), dtype=np.float64)
+        if self.multiple_scattering_on(theta_i):
+            f = f + self._higher_orders(lobe, wi, wo)
+        return f
+
+    def _higher_orders(self, lobe: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Orders >= 2 at each pair, or once at the pairs' centroid when they all lie within
+        SMOOTH_WIDTH alpha of it (an aperture's nodes): that lobe is as broad as the
+        distribution's, so it is flat across a detector aperture."""
+        centre_i, centre_o = (_unit(np.mean(w, axis=0)) for w in (wi, wo))
+        spread = max(float(np.max(np.arccos(np.clip(w @ c, -1.0, 1.0))))
+                     for w, c in ((wi, centre_i), (wo, centre_o)))
+        walk = self._extra("random_walk", lobe)
+        if spread > SMOOTH_WIDTH * min(self.spec.alpha):
+            self.evaluations["random_walk"] += len(wi)
+            return walk.eval(wi, wo)
+        self.evaluations["random_walk"] += 1
+        return np.full(len(wi), float(walk.eval(centre_i, centre_o)))
 
     def integrand(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Detector power per incident power per sr at (wi, wo) (..., 3) -> (...)."""
