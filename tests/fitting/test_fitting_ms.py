@@ -53,7 +53,7 @@ def options(multiple_scattering: bool) -> FitOptions:
                       beam_divergence_deg=0.0, multiple_scattering=multiple_scattering)
 
 
-def test_fit_with_multiple_scattering_recovers_alpha_better():
+def test_fit_with_multiple_scattering_describes_data_made_with_it():
     data = emulated_run()
     single = fit(data, options(False))
     multiple = fit(data, options(True))
@@ -68,6 +68,18 @@ def test_fit_with_multiple_scattering_recovers_alpha_better():
     assert err_multiple < 0.02 and err_single < 0.03
     assert multiple.to_dict()["multiple_scattering"] == {"walks": 1024, "seed": 0}
     assert single.to_dict()["multiple_scattering"] is None
+
+
+def test_cli_flag_sets_the_option():
+    import argparse
+
+    from gonio.commands.fit import add_fit_options, options_from
+
+    parser = argparse.ArgumentParser()
+    add_fit_options(parser)
+    on = options_from(parser.parse_args(["--multiple-scattering", "--ms-walks", "512"]))
+    assert on.multiple_scattering and on.ms_walks == 512
+    assert not options_from(parser.parse_args([])).multiple_scattering
 
 
 def test_objective_is_deterministic_and_adds_energy():
