@@ -63,8 +63,9 @@ class FitOptions:
 
     def __post_init__(self) -> None:
         if isinstance(self.ms_walks, bool) or not isinstance(self.ms_walks, int) \
-                or self.ms_walks < 2:
-            raise FitError(f"fit: ms_walks must be an integer >= 2, got {self.ms_walks!r}")
+                or not 2 <= self.ms_walks <= 1 << 15:
+            raise FitError(f"fit: ms_walks must be an integer in [2, 32768], "
+                           f"got {self.ms_walks!r}")
         if self.multiple_scattering and self.anisotropic:
             raise FitError("fit: multiple_scattering is tabulated against one alpha; it cannot "
                            "be combined with anisotropic")

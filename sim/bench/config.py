@@ -68,8 +68,9 @@ def _optional(check: Check) -> Check:
 
 
 def _walks(where: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 16:
-        raise SimConfigError(f"{where} must be an integer in [2, 65536], got {value!r}")
+    # at most one batch of walks per pair: HigherOrders' exact order-1 cancellation needs it
+    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 15:
+        raise SimConfigError(f"{where} must be an integer in [2, 32768], got {value!r}")
     return value
 
 

@@ -124,7 +124,10 @@ class HigherOrders:
 
     def __init__(self, correlated, walks: int, seed: int, fixed_seed: bool = False):
         from sim.bsdf.multiple_scattering import RandomWalkBSDF
+        from sim.bsdf.multiple_scattering.model import BATCH
 
+        if not 1 <= walks <= BATCH:
+            raise ValueError(f"walks must be in [1, {BATCH}] (one batch per pair), got {walks!r}")
         self.walk = RandomWalkBSDF(correlated, walks=walks)
         self.seed, self.fixed_seed, self.calls = int(seed), fixed_seed, 0
 

@@ -149,6 +149,7 @@ def test_defaults_leave_multiple_scattering_off_and_diffraction_auto():
     ({"rms_height_nm": 20.0}, "correlation_length_um"),
     ({"rms_height_nm": -1.0, "correlation_length_um": 1.0}, "rms_height_nm"),
     ({"ms_walks": 0}, "ms_walks"),
+    ({"ms_walks": 40000}, "ms_walks"),
     ({"distribution": "phong", "multiple_scattering": True}, "multiple_scattering"),
 ])
 def test_bad_switch_values_name_the_key(table, key):

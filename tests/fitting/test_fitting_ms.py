@@ -91,7 +91,7 @@ def test_objective_is_deterministic_and_adds_energy():
     assert np.all(first > build_model("ggx", ALPHA, 1.51, "correlated").eval(wi, wo))
 
 
-@pytest.mark.parametrize("walks", [0, 1, 2.5, True])
+@pytest.mark.parametrize("walks", [0, 1, 2.5, True, 40000])
 def test_bad_walk_counts_are_refused(walks):
     with pytest.raises(FitError, match="ms_walks"):
         FitOptions(multiple_scattering=True, ms_walks=walks)
