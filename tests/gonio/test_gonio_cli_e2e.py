@@ -103,7 +103,7 @@ def test_export_csv_and_netcdf_round_trip(tmp_path):
 def test_time_scale_override_and_raw_quick_look(tmp_path):
     """--time-scale replaces a crawling [sim] time scale; a run without dark readings cannot
     be reduced, so its plot.png is the raw quick look; --time-scale needs --sim."""
-    cfg = fast_config(time_scale=0.01)  # 100 real seconds per virtual second: would crawl
+    cfg = fast_config(time_scale=1.0)  # real time: the moves would take seconds
     plan = {"grid": [{"theta_i_deg": [20.0], "theta_o_deg": [10.0, 30.0, 50.0]}]}
     path = write_plan(tmp_path, plan, cfg)
     proc = gonio_cli("scan", path, "--sim", "--time-scale", "inf", "--out", tmp_path,

@@ -86,7 +86,8 @@ def scan(plan_text, cfg_text, *extra):
 
 def opened_devices(line: str) -> bool:
     """True if the error came from opening a device (the serial port or the TCP host)."""
-    return "cannot open" in line or "connection to 127.0.0.1:9 failed" in line
+    return any(s in line for s in ("cannot open", "could not be opened",
+                                   "connection to 127.0.0.1:9 failed"))
 
 
 def check_plan(plan_text, cfg_text) -> int:
@@ -170,3 +171,12 @@ def test_fuzzed_sim_sections(data, action, value):
     else:
         assert code == 2 and runs == []
         one_line_error(err)
+
+
+@pytest.mark.parametrize("scale", [8e-244, 0.5, 0, -1, "fast", True])
+def test_slow_motion_or_nonsense_time_scale_is_refused(scale):
+    """Slow motion would let a fuzzed time scale stretch a move beyond any timeout."""
+    cfg = {**SIM_CONFIG, "sim": {**SIM_CONFIG["sim"], "time_scale": scale}}
+    code, err, runs = scan(dump_toml(SIM_PLAN), dump_toml(cfg), "--sim")
+    assert code == 2 and runs == []
+    assert "time_scale must be a number >= 1" in one_line_error(err)
