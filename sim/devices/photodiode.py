@@ -47,6 +47,7 @@ DETECTOR_DEFAULTS: dict[str, object] = {
     "stray_light_w": 0.0,  # constant background optical power reaching the detector, W
     "read_noise_fraction": 1e-4,  # amplifier + ADC noise per sample, fraction of full scale
     "bandwidth_hz": 1000.0,  # noise bandwidth of one sample (sets the shot noise)
+    "range_gains": None,  # per range: true gain / nominal (amplifier error); None = all 1
 }
 
 
@@ -115,6 +116,22 @@ def _responsivity_table(value: object) -> np.ndarray:
     return table
 
 
+def _range_gains(value: object, n_ranges: int) -> np.ndarray:
+    """Per-range gain errors (None: 1 on every range); one factor in [0.5, 2] per range."""
+    if value is None:
+        return np.ones(n_ranges)
+    try:
+        gains = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        gains = np.empty(0)
+    if gains.shape != (n_ranges,) or not np.all((gains >= 0.5) & (gains <= 2.0)):
+        raise SimConfigError(
+            f"[sim.detector] range_gains must be a list of {n_ranges} factors in [0.5, 2], "
+            f"one per range of ranges_w, got {value!r}"
+        )
+    return gains
+
+
 class PhotodiodeModel:
     """A photodiode power meter: true power (W) -> reading (W), range (W), saturated flag.
 
@@ -152,6 +169,7 @@ class PhotodiodeModel:
                 f"got {ranges!r}"
             )
         self._ranges = tuple(float(r) for r in ranges_arr)
+        self._gains = _range_gains(table["range_gains"], len(self._ranges))
         bits = table["adc_bits"]
         if isinstance(bits, bool) or not isinstance(bits, int) or not 4 <= bits <= 32:
             raise SimConfigError(
@@ -188,6 +206,10 @@ class PhotodiodeModel:
                 return full_scale
         return self._ranges[-1]
 
+    def gain(self, range_w: float) -> float:
+        """True gain of a range relative to its nominal one (`range_gains`; 1 if not given)."""
+        return float(self._gains[self._ranges.index(range_w)])
+
     def adc_step_w(self, range_w: float) -> float:
         """One ADC count in W on a range: the span [-overrange, +overrange] x FS over 2^bits."""
         return 2.0 * self.overrange * range_w / 2.0**self.adc_bits
@@ -204,15 +226,16 @@ class PhotodiodeModel:
         light = self.responsivity_a_w(self._light_nm(wavelength_nm))
         return light * (power_w + self.stray_light_w) + self.dark_current_a
 
-    def _mean_reading_w(self, power_w: float, wavelength_nm: float) -> float:
-        """Noise-free reading: photocurrent over the responsivity at the set wavelength."""
+    def _mean_reading_w(self, power_w: float, wavelength_nm: float, gain: float = 1.0) -> float:
+        """Noise-free reading: photocurrent over the responsivity at the set wavelength, times
+        the range's gain error, less the zero offset."""
         current = self._photocurrent_a(power_w, wavelength_nm)
-        return current / self.responsivity_a_w(wavelength_nm) - self.zero_offset_w
+        return gain * current / self.responsivity_a_w(wavelength_nm) - self.zero_offset_w
 
     def autorange(self, power_w: float, wavelength_nm: float) -> float:
         """The range autoranging settles on: smallest with mean reading <= autorange_fill x FS."""
-        mean = self._mean_reading_w(power_w, wavelength_nm)
-        for full_scale in self._ranges:
+        for full_scale, gain in zip(self._ranges, self._gains, strict=True):
+            mean = self._mean_reading_w(power_w, wavelength_nm, gain)
             if mean <= self.autorange_fill * full_scale:
                 return full_scale
         return self._ranges[-1]
@@ -221,7 +244,7 @@ class PhotodiodeModel:
         """Standard deviation of one sample before quantisation, W: shot (+) read noise."""
         current = self._photocurrent_a(power_w, wavelength_nm)
         shot_a = np.sqrt(2.0 * ELEMENTARY_CHARGE_C * max(current, 0.0) * self.bandwidth_hz)
-        shot_w = shot_a / self.responsivity_a_w(wavelength_nm)
+        shot_w = self.gain(range_w) * shot_a / self.responsivity_a_w(wavelength_nm)
         read_w = self.read_noise_fraction * range_w
         return float(np.hypot(shot_w, read_w))
 
@@ -255,7 +278,7 @@ class PhotodiodeModel:
             range_w = self.autorange(power_w, wavelength_nm)
         elif range_w not in self._ranges:
             raise ValueError(f"measure: range_w {range_w!r} is not one of {self._ranges}")
-        mean = self._mean_reading_w(power_w, wavelength_nm)
+        mean = self._mean_reading_w(power_w, wavelength_nm, self.gain(range_w))
         sigma = self.sample_sigma_w(power_w, range_w, wavelength_nm)
         samples = mean + sigma * self._rng.standard_normal(int(averaging))
         clip = self.overrange * range_w

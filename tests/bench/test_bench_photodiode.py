@@ -96,6 +96,23 @@ def test_quantisation_step_per_range():
     assert value / step == pytest.approx(round(3.3e-7 / step), abs=1e-9)
 
 
+def test_range_gain_errors_scale_the_reading_on_their_range_only():
+    # reading = gain x (P + dark) / R' - zero: a range's gain error multiplies its readings
+    gains = [1.0, 1.0, 1.0, 1.0, 1.02, 0.97, 1.0]
+    model = PhotodiodeModel({"range_gains": gains, "dark_current_a": 0.0}, seed=5)
+    ideal = PhotodiodeModel({"dark_current_a": 0.0}, seed=5)
+    for range_w, gain in [(1e-4, 1.02), (1e-3, 0.97), (1e-2, 1.0)]:
+        x = readings(model, 5e-5, 400, range_w=range_w)
+        y = readings(ideal, 5e-5, 400, range_w=range_w)
+        sigma = model.expected_sigma_w(5e-5, range_w, 1, WL) / np.sqrt(400)
+        assert abs(x.mean() - gain * 5e-5) < 4 * sigma
+        assert abs(y.mean() - 5e-5) < 4 * sigma
+    assert model.gain(1e-4) == 1.02 and ideal.gain(1e-4) == 1.0
+    # autoranging judges the reading (gain x power) against autorange_fill x full scale
+    assert model.autorange(0.9e-4 / 1.02 * 0.99, WL) == 1e-4
+    assert model.autorange(0.9e-4 / 1.02 * 1.01, WL) == 1e-3
+
+
 def test_seeded_draws_repeat():
     a = readings(PhotodiodeModel(seed=11), 1e-6, 5, range_w=1e-5)
     b = readings(PhotodiodeModel(seed=11), 1e-6, 5, range_w=1e-5)
@@ -118,6 +135,9 @@ def test_constant_power_is_a_power_source():
         ({"responsivity": [[500, 0.3]]}, "responsivity"),
         ({"gain": 3}, "gain"),
         ({"overrange": "x"}, "overrange"),
+        ({"range_gains": [1.0, 1.01]}, "range_gains"),  # one per range (7 by default)
+        ({"range_gains": [1.0] * 6 + [3.0]}, "range_gains"),
+        ({"range_gains": "x"}, "range_gains"),
     ],
 )
 def test_bad_config_names_the_field(table, field):

@@ -1,7 +1,7 @@
 """Calibration round trip on the emulated bench (real ptys, the ESP and PM100 emulators, the
-scan engine): a bench given known stage zero offsets, dark current and beam drift; the
-calibration recovers the offsets and the dark offset within their uncertainties, and beam
-normalisation removes the drift from repeated readings."""
+scan engine): a bench given known stage zero offsets, dark current, beam drift and per-range
+gain errors; the calibration recovers the offsets, the dark offset and the gains within their
+uncertainties, and beam normalisation removes the drift from repeated readings."""
 
 import json
 
@@ -133,15 +133,23 @@ def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
         aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm), rel=0.005)
 
 
+# true gain / nominal per range of the default ranges_w (1e-8 ... 1e-2 W); the reference range
+# of the calibration is the largest one measured (1e-5 W), whose gain is 1
+RANGE_GAINS = [1.0, 1.03, 0.985, 1.0, 1.0, 1.0, 1.0]
+TRUE_GAIN = {"1e-07": 1.03, "1e-06": 0.985, "1e-05": 1.0}
+
+
 def test_range_gains_from_fixed_range_runs(angle_run, tmp_path):
-    # The emulated meter has no gain errors: the calibration must find every ratio 1 within
-    # its uncertainty, a linear detector, and a dark offset on each range.
+    # The emulated meter's ranges carry known gain errors ([sim.detector] range_gains): the
+    # calibration must recover each within its uncertainty, see a linear detector, and find a
+    # dark offset on each range.
     runs = []
     for range_w in (1e-7, 1e-6, 1e-5):
         cfg = instrument(tmp_path, {
             "source": {"power_w": 1e-3},
             "sample": {"kind": "hemisphere", "distribution": "ggx", "alpha": 0.394, "eta": 1.51},
             "aperture": {"diameter_mm": 10.0, "distance_mm": 500.0},
+            "detector": {"range_gains": RANGE_GAINS},
         }, detector={"range": range_w})
         run = scan(ROOT / "examples" / "plans" / "calib-detector.toml", cfg, tmp_path / "runs")
         runs.append(open_run(run).readings())
@@ -151,8 +159,11 @@ def test_range_gains_from_fixed_range_runs(angle_run, tmp_path):
     cal = build(runs + [angle_run.readings()], "", ["a", "b", "c", "angles"], eta=1.51)
     assert abs(cal.sample_offset_deg.pull(SAMPLE_OFFSET)) < 3.0
     assert set(cal.dark_offsets_w) == {"1e-08", "1e-07", "1e-06", "1e-05"}  # 1e-8: angle run
+    assert set(cal.gains) == set(TRUE_GAIN)
     for key, gain in cal.gains.items():
-        assert abs(gain.pull(1.0)) < 3.0 and gain.sigma < 2e-3, key
+        assert abs(gain.pull(TRUE_GAIN[key])) < 3.0 and gain.sigma < 2e-3, key
+    # the errors are seen, not assumed away: 1.5 and 3 % are many sigmas from 1
+    assert abs(cal.gains["1e-07"].pull(1.0)) > 10 and abs(cal.gains["1e-06"].pull(1.0)) > 5
     assert cal.linearity["chi2_dof"] < 3.0
     for gamma in cal.linearity["exponents"].values():
         assert abs(gamma["value"] - 1.0) < 3 * gamma["sigma"] + 1e-3
