@@ -1,5 +1,7 @@
-"""Incident beam power over a run: linear interpolation between the interleaved straight-through
-(beam) readings, so a slow drift of the source divides out of every sample reading.
+"""Incident beam power over a run from the interleaved straight-through (beam) readings, so a
+slow drift of the source divides out of every sample reading: `smooth_at` (what reduction and
+calibration use) takes their mean, or a polynomial in time through all of them when they drift;
+`at` interpolates linearly between neighbours.
 
 The uncertainty of an interpolated value combines the readings' own scatter with the
 interpolation error, estimated by leave-one-out: each interior beam reading predicted from its
@@ -14,8 +16,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 from calibration.values import CalibrationError
+
+MAX_DEGREE = 8  # highest polynomial degree tried for a drift over a run
 
 
 @dataclass
@@ -51,6 +56,40 @@ class BeamPower:
         noise = self.noise_w * np.sqrt(u ** 2 + (1.0 - u) ** 2)
         interp = self.interp_rel * power * 4.0 * u * (1.0 - u)
         return power, np.hypot(noise, interp)
+
+    def smooth_at(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Beam power and sigma at times t_s: the mean of all beam readings when they scatter no
+        more than their noise (no drift to follow), else a polynomial in time through all of them,
+        of the degree with the least leave-one-out error. A smooth drift is so followed with the
+        noise of all readings, not of the two nearest, whose errors would be common to every
+        sample reading of their gaps (docs/fitting.md, "Beam and drift"); fewer than four beam
+        readings: the interpolation of `at`."""
+        p, noise = self.power_w, self.noise_w
+        if len(p) >= 3 and noise > 0:
+            chi2 = float(np.sum((p - p.mean()) ** 2)) / noise**2
+            if stats.chi2.sf(chi2, len(p) - 1) > 0.01:
+                return (np.full(len(t_s), p.mean()),
+                        np.full(len(t_s), noise / math.sqrt(len(p))))
+        if len(p) < 4:
+            return self.at(t_s)
+        span = max(float(self.t_s[-1] - self.t_s[0]), 1e-12)
+        x = 2.0 * (self.t_s - self.t_s[0]) / span - 1.0
+        x_at = np.clip(2.0 * (np.asarray(t_s, float) - self.t_s[0]) / span - 1.0, -1.0, 1.0)
+        best = None
+        for degree in range(1, min(len(p) - 3, MAX_DEGREE) + 1):
+            design = np.polynomial.legendre.legvander(x, degree)
+            inverse = np.linalg.inv(design.T @ design)
+            coef = inverse @ design.T @ p
+            resid = p - design @ coef
+            leverage = np.einsum("ij,jk,ik->i", design, inverse, design)
+            loo = float(np.mean((resid / (1.0 - leverage)) ** 2))
+            if best is None or loo < best[0]:
+                best = (loo, degree, coef, inverse, float(resid @ resid) / (len(p) - degree - 1))
+        _, degree, coef, inverse, scatter2 = best
+        at = np.polynomial.legendre.legvander(x_at, degree)
+        # a reading's noise: the larger of the scatter about the curve and the expected noise
+        noise2 = max(scatter2, noise**2)
+        return at @ coef, np.sqrt(noise2 * np.einsum("ij,jk,ik->i", at, inverse, at))
 
 
 def beam_power(t_s: np.ndarray, power_w: np.ndarray, noise_w: float | None = None) -> BeamPower:

@@ -99,7 +99,7 @@ def covering(gains: dict[str, Measured] | None,
 def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
                     gains: dict[str, Measured] | None) -> np.ndarray:
     """Readings with dark- and gain-corrected power (gain 1 on ranges the gains do not cover),
-    divided by the beam power interpolated at each reading's time when the run has beam
+    divided by the beam power at each reading's time (BeamPower.smooth_at) when the run has beam
     readings (a drift during a peak scan would otherwise skew the peak and bias its centre)."""
     out = readings.copy()
     out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks,
@@ -107,7 +107,7 @@ def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
     beam = out["kind"] == "beam"
     if beam.any():
         model = beam_power(out["t_s"][beam], out["power_w"][beam])
-        out["power_w"] = out["power_w"] / model.at(out["t_s"])[0]
+        out["power_w"] = out["power_w"] / model.smooth_at(out["t_s"])[0]
     return out
 
 

@@ -2,8 +2,8 @@
 
 f = (P - dark) / (Phi(t) * Omega * factor * |cos o|): dark subtraction per range from the run's
 dark readings, the beam power Phi from the straight-through (beam) readings (their mean when
-they show no drift, else interpolated in time, calibration.beam), the aperture solid angle
-Omega, and the faces the light crosses
+they show no drift, else a smooth curve in time through all of them, calibration.beam), the
+aperture solid angle Omega, and the faces the light crosses
 (`factor`: the hemisphere's T_exit on the transmitted side, as the bench applies it,
 sim.bench.sample.exit_view). Noise of a reading: the scatter of the dark readings on its range,
 scaled with the range's full scale (read noise and ADC steps scale so), plus the beam's
@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from calibration.aperture import solid_angle_sr
 from calibration.beam import beam_power
@@ -124,19 +123,6 @@ class DarkModel:
         return level, level_sigma, noise
 
 
-def beam_at(beam, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Beam power and sigma at times t_s: the mean of all beam readings when they scatter no
-    more than their noise (no drift to follow: a far better estimate than two neighbours), else
-    calibration.beam's interpolation."""
-    p, noise = beam.power_w, beam.noise_w
-    if len(p) >= 3 and noise > 0:
-        chi2 = float(np.sum((p - p.mean()) ** 2)) / noise**2
-        if stats.chi2.sf(chi2, len(p) - 1) > 0.01:
-            return (np.full(len(t_s), p.mean()),
-                    np.full(len(t_s), noise / math.sqrt(len(p))))
-    return beam.at(t_s)
-
-
 def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None = None
                     ) -> ReducedData:
     """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
@@ -160,7 +146,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
     spec = SampleSpec(kind=optics.kind, eta=optics.eta, k=optics.k, lit_from=optics.lit_from)
     w_eval, factor = exit_view(spec, wi, wo)
     level, level_sigma, noise = dark.at(rows["range_w"])
-    phi, phi_sigma = beam_at(beam, rows["t_s"])
+    phi, phi_sigma = beam.smooth_at(rows["t_s"])
     net = rows["power_w"] - level
     scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
     with np.errstate(divide="ignore", invalid="ignore"):

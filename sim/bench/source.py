@@ -9,7 +9,8 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class Source:
     """A collimated laser-like beam. The power drifts as
-    power_w * (1 + drift_fraction * sin(2 pi t / drift_period_s)), t in (virtual) seconds;
+    power_w * (1 + drift_fraction * sin(2 pi t / drift_period_s)), t in seconds of the clock
+    the bench is given (the emulators': wall seconds since the bench started, like a lamp);
     the beam is a uniform disk of beam_diameter_mm spreading in a cone of divergence_deg
     (half-angle)."""
 
