@@ -47,12 +47,15 @@ def _choice(options: tuple[str, ...]) -> Check:
     return check
 
 
+ALPHA_RANGE = (1e-4, 4.0)  # the roughness range sim.bsdf's extreme-case tests cover
+
+
 def _alpha(where: str, value: object) -> tuple[float, float]:
     pair = value if isinstance(value, (list, tuple)) else [value, value]
     if len(pair) != 2:
         raise SimConfigError(f"{where} must be a number or [alpha_x, alpha_y], got {value!r}")
-    positive = _number(0.0, 10.0, open_low=True)
-    return positive(where, pair[0]), positive(where, pair[1])
+    in_range = _number(ALPHA_RANGE[0], ALPHA_RANGE[1])  # where sim.bsdf is verified
+    return in_range(where, pair[0]), in_range(where, pair[1])
 
 
 def _switch(where: str, value: object) -> bool | str:

@@ -166,6 +166,8 @@ def test_build_power_source_follows_the_stage_positions_and_clock():
 @pytest.mark.parametrize("sim, field", [
     ({"sample": {"alpha": -0.1}}, "alpha"),
     ({"sample": {"alpha": [0.1, 0.2, 0.3]}}, "alpha"),
+    ({"sample": {"alpha": 7.98e-243}}, "alpha"),  # below the model's verified 1e-4
+    ({"sample": {"alpha": [0.1, 5.0]}}, "alpha"),
     ({"sample": {"distribution": "gauss"}}, "distribution"),
     ({"sample": {"kind": "slab", "lit_from": "hemisphere"}}, "lit_from"),
     ({"sample": {"k": 3.0}}, "k"),
