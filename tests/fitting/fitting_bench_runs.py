@@ -52,10 +52,10 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
 
 
 def plan(tmp: Path, name: str, grids: list[dict], repeats: int = 1, dark_every: int = 20,
-         beam_every: int = 20, averaging: int = 4) -> Path:
+         beam_every: int = 20, averaging: int = 4, dwell_s: float = 0.0) -> Path:
     """A plan file of [[grid]] tables with dark and beam readings interleaved."""
     text = (f'name = "{name}"\nrepeats = {repeats}\naveraging = {averaging}\n'
-            f'order = "as-written"\n')
+            f'order = "as-written"\ndwell_s = {dwell_s}\n')
     for g in grids:
         text += "\n[[grid]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in g.items())
     text += f"\n[dark]\nevery = {dark_every}\n\n[beam]\nevery = {beam_every}\n"

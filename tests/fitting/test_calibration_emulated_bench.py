@@ -28,7 +28,9 @@ def angle_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("calib")
     cfg = instrument(tmp, {
         "source": {"power_w": 1e-3, "beam_diameter_mm": 2.0, "divergence_deg": 0.03,
-                   "drift_fraction": 0.05, "drift_period_s": 120.0},  # wall s
+                   # wall seconds: the dwell below makes the run last >= 2.4 s however fast
+                   # the machine, so the source visibly drifts (a 120 s period did not)
+                   "drift_fraction": 0.05, "drift_period_s": 20.0},
         "sample": {"kind": "hemisphere", "distribution": "beckmann", "alpha": 0.023,
                    "eta": 1.51},
         "aperture": {"diameter_mm": 10.0, "distance_mm": 500.0},
@@ -40,7 +42,7 @@ def angle_run(tmp_path_factory):
          "theta_o_deg": {"start": -2.5, "stop": 2.5, "step": 0.25}},
         {"side": "reflection", "theta_i_deg": 10.0,
          "theta_o_deg": {"start": 2.0, "stop": 18.0, "step": 0.5}},
-    ], repeats=2, dark_every=12, beam_every=6)
+    ], repeats=2, dark_every=12, beam_every=6, dwell_s=0.02)
     return open_run(scan(p, cfg, tmp / "runs"))
 
 
