@@ -145,8 +145,8 @@ def _beckmann_visible_slope(mu: np.ndarray, u: np.ndarray) -> np.ndarray:
 def _beckmann_visible_unit(v: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
     """Visible normal of the alpha = 1 Beckmann surface seen from unit v (any direction)."""
     sin_t = np.hypot(v[..., 0], v[..., 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        mu = np.clip(v[..., 2] / sin_t, -1e4, 1e8)
+    # cot theta, clipped; the divisor is floored so a denormal sin_t cannot overflow
+    mu = np.clip(v[..., 2] / np.maximum(sin_t, 1e-200), -1e4, 1e8)
     mu = np.where(sin_t > 0.0, mu, np.where(v[..., 2] > 0.0, 1e8, -1e4))
     u1 = np.clip(u1, 1e-300, 1.0 - 2.0**-53)
     u2 = np.clip(u2, 2.0**-60, 1.0 - 2.0**-53)
