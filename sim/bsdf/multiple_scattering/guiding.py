@@ -15,13 +15,10 @@ from __future__ import annotations
 import numpy as np
 
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+from sim.bsdf.vectors import dot
 
 #: Share of next directions drawn backwards from wo (the rest from the phase function).
 BACKWARDS = 0.25
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sum(a * b, axis=-1)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -37,7 +34,7 @@ def _flip(w: np.ndarray) -> np.ndarray:
 def refract(v: np.ndarray, n: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Direction transmitted from v (pointing away on n's side, v.n > 0) through a facet n into
     a medium eta times denser; False where total internal reflection forbids it."""
-    c = _dot(v, n)
+    c = dot(v, n)
     sin2_t = (1.0 - c * c) / (eta * eta)
     ok = (sin2_t < 1.0) & (c > 0.0)
     cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
@@ -59,7 +56,7 @@ def adjoint_density(slopes: SlopeDistribution, w_in: np.ndarray, wo: np.ndarray,
         wi_, wo_ = w_in[above], wo[above]
         h = _unit(wi_ + wo_)
         area = slopes.projected_area(wo_)
-        ok = (h[..., 2] > 0.0) & (_dot(wo_, h) > 0.0) & (area > 0.0)
+        ok = (h[..., 2] > 0.0) & (dot(wo_, h) > 0.0) & (area > 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             out[above] = np.where(ok, slopes.D(h) / (4.0 * area), 0.0)
     below = ~above
@@ -67,7 +64,7 @@ def adjoint_density(slopes: SlopeDistribution, w_in: np.ndarray, wo: np.ndarray,
         wi_, wo_, e = w_in[below], wo[below], eta[below]
         h = -_unit(wi_ + e[..., None] * wo_)
         h = h * np.where(h[..., 2] < 0.0, -1.0, 1.0)[..., None]
-        ci, co = _dot(wi_, h), _dot(wo_, h)
+        ci, co = dot(wi_, h), dot(wo_, h)
         ok = (ci > 0.0) & (co < 0.0) & (h[..., 2] > 0.0)
         denom = ci + e * co
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -82,10 +79,10 @@ def sample_adjoint(slopes: SlopeDistribution, wo: np.ndarray, eta: np.ndarray,
     above = wo[..., 2] > 0.0
     view = np.where(above[..., None], wo, -wo)
     m = slopes.sample_visible(view, u1, u2)
-    mirrored = 2.0 * _dot(wo, m)[..., None] * m - wo
+    mirrored = 2.0 * dot(wo, m)[..., None] * m - wo
     back, ok_t = refract(wo, -m, 1.0 / eta)
     w_in = np.where(above[..., None], mirrored, back)
-    ok = np.where(above, _dot(wo, m) > 0.0, ok_t)
+    ok = np.where(above, dot(wo, m) > 0.0, ok_t)
     return w_in, ok & np.all(np.isfinite(w_in), axis=-1)
 
 

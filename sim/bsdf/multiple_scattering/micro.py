@@ -12,10 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sum(a * b, axis=-1)
+from sim.bsdf.vectors import dot
 
 
 def _normalize(v: np.ndarray) -> np.ndarray:
@@ -27,7 +24,7 @@ def _normalize(v: np.ndarray) -> np.ndarray:
 def _reflect_phase(slopes: SlopeDistribution, w_in, w_out, fresnel) -> np.ndarray:
     """F D_visible(w_in, h) / (4 <w_in, h>) = F D(h) / (4 A(w_in)), h the half vector."""
     h = _normalize(w_in + w_out)
-    c = _dot(w_in, h)
+    c = dot(w_in, h)
     ok = (c > 0.0) & (h[..., 2] > 0.0)
     area = slopes.projected_area(w_in)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -66,7 +63,7 @@ class MicroConductor:
 
     def scatter(self, slopes, w_in, m, outside, u, unit):
         """Mirror w_in about m; the energy factor is F."""
-        c = _dot(w_in, m)
+        c = dot(w_in, m)
         w_out = 2.0 * c[..., None] * m - w_in
         factor = _unit(c) if unit else self.fresnel(c)
         return w_out, factor, np.zeros(c.shape, dtype=bool)
@@ -100,8 +97,8 @@ class MicroDielectric:
         eta_l = self.local_eta(outside)
         h = -_normalize(w_in + eta_l[..., None] * w_out)
         h = h * np.where(h[..., 2] < 0.0, -1.0, 1.0)[..., None]
-        ci = _dot(w_in, h)
-        co = _dot(w_out, h)
+        ci = dot(w_in, h)
+        co = dot(w_out, h)
         ok = (ci > 0.0) & (co < 0.0) & (h[..., 2] > 0.0)
         denom = ci + eta_l * co
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -117,7 +114,7 @@ class MicroDielectric:
     def scatter(self, slopes, w_in, m, outside, u, unit):
         """Reflect with probability F, else refract (Snell); the energy factor is 1."""
         eta_l = self.local_eta(outside)
-        c = np.clip(_dot(w_in, m), 0.0, 1.0)
+        c = np.clip(dot(w_in, m), 0.0, 1.0)
         f = self._fresnel(c, eta_l)
         sin2_t = (1.0 - c * c) / (eta_l * eta_l)
         cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
@@ -142,7 +139,7 @@ class MicroDiffuse:
     def phase_reflect(self, slopes, w_in, w_out, outside, m, unit):
         """Unbiased one-sample estimate albedo <w_out, m>+ / pi with m ~ D_visible(w_in)."""
         a = 1.0 if unit else self.albedo
-        return a * np.maximum(_dot(w_out, m), 0.0) / np.pi
+        return a * np.maximum(dot(w_out, m), 0.0) / np.pi
 
     def scatter(self, slopes, w_in, m, outside, u, unit):
         """Cosine-weighted direction about m; the energy factor is the albedo."""
