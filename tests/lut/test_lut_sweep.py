@@ -70,7 +70,7 @@ def test_every_entry_is_its_settings_bench_at_its_position(sweep_file, result):
 def test_same_numbers_on_a_cluster(sweep_file, result):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         with distributed.Client(cluster) as client:
             remote = run_sweep(load_sweep(sweep_file), client=client)
     for name, values in result.values.items():
