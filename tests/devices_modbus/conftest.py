@@ -41,6 +41,16 @@ class Rig:
     detector_map: Path
 
 
+# every transport x word order the drivers and emulators must agree on
+LINKS = [("tcp", "big"), ("tcp", "little"), ("rtu", "big"), ("rtu", "little")]
+
+
+@pytest.fixture(params=LINKS, ids=[f"{t}-{o}" for t, o in LINKS])
+def link(request):
+    """(transport, word order) of one rig."""
+    return request.param
+
+
 @pytest.fixture
 def rig(tmp_path):
     """make(transport, word_order, time_scale, stage_faults, server_faults, source, reply_s,

@@ -10,7 +10,6 @@ from drivers.base import Detector, DeviceError
 from drivers.register_map import RegisterMapError
 from sim.devices.photodiode import ConstantPower, PhotodiodeModel
 
-LINKS = [("tcp", "big"), ("tcp", "little"), ("rtu", "big"), ("rtu", "little")]
 RANGES = (1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
 
 
@@ -24,11 +23,6 @@ class SettablePower:
         if isinstance(self.value, Exception):
             raise self.value
         return self.value
-
-
-@pytest.fixture(params=LINKS, ids=[f"{t}-{o}" for t, o in LINKS])
-def link(request):
-    return request.param
 
 
 def test_configure_writes_every_setting(rig, link):

@@ -12,13 +12,6 @@ from drivers.modbus_stage import ModbusStage
 from drivers.modbus_transport import ModbusTimeouts
 from drivers.register_map import RegisterMapError
 
-LINKS = [("tcp", "big"), ("tcp", "little"), ("rtu", "big"), ("rtu", "little")]
-
-
-@pytest.fixture(params=LINKS, ids=[f"{t}-{o}" for t, o in LINKS])
-def link(request):
-    return request.param
-
 
 def test_registers_read_their_power_on_values(rig, link):
     r = rig(*link)

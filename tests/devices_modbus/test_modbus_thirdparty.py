@@ -11,12 +11,6 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 pytestmark = pytest.mark.thirdparty
 
-LINKS = [("tcp", "big"), ("tcp", "little"), ("rtu", "big"), ("rtu", "little")]
-
-
-@pytest.fixture(params=LINKS, ids=[f"{t}-{o}" for t, o in LINKS])
-def link(request):
-    return request.param
 
 
 @pytest.fixture(scope="module")
