@@ -243,7 +243,10 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
 
         # the source drifts in wall time since the bench started (a lamp does not follow the
         # motion's virtual clock), as the run store's t_s does: drift normalisation needs both
-        build.detectors(build_power_source(sim, stage_positions))
+        source = build_power_source(sim, stage_positions)
+        if detectors:  # a first reading must not stall for a compile: timeouts are short
+            source.bench.warm_up()
+        build.detectors(source)
         build.serve_modbus()
     except BaseException:
         bench.stop()

@@ -100,6 +100,12 @@ class Bench:
         return self.integral.integrate(self.sample.integrand, wi, wo,
                                        self.sample.lobe_scales(wi, wo))
 
+    def warm_up(self) -> None:
+        """Evaluate one reflected and one transmitted reading, so the model's compiled kernels
+        are built (seconds on a fresh machine) before an emulated device has to answer."""
+        for arm_deg in (140.0, 200.0):
+            self.scattered_fraction({"sample": 20.0, "arm": arm_deg})
+
     def power_w(self, positions: Mapping[str, float], t_s: float = 0.0) -> float:
         """True optical power at the detector for reported stage positions at time t_s."""
         true = self.alignment.true_positions(positions)
