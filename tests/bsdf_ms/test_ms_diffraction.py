@@ -105,11 +105,15 @@ def test_shorter_wavelengths_diffract_more():
                               / np.linalg.norm((wi + wo) / 2)))
 
 
-def test_transmission_is_left_to_the_microfacet_model():
+def test_transmission_diffracts_too_and_a_conductor_keeps_its_empty_lower_side():
+    """The transmitted lobe is diffracted as well (tests/bsdf/test_bsdf_diffraction_transmission.py
+    checks it); a conductor has nothing below the surface to diffract."""
     mf = RoughDielectric("ggx", 0.3, 1.5)
     model = TwoScaleDiffraction(mf, KCorrelationPSD(80e-9, 1e-6, 2.0))
-    wi, wo = direction(20), direction(160, 180)
-    assert model.eval(wi, wo, LAMBDA) == pytest.approx(mf.eval(wi, wo), rel=1e-15)
+    wi, wo = direction(20), direction(167, 180)
+    assert model.eval(wi, wo, LAMBDA) < 0.95 * mf.eval(wi, wo)
+    metal = TwoScaleDiffraction(RoughConductor("ggx", 0.3), KCorrelationPSD(80e-9, 1e-6, 2.0))
+    assert metal.eval(wi, wo, LAMBDA) == 0.0
 
 
 def test_diffraction_fraction_and_decision():
