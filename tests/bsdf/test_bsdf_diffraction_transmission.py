@@ -191,11 +191,12 @@ def test_specular_fraction_is_reciprocal_when_the_lobe_fits_the_disk():
     assert np.all(a_io < 0.95)
 
 
-@pytest.mark.parametrize("lam,tolerance", [(633e-9, 0.08), (100e-9, 0.03), (1e-10, 2e-3)])
+@pytest.mark.parametrize("lam,tolerance", [(633e-9, 0.03), (100e-9, 0.03), (1e-10, 1e-3)])
 def test_generalised_reciprocity_of_transmission_within_the_lobe(lam, tolerance):
     """f(i, o) / n_o^2 = f(o, i) / n_i^2 holds for the microfacet model exactly and in both limits;
     in between the convolution blurs the outgoing side only, so it holds to a few per cent
-    inside the microfacet lobe (measured: 6 % at 633 nm, 1.9 % at 100 nm, b = 3 um)."""
+    inside the microfacet lobe (measured: 1.4 % at 633 nm, 1.5 % at 100 nm, 1.4e-4 at 0.1 nm;
+    b = 3 um) and not in the diffraction-only tails outside it."""
     mf, m = model(sigma=60e-9, b=3e-6)
     wi, wo = PAIRS
     g = mf.eval(wi, wo)
