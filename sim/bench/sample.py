@@ -236,9 +236,10 @@ class Sample:
         loss = _lost_energy(s.distribution, s.alpha, eta, round(float(theta_i), 4))
         return loss > self.visible_fraction
 
-    def diffraction_on(self, theta_i: float) -> bool:
-        """Whether the reflected lobe is the two-scale diffraction model at incidence theta_i:
-        the spec's switch, or with "auto" when the Harvey-Shack diffracted share 1 - A exceeds
+    def diffraction_on(self, theta_i: float, lobe: str = "reflection") -> bool:
+        """Whether the lobe ("reflection" or "transmission") is the two-scale diffraction model
+        at incidence theta_i: the spec's switch, or with "auto" when the Harvey-Shack diffracted
+        share 1 - A (transmitted: phase path eta cos theta_t - cos theta_i) exceeds
         visible_fraction while the specular share A does too (a surface far rougher than the
         wavelength scatters by geometric optics alone, which the microfacet model is)."""
         s = self.spec
@@ -248,13 +249,14 @@ class Sample:
             return False
         from sim.bsdf.diffraction import diffraction_fraction
 
-        moved = diffraction_fraction(s.rms_height_nm * 1e-9, self.wavelength_m, theta_i)
+        eta = s.eta if lobe == "transmission" else None
+        moved = diffraction_fraction(s.rms_height_nm * 1e-9, self.wavelength_m, theta_i, eta)
         return self.visible_fraction < moved < 1.0 - self.visible_fraction
 
     def _eval(self, lobe: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         self.evaluations[lobe] += len(wi)
         theta_i = float(np.arccos(min(1.0, abs(float(np.mean(wi[:, 2]))))))
-        if lobe == "reflection" and self.diffraction_on(theta_i):
+        if self.diffraction_on(theta_i, lobe):
             self.evaluations["diffraction"] += len(wi)
             f = self._extra("diffraction", lobe).eval(wi, wo, self.wavelength_m)
         else:

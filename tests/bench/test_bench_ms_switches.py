@@ -15,8 +15,9 @@ from sim.bsdf.multiple_scattering import energy_loss
 from sim.devices.photodiode import SimConfigError
 
 AUTO = {"multiple_scattering": "auto", "diffraction": "auto"}
-WALTER = {  # the paper's three samples, with nano-roughness far above the wavelength
-    "antiglare": {**AUTO, "distribution": "beckmann", "alpha": 0.023, "rms_height_nm": 500.0,
+WALTER = {  # the paper's three samples, with nano-roughness far above the wavelength (also in
+    # transmission, whose phase path n cos theta_t - cos theta_i is ~4x shorter than 2 cos theta)
+    "antiglare": {**AUTO, "distribution": "beckmann", "alpha": 0.023, "rms_height_nm": 2000.0,
                   "correlation_length_um": 31.0},
     "ground": {**AUTO, "distribution": "ggx", "alpha": 0.394, "rms_height_nm": 1500.0,
                "correlation_length_um": 5.4},
