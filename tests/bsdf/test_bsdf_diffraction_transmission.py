@@ -5,6 +5,8 @@ generalised reciprocity."""
 import mpmath
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sim.bsdf import RoughDielectric
 from sim.bsdf.diffraction import (
@@ -225,3 +227,25 @@ def test_bench_sample_diffracts_the_transmitted_lobe():
     assert auto.evaluations["diffraction"] == len(wo) and plain.evaluations["diffraction"] == 0
     assert with_d[0] < 0.9 * without[0]  # the refracted peak loses the diffracted share (A 0.77)
     assert np.all(with_d > 0)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True)  # ~0.3 s per example
+@given(theta_i=st.floats(0.0, 89.999), theta_o=st.floats(90.001, 180.0),
+       phi=st.floats(0.0, 360.0), from_glass=st.booleans(),
+       alpha=st.sampled_from([1e-3, 0.05, 0.4, 2.0]), eta=st.sampled_from([1.0001, 1.51, 3.0]),
+       sigma_nm=st.sampled_from([0.01, 40.0, 2000.0]), b_um=st.sampled_from([0.05, 2.0, 500.0]))
+def test_extreme_inputs_give_finite_non_negative_values(theta_i, theta_o, phi, from_glass, alpha,
+                                                        eta, sigma_nm, b_um):
+    """Grazing directions, total internal reflection (from the glass), eta near 1, narrow and
+    very broad lobes, nano-roughness from 0.01 nm to 2 um: f finite and >= 0 on both sides."""
+    mf = RoughDielectric("ggx", alpha, eta)
+    m = TwoScaleDiffraction(mf, KCorrelationPSD(sigma_nm * 1e-9, b_um * 1e-6, 2.0), samples=16)
+    wi = direction(180.0 - theta_i if from_glass else theta_i)
+    wo = np.array([direction(theta_o, phi), direction(180.0 - theta_o, phi)])
+    f = m.eval(np.broadcast_to(wi, wo.shape), wo, LAMBDA)
+    assert np.all(np.isfinite(f)) and np.all(f >= 0.0)
+    a, share = m.specular_fraction(np.broadcast_to(wi, wo.shape), wo, LAMBDA)
+    assert np.all((a >= 0) & (a <= 1)) and np.all((share >= 0) & (share <= 1 + 1e-12))
+    for e in (eta, 1 / eta):
+        share_bound = diffraction_fraction(sigma_nm * 1e-9, LAMBDA, np.radians(theta_i), e)
+        assert 0.0 <= share_bound <= 1.0
