@@ -35,6 +35,7 @@ class Calibration:
     linearity: dict[str, Any] | None = None
     sample_offset_deg: Measured | None = None  # true = reported + offset
     arm_offset_deg: Measured | None = None
+    angle_fit: dict[str, Any] | None = None  # the reference sample's fit behind the offsets
     aperture_solid_angle_sr: Measured | None = None
     aperture_half_angle_deg: Measured | None = None
     aperture_method: str | None = None  # "geometry" | "beam-scan"
@@ -54,7 +55,8 @@ class Calibration:
                          "gain": values(self.gains), "gain_reference_range_w":
                              self.gain_reference, "linearity": self.linearity},
             "angles": {"sample_offset_deg": value(self.sample_offset_deg),
-                       "arm_offset_deg": value(self.arm_offset_deg)},
+                       "arm_offset_deg": value(self.arm_offset_deg),
+                       "fit": self.angle_fit},
             "aperture": {"solid_angle_sr": value(self.aperture_solid_angle_sr),
                          "half_angle_deg": value(self.aperture_half_angle_deg),
                          "method": self.aperture_method},
@@ -97,6 +99,7 @@ class Calibration:
             linearity=det.get("linearity"),
             sample_offset_deg=value(ang, "sample_offset_deg", "angles"),
             arm_offset_deg=value(ang, "arm_offset_deg", "angles"),
+            angle_fit=ang.get("fit"),
             aperture_solid_angle_sr=value(ap, "solid_angle_sr", "aperture"),
             aperture_half_angle_deg=value(ap, "half_angle_deg", "aperture"),
             aperture_method=ap.get("method"),

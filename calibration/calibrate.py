@@ -8,15 +8,13 @@ What each part needs in the readings (several runs may be given together):
   of repeats is the readings' noise);
 - beam: the interleaved straight-through readings (a summary of drift and noise).
 
-Angle equations (architecture.md geometry, true = reported + offset, eta of the sample): the
-transmitted peak at reported sample 0 sits at reported arm 180 + ds (1 - 1/eta) - da, the
-specular peak at reported sample S at 2 (S + ds) - da; two peaks give ds and da.
+Angles (architecture.md geometry, true = reported + offset, eta of the sample): the transmitted
+peak at reported sample 0 sits near reported arm 180 + ds (1 - 1/eta) - da, the specular peak at
+reported sample S near 2 (S + ds) - da; two peaks give ds and da, fitted with the reference
+sample's microfacet model (calibration.angles).
 """
 
 from __future__ import annotations
-
-import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,57 +31,49 @@ from calibration.detector import (
 )
 from calibration.values import CalibrationError, Measured
 
-
-@dataclass
-class PeakScan:
-    """One scan across a peak: arm angles, mean power of the repeats and its standard error."""
-
-    sample_deg: float
-    arm_deg: np.ndarray
-    power_w: np.ndarray
-    sigma_w: np.ndarray
+STAGES = ("sample", "arm", "elevation", "azimuth")  # PeakScan's stage order
 
 
-def averaged_points(rows: np.ndarray) -> PeakScan:
+def averaged_points(rows: np.ndarray, side: str) -> angle_cal.PeakScan:
     """Average the repeats of each plan point (at least two each) of one scan; their standard
-    errors from the noise law pooled over the scan (detector.pooled_sem)."""
-    groups, arm = [], []
+    errors from the noise law pooled over the scan (detector.pooled_sem, with each point's
+    range: an autoranged scan's read noise follows the range)."""
+    groups, where, full_scale = [], [], []
     for p in np.unique(rows["point"]):
         sel = rows[rows["point"] == p]
         if len(sel) < 2:
             raise CalibrationError(f"point {int(p)}: angle calibration needs repeated readings "
                                    "(set repeats >= 2 in the plan) to know their noise")
         groups.append(np.asarray(sel["power_w"], dtype=np.float64))
-        arm.append(float(sel["arm_deg"].mean()))
-    mean = np.array([g.mean() for g in groups])
-    return PeakScan(float(rows["sample_deg"].mean()), np.array(arm), mean, pooled_sem(groups))
+        where.append([float(sel[f"{role}_deg"].mean()) for role in STAGES])
+        full_scale.append(float(sel["range_w"].max()))
+    stages = np.array(where).T
+    return angle_cal.PeakScan(side, *stages, np.array([g.mean() for g in groups]),
+                              pooled_sem(groups, np.array(full_scale)))
 
 
-def angle_offsets(readings: np.ndarray, eta: float, seed: int = 0) -> tuple[Measured, Measured]:
-    """(sample offset, arm offset) in degrees from the transmitted peak at normal incidence and
-    the specular peak(s) in the readings (sample readings; powers already dark-corrected),
-    by weighted least squares over the peak equations (linear in the offsets to O(ds^3))."""
+def peak_scans(readings: np.ndarray) -> list[angle_cal.PeakScan]:
+    """The transmitted scan at normal incidence and each specular scan (one per reported sample
+    angle) in the sample readings, their repeats averaged."""
     rows = readings[readings["kind"] == "sample"]
     trans = rows[(rows["side"] == "transmission") & (np.abs(rows["sample_deg"]) < 0.5)]
     refl = rows[rows["side"] == "reflection"]
     if len(trans) == 0 or len(refl) == 0:
         raise CalibrationError("angle calibration needs a transmission scan at normal incidence "
                                "and a reflection scan across the specular peak")
-    k_t = 1.0 - 1.0 / eta
-    t_scan = averaged_points(trans)
-    c_t = angle_cal.peak_centre(t_scan.arm_deg, t_scan.power_w, t_scan.sigma_w, seed=seed)
-    # rows of [coefficient of ds, coefficient of da], right-hand side, sigma
-    eqs = [([k_t, -1.0], c_t.value - 180.0 - k_t * t_scan.sample_deg, c_t.sigma)]
+    scans = [averaged_points(trans, "transmission")]
     for s in np.unique(np.round(refl["sample_deg"], 3)):
-        scan = averaged_points(refl[np.abs(refl["sample_deg"] - s) < 1e-3])
-        c_r = angle_cal.peak_centre(scan.arm_deg, scan.power_w, scan.sigma_w, seed=seed)
-        eqs.append(([2.0, -1.0], c_r.value - 2.0 * scan.sample_deg, c_r.sigma))
-    a = np.array([e[0] for e in eqs]) / np.array([[max(e[2], 1e-12)] for e in eqs])
-    b = np.array([e[1] / max(e[2], 1e-12) for e in eqs])
-    coef, *_ = np.linalg.lstsq(a, b, rcond=None)
-    cov = np.linalg.inv(a.T @ a)
-    return (Measured(float(coef[0]), float(math.sqrt(cov[0, 0]))),
-            Measured(float(coef[1]), float(math.sqrt(cov[1, 1]))))
+        scans.append(averaged_points(refl[np.abs(refl["sample_deg"] - s) < 1e-3], "reflection"))
+    return scans
+
+
+def angle_offsets(readings: np.ndarray, eta: float, aperture_half_angle_deg: float = 0.0,
+                  divergence_deg: float = 0.0) -> angle_cal.OffsetFit:
+    """Sample and arm offsets (degrees) from the transmitted peak at normal incidence and the
+    specular peak(s) in the readings (sample readings; powers already dark-corrected and
+    beam-normalised), by the model fit of calibration.angles."""
+    return angle_cal.fit_offsets(peak_scans(readings), eta, aperture_half_angle_deg,
+                                 divergence_deg)
 
 
 def covering(gains: dict[str, Measured] | None,
@@ -127,11 +117,12 @@ def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
 
 def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
           eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
-          seed: int = 0) -> Calibration:
+          divergence_deg: float = 0.0) -> Calibration:
     """Everything the runs' readings (one array per run) can determine: darks always; gains
     when fixed-range runs read the same stage positions on several ranges;
     angle offsets, when eta is given, from the runs holding a specular scan (each normalised by
-    its own beam readings: times restart with every run); a beam summary per run."""
+    its own beam readings: times restart with every run), modelled with the aperture (if given)
+    and the beam's divergence half-angle; a beam summary per run."""
     readings = np.concatenate(runs)
     darks = dark_offsets(readings)
     cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
@@ -152,8 +143,12 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
         if not peak_runs:
             raise CalibrationError("angle calibration (--eta) needs a run with a specular "
                                    "scan (examples/plans/calib-angles.toml)")
-        cal.sample_offset_deg, cal.arm_offset_deg = angle_offsets(
-            np.concatenate(peak_runs), eta, seed)
+        half_angle = 0.0 if aperture is None else aperture[1].value
+        offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle, divergence_deg)
+        cal.sample_offset_deg, cal.arm_offset_deg = offsets.sample_offset, offsets.arm_offset
+        cal.angle_fit = {"distribution": offsets.distribution, "alpha": offsets.alpha.to_json(),
+                         "chi2_dof": offsets.chi2_dof, "points": offsets.n_points,
+                         "aperture_half_angle_deg": half_angle, "divergence_deg": divergence_deg}
     if aperture is not None:
         cal.aperture_solid_angle_sr, cal.aperture_half_angle_deg, cal.aperture_method = aperture
     summaries = [dict(run=name, **summary) for name, run in zip(source_runs, runs, strict=True)

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares, nnls
+from scipy.optimize import least_squares, minimize
 
 from calibration.values import CalibrationError, Measured, weighted_mean
 
@@ -89,22 +89,31 @@ def gain_ratios(readings: np.ndarray, darks: dict[str, Measured],
     return _solve_gains(cells, ranges, shared, ranges.index(reference), darks)
 
 
-def pooled_sem(groups: list[np.ndarray]) -> np.ndarray:
-    """Standard error of each group's mean from a noise law pooled over the groups of one range,
-    variance = a + b mean^2 (read noise plus relative noise), fitted to the groups' sample
-    variances: a handful of repeats per group then still gives a trustworthy error."""
+def pooled_sem(groups: list[np.ndarray], full_scale_w: np.ndarray | None = None) -> np.ndarray:
+    """Standard error of each group's mean from a noise law pooled over the groups,
+    variance = a FS^2 + b mean^2 (read noise and quantisation in proportion to the range's full
+    scale FS, plus relative noise; FS = 1 for groups of one range): a handful of repeats per
+    group then still gives a trustworthy error. The law is fitted by maximum likelihood (a
+    sample variance of n readings is the law times chi2(n - 1) / (n - 1)), which stays stable
+    where powers span decades (reweighted least squares on the variances flip-flopped between
+    the two terms)."""
     mean = np.array([g.mean() for g in groups])
     var = np.array([g.var(ddof=1) for g in groups])
-    n = np.array([len(g) for g in groups])
-    unit_m = max(float(np.abs(mean).max()), 1e-300)  # columns of order one for nnls
-    unit_v = max(float(var.max()), 1e-300)
-    design = np.stack([np.ones_like(mean), (mean / unit_m) ** 2], axis=1)
-    model = np.full(len(groups), max(float(np.mean(var)) / unit_v, 1e-300))
-    for _ in range(4):  # reweight by the current model: sample variances scatter as the model
-        w = np.sqrt(n - 1) / model
-        coef, _ = nnls(design * w[:, None], var / unit_v * w)
-        model = np.maximum(design @ coef, 1e-12 * float(np.mean(var)) / unit_v + 1e-300)
-    return np.sqrt(model * unit_v / n)
+    dof = np.array([len(g) for g in groups]) - 1.0
+    scale = np.ones(len(groups)) if full_scale_w is None else np.asarray(full_scale_w, float)
+    unit_v = max(float(var.max()), 1e-300)  # terms of order one
+    design = np.stack([scale ** 2, mean ** 2], axis=1)
+    design /= np.maximum(design.max(axis=0), 1e-300) / unit_v
+    v = var / unit_v
+    start = [max(float(np.median(v / np.maximum(design[:, k], 1e-300))), 1e-12) for k in (0, 1)]
+
+    def nll(log_coef: np.ndarray) -> float:
+        model = design @ np.exp(log_coef) + 1e-300
+        return float(np.sum(0.5 * dof * (np.log(model) + v / model)))
+
+    bounds = [(math.log(x) - 40.0, math.log(x) + 10.0) for x in start]
+    best = minimize(nll, np.log(start), method="L-BFGS-B", bounds=bounds)
+    return np.sqrt((design @ np.exp(best.x) * unit_v) / (dof + 1.0))
 
 
 def _solve_gains(cells: list[tuple[int, int, float, float]], ranges: list[float],
