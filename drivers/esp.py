@@ -8,7 +8,9 @@ axis*100 + code). Every exchange appends ";TB?" so the error status comes back w
 timeout or garble; a state-changing command is sent once, and if its status reply is lost
 the driver re-reads the device state (error buffer, target) instead of re-sending it.
 Numeric replies must have the controller's fixed shape (optional minus, digits, point,
-DECIMALS decimals, as in `-12.50000`); any other shape is a garbled reply (retried).
+DECIMALS decimals, as in `-12.50000`); any other shape is a garbled reply (retried). After
+a timeout a bare VE? (its reply is the only one without an error status) brings late
+replies and requests back in step before the next exchange (drivers.serial_transport).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
-from drivers.serial_transport import SerialLineTransport
+from drivers.serial_transport import SerialLineTransport, SyncQuery
 
 T = TypeVar("T")
 _TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
@@ -82,9 +84,11 @@ class EspController:
         self.name = name
         self.poll_s = poll_s
         self.number = decimal_parser(decimals)
+        self.version: str | None = None
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\r", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries, rtscts=rtscts,
+            sync=SyncQuery("VE?", self._is_version),
         )
         try:
             self.errors()  # start from an empty error buffer
@@ -103,6 +107,13 @@ class EspController:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def _is_version(self, text: str) -> bool:
+        """The reply to a bare VE? (the sync query): the version string (once known, exactly
+        it), never followed by an error status as the replies to every other exchange are."""
+        if self.version is not None:
+            return text == self.version
+        return "VERSION" in text.upper() and _TB.fullmatch(",".join(text.split(",")[-3:])) is None
 
     # -- error buffer -----------------------------------------------------------
     def _parse_tb(self, text: str) -> tuple[int, str]:

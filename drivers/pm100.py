@@ -10,6 +10,9 @@ setting back. Numeric answers are checked against the exact shape the manual giv
 (NR3 `1.234567E-06`: sign, one digit, point, a fixed number of decimals, `E`, signed
 two-digit exponent; NR1 integers; 0/1 flags): a reply with a byte lost or altered is a
 ProtocolError (retried like any garbled query reply), never a plausible wrong number.
+After a timeout a bare *OPC? (its `1` is the only reply without an error status)
+brings late replies and requests back in step before the next exchange, so a late READ?
+answer is never taken for a later reading (drivers.serial_transport).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
-from drivers.serial_transport import SerialLineTransport
+from drivers.serial_transport import SerialLineTransport, SyncQuery
 
 _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
 _NR1 = re.compile(r"[+-]?\d+")
@@ -50,6 +53,11 @@ def _flag(text: str) -> bool:
     if text not in ("0", "1"):
         raise ProtocolError(f"garbled flag {text!r} (expected 0 or 1)")
     return text == "1"
+
+
+def _is_opc(text: str) -> bool:
+    """The reply to a bare *OPC? (the sync query): 1, with no error status after it."""
+    return text.strip() in ("1", "+1")
 
 
 @dataclass(frozen=True)
@@ -82,7 +90,7 @@ class Pm100:
         self._nr3 = nr3_parser(nr3_decimals)
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
-            timeout_s=timeout_s, retries=retries,
+            timeout_s=timeout_s, retries=retries, sync=SyncQuery("*OPC?", _is_opc),
         )
         try:
             self.errors()  # start from an empty error queue

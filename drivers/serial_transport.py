@@ -5,6 +5,13 @@ Protocol drivers send a line and read a reply line through it. Only queries are 
 exactly once and its outcome is re-read by the driver instead. Every failure of the port
 itself (pyserial's SerialException, OSError, and the termios.error a vanished pty or USB
 adaptor raises) becomes a SerialPortError, so callers see only DriverError subclasses.
+
+A reply that missed its timeout may still arrive, after the next query has been sent, and
+would be read as that query's answer (a power reading taken at the previous stage position).
+So after a timeout the transport is out of step: before its next exchange it sends the
+driver's sync query, whose answer no other exchange produces, and discards every line up to
+that answer (the device answers in order, so whatever was late has come out by then). A
+garbled reply that arrives in step is the answer to the line just sent, garbled.
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import TypeVar
 
 import serial
@@ -44,11 +52,22 @@ def _describe(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
+@dataclass(frozen=True)
+class SyncQuery:
+    """A query whose reply no other exchange of the driver produces (`is_reply` tells it),
+    sent to bring replies back in step after a timeout or a garbled reply."""
+
+    line: str
+    is_reply: Callable[[str], bool]
+
+
 class SerialLineTransport:
     """A serial port exchanging ASCII lines, thread-safe (one exchange at a time).
 
     write_eol / read_eol: the line terminators sent and expected; timeout_s: how long a
-    reply may take; retries: extra attempts a query gets after a timeout or garbled reply.
+    reply may take; retries: extra attempts a query gets after a timeout or garbled reply;
+    sync: the driver's SyncQuery (None: input is only flushed before each write, which
+    catches a late reply only if it has already arrived).
     """
 
     def __init__(
@@ -62,6 +81,7 @@ class SerialLineTransport:
         timeout_s: float = 1.0,
         retries: int = 2,
         rtscts: bool = False,
+        sync: SyncQuery | None = None,
     ):
         if not timeout_s > 0:
             raise ValueError(f"{name}: timeout_s must be > 0, got {timeout_s!r}")
@@ -70,6 +90,11 @@ class SerialLineTransport:
         self.name, self.port = name, port
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
+        self.sync = sync
+        self.in_step = True  # False after a timeout or garble, until a sync succeeds
+        self.resyncs = 0  # sync queries answered (how often replies were out of step)
+        self._syncs_unanswered = 0  # sync queries whose reply has not been read yet
+        self._rx = bytearray()  # bytes read past the last reply line
         self.lock = threading.RLock()
         try:
             self._serial = serial.serial_for_url(
@@ -108,51 +133,100 @@ class SerialLineTransport:
         try:
             yield
         except serial.SerialTimeoutException:
+            self.in_step = False  # part of a line may have gone out
             raise DeviceTimeout(self.name, f"the port to take {action}", self.timeout_s) from None
         except PORT_FAILURES as exc:
             raise SerialPortError(self.name, self.port, action, exc) from exc
 
-    def send(self, line: str) -> None:
-        """Discard stale input, then write one line (terminator added)."""
-        data = line.encode("ascii") + self.write_eol
+    def send(self, line: str, what: str | None = None) -> None:
+        """Bring replies back in step if a reply was missed (DeviceTimeout naming `what`
+        if that fails), discard stale input, then write one line (terminator added)."""
         with self.lock:
-            with self._port("discarding stale input"):
-                self._serial.reset_input_buffer()
-            with self._port(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}"):
-                self._serial.write(data)
-                self._serial.flush()
+            if not self.in_step and self.sync is not None:
+                self._resync(what or repr(line))
+            self._write(line)
+
+    def _write(self, line: str) -> None:
+        data = line.encode("ascii") + self.write_eol
+        with self._port("discarding stale input"):
+            self._serial.reset_input_buffer()
+        self._rx.clear()
+        with self._port(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}"):
+            self._serial.write(data)
+            self._serial.flush()
+
+    def _resync(self, what: str) -> None:
+        """Send the sync query and drop every line before a sync reply (late replies, garbled
+        or not); DeviceTimeout, still out of step, if none comes in time. Nothing but sync
+        queries is sent while out of step, so any sync reply means every earlier request
+        has been answered; the surplus replies of sync queries that timed out are skipped
+        when they turn up later (see _reply)."""
+        assert self.sync is not None
+        self._write(self.sync.line)
+        self._syncs_unanswered += 1
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            try:
+                line = self._read_line(f"{what} (replies out of step after a timeout: "
+                                       f"no answer to the sync query {self.sync.line!r})",
+                                       deadline)
+            except ProtocolError:
+                continue
+            if self.sync.is_reply(line):
+                self._syncs_unanswered -= 1
+                self.in_step = True
+                self.resyncs += 1
+                return
+
+    def _reply(self, what: str) -> str:
+        """The reply to the line just sent: the next line, past any late sync replies."""
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            line = self._read_line(what, deadline)
+            if not (self._syncs_unanswered and self.sync and self.sync.is_reply(line)):
+                return line
+            self._syncs_unanswered -= 1
 
     def read_line(self, what: str, timeout_s: float | None = None) -> str:
         """Read one reply line (terminator stripped).
 
         Reads whatever has arrived in one call rather than pyserial's byte-at-a-time
-        read_until; bytes after the terminator are dropped (a line protocol sends one
-        reply per request). Raises DeviceTimeout(what) when no complete line arrives in
-        time, ProtocolError when it holds bytes that are not printable ASCII.
+        read_until; bytes after the terminator are kept for the next read_line (and
+        discarded by the next send: a line protocol sends one reply per request). Raises
+        DeviceTimeout(what) when no complete line arrives in time (the transport is then
+        out of step: the reply may still come), ProtocolError when it holds bytes that are
+        not printable ASCII.
         """
         timeout = self.timeout_s if timeout_s is None else timeout_s
-        deadline = time.monotonic() + timeout
-        data = bytearray()
+        return self._read_line(what, time.monotonic() + timeout, timeout)
+
+    def _read_line(self, what: str, deadline: float, timeout_s: float | None = None) -> str:
+        data = self._rx
         with self.lock, self._port(f"reading the reply to {what}"):
             while self.read_eol not in data:
                 left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceTimeout(self.name, what, timeout)
-                self._serial.timeout = left
-                chunk = self._serial.read(max(1, self._serial.in_waiting))
+                chunk = b""
+                if left > 0:
+                    self._serial.timeout = left
+                    chunk = self._serial.read(max(1, self._serial.in_waiting))
                 if not chunk:
-                    raise DeviceTimeout(self.name, what, timeout)
+                    self.in_step = False
+                    raise DeviceTimeout(self.name, what, timeout_s or self.timeout_s)
                 data += chunk
-        body = bytes(data[: data.index(self.read_eol)])
+        end = data.index(self.read_eol)
+        body = bytes(data[:end])
+        del data[: end + len(self.read_eol)]
         if any(b < 0x20 or b > 0x7E for b in body):
-            raise ProtocolError(f"{self.name}: garbled reply to {what}: {bytes(data)!r}")
+            raise ProtocolError(f"{self.name}: garbled reply to {what}: "
+                                f"{body + self.read_eol!r}")
         return body.decode("ascii")
 
     def exchange(self, line: str, what: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""
+        what = what or repr(line)
         with self.lock:
-            self.send(line)
-            return self.read_line(what or repr(line))
+            self.send(line, what)
+            return self._reply(what)
 
     def query(
         self,
