@@ -20,10 +20,12 @@ k the lobe per unit area of direction cosines, P(o') its share inside the unit d
 transmission BSDF integrates to the transmitted flux this way), the second term carries exactly
 (1 - A) of the microfacet energy of its side: R and T are those of the microfacet model. The
 integral uses a fixed scrambled Sobol set, half drawn from k and half from the microfacet
-sampler, combined by the balance heuristic. See docs/diffraction.md.
+sampler of the lobe evaluated, combined by the balance heuristic. See docs/diffraction.md.
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 from scipy.stats import qmc
@@ -126,11 +128,22 @@ class TwoScaleDiffraction:
         self.psd = psd
         self.samples = int(samples)
         self.eta = getattr(model, "eta", None)  # None: a conductor, reflection above only
+        self._samplers = {lobe: self._one_lobe(lobe) for lobe in ("reflection", "transmission")}
         self._u = qmc.Sobol(d=3, scramble=True, seed=20170707).random(self.samples)
         x, w = np.polynomial.legendre.leggauss(FRACTION_NODES)
         self._t, self._w = 0.5 * (x + 1.0), 0.5 * w
 
     # --- pieces -------------------------------------------------------------------------
+
+    def _one_lobe(self, lobe: str):
+        """The model restricted to one lobe, to draw the convolution's points from (a dielectric
+        with both lobes would send only F of them to the reflected side)."""
+        if lobe not in getattr(self.model, "lobes", ()) or len(self.model.lobes) == 1:
+            return self.model
+        one = copy.copy(self.model)
+        one.lobes = (lobe,)
+        one.reflection, one.transmission = lobe == "reflection", lobe == "transmission"
+        return one
 
     def _index(self, w: np.ndarray) -> np.ndarray:
         """Refractive index of the medium on w's side (1 above, model.eta below)."""
@@ -182,17 +195,16 @@ class TwoScaleDiffraction:
         shape = wi.shape[:-1]
         wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
         f = np.asarray(self.model.eval(wi, wo), dtype=np.float64).copy()
-        lit = wi[:, 2] != 0.0 if self.eta is not None else wi[:, 2] > 0.0
-        for side in (1.0, -1.0):
-            if side < 0 and self.eta is None:
-                continue
-            use = lit & (wo[:, 2] * side > 0.0)
-            if use.any():
-                f[use] = self._lobe(wi[use], wo[use], wavelength_m, side)
+        for lit in (1.0, -1.0) if self.eta is not None else (1.0,):
+            for side in (1.0, -1.0) if self.eta is not None else (1.0,):
+                use = (wi[:, 2] * lit > 0.0) & (wo[:, 2] * side > 0.0)
+                lobe = "reflection" if lit == side else "transmission"
+                if use.any():
+                    f[use] = self._lobe(wi[use], wo[use], wavelength_m, side, lobe)
         return f.reshape(shape)
 
-    def _lobe(self, wi, wo, lam0, side) -> np.ndarray:
-        """f at pairs whose wo all leave on one side (side = sign of wo_z)."""
+    def _lobe(self, wi, wo, lam0, side, lobe) -> np.ndarray:
+        """f at pairs of one lobe whose wo all leave on one side (side = sign of wo_z)."""
         n, half = wi.shape[0], self.samples // 2
         lam = lam0 / float(self._index(np.array([0.0, 0.0, side])))
         grid = np.linspace(0.0, 1.0, FRACTION_TABLE)
@@ -207,14 +219,15 @@ class TwoScaleDiffraction:
         r2 = np.sum(src1_xy**2, axis=-1)
         src1 = np.concatenate([src1_xy, side * np.sqrt(np.maximum(0.0, 1.0 - r2))[..., None]], -1)
         wi_rep = np.broadcast_to(wi[:, None, :], (n, half, 3))
-        src2, _, _ = self.model.sample(wi_rep, np.broadcast_to(u[half:], (n, half, 3)))
+        sampler = self._samplers[lobe]
+        src2, _, _ = sampler.sample(wi_rep, np.broadcast_to(u[half:], (n, half, 3)))
         ok = np.concatenate([r2 < 1.0, src2[..., 2] * side > 0.0], axis=1)
         src = np.concatenate([src1, np.where(ok[:, half:, None], src2, [0.0, 0.0, side])], axis=1)
         wi_all = np.broadcast_to(wi[:, None, :], src.shape)
         f_src = np.where(ok, self._f_side(wi_all, src, side), 0.0)
         a_src, share = self.specular_fraction(wi_all, src, lam0, table)
         k = self._kernel(np.linalg.norm(wo[:, None, :2] - src[..., :2], axis=-1), lam)
-        p_model = (np.where(ok, self.model.pdf(wi_all, src), 0.0)
+        p_model = (np.where(ok, sampler.pdf(wi_all, src), 0.0)
                    / np.maximum(np.abs(src[..., 2]), 1e-300))
         mixture = 0.5 * (k + p_model)
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -113,8 +113,8 @@ def hemisphere_energy(f_of, wi, sample_model, below, n=1500, seed=5):
 def test_transmitted_and_reflected_energy_are_the_microfacet_models(theta, from_glass):
     """Diffraction moves light within each lobe: T and R equal the microfacet model's (the same
     random points, so the difference is resolved) up to the quadrature error of the fixed
-    256-point convolution (exact only on average over point sets: 2 % of the lobe's energy
-    allowed, about 0.5 % seen), and R + T <= 1."""
+    256-point convolution (exact on average over point sets; 2 % of the lobe's energy allowed,
+    none resolved at 6000 samples: within 1.8 standard errors), and R + T <= 1."""
     mf, m = model(alpha=0.4, sigma=80e-9, b=1.5e-6, c=2.5)
     wi = direction(180.0 - theta if from_glass else theta)
     total, variance = 0.0, 0.0
@@ -197,7 +197,7 @@ def test_specular_fraction_is_reciprocal_when_the_lobe_fits_the_disk():
 def test_generalised_reciprocity_of_transmission_within_the_lobe(lam, tolerance):
     """f(i, o) / n_o^2 = f(o, i) / n_i^2 holds for the microfacet model exactly and in both limits;
     in between the convolution blurs the outgoing side only, so it holds to a few per cent
-    inside the microfacet lobe (measured: 1.4 % at 633 nm, 1.5 % at 100 nm, 1.4e-4 at 0.1 nm;
+    inside the microfacet lobe (measured: 1.3 % at 633 nm, 1.2 % at 100 nm, 1.3e-4 at 0.1 nm;
     b = 3 um) and not in the diffraction-only tails outside it."""
     mf, m = model(sigma=60e-9, b=3e-6)
     wi, wo = PAIRS
@@ -249,3 +249,40 @@ def test_extreme_inputs_give_finite_non_negative_values(theta_i, theta_o, phi, f
     for e in (eta, 1 / eta):
         share_bound = diffraction_fraction(sigma_nm * 1e-9, LAMBDA, np.radians(theta_i), e)
         assert 0.0 <= share_bound <= 1.0
+
+
+def fresnel_unpolarised(cos_i, n_i, n_o):
+    """Flat-interface reflectance (s and p averaged), written out independently of sim.bsdf."""
+    sin_t2 = (n_i / n_o) ** 2 * (1 - cos_i**2)
+    cos_t = np.sqrt(1 - sin_t2)
+    rs = (n_i * cos_i - n_o * cos_t) / (n_i * cos_i + n_o * cos_t)
+    rp = (n_o * cos_i - n_i * cos_t) / (n_o * cos_i + n_i * cos_t)
+    return 0.5 * (rs**2 + rp**2)
+
+
+@pytest.mark.parametrize("from_glass", [False, True])
+def test_flat_micro_geometry_gives_the_scalar_diffraction_lobe(from_glass):
+    """An independent route: on a nearly flat micro-geometry (Beckmann alpha 1e-3, no tail) the
+    light away from the specular directions is the closed-form scalar lobe,
+    f = T_or_R (1 - A) S(n_o |o_xy - o'_xy| / lambda) n_o^2 / (sigma_rel^2 lambda^2),
+    with the flat interface's Fresnel split, A and sigma_rel at the specular direction o'."""
+    sigma, b, c = 20e-9, 1e-6, 2.5
+    psd = KCorrelationPSD(sigma, b, c)
+    mf = RoughDielectric("beckmann", 1e-3, ETA)
+    m = TwoScaleDiffraction(mf, psd, samples=256)
+    n_i, n_o_t = (ETA, 1.0) if from_glass else (1.0, ETA)
+    theta = 20.0
+    wi = direction(180.0 - theta if from_glass else theta)
+    r = fresnel_unpolarised(np.cos(np.radians(theta)), n_i, n_o_t)
+    for n_o, energy, o_spec in ((n_o_t, 1 - r, refracted(wi, n_i, n_o_t)),
+                                (n_i, r, wi * [-1.0, -1.0, 1.0])):
+        z = np.sign(o_spec[2])
+        shifts = np.array([[0.05, 0.0], [0.0, 0.12], [-0.2, 0.1], [0.3, -0.25]])
+        xy = o_spec[:2] + shifts
+        wo = np.concatenate([xy, z * np.sqrt(1 - np.sum(xy**2, -1))[:, None]], -1)
+        a, share = m.specular_fraction(wi, o_spec, LAMBDA)
+        lam_o = LAMBDA / n_o
+        expected = energy * (1 - a) / share * psd(np.linalg.norm(shifts, axis=-1) / lam_o) / (
+            sigma**2 * lam_o**2)
+        got = m.eval(np.broadcast_to(wi, wo.shape), wo, LAMBDA)
+        assert np.allclose(got, expected, rtol=1e-3), (n_o, got / expected)  # seen: 1.2e-4
