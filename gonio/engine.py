@@ -23,7 +23,14 @@ import numpy as np
 from drivers.base import DeviceError, DriverError
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
-from gonio.plan import MOTION_ROLES, Plan, profile_seconds, sweeps_source
+from gonio.plan import (
+    AUTO_RANGE,
+    MOTION_ROLES,
+    Plan,
+    describe_range,
+    profile_seconds,
+    sweeps_source,
+)
 from gonio.progress import Progress
 from gonio.store import RunWriter
 
@@ -134,6 +141,7 @@ class Engine:
         self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
         cfg = instrument.config
         self._settle = {role: cfg.axes[role].settle_s for role in instrument.axes}
+        self._range: float | None = None  # the detector range last set (schedule's range_w)
 
     # -- one reading ------------------------------------------------------------
     def _wait_timeout(self, role: str, target: float) -> float:
@@ -174,7 +182,19 @@ class Engine:
         raise PositionMismatch(f"{role} axis at {again:.6g} deg, not at its target "
                                f"{target:.6g} deg (tolerance {tol:g})")
 
+    def _use_range(self, range_w: float) -> None:
+        """Set the detector's range (AUTO_RANGE: autorange) unless it is set already."""
+        if range_w == self._range:
+            return
+        det = self.inst.config.detector
+        self._doing = f"setting the detector ({self.inst.detector.name}) range"
+        self._range = None  # unknown until the device confirms
+        self.inst.detector.configure(det.wavelength_nm, self.plan.averaging or det.averaging,
+                                     None if range_w == AUTO_RANGE else range_w)
+        self._range = range_w
+
     def _measure(self, row: np.void, flags: list[str]) -> dict[str, Any]:
+        self._use_range(float(row["range_w"]))
         moved = self._move(row)
         pause = max((self._settle[r] for r in moved), default=0.0) + self.plan.dwell_s
         if pause > 0:
@@ -215,14 +235,27 @@ class Engine:
         raise StopRun(f"{where}: {self._doing}: {last} (after {self.retries + 1} attempts)")
 
     # -- the run ----------------------------------------------------------------
+    def _check_ranges(self) -> None:
+        """Before any motion: the detector accepts every range the remaining readings use (each
+        set once; a PM100 refuses a range its sensor lacks, a Modbus amplifier one above its
+        largest), so a bad plan range stops the run with one clear error."""
+        remaining = self.schedule["range_w"][self.writer.next_index:]
+        for range_w in np.unique(remaining):
+            try:
+                self._use_range(float(range_w))
+            except (DeviceError, ValueError) as exc:
+                raise StopRun(f"the plan's detector range {describe_range(float(range_w))}: "
+                              f"the detector refuses it ({exc})") from exc
+        if len(remaining):
+            self._use_range(float(remaining[0]))
+
     def _prepare(self) -> None:
-        """Configure the detector, home the axes that ask for it, learn where every axis is
-        (the first move's timeout depends on it)."""
+        """Configure the detector on every range the plan uses (ending on the first reading's),
+        home the axes that ask for it, learn where every axis is (the first move's timeout
+        depends on it)."""
         cfg = self.inst.config
-        det = cfg.detector
         try:
-            self.inst.detector.configure(det.wavelength_nm, self.plan.averaging or det.averaging,
-                                         det.range_w)
+            self._check_ranges()
             for role, ax in cfg.axes.items():
                 if ax.home:
                     self.inst.axes[role].home()

@@ -2,9 +2,12 @@
 
 A plan lists sample points (grids and single points of incidence, outgoing angle in and out of
 the plane of incidence, reflection/transmission side, sample azimuth) plus repeats, dwell,
-averaging and dark/beam readings interleaved at a rate. `build_schedule` turns it into the
-exact, ordered list of readings the engine runs: every reading has an index, and the same
-plan and config always give the same schedule, which is what makes `--resume` possible.
+averaging and dark/beam readings interleaved at a rate, and the detector range of each reading
+(`range`: "auto" or a fixed full scale in W; per grid, point, [dark] and [beam], else the plan's,
+else the instrument's [detector] range; a grid may list several ranges to step through).
+`build_schedule` turns it into the exact, ordered list of readings the engine runs: every reading
+has an index, and the same plan and config always give the same schedule, which is what makes
+`--resume` possible.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import Any
 import numpy as np
 import tomllib
 
+from drivers.register_map import RegisterMap
 from gonio.config import InstrumentConfig, forbidden_reason
 from gonio.errors import PlanError
 from gonio.fields import Fields
@@ -26,18 +30,22 @@ from gonio.geometry import into_limits, stage_angles
 SIDES = ("reflection", "transmission")
 ORDERS = ("optimal", "as-written")
 MOTION_ROLES = ("sample", "arm", "azimuth", "elevation")
+AUTO_RANGE = 0.0  # a schedule's range_w when the detector autoranges (else a full scale in W)
+UNSET = math.nan  # a plan's range not given at that level: the enclosing level's applies
 READ_OVERHEAD_S = 0.02  # estimated protocol time per reading, plus READ_PER_SAMPLE_S each sample
 READ_PER_SAMPLE_S = 0.003
 
 POINT_DTYPE = np.dtype([
     ("source", "U24"), ("side", "U12"), ("theta_i_deg", "f8"), ("theta_o_deg", "f8"),
     ("phi_o_deg", "f8"), ("sample_azimuth_deg", "f8"), ("skip_forbidden", "?"),
+    ("range_w", "f8"),
 ])
 
 SCHEDULE_DTYPE = np.dtype([
     ("index", "i8"), ("kind", "U6"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
     ("theta_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
     ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
+    ("range_w", "f8"),
 ])
 
 
@@ -57,6 +65,9 @@ class Plan:
     beam_every: int
     description: str = ""
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
+    range_w: float = UNSET  # the plan's detector range (AUTO_RANGE, a full scale in W, UNSET)
+    dark_range_w: float = UNSET  # UNSET: a dark reading on every range the samples use
+    beam_range_w: float = UNSET  # UNSET: the plan's range
 
 
 @dataclass(frozen=True)
@@ -99,6 +110,8 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
     points += [_single(top, i, p) for i, p in enumerate(_tables(top, "point"))]
     if not points:
         raise PlanError(f"{top.where}: no points; add a [[grid]] or a [[point]] table")
+    dark_every, dark_range = _every(top, "dark")
+    beam_every, beam_range = _every(top, "beam")
     plan = Plan(
         name=name, path=path, instrument=instrument,
         points=np.concatenate(points),
@@ -106,10 +119,13 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         dwell_s=top.number("dwell_s", 0.0, low=0.0, high=3600.0),
         averaging=top.number("averaging", None, low=1, high=100_000, integer=True),
         order=top.string("order", "optimal", choices=ORDERS),
-        dark_every=_every(top, "dark"),
-        beam_every=_every(top, "beam"),
+        dark_every=dark_every,
+        beam_every=beam_every,
         description=top.string("description", ""),
         raw=raw,
+        range_w=_ranges(top)[0],
+        dark_range_w=dark_range,
+        beam_range_w=beam_range,
     )
     top.done()
     return plan
@@ -122,6 +138,27 @@ def _tables(top: Fields, key: str) -> list[Any]:
     if not isinstance(value, list):
         raise top.fail(key, f"must be a table or an array of tables [[{key}]]")
     return value
+
+
+def _ranges(f: Fields, several: bool = False) -> tuple[float, ...]:
+    """The table's detector range(s): AUTO_RANGE for "auto", a full scale in W, UNSET if absent;
+    a grid (several) may list several, which it steps through at each of its points."""
+    value = f._get("range", None)
+    if value is None:
+        return (UNSET,)
+    values = value if several and isinstance(value, list) and value else [value]
+    out = []
+    for v in values:
+        if v == "auto":
+            out.append(AUTO_RANGE)
+        elif (isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+              and v > 0):
+            out.append(float(v))
+        else:
+            lists = " or a list of them" if several else ""
+            raise f.fail("range", f'must be "auto" or a fixed full scale in W > 0{lists}; '
+                                  f"got {v!r}")
+    return tuple(dict.fromkeys(out))
 
 
 def _sides(f: Fields) -> tuple[str, ...]:
@@ -141,8 +178,9 @@ def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
     po = f.values("phi_o_deg", (0.0,), low=-180.0, high=180.0)
     az = f.values("sample_azimuth_deg", (0.0,), low=-360.0, high=360.0)
     skip = f.boolean("skip_forbidden", False)
+    ranges = _ranges(f, several=True)
     f.done()
-    combos = list(itertools.product(sides, az, ti, po, to))
+    combos = list(itertools.product(sides, az, ti, po, to, ranges))
     if len(combos) > 1_000_000:
         raise PlanError(f"{f.where}: {len(combos)} points; at most 1000000 per grid")
     out = np.zeros(len(combos), POINT_DTYPE)
@@ -152,6 +190,7 @@ def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
     out["theta_i_deg"] = [c[2] for c in combos]
     out["phi_o_deg"] = [c[3] for c in combos]
     out["theta_o_deg"] = [c[4] for c in combos]
+    out["range_w"] = [c[5] for c in combos]
     out["skip_forbidden"] = skip
     return out
 
@@ -163,18 +202,21 @@ def _single(top: Fields, i: int, table: Any) -> np.ndarray:
     out[0] = (f"point[{i}]", side, f.number("theta_i_deg", low=-90.0, high=90.0),
               f.number("theta_o_deg", low=-90.0, high=90.0),
               f.number("phi_o_deg", 0.0, low=-180.0, high=180.0),
-              f.number("sample_azimuth_deg", 0.0, low=-360.0, high=360.0), False)
+              f.number("sample_azimuth_deg", 0.0, low=-360.0, high=360.0), False,
+              _ranges(f)[0])
     f.done()
     return out
 
 
-def _every(top: Fields, key: str) -> int:
+def _every(top: Fields, key: str) -> tuple[int, float]:
+    """[dark] or [beam]: one such reading every N sample readings, and its detector range."""
     if not top.has(key):
-        return 0
+        return 0, UNSET
     f = top.table_of(key)
     every = f.number("every", low=0, high=1_000_000, integer=True)
+    range_w = _ranges(f)[0]
     f.done()
-    return every
+    return every, range_w
 
 
 # -- validation against the instrument --------------------------------------------------------
@@ -301,26 +343,76 @@ def _best_order(points: np.ndarray, targets: np.ndarray, cfg: InstrumentConfig
     return candidates[int(np.argmin(costs))]
 
 
-def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, fixed: dict[str, np.ndarray]
-                ) -> list[tuple[str, int, int]]:
-    """(kind, repeat, point) for every reading: sample points with dark/beam ones interleaved."""
-    out: list[tuple[str, int, int]] = []
+def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, ranges: Ranges
+                ) -> list[tuple[str, int, int, float]]:
+    """(kind, repeat, point, range) for every reading: sample points with dark/beam ones
+    interleaved; a dark slot holds one dark reading per range of ranges.dark."""
+    out: list[tuple[str, int, int, float]] = []
     extras = [(k, n) for k, n in (("dark", plan.dark_every), ("beam", plan.beam_every)) if n]
+
+    def extra(kind: str, repeat: int) -> None:
+        for r in (ranges.dark if kind == "dark" else (ranges.beam,)):
+            out.append((kind, repeat, -1, r))
+
     for kind, _ in extras:
-        out.append((kind, 0, -1))
+        extra(kind, 0)
     done = 0
     for repeat, order in passes:
         for k in order:
-            out.append(("sample", repeat, int(k)))
+            out.append(("sample", repeat, int(k), float(ranges.sample[k])))
             done += 1
             for kind, every in extras:
                 if done % every == 0:
-                    out.append((kind, repeat, -1))
+                    extra(kind, repeat)
     last_repeat = passes[-1][0]
     for kind, every in extras:
         if done % every:
-            out.append((kind, last_repeat, -1))
+            extra(kind, last_repeat)
     return out
+
+
+@dataclass(frozen=True)
+class Ranges:
+    """The detector range (AUTO_RANGE or a full scale in W) of each kind of reading."""
+
+    sample: np.ndarray  # per plan point
+    dark: tuple[float, ...]  # one dark reading per range in each dark slot
+    beam: float
+
+
+def resolve_ranges(plan: Plan, cfg: InstrumentConfig, keep: np.ndarray) -> Ranges:
+    """Each reading's range: its grid's or point's, else the plan's, else the instrument's
+    [detector] range; beam readings their [beam] range, else the same fallbacks; dark readings
+    their [dark] range, else one on each range the (kept) sample points use. Checked against
+    the ranges a Modbus detector's register map lists (a PM100's sensor: when the run starts)."""
+    base = plan.range_w
+    if math.isnan(base):
+        base = AUTO_RANGE if cfg.detector.range_w is None else cfg.detector.range_w
+    sample = np.where(np.isnan(plan.points["range_w"]), base, plan.points["range_w"])
+    beam = base if math.isnan(plan.beam_range_w) else plan.beam_range_w
+    dark = (tuple(sorted({float(r) for r in sample[keep]})) if math.isnan(plan.dark_range_w)
+            else (plan.dark_range_w,))
+    where = str(plan.path) if plan.path else "plan"
+    largest = detector_largest_range(cfg)
+    if largest is not None:
+        named = [(f"{p['source']} point", r) for p, r in zip(plan.points[keep], sample[keep],
+                                                              strict=True)]
+        named += [("[dark]", r) for r in dark] + [("[beam]", beam)]
+        for what, r in named:
+            if r > largest * (1.0 + 1e-9):
+                raise PlanError(f"{where}: {what}: range {r:g} W is above the largest range "
+                                f"{largest:g} W of the detector {cfg.detector.device!r}")
+    return Ranges(sample, dark, beam)
+
+
+def detector_largest_range(cfg: InstrumentConfig) -> float | None:
+    """The largest full scale the instrument's detector offers, if the config knows it (a
+    Modbus amplifier's register map lists its gain ranges), else None."""
+    device = cfg.devices[cfg.detector.device]
+    if not device.register_map:
+        return None
+    ranges = RegisterMap.load(device.register_map).gain_ranges_w
+    return max(ranges) if ranges else None
 
 
 def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
@@ -329,6 +421,7 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
     targets, keep = stage_targets(plan, cfg)
     fixed = {k: _fixed_position(cfg, k, where) for k, n in
              (("dark", plan.dark_every), ("beam", plan.beam_every)) if n}
+    ranges = resolve_ranges(plan, cfg, keep)
     kept = np.flatnonzero(keep)
     naive = [(r, kept) for r in range(plan.repeats)]
     if plan.order == "optimal":
@@ -337,9 +430,9 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
         passes = [(r, order if r % 2 == 0 else order[::-1]) for r in range(plan.repeats)]
     else:
         passes, nesting = naive, ()
-    readings = _assemble(_interleave(passes, plan, fixed), plan, targets, fixed)
+    readings = _assemble(_interleave(passes, plan, ranges), plan, targets, fixed)
     _check_sweeps(readings, where)
-    naive_readings = _assemble(_interleave(naive, plan, fixed), plan, targets, fixed)
+    naive_readings = _assemble(_interleave(naive, plan, ranges), plan, targets, fixed)
     return Schedule(readings, estimate_seconds(readings, cfg, plan),
                     estimate_seconds(naive_readings, cfg, plan), nesting,
                     int(len(keep) - keep.sum()))
@@ -362,13 +455,14 @@ def _check_sweeps(readings: np.ndarray, where: str) -> None:
                         f"limits that exclude 0, e.g. limits_deg = [6, 354]")
 
 
-def _assemble(items: list[tuple[str, int, int]], plan: Plan, targets: np.ndarray,
+def _assemble(items: list[tuple[str, int, int, float]], plan: Plan, targets: np.ndarray,
               fixed: dict[str, np.ndarray]) -> np.ndarray:
     out = np.zeros(len(items), SCHEDULE_DTYPE)
     out["index"] = np.arange(len(items))
     pos = np.empty((len(items), 4))
-    for i, (kind, repeat, k) in enumerate(items):
+    for i, (kind, repeat, k, range_w) in enumerate(items):
         out[i]["kind"], out[i]["repeat"], out[i]["point"] = kind, repeat, k
+        out[i]["range_w"] = range_w
         if kind == "sample":
             p = plan.points[k]
             out[i]["side"] = p["side"]
@@ -417,6 +511,7 @@ def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
                 f"  {side}: theta_i {_span(s['theta_i_deg'])}, theta_o {_span(s['theta_o_deg'])},"
                 f" phi_o {_span(s['phi_o_deg'])} deg")
     lines += [
+        f"  detector range: {describe_ranges(r['range_w'])}",
         f"  dwell {plan.dwell_s:g} s, averaging {plan.averaging or cfg.detector.averaging}, "
         f"order {plan.order}" + (f" (nesting {' > '.join(sched.nesting)})" if sched.nesting
                                  else ""),
@@ -426,16 +521,26 @@ def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
     return "\n".join(lines)
 
 
+def describe_range(range_w: float) -> str:
+    """A schedule's range as text: "auto" or the full scale in W."""
+    return "auto" if range_w == AUTO_RANGE else f"{range_w:g} W"
+
+
+def describe_ranges(ranges_w: np.ndarray) -> str:
+    """The distinct ranges of some readings, e.g. "auto" or "1e-07 W, 1e-06 W"."""
+    return ", ".join(describe_range(float(r)) for r in np.unique(ranges_w))
+
+
 def listing(sched: Schedule) -> str:
     """Every scheduled reading, one line each: what it measures and where the stages go."""
     head = (f"{'index':>6} {'kind':<6} {'side':<12} {'rep':>3} {'theta_i':>8} {'theta_o':>8} "
-            f"{'phi_o':>7}  {'sample':>8} {'arm':>8} {'azimuth':>8} {'elev':>7}")
+            f"{'phi_o':>7}  {'sample':>8} {'arm':>8} {'azimuth':>8} {'elev':>7} {'range':>9}")
     lines = [head]
     for r in sched.readings:
         lines.append(f"{r['index']:>6} {r['kind']:<6} {r['side']:<12} {r['repeat']:>3} "
                      f"{r['theta_i_deg']:>8.3f} {r['theta_o_deg']:>8.3f} {r['phi_o_deg']:>7.2f}  "
                      f"{r['sample_deg']:>8.3f} {r['arm_deg']:>8.3f} {r['azimuth_deg']:>8.3f} "
-                     f"{r['elevation_deg']:>7.3f}")
+                     f"{r['elevation_deg']:>7.3f} {describe_range(r['range_w']):>9}")
     return "\n".join(lines)
 
 
