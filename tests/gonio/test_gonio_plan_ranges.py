@@ -103,12 +103,13 @@ def test_scan_reads_each_reading_on_its_planned_range(instrument, tmp_path):
     # autoranged sample readings pick their own (most sensitive unsaturated) range
     auto = (sched["kind"] == "sample") & ~fixed
     assert np.all(r["range_w"][auto] <= 1e-2) and not r["saturated"][auto].any()
-    # the same positions read on 1e-5 and 1e-4 W agree (no gain errors on this bench)
-    on = {rw: r["power_w"][(sched["kind"] == "sample") & (sched["range_w"] == rw)]
-          for rw in (1e-5, 1e-4)}
-    bright = on[1e-4] > 1e-6
-    assert bright.sum() >= 2
-    np.testing.assert_allclose(on[1e-5][bright], on[1e-4][bright], rtol=0.02)
+    # the same positions read on 1e-5 and 1e-4 W agree within the 1e-4 W range's read noise
+    # (no gain errors on this bench; readings that saturate 1e-5 W left out)
+    pick = {rw: (sched["kind"] == "sample") & (sched["range_w"] == rw) for rw in (1e-5, 1e-4)}
+    unsaturated = ~r["saturated"][pick[1e-5]]
+    assert unsaturated.sum() >= 2
+    np.testing.assert_allclose(r["power_w"][pick[1e-5]][unsaturated],
+                               r["power_w"][pick[1e-4]][unsaturated], rtol=0.01, atol=1e-7)
 
 
 def test_scan_with_a_range_the_pm100_lacks_stops_before_moving(tmp_path):
