@@ -1,8 +1,9 @@
 """Build a calibration from the readings of calibration runs (examples/plans/calib-*.toml).
 
 What each part needs in the readings (several runs may be given together):
-- detector: dark readings on every range used; for gains, the same points read with the
-  detector fixed on different ranges (the calib-detector plan run once per range);
+- detector: dark readings on every range used; for gains, the same points read on different
+  fixed ranges: one run of a plan whose grid steps through ranges (calib-detector.toml), or
+  runs each on one fixed range; a drift within a run is taken out by its beam readings;
 - angles: a transmission scan across the refracted peak at normal incidence and a reflection
   scan across the specular peak at one or more sample angles, each point repeated (the scatter
   of repeats is the readings' noise);
@@ -23,6 +24,7 @@ from calibration.beam import beam_power
 from calibration.calfile import Calibration
 from calibration.detector import (
     correct_power,
+    dark_for,
     dark_offsets,
     gain_ratios,
     pooled_sem,
@@ -101,6 +103,24 @@ def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
     return out
 
 
+def drift_free(run: np.ndarray, darks: dict[str, Measured]) -> np.ndarray:
+    """A run's readings with each sample reading's net power (reading less its range's dark
+    offset) rescaled by mean beam / beam at its time (BeamPower.smooth_at), when the run has
+    unsaturated beam readings; else the readings as they are. Gains are ratios of readings
+    taken at different times: a drift between them would enter the gains."""
+    beam = (run["kind"] == "beam") & ~run["saturated"]
+    if beam.sum() < 2:
+        return run
+    net_beam = correct_power(run["power_w"][beam], run["range_w"][beam], darks, None)
+    model = beam_power(run["t_s"][beam], net_beam)
+    out = run.copy()
+    sample = out["kind"] == "sample"
+    dark = np.array([dark_for(darks, r).value for r in out["range_w"][sample]])
+    factor = model.mean_w / model.smooth_at(out["t_s"][sample])[0]
+    out["power_w"][sample] = dark + (out["power_w"][sample] - dark) * factor
+    return out
+
+
 def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
                  gains: dict[str, Measured] | None) -> dict[str, float] | None:
     """Mean, relative drift and noise of the (corrected, unsaturated) beam readings, if any."""
@@ -119,14 +139,16 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
           eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
           divergence_deg: float = 0.0) -> Calibration:
     """Everything the runs' readings (one array per run) can determine: darks always; gains
-    when fixed-range runs read the same stage positions on several ranges;
+    from the runs that read stage positions on several ranges, or on one fixed range each
+    (an autoranged run reads a position on one range only);
     angle offsets, when eta is given, from the runs holding a specular scan (each normalised by
     its own beam readings: times restart with every run), modelled with the aperture (if given)
     and the beam's divergence half-angle; a beam summary per run."""
     readings = np.concatenate(runs)
     darks = dark_offsets(readings)
     cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
-    fixed = [run for run in runs if len(np.unique(run["range_w"][run["kind"] == "sample"])) == 1]
+    fixed = [drift_free(run, darks) for run in runs if ranges_read_together(run)
+             or len(np.unique(run["range_w"][run["kind"] == "sample"])) == 1]
     fixed_readings = np.concatenate(fixed) if fixed else readings[:0]
     if ranges_read_together(fixed_readings):
         gains = gain_ratios(fixed_readings, darks)
