@@ -1,13 +1,15 @@
 """Incident beam power over a run from the interleaved straight-through (beam) readings, so a
-slow drift of the source divides out of every sample reading: `smooth_at` (what reduction and
-calibration use) takes their mean, or a polynomial in time through all of them when they drift;
-`at` interpolates linearly between neighbours.
+slow drift of the source divides out of every sample reading: `smooth` (what reduction and
+calibration use) fits one polynomial in time, at least a straight line, through all beam
+readings; `at` interpolates linearly between neighbours.
 
-The uncertainty of an interpolated value combines the readings' own scatter with the
-interpolation error, estimated by leave-one-out: each interior beam reading predicted from its
-two neighbours; the rms of those misses (less the part their noise explains) is the error of a
-value interpolated half-way between readings (a quarter of the two-gap miss), falling to zero
-at the readings.
+Both are linear in the beam readings, so besides each value's sigma they give the errors the
+values share: a beam reading's noise moves the curve at every time at once, a common-mode error
+of all sample readings that a fit must see as such (ReducedData.shared_rel), not as independent
+noise. The uncertainty of `at` adds the interpolation error, estimated by leave-one-out: each
+interior beam reading predicted from its two neighbours; the rms of those misses (less the part
+their noise explains) is the error of a value interpolated half-way between readings (a quarter
+of the two-gap miss), falling to zero at the readings.
 """
 
 from __future__ import annotations
@@ -16,11 +18,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from calibration.values import CalibrationError
 
 MAX_DEGREE = 8  # highest polynomial degree tried for a drift over a run
+# Each degree above 1 must lower the beam readings' chi-square by this much (3 sigma for one
+# parameter). Least leave-one-out error picked degrees 2-8 in a third of runs whose drift was a
+# straight line to 1e-4, fitting the noise, and their errors came out 1.2-1.4 times the sigma.
+DEGREE_PENALTY = 9.0
 
 
 @dataclass
@@ -44,52 +49,68 @@ class BeamPower:
 
     def at(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(power, 1-sigma) interpolated at times t_s (held constant beyond the ends)."""
+        power, sigma, _ = self.interpolate(t_s)
+        return power, sigma
+
+    def interpolate(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Linear interpolation between neighbouring readings: (power, sigma, shared), shared
+        (len(t_s), readings) the error each reading's noise puts into the values (their shared
+        part; sigma adds the interpolation error, which vanishes at the readings and peaks
+        half-way, 4 u (1 - u))."""
         t_s = np.asarray(t_s, dtype=np.float64)
-        power = np.interp(t_s, self.t_s, self.power_w)
+        weights = np.zeros((len(t_s), len(self.t_s)))
         if len(self.t_s) < 2:
-            return power, np.full(t_s.shape, self.noise_w)
+            weights[:, 0] = 1.0
+            return np.full(t_s.shape, self.power_w[0]), np.full(t_s.shape, self.noise_w), \
+                self.noise_w * weights
         k = np.clip(np.searchsorted(self.t_s, t_s), 1, len(self.t_s) - 1)
         gap = self.t_s[k] - self.t_s[k - 1]
         u = np.clip((t_s - self.t_s[k - 1]) / np.where(gap > 0, gap, 1.0), 0.0, 1.0)
-        # Noise of a linear interpolation of two readings, plus the interpolation error, which
-        # vanishes at the readings and peaks half-way (4 u (1 - u)).
-        noise = self.noise_w * np.sqrt(u ** 2 + (1.0 - u) ** 2)
+        rows = np.arange(len(t_s))
+        weights[rows, k - 1], weights[rows, k] = 1.0 - u, u
+        power = weights @ self.power_w
+        shared = self.noise_w * weights
         interp = self.interp_rel * power * 4.0 * u * (1.0 - u)
-        return power, np.hypot(noise, interp)
+        return power, np.hypot(np.linalg.norm(shared, axis=1), interp), shared
 
     def smooth_at(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Beam power and sigma at times t_s: the mean of all beam readings when they scatter no
-        more than their noise (no drift to follow), else a polynomial in time through all of them,
-        of the degree with the least leave-one-out error. A smooth drift is so followed with the
-        noise of all readings, not of the two nearest, whose errors would be common to every
-        sample reading of their gaps (docs/fitting.md, "Beam and drift"); fewer than four beam
-        readings: the interpolation of `at`."""
-        p, noise = self.power_w, self.noise_w
-        if len(p) >= 3 and noise > 0:
-            chi2 = float(np.sum((p - p.mean()) ** 2)) / noise**2
-            if stats.chi2.sf(chi2, len(p) - 1) > 0.01:
-                return (np.full(len(t_s), p.mean()),
-                        np.full(len(t_s), noise / math.sqrt(len(p))))
+        """Beam power and its 1-sigma at times t_s (see `smooth`)."""
+        power, sigma, _ = self.smooth(t_s)
+        return power, sigma
+
+    def smooth(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Beam power at times t_s from one polynomial in time through all beam readings, of
+        degree 1 to MAX_DEGREE by the least chi-square plus DEGREE_PENALTY per degree, with the
+        readings' noise taken as the larger of its expected value and the scatter about the
+        highest degree: (power, sigma, shared), shared
+        (len(t_s), degree + 1) with the values' errors shared @ z, z ~ N(0, I).
+
+        Never a constant: a drift below what the readings can detect (a 1 % source drifting
+        over a short run) still biases the mean by up to half its change at the run's ends,
+        while the mean's sigma claims the readings' noise over sqrt(n); a straight line follows
+        it for at most twice that sigma. All readings, not the two nearest, carry the curve, so
+        no one reading's noise dominates a gap (docs/fitting.md, "Beam and drift"). Fewer than
+        four readings: the interpolation of `interpolate`."""
+        p = self.power_w
         if len(p) < 4:
-            return self.at(t_s)
+            return self.interpolate(t_s)
         span = max(float(self.t_s[-1] - self.t_s[0]), 1e-12)
         x = 2.0 * (self.t_s - self.t_s[0]) / span - 1.0
         x_at = np.clip(2.0 * (np.asarray(t_s, float) - self.t_s[0]) / span - 1.0, -1.0, 1.0)
-        best = None
+        fits = []
         for degree in range(1, min(len(p) - 3, MAX_DEGREE) + 1):
             design = np.polynomial.legendre.legvander(x, degree)
             inverse = np.linalg.inv(design.T @ design)
             coef = inverse @ design.T @ p
             resid = p - design @ coef
-            leverage = np.einsum("ij,jk,ik->i", design, inverse, design)
-            loo = float(np.mean((resid / (1.0 - leverage)) ** 2))
-            if best is None or loo < best[0]:
-                best = (loo, degree, coef, inverse, float(resid @ resid) / (len(p) - degree - 1))
-        _, degree, coef, inverse, scatter2 = best
+            fits.append((degree, coef, inverse, float(resid @ resid)))
+        # a reading's noise: the larger of the expected noise and the scatter about the curve
+        # of highest degree (which holds any drift the readings can show)
+        noise2 = max(self.noise_w**2, fits[-1][3] / (len(p) - fits[-1][0] - 1))
+        degree, coef, inverse, _ = min(fits, key=lambda f: f[3] / noise2 + DEGREE_PENALTY * f[0])
         at = np.polynomial.legendre.legvander(x_at, degree)
-        # a reading's noise: the larger of the scatter about the curve and the expected noise
-        noise2 = max(scatter2, noise**2)
-        return at @ coef, np.sqrt(noise2 * np.einsum("ij,jk,ik->i", at, inverse, at))
+        shared = math.sqrt(noise2) * at @ np.linalg.cholesky(inverse)
+        return at @ coef, np.linalg.norm(shared, axis=1), shared
 
 
 def beam_power(t_s: np.ndarray, power_w: np.ndarray, noise_w: float | None = None) -> BeamPower:

@@ -309,7 +309,7 @@ class _Problem:
         return scale * f
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        r = (self.predict(x, self.data) - self.data.bsdf) / self.data.sigma
+        r = self.data.whitened(self.predict(x, self.data))
         return np.where(np.isfinite(r), r, 1e6)
 
     def start(self, alpha0: float) -> np.ndarray:
@@ -339,7 +339,7 @@ def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
     if not np.all(np.isfinite(sol.x)) or sol.status <= 0:
         raise FitError(f"fit {problem.distribution}: the optimiser did not converge "
                        f"({sol.message})")
-    n, p = len(sol.fun), len(sol.x)
+    n, p = len(problem.data.bsdf), len(sol.x)  # sol.fun also holds the shared errors' priors
     chi2 = float(np.sum(sol.fun ** 2))
     dof = n - p
     jac = sol.jac
@@ -457,13 +457,14 @@ def _preferred(scored: list[tuple[_Problem, dict[str, Any]]],
 
 def _heldout_chi2(data: ReducedData, rest: np.ndarray, problem: _Problem,
                   x: np.ndarray) -> tuple[float | None, int]:
-    """Chi-square per point of the fitted model on the valid points not used by the fit."""
+    """Chi-square per point of the fitted model on the valid points not used by the fit, with
+    the errors they share (the beam curve's) in its covariance."""
     held = rest & fit_subset_mask(data, FitOptions(fit_incidence_deg=None))
     if not held.any():
         return None, 0
     part = data.subset(held)
-    r = (problem.predict(x, part) - part.bsdf) / part.sigma
-    return float(np.mean(r ** 2)), int(held.sum())
+    r = part.whitened(problem.predict(x, part))
+    return float(np.sum(r ** 2)) / int(held.sum()), int(held.sum())
 
 
 def _describe_subset(options: FitOptions) -> str:

@@ -14,6 +14,11 @@ class ReducedData:
     Directions are unit vectors in the sample (BSDF) frame of DESIGN.md; `wi` toward the
     source, `wo` toward the detector. `valid` is False for saturated, dark-limited or
     otherwise flagged points, which fits and plots leave out.
+
+    `shared_rel` (N, k) holds the relative errors the points share: the values carry a common
+    relative error shared_rel @ z, z ~ N(0, I_k) (the beam curve's error, common to every point
+    it normalises); `sigma` includes each point's own part of it, |bsdf| |shared_rel[i]|. Fits
+    take it as a covariance (`whitened`), not as independent noise. None: no shared error.
     """
 
     wi: np.ndarray  # (N, 3)
@@ -23,9 +28,14 @@ class ReducedData:
     valid: np.ndarray  # (N,) bool
     transmission: np.ndarray  # (N,) bool: wo on the interior side
     meta: dict = field(default_factory=dict)  # eta, wavelength_nm, run path, calibration used
+    shared_rel: np.ndarray | None = None  # (N, k) relative errors shared between points
 
     def __post_init__(self) -> None:
         n = len(self.bsdf)
+        if self.shared_rel is None:
+            self.shared_rel = np.zeros((n, 0))
+        if self.shared_rel.ndim != 2 or len(self.shared_rel) != n:
+            raise ValueError(f"ReducedData.shared_rel must have shape ({n}, k)")
         for name in ("wi", "wo"):
             if getattr(self, name).shape != (n, 3):
                 raise ValueError(f"ReducedData.{name} must have shape ({n}, 3)")
@@ -52,5 +62,27 @@ class ReducedData:
         """The entries selected by a boolean mask or index array."""
         return ReducedData(
             self.wi[keep], self.wo[keep], self.bsdf[keep], self.sigma[keep],
-            self.valid[keep], self.transmission[keep], dict(self.meta),
+            self.valid[keep], self.transmission[keep], dict(self.meta), self.shared_rel[keep],
         )
+
+    @property
+    def sigma_own(self) -> np.ndarray:
+        """Each point's independent 1-sigma: `sigma` without its share of the shared errors."""
+        shared = np.abs(self.bsdf) * np.linalg.norm(self.shared_rel, axis=1)
+        return np.sqrt(np.maximum(self.sigma**2 - shared**2, 0.0))
+
+    def whitened(self, model: np.ndarray) -> np.ndarray:
+        """Normalised residuals of model values against the data under the full covariance
+        (independent sigma_own plus the shared relative errors, scaled by the model, so a
+        normalisation error cannot bias the fit towards low values): the shared errors' z are
+        profiled out with their N(0, 1) priors, which is exact for errors linear in z, so the
+        sum of squares of the N + k entries returned is the generalised chi-square
+        r^T C^-1 r with C = diag(sigma_own^2) + (model shared_rel)(model shared_rel)^T."""
+        own = self.sigma_own
+        r = (model - self.bsdf) / own
+        if self.shared_rel.shape[1] == 0:
+            return r
+        a = (model / own)[:, None] * self.shared_rel
+        a = np.where(np.isfinite(a), a, 0.0)
+        z = -np.linalg.solve(a.T @ a + np.eye(a.shape[1]), a.T @ np.where(np.isfinite(r), r, 0.0))
+        return np.concatenate([r + a @ z, z])
