@@ -4,10 +4,10 @@ Convention (as sim.bench's scene): true angle = reported angle + offset. The off
 with the microfacet model of the reference sample: every scan's readings against
 scale_k * <f |cos o|>(reported + offsets), the model averaged over the aperture and the beam's
 divergence (calibration.smearing), with the sample offset, arm offset, alpha and one scale per
-scan free, by weighted least squares; the distribution (Beckmann or GGX) that fits better is
-kept. A peak's mirror-symmetry centre is only the starting point: a real lobe is not symmetric
-about its geometric direction (Fresnel and masking vary across a reflected lobe; a transmitted
-lobe at oblique incidence leans), and linear interpolation of a coarsely sampled peak biases a
+scan free, by weighted least squares; the distribution (Beckmann or GGX) is the one that fits
+better on a coarse alpha grid at the start. A peak's mirror-symmetry centre is only the
+starting point: a real lobe is not symmetric about its geometric direction (Fresnel and masking
+vary across a reflected lobe), and linear interpolation of a coarsely sampled peak biases a
 symmetry centre too; together 1-3e-4 deg on an anti-glare reference, several sigma.
 """
 
@@ -119,6 +119,7 @@ class _PeakModel:
                                self.divergence_deg, smearing_order(self.divergence_deg, alpha))
 
     def shapes(self, ds: float, da: float, alpha: float) -> list[np.ndarray]:
+        """Per scan, the model's <f |cos o|> at its reported stage angles plus the offsets."""
         from calibration.fit import build_model
         from gonio.geometry import directions
 
