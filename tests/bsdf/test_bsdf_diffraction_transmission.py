@@ -68,25 +68,25 @@ def test_transmitted_lobe_share_matches_mpmath():
     _, m = model()
     m.psd = psd
     lam = LAMBDA / ETA
-    mpmath.mp.dps = 20
-    b, c = mpmath.mpf(psd.b), mpmath.mpf(psd.c)
+    with mpmath.workdps(20):  # local: other tests rely on mpmath's global precision
+        b, c = mpmath.mpf(psd.b), mpmath.mpf(psd.c)
 
-    def kernel(s):  # S(s / lam) / (sigma^2 lam^2)
-        norm = b**2 * (c - 1) / (2 * mpmath.pi * lam**2)
-        return norm * (1 + (b * s / lam) ** 2) ** (-(c + 1) / 2)
+        def kernel(s):  # S(s / lam) / (sigma^2 lam^2)
+            norm = b**2 * (c - 1) / (2 * mpmath.pi * lam**2)
+            return norm * (1 + (b * s / lam) ** 2) ** (-(c + 1) / 2)
 
-    whole = mpmath.quad(lambda s: 2 * mpmath.pi * s * kernel(s), [0, lam / b, 1, mpmath.inf])
-    assert float(whole) == pytest.approx(1.0, rel=1e-12)
-    for r0 in (0.0, 0.4, 0.66, 0.95):
-        def ring(s, r0=r0):  # arc of the circle |o' - o| = s inside the unit disk
-            if r0 == 0:
-                return 2 * mpmath.pi if s < 1 else 0
-            x = (s * s + r0 * r0 - 1) / (2 * s * r0)
-            return 2 * mpmath.pi if x <= -1 else (0 if x >= 1 else 2 * mpmath.acos(x))
-        points = sorted({0.0, float(lam / b), abs(1 - r0), 1 + r0})
-        exact = mpmath.quad(lambda s: s * ring(s) * kernel(s), points)
-        # 48 Gauss-Legendre nodes in the radial CDF: 1e-7 .. 6e-6 (the arc has sqrt end points)
-        assert m.relevant_fraction(np.array(r0), lam) == pytest.approx(float(exact), rel=2e-5)
+        whole = mpmath.quad(lambda s: 2 * mpmath.pi * s * kernel(s), [0, lam / b, 1, mpmath.inf])
+        assert float(whole) == pytest.approx(1.0, rel=1e-12)
+        for r0 in (0.0, 0.4, 0.66, 0.95):
+            def ring(s, r0=r0):  # arc of the circle |o' - o| = s inside the unit disk
+                if r0 == 0:
+                    return 2 * mpmath.pi if s < 1 else 0
+                x = (s * s + r0 * r0 - 1) / (2 * s * r0)
+                return 2 * mpmath.pi if x <= -1 else (0 if x >= 1 else 2 * mpmath.acos(x))
+            points = sorted({0.0, float(lam / b), abs(1 - r0), 1 + r0})
+            exact = mpmath.quad(lambda s: s * ring(s) * kernel(s), points)
+            # 48 Gauss-Legendre nodes in the radial CDF: 1e-7 .. 6e-6 (the arc has sqrt end points)
+            assert m.relevant_fraction(np.array(r0), lam) == pytest.approx(float(exact), rel=2e-5)
 
 
 def hemisphere_energy(f_of, wi, sample_model, below, n=1500, seed=5):
