@@ -72,10 +72,12 @@ def test_walter_samples_round_trip(distribution, alpha, tmp_path):
     assert result.distribution == distribution
     assert abs(value - alpha) < 3.0 * sigma
     assert abs(value / alpha - 1.0) < 0.03
-    # reduce's noise model (dark scatter scaled with the range) is conservative on this bench:
-    # chi2/dof comes out 0.2-0.7 (docs/fitting.md); the bound guards against a misfit
-    assert 0.1 < result.chi2_dof_fit < 2.0
-    assert result.n_heldout > 10 and 0.1 < result.chi2_dof_heldout < 2.0
+    # reduce's noise law (dark scatter scaled with the range, plus shot noise) and the beam
+    # curve's shared error as a covariance: chi2/dof 0.60-0.94 with this seed and single
+    # scattering, no longer 0.2-0.7; the band allows for the noise level estimated from 13 dark
+    # readings (+-20 % in sigma, docs/fitting.md)
+    assert 0.4 < result.chi2_dof_fit < 2.0
+    assert result.n_heldout > 10 and 0.4 < result.chi2_dof_heldout < 2.0
     # the CLI prints the same fit as one JSON object
     assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]) == 0
 
