@@ -5,6 +5,8 @@ motion, and scans on the emulated PM100 and Modbus amplifier reading on the plan
 import numpy as np
 import pytest
 from gonio_testkit import fast_config, write_plan
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gonio.config import parse_config
 from gonio.errors import PlanError
@@ -120,3 +122,19 @@ def test_scan_with_a_range_the_pm100_lacks_stops_before_moving(tmp_path):
     assert result.outcome.status == "failed"
     assert "the plan's detector range 0.5 W: the detector refuses it" in result.outcome.reason
     assert result.outcome.done == 0
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10, 10),
+                 st.text(max_size=8), st.booleans()))
+def test_any_range_value_is_taken_exactly_or_refused_by_name(value):
+    raw = plan_dict(value)
+    valid = value == "auto" or (not isinstance(value, bool | str) and np.isfinite(value)
+                                and value > 0)
+    if not valid:
+        with pytest.raises(PlanError, match=r"grid\[0\]\.range: must be"):
+            parse_plan(raw)
+        return
+    r = build_schedule(parse_plan(raw), SERIAL).readings
+    expected = AUTO_RANGE if value == "auto" else float(value)
+    assert set(r["range_w"][r["kind"] == "sample"]) == {expected}
