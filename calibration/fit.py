@@ -9,7 +9,7 @@ the held-out chi-square tests the model rather than the fit. See docs/fitting.md
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -30,9 +30,12 @@ MAX_CONDITION = 1e6
 # A distribution is "preferred" only if it beats the next by this chi-square (2 sigma for one
 # extra degree of freedom); otherwise the result says the data cannot tell them apart.
 PREFERENCE_DELTA_CHI2 = 4.0
-# The multiple-scattering table of a fit: alpha from start / SPAN to start * SPAN, NODES nodes.
-MS_TABLE_SPAN = 3.0
-MS_TABLE_NODES = 9
+# The multiple-scattering table of a fit: NODES alphas STEP apart in log alpha about a centre;
+# a fit ending outside its inner nodes is redone about its result, at most RECENTRE times.
+MS_TABLE_STEP = 0.1
+MS_TABLE_NODES = 7
+MS_TABLE_RECENTRE = 3
+MS_WALKS_MAX = 1 << 22
 
 
 class FitError(GonioError):
@@ -58,13 +61,13 @@ class FitOptions:
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
     beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
-    ms_walks: int = 1024  # walks per point and table alpha (the same seed for every alpha)
+    ms_walks: int = 1 << 15  # walks per incidence and table alpha (the same seed for every alpha)
     ms_seed: int = 0
 
     def __post_init__(self) -> None:
         if isinstance(self.ms_walks, bool) or not isinstance(self.ms_walks, int) \
-                or not 2 <= self.ms_walks <= 1 << 15:
-            raise FitError(f"fit: ms_walks must be an integer in [2, 32768], "
+                or not 2 <= self.ms_walks <= MS_WALKS_MAX:
+            raise FitError(f"fit: ms_walks must be an integer in [2, {MS_WALKS_MAX}], "
                            f"got {self.ms_walks!r}")
         if self.multiple_scattering and self.anisotropic:
             raise FitError("fit: multiple_scattering is tabulated against one alpha; it cannot "
@@ -167,41 +170,51 @@ class FitResult:
 
 
 class _WithHigherOrders:
-    """A single-scattering model plus the random walk's orders >= 2 on the same microsurface,
-    walked from one fixed seed at every call, so the fit's objective is deterministic."""
+    """A single-scattering model plus the random walk's orders >= 2 on the same microsurface
+    (sim.bsdf.multiple_scattering.higher_orders_at: walked at the pairs, fixed seed)."""
 
     def __init__(self, single: Any, correlated: Any, walks: int, seed: int):
-        from sim.bench.sample import HigherOrders
-
-        self.single = single
-        self.orders = HigherOrders(correlated, walks, seed, fixed_seed=True)
+        self.single, self.correlated = single, correlated
+        self.walks, self.seed = walks, seed
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """f(wi, wo) in 1/sr: single scattering plus orders >= 2."""
-        return self.single.eval(wi, wo) + self.orders.eval(wi, wo)
+        from sim.bsdf.multiple_scattering import higher_orders_at
+
+        wi, wo = np.broadcast_arrays(wi, wo)
+        extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed)[0]
+        return self.single.eval(wi, wo) + extra.reshape(wi.shape[:-1])
 
 
 class _OrdersTable:
-    """Orders >= 2 at the fitted points, walked once per alpha of a log grid (MS_TABLE_SPAN
-    either side of the starting alpha, MS_TABLE_NODES nodes, one seed for all, so the table is
-    smooth in alpha) and interpolated linearly in log alpha (clamped at the ends): a
-    deterministic, smooth term for the optimiser, at the cost of a one-off walk."""
+    """Orders >= 2 at the fitted points (higher_orders_at: walked at the points themselves, one
+    set of walks per incidence) at MS_TABLE_NODES alphas MS_TABLE_STEP apart in log alpha about
+    `centre`, all from the same seed so the Monte Carlo error is common to the nodes, and a
+    cubic spline in log alpha through them (clamped at the ends): a deterministic, smooth term
+    for the optimiser. `error` and `covariance` are its Monte Carlo standard error per point
+    and their covariance (points of one incidence share walks), at the centre node."""
 
-    def __init__(self, problem: _Problem, alpha0: float):
-        o = problem.options
-        self.log_alpha = math.log(alpha0) + np.linspace(-1.0, 1.0, MS_TABLE_NODES) * math.log(
-            MS_TABLE_SPAN)
-        self.values = np.array([
-            build_model(problem.distribution, math.exp(a), problem.eta0, "correlated",
-                        problem.k, o.ms_walks, o.ms_seed).orders.eval(problem.data.wi,
-                                                                      problem.data.wo)
-            for a in self.log_alpha])
+    def __init__(self, problem: _Problem, centre: float):
+        from scipy.interpolate import CubicSpline
+
+        from sim.bsdf.multiple_scattering import higher_orders_at
+
+        o, data = problem.options, problem.data
+        half = 0.5 * (MS_TABLE_NODES - 1)
+        self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
+        walked = [higher_orders_at(build_model(problem.distribution, math.exp(a), problem.eta0,
+                                               "correlated", problem.k), data.wi, data.wo,
+                                   o.ms_walks, o.ms_seed) for a in self.log_alpha]
+        self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
+        _, self.error, self.covariance = walked[MS_TABLE_NODES // 2]
 
     def __call__(self, alpha: float) -> np.ndarray:
-        x = float(np.clip(math.log(alpha), self.log_alpha[0], self.log_alpha[-1]))
-        j = int(np.clip(np.searchsorted(self.log_alpha, x) - 1, 0, len(self.log_alpha) - 2))
-        t = (x - self.log_alpha[j]) / (self.log_alpha[j + 1] - self.log_alpha[j])
-        return (1.0 - t) * self.values[j] + t * self.values[j + 1]
+        return self.spline(float(np.clip(math.log(alpha), self.log_alpha[0],
+                                          self.log_alpha[-1])))
+
+    def covers(self, alpha: float) -> bool:
+        """True when alpha lies between the second and the last but one node."""
+        return self.log_alpha[1] <= math.log(alpha) <= self.log_alpha[-2]
 
 
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
@@ -308,6 +321,16 @@ class _Problem:
         f = self.optics.average(model, data.wi, data.wo)
         return scale * f
 
+    def orders_error(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
+        """Monte Carlo standard error of the multiple-scattering term (times the scale) at
+        the data's pairs, walked there as predict() walks them."""
+        from sim.bsdf.multiple_scattering import higher_orders_at
+
+        alpha, eta, scale = self.unpack(x)
+        walks, seed = _walk_settings(self.options)
+        correlated = build_model(self.distribution, alpha, eta, "correlated", self.k)
+        return scale * higher_orders_at(correlated, data.wi, data.wo, walks, seed)[1]
+
     def residuals(self, x: np.ndarray) -> np.ndarray:
         r = self.data.whitened(self.predict(x, self.data))
         return np.where(np.isfinite(r), r, 1e6)
@@ -328,14 +351,41 @@ class _Problem:
         return np.clip(trials[int(np.argmin(costs))], self.lower + 1e-9, self.upper - 1e-9)
 
 
+def _least_squares(problem: _Problem, alpha0: float) -> Any:
+    """The optimiser's solution from the best start about alpha0."""
+    return least_squares(problem.residuals, problem.start(alpha0),
+                         bounds=(problem.lower, problem.upper), method="trf", x_scale="jac",
+                         xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
+
+
+def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
+    """The fit with the multiple-scattering table: built about the single-scattering fit's
+    alpha (within a few % of the answer), and rebuilt about the result while that falls
+    outside the table's inner nodes. Each point's sigma gains the table's Monte Carlo error in
+    quadrature (the model's own uncertainty)."""
+    data = problem.data
+    single = _Problem(data, problem.distribution, problem.masking,
+                      replace(problem.options, multiple_scattering=False), problem.eta0,
+                      problem.k, problem.optics)
+    centre = single.unpack(_least_squares(single, alpha0).x)[0]
+    for _ in range(MS_TABLE_RECENTRE):
+        problem.data = data
+        problem.orders = _OrdersTable(problem, centre)
+        problem.data = replace(data, sigma=np.hypot(data.sigma, problem.orders.error))
+        sol = _least_squares(problem, centre)
+        alpha = problem.unpack(sol.x)[0]
+        if problem.orders.covers(alpha):
+            break
+        centre = alpha
+    return sol
+
+
 def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
     """Run one candidate's fit; returns its parameters, covariance and chi-square."""
     if problem.options.multiple_scattering:
-        problem.orders = _OrdersTable(problem, alpha0)
-    x0 = problem.start(alpha0)
-    sol = least_squares(problem.residuals, x0, bounds=(problem.lower, problem.upper),
-                        method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                        max_nfev=400)
+        sol = _solve_with_orders(problem, alpha0)
+    else:
+        sol = _least_squares(problem, alpha0)
     if not np.all(np.isfinite(sol.x)) or sol.status <= 0:
         raise FitError(f"fit {problem.distribution}: the optimiser did not converge "
                        f"({sol.message})")
@@ -350,9 +400,22 @@ def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
     at_bound = [nm for nm, m, xv in zip(problem.names, margin, sol.x, strict=True)
                 if m < 1e-6 * max(1.0, abs(xv))]
     chi2_dof = chi2 / dof
-    cov = cov_internal * np.outer(deriv, deriv) * max(1.0, chi2_dof)
+    cov_internal = cov_internal * max(1.0, chi2_dof)
+    if problem.orders is not None:
+        cov_internal = cov_internal + _orders_covariance(problem, sol.x, jac)
+    cov = cov_internal * np.outer(deriv, deriv)
     return {"x": sol.x, "values": values, "cov": cov, "chi2": chi2, "chi2_dof": chi2_dof,
             "at_bound": at_bound}
+
+
+def _orders_covariance(problem: _Problem, x: np.ndarray, jac: np.ndarray) -> np.ndarray:
+    """Covariance of the internal parameters due to the multiple-scattering table's Monte Carlo
+    error (correlated between the points walked together), propagated linearly through the
+    least-squares solution: G C G^T, G = (J^T J)^-1 J_data^T diag(scale / sigma)."""
+    n = len(problem.data.bsdf)
+    weight = problem.unpack(x)[2] / problem.data.sigma
+    gain = np.linalg.solve(jac.T @ jac, jac[:n].T * weight)
+    return gain @ problem.orders.covariance @ gain.T
 
 
 def _check_conditioning(jac: np.ndarray, names: tuple[str, ...], distribution: str) -> None:
@@ -463,6 +526,8 @@ def _heldout_chi2(data: ReducedData, rest: np.ndarray, problem: _Problem,
     if not held.any():
         return None, 0
     part = data.subset(held)
+    if problem.orders is not None:  # the model's own Monte Carlo error, as in the fit
+        part = replace(part, sigma=np.hypot(part.sigma, problem.orders_error(x, part)))
     r = part.whitened(problem.predict(x, part))
     return float(np.sum(r ** 2)) / int(held.sum()), int(held.sum())
 

@@ -34,9 +34,11 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--incidence", type=_angles, default=(0.0,), metavar="DEG[,DEG...]|all",
                    help="incidence angles of the fitted subset (default 0; 'all' for every point)")
     p.add_argument("--multiple-scattering", action="store_true",
-                   help="add the random walk's orders >= 2 to the model (fixed seed; slower)")
-    p.add_argument("--ms-walks", type=int, default=256, metavar="N",
-                   help="walks per point for --multiple-scattering (default 256)")
+                   help="add the random walk's orders >= 2 to the model (a deterministic "
+                        "table in alpha, fixed seed; its Monte Carlo error joins sigma)")
+    p.add_argument("--ms-walks", type=int, default=1 << 15, metavar="N",
+                   help="walks per incidence angle and table alpha for --multiple-scattering "
+                        "(default 32768)")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to apply (default: the one the run records)")
 
@@ -100,7 +102,7 @@ def summary(out: dict) -> str:
     if out.get("multiple_scattering"):
         ms = out["multiple_scattering"]
         lines.append(f"  multiple scattering: orders >= 2 by {ms['walks']} random walks per "
-                     f"point, seed {ms['seed']}")
+                     f"incidence, seed {ms['seed']}")
     if out.get("emulated_sample"):
         lines.append(f"  emulated sample: {out['emulated_sample']}")
     return "\n".join(lines)

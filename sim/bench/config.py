@@ -71,9 +71,9 @@ def _optional(check: Check) -> Check:
 
 
 def _walks(where: str, value: object) -> int:
-    # at most one batch of walks per pair: HigherOrders' exact order-1 cancellation needs it
-    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 15:
-        raise SimConfigError(f"{where} must be an integer in [2, 32768], got {value!r}")
+    # walks per incidence table (HigherOrderLobe); more than 2^22 would take minutes per table
+    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 22:
+        raise SimConfigError(f"{where} must be an integer in [2, 4194304], got {value!r}")
     return value
 
 
@@ -105,12 +105,12 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "masking": ("separable", _choice(MASKINGS)),
         "lit_from": ("air", _choice(LIT_FROM)),
         "retracted_beyond_deg": (89.0, _number(45.0, 90.0)),
-        "multiple_scattering": (False, _switch),
+        "multiple_scattering": ("auto", _switch),
         "diffraction": ("auto", _switch),
         "rms_height_nm": (None, _optional(_number(0.0, 1e6, open_low=True))),
         "correlation_length_um": (None, _optional(_number(0.0, 1e6, open_low=True))),
         "psd_exponent": (2.0, _number(1.0, 10.0, open_low=True)),
-        "ms_walks": (1024, _walks),
+        "ms_walks": (1 << 14, _walks),
     },
     "aperture": {
         "diameter_mm": (10.0, _number(0.0, open_low=True)),

@@ -5,9 +5,10 @@ opaque conductor; the power reaching the detector per unit incident power and so
 T_in * T_out * (eta_i / eta_o)^2 * f(wi, wo) * |cos o| (power BSDF times the faces the light
 crosses), and evaluates each lobe only at the directions that lie on its side.
 `Sample.lobe_scales` estimates how fast that integrand varies, to choose quadrature orders.
-Multiple scattering (orders >= 2 of the Heitz 2016 random walk) and diffraction
-(Holzschuch-Pacanowski 2017, reflection) are added where the spec asks for them, or with "auto"
-only where their share of the light exceeds `visible_fraction` (the detector's noise floor).
+Multiple scattering (orders >= 2 of the Heitz 2016 random walk, tabulated per incidence by
+sim.bsdf.multiple_scattering.HigherOrderLobe) and diffraction (Holzschuch-Pacanowski 2017,
+reflection) are added where the spec asks for them, or with "auto" (the default) only where
+their share of the light exceeds `visible_fraction` (the detector's noise floor).
 """
 
 from __future__ import annotations
@@ -24,8 +25,9 @@ KINDS = ("hemisphere", "slab", "conductor")
 LIT_FROM = ("air", "hemisphere")
 DISTRIBUTIONS = ("beckmann", "ggx", "phong")
 MASKINGS = ("separable", "correlated")
-#: Pairs within this many alpha of their centroid share one multiple-scattering value.
-SMOOTH_WIDTH = 0.05
+#: Walks per pair of the per-pair random walk used for anisotropic samples, per table walk
+#: (a pair's walk costs about what scoring 16 table directions does).
+ANISOTROPIC_WALK_SHARE = 16
 #: Points of the diffraction lobe integral per direction pair (TwoScaleDiffraction samples).
 DIFFRACTION_SAMPLES = 256
 
@@ -53,12 +55,12 @@ class SampleSpec:
     k: float = 0.0
     masking: str = "separable"
     lit_from: str = "air"
-    multiple_scattering: bool | str = False  # True | False | "auto"
+    multiple_scattering: bool | str = "auto"  # True | False | "auto"
     diffraction: bool | str = "auto"  # True | False | "auto"
     rms_height_nm: float | None = None  # nano-roughness (K-correlation PSD) for diffraction
     correlation_length_um: float | None = None
     psd_exponent: float = 2.0
-    ms_walks: int = 1024  # random walks per direction pair for the multiple-scattering term
+    ms_walks: int = 1 << 14  # random walks per incidence table of the multiple-scattering term
 
 
 def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -152,8 +154,21 @@ class HigherOrders:
         return out.reshape(shape)
 
 
-def _unit(w: np.ndarray) -> np.ndarray:
-    return w / np.linalg.norm(w)
+@lru_cache(maxsize=64)
+def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k: float,
+                      walks: int, seed: int):
+    """The HigherOrderLobe of a sample's microsurface (height-correlated masking), shared by
+    every bench of the process with the same parameters, so its tables are walked once."""
+    from sim.bsdf import RoughConductor, RoughDielectric
+    from sim.bsdf.multiple_scattering import HigherOrderLobe
+
+    if kind == "conductor":
+        parent = RoughConductor(distribution=distribution, alpha=alpha,
+                                eta_complex=complex(eta, k), masking="correlated")
+    else:
+        parent = RoughDielectric(distribution=distribution, alpha=alpha, eta=eta,
+                                 masking="correlated")
+    return HigherOrderLobe(parent, walks=walks, seed=seed)
 
 
 @lru_cache(maxsize=4096)
@@ -210,8 +225,14 @@ class Sample:
         key = (name, lobe)
         if key not in self._models:
             s = self.spec
-            if name == "random_walk":
-                self._models[key] = HigherOrders(self.model(lobe, "correlated"), s.ms_walks,
+            if name == "random_walk" and s.alpha[0] == s.alpha[1]:
+                self._models[key] = higher_order_lobe(s.kind, s.distribution, s.alpha[0], s.eta,
+                                                      s.k, s.ms_walks, self.seed)
+            elif name == "random_walk":
+                from sim.bsdf.multiple_scattering.model import BATCH
+
+                walks = min(BATCH, max(2, s.ms_walks // ANISOTROPIC_WALK_SHARE))
+                self._models[key] = HigherOrders(self.model(lobe, "correlated"), walks,
                                                  self.seed, fixed_seed=True)
             else:
                 from sim.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
@@ -266,18 +287,10 @@ class Sample:
         return f
 
     def _higher_orders(self, lobe: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """Orders >= 2 at each pair, or once at the pairs' centroid when they all lie within
-        SMOOTH_WIDTH alpha of it (an aperture's nodes): that lobe is as broad as the
-        distribution's, so it is flat across a detector aperture."""
-        centre_i, centre_o = (_unit(np.mean(w, axis=0)) for w in (wi, wo))
-        spread = max(float(np.max(np.arccos(np.clip(w @ c, -1.0, 1.0))))
-                     for w, c in ((wi, centre_i), (wo, centre_o)))
-        walk = self._extra("random_walk", lobe)
-        if spread > SMOOTH_WIDTH * min(self.spec.alpha):
-            self.evaluations["random_walk"] += len(wi)
-            return walk.eval(wi, wo)
-        self.evaluations["random_walk"] += 1
-        return np.full(len(wi), float(walk.eval(centre_i, centre_o)))
+        """Orders >= 2 at each pair: interpolated from the lobe's tables (isotropic), or
+        walked per pair (anisotropic)."""
+        self.evaluations["random_walk"] += len(wi)
+        return self._extra("random_walk", lobe).eval(wi, wo)
 
     def integrand(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Detector power per incident power per sr at (wi, wo) (..., 3) -> (...)."""

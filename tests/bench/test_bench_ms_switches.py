@@ -85,8 +85,8 @@ def test_added_energy_is_what_single_scattering_loses():
     """Integral over the sphere of (with - without) f |cos o|: the energy of orders >= 2, which
     for glass is exactly energy_loss (R + T = 1 for the walk)."""
     theta = math.radians(80.0)
-    spec = SampleSpec(distribution="ggx", alpha=(1.0, 1.0), masking="correlated", ms_walks=64,
-                      multiple_scattering="auto")
+    spec = SampleSpec(distribution="ggx", alpha=(1.0, 1.0), masking="correlated",
+                      ms_walks=4096, multiple_scattering="auto")
     on, off = Sample(spec, seed=3), Sample(SampleSpec(**{**spec.__dict__,
                                                          "multiple_scattering": False}))
     rng = np.random.default_rng(11)
@@ -137,9 +137,37 @@ def test_explicit_switches_override_auto():
     assert never.sample.evaluations["diffraction"] == 0
 
 
-def test_defaults_leave_multiple_scattering_off_and_diffraction_auto():
+def test_defaults_are_auto():
     spec = build_bench({}).sample.spec
-    assert spec.multiple_scattering is False and spec.diffraction == "auto"
+    assert spec.multiple_scattering == "auto" and spec.diffraction == "auto"
+
+
+@pytest.mark.parametrize("name,on_at", [("antiglare", ()), ("ground", (0, 30, 60, 75)),
+                                        ("etched", (0, 30, 60, 75))])
+def test_auto_multiple_scattering_for_the_walter_samples(name, on_at):
+    """The rule: on at an incidence where the energy single scattering loses (energy_loss,
+    height-correlated masking) exceeds visible_fraction, the detector's noise floor as a share
+    of the beam; Walter's ground and etched glass lose 2-4 % at normal incidence (on at every
+    incidence), the anti-glare glass < 1e-5 up to 60 deg (off)."""
+    table = {k: v for k, v in WALTER[name].items() if k not in ("multiple_scattering",)}
+    sample = build_bench({"sample": table}).sample
+    for theta in (0, 30, 60, 75):
+        loss = energy_loss(table["distribution"], table["alpha"], 1.51, math.radians(theta),
+                           "correlated")
+        assert sample.multiple_scattering_on(math.radians(theta)) == (theta in on_at)
+        assert (loss > sample.visible_fraction) == (theta in on_at)
+
+
+def test_auto_follows_the_detector_noise_floor():
+    """A noisier detector (5000x the read noise) no longer sees ground glass's multiple
+    scattering at normal incidence (energy lost 0.020 < its visible_fraction), but still at
+    75 deg (0.16 lost)."""
+    quiet = build_bench({"sample": WALTER["ground"]}).sample
+    noisy = build_bench({"sample": WALTER["ground"],
+                         "detector": {"read_noise_fraction": 0.5}}).sample
+    assert noisy.visible_fraction > 100 * quiet.visible_fraction
+    assert quiet.multiple_scattering_on(0.0) and not noisy.multiple_scattering_on(0.0)
+    assert noisy.multiple_scattering_on(math.radians(75.0))
 
 
 @pytest.mark.parametrize("table,key", [
@@ -150,7 +178,7 @@ def test_defaults_leave_multiple_scattering_off_and_diffraction_auto():
     ({"rms_height_nm": 20.0}, "correlation_length_um"),
     ({"rms_height_nm": -1.0, "correlation_length_um": 1.0}, "rms_height_nm"),
     ({"ms_walks": 0}, "ms_walks"),
-    ({"ms_walks": 40000}, "ms_walks"),
+    ({"ms_walks": 1 << 23}, "ms_walks"),
     ({"distribution": "phong", "multiple_scattering": True}, "multiple_scattering"),
 ])
 def test_bad_switch_values_name_the_key(table, key):

@@ -11,6 +11,7 @@ from sim.bench import build_bench, build_power_source
 from sim.bench.geometry import sample_frame_directions
 from sim.bench.optics import fresnel_dielectric, normal_transmittance
 from sim.bench.quadrature import cap_solid_angle
+from sim.bench.sample import higher_order_lobe
 from sim.bench.scene import disk_overlap_fraction
 from sim.bsdf import RoughDielectric
 from sim.devices.photodiode import PowerSource, SimConfigError
@@ -78,7 +79,10 @@ def test_small_aperture_is_the_one_point_formula_of_design_md():
     b = bench(WIDE, aperture={"diameter_mm": 0.5, "distance_mm": 1000.0})
     pos = {"sample": 30.0, "arm": 200.0}
     wi, wo = sample_frame_directions(pos)
-    f = float(RoughDielectric("ggx", 0.553, 1.51).eval(wi, wo))
+    assert b.sample.multiple_scattering_on(math.radians(30.0))  # "auto" for etched glass
+    orders = higher_order_lobe("hemisphere", "ggx", 0.553, 1.51, 0.0, b.sample.spec.ms_walks,
+                               b.sample.seed)
+    f = float(RoughDielectric("ggx", 0.553, 1.51).eval(wi, wo) + orders.eval(wi, wo))
     omega = cap_solid_angle(math.atan(0.25 / 1000.0))
     expected = 1e-3 * f * abs(wo[2]) * omega * normal_transmittance(1.51)
     assert b.power_w(pos) == pytest.approx(expected, rel=1e-6)

@@ -28,9 +28,10 @@ def table(name: str, values: dict) -> str:
 
 def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
                seed: int = 1, time_scale: float | str = "inf") -> Path:
-    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables
-    (single scattering unless the sample table asks). A drifting source drifts in wall seconds
-    since the bench started, the clock of the run's t_s, at any time_scale."""
+    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables (the
+    bench's defaults otherwise: multiple scattering "auto", so on for Walter's ground and
+    etched glass). A drifting source drifts in wall seconds since the bench started, the clock
+    of the run's t_s, at any time_scale."""
     text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
     if detector:
         for key, value in detector.items():
@@ -43,8 +44,6 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
             text = "\n".join(lines)
     text += "\n" + table("sim", {"time_scale": time_scale, "seed": seed})
     for name, values in sim.items():
-        if name == "sample":  # single scattering unless asked: the fits here model only that
-            values = {"multiple_scattering": False, **values}
         text += "\n" + table(f"sim.{name}", values)
     path = tmp / f"instrument-{len(list(tmp.glob('instrument-*.toml')))}.toml"
     path.write_text(text)

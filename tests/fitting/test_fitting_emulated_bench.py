@@ -28,7 +28,11 @@ APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-5}  # bench ac
 
 
 def sample(distribution: str, alpha: float) -> dict:
-    return {"kind": "hemisphere", "distribution": distribution, "alpha": alpha, "eta": 1.51}
+    """The sample table; the bench's multiple-scattering tables (where "auto" turns them on)
+    with 8x the default walks, so their Monte Carlo error stays below the fit's own (which the
+    fit adds to sigma) and the chi-square tests the model, not the emulator's walks."""
+    return {"kind": "hemisphere", "distribution": distribution, "alpha": alpha, "eta": 1.51,
+            "ms_walks": 1 << 17}
 
 
 def wide_lobe_grids() -> list[dict]:
@@ -67,7 +71,11 @@ def test_walter_samples_round_trip(distribution, alpha, tmp_path):
     grids = narrow_lobe_grids() if alpha < 0.1 else wide_lobe_grids()
     run = scan(plan(tmp_path, f"walter-{distribution}", grids, dark_every=8), cfg,
                tmp_path / "runs")
-    data, result = fit_run(run, FitOptions(distributions=("beckmann", "ggx")))
+    # the bench's default multiple_scattering = "auto" adds it for ground and etched glass
+    # (energy lost above the detector's noise floor), not for the anti-glare glass: fit alike
+    rough = alpha > 0.1
+    data, result = fit_run(run, FitOptions(distributions=("beckmann", "ggx"),
+                                           multiple_scattering=rough))
     value, sigma = result.param("alpha")
     assert result.distribution == distribution
     assert abs(value - alpha) < 3.0 * sigma
@@ -79,7 +87,8 @@ def test_walter_samples_round_trip(distribution, alpha, tmp_path):
     assert 0.4 < result.chi2_dof_fit < 2.0
     assert result.n_heldout > 10 and 0.4 < result.chi2_dof_heldout < 2.0
     # the CLI prints the same fit as one JSON object
-    assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]) == 0
+    assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]
+                + ["--multiple-scattering"] * rough) == 0
 
 
 @pytest.fixture(scope="module")

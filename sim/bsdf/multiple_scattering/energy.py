@@ -9,11 +9,10 @@ the sphere by importance sampling, the white-furnace check of the random walk.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import betaln
 
 from sim.bsdf.distributions import make_distribution
 from sim.bsdf.fresnel import dielectric_reflectance_transmittance
-from sim.bsdf.masking import check_masking
+from sim.bsdf.masking import check_masking, log_beta
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 from sim.bsdf.multiple_scattering.walk import flip
 
@@ -58,9 +57,10 @@ def single_scattering_energy(
     wt = -wi / eta + (c / eta - cos_t)[:, None] * m
     wt_up = flip(wt / np.linalg.norm(wt, axis=-1, keepdims=True))
     lt = slopes.lambda_(wt_up)
-    with np.errstate(invalid="ignore"):
-        g = (1.0 + li) * np.exp(betaln(1.0 + li, 1.0 + lt)) if correlated else 1.0 / (1.0 + lt)
-        trans = np.where(wt_up[:, 2] > 0.0, g, 0.0)
+    seen = (wt_up[:, 2] > 0.0) & np.isfinite(lt)  # Lambda = inf (grazing): masked, G = 0
+    lt = np.where(seen, lt, 0.0)
+    g = (1.0 + li) * np.exp(log_beta(1.0 + li, 1.0 + lt)) if correlated else 1.0 / (1.0 + lt)
+    trans = np.where(seen, g, 0.0)
     return float(np.sum(weights * (fr * refl + (1.0 - fr) * np.nan_to_num(trans))))
 
 

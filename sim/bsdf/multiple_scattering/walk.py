@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.bsdf.multiple_scattering import nee_kernel
 from sim.bsdf.multiple_scattering.guiding import guided_scatter
 from sim.bsdf.multiple_scattering.heights import log1mexp
 from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
@@ -68,9 +69,14 @@ class Walker:
         max_order: int | None = None,
         unit: bool = False,
         u_first: np.ndarray | None = None,
+        targets: np.ndarray | None = None,
+        min_order: int = 1,
     ) -> WalkResult:
         """Walk once from each row of wi (n, 3); with wo, accumulate NEE towards wo (n, 3).
 
+        targets (m, 3), instead of wo: accumulate NEE from every walk towards every target
+        (value (n, m)); the path is then independent of the targets (no guiding), so one walk
+        serves them all. min_order: count only orders >= min_order.
         order: count only that scattering order (the walk stops after it); max_order: stop after
         that many events and report the energy still inside; unit: direction density instead of
         energy; u_first (n, 3): uniforms for the first event (height, normal), for stratification.
@@ -88,14 +94,14 @@ class Walker:
         log_v = np.where(outside, -np.inf, 0.0)  # log(1 - C1(h))
         beta = np.ones(n)
         alive = micro.transmits | outside
-        value = np.zeros(n)
+        value = np.zeros(n) if targets is None else np.zeros((n, len(targets)))
         exit_dir = np.full((n, 3), np.nan)
         weight = np.zeros(n)
         truncated = np.zeros(n)
         orders = np.zeros(n, dtype=np.int64)
         first = np.full(n, np.nan)
         idx = np.flatnonzero(alive)
-        forced = wo is not None
+        forced = wo is not None or targets is not None
         k = 0
         while idx.size:
             k += 1
@@ -133,10 +139,14 @@ class Walker:
                 first[idx] = log_u[idx]
             w_in = -dk
             m = slopes.sample_visible(w_in, u[1], u[2])
-            if wo is not None and (order is None or order == k):
+            counted = k >= min_order and (order is None or order == k)
+            if wo is not None and counted:
                 value[idx] += beta[idx] * self._next_event(w_in, m, out, wo[idx], new, other, unit)
+            elif targets is not None and counted:
+                value[idx] += beta[idx, None] * self._next_event_all(w_in, m, out, targets, new,
+                                                                     other, unit)
             scattered = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)), unit)
-            if forced and self.guided and micro.guidable:
+            if wo is not None and self.guided and micro.guidable:
                 scattered = guided_scatter(slopes, micro, w_in, m, out, wo[idx],
                                            rng.random((4, idx.size)), unit, scattered)
             w_next, factor, crossed = scattered
@@ -157,6 +167,19 @@ class Walker:
                 break
             idx = idx[beta[idx] > 0.0]
         return WalkResult(value, exit_dir, weight, truncated, orders, first)
+
+    def _next_event_all(self, w_in, m, out, targets, log_here, log_there, unit,
+                        compiled: bool = True) -> np.ndarray:
+        """_next_event from each of n events towards each of m targets: (n, m); compiled
+        (nee_kernel) for dielectric and conductor facets unless asked not to."""
+        if compiled and not unit and nee_kernel.supports(self.micro):
+            return nee_kernel.compiled_next_event_all(self.slopes, self.micro, w_in, out,
+                                                      targets, log_here, log_there)
+        n, k = len(w_in), len(targets)
+        each = np.repeat(np.arange(n), k)
+        flat = self._next_event(w_in[each], m[each], out[each], np.tile(targets, (n, 1)),
+                                log_here[each], log_there[each], unit)
+        return flat.reshape(n, k)
 
     def _next_event(self, w_in, m, out, wo, log_here, log_there, unit) -> np.ndarray:
         """Phase function towards wo times the probability that wo escapes from this event."""
