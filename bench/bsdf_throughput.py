@@ -2,11 +2,11 @@
 random direction pairs, evaluations per second, beside a plain-numpy baseline in the same run.
 
 Rows: a straightforward textbook numpy eval (the baseline; no grazing, TIR or eta ~ 1 care),
-the model's numpy reference path, its compiled numba kernel (all threads, and one thread),
-pdf(), and sample() per second. Median of several runs; compile time is excluded (warm-up).
-The machine is shared, so the CPU-time rate (items per CPU second, all threads summed) is
-printed beside the wall-clock one (median and best run): it is the per-core cost, free of time
-spent descheduled; the load average is printed before and after.
+the model's numpy reference path, its compiled numba kernels (all threads, and one thread) for
+eval, pdf() and sample(), and sample() of two other models. Median of several runs; compile
+time is excluded (warm-up). The machine is shared, so the CPU-time rate (items per CPU second,
+all threads summed) is printed beside the wall-clock one (median and best run): it is the
+per-core cost, free of time spent descheduled; the load average is printed before and after.
 For scale, the issue quotes Mitsuba 3's LLVM backend at ~100 M pairs/s (float32, 2 cores)."""
 
 from __future__ import annotations
@@ -96,6 +96,7 @@ def main() -> None:
                      rate(lambda: fast.sample(wi, u), 8)))
         numba.set_num_threads(1)
         rows.append(("gonio numba eval (1 thread)", rate(lambda: fast.eval(wi, wo), 15)))
+        rows.append(("gonio numba pdf (1 thread)", rate(lambda: fast.pdf(wi, wo), 8)))
         rows.append(("gonio numba sample (1 thread)", rate(lambda: fast.sample(wi, u), 8)))
         numba.set_num_threads(threads)
         for name, model in (("Beckmann walter", RoughDielectric("beckmann", ALPHA, ETA,

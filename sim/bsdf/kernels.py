@@ -483,48 +483,208 @@ if AVAILABLE:
             pdf[k] = p
         return wo, weight, pdf
 
-    @njit(cache=True, parallel=True, error_model="numpy")
-    def dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
-        """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero."""
-        n = wi.shape[0]
-        wo = np.zeros((n, 3))
-        weight = np.zeros(n)
-        pdf = np.zeros(n)
+    @njit(cache=True, error_model="numpy")
+    def _dielectric_sample_one(wi, u, k, dist, ax, ay, eta, masking, refl_on, trans_on,
+                               sampling):
+        """One sample of RoughDielectric for pair k: (ox, oy, oz, weight, pdf), all 0 if it
+        failed (the numpy path's formulas, pair by pair)."""
         both = refl_on and trans_on
+        ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
+        sgn = -1.0 if iz < 0.0 else 1.0
+        iz = iz * sgn
+        e = 1.0 / eta if sgn < 0.0 else eta
+        em1 = (1.0 - eta) / eta if sgn < 0.0 else eta - 1.0
+        mx, my, mz = _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
+        c = ix * mx + iy * my + iz * mz
+        fr = _fresnel_toward(abs(c), e, em1)
+        e_ct = math.sqrt(max(em1 * (e + 1.0) + c * c, 0.0))
+        ft = _transmittance_e(abs(c), e_ct, e) if e_ct > 0.0 else 0.0
+        reflected = u[k, 2] < fr if both else refl_on
+        if reflected:
+            ox, oy, oz = 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz
+        else:
+            gap = -em1 * (e + 1.0) / (c + e_ct if c + e_ct > 0.0 else 1.0)
+            ox, oy, oz = (-ix + gap * mx) / e, (-iy + gap * my) / e, (-iz + gap * mz) / e
+        ok = c > 0.0 and mz > 0.0 and iz > COS_HORIZON and abs(oz) > COS_HORIZON
+        ok = ok and ((oz > 0.0) if reflected else (oz < 0.0 and ft > 0.0))
+        if not ok:
+            return 0.0, 0.0, 0.0, 0.0, 0.0
+        lobe = fr if reflected else ft
+        if reflected:
+            jac = 1.0 / (4.0 * abs(c))
+        else:
+            jac = e * e_ct / (gap * gap) if gap != 0.0 else math.inf
+        p = (lobe if both else 1.0) * _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx,
+                                                    my, mz) * jac
+        li = _cos_lambda(dist, ax, ay, ix, iy, iz)
+        w = _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
+                             mx, my, mz, c, not reflected)
+        if not p > 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 0.0
+        return ox, oy, oz * sgn, (1.0 if both else lobe) * w, p
+
+    @njit(cache=True, parallel=True, error_model="numpy")
+    def _dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
+        """sample() of RoughDielectric pair by pair: (wo, weight, pdf), failed samples 0."""
+        n = wi.shape[0]
+        wo = np.empty((n, 3))
+        weight = np.empty(n)
+        pdf = np.empty(n)
         for k in prange(n):
-            ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
-            sgn = -1.0 if iz < 0.0 else 1.0
-            iz = iz * sgn
-            e = 1.0 / eta if sgn < 0.0 else eta
-            em1 = (1.0 - eta) / eta if sgn < 0.0 else eta - 1.0
-            mx, my, mz = _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
-            c = ix * mx + iy * my + iz * mz
-            fr = _fresnel_toward(abs(c), e, em1)
-            e_ct = math.sqrt(max(em1 * (e + 1.0) + c * c, 0.0))
-            ft = _transmittance_e(abs(c), e_ct, e) if e_ct > 0.0 else 0.0
-            reflected = u[k, 2] < fr if both else refl_on
-            if reflected:
-                ox, oy, oz = 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz
-            else:
-                gap = -em1 * (e + 1.0) / (c + e_ct if c + e_ct > 0.0 else 1.0)
-                ox, oy, oz = (-ix + gap * mx) / e, (-iy + gap * my) / e, (-iz + gap * mz) / e
-            ok = c > 0.0 and mz > 0.0 and iz > COS_HORIZON and abs(oz) > COS_HORIZON
-            ok = ok and ((oz > 0.0) if reflected else (oz < 0.0 and ft > 0.0))
-            if not ok:
-                continue
-            lobe = fr if reflected else ft
-            if reflected:
-                jac = 1.0 / (4.0 * abs(c))
-            else:
-                jac = e * e_ct / (gap * gap) if gap != 0.0 else math.inf
-            p = (lobe if both else 1.0) * _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx,
-                                                        my, mz) * jac
-            li = _cos_lambda(dist, ax, ay, ix, iy, iz)
-            w = _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
-                                 mx, my, mz, c, not reflected)
-            if not p > 0.0:
-                continue
-            wo[k, 0], wo[k, 1], wo[k, 2] = ox, oy, oz * sgn
-            weight[k] = (1.0 if both else lobe) * w
-            pdf[k] = p
+            wo[k, 0], wo[k, 1], wo[k, 2], weight[k], pdf[k] = _dielectric_sample_one(
+                wi, u, k, dist, ax, ay, eta, masking, refl_on, trans_on, sampling)
         return wo, weight, pdf
+
+    #: Taylor coefficients of sin t / t and cos t in t^2 to t^16 and t^18 (|t| <= pi/4: the
+    #: truncation is below 1e-17 relative).
+    SIN_TERMS = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(8, -1, -1))
+    COS_TERMS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(9, -1, -1))
+
+    @njit(cache=True, error_model="numpy", inline="always")
+    def _cos_sin_2pi(u):
+        """(cos 2 pi u, sin 2 pi u) for 0 <= u <= 1 by quadrant and Taylor polynomials:
+        branch-free, so that it vectorises (math.cos and sin do not)."""
+        q = math.floor(4.0 * u + 0.5)
+        t = (2.0 * math.pi) * (u - 0.25 * q)  # exact difference, |t| <= pi / 4
+        t2 = t * t
+        s = 0.0
+        for a in SIN_TERMS:  # highest power first (Horner)
+            s = s * t2 + a
+        s = s * t
+        c = 0.0
+        for a in COS_TERMS:
+            c = c * t2 + a
+        quadrant = q - 4.0 * math.floor(0.25 * q)
+        odd = (quadrant == 1.0) | (quadrant == 3.0)
+        cq, sq = (s, c) if odd else (c, s)
+        return (-cq if (quadrant == 1.0) | (quadrant == 2.0) else cq,
+                -sq if (quadrant == 2.0) | (quadrant == 3.0) else sq)
+
+    @njit(cache=True, error_model="numpy")
+    def _ggx_visible_sample_block(fi, fu, ax, ay, eta, correlated, refl_on, trans_on, fwo,
+                                  weight, pdf):
+        """SIMD loop of _ggx_visible_sample over flat (3 m) wi and u into fwo (3 m), weight and
+        pdf (m): 9 sqrt and 5 divisions per sample, no libm calls; samples it cannot vouch for
+        (wi off unit length or near grazing, u outside [0, 1], eta = 1 transmission, tiny or
+        huge results, correlated transmission) get pdf NaN. Calls nothing (see
+        _ggx_dielectric_block)."""
+        _prefer_512_bit_vectors()
+        inv_ax, inv_ay = 1.0 / ax, 1.0 / ay
+        pi_axay = math.pi * ax * ay
+        e_in = 1.0 / eta
+        em1_in = (1.0 - eta) / eta
+        e2m1_out, e2m1_in = (eta - 1.0) * (eta + 1.0), em1_in * (e_in + 1.0)
+        both = refl_on and trans_on
+        separable = not correlated
+        for j in range(pdf.shape[0]):
+            ix, iy, iz = fi[3 * j], fi[3 * j + 1], fi[3 * j + 2]
+            u1, u2, u3 = fu[3 * j], fu[3 * j + 1], fu[3 * j + 2]
+            di = ix * ix + iy * iy + iz * iz - 1.0
+            ri = 1.0 + di * (-0.5 + 0.375 * di)
+            inside = iz < 0.0
+            sgn = -1.0 if inside else 1.0
+            ix, iy, iz = ix * ri, iy * ri, iz * (ri * sgn)
+            e = e_in if inside else eta
+            inv_e = eta if inside else e_in
+            e2m1 = e2m1_in if inside else e2m1_out
+            e2 = e * e
+            # visible normal (Heitz 2018) in the stretched frame: hemisphere v, basis t1, t2
+            vx, vy, vz = ax * ix, ay * iy, iz
+            lat2 = vx * vx + vy * vy
+            s_n = math.sqrt(lat2 + vz * vz)
+            s_l = math.sqrt(lat2) if lat2 > 0.0 else 1.0
+            r = 1.0 / (s_n * s_l)
+            inv_n = s_l * r
+            t1x = -vy * (s_n * r) if lat2 > 0.0 else 1.0  # (-vy, vx) / |v_xy|
+            t1y = vx * (s_n * r) if lat2 > 0.0 else 0.0
+            vx, vy, vz = vx * inv_n, vy * inv_n, vz * inv_n
+            t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x
+            rad = math.sqrt(u1)
+            cos_p, sin_p = _cos_sin_2pi(u2)
+            p1, p2 = rad * cos_p, rad * sin_p
+            h = 0.5 * (1.0 + vz)
+            p2 = (1.0 - h) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + h * p2
+            p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
+            nx = ax * (p1 * t1x + p2 * t2x + p3 * vx)
+            ny = ay * (p1 * t1y + p2 * t2y + p3 * vy)
+            nz = max(p2 * t2z + p3 * vz, 0.0)
+            n2 = nx * nx + ny * ny + nz * nz
+            inv_m = 1.0 / math.sqrt(n2)
+            mx, my, mz = nx * inv_m, ny * inv_m, nz * inv_m
+            c = ix * mx + iy * my + iz * mz
+            # Fresnel toward m, one division: 1 / den_s and 1 / den_p from 1 / (den_s den_p)
+            e_ct2 = e2m1 + c * c
+            e_ct = math.sqrt(max(e_ct2, 0.0))
+            den_s = c + e_ct
+            den_p = e2 * c + e_ct
+            inv = 1.0 / (den_s * den_p)
+            r_s, r_p = den_p * inv, den_s * inv
+            rs = -e2m1 * r_s * r_s
+            rp = e2m1 * (c * c * (e2 + 1.0) - 1.0) * r_p * r_p
+            fr = 1.0 if e_ct2 <= 0.0 else 0.5 * (rs * rs + rp * rp)
+            ft = 2.0 * (c * e_ct) * (r_s * r_s + e2 * r_p * r_p) if e_ct > 0.0 else 0.0
+            reflected = u3 < fr if both else refl_on
+            gap = -e2m1 * r_s  # c - e cos_t = (1 - e^2) / (c + e cos_t)
+            ox = 2.0 * c * mx - ix if reflected else (gap * mx - ix) * inv_e
+            oy = 2.0 * c * my - iy if reflected else (gap * my - iy) * inv_e
+            oz = 2.0 * c * mz - iz if reflected else (gap * mz - iz) * inv_e
+            aoz = abs(oz)
+            # pdf = lobe D(m) c / (iz + Li) * Jacobian, weight = G2 / G1(wi) (times the lobe
+            # for one lobe); D = 1 / (pi ax ay q^2), iz + Li = (iz + s_i) / 2
+            q = mz * mz + ((mx * inv_ax) ** 2 + (my * inv_ay) ** 2)
+            s_i = math.sqrt(iz * iz + ((ax * ix) ** 2 + (ay * iy) ** 2))
+            s_o = math.sqrt(aoz * aoz + ((ax * ox) ** 2 + (ay * oy) ** 2))
+            lobe = fr if reflected else ft
+            choice = lobe if both else 1.0
+            w_lobe = 1.0 if both else lobe
+            p_num = choice if reflected else choice * (2.0 * c) * e * e_ct
+            p_den = pi_axay * (q * q) * (iz + s_i) * (2.0 if reflected else gap * gap)
+            if correlated:
+                w_num, w_den = aoz * (iz + s_i), aoz * s_i + iz * s_o
+            else:
+                w_num, w_den = 2.0 * aoz, aoz + s_o
+            # one division for pdf and weight: p = p_num w_den / (p_den w_den) and so on
+            inv = 1.0 / (p_den * w_den)
+            p = p_num * w_den * inv
+            w = w_lobe * w_num * p_den * inv
+            ok = ((c > 0.0) & (mz > 0.0) & (iz > COS_HORIZON) & (aoz > COS_HORIZON)
+                  & ((oz > 0.0) if reflected else ((oz < 0.0) & (ft > 0.0))))
+            safe = ((abs(di) <= UNIT_TOL) & (iz >= SAFE_MIN) & (u1 >= 0.0) & (u1 <= 1.0)
+                    & (u2 >= 0.0) & (u2 <= 1.0))
+            sure = ((p > TINY) & (p < math.inf) & (w > TINY) & (w < math.inf)
+                    & (reflected | separable) & (p_den * w_den > TINY))
+            fwo[3 * j] = ox if ok else 0.0
+            fwo[3 * j + 1] = oy if ok else 0.0
+            fwo[3 * j + 2] = oz * sgn if ok else 0.0
+            weight[j] = w if ok else 0.0
+            pdf[j] = math.nan if not safe or (ok and not sure) else (p if ok else 0.0)
+
+    @njit(cache=True, parallel=True, error_model="numpy")
+    def _ggx_visible_sample(wi, u, ax, ay, eta, correlated, refl_on, trans_on):
+        """sample() of the GGX RoughDielectric with visible-normal sampling: SIMD blocks, then
+        the samples a block left NaN by _dielectric_sample_one."""
+        n = wi.shape[0]
+        wo = np.empty(3 * n)
+        weight = np.empty(n)
+        pdf = np.empty(n)
+        masking = 1 if correlated else 0
+        for b in prange((n + BLOCK - 1) // BLOCK):
+            start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
+            _ggx_visible_sample_block(wi[start:stop].ravel(), u[start:stop].ravel(), ax, ay,
+                                      eta, correlated, refl_on, trans_on,
+                                      wo[3 * start:3 * stop], weight[start:stop],
+                                      pdf[start:stop])
+            for k in range(start, stop):
+                if math.isnan(pdf[k]):
+                    wo[3 * k], wo[3 * k + 1], wo[3 * k + 2], weight[k], pdf[k] = (
+                        _dielectric_sample_one(wi, u, k, 0, ax, ay, eta, masking, refl_on,
+                                               trans_on, 0))
+        return wo.reshape((n, 3)), weight, pdf
+
+    def dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
+        """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero; GGX with
+        visible normals in SIMD blocks, the rest pair by pair."""
+        if dist == 0 and sampling == 0:
+            return _ggx_visible_sample(wi, u, ax, ay, eta, masking == 1, refl_on, trans_on)
+        return _dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on,
+                                  sampling)

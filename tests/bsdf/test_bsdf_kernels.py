@@ -113,6 +113,8 @@ def test_phong_falls_back_to_numpy():
     dict(), dict(sampling="walter", masking="correlated"),
     dict(alpha=(0.1, 0.5), lobes=("transmission",)), dict(eta=1 / 1.3, lobes=("reflection",)),
     dict(eta=1.0), dict(distribution="beckmann", sampling="walter"),
+    dict(masking="correlated"), dict(alpha=(0.05, 0.9), eta=1 / 1.4, masking="correlated"),
+    dict(alpha=1e-4, eta=4.0, lobes=("transmission",)), dict(alpha=4.0, eta=0.25),
     dict(distribution="beckmann", alpha=(0.1, 0.6), sampling="walter", masking="correlated",
          eta=1 / 1.4),
 ], ids=str)
@@ -139,9 +141,24 @@ def test_beckmann_visible_sampling_stays_numpy():
     assert model.backend == "numba" and not model._compiled_sampling()
 
 
-def _sample_agree(cls, kw):
-    rng = np.random.default_rng(3)
-    wi, u = rng.normal(size=(50_000, 3)), rng.random((50_000, 3))
+def test_ggx_simd_sample_input_layouts():
+    """One wi broadcast against many u and strided inputs give the contiguous result bit for
+    bit; wi off unit length and u at the ends of [0, 1] agree with the numpy path."""
+    rng = np.random.default_rng(6)
+    wi, u = rng.normal(size=(20_000, 3)), rng.random((20_000, 3))
+    u[:6] = [[0, 0, 0], [1, 1, 1], [0, 0.25, 0.5], [1, 0.75, 0], [0.5, 1 - 1e-16, 1], [0, 1, 0]]
+    model = RoughDielectric("ggx", 0.3, 1.51)
+    one = np.broadcast_to(wi[3], wi.shape)
+    for a, b in ((model.sample(one, u), model.sample(np.ascontiguousarray(one), u)),
+                 (model.sample(wi[::2], u[::2]), tuple(x[::2] for x in model.sample(wi, u)))):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    _sample_agree(RoughDielectric, dict(alpha=0.3, eta=1.51), wi * 3.7, u)
+
+
+def _sample_agree(cls, kw, wi=None, u=None):
+    if wi is None:
+        rng = np.random.default_rng(3)
+        wi, u = rng.normal(size=(50_000, 3)), rng.random((50_000, 3))
     fast, ref = cls(**kw), cls(backend="numpy", **kw)
     assert fast._compiled_sampling()
     (wo_f, w_f, p_f), (wo_r, w_r, p_r) = fast.sample(wi, u), ref.sample(wi, u)
