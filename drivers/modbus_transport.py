@@ -3,7 +3,9 @@
 One `ModbusLink` per endpoint (serial port or host:port), shared by every unit on it:
 `open_link` hands out the same link to drivers of several units on one RTU bus or one
 TCP server, and closes it when the last user is done. Reads may be retried after a
-timeout or a garbled reply; writes never are (a write may already have acted).
+timeout or a garbled reply; writes never are (a write may already have acted). A late reply
+never answers a later request: on TCP the connection is closed after a timeout (and replies
+carry transaction ids); on RTU the line is brought back in step first (drivers.modbus_rtu_sync).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOEx
 from pymodbus.pdu import ExceptionResponse
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.modbus_rtu_sync import RtuSync
 from drivers.register_map import RegisterMap
 
 MODBUS_EXCEPTIONS = {
@@ -71,16 +74,18 @@ class ModbusLink:
                                               retries=0)
         self._lock = threading.Lock()
         self.users = 0
+        self.in_step = True  # RTU: False after a reply timeout, until an echo is answered
+        self._sync = RtuSync()
 
     def read(self, device: str, table: str, address: int, count: int, unit: int) -> list[int]:
         """Read count registers of table ("holding" | "input"); retried on timeout / garble."""
-        fn = (self._client.read_holding_registers if table == "holding"
-              else self._client.read_input_registers)
+        fn, code = ((self._client.read_holding_registers, 3) if table == "holding"
+                    else (self._client.read_input_registers, 4))
         what = f"{table} registers {address}..{address + count - 1} of unit {unit}"
         attempt = 0
         while True:
             try:
-                return self._read_once(device, what, fn, address, count, unit)
+                return self._read_once(device, what, (fn, code), address, count, unit)
             except (DeviceTimeout, ProtocolError):
                 if attempt == self.read_retries:
                     raise
@@ -89,7 +94,7 @@ class ModbusLink:
 
     def _read_once(self, device: str, what: str, fn, address: int, count: int,
                    unit: int) -> list[int]:
-        reply = self._call(device, what, fn, address, count=count, device_id=unit)
+        reply = self._call(device, what, fn, unit, address, count=count)
         if len(reply.registers) != count:
             raise ProtocolError(f"{device}: {what}: {len(reply.registers)} registers in the "
                                 f"reply, expected {count}")
@@ -98,13 +103,19 @@ class ModbusLink:
     def write(self, device: str, address: int, values: list[int], unit: int) -> None:
         """Write holding registers (function 16), once: never re-sent on a failure."""
         what = f"reply to a write of holding registers {address}.. of unit {unit}"
-        self._call(device, what, self._client.write_registers, address, values=values,
-                   device_id=unit)
+        self._call(device, what, (self._client.write_registers, 16), unit, address,
+                   values=values)
 
-    def _call(self, device: str, what: str, fn, *args, **kwargs):
+    def _call(self, device: str, what: str, fn, unit: int, *args, **kwargs):
+        """fn = (client method, its function code), called for `unit`; a reply to another
+        function (a late frame on an RTU line) is a ProtocolError."""
+        call, code = fn
         with self._lock:
             try:
-                reply = fn(*args, **kwargs)
+                if self.transport == "rtu" and not self.in_step:
+                    self._sync.resync(self._port(), unit, device, what, self.timeouts.reply_s)
+                    self.in_step = True
+                reply = call(*args, device_id=unit, **kwargs)
             except (ConnectionException, OSError) as exc:  # refused, reset, hung up
                 self._client.close()
                 raise DriverError(f"{device}: connection to {self.endpoint} failed or lost "
@@ -115,14 +126,25 @@ class ModbusLink:
                 if isinstance(exc, ModbusIOException) and not (
                     "transaction id" in str(exc) or "device id" in str(exc)
                 ):
+                    self.in_step = False  # the reply may still come
                     raise DeviceTimeout(device, what, self.timeouts.reply_s) from None
                 raise ProtocolError(f"{device}: {what}: garbled or mismatched reply "
                                     f"({exc})") from None
+        if reply.function_code & 0x7F != code:
+            self.in_step = False
+            raise ProtocolError(f"{device}: {what}: a reply to function "
+                                f"{reply.function_code & 0x7F}, not {code} (a late frame)")
         if isinstance(reply, ExceptionResponse) or reply.isError():
-            code = getattr(reply, "exception_code", 0)
-            raise DeviceError(device, f"Modbus exception {code:02d}",
-                              f"{MODBUS_EXCEPTIONS.get(code, 'unknown exception')} ({what})")
+            exc_code = getattr(reply, "exception_code", 0)
+            raise DeviceError(device, f"Modbus exception {exc_code:02d}",
+                              f"{MODBUS_EXCEPTIONS.get(exc_code, 'unknown exception')} ({what})")
         return reply
+
+    def _port(self):
+        """The RTU line's open pyserial port (connecting first if need be)."""
+        if not self._client.connected and not self._client.connect():
+            raise ConnectionException(f"cannot open {self.endpoint}")
+        return self._client.socket
 
     def close(self) -> None:
         """Close the client connection."""

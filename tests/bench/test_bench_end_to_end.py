@@ -69,25 +69,21 @@ def test_reduced_run_matches_the_bench_within_the_noise(run_dir):
     ok = data.valid
     assert ok.sum() >= 15
     resid = (data.bsdf - expected) / data.sigma
-    # a reading taken while a stage was still short of its recorded position shows as a gross
-    # outlier; that is a timing fault of the emulators / drivers / engine (seen on the serial
-    # path), not of the bench or the reduction: test the rest, then report it.
-    misplaced = ok & (np.abs(resid) > 10.0)
-    rest = ok & ~misplaced
+    # every reading belongs to the positions recorded with it: one taken before the stage
+    # arrived, or a late reply answering a later query, would show as a gross outlier
+    gross = ok & (np.abs(resid) > 10.0)
+    assert not gross.any(), (f"sample readings {rows['index'][gross].tolist()} are "
+                             f"{np.round(resid[gross], 1).tolist()} sigma off the bench at "
+                             "their recorded positions")
     # The beam normalisation error is common to all points between two beam readings, so a
     # plain chi-square over correlated points is not chi-square distributed; take the common
     # scale out (it must be within the beam's 0.1 %), then the rest must not exceed the noise.
-    w = 1.0 / data.sigma[rest] ** 2
-    scale = float(np.sum(w * data.bsdf[rest] * expected[rest]) / np.sum(w * expected[rest] ** 2))
+    w = 1.0 / data.sigma[ok] ** 2
+    scale = float(np.sum(w * data.bsdf[ok] * expected[ok]) / np.sum(w * expected[ok] ** 2))
     assert scale == pytest.approx(1.0, abs=1e-3)
-    chi2 = float(np.sum(((data.bsdf - scale * expected) / data.sigma)[rest] ** 2))
-    assert stats.chi2.sf(chi2, int(rest.sum()) - 1) > 1e-3, (chi2, int(rest.sum()))
+    chi2 = float(np.sum(((data.bsdf - scale * expected) / data.sigma)[ok] ** 2))
+    assert stats.chi2.sf(chi2, int(ok.sum()) - 1) > 1e-3, (chi2, int(ok.sum()))
     assert data.meta["aperture_half_angle_deg"] == pytest.approx(math.degrees(math.atan(0.01)))
-    if misplaced.any():
-        idx = rows["index"][misplaced]
-        pytest.xfail(f"sample readings {idx.tolist()} are {np.round(resid[misplaced], 1).tolist()}"
-                     " sigma off the bench at their recorded positions: read before the stage "
-                     "arrived (outside sim.bench and calibration; reported to the lead)")
 
 
 def test_reduce_and_plot_commands(run_dir):
