@@ -26,6 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="run with an arm scan across the straight beam (sample retracted)")
     b.add_argument("--beam-diameter-mm", type=float, default=0.0,
                    help="beam diameter for --aperture-scan (default 0: beam much smaller)")
+    b.add_argument("--divergence-deg", type=float, metavar="DEG",
+                   help="beam divergence half-angle for the angle-offset fit (default: the "
+                   "run's [sim.source] divergence_deg on an emulated bench, else 0)")
     u = actions.add_parser("use", help="record in a run which calibration applies to it")
     u.add_argument("run", help="run directory")
     u.add_argument("calibration", help="calibration file")
@@ -64,8 +67,12 @@ def _build(args: argparse.Namespace) -> int:
     elif args.aperture_scan:
         ap = (*_aperture_from_scan(open_run(args.aperture_scan), args.beam_diameter_mm),
               "beam-scan")
+    divergence = args.divergence_deg
+    if divergence is None:
+        source = (runs[0].config.get("sim") or {}).get("source", {})
+        divergence = float(source.get("divergence_deg", 0.0))
     cal = build([r.readings() for r in runs], utc_now(), [str(r.path) for r in runs],
-                eta=args.eta, aperture=ap)
+                eta=args.eta, aperture=ap, divergence_deg=divergence)
     print(calfile.save(cal, args.out))
     return 0
 

@@ -114,6 +114,8 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
     assert shown["source_runs"] == [str(angle_run.path)]
     assert abs(shown["angles"]["arm_offset_deg"]["value"] - ARM_OFFSET) < 0.03
     assert shown["aperture"]["method"] == "geometry"
+    divergence = angle_run.config["sim"]["source"].get("divergence_deg", 0.0)
+    assert json.dumps(shown["angles"]).count(f'"divergence_deg": {divergence}') == 1
     assert shown["aperture"]["half_angle_deg"]["value"] == pytest.approx(0.5729, abs=1e-3)
     assert main(["calibrate", "use", str(angle_run.path), str(cal)]) == 0
     meta = json.loads((angle_run.path / "meta.json").read_text())
