@@ -1,0 +1,151 @@
+"""Orders >= 2 by shared-path next-event estimation (HigherOrderLobe, higher_orders_at): the
+compiled kernel against the numpy reference, agreement with the per-pair random walk (all
+orders minus order 1), energy against energy_loss, reciprocity, interpolation, determinism."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sim.bsdf import RoughConductor, RoughDielectric
+from sim.bsdf.multiple_scattering import (
+    HigherOrderLobe,
+    RandomWalkBSDF,
+    energy_loss,
+    higher_orders_at,
+    nee_kernel,
+)
+from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
+from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+from sim.bsdf.multiple_scattering.walk import Walker
+
+Z_MAX = 4.5  # |z-score| allowed for a Monte Carlo comparison (deterministic seeds)
+GLASS = RoughDielectric("ggx", 0.5, 1.51, masking="correlated")
+
+
+def direction(theta_deg, phi_deg=0.0):
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+
+@pytest.mark.skipif(not nee_kernel.AVAILABLE, reason="numba is not installed")
+@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+@pytest.mark.parametrize("micro", [MicroDielectric(1.51), MicroDielectric(1.0 / 1.51),
+                                   MicroConductor(None), MicroConductor(0.2 + 3.4j)],
+                         ids=["glass", "inverse-glass", "mirror", "gold-like"])
+def test_compiled_next_event_matches_numpy(name, micro):
+    rng = np.random.default_rng(1)
+    walker = Walker(SlopeDistribution.named(name, 0.4), micro, guided=False)
+    n, m = 400, 60
+    w_in = rng.normal(size=(n, 3))
+    w_in /= np.linalg.norm(w_in, axis=1, keepdims=True)
+    targets = rng.normal(size=(m, 3))
+    targets /= np.linalg.norm(targets, axis=1, keepdims=True)
+    targets[:3] = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]  # poles, horizon
+    out = rng.random(n) < 0.5
+    here = np.log(rng.random(n))
+    there = np.log1p(-np.exp(here))
+    args = (w_in, w_in, out, targets, here, there, False)
+    fast = walker._next_event_all(*args, compiled=True)
+    slow = walker._next_event_all(*args, compiled=False)
+    assert np.all(np.isfinite(fast)) and np.count_nonzero(slow) > 0.2 * slow.size
+    np.testing.assert_allclose(fast, slow, rtol=1e-6, atol=1e-300)
+
+
+@pytest.mark.parametrize("wi,wo", [
+    (direction(30), direction(50, 160)),  # reflection
+    (direction(30), direction(160, 170)),  # transmission
+    (direction(60), direction(130, 20)),  # transmission, out of plane
+    (-direction(20), -direction(40, 180)),  # transmission from the glass
+])
+def test_orders_two_and_up_match_the_per_pair_walk(wi, wo):
+    """Shared-path NEE (min_order 2) against the guided per-pair walk's all orders minus order
+    1 (walked from the same seed, so order 1 cancels exactly): the same expectation."""
+    value, err, _ = (float(v.ravel()[0]) for v in higher_orders_at(GLASS, wi, wo, 1 << 15, 2))
+    walk = RandomWalkBSDF(GLASS, walks=1 << 13)
+    every = walk.estimate(wi, wo, np.random.default_rng(3))
+    first = walk.estimate(wi, wo, np.random.default_rng(3), order=1)
+    reference = every.value - first.value
+    assert value > 0 and err < 0.2 * value
+    assert abs(value - reference) < Z_MAX * math.hypot(err, float(every.stderr))
+
+
+@pytest.mark.parametrize("model,theta", [
+    (GLASS, 30.0), (RoughDielectric("beckmann", 0.7, 1.51, masking="correlated"), 60.0),
+    (RoughConductor("ggx", 0.8, None, masking="correlated"), 45.0)])
+def test_table_energy_is_what_single_scattering_loses(model, theta):
+    """The integral of the tabulated lobe times |cos o| over the sphere (trapezoid rule on the
+    grid, both azimuth halves) equals energy_loss, an independent quadrature of order 1, within
+    the tables' Monte Carlo error (taken as fully correlated within a column) and 1 % for the
+    5-degree trapezoid rule."""
+    lobe = HigherOrderLobe(model, walks=1 << 12, seed=4)
+    node = int(theta / 5.0)
+    t = np.radians(lobe.theta_deg)
+    p = np.radians(lobe.phi_deg)
+    mid = len(t) // 2
+    tables = [[lobe.column(1, node, j, half) for j in range(len(p))] for half in (False, True)]
+    f, err = (np.concatenate([np.stack([c[k] for c in tables[0]], axis=1)[:mid],
+                              np.stack([c[k] for c in tables[1]], axis=1)]) for k in (0, 1))
+    weight = np.abs(np.cos(t))[:, None] * np.sin(t)[:, None]
+    trapezoid_t = np.gradient(t)  # node spacing (half at the ends, as the trapezoid rule)
+    trapezoid_t[[0, -1]] *= 0.5
+    trapezoid_p = np.full(len(p), p[1] - p[0])
+    trapezoid_p[[0, -1]] *= 0.5
+    cell = 2.0 * weight * trapezoid_t[:, None] * trapezoid_p[None, :]
+    energy = float(np.sum(f * cell))
+    energy_err = float(np.sqrt(np.sum(np.sum(err * cell, axis=0) ** 2)))
+    eta = getattr(model, "eta", None)
+    loss = energy_loss(model.distribution.name, 0.0 + model.distribution.alpha_x, eta,
+                       math.radians(theta))
+    assert loss > 0.02 and energy_err < 0.1 * loss
+    assert abs(energy - loss) < Z_MAX * energy_err + 0.01 * loss, (energy, energy_err, loss)
+
+
+def test_reflection_is_reciprocal():
+    """f(wi, wo) = f(wo, wi) for the reflected orders >= 2, each from its own table."""
+    lobe = HigherOrderLobe(GLASS, walks=1 << 14, seed=5)
+    pairs = [(30.0, 60.0, 180.0), (20.0, 45.0, 90.0), (0.0, 70.0, 0.0)]
+    for a, b, phi in pairs:
+        forward, e1 = lobe.estimate(direction(a), direction(b, phi))
+        backward, e2 = lobe.estimate(direction(b), direction(a, phi))
+        assert abs(forward - backward) < Z_MAX * math.hypot(e1, e2) + 1e-12
+
+
+def test_interpolation_between_nodes_agrees_with_walks_at_the_pairs():
+    """Off the grid (incidence 32 deg, polar and azimuth between nodes) the interpolated lobe
+    agrees with the lobe walked at the pairs within the errors plus 3 % of the lobe's peak."""
+    lobe = HigherOrderLobe(GLASS, walks=1 << 14, seed=6)
+    wi = direction(32.0)
+    wo = np.array([direction(t, p) for t, p in ((12.0, 37.0), (52.0, 170.0), (71.0, 95.0),
+                                                (133.0, 8.0), (167.0, 120.0), (118.0, 175.0))])
+    table, table_err = lobe.estimate(wi, wo)
+    walked, walked_err, _ = higher_orders_at(GLASS, wi, wo, 1 << 15, seed=7)
+    peak = walked.max()
+    assert np.all(np.abs(table - walked) < Z_MAX * np.hypot(table_err, walked_err) + 0.03 * peak)
+
+
+def test_tables_are_deterministic_and_walk_only_the_columns_needed():
+    wi = direction(30.0)
+    wo = np.array([direction(150.0, 0.3), direction(170.0, 179.5), direction(40.0, 180.0)])
+    a = HigherOrderLobe(GLASS, walks=512, seed=1)
+    b = HigherOrderLobe(GLASS, walks=512, seed=1)
+    np.testing.assert_array_equal(a.eval(wi, wo), b.eval(wi, wo))
+    assert a.columns_walked == 3  # transmitted at 0 and 180 deg azimuth, reflected at 180 deg
+    normal = HigherOrderLobe(GLASS, walks=512, seed=1)
+    normal.eval(direction(0.0), np.array([direction(150.0, phi) for phi in (0, 40, 99, 180)]))
+    assert normal.columns_walked == 1  # at normal incidence one azimuth serves all
+    assert not np.array_equal(a.eval(wi, wo), HigherOrderLobe(GLASS, walks=512, seed=2).eval(
+        wi, wo))
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"walks": 1}, "walks"), ({"walks": 2.5}, "walks"),
+    ({"theta_step_deg": 7.0}, "theta_step_deg"), ({"phi_step_deg": 0.0}, "phi_step_deg")])
+def test_bad_settings_are_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        HigherOrderLobe(GLASS, **kwargs)
+
+
+def test_anisotropic_surfaces_are_refused():
+    with pytest.raises(ValueError, match="isotropic"):
+        HigherOrderLobe(RoughDielectric("ggx", (0.5, 0.2), 1.51, masking="correlated"))
