@@ -286,8 +286,9 @@ if AVAILABLE:
     #: Pairs per block of the SIMD kernel: transposed into cache-resident arrays, then one
     #: branch-free loop over the block, then a scalar pass over the pairs it hands back.
     BLOCK = 1024
-    #: The SIMD loop normalises a direction of squared length 1 + d, |d| <= UNIT_TOL, by the
-    #: series 1 - d/2 + 3 d^2/8 (truncation 5/16 |d|^3 < 4e-19); others go to the scalar kernel.
+    #: In a block whose directions all have squared length 1 + d, |d| <= UNIT_TOL, the SIMD
+    #: loop normalises by the series 1 - d/2 + 3 d^2/8 (truncation 5/16 |d|^3 < 4e-19) instead
+    #: of a sqrt and a division.
     UNIT_TOL = 1e-6
     #: The SIMD loop hands back pairs with a cosine, or |wi + e wo| (unnormalised half
     #: vector), below SAFE_MIN: its undivided products stay far from under/overflow above it.
@@ -296,11 +297,21 @@ if AVAILABLE:
     TINY = 1e-290
 
     @njit(cache=True, error_model="numpy")
+    def _normalised(f):
+        """A normalised copy of the flat (3 m) directions f."""
+        g = np.empty(f.shape[0])
+        for j in range(0, f.shape[0], 3):
+            inv = 1.0 / math.sqrt(f[j] * f[j] + f[j + 1] * f[j + 1] + f[j + 2] * f[j + 2])
+            g[j], g[j + 1], g[j + 2] = f[j] * inv, f[j + 1] * inv, f[j + 2] * inv
+        return g
+
+    @njit(cache=True, error_model="numpy")
     def _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on, res):
         """SIMD loop of _ggx_dielectric over flat (3 m) wi and wo into res (m): 3 sqrt and 1
-        division per pair; pairs it cannot vouch for (not unit length, near-grazing, tiny or
-        huge intermediates, correlated transmission) are left NaN. Calls nothing, so that its
-        FMA contraction is not inherited by the scalar kernels (numba passes fastmath on)."""
+        division per pair; pairs it cannot vouch for (off unit length, near-grazing, tiny or
+        huge intermediates, correlated transmission) are left NaN.
+        Calls nothing but inlined helpers: numba compiles a callee with its caller's fastmath
+        flags, so that kernels stay free of any flags given here."""
         _prefer_512_bit_vectors()
         inv_ax, inv_ay = 1.0 / ax, 1.0 / ay
         pi_axay = math.pi * ax * ay
@@ -311,6 +322,7 @@ if AVAILABLE:
         k_refl = 1.0 if mode == 0 else 0.5  # 0.25 and the G2 or pdf numerator (see docs)
         k_trans = 4.0 if mode == 0 else (1.0 if mode == 1 else 2.0)
         fresnel = mode != 2 or both  # pdf: Fresnel is the lobe choice, 1 for one lobe
+        far = 0
         for j in range(res.shape[0]):
             ix, iy, iz = fi[3 * j], fi[3 * j + 1], fi[3 * j + 2]
             ox, oy, oz = fo[3 * j], fo[3 * j + 1], fo[3 * j + 2]
@@ -369,10 +381,12 @@ if AVAILABLE:
             val = num / den
             live = refl_on if refl else (trans_on & (vi > 0.0) & (vo < 0.0))
             ok = (iz > COS_HORIZON) & (aoz > COS_HORIZON) & (n2 > 0.0) & (vz * sv > 0.0) & live
+            far += (abs(di) > UNIT_TOL) | (abs(do) > UNIT_TOL)
             safe = ((abs(di) <= UNIT_TOL) & (abs(do) <= UNIT_TOL) & (iz >= SAFE_MIN)
                     & (aoz >= SAFE_MIN) & (n2 >= SAFE_MIN * SAFE_MIN))
             sure = (num > TINY) & (den > TINY) & (val < math.inf) & ((mode != 1) | refl)
             res[j] = math.nan if not safe or (ok and not sure) else (val if ok else 0.0)
+        return far
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def _ggx_dielectric(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
@@ -384,8 +398,11 @@ if AVAILABLE:
         for b in prange((n + BLOCK - 1) // BLOCK):
             start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
             # ravel: views of C-contiguous pairs, block copies of broadcast ones
-            _ggx_dielectric_block(wi[start:stop].ravel(), wo[start:stop].ravel(), ax, ay, eta,
-                                  mode, refl_on, trans_on, out[start:stop])
+            fi, fo = wi[start:stop].ravel(), wo[start:stop].ravel()
+            if _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on,
+                                     out[start:stop]):  # directions off unit length: again
+                _ggx_dielectric_block(_normalised(fi), _normalised(fo), ax, ay, eta, mode,
+                                      refl_on, trans_on, out[start:stop])
             for k in range(start, stop):
                 if math.isnan(out[k]):
                     out[k] = _dielectric_one(wi, wo, k, 0, ax, ay, eta, masking, refl_on,
@@ -564,10 +581,10 @@ if AVAILABLE:
     def _ggx_visible_sample_block(fi, fu, ax, ay, eta, correlated, refl_on, trans_on, fwo,
                                   weight, pdf):
         """SIMD loop of _ggx_visible_sample over flat (3 m) wi and u into fwo (3 m), weight and
-        pdf (m): 9 sqrt and 5 divisions per sample, no libm calls; samples it cannot vouch for
-        (wi off unit length or near grazing, u outside [0, 1], eta = 1 transmission, tiny or
-        huge results, correlated transmission) get pdf NaN. Calls nothing (see
-        _ggx_dielectric_block)."""
+        pdf (m): 9 sqrt and 5 divisions per sample, no libm calls; samples it cannot vouch
+        for (wi off unit length or near grazing, u outside [0, 1], eta = 1
+        transmission, tiny or huge results, correlated transmission) get pdf NaN. Calls
+        nothing but inlined helpers (see _ggx_dielectric_block)."""
         _prefer_512_bit_vectors()
         inv_ax, inv_ay = 1.0 / ax, 1.0 / ay
         pi_axay = math.pi * ax * ay
@@ -576,6 +593,7 @@ if AVAILABLE:
         e2m1_out, e2m1_in = (eta - 1.0) * (eta + 1.0), em1_in * (e_in + 1.0)
         both = refl_on and trans_on
         separable = not correlated
+        far = 0
         for j in range(pdf.shape[0]):
             ix, iy, iz = fi[3 * j], fi[3 * j + 1], fi[3 * j + 2]
             u1, u2, u3 = fu[3 * j], fu[3 * j + 1], fu[3 * j + 2]
@@ -649,6 +667,7 @@ if AVAILABLE:
             w = w_lobe * w_num * p_den * inv
             ok = ((c > 0.0) & (mz > 0.0) & (iz > COS_HORIZON) & (aoz > COS_HORIZON)
                   & ((oz > 0.0) if reflected else ((oz < 0.0) & (ft > 0.0))))
+            far += abs(di) > UNIT_TOL
             safe = ((abs(di) <= UNIT_TOL) & (iz >= SAFE_MIN) & (u1 >= 0.0) & (u1 <= 1.0)
                     & (u2 >= 0.0) & (u2 <= 1.0))
             sure = ((p > TINY) & (p < math.inf) & (w > TINY) & (w < math.inf)
@@ -658,6 +677,7 @@ if AVAILABLE:
             fwo[3 * j + 2] = oz * sgn if ok else 0.0
             weight[j] = w if ok else 0.0
             pdf[j] = math.nan if not safe or (ok and not sure) else (p if ok else 0.0)
+        return far
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def _ggx_visible_sample(wi, u, ax, ay, eta, correlated, refl_on, trans_on):
@@ -670,10 +690,12 @@ if AVAILABLE:
         masking = 1 if correlated else 0
         for b in prange((n + BLOCK - 1) // BLOCK):
             start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
-            _ggx_visible_sample_block(wi[start:stop].ravel(), u[start:stop].ravel(), ax, ay,
-                                      eta, correlated, refl_on, trans_on,
-                                      wo[3 * start:3 * stop], weight[start:stop],
-                                      pdf[start:stop])
+            fi, fu = wi[start:stop].ravel(), u[start:stop].ravel()
+            outs = wo[3 * start:3 * stop], weight[start:stop], pdf[start:stop]
+            if _ggx_visible_sample_block(fi, fu, ax, ay, eta, correlated, refl_on, trans_on,
+                                         *outs):  # directions off unit length: again
+                _ggx_visible_sample_block(_normalised(fi), fu, ax, ay, eta, correlated,
+                                          refl_on, trans_on, *outs)
             for k in range(start, stop):
                 if math.isnan(pdf[k]):
                     wo[3 * k], wo[3 * k + 1], wo[3 * k + 2], weight[k], pdf[k] = (

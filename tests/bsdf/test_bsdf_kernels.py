@@ -83,8 +83,8 @@ def test_ggx_simd_eval_matches_mpmath(kw):
                          ids=str)
 def test_ggx_simd_input_layouts(kw):
     """Broadcast and strided inputs give the contiguous result bit for bit; directions off unit
-    length (handed to the scalar kernel beyond 1e-6, normalised by a series within) agree with
-    the unit ones and with the numpy path as closely as the kernels agree with numpy."""
+    length (normalised by a series within 1e-6, beyond it the block is normalised and run
+    again) agree with the unit ones and with the numpy path as the kernels agree with numpy."""
     wi, wo = _pairs(20_000, seed=4)
     model = RoughDielectric("ggx", 0.3, 1.51, **kw)
     for want_pdf in (False, True):
