@@ -29,10 +29,10 @@ APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-5}  # bench ac
 
 def sample(distribution: str, alpha: float) -> dict:
     """The sample table; the bench's multiple-scattering tables (where "auto" turns them on)
-    with 8x the default walks, so their Monte Carlo error stays below the fit's own (which the
+    with 4x the default walks, so their Monte Carlo error stays below the fit's own (which the
     fit adds to sigma) and the chi-square tests the model, not the emulator's walks."""
     return {"kind": "hemisphere", "distribution": distribution, "alpha": alpha, "eta": 1.51,
-            "ms_walks": 1 << 17}
+            "ms_walks": 1 << 16}
 
 
 def wide_lobe_grids() -> list[dict]:
