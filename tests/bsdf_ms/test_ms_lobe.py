@@ -134,6 +134,9 @@ def test_tables_are_deterministic_and_walk_only_the_columns_needed():
     normal = HigherOrderLobe(GLASS, walks=512, seed=1)
     normal.eval(direction(0.0), np.array([direction(150.0, phi) for phi in (0, 40, 99, 180)]))
     assert normal.columns_walked == 1  # at normal incidence one azimuth serves all
+    # a divergent beam's directions 0.03 deg off a node walk no neighbouring incidence
+    normal.eval(direction(0.03, 77.0), np.array([direction(150.0, phi) for phi in (0, 99)]))
+    assert normal.columns_walked == 1
     assert not np.array_equal(a.eval(wi, wo), HigherOrderLobe(GLASS, walks=512, seed=2).eval(
         wi, wo))
 
