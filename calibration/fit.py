@@ -137,8 +137,14 @@ class FitResult:
 
     def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
-        (scale factor and aperture average included)."""
-        return self.scale * self.optics.average(self.model(), wi, wo)
+        (scale factor and aperture average of single scattering included; the broad
+        multiple-scattering lobe, if any, at the pairs themselves)."""
+        single = build_model(self.distribution, self.alpha, self.eta, self.masking, self.k)
+        f = self.optics.average(single, wi, wo)
+        if self.walks is not None:
+            f = f + walked_orders(self.distribution, self.alpha, self.eta, self.k, wi, wo,
+                                  self.walks, self.seed)[0]
+        return self.scale * f
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary (what `gonio fit --json` prints)."""
@@ -215,6 +221,19 @@ class _OrdersTable:
     def covers(self, alpha: float) -> bool:
         """True when alpha lies between the second and the last but one node."""
         return self.log_alpha[1] <= math.log(alpha) <= self.log_alpha[-2]
+
+
+def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
+                  wi: np.ndarray, wo: np.ndarray, walks: int,
+                  seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Orders >= 2 of the height-correlated microsurface and their standard error at the pairs
+    (sim.bsdf.multiple_scattering.higher_orders_at), not aperture-averaged (the lobe is broad)."""
+    from sim.bsdf.multiple_scattering import higher_orders_at
+
+    wi, wo = np.broadcast_arrays(wi, wo)
+    value, err, _ = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
+                                     wi, wo, walks, seed)
+    return value.reshape(wi.shape[:-1]), err.reshape(wi.shape[:-1])
 
 
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
@@ -313,23 +332,31 @@ class _Problem:
 
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         alpha, eta, scale = self.unpack(x)
-        if self.orders is not None and data is self.data:  # the fit: single + tabulated orders
-            model = build_model(self.distribution, alpha, eta, self.masking, self.k)
-            return scale * (self.optics.average(model, data.wi, data.wo) + self.orders(alpha))
-        model = build_model(self.distribution, alpha, eta, self.masking, self.k,
-                            *_walk_settings(self.options))
+        model = build_model(self.distribution, alpha, eta, self.masking, self.k)
         f = self.optics.average(model, data.wi, data.wo)
+        if self.orders is not None and data is self.data:  # the fit: single + tabulated orders
+            return scale * (f + self.orders(alpha))
+        if self.options.multiple_scattering:  # the broad lobe at the points, as the fit has it
+            f = f + self._walked(x, data)[0]
         return scale * f
+
+    def _walked(self, x: np.ndarray, data: ReducedData) -> tuple[np.ndarray, np.ndarray]:
+        """Orders >= 2 and their standard error at the data's pairs (higher_orders_at), for
+        points outside the fitted subset; the last answer is kept (predict and orders_error
+        ask for the same)."""
+        key = (id(data), tuple(np.asarray(x, float)))
+        if getattr(self, "_walked_key", None) != key:
+            alpha, eta, _ = self.unpack(x)
+            walks, seed = _walk_settings(self.options)
+            self._walked_value = walked_orders(self.distribution, alpha, eta, self.k, data.wi,
+                                               data.wo, walks, seed)
+            self._walked_key = key
+        return self._walked_value
 
     def orders_error(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         """Monte Carlo standard error of the multiple-scattering term (times the scale) at
         the data's pairs, walked there as predict() walks them."""
-        from sim.bsdf.multiple_scattering import higher_orders_at
-
-        alpha, eta, scale = self.unpack(x)
-        walks, seed = _walk_settings(self.options)
-        correlated = build_model(self.distribution, alpha, eta, "correlated", self.k)
-        return scale * higher_orders_at(correlated, data.wi, data.wo, walks, seed)[1]
+        return self.unpack(x)[2] * self._walked(x, data)[1]
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         r = self.data.whitened(self.predict(x, self.data))
