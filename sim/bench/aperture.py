@@ -63,12 +63,17 @@ class ApertureIntegral:
         inside the cap."""
         if self.order is not None:
             return self.order
+        edge_in_aperture = scales.edge_o < self.aperture_rad
+        n_o = (MAX_ORDER if edge_in_aperture else
+               order_for(SAFETY * self.aperture_rad / scales.width_o, self.rtol / 2))
         n_i = 0
         if self.divergence_rad > 0.0:
-            n_i = (MAX_ORDER if scales.edge_i < self.divergence_rad else
-                   order_for(SAFETY * self.divergence_rad / scales.width_i, self.rtol / 2))
-        n_o = (MAX_ORDER if scales.edge_o < self.aperture_rad else
-               order_for(SAFETY * self.aperture_rad / scales.width_o, self.rtol / 2))
+            # with the edge inside the aperture, the beam averages the aperture's integral,
+            # which the cap has smoothed over its own half-angle: no kink left for the beam
+            width_i = max(scales.width_i, self.aperture_rad) if edge_in_aperture else \
+                scales.width_i
+            n_i = (MAX_ORDER if scales.edge_i < self.divergence_rad and not edge_in_aperture
+                   else order_for(SAFETY * self.divergence_rad / width_i, self.rtol / 2))
         return n_i, n_o
 
     def integrate(self, g: Integrand, wi: np.ndarray, wo: np.ndarray,
