@@ -19,7 +19,7 @@ from sim.bsdf.vectors import directions
 INCIDENCE_NODES_DEG = np.append(np.arange(0.0, 90.0, 5.0), 89.5)
 #: Grid steps (deg) of the polar angle of wo from +z (both hemispheres) and of its azimuth
 #: from the plane of incidence (one side: an isotropic surface is mirror-symmetric about it).
-THETA_STEP_DEG = 5.0
+THETA_STEP_DEG = 2.5
 PHI_STEP_DEG = 15.0
 #: Incidence weights below this (0.1 deg of a 5 deg step) go to the nearer node, so a divergent
 #: beam's nodes about a node's incidence walk no neighbouring tables (the lobe changes by a few
