@@ -9,6 +9,7 @@ the held-out chi-square tests the model rather than the fit. See docs/fitting.md
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -36,6 +37,9 @@ MS_TABLE_STEP = 0.1
 MS_TABLE_NODES = 7
 MS_TABLE_RECENTRE = 3
 MS_WALKS_MAX = 1 << 22
+# Points of the two-scale model's lobe integral per pair: the bench's (sim.bench.sample), so a
+# fit of an emulated run evaluates the same fixed point set.
+DIFFRACTION_SAMPLES = 256
 
 
 class FitError(GonioError):
@@ -63,8 +67,16 @@ class FitOptions:
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
     ms_walks: int = 1 << 15  # walks per incidence and table alpha (the same seed for every alpha)
     ms_seed: int = 0
+    diffraction: bool = False  # the two-scale model (Holzschuch-Pacanowski) around the trial one
+    rms_height_nm: float | None = None  # nano-roughness of the K-correlation PSD (held fixed)
+    correlation_length_um: float | None = None
+    psd_exponent: float = 2.0
+    wavelength_nm: float | None = None  # None: the data's meta["wavelength_nm"]
+    diffraction_samples: int = DIFFRACTION_SAMPLES
 
     def __post_init__(self) -> None:
+        if self.diffraction:
+            _check_diffraction_options(self)
         if isinstance(self.ms_walks, bool) or not isinstance(self.ms_walks, int) \
                 or not 2 <= self.ms_walks <= MS_WALKS_MAX:
             raise FitError(f"fit: ms_walks must be an integer in [2, {MS_WALKS_MAX}], "
@@ -82,6 +94,84 @@ class FitOptions:
         if self.eta is not None and not ETA_BOUNDS[0] <= self.eta <= ETA_BOUNDS[1]:
             raise FitError(f"fit: eta must be in [{ETA_BOUNDS[0]}, {ETA_BOUNDS[1]}], "
                            f"got {self.eta!r}")
+
+
+@dataclass(frozen=True)
+class Diffraction:
+    """Held-fixed nano-roughness and wavelength of a fit's two-scale diffraction term."""
+
+    rms_height_nm: float
+    correlation_length_um: float
+    psd_exponent: float
+    wavelength_nm: float
+    samples: int = DIFFRACTION_SAMPLES
+
+    def wrap(self, model: Any) -> Any:
+        """The two-scale model (sim.bsdf.diffraction.TwoScaleDiffraction) around `model`, with
+        eval(wi, wo) at this wavelength."""
+        return _Diffracted(model, self)
+
+    def to_dict(self) -> dict[str, float]:
+        """The settings as a JSON-ready dict."""
+        return {"rms_height_nm": self.rms_height_nm,
+                "correlation_length_um": self.correlation_length_um,
+                "psd_exponent": self.psd_exponent, "wavelength_nm": self.wavelength_nm,
+                "samples": self.samples}
+
+
+class _Diffracted:
+    """TwoScaleDiffraction at a fixed wavelength, with the eval(wi, wo) signature of the
+    microfacet models (what Smearing.average calls)."""
+
+    def __init__(self, model: Any, settings: Diffraction):
+        from sim.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
+
+        psd = KCorrelationPSD(settings.rms_height_nm * 1e-9,
+                              settings.correlation_length_um * 1e-6, settings.psd_exponent)
+        self.two_scale = TwoScaleDiffraction(model, psd, settings.samples)
+        self.wavelength_m = settings.wavelength_nm * 1e-9
+
+    def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """f(wi, wo) in 1/sr: specular share of the microfacet lobe plus the diffracted lobe."""
+        wi, wo = np.broadcast_arrays(wi, wo)
+        return self.two_scale.eval(wi, wo, self.wavelength_m)
+
+
+def _check_diffraction_options(options: FitOptions) -> None:
+    """Raise FitError naming what a diffraction fit lacks or cannot combine with."""
+    missing = [name for name in ("rms_height_nm", "correlation_length_um")
+               if getattr(options, name) is None]
+    if missing:
+        raise FitError(f"fit: diffraction needs the nano-roughness {' and '.join(missing)} "
+                       "(from the run's [sim.sample], or --rms-height-nm and "
+                       "--correlation-length-um)")
+    for name in ("rms_height_nm", "correlation_length_um", "wavelength_nm"):
+        value = getattr(options, name)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise FitError(f"fit: {name} must be positive and finite, got {value!r}")
+    if not (math.isfinite(options.psd_exponent) and options.psd_exponent > 1):
+        raise FitError(f"fit: psd_exponent must be finite and > 1, got {options.psd_exponent!r}")
+    samples = options.diffraction_samples
+    if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2 or samples % 2:
+        raise FitError(f"fit: diffraction_samples must be an even integer >= 2, got {samples!r}")
+    if options.multiple_scattering:
+        raise FitError("fit: diffraction cannot be combined with multiple_scattering (the "
+                       "orders table is tabulated without it); choose one")
+
+
+def diffraction_settings(data: ReducedData, options: FitOptions) -> Diffraction | None:
+    """The fit's diffraction term from the options and the data's wavelength; None when off."""
+    if not options.diffraction:
+        return None
+    wavelength = options.wavelength_nm
+    if wavelength is None:
+        wavelength = data.meta.get("wavelength_nm")
+    if wavelength is None:
+        raise FitError("fit: diffraction needs the wavelength; the data carry no "
+                       "meta['wavelength_nm'] and none was given")
+    return Diffraction(float(options.rms_height_nm), float(options.correlation_length_um),
+                       float(options.psd_exponent), float(wavelength),
+                       options.diffraction_samples)
 
 
 @dataclass
@@ -106,6 +196,8 @@ class FitResult:
     optics: Smearing = field(default_factory=lambda: Smearing(0.0, 0, 0.0, 0))
     walks: int | None = None  # walks per point of the multiple-scattering term; None: off
     seed: int = 0
+    diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
+    fit_time_s: float = 0.0  # wall time of fit()
 
     @property
     def clearly_preferred(self) -> bool:
@@ -133,13 +225,14 @@ class FitResult:
         """The fitted sim.bsdf model (without the scale factor), with the multiple-scattering
         term the fit used, if any."""
         return build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
-                           self.walks, self.seed)
+                           self.walks, self.seed, self.diffraction)
 
     def predict(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
         (scale factor and aperture average of single scattering included; the broad
         multiple-scattering lobe, if any, at the pairs themselves)."""
-        single = build_model(self.distribution, self.alpha, self.eta, self.masking, self.k)
+        single = build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
+                             diffraction=self.diffraction)
         f = self.optics.average(single, wi, wo)
         if self.walks is not None:
             f = f + walked_orders(self.distribution, self.alpha, self.eta, self.k, wi, wo,
@@ -171,6 +264,8 @@ class FitResult:
             "beam_divergence_deg": self.optics.divergence_deg,
             "multiple_scattering": (None if self.walks is None
                                     else {"walks": self.walks, "seed": self.seed}),
+            "diffraction": None if self.diffraction is None else self.diffraction.to_dict(),
+            "fit_time_s": self.fit_time_s,
             "candidates": self.candidates,
         }
 
@@ -238,11 +333,15 @@ def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
 
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
                 masking: str, k: float | None = None, walks: int | None = None,
-                seed: int = 0) -> Any:
+                seed: int = 0, diffraction: Diffraction | None = None) -> Any:
     """The sim.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
     complex index eta + i k when k is given (imported here so calibration loads without it);
-    with walks, plus multiple scattering (orders >= 2, `walks` walks per pair, fixed seed)."""
+    with walks, plus multiple scattering (orders >= 2, `walks` walks per pair, fixed seed);
+    with diffraction, the two-scale model around it."""
     from sim.bsdf import RoughConductor, RoughDielectric
+
+    if diffraction is not None:
+        return diffraction.wrap(build_model(distribution, alpha, eta, masking, k, walks, seed))
 
     if walks is not None:
         return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k),
@@ -295,8 +394,10 @@ class _Problem:
     log alpha (one or two), eta (if free), log scale (if free)."""
 
     def __init__(self, data: ReducedData, distribution: str, masking: str, options: FitOptions,
-                 eta0: float, k: float | None, optics: Smearing):
+                 eta0: float, k: float | None, optics: Smearing,
+                 diffraction: Diffraction | None = None):
         self.data, self.distribution, self.masking = data, distribution, masking
+        self.diffraction = diffraction
         self.options, self.eta0, self.k = options, eta0, k
         self.optics = optics
         names = ["alpha_x", "alpha_y"] if options.anisotropic else ["alpha"]
@@ -332,7 +433,8 @@ class _Problem:
 
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
         alpha, eta, scale = self.unpack(x)
-        model = build_model(self.distribution, alpha, eta, self.masking, self.k)
+        model = build_model(self.distribution, alpha, eta, self.masking, self.k,
+                            diffraction=self.diffraction)
         f = self.optics.average(model, data.wi, data.wo)
         if self.orders is not None and data is self.data:  # the fit: single + tabulated orders
             return scale * (f + self.orders(alpha))
@@ -464,7 +566,9 @@ def _check_conditioning(jac: np.ndarray, names: tuple[str, ...], distribution: s
 def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     """Fit every candidate (distribution x masking) on the chosen subset, keep the lowest
     chi-square, and score the fitted model on the held-out valid points."""
+    started = time.perf_counter()
     options = options or FitOptions()
+    diffraction = diffraction_settings(data, options)
     eta0 = options.eta if options.eta is not None else data.meta.get("eta")
     if eta0 is None:
         raise FitError("fit: the data carry no eta (meta['eta']) and none was given")
@@ -496,7 +600,8 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
     scored, failures = [], []
     for distribution in options.distributions:
         for masking in options.maskings:
-            problem = _Problem(fit_data, distribution, masking, options, eta0, k, optics)
+            problem = _Problem(fit_data, distribution, masking, options, eta0, k, optics,
+                               diffraction)
             try:
                 scored.append((problem, _solve(problem, alpha0)))
             except FitError as exc:
@@ -527,6 +632,7 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
         + [{"failed": msg} for msg in failures],
         optics=optics,
         walks=_walk_settings(options)[0], seed=options.ms_seed,
+        diffraction=diffraction, fit_time_s=time.perf_counter() - started,
     )
 
 

@@ -1,5 +1,6 @@
 """`gonio fit RUN [--json]`: fit the microfacet model to a run's reduced BSDF (by default at
-normal incidence only, as Walter et al. did) and score it on the other incidences."""
+normal incidence only, as Walter et al. did) and score it on the other incidences; with
+--diffraction, the two-scale diffraction model around it."""
 
 from __future__ import annotations
 
@@ -39,19 +40,51 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ms-walks", type=int, default=1 << 15, metavar="N",
                    help="walks per incidence angle and table alpha for --multiple-scattering "
                         "(default 32768)")
+    p.add_argument("--diffraction", action="store_true",
+                   help="fit the two-scale diffraction model (Holzschuch-Pacanowski) around the "
+                        "microfacet one, at the run's wavelength; nano-roughness held fixed")
+    p.add_argument("--rms-height-nm", type=float, metavar="NM",
+                   help="nano-roughness rms height for --diffraction (default: the run's "
+                        "[sim.sample] rms_height_nm)")
+    p.add_argument("--correlation-length-um", type=float, metavar="UM",
+                   help="nano-roughness correlation length for --diffraction (default: the "
+                        "run's [sim.sample] correlation_length_um)")
+    p.add_argument("--psd-exponent", type=float, metavar="C",
+                   help="K-correlation PSD exponent for --diffraction (default: the run's "
+                        "[sim.sample] psd_exponent, else 2)")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to apply (default: the one the run records)")
 
 
-def options_from(args: argparse.Namespace):  # -> calibration.fit.FitOptions
-    """FitOptions from parsed arguments."""
+def nano_roughness(config: dict, rms_height_nm: float | None,
+                   correlation_length_um: float | None,
+                   psd_exponent: float | None) -> tuple[float | None, float | None, float]:
+    """(rms height nm, correlation length um, PSD exponent) for --diffraction: each flag given
+    wins, else the run config's [sim.sample] value, else None (the exponent: 2)."""
+    sample = (config.get("sim") or {}).get("sample") or {}
+    given = (rms_height_nm, correlation_length_um, psd_exponent)
+    keys = ("rms_height_nm", "correlation_length_um", "psd_exponent")
+    rms, length, exponent = (value if value is not None else sample.get(key)
+                             for value, key in zip(given, keys, strict=True))
+    return (None if rms is None else float(rms), None if length is None else float(length),
+            2.0 if exponent is None else float(exponent))
+
+
+def options_from(args: argparse.Namespace,
+                 config: dict | None = None):  # -> calibration.fit.FitOptions
+    """FitOptions from parsed arguments; `config` (the run's instrument config) supplies the
+    nano-roughness of --diffraction that no flag gives."""
     from calibration.fit import FitOptions
 
+    rms, length, exponent = nano_roughness(config or {}, args.rms_height_nm,
+                                           args.correlation_length_um, args.psd_exponent)
     return FitOptions(distributions=args.distribution, maskings=args.masking,
                       anisotropic=args.anisotropic, fit_eta=args.fit_eta,
                       fit_scale=args.fit_scale, eta=args.eta,
                       fit_incidence_deg=args.incidence,
-                      multiple_scattering=args.multiple_scattering, ms_walks=args.ms_walks)
+                      multiple_scattering=args.multiple_scattering, ms_walks=args.ms_walks,
+                      diffraction=args.diffraction, rms_height_nm=rms,
+                      correlation_length_um=length, psd_exponent=exponent)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -66,8 +99,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit and print the result (a summary, or one JSON object with --json)."""
     from calibration.pipeline import fit_run
+    from gonio.store import open_run
 
-    data, result = fit_run(args.run, options_from(args), args.calibration)
+    config = open_run(args.run).config if args.diffraction else None
+    data, result = fit_run(args.run, options_from(args, config), args.calibration)
     out = result.to_dict()
     out["run"] = str(args.run)
     out["calibration"] = data.meta.get("calibration")
@@ -103,6 +138,13 @@ def summary(out: dict) -> str:
         ms = out["multiple_scattering"]
         lines.append(f"  multiple scattering: orders >= 2 by {ms['walks']} random walks per "
                      f"incidence, seed {ms['seed']}")
+    if out.get("diffraction"):
+        d = out["diffraction"]
+        lines.append(f"  diffraction: two-scale model, rms height {d['rms_height_nm']:g} nm, "
+                     f"correlation length {d['correlation_length_um']:g} um, PSD exponent "
+                     f"{d['psd_exponent']:g}, at {d['wavelength_nm']:g} nm (held fixed)")
+    if "fit_time_s" in out:
+        lines.append(f"  fit time {out['fit_time_s']:.2f} s")
     if out.get("emulated_sample"):
         lines.append(f"  emulated sample: {out['emulated_sample']}")
     return "\n".join(lines)
