@@ -20,7 +20,8 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
 
 def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) -> ReducedData:
     """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"];
-    an emulated bench's beam divergence into meta["beam_divergence_deg"] for the fit)."""
+    an emulated bench's [sim] table into meta["sim"] and its beam divergence into
+    meta["beam_divergence_deg"] for the fit)."""
     from calibration.reduce import reduce_readings
     from gonio.store import open_run
 
@@ -30,6 +31,8 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
     if cal is not None:
         readings = calfile.apply(readings, cal)
     data = reduce_readings(run, readings, cal)
+    if run.config.get("sim"):  # an emulated run: its bench, for the plot's model curve
+        data.meta.setdefault("sim", run.config["sim"])
     divergence = (run.config.get("sim") or {}).get("source", {}).get("divergence_deg")
     if divergence is not None:
         data.meta.setdefault("beam_divergence_deg", float(divergence))

@@ -44,25 +44,43 @@ def model_curves(meta: dict, theta_i_deg: float, transmission: bool
         return {}
     from sim.bench.aperture import order_for
     from sim.bench.quadrature import cap_rule
-    from sim.bsdf import RoughConductor, RoughDielectric
 
     alpha = spec["alpha"] if np.isscalar(spec["alpha"]) else tuple(spec["alpha"])
-    common = {"distribution": spec["distribution"], "alpha": alpha, "masking": spec["masking"]}
-    k = meta.get("k") or 0.0
-    model = (RoughConductor(eta_complex=complex(spec["eta"], k), **common)
-             if meta.get("kind") == "conductor" else RoughDielectric(eta=spec["eta"], **common))
     theta = np.linspace(-89.5, 89.5, CURVE_POINTS)
     wi, wo = in_plane_directions(theta_i_deg, theta, transmission)
-    label = f"{spec['distribution']} alpha {np.round(alpha, 4)}"
-    curves = {f"model ({label})": (theta, model.eval(wi, wo))}
+    model_eval, extras = _generating_model(meta, spec, alpha, float(np.radians(theta_i_deg)),
+                                           "transmission" if transmission else "reflection")
+    label = f"{spec['distribution']} alpha {np.round(alpha, 4)}{extras}"
+    curves = {f"model ({label})": (theta, model_eval(wi, wo))}
     half_angle = math.radians(float(meta.get("aperture_half_angle_deg") or 0.0))
     if half_angle > 0:
         # a transmitted lobe is about 0.3 alpha rad wide: resolve it across the aperture
         order = order_for(half_angle / (0.3 * float(np.min(alpha))), 1e-3)
         nodes, weights = cap_rule(wo, half_angle, order)
-        f = model.eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
+        f = model_eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
         curves["model through the aperture"] = (theta, f @ weights / weights.sum())
     return curves
+
+
+def _generating_model(meta: dict, spec: dict, alpha, theta_i: float, lobe: str):
+    """(eval(wi, wo), label suffix) of the run's model: an emulated run's bench sample (with
+    the multiple scattering and diffraction its "auto" switches turn on), else the plain
+    microfacet model of meta["model"]."""
+    if meta.get("sim"):
+        from sim.bench import build_bench
+
+        sample = build_bench(meta["sim"]).sample
+        extras = [name for name, on in (
+            ("multiple scattering", sample.multiple_scattering_on(theta_i)),
+            ("diffraction", sample.diffraction_on(theta_i, lobe))) if on]
+        return sample.bsdf, "".join(f" + {name}" for name in extras)
+    from sim.bsdf import RoughConductor, RoughDielectric
+
+    common = {"distribution": spec["distribution"], "alpha": alpha, "masking": spec["masking"]}
+    k = meta.get("k") or 0.0
+    model = (RoughConductor(eta_complex=complex(spec["eta"], k), **common)
+             if meta.get("kind") == "conductor" else RoughDielectric(eta=spec["eta"], **common))
+    return model.eval, ""
 
 
 def x_range(theta_deg: np.ndarray) -> tuple[float, float]:

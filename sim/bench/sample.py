@@ -292,6 +292,18 @@ class Sample:
         self.evaluations["random_walk"] += len(wi)
         return self._extra("random_walk", lobe).eval(wi, wo)
 
+    def bsdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """The BSDF the bench uses at sample-frame pairs (..., 3), with the multiple scattering
+        and diffraction it switches on (for plots of a run's generating model)."""
+        wi, wo = np.broadcast_arrays(wi, wo)
+        flat_i, flat_o = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        out = np.zeros(len(flat_i))
+        reflected = (flat_o[:, 2] > 0) == (flat_i[:, 2] > 0)
+        for lobe, on_lobe in (("reflection", reflected), ("transmission", ~reflected)):
+            if on_lobe.any():
+                out[on_lobe] = self._eval(lobe, flat_i[on_lobe], flat_o[on_lobe])
+        return out.reshape(wi.shape[:-1])
+
     def integrand(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Detector power per incident power per sr at (wi, wo) (..., 3) -> (...)."""
         wi, wo = np.broadcast_arrays(wi, wo)
