@@ -144,3 +144,37 @@ def test_missing_wavelength_is_refused(data):
     bare = replace(data, meta={"eta": 0.2, "k": 3.4, "kind": "conductor"})
     with pytest.raises(FitError, match="wavelength"):
         fit(bare, options(True))
+
+
+def test_scanned_run_fits_with_diffraction_from_the_cli(tmp_path, capsys):
+    """The real round trip (ptys, emulators, scan engine, run store, reduce): `gonio fit RUN
+    --diffraction` takes the nano-roughness from the run's [sim.sample] and the wavelength from
+    the reduced data, and recovers alpha; without it the fit is far worse."""
+    import json
+
+    from fitting_bench_runs import instrument, plan, scan
+
+    from gonio.cli import main
+
+    cfg = instrument(tmp_path, {"sample": SAMPLE, "aperture": {**APERTURE, "rtol": 1e-5}},
+                     seed=3)
+    grids = [{"side": "reflection", "theta_i_deg": 0.0,
+              "theta_o_deg": {"start": 7.0, "stop": 70.0, "step": 3.5}}]
+    run = scan(plan(tmp_path, "lapped-metal", grids, dark_every=8), cfg, tmp_path / "runs")
+    results = {}
+    for flags in ([], ["--diffraction"]):
+        assert main(["fit", str(run), "--json", "--distribution", "ggx", *flags]) == 0
+        results[bool(flags)] = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    plain, two_scale = results[False], results[True]
+    alpha = two_scale["parameters"]["alpha"]
+    print(f"scanned: alpha {alpha['value']:.5f} +- {alpha['sigma']:.5f}, chi2/dof "
+          f"{two_scale['chi2_dof_fit']:.3g} ({two_scale['n_fit']} points, "
+          f"{two_scale['fit_time_s']:.2f} s); without diffraction alpha "
+          f"{plain['parameters']['alpha']['value']:.5f}, chi2/dof {plain['chi2_dof_fit']:.3g}")
+    assert two_scale["diffraction"]["rms_height_nm"] == NANO["rms_height_nm"]
+    assert two_scale["diffraction"]["correlation_length_um"] == NANO["correlation_length_um"]
+    assert two_scale["diffraction"]["wavelength_nm"] == pytest.approx(632.8)
+    assert two_scale["chi2_dof_fit"] < 2.0
+    assert abs(alpha["value"] / ALPHA - 1.0) < 0.03
+    assert abs(alpha["value"] - ALPHA) < 3.0 * alpha["sigma"]
+    assert plain["chi2_dof_fit"] > 10.0 * two_scale["chi2_dof_fit"]
