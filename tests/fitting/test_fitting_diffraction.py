@@ -79,6 +79,10 @@ def test_fit_with_diffraction_recovers_alpha(data):
     assert out["diffraction"]["wavelength_nm"] == 632.8
     assert out["diffraction"]["rms_height_nm"] == NANO["rms_height_nm"]
     assert plain.to_dict()["diffraction"] is None
+    from gonio.commands.fit import summary
+
+    text = summary({**out, "run": "emulated"})
+    assert "diffraction: two-scale model, rms height 30 nm" in text and "fit time" in text
     # the result's predict() is the model the fit compared with the data
     r = (two_scale.predict(data.wi, data.wo) - data.bsdf) / data.sigma
     assert float(np.sum(r**2)) / (len(r) - 1) == pytest.approx(two_scale.chi2_dof_fit, rel=1e-6)
