@@ -231,13 +231,21 @@ class FitResult:
         """Model BSDF (1/sr) at direction pairs, as the fit compared it with the data
         (scale factor and aperture average of single scattering included; the broad
         multiple-scattering lobe, if any, at the pairs themselves)."""
+        return self.predict_with_error(wi, wo)[0]
+
+    def predict_with_error(self, wi: np.ndarray, wo: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """predict() and its standard error: the Monte Carlo error of the walked
+        multiple-scattering orders (0 without them), which the fit adds to each point's sigma."""
         single = build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
                              diffraction=self.diffraction)
         f = self.optics.average(single, wi, wo)
+        err = np.zeros_like(f)
         if self.walks is not None:
-            f = f + walked_orders(self.distribution, self.alpha, self.eta, self.k, wi, wo,
-                                  self.walks, self.seed)[0]
-        return self.scale * f
+            orders, err = walked_orders(self.distribution, self.alpha, self.eta, self.k, wi, wo,
+                                        self.walks, self.seed)
+            f = f + orders
+        return self.scale * f, abs(self.scale) * err
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary (what `gonio fit --json` prints)."""

@@ -1,6 +1,7 @@
 """The fit overlay of `gonio plot RUN --fit`: per incidence angle, the measured BSDF with its
 error bars against the signed outgoing angle (log scale), the fitted model through it, and the
-normalised residuals (data - model) / sigma below, fitted and held-out points told apart."""
+normalised residuals (data - model) / sigma below (sigma: the data's and the model's own Monte
+Carlo error, as the fit weighs them), fitted and held-out points told apart."""
 
 from __future__ import annotations
 
@@ -42,7 +43,10 @@ def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
     fig, axes = plt.subplots(2 * len(sides), len(incidences), squeeze=False, sharex="col",
                              figsize=(3.4 * len(incidences), 3.6 * len(sides)),
                              gridspec_kw={"height_ratios": [3, 1] * len(sides)})
-    residual = (result.predict(data.wi, data.wo) - data.bsdf) / data.sigma
+    # against the data's sigma and the model's own Monte Carlo error (multiple scattering),
+    # as the fit weighs them
+    model, model_sigma = result.predict_with_error(data.wi, data.wo)
+    residual = (model - data.bsdf) / np.hypot(data.sigma, model_sigma)
     for row, side in enumerate(sides):
         for col, t in enumerate(incidences):
             top, bottom = axes[2 * row, col], axes[2 * row + 1, col]
@@ -64,7 +68,7 @@ def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
             bottom.set_xlabel("θo (deg)")
             if col == 0:
                 top.set_ylabel("BSDF (1/sr)")
-                bottom.set_ylabel("(data − model)/σ", fontsize=8)
+                bottom.set_ylabel("(data − model)/σ", fontsize=8)  # σ: data ⊕ model
             if sel.any():
                 top.legend(fontsize=7)
     a = np.atleast_1d(result.alpha)

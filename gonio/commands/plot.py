@@ -23,8 +23,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Reduce, (fit,) plot; print the PNG's path."""
     from calibration.plot import plot_run
+    from gonio.store import open_run
 
+    config = open_run(args.run).config if args.fit and args.diffraction else None
     out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
-                   fit_options=options_from(args) if args.fit else None)
+                   fit_options=options_from(args, config) if args.fit else None)
     print(out)
     return 0

@@ -87,6 +87,21 @@ def test_uncertainty_covers_the_walks_monte_carlo_error(data):
     assert abs(a[0] - b[0]) < 3.0 * np.hypot(a[1], b[1])
 
 
+def test_prediction_error_is_the_walks_monte_carlo_error(data):
+    """predict_with_error gives the walked orders' standard error (what the plot's residuals
+    and the fit's sigma include); it is 0 without multiple scattering."""
+    from calibration.fit import walked_orders
+
+    multiple, single = fit(data, options(True)), fit(data, options(False))
+    f, err = multiple.predict_with_error(data.wi, data.wo)
+    np.testing.assert_array_equal(f, multiple.predict(data.wi, data.wo))
+    expected = walked_orders(multiple.distribution, multiple.alpha, multiple.eta, multiple.k,
+                             data.wi, data.wo, multiple.walks, multiple.seed)[1]
+    np.testing.assert_allclose(err, abs(multiple.scale) * expected)
+    assert np.all(err[data.valid] > 0) and np.all(err < f)
+    assert not single.predict_with_error(data.wi, data.wo)[1].any()
+
+
 def test_cli_flag_sets_the_option():
     import argparse
 
