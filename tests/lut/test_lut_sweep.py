@@ -8,13 +8,10 @@ import json
 import numpy as np
 import pytest
 
-bench = pytest.importorskip("sim.bench", reason="needs sim.bench (the bench engineer's area)")
-if not hasattr(bench, "build_power_source"):
-    pytest.skip("sim.bench.build_power_source has not landed yet", allow_module_level=True)
-
-from gonio.cli import main  # noqa: E402
-from sim.devices.photodiode import PhotodiodeModel  # noqa: E402
-from sim.lut.sweep import load_sweep, parse_sweep, run_sweep, setting_seed  # noqa: E402
+from gonio.cli import main
+from sim.bench import build_power_source
+from sim.devices.photodiode import PhotodiodeModel
+from sim.lut.sweep import load_sweep, parse_sweep, run_sweep, setting_seed
 
 SWEEP = """
 seed = 4
@@ -56,7 +53,7 @@ def test_every_entry_is_its_settings_bench_at_its_position(sweep_file, result):
                "aperture": {"diameter_mm": [5.0, 10.0][j]}}
         pos = {"sample": [0.0, 20.0][k], "arm": [160.0, 180.0][m], "elevation": 0.0,
                "azimuth": 0.0}
-        power = bench.build_power_source(cfg, lambda p=pos: p, clock=lambda: 0.0).power_w()
+        power = build_power_source(cfg, lambda p=pos: p, clock=lambda: 0.0).power_w()
         assert result.values["power_w"][i, j, k, m, 0, 0] == power
     # readings: the seeded meter of each setting, in position order
     meter = PhotodiodeModel(None, seed=setting_seed(4, 3))
