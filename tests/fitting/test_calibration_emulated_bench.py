@@ -8,18 +8,15 @@ import math
 
 import numpy as np
 import pytest
+from fitting_bench_runs import ROOT, instrument, plan, scan
 
-pytest.importorskip("sim.bench", reason="the emulated bench (sim.bench) is not installed yet")
-
-from fitting_bench_runs import ROOT, instrument, plan, scan  # noqa: E402
-
-from calibration import aperture, calfile  # noqa: E402
-from calibration.beam import beam_power  # noqa: E402
-from calibration.calibrate import build  # noqa: E402
-from calibration.detector import correct_power, range_key  # noqa: E402
-from calibration.values import Measured  # noqa: E402
-from gonio.store import open_run  # noqa: E402
-from sim.devices.photodiode import SILICON_RESPONSIVITY  # noqa: E402
+from calibration import aperture, calfile
+from calibration.beam import beam_power
+from calibration.calibrate import build
+from calibration.detector import correct_power, range_key
+from calibration.values import Measured
+from gonio.store import open_run
+from sim.devices.photodiode import SILICON_RESPONSIVITY
 
 SAMPLE_OFFSET, ARM_OFFSET, DARK_CURRENT_A = 0.3, -0.2, 1e-10
 DIVERGENCE_DEG = 0.03

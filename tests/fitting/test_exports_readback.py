@@ -6,14 +6,12 @@ import math
 import numpy as np
 import pytest
 
-pytest.importorskip("sim.bsdf", reason="the BSDF model (sim.bsdf) is not installed yet")
-
-from calibration.exports import mitsuba_file, zemax_files  # noqa: E402
-from calibration.exports.mitsuba import read_mitsuba  # noqa: E402
-from calibration.exports.zemax import read_zemax, table_tis  # noqa: E402
-from calibration.fit import FitOptions, fit  # noqa: E402
-from calibration.synthetic import synthesize  # noqa: E402
-from calibration.values import CalibrationError  # noqa: E402
+from calibration.exports import mitsuba_file, zemax_files
+from calibration.exports.mitsuba import read_mitsuba
+from calibration.exports.zemax import read_zemax, table_tis
+from calibration.fit import FitOptions, fit
+from calibration.synthetic import synthesize
+from calibration.values import CalibrationError
 
 
 @pytest.fixture(scope="module")

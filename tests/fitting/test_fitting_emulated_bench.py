@@ -7,21 +7,17 @@ import math
 
 import numpy as np
 import pytest
+from fitting_bench_runs import instrument, plan, scan
 
-pytest.importorskip("sim.bench", reason="the emulated bench (sim.bench) is not installed yet")
-pytest.importorskip("calibration.reduce", reason="reduction (calibration.reduce) is not in yet")
-
-from fitting_bench_runs import instrument, plan, scan  # noqa: E402
-
-from calibration import calfile  # noqa: E402
-from calibration.calibrate import build  # noqa: E402
-from calibration.exports.mitsuba import read_mitsuba  # noqa: E402
-from calibration.exports.zemax import read_zemax  # noqa: E402
-from calibration.fit import FitOptions  # noqa: E402
-from calibration.pipeline import fit_run  # noqa: E402
-from calibration.values import Measured  # noqa: E402
-from gonio.cli import main  # noqa: E402
-from gonio.store import open_run  # noqa: E402
+from calibration import calfile
+from calibration.calibrate import build
+from calibration.exports.mitsuba import read_mitsuba
+from calibration.exports.zemax import read_zemax
+from calibration.fit import FitOptions
+from calibration.pipeline import fit_run
+from calibration.values import Measured
+from gonio.cli import main
+from gonio.store import open_run
 
 SOURCE = {"power_w": 1e-3, "beam_diameter_mm": 2.0, "divergence_deg": 0.03}
 APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-5}  # bench accuracy << noise

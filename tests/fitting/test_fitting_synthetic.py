@@ -7,10 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-pytest.importorskip("sim.bsdf", reason="the BSDF model (sim.bsdf) is not installed yet")
-
-from calibration.fit import FitError, FitOptions, fit  # noqa: E402
-from calibration.synthetic import synthesize  # noqa: E402
+from calibration.fit import FitError, FitOptions, fit
+from calibration.synthetic import synthesize
 
 WALTER = [("beckmann", 0.023), ("ggx", 0.394), ("ggx", 0.553)]
 
@@ -150,12 +148,12 @@ def test_narrow_lobe_through_a_finite_aperture():
 def test_smearing_matches_the_emulated_bench_power():
     # An independent route: sim.bench integrates f |cos o| over the aperture and the beam cone
     # to rtol 1e-6; dividing its power by what reduction divides by must give the smeared BSDF.
-    bench_config = pytest.importorskip("sim.bench.config", reason="sim.bench not installed")
     from calibration.fit import build_model
     from calibration.smearing import Smearing
     from gonio.geometry import directions
+    from sim.bench.config import build_bench
 
-    bench = bench_config.build_bench({
+    bench = build_bench({
         "source": {"power_w": 1.0, "divergence_deg": 0.03},
         "sample": {"kind": "hemisphere", "distribution": "beckmann", "alpha": 0.023,
                    "eta": 1.51},
