@@ -53,13 +53,15 @@ class ModbusStageEmulator(EmulatedUnit):
 
     def refresh(self, fields: list[Field]) -> None:
         names = {f.name for f in fields}
-        if "actual_position" in names:
-            self.registers.set("actual_position", self.axis.position())
+        # status before position: the clock runs on between the two, and a "not moving" read
+        # first guarantees the position read next is the final one
         if "status" in names:
             flags = {"moving": self.axis.is_moving(), "homed": self.axis.homed,
                      "limit": self.limit_hit, "fault": self.fault is not None}
             self.registers.set("status", sum(1 << self.layout.bits[b] for b, on in flags.items()
                                              if on))
+        if "actual_position" in names:
+            self.registers.set("actual_position", self.axis.position())
         if "fault_code" in names:
             code = self.layout.faults[self.fault][0] if self.fault else 0
             self.registers.set("fault_code", code)
