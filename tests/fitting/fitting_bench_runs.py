@@ -70,3 +70,31 @@ def scan(plan_path: Path, instrument_path: Path, out: Path) -> Path:
     result = new_scan(plan_path, instrument_path, sim=True, out=out, progress=False)
     assert result.outcome.status == "completed", result.outcome
     return result.path
+
+
+def metered_bsdf(bench, positions: list[tuple[float, float]], seed: int, averaging: int = 16,
+                 wavelength_nm: float = 632.8):
+    """(wi, wo, bsdf, sigma) of readings at (sample, arm) positions: the bench's true power
+    read by the photodiode model (noise, ranges, quantisation; dark level zeroed, as a run's
+    [dark] readings subtract it) and divided as reduction divides; sigma is the detector's."""
+    import numpy as np
+
+    from sim.bench.geometry import sample_frame_directions
+    from sim.bench.sample import exit_view
+    from sim.devices.photodiode import PhotodiodeModel
+
+    meter = PhotodiodeModel(None, seed=seed)
+    meter.zero(wavelength_nm)
+    wi, wo, bsdf, sigma = [], [], [], []
+    for s, arm in positions:
+        position = {"sample": float(s), "arm": float(arm)}
+        i, o = sample_frame_directions(position)
+        power = bench.power_w(position)
+        m = meter.measure(power, None, averaging, wavelength_nm)
+        _, factor = exit_view(bench.sample.spec, i, o)
+        scale = bench.source.power_w * bench.integral.solid_angle_sr * factor * abs(o[2])
+        wi.append(i)
+        wo.append(o)
+        bsdf.append(m.reading_w / scale)
+        sigma.append(meter.expected_sigma_w(power, m.range_w, averaging, wavelength_nm) / scale)
+    return np.array(wi), np.array(wo), np.array(bsdf), np.array(sigma)

@@ -9,13 +9,11 @@ import argparse
 
 import numpy as np
 import pytest
+from fitting_bench_runs import metered_bsdf
 
 from calibration.fit import FitError, FitOptions, build_model, fit
 from calibration.reduced import ReducedData
 from sim.bench import build_bench
-from sim.bench.geometry import sample_frame_directions
-from sim.bench.sample import exit_view
-from sim.devices.photodiode import PhotodiodeModel
 
 ALPHA = 0.08
 NANO = {"rms_height_nm": 30.0, "correlation_length_um": 2.0, "psd_exponent": 2.0}
@@ -29,24 +27,11 @@ def emulated_run(seed: int = 3) -> ReducedData:
     model (noise, ranges, quantisation) from the bench's true power (aperture-integrated)."""
     bench = build_bench({"sample": SAMPLE, "aperture": APERTURE, "seed": 1})
     assert bench.sample.diffraction_on(0.0)
-    meter = PhotodiodeModel(None, seed=seed)
-    meter.zero(632.8)
     arms = np.concatenate([np.arange(-70.0, -5.0, 5.0), np.arange(7.0, 72.0, 5.0)])
-    wi, wo, bsdf, sigma = [], [], [], []
-    for arm in arms:
-        i, o = sample_frame_directions({"sample": 0.0, "arm": float(arm)})
-        power = bench.power_w({"sample": 0.0, "arm": float(arm)})
-        m = meter.measure(power, None, 16, 632.8)
-        _, factor = exit_view(bench.sample.spec, i, o)
-        scale = bench.source.power_w * bench.integral.solid_angle_sr * factor * abs(o[2])
-        wi.append(i)
-        wo.append(o)
-        bsdf.append(m.reading_w / scale)
-        sigma.append(meter.expected_sigma_w(power, m.range_w, 16, 632.8) / scale)
-    wi, wo = np.array(wi), np.array(wo)
+    wi, wo, bsdf, sigma = metered_bsdf(bench, [(0.0, arm) for arm in arms], seed)
     half_angle = float(np.degrees(np.arctan(0.5 * APERTURE["diameter_mm"]
                                             / APERTURE["distance_mm"])))
-    return ReducedData(wi=wi, wo=wo, bsdf=np.array(bsdf), sigma=np.array(sigma),
+    return ReducedData(wi=wi, wo=wo, bsdf=bsdf, sigma=sigma,
                        valid=np.ones(len(wi), bool), transmission=np.zeros(len(wi), bool),
                        meta={"eta": 0.2, "k": 3.4, "kind": "conductor", "wavelength_nm": 632.8,
                              "aperture_half_angle_deg": half_angle})

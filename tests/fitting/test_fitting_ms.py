@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fitting_bench_runs import metered_bsdf
 
 from calibration.fit import FitError, FitOptions, build_model, fit
 from calibration.reduced import ReducedData
 from sim.bench import build_bench
-from sim.bench.geometry import sample_frame_directions
-from sim.bench.sample import exit_view
-from sim.devices.photodiode import PhotodiodeModel
 
 ALPHA = 0.553  # Walter's acid-etched glass
 SAMPLE = {"kind": "hemisphere", "distribution": "ggx", "alpha": ALPHA, "eta": 1.51,
@@ -27,25 +25,12 @@ def emulated_run(seed: int = 5) -> ReducedData:
     detector's alone (a real bench's data carry no Monte Carlo error)."""
     bench = build_bench({"sample": SAMPLE, "aperture": {"diameter_mm": 4.0}, "seed": 1})
     assert bench.sample.multiple_scattering_on(0.0)
-    meter = PhotodiodeModel(None, seed=seed)
-    meter.zero(632.8)  # subtract the dark level, as a run's [dark] readings do
     positions = [(s, s + d) for s in (0.0, 60.0)
                  for d in np.concatenate([np.arange(-75.0, 80.0, 15.0), 180.0 +
                                           np.arange(-60.0, 65.0, 10.0)])
                  if abs(s + d) > 5.0 and abs(np.cos(np.radians(d))) > 0.1]
-    wi, wo, bsdf, sigma = [], [], [], []
-    for s, arm in positions:
-        i, o = sample_frame_directions({"sample": s, "arm": arm})
-        power = bench.power_w({"sample": s, "arm": arm})
-        m = meter.measure(power, None, 16, 632.8)
-        _, factor = exit_view(bench.sample.spec, i, o)
-        scale = bench.source.power_w * bench.integral.solid_angle_sr * factor * abs(o[2])
-        wi.append(i)
-        wo.append(o)
-        bsdf.append(m.reading_w / scale)
-        sigma.append(meter.expected_sigma_w(power, m.range_w, 16, 632.8) / scale)
-    wi, wo = np.array(wi), np.array(wo)
-    return ReducedData(wi=wi, wo=wo, bsdf=np.array(bsdf), sigma=np.array(sigma),
+    wi, wo, bsdf, sigma = metered_bsdf(bench, positions, seed)
+    return ReducedData(wi=wi, wo=wo, bsdf=bsdf, sigma=sigma,
                        valid=np.ones(len(wi), bool), transmission=wo[:, 2] < 0,
                        meta={"eta": 1.51})
 
