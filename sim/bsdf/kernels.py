@@ -312,6 +312,16 @@ if AVAILABLE:
             g[j], g[j + 1], g[j + 2] = f[j] * inv, f[j + 1] * inv, f[j + 2] * inv
         return g
 
+    @njit(cache=True, error_model="numpy", inline="always")
+    def _block_constants(ax, ay, eta):
+        """Per-call constants of the SIMD blocks: 1/alpha_x, 1/alpha_y, pi alpha_x alpha_y, and
+        for light arriving from inside 1/eta and 1/eta - 1; eta^2 - 1 from outside and
+        (1/eta)^2 - 1 from inside."""
+        e_in = 1.0 / eta
+        em1_in = (1.0 - eta) / eta
+        return (1.0 / ax, 1.0 / ay, math.pi * ax * ay, e_in, em1_in, (eta - 1.0) * (eta + 1.0),
+                em1_in * (e_in + 1.0))
+
     @njit(cache=True, error_model="numpy")
     def _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on, res):
         """SIMD loop of _ggx_dielectric over flat (3 m) wi and wo into res (m): 3 sqrt and 1
@@ -320,11 +330,7 @@ if AVAILABLE:
         Calls nothing but inlined helpers: numba compiles a callee with its caller's fastmath
         flags, so that kernels stay free of any flags given here."""
         _prefer_512_bit_vectors()
-        inv_ax, inv_ay = 1.0 / ax, 1.0 / ay
-        pi_axay = math.pi * ax * ay
-        e_in = 1.0 / eta
-        em1_in = (1.0 - eta) / eta
-        e2m1_out, e2m1_in = (eta - 1.0) * (eta + 1.0), em1_in * (e_in + 1.0)
+        inv_ax, inv_ay, pi_axay, e_in, em1_in, e2m1_out, e2m1_in = _block_constants(ax, ay, eta)
         both = refl_on and trans_on
         k_refl = 1.0 if mode == 0 else 0.5  # 0.25 and the G2 or pdf numerator (see docs)
         k_trans = 4.0 if mode == 0 else (1.0 if mode == 1 else 2.0)
@@ -593,11 +599,7 @@ if AVAILABLE:
         transmission, tiny or huge results, correlated transmission) get pdf NaN. Calls
         nothing but inlined helpers (see _ggx_dielectric_block)."""
         _prefer_512_bit_vectors()
-        inv_ax, inv_ay = 1.0 / ax, 1.0 / ay
-        pi_axay = math.pi * ax * ay
-        e_in = 1.0 / eta
-        em1_in = (1.0 - eta) / eta
-        e2m1_out, e2m1_in = (eta - 1.0) * (eta + 1.0), em1_in * (e_in + 1.0)
+        inv_ax, inv_ay, pi_axay, e_in, em1_in, e2m1_out, e2m1_in = _block_constants(ax, ay, eta)
         both = refl_on and trans_on
         separable = not correlated
         far = 0
