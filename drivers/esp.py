@@ -22,7 +22,7 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
-from drivers.serial_transport import SerialLineTransport, SyncQuery
+from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
 
 T = TypeVar("T")
 _TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
@@ -32,15 +32,8 @@ DECIMALS = 5  # the ESP301's (and the emulator's) position and rate replies: 12.
 
 def decimal_parser(decimals: int = DECIMALS) -> Callable[[str], float]:
     """A strict reader of the ESP's fixed-point replies (`-?digits.<decimals digits>`)."""
-    shape = re.compile(rf"-?\d+\.\d{{{int(decimals)}}}")
-
-    def parse(text: str) -> float:
-        if shape.fullmatch(text) is None:
-            raise ProtocolError(f"garbled number {text!r} (expected {0:.{int(decimals)}f} "
-                                "form)")
-        return float(text)
-
-    return parse
+    return strict_number_parser(rf"-?\d+\.\d{{{int(decimals)}}}",
+                                f"{0:.{int(decimals)}f} form")
 
 
 def _integer(text: str) -> int:

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
-from drivers.serial_transport import SerialLineTransport, SyncQuery
+from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
 
 _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
 _NR1 = re.compile(r"[+-]?\d+")
@@ -32,15 +32,8 @@ NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> Callable[[str], float]:
     """A strict NR3 reader: `[+-]d.<decimals digits>E[+-]dd` exactly, else ProtocolError."""
-    shape = re.compile(rf"[+-]?\d\.\d{{{int(decimals)}}}E[+-]\d\d")
-
-    def parse(text: str) -> float:
-        if shape.fullmatch(text) is None:
-            raise ProtocolError(f"garbled number {text!r} (expected NR3 like "
-                                f"{1.0:.{int(decimals)}E})")
-        return float(text)
-
-    return parse
+    return strict_number_parser(rf"[+-]?\d\.\d{{{int(decimals)}}}E[+-]\d\d",
+                                f"NR3 like {1.0:.{int(decimals)}E}")
 
 
 def _nr1(text: str) -> int:

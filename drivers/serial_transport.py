@@ -16,6 +16,7 @@ garbled reply that arrives in step is the answer to the line just sent, garbled.
 
 from __future__ import annotations
 
+import re
 import termios
 import threading
 import time
@@ -50,6 +51,20 @@ def _describe(exc: BaseException) -> str:
     if isinstance(exc, termios.error) and len(exc.args) == 2:
         return f"[Errno {exc.args[0]}] {exc.args[1]}"
     return str(exc) or type(exc).__name__
+
+
+def strict_number_parser(pattern: str, expected: str) -> Callable[[str], float]:
+    """A reader of numeric replies that must match pattern exactly: ASCII replies carry no
+    checksum, so a dropped or garbled byte must break the shape (ProtocolError naming the
+    expected form) rather than pass as another number."""
+    shape = re.compile(pattern)
+
+    def parse(text: str) -> float:
+        if shape.fullmatch(text) is None:
+            raise ProtocolError(f"garbled number {text!r} (expected {expected})")
+        return float(text)
+
+    return parse
 
 
 @dataclass(frozen=True)
