@@ -26,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="run with an arm scan across the straight beam (sample retracted)")
     b.add_argument("--beam-diameter-mm", type=float, default=0.0,
                    help="beam diameter for --aperture-scan (default 0: beam much smaller)")
-    b.add_argument("--divergence-deg", type=float, metavar="DEG",
+    b.add_argument("--divergence-deg", type=_half_angle_deg, metavar="DEG",
                    help="beam divergence half-angle for the angle-offset fit (default: the "
                    "run's [sim.source] divergence_deg on an emulated bench, else 0)")
     u = actions.add_parser("use", help="record in a run which calibration applies to it")
@@ -35,6 +35,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s = actions.add_parser("show", help="print a calibration file's values")
     s.add_argument("calibration", help="calibration file")
     p.set_defaults(func=run)
+
+
+def _half_angle_deg(text: str) -> float:
+    """A beam divergence half-angle from the command line: a number in [0, 45) degrees."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0.0 <= value < 45.0:
+        raise argparse.ArgumentTypeError(f"a half-angle in [0, 45) deg, got {value:g}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:

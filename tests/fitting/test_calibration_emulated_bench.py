@@ -120,6 +120,11 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
     assert calfile.used_by(meta).to_json() == calfile.load(cal).to_json()
     assert main(["calibrate", "build", str(tmp_path), "--out", str(cal)]) == 2
     assert "not a run directory" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as bad:
+        main(["calibrate", "build", str(angle_run.path), "--out", str(cal),
+              "--divergence-deg", "-1"])
+    assert bad.value.code == 2
+    assert "--divergence-deg: a half-angle in [0, 45) deg, got -1" in capsys.readouterr().err
 
 
 def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
