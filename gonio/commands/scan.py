@@ -78,13 +78,18 @@ def run(args: argparse.Namespace) -> int:
                           progress=progress, calibration=calibration,
                           time_scale=args.time_scale)
     outcome = result.outcome
+    plotted = False
     if not args.no_plot and outcome.done:
         try:
             _plot(result.path)
+            plotted = True
         except Exception as exc:  # the data are stored; a plot problem must not hide the run
             print(f"gonio scan: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
     if outcome.status != "completed":
         print(f"gonio scan: run {outcome.status} after {outcome.done} readings: "
               f"{outcome.reason}", file=sys.stderr)
+    else:
+        plot = f"; plot {result.path / 'plot.png'}" if plotted else ""
+        print(f"gonio scan: completed, {outcome.done} readings stored{plot}", file=sys.stderr)
     print(result.path, flush=True)
     return {"completed": 0, "aborted": 130}.get(outcome.status, 1)
