@@ -73,6 +73,7 @@ def test_readme_demo_under_a_minute(tmp_path):
     assert len(run) == run.meta["planned"] == 66
     png = (run_dir / "plot.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert f"completed, 66 readings stored; plot {run_dir / 'plot.png'}" in proc.stderr
 
 
 def test_export_csv_and_netcdf_round_trip(tmp_path):
