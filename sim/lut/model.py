@@ -50,6 +50,7 @@ class ModelEstimator:
     masking: str = "correlated"
     multiple_scattering: bool = False
     reflection_eta: float = 1.5
+    backend: str | None = None  # RoughDielectric's: None = compiled kernels, "numpy" = reference
 
     @classmethod
     def for_spec(cls, spec: TableSpec) -> ModelEstimator:
@@ -73,15 +74,16 @@ class ModelEstimator:
                 f"multiple_scattering={self.multiple_scattering}); {eta}; "
                 f"importance sampling by {walk}; alpha < {ALPHA_DELTA:g}: smooth limit")
 
-    def model(self, alpha: float | np.ndarray, eta: float) -> RoughDielectric:
-        """The single-lobe model at one eta (alpha may be an array matching the directions)."""
+    def model(self, alpha: float, eta: float) -> RoughDielectric:
+        """The single-lobe model at one (alpha, eta)."""
         return RoughDielectric(self.distribution, alpha=alpha, eta=eta, masking=self.masking,
-                               lobes=(self.kind,))
+                               lobes=(self.kind,), backend=self.backend)
 
     def __call__(self, params: np.ndarray, u: np.ndarray,
                  rng: np.random.Generator) -> np.ndarray:
         """Channels (m, channels) at params (m, 2 or 3) from the shared uniforms u (n, 3):
-        smooth limits where alpha < ALPHA_DELTA, else one vectorised model per eta value."""
+        smooth limits where alpha < ALPHA_DELTA, else one scalar-alpha model per distinct
+        (alpha, eta), whose sample() runs in sim.bsdf's compiled kernels."""
         params = np.asarray(params, dtype=np.float64)
         mu, alpha = params[:, 0], params[:, 1]
         eta = params[:, 2] if self.kind == "transmission" else np.full(len(mu),
@@ -93,17 +95,19 @@ class ModelEstimator:
             for j in np.flatnonzero(~smooth):
                 out[j] = self._walks(mu[j], alpha[j], eta[j], u, rng)
             return out
-        for e in np.unique(eta[~smooth]):
-            rows = np.flatnonzero(~smooth & (eta == e))
-            out[rows] = self._single(mu[rows], alpha[rows], float(e), u)
+        rough = np.flatnonzero(~smooth)
+        pairs, group = np.unique(np.column_stack([alpha[rough], eta[rough]]), axis=0,
+                                 return_inverse=True)
+        for g, (a, e) in enumerate(pairs):
+            rows = rough[group.ravel() == g]
+            out[rows] = self._single(mu[rows], float(a), float(e), u)
         return out
 
-    def _single(self, mu: np.ndarray, alpha: np.ndarray, eta: float,
-                u: np.ndarray) -> np.ndarray:
-        """Single-scattering channels (k, channels) at k points sharing eta."""
+    def _single(self, mu: np.ndarray, alpha: float, eta: float, u: np.ndarray) -> np.ndarray:
+        """Single-scattering channels (k, channels) at k view angles sharing alpha and eta."""
         k, n = len(mu), len(u)
         v = np.repeat(view_direction(mu), n, axis=0)
-        wo, weight, _ = self.model(np.repeat(alpha, n), eta).sample(v, np.tile(u, (k, 1)))
+        wo, weight, _ = self.model(alpha, eta).sample(v, np.tile(u, (k, 1)))
         if self.kind == "transmission":
             return (weight.reshape(k, n).mean(axis=1) / (eta * eta))[:, None]
         h = wo + v

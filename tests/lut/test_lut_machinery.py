@@ -12,6 +12,7 @@ import pytest
 from sim.lut import TableSpec, bake, load_table, parse_size, validate
 from sim.lut.axes import ETA_MAX, axes_for
 from sim.lut.bake import grid_points, integrate_tile
+from sim.lut.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worker, usable_cores
 from sim.lut.table import Table, interpolate
 
 
@@ -183,3 +184,19 @@ def test_a_non_finite_estimate_is_named():
     spec = TableSpec(kind="transmission", shape=(2, 2, 2), samples=4)
     with pytest.raises(ValueError, match=r"non-finite table value at \(N.V, alpha\[, eta\]\)"):
         bake(spec, Broken())
+
+
+def test_tasks_run_kernels_on_one_thread_and_workers_share_the_cores(client):
+    """The thread policy of sim.lut.cluster: inside a task numba runs one thread (restored
+    after), in-process and on a cluster; local workers x threads never exceed the cores."""
+    numba = pytest.importorskip("numba")
+    before = numba.get_num_threads()
+    assert map_tasks(numba.get_num_threads, [()] * 4) == [1] * 4
+    assert map_tasks(numba.get_num_threads, [()] * 4, client) == [1] * 4
+    assert run_with_one_kernel_thread(numba.get_num_threads) == 1
+    assert numba.get_num_threads() == before
+    cores = usable_cores()
+    for workers in (1, 2, 3, cores, 2 * cores):
+        threads = threads_per_worker(workers)
+        assert threads >= 1 and (workers * threads <= cores or threads == 1)
+    assert threads_per_worker(1) == cores
