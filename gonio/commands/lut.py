@@ -1,6 +1,7 @@
 """`gonio lut`: bake a real-time split-sum lookup table from gonio's rough-dielectric model
 (transmission: N.V x roughness x eta; reflection: N.V x roughness, F0 scale and bias) into an
-.npz with its axes, parameterisation and model, optionally validated. See docs/lut.md."""
+.npz (or an OpenEXR .exr) with its axes, parameterisation and model, optionally validated.
+See docs/lut.md."""
 
 from __future__ import annotations
 
@@ -20,7 +21,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--size", help="nodes per axis, e.g. 64x64x32 (transmission: N.V x "
                    "roughness x eta) or 64x64 (reflection); default per kind as shown")
     p.add_argument("--dtype", choices=("float16", "float32", "float64"), default="float16")
-    p.add_argument("--out", required=True, metavar="FILE", help="output .npz")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="output .npz, or .exr (OpenEXR, float16 as HALF or float32 as FLOAT, a "
+                        "transmission table as an atlas of eta slices; needs gonio[exr])")
     p.add_argument("--samples", type=int, default=1024,
                    help="Sobol points per entry, a power of two (default 1024)")
     p.add_argument("--seed", type=int, default=0)
@@ -53,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
     from sim.lut import TableSpec, bake, parse_size, validate
     from sim.lut.cluster import dask_client, describe
+    from sim.lut.table import check_storable
 
     try:
         spec = TableSpec(kind=args.kind, shape=parse_size(args.size or DEFAULT_SIZE[args.kind]),
@@ -61,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
                          masking=args.masking, multiple_scattering=args.multiple_scattering)
         if args.validate and min(args.validate_entries, args.validate_points) < 1:
             raise ValueError("--validate-entries and --validate-points must be >= 1")
+        check_storable(spec, args.out)
         with dask_client(args.workers, args.scheduler) as client:
             table = bake(spec, client=client, progress=args.progress)
             layout = describe(args.workers, args.scheduler)

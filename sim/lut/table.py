@@ -1,4 +1,5 @@
-"""A baked table: values in the stored dtype, its spec and model, npz storage and lookups.
+"""A baked table: values in the stored dtype, its spec and model, storage (.npz, or .exr
+through sim.lut.exr) and lookups.
 
 Lookups interpolate multilinearly in texture coordinates with clamp-to-edge, exactly what a
 GPU's linear sampler does with the same array uploaded as a texture.
@@ -60,8 +61,13 @@ class Table:
 
     def save(self, path: str | Path) -> Path:
         """Write an .npz: `table`, one `axis_<name>` array of node values per axis and a
-        JSON `metadata` string (readable with numpy.load(allow_pickle=False))."""
+        JSON `metadata` string (readable with numpy.load(allow_pickle=False)); or, for a
+        path ending in .exr, an OpenEXR image (sim.lut.exr)."""
         path = Path(path)
+        if is_exr(path):
+            from sim.lut.exr import save_exr
+
+            return save_exr(self, path)
         axes = {f"axis_{a.name}": a.values() for a in self.spec.axes}
         with open(path, "wb") as fh:
             np.savez(fh, table=self.data, metadata=np.array(json.dumps(self.metadata())),
@@ -99,8 +105,26 @@ def interpolate(data: np.ndarray, coords: list[np.ndarray]) -> np.ndarray:
     return result
 
 
+def is_exr(path: str | Path) -> bool:
+    """True when a table path names an OpenEXR file (suffix .exr, any case)."""
+    return Path(path).suffix.lower() == ".exr"
+
+
+def check_storable(spec: TableSpec, path: str | Path) -> None:
+    """Raise ValueError now if the file format of path cannot hold a table of spec."""
+    if is_exr(path):
+        from sim.lut.exr import check_exr
+
+        check_exr(spec)
+
+
 def load_table(path: str | Path) -> Table:
-    """Read a table written by Table.save; a file that is not one is a clear ValueError."""
+    """Read a table written by Table.save (.npz, or .exr); a file that is not one is a clear
+    ValueError."""
+    if is_exr(path):
+        from sim.lut.exr import load_exr
+
+        return load_exr(path)
     try:
         with np.load(path, allow_pickle=False) as f:
             meta = json.loads(str(f["metadata"]))

@@ -14,6 +14,7 @@ from sim.lut.axes import ETA_MAX, axes_for
 from sim.lut.bake import grid_points, integrate_tile
 from sim.lut.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worker, usable_cores
 from sim.lut.table import Table, interpolate
+from sim.lut.validate import TIR_BAND, near_critical
 
 
 class StandIn:
@@ -200,3 +201,27 @@ def test_tasks_run_kernels_on_one_thread_and_workers_share_the_cores(client):
         threads = threads_per_worker(workers)
         assert threads >= 1 and (workers * threads <= cores or threads == 1)
     assert threads_per_worker(1) == cores
+
+
+def test_lookup_errors_are_split_at_the_tir_edge_band():
+    """near_critical marks eta < 1 points within TIR_BAND of N.V_c = sqrt(1 - eta^2) only;
+    the report's edge and rest parts recombine to the whole."""
+    eta = 1 / 1.5
+    critical = np.sqrt(1 - eta**2)
+    params = np.array([[critical, 0.1, eta], [critical + 0.9 * TIR_BAND, 0.1, eta],
+                       [critical - 1.1 * TIR_BAND, 0.1, eta], [critical, 0.1, 1.5],
+                       [0.0, 0.1, 1.0]])
+    assert near_critical(params).tolist() == [True, True, False, False, False]
+    spec = TableSpec(kind="transmission", shape=(4, 4, 4), dtype="float64", samples=64,
+                     tile_entries=32)
+    report = validate(bake(spec, StandIn()), StandIn(), points=400, reference_samples=256)
+    d = report.to_dict()
+    assert 0 < d["edge_points"] < 400 and d["tir_band"] == TIR_BAND
+    whole = (d["edge_lookup_rms"] ** 2 * d["edge_points"]
+             + d["rest_lookup_rms"] ** 2 * (400 - d["edge_points"])) / 400
+    assert np.sqrt(whole) == pytest.approx(report.lookup_rms, rel=1e-12)
+    assert report.lookup_max == max(d["edge_lookup_max"], d["rest_lookup_max"])
+    reflection = TableSpec(kind="reflection", shape=(4, 4), samples=64)
+    r = validate(bake(reflection, StandIn(("scale", "bias"))), StandIn(("scale", "bias")),
+                 points=50, reference_samples=256)
+    assert r.edge_points is None and r.rest_lookup_rms is None
