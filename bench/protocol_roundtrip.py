@@ -7,10 +7,13 @@ bare transport's echo round trip measured in the same run (the floor no protocol
   of a 12-byte request on a plain socket.
 - Modbus RTU over a pty: the same driver call vs the pty echo (the RTU endpoint is a
   two-pty relay, so its path has one more hop than the echo).
-- Both Modbus rows also time the bare pymodbus client on the same emulator, which separates
-  what the driver layer costs from what pymodbus (client and server) costs.
+- Each Modbus transport also times, on the same emulator, stock pymodbus's own sync client
+  (what pymodbus alone gives; its RTU client polls the port every millisecond) and the raw
+  request frame written and its reply read back with no client library (what the emulator
+  itself costs: the floor of any client on it).
 
-Run: python bench/protocol_roundtrip.py [--seconds 1.0]
+Run: python bench/protocol_roundtrip.py [--seconds 1.0]   (figures are noisy on a shared
+machine: the load average is printed before and after)
 """
 
 from __future__ import annotations
@@ -39,6 +42,9 @@ from sim.devices.motion import VirtualClock
 STAGE_MAP = Path(__file__).resolve().parents[1] / "examples" / "registermaps" / "stepper-drive.toml"
 ESP_QUERY = b"1TP?\r"
 MODBUS_TCP_REQUEST = bytes.fromhex("000100000006010300080002")  # read holding 8..9 of unit 1
+MODBUS_TCP_REPLY_BYTES = 13  # MBAP 7 + function, byte count, 4 data bytes
+MODBUS_RTU_REQUEST = bytes.fromhex("01030008000245c9")  # the same read as an RTU frame
+MODBUS_RTU_REPLY_BYTES = 9  # unit, function, byte count, 4 data bytes, CRC
 
 
 def rate(call: Callable[[], object], seconds: float) -> float:
@@ -141,9 +147,9 @@ def esp_rate(seconds: float) -> float:
         emulator.stop()
 
 
-def modbus_rates(transport: str, seconds: float) -> tuple[float, float]:
-    """Round trips per second on the Modbus emulator: ModbusStage.position(), and the bare
-    pymodbus client reading the same two registers (what the driver layer itself costs)."""
+def modbus_rates(transport: str, seconds: float) -> tuple[float, float, float]:
+    """Round trips per second on the Modbus emulator: ModbusStage.position(), stock pymodbus's
+    client reading the same two registers, and the raw request frame with no client."""
     unit = ModbusStageEmulator(VirtualClock(math.inf), STAGE_MAP, (-95.0, 95.0), 20.0, 80.0)
     server = ModbusEmulatorServer(transport, {1: unit})
     endpoint = server.start()
@@ -158,9 +164,48 @@ def modbus_rates(transport: str, seconds: float) -> tuple[float, float]:
             bare = rate(lambda: client.read_holding_registers(8, count=2, device_id=1), seconds)
         finally:
             client.close()
-        return driver, bare
+        raw = (raw_tcp_rate(host, int(port), seconds) if transport == "tcp"
+               else raw_rtu_rate(host, seconds))
+        return driver, bare, raw
     finally:
         server.stop()
+
+
+def raw_tcp_rate(host: str, port: int, seconds: float) -> float:
+    """The 12-byte read request on a plain socket, its 13-byte reply read back, per second."""
+    sock = socket.create_connection((host, port))
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def once() -> None:
+        sock.sendall(MODBUS_TCP_REQUEST)
+        got = b""
+        while len(got) < MODBUS_TCP_REPLY_BYTES:
+            got += sock.recv(4096)
+
+    try:
+        return rate(once, seconds)
+    finally:
+        sock.close()
+
+
+def raw_rtu_rate(path: str, seconds: float) -> float:
+    """The 8-byte RTU read request through pyserial, its 9-byte reply read back, per second."""
+    port = serial.Serial(path, 115200, timeout=1.0)
+
+    def once() -> None:
+        port.write(MODBUS_RTU_REQUEST)
+        if len(port.read(MODBUS_RTU_REPLY_BYTES)) != MODBUS_RTU_REPLY_BYTES:
+            raise RuntimeError("the RTU emulator did not answer a raw read request")
+
+    try:
+        return rate(once, seconds)
+    finally:
+        port.close()
+
+
+def load() -> str:
+    """The 1, 5 and 15 minute load averages (the machine is shared: figures move with it)."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
 def main() -> None:
@@ -168,26 +213,27 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
     args = parser.parse_args()
     s = args.seconds
-    tcp_driver, tcp_bare = modbus_rates("tcp", s)
+    print(f"load average before: {load()} ({os.cpu_count()} cores)")
+    tcp_driver, tcp_bare, tcp_raw = modbus_rates("tcp", s)
     tcp_echo = tcp_echo_rate(MODBUS_TCP_REQUEST, s)
-    rtu_driver, rtu_bare = modbus_rates("rtu", s)
-    rtu_echo = pty_echo_rate(MODBUS_TCP_REQUEST[6:] + b"\0\0", s)
+    rtu_driver, rtu_bare, rtu_raw = modbus_rates("rtu", s)
+    rtu_echo = pty_echo_rate(MODBUS_RTU_REQUEST, s)
+    tcp_floor, rtu_floor = "TCP echo, 12 bytes", "pty echo, 8 bytes"
     rows = [
         ("ESP TP? over pty (EspAxis.position)", esp_rate(s),
          "pty echo, 5 bytes", pty_echo_rate(ESP_QUERY, s)),
-        ("Modbus TCP read 2 regs (ModbusStage.position)", tcp_driver,
-         "TCP echo, 12 bytes", tcp_echo),
-        ("Modbus TCP read 2 regs (bare pymodbus client)", tcp_bare, "TCP echo, 12 bytes",
-         tcp_echo),
-        ("Modbus RTU read 2 regs (ModbusStage.position)", rtu_driver,
-         "pty echo, 8 bytes", rtu_echo),
-        ("Modbus RTU read 2 regs (bare pymodbus client)", rtu_bare, "pty echo, 8 bytes",
-         rtu_echo),
+        ("Modbus TCP read 2 regs (ModbusStage.position)", tcp_driver, tcp_floor, tcp_echo),
+        ("Modbus TCP read 2 regs (stock pymodbus client)", tcp_bare, tcp_floor, tcp_echo),
+        ("Modbus TCP read 2 regs (raw frame, no client)", tcp_raw, tcp_floor, tcp_echo),
+        ("Modbus RTU read 2 regs (ModbusStage.position)", rtu_driver, rtu_floor, rtu_echo),
+        ("Modbus RTU read 2 regs (stock pymodbus client)", rtu_bare, rtu_floor, rtu_echo),
+        ("Modbus RTU read 2 regs (raw frame, no client)", rtu_raw, rtu_floor, rtu_echo),
     ]
     print(f"{'protocol round trip':48s} {'per s':>9s}   {'floor (same run)':20s} {'per s':>9s}"
           f"  {'ratio':>6s}")
     for name, value, floor_name, floor in rows:
         print(f"{name:48s} {value:9.0f}   {floor_name:20s} {floor:9.0f}  {value / floor:6.3f}")
+    print(f"load average after: {load()}")
 
 
 if __name__ == "__main__":

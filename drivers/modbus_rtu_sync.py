@@ -25,7 +25,12 @@ from drivers.base import DeviceTimeout
 
 DIAGNOSTICS = 0x08
 RETURN_QUERY_DATA = b"\x00\x00"
-STRAGGLER_S = 0.005  # an RTU inter-frame gap on a pty: the last bytes of a matched answer
+
+
+def silent_interval_s(baudrate: int) -> float:
+    """RTU's t3.5 at a baud rate: 3.5 characters of 11 bits, fixed 1.75 ms above 19200 baud
+    (Modbus over Serial Line V1.02, 2.5.1.1). Bytes after this much silence are a new frame."""
+    return 0.00175 if baudrate > 19200 else 3.5 * 11 / baudrate
 
 
 def rtu_frame(unit: int, pdu: bytes) -> bytes:
@@ -62,9 +67,10 @@ class RtuSync:
         DeviceTimeout naming `what` if it does not come within reply_s."""
         token = (next(self._tokens) % 0x10000).to_bytes(2, "big")
         echo = rtu_frame(unit, bytes([DIAGNOSTICS]) + RETURN_QUERY_DATA + token)
-        port.reset_input_buffer()
+        # drop stale bytes and send; read / write raise OSError on a lost port (pyserial's
+        # reset_input_buffer and flush would raise termios.error, which nothing maps)
+        port.read(port.in_waiting)
         port.write(echo)
-        port.flush()
         deadline = time.monotonic() + reply_s
         received = bytearray()
         saved = port.timeout
@@ -76,7 +82,8 @@ class RtuSync:
                                         " no answer to the Modbus echo, function 08)", reply_s)
                 port.timeout = left
                 received += port.read(max(1, port.in_waiting))
-            port.timeout = STRAGGLER_S  # the rest of the answer, if it matched early
-            port.read(len(echo))
+            port.timeout = silent_interval_s(port.baudrate)  # the rest of a matched answer:
+            while port.read(max(1, port.in_waiting)) and time.monotonic() < deadline:
+                pass  # up to the silence ending its frame (a babbling line: the deadline)
         finally:
             port.timeout = saved

@@ -15,11 +15,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.pdu import ExceptionResponse
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import RtuSync
 from drivers.register_map import RegisterMap
 
@@ -70,8 +71,7 @@ class ModbusLink:
                                            retries=0)
         else:
             self.endpoint = port_or_host
-            self._client = ModbusSerialClient(port_or_host, baudrate=baudrate, timeout=reply_s,
-                                              retries=0)
+            self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s, retries=0)
         self._lock = threading.Lock()
         self.users = 0
         self.in_step = True  # RTU: False after a reply timeout, until an echo is answered
@@ -201,18 +201,26 @@ class MappedUnit:
         self.link = open_link(transport, port_or_host, tcp_port=tcp_port, baudrate=baudrate,
                               timeouts=timeouts, read_retries=read_retries)
         self._closed = False
+        self._read_plans: dict[tuple[str, ...], list] = {}
 
     def read_values(self, *names: str) -> dict[str, float]:
         """Engineering values of the named registers, one read per table they lie in."""
-        by_table: dict[str, list[str]] = {}
-        for n in names:
-            by_table.setdefault(self.map.register(n).table, []).append(n)
+        plan = self._read_plans.get(names)
+        if plan is None:
+            plan = self._read_plans[names] = self._read_plan(names)
         out = {}
-        for group in by_table.values():
-            table, first, count = self.map.block(tuple(group))
+        for table, first, count, group in plan:
             words = self.link.read(self.name, table, first, count, self.unit)
             out.update({n: self.map.take(n, first, words) for n in group})
         return out
+
+    def _read_plan(self, names: tuple[str, ...]) -> list[tuple[str, int, int, tuple[str, ...]]]:
+        """(table, first address, count, names) of each read covering names (made once per
+        tuple of names: a driver asks for the same few sets again and again)."""
+        by_table: dict[str, list[str]] = {}
+        for n in names:
+            by_table.setdefault(self.map.register(n).table, []).append(n)
+        return [(*self.map.block(tuple(group)), tuple(group)) for group in by_table.values()]
 
     def read_value(self, name: str) -> float:
         """Engineering value of one named register."""

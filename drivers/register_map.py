@@ -22,6 +22,8 @@ _TYPES = {  # type -> (struct code of its big-endian bytes, number of registers)
     "int32": ("i", 2),
     "float32": ("f", 2),
 }
+_VALUE_CODECS = {kind: struct.Struct(">" + code) for kind, (code, _) in _TYPES.items()}
+_WORD_CODECS = {n: struct.Struct(f">{n}H") for n in (1, 2)}  # big-endian 16-bit words
 _TABLES = ("holding", "input")
 _ACCESS = ("r", "rw")
 
@@ -144,8 +146,8 @@ class RegisterMap:
         reg = self.register(name)
         if len(words) != reg.count:
             raise RegisterMapError(f"{name} needs {reg.count} registers, got {len(words)}")
-        data = b"".join(int(w).to_bytes(2, "big") for w in self._order(list(words)))
-        (raw,) = struct.unpack(">" + _TYPES[reg.type][0], data)
+        (raw,) = _VALUE_CODECS[reg.type].unpack(_WORD_CODECS[reg.count].pack(
+            *self._order(list(words))))
         return raw / reg.scale
 
     def block(self, names: tuple[str, ...]) -> tuple[str, int, int]:

@@ -42,7 +42,8 @@ from sim.devices.register_map import (
 
 _TABLE_OF_FUNCTION = {3: "holding", 4: "input", 23: "holding"}
 _WRITE_FUNCTIONS = (6, 16, 23)
-RTU_FRAME_GAP_S = 0.005  # silence that ends an RTU frame (3.5 characters, floored for ptys)
+RTU_CHARACTER_BITS = 11  # start, 8 data, parity (or a second stop bit), stop
+RTU_FIXED_T35_S = 0.00175  # the spec's t3.5 above 19200 baud
 _MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
 
 
@@ -161,9 +162,26 @@ class _FaultyReplies:
             self.emulator.outgoing(handler, data) if sending else data
         )
         handler.trace_pdu = lambda sending, pdu: pdu if sending else _refuse_reply_codes(pdu)
+        handler.handle_later = _handle_on_this_loop(handler)
         if self.emulator.transport == "rtu":
-            handler.data_received = _after_silence_new_frame(handler)
+            gap_s = rtu_silent_interval_s(self.emulator.baudrate)
+            handler.data_received = _after_silence_new_frame(handler, gap_s)
         return handler
+
+
+def _handle_on_this_loop(handler):
+    """pymodbus 3.16 hands each decoded request to its handler with run_coroutine_threadsafe,
+    from the loop's own thread: a self-pipe write and read and an extra loop pass per
+    request (about a third of a TCP round trip here). A task made on the loop directly does
+    the same, in order; the tasks are kept referenced until done."""
+    pending: set[asyncio.Task] = set()
+
+    def handle_later() -> None:
+        task = handler.loop.create_task(handler.handle_request())
+        pending.add(task)
+        task.add_done_callback(pending.discard)
+
+    return handle_later
 
 
 def _refuse_reply_codes(request):
@@ -179,9 +197,19 @@ def _refuse_reply_codes(request):
     return request
 
 
-def _after_silence_new_frame(handler, gap_s: float = RTU_FRAME_GAP_S):
-    """RTU's framing rule: a silent interval ends a frame, so leftovers of a truncated or
-    garbled frame are dropped before the bytes after the silence are parsed."""
+def rtu_silent_interval_s(baudrate: int) -> float:
+    """RTU's t3.5, the silence that ends a frame: 3.5 characters of 11 bits at the baud rate,
+    and a fixed 1.75 ms above 19200 baud (Modbus over Serial Line V1.02, 2.5.1.1)."""
+    if baudrate > 19200:
+        return RTU_FIXED_T35_S
+    return 3.5 * RTU_CHARACTER_BITS / baudrate
+
+
+def _after_silence_new_frame(handler, gap_s: float):
+    """RTU's framing rule: a silent interval (t3.5) ends a frame, so leftovers of a truncated
+    or garbled frame are dropped before the bytes after the silence are parsed. (A complete
+    frame needs no silence: pymodbus's framer takes it as soon as its function code's length
+    has arrived and its CRC checks, so the interval never delays a reply.)"""
     receive = handler.data_received
     last = [0.0]
 
@@ -216,6 +244,8 @@ class ModbusEmulatorServer:
             raise ValueError(f"Modbus transport must be 'tcp' or 'rtu', got {transport!r}")
         if not units:
             raise ValueError("ModbusEmulatorServer needs at least one unit")
+        if isinstance(baudrate, bool) or not isinstance(baudrate, int) or baudrate <= 0:
+            raise ValueError(f"Modbus RTU baud rate must be a positive integer, got {baudrate!r}")
         for unit_id in units:
             if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 1 <= unit_id <= 247:
                 raise ValueError(f"Modbus unit ids are integers 1..247, got {unit_id!r}")
@@ -225,6 +255,7 @@ class ModbusEmulatorServer:
         self.port, self.baudrate = port, baudrate
         self.endpoint: str | None = None
         self.disconnected = False
+        self._sent = 0  # reply bytes handed to the transport (RTU: the relay's count to match)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server = None
         self._thread: threading.Thread | None = None
@@ -312,8 +343,9 @@ class ModbusEmulatorServer:
     def outgoing(self, handler, frame: bytes) -> bytes:
         """Called by pymodbus with each reply frame: send it through the unit's faults.
 
-        The frame goes out later from the event loop (after the injected latency), so a
-        slow unit does not block the server; pymodbus itself sends nothing.
+        A delayed frame (injected latency) or the last before a hang-up goes out later from
+        the event loop, so a slow unit does not block the server; any other goes out now.
+        pymodbus itself sends nothing.
         """
         unit_id = frame[0] if self.transport == "rtu" else frame[6] if len(frame) > 6 else 0
         unit = self.units.get(unit_id)
@@ -324,8 +356,11 @@ class ModbusEmulatorServer:
             out = faults.reply(frame, crc_bytes=2)
         else:  # TCP checksums guard the payload: dropped / corrupted bytes hit the MBAP header
             out = faults.reply(frame, keep_tail=max(len(frame) - _MBAP_BYTES, 0))
-        hang_up = faults.should_disconnect()
-        self._loop.call_later(faults.delay(), self._deliver, handler, out, hang_up)
+        hang_up, delay_s = faults.should_disconnect(), faults.delay()
+        if delay_s or hang_up:
+            self._loop.call_later(delay_s, self._deliver, handler, out, hang_up)
+        else:
+            self._deliver(handler, out, False)
         return b""
 
     def _deliver(self, handler, data: bytes | None, hang_up: bool) -> None:
@@ -334,17 +369,19 @@ class ModbusEmulatorServer:
             return
         if data:
             transport.write(data)
+            self._sent += len(data)
         if hang_up:
             if self.transport == "rtu":
                 self.disconnected = True
-                self._relay.hang_up()
+                self._relay.hang_up(self._sent)
             else:
                 handler.close()
 
 
 class _PtyRelay:
     """Two raw ptys joined master to master by a thread: the server opens `server_path`,
-    clients open `client_path`; `hang_up()` closes the client side like a pulled cable."""
+    clients open `client_path`; `hang_up(n)` closes the client side like a pulled cable once
+    the host has its first n bytes."""
 
     def __init__(self):
         self._server_master, self._server_slave = os.openpty()
@@ -355,18 +392,27 @@ class _PtyRelay:
         self.client_path = os.ttyname(self._client_slave)
         self._wake_r, self._wake_w = os.pipe()
         self._stop = threading.Event()
+        self._to_client = 0  # bytes relayed to the host so far
+        self._cut_after: int | None = None  # hang up once the host has this many bytes
         self._thread = threading.Thread(target=self._pump, name="modbus-rtu-relay", daemon=True)
         self._thread.start()
 
     def _pump(self) -> None:
         peer = {self._server_master: self._client_master,
                 self._client_master: self._server_master}
+        cut = _HangUpWatch()
         while not self._stop.is_set():
+            armed = self._cut_after is not None and self._to_client >= self._cut_after
             try:
-                ready, _, _ = select.select([*peer, self._wake_r], [], [])
+                ready, _, _ = select.select([*peer, self._wake_r], [], [],
+                                            _HangUpWatch.POLL_S if armed else None)
             except (OSError, ValueError):
                 return
             if self._wake_r in ready:
+                os.read(self._wake_r, 64)
+                continue  # stopping, or a hang-up armed: look again
+            if armed and cut.due(self._client_master in ready, self._client_slave):
+                self._cut_client()
                 return
             for fd in ready:
                 try:
@@ -375,31 +421,17 @@ class _PtyRelay:
                         os.write(peer[fd], data)
                 except OSError:
                     return
+                if fd == self._server_master:
+                    self._to_client += len(data)
 
-    def _halt(self) -> None:
-        self._stop.set()
-        os.write(self._wake_w, b"x")
-        if self._thread is not threading.current_thread():
-            self._thread.join(2.0)
+    def hang_up(self, after_bytes: int) -> None:
+        """Cut the client side once the host has read the first `after_bytes` bytes relayed
+        to it (a hangup would flush them): when it writes again, or when its input queue
+        has emptied; its reads fail from then on. Returns at once."""
+        self._cut_after = after_bytes
+        os.write(self._wake_w, b"c")
 
-    def hang_up(self) -> None:
-        """Cut the client side once the host has read what was sent (a hangup would flush
-        it); its reads fail from then on. Returns at once, the cut happens in a thread."""
-        threading.Thread(target=self._hang_up_when_read, name="modbus-rtu-hangup",
-                         daemon=True).start()
-
-    def _hang_up_when_read(self, patience_s: float = 1.0) -> None:
-        start = time.monotonic()
-        seen = False
-        while time.monotonic() - start < patience_s and self._client_slave >= 0:
-            waiting = fcntl.ioctl(self._client_slave, termios.TIOCINQ, b"\0\0\0\0")
-            if int.from_bytes(waiting, sys.byteorder):
-                seen = True
-            elif seen or time.monotonic() - start > 0.05:
-                break
-            time.sleep(0.001)
-        if not self._stop.is_set():
-            self._halt()
+    def _cut_client(self) -> None:
         for fd in (self._client_master, self._client_slave):
             _close(fd)
         self._client_master = self._client_slave = -1
@@ -407,12 +439,37 @@ class _PtyRelay:
     def close(self) -> None:
         """Stop relaying and close every pty fd (idempotent)."""
         if not self._stop.is_set():
-            self._halt()
+            self._stop.set()
+            os.write(self._wake_w, b"x")
+            self._thread.join(2.0)
         for fd in (self._server_master, self._server_slave, self._client_master,
                    self._client_slave, self._wake_r, self._wake_w):
             _close(fd)
         self._server_master = self._server_slave = self._client_master = -1
         self._client_slave = self._wake_r = self._wake_w = -1
+
+
+class _HangUpWatch:
+    """When a pulled-cable fault may cut the host's pty, all bytes before it being relayed:
+    at the host's next write (it has read them), once its input queue was seen full and is
+    empty again, or after GRACE_S with the queue empty (read before it was ever looked at)."""
+
+    POLL_S = 0.0005
+    GRACE_S = 0.05
+
+    def __init__(self):
+        self._since: float | None = None
+        self._seen = False
+
+    def due(self, host_wrote: bool, client_slave: int) -> bool:
+        """True when the cut may come now (called on every pump wake-up while armed)."""
+        now = time.monotonic()
+        if self._since is None:
+            self._since = now
+        waiting = int.from_bytes(fcntl.ioctl(client_slave, termios.TIOCINQ, b"\0\0\0\0"),
+                                 sys.byteorder)
+        self._seen = self._seen or waiting > 0
+        return host_wrote or (not waiting and (self._seen or now - self._since > self.GRACE_S))
 
 
 def _close(fd: int) -> None:
