@@ -2,8 +2,8 @@
 
 Several units (unit ids) share one endpoint, as on one RTU bus or one TCP gateway. The
 pymodbus server does the framing; each request lands in the addressed unit's `read` /
-`write` (a `ModbusUnit`). RTU: pymodbus opens the slave side of an internal pty whose
-master a relay thread joins to a second pty; clients open that one's slave (`endpoint`).
+`write` (a `ModbusUnit`). RTU: one raw pty (sim.devices.modbus_pty); clients open its slave
+(`endpoint`), the server reads and writes its master on the server's event loop.
 Faults (latency, dropped / corrupted bytes, bad CRC, stalls, disconnects) act on the
 reply frames, per unit (the unit's own injector) or for the whole endpoint. On TCP the
 payload is guarded by TCP's own checksums, so dropped and corrupted bytes hit the 7-byte
@@ -13,15 +13,10 @@ MBAP header only, and a bad CRC does not apply.
 from __future__ import annotations
 
 import asyncio
-import fcntl
-import os
-import select
-import sys
-import termios
 import threading
 import time
-import tty
 from collections.abc import Mapping
+from functools import partial
 from typing import Protocol
 
 from pymodbus.constants import ExcCodes
@@ -31,6 +26,7 @@ from pymodbus.pdu import ExceptionResponse
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.modbus_pty import PtyLine
 from sim.devices.register_map import (
     ILLEGAL_FUNCTION,
     ILLEGAL_VALUE,
@@ -255,13 +251,12 @@ class ModbusEmulatorServer:
         self.port, self.baudrate = port, baudrate
         self.endpoint: str | None = None
         self.disconnected = False
-        self._sent = 0  # reply bytes handed to the transport (RTU: the relay's count to match)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
-        self._relay: _PtyRelay | None = None
+        self._line: PtyLine | None = None
 
     @property
     def protocol(self) -> str:
@@ -274,8 +269,8 @@ class ModbusEmulatorServer:
         if self._thread is not None:
             raise RuntimeError("ModbusEmulatorServer already started")
         if self.transport == "rtu":
-            self._relay = _PtyRelay()
-            self.endpoint = self._relay.client_path
+            self._line = PtyLine()
+            self.endpoint = self._line.path
         self._thread = threading.Thread(target=self._run, name=f"{self.protocol}-server",
                                         daemon=True)
         self._thread.start()
@@ -297,8 +292,8 @@ class ModbusEmulatorServer:
             loop.call_soon_threadsafe(loop.stop)
         if self._thread is not None:
             self._thread.join(5.0)
-        if self._relay is not None:
-            self._relay.close()
+        if self._line is not None:
+            self._line.close()
         self._server = None
 
     def __enter__(self) -> ModbusEmulatorServer:
@@ -328,8 +323,9 @@ class ModbusEmulatorServer:
         if self.transport == "tcp":
             server = _TcpServer(context, address=("127.0.0.1", self.port))
         else:
-            server = _SerialServer(context, port=self._relay.server_path, baudrate=self.baudrate,
+            server = _SerialServer(context, port=self._line.path, baudrate=self.baudrate,
                                    ignore_missing_devices=True)
+            server.call_create = partial(self._line.open, server.handle_new_connection)
         server.emulator = self
         await server.serve_forever(background=True)
         if self.transport == "tcp":
@@ -369,112 +365,9 @@ class ModbusEmulatorServer:
             return
         if data:
             transport.write(data)
-            self._sent += len(data)
         if hang_up:
             if self.transport == "rtu":
                 self.disconnected = True
-                self._relay.hang_up(self._sent)
+                transport.hang_up()
             else:
                 handler.close()
-
-
-class _PtyRelay:
-    """Two raw ptys joined master to master by a thread: the server opens `server_path`,
-    clients open `client_path`; `hang_up(n)` closes the client side like a pulled cable once
-    the host has its first n bytes."""
-
-    def __init__(self):
-        self._server_master, self._server_slave = os.openpty()
-        self._client_master, self._client_slave = os.openpty()
-        for fd in (self._server_slave, self._client_slave):
-            tty.setraw(fd)
-        self.server_path = os.ttyname(self._server_slave)
-        self.client_path = os.ttyname(self._client_slave)
-        self._wake_r, self._wake_w = os.pipe()
-        self._stop = threading.Event()
-        self._to_client = 0  # bytes relayed to the host so far
-        self._cut_after: int | None = None  # hang up once the host has this many bytes
-        self._thread = threading.Thread(target=self._pump, name="modbus-rtu-relay", daemon=True)
-        self._thread.start()
-
-    def _pump(self) -> None:
-        peer = {self._server_master: self._client_master,
-                self._client_master: self._server_master}
-        cut = _HangUpWatch()
-        while not self._stop.is_set():
-            armed = self._cut_after is not None and self._to_client >= self._cut_after
-            try:
-                ready, _, _ = select.select([*peer, self._wake_r], [], [],
-                                            _HangUpWatch.POLL_S if armed else None)
-            except (OSError, ValueError):
-                return
-            if self._wake_r in ready:
-                os.read(self._wake_r, 64)
-                continue  # stopping, or a hang-up armed: look again
-            if armed and cut.due(self._client_master in ready, self._client_slave):
-                self._cut_client()
-                return
-            for fd in ready:
-                try:
-                    data = os.read(fd, 4096)
-                    if data:
-                        os.write(peer[fd], data)
-                except OSError:
-                    return
-                if fd == self._server_master:
-                    self._to_client += len(data)
-
-    def hang_up(self, after_bytes: int) -> None:
-        """Cut the client side once the host has read the first `after_bytes` bytes relayed
-        to it (a hangup would flush them): when it writes again, or when its input queue
-        has emptied; its reads fail from then on. Returns at once."""
-        self._cut_after = after_bytes
-        os.write(self._wake_w, b"c")
-
-    def _cut_client(self) -> None:
-        for fd in (self._client_master, self._client_slave):
-            _close(fd)
-        self._client_master = self._client_slave = -1
-
-    def close(self) -> None:
-        """Stop relaying and close every pty fd (idempotent)."""
-        if not self._stop.is_set():
-            self._stop.set()
-            os.write(self._wake_w, b"x")
-            self._thread.join(2.0)
-        for fd in (self._server_master, self._server_slave, self._client_master,
-                   self._client_slave, self._wake_r, self._wake_w):
-            _close(fd)
-        self._server_master = self._server_slave = self._client_master = -1
-        self._client_slave = self._wake_r = self._wake_w = -1
-
-
-class _HangUpWatch:
-    """When a pulled-cable fault may cut the host's pty, all bytes before it being relayed:
-    at the host's next write (it has read them), once its input queue was seen full and is
-    empty again, or after GRACE_S with the queue empty (read before it was ever looked at)."""
-
-    POLL_S = 0.0005
-    GRACE_S = 0.05
-
-    def __init__(self):
-        self._since: float | None = None
-        self._seen = False
-
-    def due(self, host_wrote: bool, client_slave: int) -> bool:
-        """True when the cut may come now (called on every pump wake-up while armed)."""
-        now = time.monotonic()
-        if self._since is None:
-            self._since = now
-        waiting = int.from_bytes(fcntl.ioctl(client_slave, termios.TIOCINQ, b"\0\0\0\0"),
-                                 sys.byteorder)
-        self._seen = self._seen or waiting > 0
-        return host_wrote or (not waiting and (self._seen or now - self._since > self.GRACE_S))
-
-
-def _close(fd: int) -> None:
-    if fd >= 0:
-        try:
-            os.close(fd)
-        except OSError:
-            pass
