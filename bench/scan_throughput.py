@@ -1,9 +1,15 @@
 """Points per second of a 2,000-point scan through the full stack (plan -> engine -> ESP and
 PM100 drivers -> emulators on real ptys -> run store with an fsync per point), with zero
-emulator latency and instant motion, beside its floor measured in the same run: the number
-of protocol round trips the scan needed times the bare round-trip time of each device (a
-pyserial write + readline of a typical request to the same emulator), plus the optical
-bench's own time per reading.
+emulator latency and instant motion, beside its floor measured in the same run:
+
+- round trips: the requests the emulators served during the scan, per device, times the
+  bare round trip of that device (a plain pyserial client writing the scan's own per-point
+  request lines to a fresh emulator and reading each reply to its terminator);
+- bench physics: the optical bench evaluated at exactly the stage positions the scan
+  recorded, in the scan's order, in a fresh process (cold caches, after the same warm-up the
+  emulators do before serving), so the multiple-scattering tables the scan walked on first
+  use are counted as they were paid in the scan;
+- fsync: appending and fsyncing as many lines, as long as the scan's, beside the run.
 
 Run: python bench/scan_throughput.py [--points 2000]
 """
@@ -13,17 +19,20 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import serial
 import tomllib
 
 from gonio.config import parse_config
 from gonio.plan import build_schedule, parse_plan
 from gonio.runner import new_scan
-from gonio.store import open_run
+from gonio.store import READINGS, open_run
 from sim.bench import build_power_source
 from sim.devices.esp import EspEmulator
 from sim.devices.motion import VirtualClock
@@ -31,6 +40,11 @@ from sim.devices.photodiode import ConstantPower
 from sim.devices.pm100 import Pm100Emulator
 
 ROOT = Path(__file__).resolve().parents[1]
+ROLES = ("sample", "arm", "azimuth", "elevation")
+# what the engine sends per point with instant motion: the arm's move and its motion-done +
+# position poll (ESP), and a reading with its range (PM100); each ends in its error status
+ESP_LINES = (b"1PA{target};TB?\r", b"1MD?;1TP?;TB?\r")
+PM100_LINES = (b":READ?;:SENS:POW:RANG?;:SYST:ERR?\n",)
 
 
 def config_text() -> str:
@@ -53,51 +67,84 @@ skip_forbidden = true
 """
 
 
-def bare_round_trip_s(emulator, request: bytes, n: int = 2000) -> float:
-    """Mean seconds of one pyserial write + readline of `request` to a running emulator."""
+def bare_round_trip_s(emulator, lines: tuple[bytes, ...], eol: bytes, n: int = 2000) -> float:
+    """Mean seconds of one exchange of a plain pyserial client with a running emulator: write
+    a line, read until the reply's terminator; the lines are sent in turn ({target} becomes
+    an alternating move target)."""
     port = serial.Serial(emulator.start(), 115200, timeout=1.0)
+
+    def exchange(k: int) -> None:
+        port.write(lines[k % len(lines)].replace(b"{target}", b"%d" % (10 + k // len(lines) % 2)))
+        reply = b""
+        while not reply.endswith(eol):
+            chunk = port.read(max(1, port.in_waiting))
+            if not chunk:
+                raise RuntimeError(f"no reply to {lines[k % len(lines)]!r}")
+            reply += chunk
+
     try:
-        for _ in range(50):
-            port.write(request)
-            port.readline()
+        for k in range(50):
+            exchange(k)
         t0 = time.perf_counter()
-        for _ in range(n):
-            port.write(request)
-            if not port.readline():
-                raise RuntimeError(f"no reply to {request!r}")
+        for k in range(n):
+            exchange(k)
         return (time.perf_counter() - t0) / n
     finally:
         port.close()
         emulator.stop()
 
 
-def physics_s(sim: dict, n: int = 300) -> float:
-    """Mean seconds of one bench power evaluation at scan-like positions."""
-    pos = {"sample": 20.0, "arm": 10.0, "azimuth": 0.0, "elevation": 0.0}
-    source = build_power_source(sim, lambda: pos)
-    t0 = time.perf_counter()
-    for k in range(n):
-        pos["arm"] = 10.0 + 340.0 * k / n
+def physics_replay_s(positions_file: Path) -> float:
+    """Seconds the bench takes for the readings at the stage positions in positions_file
+    (rows of ROLES), in order, after the emulators' warm-up: run in a fresh process, so no
+    table the scan walked is warm here."""
+    out = subprocess.run([sys.executable, __file__, "--replay-physics", str(positions_file)],
+                         capture_output=True, text=True, check=True)
+    return float(out.stdout.split()[-1])
+
+
+def _replay_physics(positions_file: Path) -> None:
+    """The child of physics_replay_s: print the seconds of the replayed evaluations."""
+    sim = parse_config(tomllib.loads(config_text())).sim
+    here = dict.fromkeys(ROLES, 0.0)
+    source = build_power_source(sim, lambda: here)
+    source.bench.warm_up()
+    seconds = 0.0
+    for row in np.load(positions_file):
+        here.update(zip(ROLES, map(float, row), strict=True))
+        t0 = time.perf_counter()
         source.power_w()
-    return (time.perf_counter() - t0) / n
+        seconds += time.perf_counter() - t0
+    print(seconds)
 
 
-def fsync_s(folder: Path, n: int = 300) -> float:
-    """Mean seconds to append and fsync one reading-sized line (what the store does)."""
+def fsync_s(folder: Path, n: int, line_bytes: int) -> float:
+    """Seconds to append and fsync n lines of line_bytes each (what the store does per
+    reading, without the JSON encoding)."""
     with open(folder / "fsync-probe", "ab") as fh:
         t0 = time.perf_counter()
         for _ in range(n):
-            fh.write(b"x" * 400 + b"\n")
+            fh.write(b"x" * (line_bytes - 1) + b"\n")
             fh.flush()
             os.fsync(fh.fileno())
-        return (time.perf_counter() - t0) / n
+        return time.perf_counter() - t0
+
+
+def load() -> str:
+    """The 1, 5 and 15 minute load averages (figures on a shared machine move with them)."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
 def main() -> None:
     """Run the scan, measure the floors, print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=2000)
+    parser.add_argument("--replay-physics", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.replay_physics:
+        _replay_physics(args.replay_physics)
+        return
+    load_before = load()
     cfg = parse_config(tomllib.loads(config_text()))
     per_curve = math.ceil(args.points / 10)
     while (n := len(build_schedule(parse_plan(tomllib.loads(plan_text(per_curve))), cfg))
@@ -113,27 +160,31 @@ def main() -> None:
         run = open_run(result.path)
         r = run.readings()
         requests = run.meta["sessions"][-1]["requests_served"]
-        sync_s = fsync_s(tmp)
+        line_bytes = round((result.path / READINGS).stat().st_size / max(len(r), 1))
+        sync_s = fsync_s(tmp, n, line_bytes)
+        np.save(tmp / "positions.npy", np.stack([r[f"{role}_deg"] for role in ROLES], axis=1))
+        bench_s = physics_replay_s(tmp / "positions.npy")
     assert result.outcome.status == "completed" and len(r) == n, result.outcome
     loop_s = float(r["t_s"][-1] - r["t_s"][0]) * n / (n - 1)
-    esp_s = bare_round_trip_s(EspEmulator(VirtualClock(math.inf), {1: {}}), b"1TP?\r")
-    pm_s = bare_round_trip_s(Pm100Emulator(ConstantPower(1e-6)), b":READ?;:SENS:POW:RANG?\n")
-    bench_s = physics_s(cfg.sim)
+    esp_s = bare_round_trip_s(EspEmulator(VirtualClock(math.inf), {1: {}}), ESP_LINES, b"\r\n")
+    pm_s = bare_round_trip_s(Pm100Emulator(ConstantPower(1e-6)), PM100_LINES, b"\n")
     floor_s = requests["esp"] * esp_s + requests["pm100"] * pm_s
-    print(f"scan of {n} readings (sim-serial, instant motion, zero latency, fsync per point)")
-    print(f"  round trips needed: esp {requests['esp']} ({requests['esp'] / n:.1f}/point), "
-          f"pm100 {requests['pm100']} ({requests['pm100'] / n:.1f}/point)")
+    print(f"scan of {n} readings (sim-serial, instant motion, zero latency, fsync per point); "
+          f"load average {load_before} before, {load()} after")
+    print(f"  round trips needed: esp {requests['esp']} ({requests['esp'] / n:.2f}/point), "
+          f"pm100 {requests['pm100']} ({requests['pm100'] / n:.2f}/point)")
     print(f"  bare round trip: esp {esp_s * 1e3:.3f} ms, pm100 {pm_s * 1e3:.3f} ms; "
-          f"bench physics {bench_s * 1e3:.3f} ms/reading; fsync {sync_s * 1e3:.3f} ms")
-    print(f"{'':2}{'what':<46}{'seconds':>9}{'points/s':>10}")
+          f"bench physics at the scan's positions {bench_s / n * 1e3:.3f} ms/reading; "
+          f"fsync of a {line_bytes}-byte line {sync_s / n * 1e3:.3f} ms")
+    print(f"{'':2}{'what':<50}{'seconds':>9}{'points/s':>10}")
+    floor_all = floor_s + bench_s + sync_s
     rows = [("full stack, measuring loop", loop_s),
             ("full stack, incl. start-up and plot-free finish", total_s),
             ("baseline: sum of bare protocol round trips", floor_s),
-            ("baseline + bench physics", floor_s + n * bench_s),
-            ("baseline + bench physics + an fsync per point", floor_s + n * (bench_s + sync_s))]
+            ("baseline + bench physics", floor_s + bench_s),
+            ("baseline + bench physics + an fsync per point", floor_all)]
     for what, seconds in rows:
-        print(f"  {what:<46}{seconds:>9.2f}{n / seconds:>10.0f}")
-    floor_all = floor_s + n * (bench_s + sync_s)
+        print(f"  {what:<50}{seconds:>9.2f}{n / seconds:>10.0f}")
     print(f"  full stack / (round trips + physics + fsync): {loop_s / floor_all:.2f}x; "
           f"engine and driver overhead {(loop_s - floor_all) / n * 1e3:.2f} ms/point")
 

@@ -141,14 +141,26 @@ class EspController:
 
         Retried on timeout or garble; a device error raises DeviceError (not retried).
         """
-        def checked(text: str) -> T:
-            parts = text.rsplit(",", 3)
+        return self.query_values(line, parse)[0]
+
+    def query_values(self, line: str, *parsers: Callable[[str], object]) -> list:
+        """Ask several queries on one line (`1MD?;1TP?`, one parser per answer) with ";TB?"
+        appended: one round trip for all of them, answered in order on one line, joined by
+        commas. Only the first answer may contain commas (a version string), so a lost or
+        extra comma between answers breaks the count: a garbled reply (retried), not a
+        misread one."""
+        n = len(parsers)
+
+        def checked(text: str) -> list:
+            parts = text.rsplit(",", n + 2)
             code, message = self._parse_tb(",".join(parts[-3:]))
             self._raise_if_error(code, message)
-            if len(parts) != 4:
-                raise ProtocolError(f"{self.name}: no value in reply to {line!r}: {text!r}")
+            if len(parts) != n + 3:
+                raise ProtocolError(f"{self.name}: {len(parts) - 3} answers to {line!r}, "
+                                    f"expected {n}: {text!r}")
             try:
-                return parse(parts[0].strip())
+                return [parse(answer.strip()) for parse, answer in zip(parsers, parts[:n],
+                                                                       strict=True)]
             except ProtocolError as exc:
                 raise ProtocolError(f"{self.name}: reply to {line!r}: {exc}") from None
 
@@ -224,13 +236,18 @@ class EspAxis:
         return not self._query("MD?", _flag)
 
     def wait(self, timeout_s: float) -> float:
-        """Poll MD? until the motion is done; DeviceTimeout after timeout_s. Returns TP?."""
+        """Poll motion done and position together (`nMD?;nTP?`, one round trip) until the
+        device reports the motion done; returns the position it reported with that status
+        (read after it, so the final one). DeviceTimeout after timeout_s."""
         deadline = time.monotonic() + timeout_s
-        while self.is_moving():
+        while True:
+            done, position = self.controller.query_values(
+                f"{self._p}MD?;{self._p}TP?", _flag, self.controller.number)
+            if done:
+                return position
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, "motion done (MD?)", timeout_s)
             time.sleep(self.controller.poll_s)
-        return self.position()
 
     def stop(self) -> None:
         """ST: decelerate to a stop; safe at any time (the HOMING ABORTED a stop during a

@@ -17,6 +17,7 @@ garbled reply that arrives in step is the answer to the line just sent, garbled.
 from __future__ import annotations
 
 import re
+import select
 import termios
 import threading
 import time
@@ -34,6 +35,7 @@ T = TypeVar("T")
 # What pyserial lets through when a port fails: its own exception, OSError from os.read /
 # os.write / ioctl, and termios.error (no OSError subclass) from tcflush / tcdrain / tcsetattr.
 PORT_FAILURES = (serial.SerialException, OSError, termios.error)
+PRINTABLE = bytes(range(0x20, 0x7F))
 
 
 class SerialPortError(DriverError):
@@ -205,8 +207,10 @@ class SerialLineTransport:
     def read_line(self, what: str, timeout_s: float | None = None) -> str:
         """Read one reply line (terminator stripped).
 
-        Reads whatever has arrived in one call rather than pyserial's byte-at-a-time
-        read_until; bytes after the terminator are kept for the next read_line (and
+        Waits on the port's descriptor (select, up to the deadline) and reads whatever has
+        arrived in one call, rather than pyserial's byte-at-a-time read_until or re-setting
+        pyserial's timeout per read (each set re-applies the port's termios settings: two
+        system calls per chunk); bytes after the terminator are kept for the next read_line (and
         discarded by the next send: a line protocol sends one reply per request). Raises
         DeviceTimeout(what) when no complete line arrives in time (the transport is then
         out of step: the reply may still come), ProtocolError when it holds bytes that are
@@ -220,18 +224,14 @@ class SerialLineTransport:
         with self.lock, self._port(f"reading the reply to {what}"):
             while self.read_eol not in data:
                 left = deadline - time.monotonic()
-                chunk = b""
-                if left > 0:
-                    self._serial.timeout = left
-                    chunk = self._serial.read(max(1, self._serial.in_waiting))
-                if not chunk:
+                if left <= 0 or not select.select([self._serial.fileno()], [], [], left)[0]:
                     self.in_step = False
                     raise DeviceTimeout(self.name, what, timeout_s or self.timeout_s)
-                data += chunk
+                data += self._serial.read(max(1, self._serial.in_waiting))
         end = data.index(self.read_eol)
         body = bytes(data[:end])
         del data[: end + len(self.read_eol)]
-        if any(b < 0x20 or b > 0x7E for b in body):
+        if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
             raise ProtocolError(f"{self.name}: garbled reply to {what}: "
                                 f"{body + self.read_eol!r}")
         return body.decode("ascii")

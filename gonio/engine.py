@@ -196,9 +196,10 @@ class Engine:
     def _measure(self, row: np.void, flags: list[str]) -> dict[str, Any]:
         self._use_range(float(row["range_w"]))
         moved = self._move(row)
-        pause = max((self._settle[r] for r in moved), default=0.0) + self.plan.dwell_s
-        if pause > 0:
-            time.sleep(real_seconds(self.inst, pause))
+        pause = real_seconds(self.inst, max((self._settle[r] for r in moved), default=0.0)
+                             + self.plan.dwell_s)
+        if pause > 0:  # instant time: no sleep(0), which only yields the core away
+            time.sleep(pause)
         self._doing = f"reading the detector ({self.inst.detector.name})"
         reading = self.inst.detector.read()
         pos = self._reported

@@ -29,9 +29,10 @@ PLAN = {"name": "late-replies", "averaging": 4, "dwell_s": 0.0, "grid": [
     {"side": ["reflection", "transmission"], "theta_i_deg": [0.0, 20.0],
      "theta_o_deg": {"start": -70.0, "stop": 70.0, "step": 10.0}, "skip_forbidden": True}]}
 # Replies that carry a measurement: a PM100 READ?;:SENS:POW:RANG?;:SYST:ERR? (3 answers), an
-# ESP nTP?;TB? or nMD?;TB? (4 fields), a Modbus RTU read of input registers (function 04).
+# ESP nTP?;TB? (4 fields) or nMD?;nTP?;TB? (5 fields), a Modbus RTU read of input registers
+# (function 04).
 MEASUREMENTS = {"pm100": lambda reply: reply.count(b";") == 2,
-                "esp": lambda reply: reply.count(b",") == 3,
+                "esp": lambda reply: reply.count(b",") in (3, 4),
                 "photodiode": lambda reply: reply[1:2] == b"\x04"}
 
 
