@@ -53,6 +53,18 @@ def warm_up() -> None:
     bake(TableSpec(kind="transmission", shape=(2, 2, 2), samples=64))
 
 
+def timed_bake(spec: TableSpec, estimator=None, client=None) -> tuple[Table, float]:
+    """The baked table and the CPU seconds it took: this process (threads, scheduler, client)
+    plus, on a cluster, every worker process."""
+    workers_before = client.run(time.process_time) if client is not None else {}
+    before = time.process_time()
+    table = bake(spec, estimator, client=client)
+    cpu = time.process_time() - before
+    if client is not None:
+        cpu += sum(t - workers_before[w] for w, t in client.run(time.process_time).items())
+    return table, cpu
+
+
 def bake_times(shape: tuple[int, ...], samples: int) -> None:
     """Numpy path, in-process, 1- and 2-worker local clusters; asserts identical bits. The
     table is kept in float64 (the cast to float16 is the same work) so that the bit checks
@@ -60,23 +72,25 @@ def bake_times(shape: tuple[int, ...], samples: int) -> None:
     spec = TableSpec(kind="transmission", shape=shape, samples=samples, dtype="float64")
     print(f"{usable_cores()} usable cores; load average {load()}")
     warm_up()
-    numpy_path = bake(spec, dataclasses.replace(ModelEstimator.for_spec(spec), backend="numpy"))
-    local = bake(spec)
+    numpy_path, numpy_cpu = timed_bake(
+        spec, dataclasses.replace(ModelEstimator.for_spec(spec), backend="numpy"))
+    local, cpu = timed_bake(spec)
     base = local.bake_seconds
     label = "numpy reference path (no kernels), in-process"
     difference = np.max(np.abs(numpy_path.data - local.data))
-    print(f"{label:{WIDTH}s}: {numpy_path.bake_seconds:7.2f} s   kernels "
-          f"{numpy_path.bake_seconds / base:.2f}x faster; max |difference| {difference:.1e}")
-    print(f"{describe(None, None):{WIDTH}s}: {base:7.2f} s   (baseline)")
+    print(f"{label:{WIDTH}s}: {numpy_path.bake_seconds:7.2f} s ({numpy_cpu:6.2f} CPU s)   "
+          f"kernels {numpy_path.bake_seconds / base:.2f}x faster; max |difference| "
+          f"{difference:.1e}")
+    print(f"{describe(None, None):{WIDTH}s}: {base:7.2f} s ({cpu:6.2f} CPU s)   (baseline)")
     for workers in (1, 2):
         start = time.perf_counter()
         with dask_client(workers=workers) as client:
             client.run(warm_up)
             startup = time.perf_counter() - start
-            remote = bake(spec, client=client)
+            remote, remote_cpu = timed_bake(spec, client=client)
         same = local.data.tobytes() == remote.data.tobytes()
-        print(f"{describe(workers, None):{WIDTH}s}: {remote.bake_seconds:7.2f} s   "
-              f"speed-up {base / remote.bake_seconds:.2f}x "
+        print(f"{describe(workers, None):{WIDTH}s}: {remote.bake_seconds:7.2f} s "
+              f"({remote_cpu:6.2f} CPU s)   speed-up {base / remote.bake_seconds:.2f}x "
               f"({base / (remote.bake_seconds + startup):.2f}x with its {startup:.2f} s "
               f"start-up); identical bits: {same}")
         if not same:

@@ -14,9 +14,13 @@ from typing import Protocol
 import numpy as np
 from scipy.stats import qmc
 
-from sim.lut.cluster import map_tasks
+from sim.lut.cluster import map_tasks, total_threads
 from sim.lut.spec import TableSpec
 from sim.lut.table import Table
+
+#: Dask tasks per thread of the layout: enough to balance the load, few enough that the
+#: per-task cost of a distributed scheduler (about a millisecond each) stays small.
+TASKS_PER_THREAD = 8
 
 
 class Estimator(Protocol):
@@ -46,14 +50,23 @@ def integrate_tile(params: np.ndarray, estimator: Estimator, samples: int, seed:
     return out
 
 
+def integrate_tiles(tiles: list[tuple]) -> np.ndarray:
+    """integrate_tile over a run of tiles (one Dask task), results stacked in order."""
+    return np.concatenate([integrate_tile(*tile) for tile in tiles], axis=0)
+
+
 def integrate_points(params: np.ndarray, estimator: Estimator, *, samples: int, seed: int,
                      tile_entries: int, client=None, progress: bool = False) -> np.ndarray:
-    """Estimates (m, channels) at parameter points (m, d), one Dask task per tile: the
-    threaded scheduler when client is None, else the given distributed Client."""
+    """Estimates (m, channels) at parameter points (m, d) with Dask: the threaded scheduler
+    when client is None, else the given distributed Client. Consecutive tiles go to one task,
+    about TASKS_PER_THREAD tasks per Dask thread (a tile's result does not depend on its
+    task, so neither do the bits)."""
     params = np.ascontiguousarray(params, dtype=np.float64)
     tiles = [(params[s:s + tile_entries], estimator, samples, seed, k)
              for k, s in enumerate(range(0, len(params), tile_entries))]
-    return np.concatenate(map_tasks(integrate_tile, tiles, client, progress), axis=0)
+    per_task = max(1, -(-len(tiles) // (TASKS_PER_THREAD * total_threads(client))))
+    batches = [(tiles[i:i + per_task],) for i in range(0, len(tiles), per_task)]
+    return np.concatenate(map_tasks(integrate_tiles, batches, client, progress), axis=0)
 
 
 def grid_points(spec: TableSpec) -> np.ndarray:

@@ -27,6 +27,13 @@ def threads_per_worker(workers: int) -> int:
     return max(1, usable_cores() // workers)
 
 
+def total_threads(client=None) -> int:
+    """Dask threads that will run tasks: this process's cores, or all the cluster's threads."""
+    if client is None:
+        return usable_cores()
+    return max(1, sum(client.nthreads().values()))
+
+
 def run_with_one_kernel_thread(fn: Callable, *args):
     """fn(*args) with numba's parallel kernels on this thread limited to one thread (the
     previous count restored after), so Dask's threads are the only parallelism."""
