@@ -108,8 +108,9 @@ def test_bake_converges_to_the_exact_integral():
     assert table.data.dtype == np.float32 and np.isfinite(table.data).all()
 
 
-def test_same_bits_whatever_the_layout(client):
-    """Serial loop over tiles, threaded Dask and a 2-worker distributed cluster agree bitwise."""
+def test_same_bits_whatever_the_layout(client, monkeypatch):
+    """Serial loop over tiles, threaded Dask, a 2-worker distributed cluster and any number of
+    tiles per Dask task agree bitwise."""
     estimator = StandIn()
     threads = bake(SPEC, estimator).data
     cluster = bake(SPEC, estimator, client=client).data
@@ -119,6 +120,9 @@ def test_same_bits_whatever_the_layout(client):
         for k, s in enumerate(range(0, len(points), SPEC.tile_entries))
     ]).reshape(threads.shape).astype(SPEC.dtype)
     assert threads.tobytes() == cluster.tobytes() == serial.tobytes()
+    for per_thread in (1, 1000):  # one task per thread, one tile per task
+        monkeypatch.setattr("sim.lut.bake.TASKS_PER_THREAD", per_thread)
+        assert bake(SPEC, estimator).data.tobytes() == threads.tobytes()
     other_seed = bake(TableSpec(**{**SPEC.to_dict(), "shape": SPEC.shape, "seed": 8}), estimator)
     assert other_seed.data.tobytes() != threads.tobytes()
 
