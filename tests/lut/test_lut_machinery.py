@@ -3,6 +3,7 @@ with an analytic stand-in integrand whose exact integral is known."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 
@@ -121,7 +122,9 @@ def test_same_bits_whatever_the_layout(client, monkeypatch):
     ]).reshape(threads.shape).astype(SPEC.dtype)
     assert threads.tobytes() == cluster.tobytes() == serial.tobytes()
     for per_thread in (1, 1000):  # one task per thread, one tile per task
-        monkeypatch.setattr("sim.lut.bake.TASKS_PER_THREAD", per_thread)
+        # the module by name: the attribute sim.lut.bake is the bake function
+        monkeypatch.setattr(importlib.import_module("sim.lut.bake"), "TASKS_PER_THREAD",
+                            per_thread)
         assert bake(SPEC, estimator).data.tobytes() == threads.tobytes()
     other_seed = bake(TableSpec(**{**SPEC.to_dict(), "shape": SPEC.shape, "seed": 8}), estimator)
     assert other_seed.data.tobytes() != threads.tobytes()
