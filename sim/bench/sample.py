@@ -32,14 +32,63 @@ ANISOTROPIC_WALK_SHARE = 16
 DIFFRACTION_SAMPLES = 256
 
 
+@dataclass(frozen=True)
+class EdgeCircles:
+    """Where the integrand jumps or kinks, as circles {w: axis . w = level} in the free
+    direction of a pair for given values of the fixed one (the same for wo given wi and for wi
+    given wo). Axis z: the horizon (level 0) and, in transmission, facets standing vertical
+    (h_z = 0, level -w_fixed.z / e, e = index across / index on the fixed side; GGX's D does
+    not vanish there, so f jumps). Axis w_fixed: in transmission a facet seen edge-on (the end
+    of the lobe; from the glass, TIR: level -min(e, 1/e)); in reflection inside the denser
+    medium, the TIR kink of F (level 2 e^2 - 1). In wo only: the kinks of the multiple-
+    scattering tables, linear in theta_o between grid angles (levels `table_levels`)."""
+
+    n_above: float  # refractive index on the +z side
+    n_below: float
+    transmits: bool  # False: an opaque conductor (the horizon is its only edge)
+    table_levels: tuple[float, ...] = ()
+
+    def circles(self, fixed: np.ndarray, free_is_wo: bool = True
+                ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """[(axis (N, 3), levels (N, L))] per axis for fixed directions (N, 3), on one side."""
+        fixed = np.atleast_2d(fixed)
+        n = len(fixed)
+        z_axis = np.broadcast_to([0.0, 0.0, 1.0], (n, 3))
+        z_levels = np.broadcast_to((0.0, *(self.table_levels if free_is_wo else ())),
+                                   (n, 1 + len(self.table_levels) * free_is_wo))
+        if not self.transmits:
+            return [(z_axis, z_levels)]
+        above = fixed[:, 2] > 0
+        n_fixed = np.where(above, self.n_above, self.n_below)
+        e = np.where(above, self.n_below, self.n_above) / n_fixed
+        vertical = -fixed[:, 2] / e
+        edge_on = -np.minimum(e, 1.0 / e)
+        tir = np.where(e < 1.0, 2.0 * e * e - 1.0, 2.0)  # 2: no such circle
+        return [(z_axis, np.concatenate([z_levels, vertical[:, None]], axis=1)),
+                (fixed, np.stack([edge_on, tir], axis=1))]
+
+    def distance(self, fixed: np.ndarray, free: np.ndarray, free_is_wo: bool = True) -> float:
+        """Angle (rad) from the free direction (3,) to the nearest circle, for one fixed (3,)."""
+        best = np.inf
+        for axis, levels in self.circles(fixed, free_is_wo):
+            real = levels[0][np.abs(levels[0]) <= 1.0]
+            if len(real):
+                t = np.arccos(np.clip(float(axis[0] @ free), -1.0, 1.0))
+                best = min(best, float(np.min(np.abs(t - np.arccos(real)))))
+        return best
+
+
 class LobeScales(NamedTuple):
     """Angular scales (rad) near (wi, wo): the smooth lobe's local width in wi and wo, and the
-    distance to the nearest edge (a kink: the horizon, masking's cut-off, TIR) in wi and wo."""
+    distance to the nearest edge (a jump or kink: the horizon, a facet seen edge-on, vertical
+    facets, TIR) in wi and wo; `edges`, when they are all circles (EdgeCircles), lets the
+    aperture integral split its caps along them."""
 
     width_i: float
     width_o: float
     edge_i: float
     edge_o: float
+    edges: EdgeCircles | None = None
 
 
 @dataclass(frozen=True)
@@ -334,9 +383,8 @@ class Sample:
 
     def lobe_scales(self, wi: np.ndarray, wo: np.ndarray) -> LobeScales:
         """How fast the integrand varies near (wi, wo): the distribution's local width at the
-        coupling half vector, and the distance to the lobe's edges (the horizon, a facet seen
-        edge-on, the TIR edge of 1 - F), carried to wi and wo by the least stretch of the
-        half-vector maps."""
+        coupling half vector, carried to wi and wo by the least stretch of the half-vector
+        maps, and the angles to the nearest edges (exact, from edge_circles)."""
         s = self.spec
         eta_i = 1.0 if wi[2] > 0 else self.n_interior
         eta_o = 1.0 if wo[2] > 0 else self.n_interior
@@ -346,17 +394,34 @@ class Sample:
             w_eval = optics.air_to_glass_direction(wo, s.eta)
             stretch = s.eta * np.sqrt(abs(w_eval[2]) / max(abs(wo[2]), 1e-300))
         h = optics.half_vector(wi, w_eval, eta_i, eta_o)
-        t = np.hypot(h[0], h[1]) / max(h[2], 1e-300)
+        t = np.hypot(h[0], h[1]) / max(h[2], 1e-9)  # finite on vertical facets (h_z = 0)
         w_h = _slope_scale(s.distribution, min(s.alpha), t) * h[2] ** 2
-        # edges: a facet seen edge-on from wi or wo; facets standing vertical (h_z = 0), where
-        # D stops (GGX's D does not vanish there)
-        edge_h = min(abs(float(wi @ h)), abs(float(w_eval @ h)),
-                     float(np.arcsin(min(1.0, h[2]))))
-        if wi[2] * w_eval[2] < 0 and eta_i != eta_o:
-            edge_h = min(edge_h, _tir_distance(wi, h, eta_i, eta_o))
         stretch_o = optics.min_stretch(wi, w_eval, eta_i, eta_o) * stretch
         stretch_i = optics.min_stretch(w_eval, wi, eta_o, eta_i)
-        edge_o = min(edge_h * stretch_o, _angle_to_horizon(wo))
-        edge_i = min(edge_h * stretch_i, _angle_to_horizon(wi))
+        edges = self.edge_circles(wi)
+        if edges is not None:
+            edge_o, edge_i = edges.distance(wi, wo), edges.distance(wo, wi, free_is_wo=False)
+        else:  # a slab's transmission: the edges of f at w_eval, carried to wo and wi
+            edge_h = min(abs(float(wi @ h)), abs(float(w_eval @ h)),
+                         float(np.arcsin(min(1.0, h[2]))))
+            if wi[2] * w_eval[2] < 0 and eta_i != eta_o:
+                edge_h = min(edge_h, _tir_distance(wi, h, eta_i, eta_o))
+            edge_o = min(edge_h * stretch_o, _angle_to_horizon(wo))
+            edge_i = min(edge_h * stretch_i, _angle_to_horizon(wi))
         return LobeScales(max(float(w_h * stretch_i), 1e-9), max(float(w_h * stretch_o), 1e-9),
-                          float(edge_i), float(edge_o))
+                          float(edge_i), float(edge_o), edges)
+
+    def edge_circles(self, wi: np.ndarray) -> EdgeCircles | None:
+        """The integrand's edges as circles at incidence about wi (3,), or None for a slab (its
+        transmitted lobe is evaluated inside the glass, where the edges are circles of w_eval,
+        not of wo). With tabulated multiple scattering on, its theta_o grid adds kinks."""
+        s = self.spec
+        if s.kind == "slab":
+            return None
+        levels: tuple[float, ...] = ()
+        theta_i = float(np.arccos(min(1.0, abs(float(wi[2])))))
+        if s.alpha[0] == s.alpha[1] and self.multiple_scattering_on(theta_i):
+            from sim.bsdf.multiple_scattering.lobe import THETA_STEP_DEG
+
+            levels = tuple(np.cos(np.radians(np.arange(THETA_STEP_DEG, 180.0, THETA_STEP_DEG))))
+        return EdgeCircles(1.0, self.n_interior, s.kind != "conductor", levels)
