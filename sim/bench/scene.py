@@ -88,12 +88,13 @@ class Bench:
 
         Far from the lobe's peak, a low-order probe that finds less than NEGLIGIBLE of the
         incident power is returned as is: the order rule would spend thousands of evaluations
-        on a tail no detector can see."""
+        on a tail no detector can see. Not near an edge of the lobe: there the aperture may
+        hold a sliver of the lobe that the probe's few nodes miss."""
         wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
         peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
         reach = self.integral.aperture_rad + self.integral.divergence_rad
         far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
-        if self.order is None and far:
+        if self.order is None and far and not self.sample.edge_within(wi, wo, reach):
             probe = self.probe.integrate(self.sample.integrand, wi, wo, ONE_POINT)
             if probe < NEGLIGIBLE:
                 return probe
