@@ -11,7 +11,7 @@ import pytest
 
 from gonio.cli import main
 from sim.lut import TableSpec, bake, load_table
-from sim.lut.table import Table
+from sim.lut.table import Table, interpolate
 
 if os.environ.get("CI"):
     import OpenEXR  # CI installs the test extra, which includes gonio[exr]: never skip there
@@ -115,3 +115,23 @@ def test_cli_writes_exr_and_refuses_float64_before_baking(tmp_path, capsys):
     err = captured.err.strip()
     assert err.startswith("gonio lut: error:") and "not float64" in err and "\n" not in err
     assert "baked" not in captured.out and not (tmp_path / "x.exr").exists()
+
+
+def test_atlas_sampling_recipe_of_the_docs_gives_the_trilinear_lookup(tmp_path):
+    """docs/lut.md's shader recipe (two bilinear fetches in the atlas, blended across eta)
+    applied to the pixels read back from the file equals Table.lookup."""
+    spec = TableSpec(kind="transmission", shape=(8, 5, 6), dtype="float32", samples=4)
+    table = bake(spec, Ramp(("transmittance",)))
+    table.data = (table.data + np.random.default_rng(4).random(table.data.shape)).astype(
+        np.float32)  # a ramp is multilinear already: add texel noise so blending shows
+    _, channels = read_raw(table.save(tmp_path / "t.exr"))
+    atlas = channels["R"][0].astype(np.float64)[..., None]
+    n_mu, n_alpha, n_eta = spec.shape
+    t = np.random.default_rng(5).random((500, 3))
+    t_alpha = np.clip(t[:, 1], 0.5 / n_alpha, 1 - 0.5 / n_alpha)
+    x = np.clip(t[:, 2] * n_eta - 0.5, 0, n_eta - 1)
+    k = np.minimum(np.floor(x), n_eta - 2)
+    low, high = (interpolate(atlas, [(k + j + t_alpha) / n_eta, t[:, 0]]) for j in (0, 1))
+    recipe = low + (x - k)[:, None] * (high - low)
+    params = [a.to_value(t[:, j]) for j, a in enumerate(spec.axes)]
+    assert np.allclose(recipe, table.lookup(*params), rtol=0, atol=1e-12)
