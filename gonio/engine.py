@@ -278,6 +278,7 @@ class Engine:
                     self.writer.append(record)
                     if self.progress:
                         self.progress.update(record)
+                self.writer.wait_stored()  # the last fsync: a disk error fails here, not in _finish
         except StopRun as exc:
             status, reason = "failed", str(exc)
         except (Aborted, KeyboardInterrupt) as exc:

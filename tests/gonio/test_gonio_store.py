@@ -1,11 +1,15 @@
 """The run store: append-only readings, torn last lines, resume without duplicates."""
 
+import errno
 import json
 import math
+import os
+import time
 
 import numpy as np
 import pytest
 
+import gonio.store
 from gonio.errors import RunError
 from gonio.store import READING_DTYPE, RunWriter, open_run
 
@@ -94,3 +98,47 @@ def test_a_run_has_one_writer_at_a_time(writer):
     again = RunWriter.resume(writer.path)  # the lock went with the first writer
     assert again.next_index == 1
     again.close()
+
+
+def _readings_fsyncs(monkeypatch, fail: bool = False) -> list[tuple[int, int]]:
+    """Route the store's fsyncs of readings.jsonl through a slow recorder (file size when the
+    fsync started and when it returned) or, with fail, an I/O error; returns the records."""
+    real_fsync, calls = os.fsync, []
+
+    def fsync(fd: int) -> None:
+        if not os.readlink(f"/proc/self/fd/{fd}").endswith("readings.jsonl"):
+            return real_fsync(fd)
+        if fail:
+            raise OSError(errno.EIO, "Input/output error")
+        started = os.fstat(fd).st_size
+        time.sleep(0.02)
+        real_fsync(fd)
+        calls.append((started, os.fstat(fd).st_size))
+
+    monkeypatch.setattr(gonio.store.os, "fsync", fsync)
+    return calls
+
+
+def test_each_line_is_written_at_once_and_fsynced_before_the_next(writer, monkeypatch):
+    """A line is in the file when append returns (a reader, or a kill right after, sees it);
+    its fsync runs on while the engine goes on, the next line waits for it, and meta.json
+    reports the run stopped only once the last one returned."""
+    fsyncs = _readings_fsyncs(monkeypatch)
+    for i in range(4):
+        writer.append(row(i))
+        assert len(open_run(writer.path)) == i + 1
+    writer.set_status("paused", "")
+    size = (writer.path / "readings.jsonl").stat().st_size
+    assert len(fsyncs) == 4  # one per reading, the last one awaited by set_status
+    assert all(start == end for start, end in fsyncs)  # nothing written during an fsync
+    assert [end for _, end in fsyncs] == sorted({end for _, end in fsyncs})
+    assert fsyncs[-1][1] == size
+    assert open_run(writer.path).meta["sessions"][-1]["last_index"] == 3
+
+
+def test_a_failed_fsync_stops_the_writing(writer, monkeypatch):
+    _readings_fsyncs(monkeypatch, fail=True)
+    writer.append(row(0))
+    with pytest.raises(OSError, match="Input/output error"):
+        writer.append(row(1))
+    assert len(open_run(writer.path)) == 1  # no line after the one the disk refused
