@@ -85,7 +85,7 @@ def describe(workers: int | None, scheduler: str | None) -> str:
     if workers is not None:
         return (f"local Dask cluster, {workers} worker process(es) x "
                 f"{threads_per_worker(workers)} thread(s)")
-    return f"in-process (Dask threaded scheduler, {usable_cores()} thread(s))"
+    return f"in-process, Dask threaded scheduler, {usable_cores()} thread(s)"
 
 
 def map_tasks(fn: Callable, arguments: Sequence[tuple], client=None,
