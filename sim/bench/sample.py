@@ -13,7 +13,7 @@ their share of the light exceeds `visible_fraction` (the detector's noise floor)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -410,13 +410,6 @@ class Sample:
             edge_i = min(edge_h * stretch_i, _angle_to_horizon(wi))
         return LobeScales(max(float(w_h * stretch_i), 1e-9), max(float(w_h * stretch_o), 1e-9),
                           float(edge_i), float(edge_o), edges)
-
-    def edge_within(self, wi: np.ndarray, wo: np.ndarray, angle_rad: float) -> bool:
-        """Whether an edge of the model (not a table kink) lies within angle_rad of wo, or may
-        (a slab, whose edges are not known as circles): a cap there can hold a sliver of the
-        lobe that a few nodes miss."""
-        edges = self.edge_circles(wi)
-        return edges is None or replace(edges, table_levels=()).distance(wi, wo) < angle_rad
 
     def edge_circles(self, wi: np.ndarray) -> EdgeCircles | None:
         """The integrand's edges as circles at incidence about wi (3,), or None for a slab (its

@@ -88,14 +88,15 @@ class Bench:
 
         Far from the lobe's peak, a low-order probe that finds less than NEGLIGIBLE of the
         incident power is returned as is: the order rule would spend thousands of evaluations
-        on a tail no detector can see. Not near an edge of the lobe: there the aperture may
-        hold a sliver of the lobe that the probe's few nodes miss."""
+        on a tail no detector can see. The probe's cap is split along any edge of the lobe
+        inside it, so a sliver of the lobe past an edge gets nodes of its own."""
         wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
         peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
         reach = self.integral.aperture_rad + self.integral.divergence_rad
         far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
-        if self.order is None and far and not self.sample.edge_within(wi, wo, reach):
-            probe = self.probe.integrate(self.sample.integrand, wi, wo, ONE_POINT)
+        if self.order is None and far:
+            split = ONE_POINT._replace(edge_o=0.0, edges=self.sample.edge_circles(wi))
+            probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
             if probe < NEGLIGIBLE:
                 return probe
         return self.integral.integrate(self.sample.integrand, wi, wo,
