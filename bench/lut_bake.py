@@ -9,6 +9,11 @@ On a machine whose in-process bake already uses every core a cluster on that sam
 cannot be faster: its speed-up measures what the process boundary costs (serialising tiles
 and results, one scheduler), not added compute. A cluster pays off with more machines.
 
+Thread policy, on a smaller table (median of 3 interleaved runs, wall and CPU seconds): the
+policy of sim.lut.cluster (Dask threads own the cores, kernels one thread per task) against
+numba owning the cores (a plain loop over tiles in this thread, kernels on every core) and
+against no policy (Dask threads x numba threads, oversubscribed); all must give equal bits.
+
 Accuracy: max and RMS error of entries and of random lookups for each size and dtype; for
 transmission, lookups split into points near the total-internal-reflection edge
 (eta < 1, |N.V - N.V_c| <= TIR_BAND) and the rest.
@@ -21,12 +26,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import statistics
 import time
 
 import numpy as np
 
 from sim.lut import Table, TableSpec, bake
-from sim.lut.bake import grid_points
+from sim.lut.bake import grid_points, integrate_tile
 from sim.lut.cluster import dask_client, describe, usable_cores
 from sim.lut.model import ModelEstimator
 from sim.lut.validate import (
@@ -98,6 +104,54 @@ def bake_times(shape: tuple[int, ...], samples: int) -> None:
     print(f"load average after: {load()}")
 
 
+def tiles_of(spec: TableSpec) -> list[tuple]:
+    """integrate_tile's arguments for every tile of spec, with the model's estimator."""
+    points, step = grid_points(spec), spec.tile_entries
+    estimator = ModelEstimator.for_spec(spec)
+    return [(points[s:s + step], estimator, spec.samples, spec.seed, k)
+            for k, s in enumerate(range(0, len(points), step))]
+
+
+def kernels_own_the_cores(spec: TableSpec) -> np.ndarray:
+    """The table's values by a plain loop over tiles: numba's kernels use every core."""
+    return np.concatenate([integrate_tile(*tile) for tile in tiles_of(spec)])
+
+
+def oversubscribed(spec: TableSpec) -> np.ndarray:
+    """The values with Dask threads (one per core) each calling the kernels on every core."""
+    import dask
+
+    tasks = [dask.delayed(integrate_tile)(*tile) for tile in tiles_of(spec)]
+    return np.concatenate(dask.compute(*tasks, scheduler="threads",
+                                       num_workers=usable_cores()))
+
+
+def thread_policy(shape: tuple[int, ...], samples: int, repeats: int = 3) -> None:
+    """Median wall and CPU seconds of three ways to spend the cores; asserts equal bits."""
+    spec = TableSpec(kind="transmission", shape=shape, samples=samples, dtype="float64")
+    ways = {"policy: Dask threads, kernels 1 thread (baseline)":
+            lambda: bake(spec).data.reshape(-1, 1),
+            "kernels on every core, one Python thread": lambda: kernels_own_the_cores(spec),
+            "Dask threads x kernels on every core": lambda: oversubscribed(spec)}
+    times: dict[str, list[tuple[float, float]]] = {name: [] for name in ways}
+    values = {}
+    for _ in range(repeats):
+        for name, way in ways.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            values[name] = way()
+            times[name].append((time.perf_counter() - wall, time.process_time() - cpu))
+    print(f"load average {load()}")
+    base = statistics.median(w for w, _ in times[next(iter(ways))])
+    for name, runs in times.items():
+        wall = statistics.median(w for w, _ in runs)
+        cpu = statistics.median(c for _, c in runs)
+        same = values[name].tobytes() == values[next(iter(ways))].tobytes()
+        print(f"{name:{WIDTH}s}: {wall:7.2f} s ({cpu:6.2f} CPU s)   {base / wall:.2f}x; "
+              f"identical bits: {same}")
+        if not same:
+            raise SystemExit("thread layouts disagree")
+
+
 def accuracy_table(kind: str, shapes: list[tuple[int, ...]], samples_list: list[int],
                    dtypes: list[str], entries: int, points: int,
                    reference_samples: int) -> None:
@@ -148,6 +202,10 @@ def main() -> None:
     shape = (32, 32, 16) if args.quick else (64, 64, 32)
     print(f"== bake time, transmission {'x'.join(map(str, shape))}, {args.samples} samples/entry")
     bake_times(shape, args.samples)
+    small = (32, 32, 4) if args.quick else (64, 64, 8)
+    print(f"== thread policy, transmission {'x'.join(map(str, small))}, {args.samples} "
+          f"samples/entry, {usable_cores()} cores")
+    thread_policy(small, args.samples)
     if args.skip_accuracy:
         return
     samples = [64, 256] if args.quick else [64, 256, 1024]
