@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from sim.lut import Table, TableSpec, bake
-from sim.lut.bake import grid_points, integrate_tile
+from sim.lut.bake import grid_points, integrate_tile, tile_arguments
 from sim.lut.cluster import dask_client, describe, usable_cores
 from sim.lut.model import ModelEstimator
 from sim.lut.validate import (
@@ -106,10 +106,8 @@ def bake_times(shape: tuple[int, ...], samples: int) -> None:
 
 def tiles_of(spec: TableSpec) -> list[tuple]:
     """integrate_tile's arguments for every tile of spec, with the model's estimator."""
-    points, step = grid_points(spec), spec.tile_entries
-    estimator = ModelEstimator.for_spec(spec)
-    return [(points[s:s + step], estimator, spec.samples, spec.seed, k)
-            for k, s in enumerate(range(0, len(points), step))]
+    return tile_arguments(grid_points(spec), ModelEstimator.for_spec(spec), samples=spec.samples,
+                          seed=spec.seed, tile_entries=spec.tile_entries)
 
 
 def kernels_own_the_cores(spec: TableSpec) -> np.ndarray:

@@ -55,15 +55,22 @@ def integrate_tiles(tiles: list[tuple]) -> np.ndarray:
     return np.concatenate([integrate_tile(*tile) for tile in tiles], axis=0)
 
 
+def tile_arguments(params: np.ndarray, estimator: Estimator, *, samples: int, seed: int,
+                   tile_entries: int) -> list[tuple]:
+    """integrate_tile's arguments for each tile of the points (m, d), in order."""
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    return [(params[s:s + tile_entries], estimator, samples, seed, k)
+            for k, s in enumerate(range(0, len(params), tile_entries))]
+
+
 def integrate_points(params: np.ndarray, estimator: Estimator, *, samples: int, seed: int,
                      tile_entries: int, client=None, progress: bool = False) -> np.ndarray:
     """Estimates (m, channels) at parameter points (m, d) with Dask: the threaded scheduler
     when client is None, else the given distributed Client. Consecutive tiles go to one task,
     about TASKS_PER_THREAD tasks per Dask thread (a tile's result does not depend on its
     task, so neither do the bits)."""
-    params = np.ascontiguousarray(params, dtype=np.float64)
-    tiles = [(params[s:s + tile_entries], estimator, samples, seed, k)
-             for k, s in enumerate(range(0, len(params), tile_entries))]
+    tiles = tile_arguments(params, estimator, samples=samples, seed=seed,
+                           tile_entries=tile_entries)
     per_task = max(1, -(-len(tiles) // (TASKS_PER_THREAD * total_threads(client))))
     batches = [(tiles[i:i + per_task],) for i in range(0, len(tiles), per_task)]
     return np.concatenate(map_tasks(integrate_tiles, batches, client, progress), axis=0)
