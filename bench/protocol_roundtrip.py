@@ -5,8 +5,8 @@ bare transport's echo round trip measured in the same run (the floor no protocol
   through pyserial.
 - Modbus TCP on 127.0.0.1: ModbusStage.position() (function 03, two registers) vs a TCP echo
   of a 12-byte request on a plain socket.
-- Modbus RTU over a pty: the same driver call vs the pty echo (the RTU endpoint is a
-  two-pty relay, so its path has one more hop than the echo).
+- Modbus RTU over a pty: the same driver call vs the pty echo (the emulator serves the
+  pty's master on its event loop: the same single pty hop as the echo).
 - Each Modbus transport also times, on the same emulator, stock pymodbus's own sync client
   (what pymodbus alone gives; its RTU client polls the port every millisecond) and the raw
   request frame written and its reply read back with no client library (what the emulator
