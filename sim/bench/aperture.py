@@ -40,12 +40,13 @@ def order_for(q: float, rtol: float) -> int:
 
 def split_order_for(q: float, rtol: float) -> int:
     """Gauss order across and along each piece of a cap split along an edge, for a cap whose
-    half-angle is q local lobe scales (calibrated like order_for, on Gaussian lobes cut by
-    circles at every offset: tests/bench/test_aperture_split.py; 2 orders higher than that
-    calibration asks, for the horizon, where g's fall to zero (masking, the multiple-scattering
-    tables) is not what the lobe's width describes: measured 1e-3 at order 5, 3e-7 at 8)."""
+    half-angle is q local lobe scales: ceil(5 + d + (1.1 + 0.1 d) q^0.7), d = log10(1/rtol),
+    calibrated like order_for on Gaussian lobes cut by circles at every offset
+    (tests/bench/test_aperture_split.py). It starts higher than order_for: the pieces are
+    not round, and at the horizon g's fall to zero (masking, the multiple-scattering tables) is
+    not what the lobe's width describes (measured 1e-3 at order 5, 3e-7 at order 8)."""
     digits = math.log10(1.0 / rtol)
-    return min(MAX_ORDER, math.ceil(4.0 + 0.7 * digits + (0.9 + 0.1 * digits) * q**0.7))
+    return min(MAX_ORDER, math.ceil(5.0 + digits + (1.1 + 0.1 * digits) * q**0.7))
 
 
 def _beam_mean(weights: np.ndarray, n_i: int) -> np.ndarray:
