@@ -71,6 +71,23 @@ def _cutting_circles(edges: EdgeCircles, fixed: np.ndarray, center: np.ndarray,
     return None
 
 
+def _split_inner(g: Integrand, edges: EdgeCircles, fixed: tuple[np.ndarray, float, int],
+                 free: tuple[np.ndarray, float, int], free_is_wo: bool
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+    """At each node of the fixed cap's polar rule, the integral of g over the free cap split
+    along the edge circles there: (the fixed rule's weights, the integrals), or None when no
+    family of circles can be split along. Caps are (centre, half-angle, order)."""
+    fixed_nodes, fixed_weights = cap_rule(*fixed)
+    center, half_angle, n = free
+    cut = _cutting_circles(edges, fixed_nodes, center, half_angle, free_is_wo)
+    if cut is None:
+        return None
+    nodes, weights = split_cap_rule(np.broadcast_to(center, fixed_nodes.shape), half_angle,
+                                    *cut, n, n)
+    pairs = (fixed_nodes[:, None, :], nodes) if free_is_wo else (nodes, fixed_nodes[:, None, :])
+    return fixed_weights, np.sum(g(*pairs) * weights, axis=-1)
+
+
 @dataclass(frozen=True)
 class ApertureIntegral:
     """Aperture of half-angle aperture_rad, beam of divergence half-angle divergence_rad
@@ -127,28 +144,23 @@ class ApertureIntegral:
         fixed_i, fixed_o = self.order if self.order is not None else (None, None)
         beam = self.divergence_rad > 0.0
         if scales.edges is not None and scales.edge_o < self.aperture_rad and fixed_o != 0:
-            n_i = (fixed_i if fixed_i is not None else order_for(
-                SAFETY * self.divergence_rad / self._beam_width(scales), self.rtol / 2)) \
-                if beam else 0
-            wi_nodes, wi_weights = cap_rule(wi, self.divergence_rad, n_i)
-            cut = _cutting_circles(scales.edges, wi_nodes, wo, self.aperture_rad, True)
-            if cut is not None:
-                n = self._split_order(self.aperture_rad, scales.width_o, fixed_o)
-                nodes, weights = split_cap_rule(np.broadcast_to(wo, wi_nodes.shape),
-                                                self.aperture_rad, *cut, n, n)
-                inner = np.sum(g(wi_nodes[:, None, :], nodes) * weights, axis=-1)
+            n_i = 0 if not beam else fixed_i if fixed_i is not None else order_for(
+                SAFETY * self.divergence_rad / self._beam_width(scales), self.rtol / 2)
+            n = self._split_order(self.aperture_rad, scales.width_o, fixed_o)
+            split = _split_inner(g, scales.edges, (wi, self.divergence_rad, n_i),
+                                 (wo, self.aperture_rad, n), free_is_wo=True)
+            if split is not None:
+                wi_weights, inner = split
                 return float(inner @ _beam_mean(wi_weights, n_i))
-        elif (scales.edges is not None and beam and scales.edge_i < self.divergence_rad
-              and fixed_i != 0):
+        if (scales.edges is not None and beam and scales.edge_i < self.divergence_rad
+                and fixed_i != 0):
             n_o = fixed_o if fixed_o is not None else order_for(
                 SAFETY * self.aperture_rad / scales.width_o, self.rtol / 2)
-            wo_nodes, wo_weights = cap_rule(wo, self.aperture_rad, n_o)
-            cut = _cutting_circles(scales.edges, wo_nodes, wi, self.divergence_rad, False)
-            if cut is not None:
-                n = self._split_order(self.divergence_rad, scales.width_i, fixed_i)
-                nodes, weights = split_cap_rule(np.broadcast_to(wi, wo_nodes.shape),
-                                                self.divergence_rad, *cut, n, n)
-                inner = np.sum(g(nodes, wo_nodes[:, None, :]) * weights, axis=-1)
+            n = self._split_order(self.divergence_rad, scales.width_i, fixed_i)
+            split = _split_inner(g, scales.edges, (wo, self.aperture_rad, n_o),
+                                 (wi, self.divergence_rad, n), free_is_wo=False)
+            if split is not None:
+                wo_weights, inner = split
                 return float(inner @ wo_weights) / cap_solid_angle(self.divergence_rad)
         return self._product(g, wi, wo, *self.orders(scales))
 

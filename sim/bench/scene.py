@@ -89,13 +89,18 @@ class Bench:
         Far from the lobe's peak, a low-order probe that finds less than NEGLIGIBLE of the
         incident power is returned as is: the order rule would spend thousands of evaluations
         on a tail no detector can see. The probe's cap is split along any edge of the lobe
-        inside it, so a sliver of the lobe past an edge gets nodes of its own."""
+        inside it, so a sliver of the lobe past an edge gets nodes of its own; with an edge
+        inside the beam cone (which the probe's one incident direction cannot see) the full
+        rule is used."""
         wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
         peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
         reach = self.integral.aperture_rad + self.integral.divergence_rad
         far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
-        if self.order is None and far:
-            split = ONE_POINT._replace(edge_o=0.0, edges=self.sample.edge_circles(wi))
+        edges = self.sample.edge_circles(wi)
+        edge_in_beam = edges is not None and edges.distance(
+            wo, wi, free_is_wo=False) < self.integral.divergence_rad
+        if self.order is None and far and not edge_in_beam:
+            split = ONE_POINT._replace(edge_o=0.0, edges=edges)
             probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
             if probe < NEGLIGIBLE:
                 return probe
