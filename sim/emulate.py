@@ -203,7 +203,9 @@ class _Builder:
     def serve_modbus(self) -> None:
         """One Modbus server per bus or TCP endpoint, with all its collected units."""
         for (transport, _), units in self.modbus.items():
-            server = ModbusEmulatorServer(transport, {u: emu for u, (_, emu) in units.items()})
+            first = self.devices[next(iter(units.values()))[0]]  # a bus has one baud rate
+            server = ModbusEmulatorServer(transport, {u: emu for u, (_, emu) in units.items()},
+                                          baudrate=int(first.get("baudrate", 19200)))
             endpoint = server.start()
             self.bench._stops.append(server.stop)
             for name, _ in units.values():
