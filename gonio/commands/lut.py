@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="include multiple scattering (Heitz 2016 random walk; transmission)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, metavar="N",
-                       help="bake on a local Dask cluster of N worker processes")
+                       help="bake on a local Dask cluster of N worker processes sharing the "
+                            "cores (cores // N threads each)")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="bake on an existing Dask cluster, e.g. tcp://host:8786")
     p.add_argument("--validate", action="store_true",
