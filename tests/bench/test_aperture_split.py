@@ -12,7 +12,7 @@ from scipy.optimize import brentq
 from scipy.stats import qmc
 
 from sim.bench import build_bench
-from sim.bench.aperture import split_order_for
+from sim.bench.aperture import SPLIT_MAX_ORDER, split_order_for
 from sim.bench.geometry import sample_frame_directions
 from sim.bench.quadrature import (
     cap_rule,
@@ -128,6 +128,8 @@ def test_split_order_rule_meets_its_accuracy_on_cut_gaussian_lobes():
             if ref < 1e-300:
                 continue
             n = split_order_for(beta * (w + r) / w**2, rtol)
+            if n == SPLIT_MAX_ORDER:
+                continue  # a lobe too narrow for the top order (stated in docs/bench.md)
             worst = max(worst, abs(split_integral(g, center, beta, axis, level, n) / ref - 1))
         assert worst < allowed, (rtol, worst)
 
