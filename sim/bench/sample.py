@@ -401,7 +401,7 @@ class Sample:
         edges = self.edge_circles(wi)
         if edges is not None:
             edge_o, edge_i = edges.distance(wi, wo), edges.distance(wo, wi, free_is_wo=False)
-        else:  # a slab's transmission: the edges of f at w_eval, carried to wo and wi
+        else:  # a slab: the edges of f at w_eval (inside the glass), carried to wo and wi
             edge_h = min(abs(float(wi @ h)), abs(float(w_eval @ h)),
                          float(np.arcsin(min(1.0, h[2]))))
             if wi[2] * w_eval[2] < 0 and eta_i != eta_o:
