@@ -268,10 +268,16 @@ class RunWriter:
         self._pending = self._syncer.submit(os.fsync, self._fh.fileno())
 
     def wait_stored(self) -> None:
-        """Return once every appended reading is fsynced (OSError if the disk refused)."""
-        pending, self._pending = self._pending, None
-        if pending is not None:
+        """Return once every appended reading is fsynced (OSError, once, if the disk refused).
+        Interrupted (Ctrl-C), the fsync stays pending: the next call waits for it again."""
+        pending = self._pending
+        if pending is None:
+            return
+        try:
             pending.result()
+        finally:
+            if pending.done():
+                self._pending = None
 
     def close(self) -> None:
         """Wait for the last fsync, then close the readings file."""

@@ -4,6 +4,8 @@ import errno
 import json
 import math
 import os
+import signal
+import threading
 import time
 
 import numpy as np
@@ -100,7 +102,8 @@ def test_a_run_has_one_writer_at_a_time(writer):
     again.close()
 
 
-def _readings_fsyncs(monkeypatch, fail: bool = False) -> list[tuple[int, int]]:
+def _readings_fsyncs(monkeypatch, fail: bool = False, slow_s: float = 0.02
+                     ) -> list[tuple[int, int]]:
     """Route the store's fsyncs of readings.jsonl through a slow recorder (file size when the
     fsync started and when it returned) or, with fail, an I/O error; returns the records."""
     real_fsync, calls = os.fsync, []
@@ -111,7 +114,7 @@ def _readings_fsyncs(monkeypatch, fail: bool = False) -> list[tuple[int, int]]:
         if fail:
             raise OSError(errno.EIO, "Input/output error")
         started = os.fstat(fd).st_size
-        time.sleep(0.02)
+        time.sleep(slow_s)
         real_fsync(fd)
         calls.append((started, os.fstat(fd).st_size))
 
@@ -142,3 +145,18 @@ def test_a_failed_fsync_stops_the_writing(writer, monkeypatch):
     with pytest.raises(OSError, match="Input/output error"):
         writer.append(row(1))
     assert len(open_run(writer.path)) == 1  # no line after the one the disk refused
+
+
+def test_ctrl_c_while_waiting_for_an_fsync_leaves_it_awaited(writer, monkeypatch):
+    """A second Ctrl-C (KeyboardInterrupt) that lands while append waits for the previous
+    line's fsync: the run then stops, and meta.json must still come after that fsync."""
+    fsyncs = _readings_fsyncs(monkeypatch, slow_s=1.0)
+    writer.append(row(0))
+    threading.Timer(0.1, signal.pthread_kill,
+                    (threading.main_thread().ident, signal.SIGINT)).start()
+    with pytest.raises(KeyboardInterrupt):
+        writer.append(row(1))
+    assert fsyncs == []  # interrupted before the fsync of line 0 returned
+    writer.set_status("aborted", "aborted by the user (Ctrl-C)")
+    assert len(fsyncs) == 1  # set_status waited for it
+    assert len(open_run(writer.path)) == 1
