@@ -103,7 +103,7 @@ def edge_inside(bench, where: list[dict[str, float]]) -> np.ndarray:
     out = []
     for p in where:
         wi, wo = sample_frame_directions(p, flipped=bench.sample.flipped)
-        edges = replace(bench.sample.edge_circles(wi), table_levels=())
+        edges = replace(bench.sample.edge_circles(wi), table_step_deg=None)
         out.append(edges.distance(wi, wo) < bench.integral.aperture_rad)
     return np.array(out)
 

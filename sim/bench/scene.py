@@ -100,7 +100,8 @@ class Bench:
         edge_in_beam = edges is not None and edges.distance(
             wo, wi, free_is_wo=False) < self.integral.divergence_rad
         if self.order is None and far and not edge_in_beam:
-            split = ONE_POINT._replace(edge_o=0.0, edges=edges)
+            model_edges = None if edges is None else replace(edges, table_step_deg=None)
+            split = ONE_POINT._replace(edge_o=0.0, edges=model_edges)
             probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
             if probe < NEGLIGIBLE:
                 return probe
