@@ -95,28 +95,31 @@ def bare_round_trip_s(emulator, lines: tuple[bytes, ...], eol: bytes, n: int = 2
         emulator.stop()
 
 
-def physics_replay_s(positions_file: Path) -> float:
-    """Seconds the bench takes for the readings at the stage positions in positions_file
-    (rows of ROLES), in order, after the emulators' warm-up: run in a fresh process, so no
-    table the scan walked is warm here."""
+def physics_replay_s(positions_file: Path) -> tuple[float, float]:
+    """Seconds (wall, CPU) the bench takes for the readings at the stage positions in
+    positions_file (rows of ROLES), in order, after the emulators' warm-up: run in a fresh
+    process, so no table the scan walked is warm here. CPU time shows how much of the wall
+    time a loaded machine added."""
     out = subprocess.run([sys.executable, __file__, "--replay-physics", str(positions_file)],
                          capture_output=True, text=True, check=True)
-    return float(out.stdout.split()[-1])
+    wall, cpu = map(float, out.stdout.split()[-2:])
+    return wall, cpu
 
 
 def _replay_physics(positions_file: Path) -> None:
-    """The child of physics_replay_s: print the seconds of the replayed evaluations."""
+    """The child of physics_replay_s: print the wall and CPU seconds of the evaluations."""
     sim = parse_config(tomllib.loads(config_text())).sim
     here = dict.fromkeys(ROLES, 0.0)
     source = build_power_source(sim, lambda: here)
     source.bench.warm_up()
-    seconds = 0.0
+    wall = cpu = 0.0
     for row in np.load(positions_file):
         here.update(zip(ROLES, map(float, row), strict=True))
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         source.power_w()
-        seconds += time.perf_counter() - t0
-    print(seconds)
+        wall += time.perf_counter() - t0
+        cpu += time.thread_time() - c0
+    print(wall, cpu)
 
 
 def fsync_s(folder: Path, n: int, line_bytes: int) -> float:
@@ -164,7 +167,7 @@ def main() -> None:
         line_bytes = round((result.path / READINGS).stat().st_size / max(len(r), 1))
         sync_s = fsync_s(tmp, n, line_bytes)
         np.save(tmp / "positions.npy", np.stack([r[f"{role}_deg"] for role in ROLES], axis=1))
-        bench_s = physics_replay_s(tmp / "positions.npy")
+        bench_s, bench_cpu_s = physics_replay_s(tmp / "positions.npy")
     assert result.outcome.status == "completed" and len(r) == n, result.outcome
     loop_s = float(r["t_s"][-1] - r["t_s"][0]) * n / (n - 1)
     esp_s = bare_round_trip_s(EspEmulator(VirtualClock(math.inf), {1: {}}), ESP_LINES, b"\r\n")
@@ -175,7 +178,8 @@ def main() -> None:
     print(f"  round trips needed: esp {requests['esp']} ({requests['esp'] / n:.2f}/point), "
           f"pm100 {requests['pm100']} ({requests['pm100'] / n:.2f}/point)")
     print(f"  bare round trip: esp {esp_s * 1e3:.3f} ms, pm100 {pm_s * 1e3:.3f} ms; "
-          f"bench physics at the scan's positions {bench_s / n * 1e3:.3f} ms/reading; "
+          f"bench physics at the scan's positions {bench_s / n * 1e3:.3f} ms/reading "
+          f"({bench_cpu_s / n * 1e3:.3f} ms of CPU); "
           f"fsync of a {line_bytes}-byte line {sync_s / n * 1e3:.3f} ms")
     print(f"{'':2}{'what':<50}{'seconds':>9}{'points/s':>10}")
     floor_all = floor_s + bench_s + sync_s
