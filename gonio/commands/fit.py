@@ -115,6 +115,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Above this alpha, multiple scattering is a visible part of a rough dielectric's lobe.
+ROUGH_ALPHA = 0.1
+
+
 def summary(out: dict) -> str:
     """Human-readable lines of a fit result dict."""
     lines = [f"run {out['run']}: {out['distribution']} ({out['masking']} masking)"]
@@ -134,6 +138,12 @@ def summary(out: dict) -> str:
     if out["chi2_dof_fit"] > 3.0:
         lines.append("  warning: chi2/dof well above 1: the model does not describe the fitted "
                      "points within their uncertainties (see gonio plot RUN --fit)")
+        alpha = max(p["value"] for name, p in out["parameters"].items()
+                    if name.startswith("alpha"))
+        if alpha > ROUGH_ALPHA and not out.get("multiple_scattering"):
+            lines.append(f"  hint: at alpha {alpha:.3g} light scatters more than once between "
+                         "microfacets, which single scattering leaves out: try "
+                         "--multiple-scattering")
     if out.get("multiple_scattering"):
         ms = out["multiple_scattering"]
         lines.append(f"  multiple scattering: orders >= 2 by {ms['walks']} random walks per "

@@ -1,0 +1,31 @@
+"""`gonio fit`'s summary: a rough sample fitted badly without multiple scattering gets a hint
+to add it; a good fit, a smooth sample or a fit that has it gets none."""
+
+import pytest
+
+from gonio.commands.fit import summary
+
+
+def fit_dict(alpha: float, chi2: float, multiple_scattering: bool) -> dict:
+    out = {"run": "r", "distribution": "ggx", "masking": "separable",
+           "parameters": {"alpha": {"value": alpha, "sigma": 1e-3},
+                          "eta": {"value": 1.51, "fixed": True}},
+           "chi2_dof_fit": chi2, "n_fit": 133, "chi2_dof_heldout": chi2, "n_heldout": 399,
+           "candidates": [{"distribution": "ggx", "masking": "separable",
+                           "chi2_dof_fit": chi2}],
+           "clearly_preferred": True}
+    if multiple_scattering:
+        out["multiple_scattering"] = {"walks": 32768, "seed": 0}
+    return out
+
+
+@pytest.mark.parametrize("alpha, chi2, ms, hinted", [
+    (0.40, 1.96e5, False, True),
+    (0.40, 1.4, False, False),
+    (0.023, 50.0, False, False),
+    (0.40, 50.0, True, False),
+])
+def test_multiple_scattering_hint(alpha, chi2, ms, hinted):
+    text = summary(fit_dict(alpha, chi2, ms))
+    assert ("try --multiple-scattering" in text) is hinted
+    assert ("warning: chi2/dof well above 1" in text) is (chi2 > 3.0)
