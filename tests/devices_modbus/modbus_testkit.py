@@ -1,5 +1,6 @@
 """Shared helpers of the Modbus tests: the shipped maps and endpoint arguments for drivers."""
 
+import struct
 from pathlib import Path
 
 from sim.devices.modbus_server import ModbusEmulatorServer
@@ -8,6 +9,16 @@ MAPS = Path(__file__).resolve().parents[2] / "examples" / "registermaps"
 STAGE_MAP = MAPS / "stepper-drive.toml"
 DETECTOR_MAP = MAPS / "photodiode-adc.toml"
 STAGE_UNIT, DETECTOR_UNIT, SECOND_STAGE_UNIT = 1, 2, 3
+
+
+def crc16(data: bytes) -> bytes:
+    """Modbus CRC-16 (poly 0xA001, init 0xFFFF), low byte first: written here, not imported."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return struct.pack("<H", crc)
 
 
 def with_word_order(src: Path, order: str, folder: Path) -> Path:

@@ -9,7 +9,7 @@ import struct
 import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from modbus_testkit import DETECTOR_MAP, STAGE_MAP  # noqa: I001 - the test folder's own fixtures
+from modbus_testkit import DETECTOR_MAP, STAGE_MAP, crc16  # noqa: I001 - the test folder's own fixtures
 
 from drivers.modbus_stage import ModbusStage
 from sim.devices.modbus_detector import ModbusDetectorEmulator
@@ -21,16 +21,6 @@ from sim.devices.photodiode import ConstantPower
 FUZZ = settings(max_examples=50, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow])
 ALLOWED_EXCEPTIONS = {1, 2, 3, 11}  # 04 would mean a unit failed inside
-
-
-def crc16(data: bytes) -> bytes:
-    """Modbus CRC-16 (poly 0xA001, init 0xFFFF), low byte first: written here, not imported."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return struct.pack("<H", crc)
 
 
 @st.composite

@@ -5,14 +5,13 @@ a pulled-cable fault cuts the line only after the host has read the last reply."
 
 import math
 import os
-import struct
 import threading
 import time
 import tty
 
 import pytest
 import serial
-from modbus_testkit import STAGE_MAP  # noqa: I001 - the test folder's own helpers
+from modbus_testkit import STAGE_MAP, crc16  # noqa: I001 - the test folder's own helpers
 
 from drivers.base import DeviceTimeout
 from drivers.modbus_rtu_client import RtuClient
@@ -21,16 +20,6 @@ from sim.devices.faults import FaultSpec
 from sim.devices.modbus_server import ModbusEmulatorServer, rtu_silent_interval_s
 from sim.devices.modbus_stage import ModbusStageEmulator
 from sim.devices.motion import VirtualClock
-
-
-def crc16(data: bytes) -> bytes:
-    """Modbus CRC-16 (poly 0xA001, init 0xFFFF), low byte first: written here, not imported."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return struct.pack("<H", crc)
 
 
 def frame(body: bytes) -> bytes:
