@@ -312,6 +312,24 @@ if AVAILABLE:
             g[j], g[j + 1], g[j + 2] = f[j] * inv, f[j + 1] * inv, f[j + 2] * inv
         return g
 
+    @njit(cache=True, error_model="numpy")
+    def _one_plus_lambda(ax, ay, w, k):
+        """1 + Lambda of GGX for direction k of w (N, 3), as the scalar kernel computes it."""
+        x, y, z = _unit(w[k, 0], w[k, 1], w[k, 2])
+        return 1.0 + _cos_lambda(0, ax, ay, x, y, z) / abs(z)
+
+    @njit(cache=True, error_model="numpy")
+    def _times_beta(x, ax, ay, wi, wo, k):
+        """x B(1 + Lambda_i, 1 + Lambda_o) for pair k (log form, _log_beta), or NaN when that
+        is not a finite number above TINY: the caller then recomputes the pair in the scalar
+        kernel. The SIMD blocks leave this factor of correlated transmission to it."""
+        p, q = _one_plus_lambda(ax, ay, wi, k), _one_plus_lambda(ax, ay, wo, k)
+        if max(p, q) < STIRLING_FROM:  # _log_beta's first region without the log and exp
+            v = x * (math.gamma(min(p, q)) * (math.gamma(max(p, q)) / math.gamma(p + q)))
+        else:
+            v = x * math.exp(_log_beta(p, q))
+        return v if TINY < v < math.inf else math.nan
+
     @njit(cache=True, error_model="numpy", inline="always")
     def _block_constants(ax, ay, eta):
         """Per-call constants of the SIMD blocks: 1/alpha_x, 1/alpha_y, pi alpha_x alpha_y, and
@@ -326,7 +344,9 @@ if AVAILABLE:
     def _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on, res):
         """SIMD loop of _ggx_dielectric over flat (3 m) wi and wo into res (m): 3 sqrt and 1
         division per pair; pairs it cannot vouch for (off unit length, near-grazing, tiny or
-        huge intermediates, correlated transmission) are left NaN.
+        huge intermediates) are left NaN. Correlated transmission (mode 1) leaves -f / B(P, Q)
+        in res, negative as the mark for the caller to multiply the Beta function in
+        (_times_beta); the block spends no division and no store on it.
         Calls nothing but inlined helpers: numba compiles a callee with its caller's fastmath
         flags, so that kernels stay free of any flags given here."""
         _prefer_512_bit_vectors()
@@ -378,7 +398,8 @@ if AVAILABLE:
             if mode == 0:
                 g_den = (iz + s_i) * (aoz + s_o)
             elif mode == 1:
-                g_den = aoz * s_i + iz * s_o if refl else 1.0  # Beta G2: scalar pass
+                # transmission: G2 / (iz aoz) = B(P, Q) / (iz aoz), B from the caller
+                g_den = aoz * s_i + iz * s_o if refl else iz * aoz
             else:
                 g_den = iz + s_i
             # F = e2m1^2 (b^2 + x^2 a^2) / (2 a^2 b^2); T = 2 p (b + e^2 a) / (a b)
@@ -397,14 +418,16 @@ if AVAILABLE:
             far += (abs(di) > UNIT_TOL) | (abs(do) > UNIT_TOL)
             safe = ((abs(di) <= UNIT_TOL) & (abs(do) <= UNIT_TOL) & (iz >= SAFE_MIN)
                     & (aoz >= SAFE_MIN) & (n2 >= SAFE_MIN * SAFE_MIN))
-            sure = (num > TINY) & (den > TINY) & (val < math.inf) & ((mode != 1) | refl)
+            sure = (num > TINY) & (den > TINY) & (val < math.inf)
+            val = -val if (mode == 1) & (not refl) else val
             res[j] = math.nan if not safe or (ok and not sure) else (val if ok else 0.0)
         return far
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def _ggx_dielectric(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
         """GGX dielectric eval (mode 0 separable, 1 correlated) or visible pdf (mode 2): SIMD
-        blocks, then the pairs a block left NaN by the scalar kernel."""
+        blocks, the Beta factor of correlated transmission, then the pairs left NaN by the
+        scalar kernel."""
         n = wi.shape[0]
         out = np.empty(n)
         masking, want_pdf = (1 if mode == 1 else 0), mode == 2
@@ -417,6 +440,8 @@ if AVAILABLE:
                 _ggx_dielectric_block(_normalised(fi), _normalised(fo), ax, ay, eta, mode,
                                       refl_on, trans_on, out[start:stop])
             for k in range(start, stop):
+                if out[k] < 0.0:  # correlated transmission: times B(1 + Lambda_i, 1 + Lambda_o)
+                    out[k] = _times_beta(-out[k], ax, ay, wi, wo, k)
                 if math.isnan(out[k]):
                     out[k] = _dielectric_one(wi, wo, k, 0, ax, ay, eta, masking, refl_on,
                                              trans_on, 0, want_pdf)
@@ -594,14 +619,15 @@ if AVAILABLE:
     def _ggx_visible_sample_block(fi, fu, ax, ay, eta, correlated, refl_on, trans_on, fwo,
                                   weight, pdf):
         """SIMD loop of _ggx_visible_sample over flat (3 m) wi and u into fwo (3 m), weight and
-        pdf (m): 9 sqrt and 5 divisions per sample, no libm calls; samples it cannot vouch
-        for (wi off unit length or near grazing, u outside [0, 1], eta = 1
-        transmission, tiny or huge results, correlated transmission) get pdf NaN. Calls
-        nothing but inlined helpers (see _ggx_dielectric_block)."""
+        pdf (m): 9 sqrt and 5 divisions per sample, no libm calls;
+        samples it cannot vouch for (wi off unit length or near grazing, u outside [0, 1],
+        eta = 1 transmission, tiny or huge results) get pdf NaN. Correlated transmission
+        leaves -weight / B(P, Q) in weight, negative as the mark for the caller to multiply
+        the Beta function in (_times_beta). Calls nothing but inlined helpers (see
+        _ggx_dielectric_block)."""
         _prefer_512_bit_vectors()
         inv_ax, inv_ay, pi_axay, e_in, em1_in, e2m1_out, e2m1_in = _block_constants(ax, ay, eta)
         both = refl_on and trans_on
-        separable = not correlated
         far = 0
         for j in range(pdf.shape[0]):
             ix, iy, iz = fi[3 * j], fi[3 * j + 1], fi[3 * j + 2]
@@ -666,8 +692,12 @@ if AVAILABLE:
             w_lobe = 1.0 if both else lobe
             p_num = choice if reflected else choice * (2.0 * c) * e * e_ct
             p_den = pi_axay * (q * q) * (iz + s_i) * (2.0 if reflected else gap * gap)
+            # correlated transmission: weight = aoz (iz + Li) B(P, Q) / (iz aoz) = P B(P, Q),
+            # P = 1 + Lambda_i = (iz + s_i) / (2 iz): left as (iz + s_i) / (2 iz) without B
+            trans_beta = correlated & (not reflected)
             if correlated:
-                w_num, w_den = aoz * (iz + s_i), aoz * s_i + iz * s_o
+                w_num = iz + s_i if trans_beta else aoz * (iz + s_i)
+                w_den = 2.0 * iz if trans_beta else aoz * s_i + iz * s_o
             else:
                 w_num, w_den = 2.0 * aoz, aoz + s_o
             # one division for pdf and weight: p = p_num w_den / (p_den w_den) and so on
@@ -680,20 +710,22 @@ if AVAILABLE:
             safe = ((abs(di) <= UNIT_TOL) & (iz >= SAFE_MIN) & (u1 >= 0.0) & (u1 <= 1.0)
                     & (u2 >= 0.0) & (u2 <= 1.0))
             sure = ((p > TINY) & (p < math.inf) & (w > TINY) & (w < math.inf)
-                    & (reflected | separable) & (p_den * w_den > TINY))
+                    & (p_den * w_den > TINY))
             fwo[3 * j] = ox if ok else 0.0
             fwo[3 * j + 1] = oy if ok else 0.0
             fwo[3 * j + 2] = oz * sgn if ok else 0.0
-            weight[j] = w if ok else 0.0
+            weight[j] = (-w if trans_beta else w) if ok else 0.0
             pdf[j] = math.nan if not safe or (ok and not sure) else (p if ok else 0.0)
         return far
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def _ggx_visible_sample(wi, u, ax, ay, eta, correlated, refl_on, trans_on):
-        """sample() of the GGX RoughDielectric with visible-normal sampling: SIMD blocks, then
-        the samples a block left NaN by _dielectric_sample_one."""
+        """sample() of the GGX RoughDielectric with visible-normal sampling: SIMD blocks, the
+        Beta factor of correlated transmission, then the samples left NaN by
+        _dielectric_sample_one."""
         n = wi.shape[0]
         wo = np.empty(3 * n)
+        wo2 = wo.reshape((n, 3))
         weight = np.empty(n)
         pdf = np.empty(n)
         masking = 1 if correlated else 0
@@ -706,11 +738,14 @@ if AVAILABLE:
                 _ggx_visible_sample_block(_normalised(fi), fu, ax, ay, eta, correlated,
                                           refl_on, trans_on, *outs)
             for k in range(start, stop):
+                if weight[k] < 0.0 and not math.isnan(pdf[k]):  # correlated transmission
+                    weight[k] = _times_beta(-weight[k], ax, ay, wi, wo2, k)
+                    pdf[k] = math.nan if math.isnan(weight[k]) else pdf[k]
                 if math.isnan(pdf[k]):
                     wo[3 * k], wo[3 * k + 1], wo[3 * k + 2], weight[k], pdf[k] = (
                         _dielectric_sample_one(wi, u, k, 0, ax, ay, eta, masking, refl_on,
                                                trans_on, 0))
-        return wo.reshape((n, 3)), weight, pdf
+        return wo2, weight, pdf
 
     def dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
         """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero; GGX with
