@@ -1,17 +1,30 @@
 """What the instrument averages a BSDF over before the detector reports it: the aperture's cap
 of outgoing directions and the divergent beam's cone of incoming ones (the fit's forward model
-of a reading, beside the point model)."""
+of a reading, beside the point model). Where an edge of the model (a jump or kink on a known
+circle: sim.bench.sample.EdgeCircles) crosses the aperture, the aperture is split along it as
+the bench splits it (sim.bench.quadrature.split_cap_rule), so the two agree to ~1e-5 there."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-EDGE_ORDER = 40  # radial order over an aperture that straddles an edge of the lobe (the bench's)
-RIM_POINTS = 24  # directions on the aperture's rim probed for an edge of the lobe
+from sim.bench.aperture import order_for, split_order_for
+from sim.bench.quadrature import cap_rule, split_cap_rule
+from sim.bench.sample import EdgeCircles
+
+#: Radial order over an aperture that straddles an edge of the lobe not on a known circle (a
+#: model whose edges are not known, a cap too near a circle family's axis): the bench's top order
+EDGE_ORDER = 40
+RIM_POINTS = 24  # directions on the aperture's rim probed for an edge of such a model
+#: Accuracy asked of a split aperture (sim.bench.aperture.split_order_for), so the fit's model of
+#: a reading across an edge follows the bench's to ~1e-5 (the data's sigma is a few 1e-4)
+SPLIT_RTOL = 1e-5
+BEAM_MARGIN = 3.0  # beam half-angles by which the beam's tilt may move an edge circle
 
 
 def _rim(w: np.ndarray, half_angle_rad: float, n: int) -> np.ndarray:
@@ -25,57 +38,176 @@ def _rim(w: np.ndarray, half_angle_rad: float, n: int) -> np.ndarray:
     return math.cos(half_angle_rad) * w[:, None, :] + math.sin(half_angle_rad) * ring
 
 
+def model_edges(model: Any) -> EdgeCircles | None:
+    """The circles where a sim.bsdf model jumps or kinks (EdgeCircles, lit from air), from the
+    candidate itself (its eta): a RoughDielectric's or a RoughConductor's; None for another."""
+    if hasattr(model, "eta_complex"):
+        return EdgeCircles(1.0, 1.0, transmits=False)
+    eta = getattr(model, "eta", None)
+    return EdgeCircles(1.0, float(eta), transmits=True) if isinstance(eta, float) else None
+
+
+def _alpha(model: Any) -> float | None:
+    """The model's narrowest roughness, or None when it has no microfacet distribution."""
+    distribution = getattr(model, "distribution", None)
+    if not hasattr(distribution, "alpha_x"):
+        return None
+    return min(distribution.alpha_x, distribution.alpha_y)
+
+
+def _cutting_family(edges: EdgeCircles, wi: np.ndarray, wo: np.ndarray, half_angle: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per point (N) of beam directions wi (N, K, 3) about a cap of half_angle about wo (N, 3):
+    whether an edge circle crosses the cap for some beam direction; whether a family of them
+    does and can be split along for all of them (quadrature.splittable's condition); the first
+    such family's axes (N, K, 3) and its levels (N, K, L), those crossing no cap pushed out of
+    [-1, 1] and sorted last (the bench's choice of family, sim.bench.aperture, for many points
+    at once)."""
+    n, k = wi.shape[:2]
+    crossed, chosen = np.zeros(n, bool), np.zeros(n, bool)
+    axes, levels = np.zeros((n, k, 3)), np.full((n, k, 1), 2.0)
+    for axis, level in edges.circles(wi.reshape(-1, 3), free_is_wo=True):
+        axis, level = axis.reshape(n, k, 3), level.reshape(n, k, level.shape[-1])
+        cos_t = np.clip(np.einsum("nkj,nj->nk", axis, wo), -1.0, 1.0)
+        crosses = (np.abs(level) < 1.0) & (np.abs(
+            np.arccos(cos_t)[..., None] - np.arccos(np.clip(level, -1.0, 1.0))) < half_angle)
+        splits = np.all(np.abs(cos_t) <= math.cos(2.0 * half_angle), axis=1)
+        crossed |= crosses.any(axis=(1, 2))
+        take = ~chosen & crosses.any(axis=(1, 2)) & splits
+        if take.any():
+            # crossing levels first, the others at 2 (outside: a piece of zero weight)
+            level = np.sort(np.where(crosses, level, 2.0), axis=-1)[..., :max(
+                1, int(crosses[take].sum(axis=-1).max()))]
+            width = max(levels.shape[-1], level.shape[-1])
+            levels = np.pad(levels, ((0, 0), (0, 0), (0, width - levels.shape[-1])),
+                            constant_values=2.0)
+            level = np.pad(level, ((0, 0), (0, 0), (0, width - level.shape[-1])),
+                           constant_values=2.0)
+            axes[take], levels[take] = axis[take], level[take]
+            chosen |= take
+    return crossed, chosen, axes, levels
+
+
 @dataclass(frozen=True)
 class Smearing:
     """What the instrument averages the BSDF over: the detector aperture (a cap of half-angle
     aperture_deg about wo, weighted by |cos o| relative to the centre, as the detector collects
     f |cos o| dw and reduction divides by the centre's |cos o|) and the beam's divergence (a
-    cone of half-angle divergence_deg about wi), each a cap rule of the given radial order;
-    an aperture over which the model falls to zero somewhere (an edge of the lobe) gets
-    EDGE_ORDER."""
+    cone of half-angle divergence_deg about wi), each a cap rule of the given radial order.
+    An aperture crossed by one of the model's edge circles (model_edges) is split along them
+    (at each node of the beam's rule, as the bench does); an aperture over which a model of
+    unknown edges falls to zero somewhere gets EDGE_ORDER."""
 
     aperture_deg: float
     aperture_order: int
     divergence_deg: float
     divergence_order: int
 
+    def _nodes(self, w: np.ndarray, deg: float, order: int) -> tuple[np.ndarray, np.ndarray]:
+        """Cap rule nodes (N, K, 3) about w (N, 3) and weights (K,) summing to 1."""
+        if deg <= 0.0 or order <= 0:
+            return w[:, None, :], np.ones(1)
+        x, weight = cap_rule(w, math.radians(deg), order)
+        return x, weight / weight.sum()
+
+    def _product(self, model: Any, wi: np.ndarray, wo: np.ndarray, order: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """The product rule of the beam cone and an aperture of this order: (average (N,),
+        whether the model is zero on some nodes and not on all)."""
+        wi_n, wi_w = self._nodes(wi, self.divergence_deg, self.divergence_order)
+        wo_n, wo_w = self._nodes(wo, self.aperture_deg, order)
+        f = model.eval(
+            np.broadcast_to(wi_n[:, :, None, :], (len(wi), len(wi_w), len(wo_w), 3)),
+            np.broadcast_to(wo_n[:, None, :, :], (len(wo), len(wi_w), len(wo_w), 3)))
+        # the detector collects f |cos o| dw; reduction divides by |cos o| at the centre
+        cos_ratio = np.abs(wo_n[..., 2]) / np.maximum(np.abs(wo[:, None, 2]), 1e-300)
+        lit = (f > 0).reshape(len(wi), -1)
+        straddles = lit.any(axis=1) & ~lit.all(axis=1)
+        return np.einsum("nij,i,nj->n", f, wi_w, wo_w * cos_ratio), straddles
+
+    def _edge_beam_order(self) -> int:
+        """The beam rule's order where an edge crosses the aperture: the beam moves the edge
+        across the aperture, whose integral varies on the aperture's scale, not the lobe's
+        (a point beam is off by ~1e-4 of the peak at 0.03 deg; the bench's _beam_width)."""
+        if self.divergence_deg <= 0.0:
+            return 0
+        return max(self.divergence_order,
+                   order_for(self.divergence_deg / self.aperture_deg, SPLIT_RTOL))
+
     def average(self, model: Any, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Model BSDF (N,) averaged over the caps about each wi (N, 3) and wo (N, 3)."""
         if self.aperture_order <= 0 and self.divergence_order <= 0:
             return model.eval(wi, wo)
-        from sim.bench.quadrature import cap_rule
-
-        def nodes(w: np.ndarray, deg: float, order: int) -> tuple[np.ndarray, np.ndarray]:
-            if deg <= 0.0 or order <= 0:
-                return w[:, None, :], np.ones(1)
-            x, weight = cap_rule(w, math.radians(deg), order)
-            return x, weight / weight.sum()
-
-        def smeared(wi: np.ndarray, wo: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
-            wi_n, wi_w = nodes(wi, self.divergence_deg, self.divergence_order)
-            wo_n, wo_w = nodes(wo, self.aperture_deg, order)
-            f = model.eval(
-                np.broadcast_to(wi_n[:, :, None, :], (len(wi), len(wi_w), len(wo_w), 3)),
-                np.broadcast_to(wo_n[:, None, :, :], (len(wo), len(wi_w), len(wo_w), 3)))
-            # the detector collects f |cos o| dw; reduction divides by |cos o| at the centre
-            cos_ratio = np.abs(wo_n[..., 2]) / np.maximum(np.abs(wo[:, None, 2]), 1e-300)
-            lit = (f > 0).reshape(len(wi), -1)
-            straddles = lit.any(axis=1) & ~lit.all(axis=1)
-            return np.einsum("nij,i,nj->n", f, wi_w, wo_w * cos_ratio), straddles
-
-        out, straddles = smeared(wi, wo, self.aperture_order)
-        if self.aperture_deg > 0.0 and self.aperture_order > 0:
+        out, straddles = self._product(model, wi, wo, self.aperture_order)
+        if self.aperture_deg <= 0.0 or self.aperture_order <= 0:
+            return out
+        half_angle = math.radians(self.aperture_deg)
+        edges = model_edges(model)
+        if edges is not None:
+            alpha = _alpha(model)
+            n = split_order_for(half_angle / (0.34 * alpha) if alpha else 0.0, SPLIT_RTOL)
+            rule = _split_rule(self, edges, n, np.ascontiguousarray(wi, float).tobytes(),
+                               np.ascontiguousarray(wo, float).tobytes())
+            if len(rule.where):
+                f = model.eval(np.broadcast_to(rule.wi_nodes, rule.nodes.shape), rule.nodes)
+                out[rule.where] = np.sum(f * rule.weights, axis=-1) @ rule.beam_weights
+            straddles = rule.straddles
+        else:
             # the rule's nodes stop short of the rim: an edge there is found on the rim
-            rim = _rim(wo, math.radians(self.aperture_deg), RIM_POINTS)
+            rim = _rim(wo, half_angle, RIM_POINTS)
             lit = np.concatenate([(model.eval(wi[:, None, :], rim) > 0),
                                   (out > 0)[:, None]], axis=1)
             straddles |= lit.any(axis=1) & ~lit.all(axis=1)
         if straddles.any():
-            # an edge of the lobe (f falls to 0: GGX's vertical facets, the horizon) inside the
-            # aperture: a low-order rule is off by up to its whole jump; the bench takes its
-            # top order there too (sim.bench.aperture)
-            out[straddles] = smeared(wi[straddles], wo[straddles], EDGE_ORDER)[0]
+            # an edge of the lobe inside the aperture that no split follows: a low-order rule
+            # is off by up to its whole jump; the bench's top order converges algebraically
+            out[straddles] = self._product(model, wi[straddles], wo[straddles], EDGE_ORDER)[0]
         return out
+
+
+@dataclass(frozen=True)
+class _SplitRule:
+    """The split aperture rule of the points (where) an edge circle crosses: beam nodes
+    (M, K, 1, 3), aperture nodes (M, K, P, 3) and weights (M, K, P) (|cos o| ratio included,
+    normalised per beam node), the beam's weights (K,); straddles (N,): points crossed by an
+    edge no split can follow (an aperture too near the family's axis)."""
+
+    where: np.ndarray
+    wi_nodes: np.ndarray
+    nodes: np.ndarray
+    weights: np.ndarray
+    beam_weights: np.ndarray
+    straddles: np.ndarray
+
+
+@lru_cache(maxsize=8)
+def _split_rule(optics: Smearing, edges: EdgeCircles, n: int, wi_bytes: bytes,
+                wo_bytes: bytes) -> _SplitRule:
+    """The split rule for the pairs (wi, wo) given as float64 bytes (kept: a fit asks for the
+    same pairs at every candidate alpha, and the rule depends only on eta and the order)."""
+    wi, wo = np.frombuffer(wi_bytes).reshape(-1, 3), np.frombuffer(wo_bytes).reshape(-1, 3)
+    half_angle = math.radians(optics.aperture_deg)
+    # the beam's tilt moves a circle by about as much (1 / (e sin) <= 1.4 for glass lit from
+    # air): only apertures within BEAM_MARGIN beam half-angles of one can be crossed
+    near = np.flatnonzero(_cutting_family(edges, wi[:, None, :], wo, half_angle + BEAM_MARGIN
+                                          * math.radians(optics.divergence_deg))[0])
+    wi_n, wi_w = optics._nodes(wi[near], optics.divergence_deg, optics._edge_beam_order())
+    k = wi_n.shape[1]
+    crossed, split, axes, levels = _cutting_family(edges, wi_n, wo[near], half_angle)
+    straddles = np.zeros(len(wi), bool)
+    straddles[near] = crossed & ~split
+    where, m = near[split], int(split.sum())
+    if m == 0:
+        return _SplitRule(where, np.zeros((0, k, 1, 3)), np.zeros((0, k, 1, 3)),
+                          np.zeros((0, k, 1)), wi_w, straddles)
+    centers = np.repeat(wo[where], k, axis=0)
+    nodes, weights = split_cap_rule(centers, half_angle, axes[split].reshape(-1, 3),
+                                    levels[split].reshape(len(centers), -1), n, n)
+    # the detector collects f |cos o| dw; reduction divides by |cos o| at the centre
+    cos_ratio = np.abs(nodes[..., 2]) / np.maximum(np.abs(centers[:, None, 2]), 1e-300)
+    weights = weights * cos_ratio / np.sum(weights, axis=1, keepdims=True)
+    return _SplitRule(where, wi_n[split][:, :, None, :], nodes.reshape(m, k, -1, 3),
+                      weights.reshape(m, k, -1), wi_w, straddles)
 
 
 def aperture_average(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: float,
