@@ -43,13 +43,14 @@ def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
     return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
 
 
-def direction_pairs() -> tuple[np.ndarray, np.ndarray]:
-    """12 pairs: incidence 0, 30, 60 deg; reflection and transmission, in and out of plane."""
-    wi, wo = [], []
-    for ti in (0.0, 30.0, 60.0):
-        for to, po in ((20.0, 180.0), (45.0, 90.0), (150.0, 0.0), (170.0, 180.0)):
-            wi.append(direction(ti))
-            wo.append(direction(to, po))
+def direction_pairs(incidences=(0.0, 30.0, 60.0),
+                    outgoing=((20.0, 180.0), (45.0, 90.0), (150.0, 0.0), (170.0, 180.0))
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Every incidence (deg, in the x-z plane) with every outgoing (theta, phi) in deg; by
+    default 12 pairs: incidence 0, 30, 60 deg; reflection and transmission, in and out of
+    plane."""
+    wi = [direction(ti) for ti in incidences for _ in outgoing]
+    wo = [direction(to, po) for _ in incidences for to, po in outgoing]
     return np.array(wi), np.array(wo)
 
 
@@ -152,12 +153,8 @@ def diffraction_table(rng: np.random.Generator) -> list[str]:
 def off_grid_pairs() -> tuple[np.ndarray, np.ndarray]:
     """12 pairs between the table's nodes: incidence 0, 32, 60 deg; both lobes, in and out of
     plane (polar angles and azimuths off the 5 x 15 deg grid)."""
-    wi, wo = [], []
-    for ti in (0.0, 32.0, 60.0):
-        for to, po in ((22.0, 172.0), (47.0, 100.0), (152.0, 8.0), (168.0, 172.0)):
-            wi.append(direction(ti))
-            wo.append(direction(to, po))
-    return np.array(wi), np.array(wo)
+    return direction_pairs((0.0, 32.0, 60.0),
+                           ((22.0, 172.0), (47.0, 100.0), (152.0, 8.0), (168.0, 172.0)))
 
 
 def _score(value: np.ndarray, ref: np.ndarray) -> str:
