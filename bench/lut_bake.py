@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from sim.lut import Table, TableSpec, bake
-from sim.lut.bake import grid_points, integrate_tile, tile_arguments
+from sim.lut.bake import grid_points, integrate_tile, integrate_tiles, tile_arguments
 from sim.lut.cluster import dask_client, describe, usable_cores
 from sim.lut.model import ModelEstimator
 from sim.lut.validate import (
@@ -112,7 +112,7 @@ def tiles_of(spec: TableSpec) -> list[tuple]:
 
 def kernels_own_the_cores(spec: TableSpec) -> np.ndarray:
     """The table's values by a plain loop over tiles: numba's kernels use every core."""
-    return np.concatenate([integrate_tile(*tile) for tile in tiles_of(spec)])
+    return integrate_tiles(tiles_of(spec))
 
 
 def oversubscribed(spec: TableSpec) -> np.ndarray:
