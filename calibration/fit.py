@@ -440,33 +440,27 @@ class _Problem:
         return values, deriv
 
     def predict(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
+        return self.predict_with_error(x, data)[0]
+
+    def predict_with_error(self, x: np.ndarray, data: ReducedData
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """The model at the data's pairs and the Monte Carlo standard error (times the scale)
+        of its multiple-scattering term: walked at the pairs (higher_orders_at) for points
+        outside the fitted subset; 0 on the fitted points (the table's error is in their
+        sigma) and without multiple scattering."""
         alpha, eta, scale = self.unpack(x)
         model = build_model(self.distribution, alpha, eta, self.masking, self.k,
                             diffraction=self.diffraction)
         f = self.optics.average(model, data.wi, data.wo)
+        err = np.zeros_like(f)
         if self.orders is not None and data is self.data:  # the fit: single + tabulated orders
-            return scale * (f + self.orders(alpha))
-        if self.options.multiple_scattering:  # the broad lobe at the points, as the fit has it
-            f = f + self._walked(x, data)[0]
-        return scale * f
-
-    def _walked(self, x: np.ndarray, data: ReducedData) -> tuple[np.ndarray, np.ndarray]:
-        """Orders >= 2 and their standard error at the data's pairs (higher_orders_at), for
-        points outside the fitted subset; the last answer is kept (predict and orders_error
-        ask for the same)."""
-        key = (id(data), tuple(np.asarray(x, float)))
-        if getattr(self, "_walked_key", None) != key:
-            alpha, eta, _ = self.unpack(x)
+            f = f + self.orders(alpha)
+        elif self.options.multiple_scattering:  # the broad lobe at the points, as the fit has it
             walks, seed = _walk_settings(self.options)
-            self._walked_value = walked_orders(self.distribution, alpha, eta, self.k, data.wi,
-                                               data.wo, walks, seed)
-            self._walked_key = key
-        return self._walked_value
-
-    def orders_error(self, x: np.ndarray, data: ReducedData) -> np.ndarray:
-        """Monte Carlo standard error of the multiple-scattering term (times the scale) at
-        the data's pairs, walked there as predict() walks them."""
-        return self.unpack(x)[2] * self._walked(x, data)[1]
+            orders, err = walked_orders(self.distribution, alpha, eta, self.k, data.wi, data.wo,
+                                        walks, seed)
+            f = f + orders
+        return scale * f, scale * err
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         r = self.data.whitened(self.predict(x, self.data))
@@ -667,9 +661,10 @@ def _heldout_chi2(data: ReducedData, rest: np.ndarray, problem: _Problem,
     if not held.any():
         return None, 0
     part = data.subset(held)
+    model, model_err = problem.predict_with_error(x, part)
     if problem.orders is not None:  # the model's own Monte Carlo error, as in the fit
-        part = replace(part, sigma=np.hypot(part.sigma, problem.orders_error(x, part)))
-    r = part.whitened(problem.predict(x, part))
+        part = replace(part, sigma=np.hypot(part.sigma, model_err))
+    r = part.whitened(model)
     return float(np.sum(r ** 2)) / int(held.sum()), int(held.sum())
 
 
