@@ -204,29 +204,25 @@ class SerialLineTransport:
                 return line
             self._syncs_unanswered -= 1
 
-    def read_line(self, what: str, timeout_s: float | None = None) -> str:
-        """Read one reply line (terminator stripped).
+    def _read_line(self, what: str, deadline: float) -> str:
+        """Read one reply line (terminator stripped) by the monotonic `deadline`.
 
         Waits on the port's descriptor (select, up to the deadline) and reads whatever has
         arrived in one call, rather than pyserial's byte-at-a-time read_until or re-setting
         pyserial's timeout per read (each set re-applies the port's termios settings: two
-        system calls per chunk); bytes after the terminator are kept for the next read_line (and
+        system calls per chunk); bytes after the terminator are kept for the next line (and
         discarded by the next send: a line protocol sends one reply per request). Raises
         DeviceTimeout(what) when no complete line arrives in time (the transport is then
         out of step: the reply may still come), ProtocolError when it holds bytes that are
         not printable ASCII.
         """
-        timeout = self.timeout_s if timeout_s is None else timeout_s
-        return self._read_line(what, time.monotonic() + timeout, timeout)
-
-    def _read_line(self, what: str, deadline: float, timeout_s: float | None = None) -> str:
         data = self._rx
         with self.lock, self._port(f"reading the reply to {what}"):
             while self.read_eol not in data:
                 left = deadline - time.monotonic()
                 if left <= 0 or not select.select([self._serial.fileno()], [], [], left)[0]:
                     self.in_step = False
-                    raise DeviceTimeout(self.name, what, timeout_s or self.timeout_s)
+                    raise DeviceTimeout(self.name, what, self.timeout_s)
                 data += self._serial.read(max(1, self._serial.in_waiting))
         end = data.index(self.read_eol)
         body = bytes(data[:end])
