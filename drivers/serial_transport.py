@@ -72,7 +72,7 @@ def strict_number_parser(pattern: str, expected: str) -> Callable[[str], float]:
 @dataclass(frozen=True)
 class SyncQuery:
     """A query whose reply no other exchange of the driver produces (`is_reply` tells it),
-    sent to bring replies back in step after a timeout or a garbled reply."""
+    sent to bring replies back in step after a timeout."""
 
     line: str
     is_reply: Callable[[str], bool]
@@ -108,7 +108,7 @@ class SerialLineTransport:
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
         self.sync = sync
-        self.in_step = True  # False after a timeout or garble, until a sync succeeds
+        self.in_step = True  # False after a timeout, until a sync succeeds
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
         self._syncs_unanswered = 0  # sync queries whose reply has not been read yet
         self._rx = bytearray()  # bytes read past the last reply line
