@@ -96,15 +96,16 @@ class Bench:
         peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
         reach = self.integral.aperture_rad + self.integral.divergence_rad
         far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
-        edges = self.sample.edge_circles(wi)
-        edge_in_beam = edges is not None and edges.distance(
-            wo, wi, free_is_wo=False) < self.integral.divergence_rad
-        if self.order is None and far and not edge_in_beam:
-            model_edges = None if edges is None else replace(edges, table_step_deg=None)
-            split = ONE_POINT._replace(edge_o=0.0, edges=model_edges)
-            probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
-            if probe < NEGLIGIBLE:
-                return probe
+        if self.order is None and far:
+            edges = self.sample.edge_circles(wi)
+            edge_in_beam = edges is not None and edges.distance(
+                wo, wi, free_is_wo=False) < self.integral.divergence_rad
+            if not edge_in_beam:
+                model_edges = None if edges is None else replace(edges, table_step_deg=None)
+                split = ONE_POINT._replace(edge_o=0.0, edges=model_edges)
+                probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
+                if probe < NEGLIGIBLE:
+                    return probe
         return self.integral.integrate(self.sample.integrand, wi, wo,
                                        self.sample.lobe_scales(wi, wo))
 
