@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from sim.bench.aperture import order_for, split_order_for
+from sim.bench.aperture import crossing, order_for, split_order_for
 from sim.bench.quadrature import cap_rule, split_cap_rule
 from sim.bench.sample import EdgeCircles
 
@@ -69,8 +69,7 @@ def _cutting_family(edges: EdgeCircles, wi: np.ndarray, wo: np.ndarray, half_ang
     for axis, level in edges.circles(wi.reshape(-1, 3), free_is_wo=True):
         axis, level = axis.reshape(n, k, 3), level.reshape(n, k, level.shape[-1])
         cos_t = np.clip(np.einsum("nkj,nj->nk", axis, wo), -1.0, 1.0)
-        crosses = (np.abs(level) < 1.0) & (np.abs(
-            np.arccos(cos_t)[..., None] - np.arccos(np.clip(level, -1.0, 1.0))) < half_angle)
+        crosses = crossing(cos_t, level, half_angle)
         splits = np.all(np.abs(cos_t) <= math.cos(2.0 * half_angle), axis=1)
         crossed |= crosses.any(axis=(1, 2))
         take = ~chosen & crosses.any(axis=(1, 2)) & splits

@@ -59,6 +59,15 @@ def _beam_mean(weights: np.ndarray, n_i: int) -> np.ndarray:
     return np.ones(1) if n_i == 0 else weights / weights.sum()
 
 
+def crossing(cos_t: np.ndarray, levels: np.ndarray, half_angle: float) -> np.ndarray:
+    """Which edge circles {w: axis . w = level} (levels (..., L)) cross a cap of half_angle
+    whose centre lies at cos_t = axis . centre (...) (a level outside (-1, 1): no circle); the
+    rule the bench and the fit's smearing (calibration.smearing) choose a split by."""
+    t = np.arccos(np.clip(cos_t, -1.0, 1.0))[..., None]
+    return (np.abs(levels) < 1.0) & (
+        np.abs(t - np.arccos(np.clip(levels, -1.0, 1.0))) < half_angle)
+
+
 def _cutting_circles(edges: EdgeCircles, fixed: np.ndarray, center: np.ndarray,
                      half_angle: float, free_is_wo: bool) -> tuple[np.ndarray, np.ndarray] | None:
     """(axis (N, 3), levels (N, L)) of the first family of edge circles (one axis) that crosses
@@ -68,9 +77,7 @@ def _cutting_circles(edges: EdgeCircles, fixed: np.ndarray, center: np.ndarray,
     jump is D(90 deg) times i.m, which is 0 on the end of the transmitted lobe; at normal
     incidence the two are the same circle)."""
     for axis, levels in edges.circles(fixed, free_is_wo):
-        t = np.arccos(np.clip(axis @ center, -1.0, 1.0))[:, None]
-        inside = (np.abs(levels) < 1.0) & (
-            np.abs(t - np.arccos(np.clip(levels, -1.0, 1.0))) < half_angle)
+        inside = crossing(axis @ center, levels, half_angle)
         if inside.any() and splittable(center, half_angle, axis):
             return axis, levels[:, inside.any(axis=0)]
     return None
