@@ -20,7 +20,7 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
 
 def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) -> ReducedData:
     """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"];
-    an emulated bench's [sim] table into meta["sim"] and its beam divergence into
+    an emulated bench's [sim] table into meta["sim"] and the [optics] beam divergence into
     meta["beam_divergence_deg"] for the fit)."""
     from calibration.reduce import reduce_readings
     from gonio.store import open_run
@@ -33,7 +33,7 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
     data = reduce_readings(run, readings, cal)
     if run.config.get("sim"):  # an emulated run: its bench, for the plot's model curve
         data.meta.setdefault("sim", run.config["sim"])
-    divergence = (run.config.get("sim") or {}).get("source", {}).get("divergence_deg")
+    divergence = (run.config.get("optics") or {}).get("divergence_deg")
     if divergence is not None:
         data.meta.setdefault("beam_divergence_deg", float(divergence))
     if cal is not None:

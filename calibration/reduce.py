@@ -49,33 +49,53 @@ class Optics:
         return solid_angle_sr(math.radians(self.aperture_half_angle_deg))
 
 
-def optics_of(config: dict, cal=None) -> Optics:
-    """Optics from a run's instrument config ([sim] describes the emulated bench's sample and
-    aperture) and a calibration (its measured aperture wins over the geometry)."""
+def optics_of(config: dict, cal=None, plan: dict | None = None, emulated: bool = False
+              ) -> Optics:
+    """What reduction needs, from what the experimenter describes: the run config's [optics]
+    (aperture, wavelength), the plan's [sample] (kind, eta, k, lit side) and a calibration (its
+    measured aperture wins over the geometry). `emulated`: every device was emulated, so
+    `model` may carry the emulator's truth ([sim.sample]) for plots; nothing else reads [sim]."""
+    from gonio.errors import GonioError
+    from gonio.optics import optics_of_config
+    from gonio.sample import sample_of_plan
+
+    try:
+        optics = optics_of_config(config, "run config")
+        sample = sample_of_plan(plan or {}, "run plan")
+    except GonioError as exc:
+        raise CalibrationError(str(exc)) from None
+    missing = []
+    if sample is None:
+        missing.append("the plan's [sample] table (id, kind, eta: what was measured)")
+    measured_aperture = cal is not None and cal.aperture_half_angle_deg is not None
+    if optics is None and not measured_aperture:
+        missing.append("the instrument config's [optics] table (aperture_diameter_mm, "
+                       "aperture_distance_mm, wavelength_nm, ...) or a calibration with the "
+                       "aperture (gonio calibrate build --aperture-geometry | --aperture-scan)")
+    if missing:
+        raise CalibrationError(f"cannot reduce: the run lacks {' and '.join(missing)}")
+    half_angle = (cal.aperture_half_angle_deg.value if measured_aperture
+                  else optics.aperture_half_angle_deg)
+    wavelength = (optics.wavelength_nm if optics is not None
+                  else float(config.get("detector", {}).get("wavelength_nm", math.nan)))
+    return Optics(sample.kind, sample.eta, sample.k, sample.lit_from, half_angle, wavelength,
+                  _emulator_truth(config, plan or {}) if emulated else None)
+
+
+def _emulator_truth(config: dict, plan: dict) -> dict | None:
+    """The generating model of an emulated run ([sim.sample]: distribution, alpha, masking,
+    and the index it emulates), for plots that overlay the emulator's truth."""
     from sim.bench.config import read_table
     from sim.devices.photodiode import SimConfigError
 
-    sim = config.get("sim")
-    if not sim:
-        raise CalibrationError(
-            "the run's instrument config has no [sim] section describing the sample and "
-            "aperture; apply a calibration with the aperture (gonio calibrate) and give the "
-            "sample's index")
     try:
-        sample, aperture = read_table(sim, "sample"), read_table(sim, "aperture")
-        source = read_table(sim, "source")
+        sample = read_table(config.get("sim") or {}, "sample", plan.get("sample"))
     except SimConfigError as exc:
         raise CalibrationError(f"run config: {exc}") from None
-    half_angle = math.degrees(math.atan(0.5 * aperture["diameter_mm"] / aperture["distance_mm"]))
-    if cal is not None and cal.aperture_half_angle_deg is not None:
-        half_angle = cal.aperture_half_angle_deg.value
     alpha = sample["alpha"]
-    model = {"distribution": sample["distribution"],
-             "alpha": alpha[0] if alpha[0] == alpha[1] else list(alpha),
-             "eta": sample["eta"], "masking": sample["masking"]}
-    detector = config.get("detector", {})
-    return Optics(sample["kind"], sample["eta"], sample["k"], sample["lit_from"], half_angle,
-                  float(detector.get("wavelength_nm", source["wavelength_nm"])), model)
+    return {"distribution": sample["distribution"],
+            "alpha": alpha[0] if alpha[0] == alpha[1] else list(alpha),
+            "eta": sample["eta"], "masking": sample["masking"]}
 
 
 def shot_variance_per_w(config: dict, averaging: int) -> float:
@@ -155,7 +175,8 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
     """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
 
     run: a gonio.store.Run (its config gives the optics unless `optics` is given)."""
-    optics = optics or optics_of(run.config, cal)
+    optics = optics or optics_of(run.config, cal, getattr(run, "plan", None),
+                                 emulated=(getattr(run, "meta", None) or {}).get("sim") is True)
     kinds = readings["kind"]
     dark = DarkModel.from_readings(readings[(kinds == "dark") & ~readings["saturated"]])
     beam_rows = readings[(kinds == "beam") & ~readings["saturated"]]

@@ -1,4 +1,4 @@
-"""Instrument configs (TOML): devices, axes, detector, safety zones, beam/dark positions, [sim].
+"""Instrument configs (TOML): devices, axes, detector, safety, beam/dark positions, optics, [sim].
 
 `load_config(path)` parses and validates a file into an `InstrumentConfig`; every error is a
 one-line ConfigError naming the file and the field. The raw (path-resolved) dict is kept for
@@ -17,7 +17,8 @@ import tomllib
 
 from drivers.register_map import RegisterMap
 from gonio.errors import ConfigError
-from gonio.fields import Fields
+from gonio.fields import REQUIRED, Fields
+from gonio.optics import Optics, parse_optics
 
 PROTOCOLS = ("esp", "pm100", "modbus-stage", "modbus-detector")
 STAGE_PROTOCOLS = ("esp", "modbus-stage")
@@ -95,6 +96,7 @@ class InstrumentConfig:
     beam: Position | None
     dark: Position | None
     raw: dict[str, Any] = field(repr=False)
+    optics: Optics | None = None
 
     @property
     def sim(self) -> dict[str, Any]:
@@ -125,7 +127,8 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     name = top.string("name", default=path.stem if path else "instrument")
     devices = _devices(top.table_of("devices"), path)
     axes = _axes(top.table_of("axes"), devices)
-    detector = _detector(top.table_of("detector"), devices)
+    optics = parse_optics(top.table_of("optics")) if top.has("optics") else None
+    detector = _detector(top.table_of("detector"), devices, optics)
     safety = top.table_of("safety")
     clearance = safety.number("beam_clearance_deg", default=5.0, low=0.0, high=90.0)
     forbidden = _zones(safety)
@@ -140,7 +143,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
         if dev.register_map:
             raw["devices"][dev.name]["register_map"] = dev.register_map
     return InstrumentConfig(name, path, devices, axes, detector, clearance, forbidden,
-                            beam, dark, raw)
+                            beam, dark, raw, optics)
 
 
 def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
@@ -235,7 +238,10 @@ def _check_register_ranges(devices: dict[str, DeviceConfig], axes: dict[str, Axi
                                   f"refuses it ({exc})") from None
 
 
-def _detector(f: Fields, devices: dict[str, DeviceConfig]) -> DetectorConfig:
+def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
+              ) -> DetectorConfig:
+    """[detector]; its correction wavelength defaults to [optics] wavelength_nm and may not
+    differ from it (a meter corrected for another wavelength misreads the source)."""
     device = f.string("device")
     if device not in devices:
         raise f.fail("device", f"no device {device!r} under [devices]")
@@ -246,9 +252,15 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig]) -> DetectorConfig:
         range_w = None
     else:
         range_w = f.number("range", low=0.0, low_open=True)
+    wavelength = f.number("wavelength_nm", optics.wavelength_nm if optics else REQUIRED,
+                          low=200.0, high=2000.0)
+    if optics is not None and abs(wavelength - optics.wavelength_nm) > 1e-6:
+        raise f.fail("wavelength_nm", f"{wavelength:g} nm differs from [optics] wavelength_nm "
+                     f"{optics.wavelength_nm:g} nm (the meter must be corrected for the "
+                     f"source's wavelength)")
     det = DetectorConfig(
         device=device,
-        wavelength_nm=f.number("wavelength_nm", low=200.0, high=2000.0),
+        wavelength_nm=wavelength,
         averaging=f.number("averaging", 1, low=1, high=100_000, integer=True),
         range_w=range_w,
     )

@@ -26,6 +26,7 @@ from gonio.config import InstrumentConfig, forbidden_reason
 from gonio.errors import PlanError
 from gonio.fields import Fields
 from gonio.geometry import into_limits, stage_angles
+from gonio.sample import SampleInfo, parse_sample
 
 SIDES = ("reflection", "transmission")
 ORDERS = ("optimal", "as-written")
@@ -42,7 +43,7 @@ POINT_DTYPE = np.dtype([
 ])
 
 SCHEDULE_DTYPE = np.dtype([
-    ("index", "i8"), ("kind", "U6"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
+    ("index", "i8"), ("kind", "U12"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
     ("theta_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
     ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
     ("range_w", "f8"),
@@ -68,6 +69,7 @@ class Plan:
     range_w: float = UNSET  # the plan's detector range (AUTO_RANGE, a full scale in W, UNSET)
     dark_range_w: float = UNSET  # UNSET: a dark reading on every range the samples use
     beam_range_w: float = UNSET  # UNSET: the plan's range
+    sample: SampleInfo | None = None  # [sample]: what is measured
 
 
 @dataclass(frozen=True)
@@ -126,6 +128,7 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         range_w=_ranges(top)[0],
         dark_range_w=dark_range,
         beam_range_w=beam_range,
+        sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
     )
     top.done()
     return plan

@@ -57,13 +57,13 @@ class _Devices:
 
 
 @contextmanager
-def _devices(cfg: InstrumentConfig, sim: list[str] | bool) -> Iterator[_Devices]:
+def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan) -> Iterator[_Devices]:
     if sim is False:
         yield _Devices(cfg)
         return
     from gonio.simulate import simulation  # only --sim touches sim
 
-    with simulation(cfg, None if sim is True else sim) as s:
+    with simulation(cfg, None if sim is True else sim, plan.raw.get("sample")) as s:
         yield _Devices(s.config, s.time_scale, tuple(s.devices), s.positions,
                        s.bench.fault_counts, s.bench.request_counts)
 
@@ -73,7 +73,7 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          control: PauseControl | None) -> ScanResult:
     """Open the devices, then the run (so a device that cannot be opened leaves no new
     run behind), and measure what is left of the schedule."""
-    with _devices(cfg, sim) as dev, build_instrument(dev.config, dev.time_scale) as inst:
+    with _devices(cfg, sim, plan) as dev, build_instrument(dev.config, dev.time_scale) as inst:
         writer = make_writer()
         try:
             writer.start_session(sim=list(dev.emulated), endpoints={
@@ -100,14 +100,18 @@ def _scale(value: float) -> float | str:
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              sim: list[str] | bool = False, out: str | Path = "runs",
              progress: bool | None = None, control: PauseControl | None = None,
-             calibration: dict | None = None, time_scale: float | None = None) -> ScanResult:
+             calibration: dict | None = None, time_scale: float | None = None,
+             sample_id: str | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
     calibration: what meta.json records about the calibration file to use (or None);
-    time_scale: replaces the config's [sim] time_scale (emulated runs only).
+    time_scale: replaces the config's [sim] time_scale (emulated runs only);
+    sample_id: replaces the plan's [sample] id (the stored plan and the record carry it).
     """
     plan = load_plan(plan_path)
+    if sample_id is not None:
+        plan = with_sample_id(plan, sample_id)
     cfg_path = instrument_path(plan, instrument)
     cfg = load_config(cfg_path)
     if time_scale is not None:
@@ -125,9 +129,20 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
             "sim": sim if isinstance(sim, list) else bool(sim), "seeds": seeds,
             "time_scale": cfg.sim.get("time_scale", 1.0) if sim is not False else 1.0,
-            "calibration": calibration, "t0_epoch": time.time()}
+            "calibration": calibration, "t0_epoch": time.time(),
+            "optics": cfg.optics.to_json() if cfg.optics else None,
+            "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control)
+
+
+def with_sample_id(plan: Plan, sample_id: str) -> Plan:
+    """The plan with its [sample] id replaced (`gonio scan --sample-id`)."""
+    if plan.sample is None:
+        raise PlanError(f"{plan.path}: --sample-id {sample_id!r} needs a [sample] table in the "
+                        f"plan (id, kind, eta: what is measured)")
+    raw = {**plan.raw, "sample": {**plan.raw["sample"], "id": sample_id}}
+    return parse_plan(raw, plan.path)
 
 
 def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,

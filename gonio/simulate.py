@@ -66,20 +66,22 @@ def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConf
     return parse_config(raw, cfg.path)
 
 
-def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float]
-           ) -> EmulatedBench:
+def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float],
+           sample: dict | None = None) -> EmulatedBench:
     try:
-        return start(cfg.raw, devices, lambda: positions)
+        return start(cfg.raw, devices, lambda: positions, sample)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
 
 
 @contextmanager
-def simulation(cfg: InstrumentConfig, names: list[str] | None = None) -> Iterator[Simulation]:
-    """Run the emulators of a config for the duration of a `with` block."""
+def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
+               sample: dict | None = None) -> Iterator[Simulation]:
+    """Run the emulators of a config for the duration of a `with` block; `sample` is the
+    plan's [sample] table (the emulated sample's kind and index unless [sim] states them)."""
     devices = resolve_devices(cfg, names)
     positions: dict[str, float] = {}
-    bench = _start(cfg, devices, positions)
+    bench = _start(cfg, devices, positions, sample)
     try:
         pointed = point_at(cfg, {n: e.endpoint for n, e in bench.endpoints.items()})
         stages_emulated = all(ax.device in devices for ax in cfg.axes.values())

@@ -40,7 +40,7 @@ READINGS = "readings.jsonl"
 META = "meta.json"
 
 READING_DTYPE = np.dtype([
-    ("index", "i8"), ("kind", "U6"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
+    ("index", "i8"), ("kind", "U12"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
     ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
     ("theta_i_deg", "f8"), ("phi_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
     ("plan_theta_i_deg", "f8"), ("plan_theta_o_deg", "f8"), ("plan_phi_o_deg", "f8"),

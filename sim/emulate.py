@@ -187,7 +187,7 @@ class _Builder:
 
     def detectors(self, source: Any) -> None:
         """Emulators of the chosen detectors, lit by `source` (the bench's PowerSource)."""
-        light_nm = self.sim.get("source", {}).get("wavelength_nm")
+        light_nm = source.bench.source.wavelength_nm
         detector = self.sim.get("detector")
         for name in self.chosen:
             dev = self.devices[name]
@@ -214,11 +214,13 @@ class _Builder:
 
 
 def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
-          positions: Callable[[], Mapping[str, float]] | None = None) -> EmulatedBench:
+          positions: Callable[[], Mapping[str, float]] | None = None,
+          sample: Mapping[str, Any] | None = None) -> EmulatedBench:
     """Serve the config's devices (all, or those named) and return the running bench.
 
     positions: where the stages that are not emulated are ({role: deg}); needed when a
-    detector is emulated but some stage is real.
+    detector is emulated but some stage is real. The bench is the config's [optics] with the
+    plan's [sample] table (`sample`, if a plan is known) and the [sim] truth (sim.bench.config).
     """
     sim = _sim_table(config)
     all_devices = config["devices"]
@@ -245,7 +247,8 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
 
         # the source drifts in wall time since the bench started (a lamp does not follow the
         # motion's virtual clock), as the run store's t_s does: drift normalisation needs both
-        source = build_power_source(sim, stage_positions)
+        source = build_power_source(sim, stage_positions, optics=config.get("optics"),
+                                    sample=sample)
         if detectors:  # a first reading must not stall for a compile: timeouts are short
             source.bench.warm_up()
         build.detectors(source)

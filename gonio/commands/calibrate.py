@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="beam diameter for --aperture-scan (default 0: beam much smaller)")
     b.add_argument("--divergence-deg", type=_half_angle_deg, metavar="DEG",
                    help="beam divergence half-angle for the angle-offset fit (default: the "
-                   "run's [sim.source] divergence_deg on an emulated bench, else 0)")
+                   "run's [optics] divergence_deg, else 0)")
     u = actions.add_parser("use", help="record in a run which calibration applies to it")
     u.add_argument("run", help="run directory")
     u.add_argument("calibration", help="calibration file")
@@ -80,8 +80,7 @@ def _build(args: argparse.Namespace) -> int:
               "beam-scan")
     divergence = args.divergence_deg
     if divergence is None:
-        source = (runs[0].config.get("sim") or {}).get("source", {})
-        divergence = float(source.get("divergence_deg", 0.0))
+        divergence = float((runs[0].config.get("optics") or {}).get("divergence_deg", 0.0))
     cal = build([r.readings() for r in runs], utc_now(), [str(r.path) for r in runs],
                 eta=args.eta, aperture=ap, divergence_deg=divergence)
     print(calfile.save(cal, args.out))
@@ -101,13 +100,13 @@ def _aperture_from_scan(scan_run, beam_diameter_mm: float):
     if len(sample) == 0:
         raise CalibrationError(f"{scan_run.path}: no sample readings to scan the beam with")
     power = correct_power(sample["power_w"], sample["range_w"], dark_offsets(r), None)
-    distance_mm = float(scan_run.config.get("sim", {}).get("aperture", {})
-                        .get("distance_mm", 0.0)) or None
+    distance_mm = float((scan_run.config.get("optics") or {})
+                        .get("aperture_distance_mm", 0.0)) or None
     beam_rad = 0.0
     if beam_diameter_mm > 0:
         if distance_mm is None:
             raise CalibrationError("--beam-diameter-mm needs the aperture distance "
-                                   "([sim.aperture] distance_mm) in the run's config")
+                                   "([optics] aperture_distance_mm) in the run's config")
         beam_rad = 0.5 * beam_diameter_mm / distance_mm
     noise = np.std(power[power < 0.02 * power.max()]) if np.any(power < 0.02 * power.max()) else 0
     sigma = np.hypot(noise, 1e-3 * np.abs(power))

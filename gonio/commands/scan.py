@@ -34,6 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", metavar="RUN", help="continue an interrupted run")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to record in the run (used by reduce and fit)")
+    p.add_argument("--sample-id", metavar="ID",
+                   help="the measured sample's id, instead of the plan's [sample] id")
     p.add_argument("--no-plot", action="store_true", help="do not write plot.png")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -62,9 +64,9 @@ def run(args: argparse.Namespace) -> int:
             and args.sim[0].endswith(".toml"):
         args.plan, args.sim = args.sim[0], True  # `gonio scan --sim PLAN`: the plan, not NAMES
     if args.resume:
-        if args.plan or args.calibration or args.time_scale is not None:
+        if args.plan or args.calibration or args.time_scale is not None or args.sample_id:
             raise GonioError("--resume RUN continues a run as it was started: "
-                             "give no PLAN, --calibration or --time-scale with it")
+                             "give no PLAN, --calibration, --time-scale or --sample-id with it")
         result = resume_scan(args.resume, args.instrument, args.sim, progress=progress)
     else:
         if not args.plan:
@@ -76,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             calibration = reference(args.calibration)
         result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
                           progress=progress, calibration=calibration,
-                          time_scale=args.time_scale)
+                          time_scale=args.time_scale, sample_id=args.sample_id)
     outcome = result.outcome
     plotted = False
     if not args.no_plot and outcome.done:

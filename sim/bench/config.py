@@ -3,11 +3,16 @@
 Reads the tables this package owns, [sim.source], [sim.sample], [sim.aperture] and
 [sim.alignment] (docs/bench.md has the schema); every bad field raises one SimConfigError
 naming it. [sim.detector] belongs to sim.devices.photodiode, the other keys to the emulators.
+
+The bench's geometry comes from what the experimenter describes, the instrument config's
+[optics] and the plan's [sample] (passed in as plain tables); a key [sim] states itself wins
+(an emulated bench that differs from its description), and the defaults fill the rest.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Mapping
 
 from sim.bench.sample import (
@@ -128,8 +133,22 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
 }
 
 
-def read_table(sim_config: Mapping, name: str) -> dict[str, object]:
-    """Validated [sim.<name>] table with defaults filled in."""
+#: [sim.<table>] key <- the key of the experimenter's description ([optics] or [sample]) that
+#: gives it when [sim] does not state it.
+DESCRIBED: dict[str, tuple[str, dict[str, str]]] = {
+    "source": ("optics", {"wavelength_nm": "wavelength_nm",
+                          "beam_diameter_mm": "beam_diameter_mm",
+                          "divergence_deg": "divergence_deg"}),
+    "aperture": ("optics", {"diameter_mm": "aperture_diameter_mm",
+                            "distance_mm": "aperture_distance_mm"}),
+    "sample": ("sample", {"kind": "kind", "eta": "eta", "k": "k", "lit_from": "lit_from"}),
+}
+
+
+def read_table(sim_config: Mapping, name: str, described: Mapping | None = None
+               ) -> dict[str, object]:
+    """Validated [sim.<name>] table: its own keys, else the description's (`described`: the
+    [optics] or [sample] table DESCRIBED maps it from), else the defaults."""
     table = sim_config.get(name, {})
     if not isinstance(table, Mapping):
         raise SimConfigError(f"[sim.{name}] must be a table, got {table!r}")
@@ -138,15 +157,37 @@ def read_table(sim_config: Mapping, name: str) -> dict[str, object]:
     if unknown:
         raise SimConfigError(
             f"[sim.{name}] unknown key {unknown[0]!r}; known: {', '.join(fields)}")
-    return {key: check(f"[sim.{name}] {key}", table.get(key, default))
-            for key, (default, check) in fields.items()}
+    source, keys = DESCRIBED.get(name, ("", {}))
+    base = {key: described[theirs] for key, theirs in keys.items()
+            if described is not None and theirs in described}
+    out = {}
+    for key, (default, check) in fields.items():
+        where = f"[sim.{name}] {key}" if key in table or key not in base \
+            else f"[{source}] {keys[key]}"
+        out[key] = check(where, table.get(key, base.get(key, default)))
+    return out
 
 
-def build_bench(sim_config: Mapping) -> Bench:
-    """The Bench described by a [sim] table (missing tables and keys take the defaults)."""
-    source = Source(**read_table(sim_config, "source"))
-    sample_table = read_table(sim_config, "sample")
-    aperture = read_table(sim_config, "aperture")
+def _warn_polarisation(optics: Mapping | None) -> None:
+    """The model's Fresnel is unpolarised: say so (once) when the bench is described polarised."""
+    states = {key: (optics or {}).get(key, "unpolarised")
+              for key in ("source_polarisation", "analyser_polarisation")}
+    polarised = {key: state for key, state in states.items() if state != "unpolarised"}
+    if polarised:
+        listed = ", ".join(f"{key} = {state!r}" for key, state in polarised.items())
+        warnings.warn(f"[optics] {listed}: the emulated bench models unpolarised light only "
+                      f"(the state is recorded, not emulated)", UserWarning, stacklevel=3)
+
+
+def build_bench(sim_config: Mapping, optics: Mapping | None = None,
+                sample: Mapping | None = None) -> Bench:
+    """The Bench of a [sim] table on the bench the experimenter describes: the instrument
+    config's [optics] and the plan's [sample] tables (see DESCRIBED); missing keys take the
+    defaults."""
+    _warn_polarisation(optics)
+    source = Source(**read_table(sim_config, "source", optics))
+    sample_table = read_table(sim_config, "sample", sample)
+    aperture = read_table(sim_config, "aperture", optics)
     retracted = sample_table.pop("retracted_beyond_deg")
     spec = SampleSpec(**sample_table)
     if spec.kind != "hemisphere" and spec.lit_from != "air":
@@ -199,8 +240,11 @@ def build_power_source(
     sim_config: Mapping,
     positions: Callable[[], Mapping[str, float]],
     clock: Callable[[], float] | None = None,
+    optics: Mapping | None = None,
+    sample: Mapping | None = None,
 ) -> BenchPowerSource:
-    """PowerSource for detector emulators: the bench of sim_config (the [sim] table) at the
-    stage positions positions() returns ({"sample", "arm", "azimuth", "elevation"}, degrees),
-    at the time clock() returns (virtual seconds; default: real seconds since now)."""
-    return BenchPowerSource(build_bench(sim_config), positions, clock)
+    """PowerSource for detector emulators: the bench of sim_config (the [sim] table; optics and
+    sample as in build_bench) at the stage positions positions() returns ({"sample", "arm",
+    "azimuth", "elevation"}, degrees), at the time clock() returns (virtual seconds; default:
+    real seconds since now)."""
+    return BenchPowerSource(build_bench(sim_config, optics, sample), positions, clock)

@@ -18,6 +18,11 @@ name = "e2e-ground-glass"
 instrument = "{instrument}"
 averaging = 16
 
+[sample]
+id = "e2e-glass"
+kind = "hemisphere"
+eta = 1.51
+
 [[grid]]
 side = ["reflection", "transmission"]
 theta_i_deg = [0.0, 30.0]
@@ -59,7 +64,7 @@ def test_reduced_run_matches_the_bench_within_the_noise(run_dir):
 
     run = open_run(run_dir)
     data = reduce_run(run_dir)
-    bench = build_bench(run.config["sim"])
+    bench = build_bench(run.config["sim"], run.config["optics"], run.plan["sample"])
     rows = run.readings()
     rows = rows[rows["kind"] == "sample"]
     truth = np.array([bench.scattered_fraction({"sample": s, "arm": a}) for s, a in

@@ -18,11 +18,26 @@ from sim.bsdf import RoughDielectric
 from sim.devices.photodiode import PhotodiodeModel
 
 WL = 632.8
+#: The bench as its config's [optics] describes it (the [sim] defaults' geometry).
+OPTICS = {"wavelength_nm": WL, "bandwidth_nm": 0.002, "beam_diameter_mm": 2.0,
+          "divergence_deg": 0.0, "aperture_diameter_mm": 10.0, "aperture_distance_mm": 500.0}
+
+
+def described_sample(sim):
+    """The plan's [sample] of a run on the bench of `sim` (its kind and index)."""
+    table = sim.get("sample", {})
+    return {"id": "test", "kind": table.get("kind", "hemisphere"), "eta": table.get("eta", 1.51),
+            **{key: table[key] for key in ("k", "lit_from") if key in table}}
 
 
 def simulate_run(sim, points, averaging=16, n_dark=40, beam_every=8, seed=1):
     """Readings of a scan driven straight through the bench and the detector model."""
-    bench = build_bench(sim)
+    sample = described_sample(sim)
+    aperture = sim.get("aperture", {})  # a test's own aperture is the bench's description too
+    optics = {**OPTICS, **{f"aperture_{key}": aperture[key] for key in ("diameter_mm",
+                                                                         "distance_mm")
+                           if key in aperture}}
+    bench = build_bench(sim, optics, sample)
     detector = PhotodiodeModel(sim.get("detector"), seed=seed)
     rows, t = [], 0.0
 
@@ -42,8 +57,9 @@ def simulate_run(sim, points, averaging=16, n_dark=40, beam_every=8, seed=1):
         st = stage_angles(ti, to, 0.0, side == "transmission")
         read("sample", float(st.sample_deg), float(st.arm_deg), side)
     read("beam", 90.0, 180.0)
-    return SimpleNamespace(config={"sim": sim, "detector": {"wavelength_nm": WL}}, path="mem",
-                           meta={}), np.array(rows, dtype=READING_DTYPE), bench
+    run = SimpleNamespace(config={"sim": sim, "optics": optics, "detector": {}}, path="mem",
+                          plan={"sample": sample}, meta={"sim": True})
+    return run, np.array(rows, dtype=READING_DTYPE), bench
 
 
 THETAS_O = tuple(np.arange(-80.0, 81.0, 4.0))
@@ -116,10 +132,10 @@ def test_narrow_lobe_through_the_hemisphere_finite_and_flagged():
 
 
 def test_optics_and_errors():
-    optics = optics_of({"sim": {"aperture": {"diameter_mm": 10.0, "distance_mm": 500.0}}})
+    optics = optics_of({"optics": OPTICS}, plan={"sample": described_sample({})})
     assert optics.aperture_half_angle_deg == pytest.approx(math.degrees(math.atan(0.01)))
-    with pytest.raises(CalibrationError, match=r"\[sim\]"):
-        optics_of({})
+    with pytest.raises(CalibrationError, match=r"\[sample\].*\[optics\]"):
+        optics_of({"sim": {"aperture": {"diameter_mm": 10.0, "distance_mm": 500.0}}})
     run, readings, _ = simulate_run(SIM, plan((0.0,), [0.0, 10.0]))
     with pytest.raises(CalibrationError, match="beam"):
         reduce_readings(run, readings[readings["kind"] != "beam"])

@@ -22,6 +22,18 @@ def toml_value(value: object) -> str:
     return repr(float(value)) if isinstance(value, float) else str(value)
 
 
+#: The example's [optics], and the [sim] geometry keys a test's tables give that move there.
+OPTICS = {"wavelength_nm": 632.8, "bandwidth_nm": 0.002, "beam_diameter_mm": 2.0,
+          "divergence_deg": 0.03, "aperture_diameter_mm": 10.0, "aperture_distance_mm": 500.0}
+OPTICS_FROM_SIM = {"source": {"wavelength_nm": "wavelength_nm",
+                              "beam_diameter_mm": "beam_diameter_mm",
+                              "divergence_deg": "divergence_deg"},
+                   "aperture": {"diameter_mm": "aperture_diameter_mm",
+                                "distance_mm": "aperture_distance_mm"}}
+#: The plans' default [sample]: Walter's glass hemisphere, lit from the air side.
+GLASS = {"id": "test-glass", "kind": "hemisphere", "eta": 1.51}
+
+
 def table(name: str, values: dict) -> str:
     return f"[{name}]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in values.items())
 
@@ -42,6 +54,15 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
                      if not (start < i < end and ln.split("=")[0].strip() == key)]
             lines.insert(start + 1, f"{key} = {toml_value(value)}")
             text = "\n".join(lines)
+    optics = dict(OPTICS)
+    for name, keys in OPTICS_FROM_SIM.items():  # the geometry is the bench's description
+        for key, theirs in keys.items():
+            if key in sim.get(name, {}):
+                optics[theirs] = sim[name][key]
+    sim = {name: {k: v for k, v in values.items() if k not in OPTICS_FROM_SIM.get(name, {})}
+           for name, values in sim.items()}
+    head, _, rest = text.partition("\n[optics]")
+    text = head + "\n" + table("optics", optics) + "\n[" + rest.split("\n[", 1)[1]
     text += "\n" + table("sim", {"time_scale": time_scale, "seed": seed})
     for name, values in sim.items():
         text += "\n" + table(f"sim.{name}", values)
@@ -51,10 +72,12 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
 
 
 def plan(tmp: Path, name: str, grids: list[dict], repeats: int = 1, dark_every: int = 20,
-         beam_every: int = 20, averaging: int = 4, dwell_s: float = 0.0) -> Path:
-    """A plan file of [[grid]] tables with dark and beam readings interleaved."""
+         beam_every: int = 20, averaging: int = 4, dwell_s: float = 0.0,
+         sample: dict | None = None) -> Path:
+    """A plan file of [[grid]] tables with dark and beam readings interleaved; its [sample]
+    is `sample` (default GLASS)."""
     text = (f'name = "{name}"\nrepeats = {repeats}\naveraging = {averaging}\n'
-            f'order = "as-written"\ndwell_s = {dwell_s}\n')
+            f'order = "as-written"\ndwell_s = {dwell_s}\n\n' + table("sample", sample or GLASS))
     for g in grids:
         text += "\n[[grid]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in g.items())
     text += f"\n[dark]\nevery = {dark_every}\n\n[beam]\nevery = {beam_every}\n"

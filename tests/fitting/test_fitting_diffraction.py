@@ -149,7 +149,9 @@ def test_scanned_run_fits_with_diffraction_from_the_cli(tmp_path, capsys):
                      seed=3)
     grids = [{"side": "reflection", "theta_i_deg": 0.0,
               "theta_o_deg": {"start": 7.0, "stop": 70.0, "step": 3.5}}]
-    run = scan(plan(tmp_path, "lapped-metal", grids, dark_every=8), cfg, tmp_path / "runs")
+    metal = {"id": "lapped-metal", "kind": "conductor", "eta": 0.2, "k": 3.4}
+    run = scan(plan(tmp_path, "lapped-metal", grids, dark_every=8, sample=metal), cfg,
+               tmp_path / "runs")
     results = {}
     for flags in ([], ["--diffraction"]):
         assert main(["fit", str(run), "--json", "--distribution", "ggx", *flags]) == 0

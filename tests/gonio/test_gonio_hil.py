@@ -24,7 +24,7 @@ def rehearsal_config():
     """lab.toml, made quick: instant motion, cheap aperture rule, short settling."""
     cfg = load_example("lab")
     cfg["sim"].update(time_scale="inf")
-    cfg["sim"]["aperture"]["order"] = [0, 0]
+    cfg["sim"].setdefault("aperture", {})["order"] = [0, 0]
     for axis in cfg["axes"].values():
         axis["settle_s"] = 0.0
     return cfg

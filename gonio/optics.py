@@ -1,0 +1,91 @@
+"""The bench's optics as the experimenter knows them: the instrument config's [optics] table.
+
+Wavelength and bandwidth of the source, the beam at the sample, the receiver aperture (so the
+receiver solid angle) and the polarisation of source and analyser. Reduction, fits, plots and
+exports read these, never the emulator's [sim] truth; the record of every run carries them
+(ASTM E2387, ISO 19986: the data hold only for this wavelength, geometry and polarisation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from gonio.errors import ConfigError
+from gonio.fields import Fields
+
+#: Polarisation states a source or an analyser may have (or a linear angle in degrees).
+POLARISATIONS = ("unpolarised", "s", "p")
+
+
+@dataclass(frozen=True)
+class Optics:
+    """[optics]: lengths in mm, angles in degrees (divergence is the half-angle); a polarisation
+    is "unpolarised", "s", "p" or a linear polariser's angle in degrees."""
+
+    wavelength_nm: float
+    bandwidth_nm: float
+    beam_diameter_mm: float
+    divergence_deg: float
+    aperture_diameter_mm: float
+    aperture_distance_mm: float
+    source_polarisation: str | float
+    analyser_polarisation: str | float
+
+    @property
+    def aperture_half_angle_deg(self) -> float:
+        """Half-angle the receiver aperture subtends at the sample."""
+        return math.degrees(math.atan(0.5 * self.aperture_diameter_mm
+                                      / self.aperture_distance_mm))
+
+    @property
+    def receiver_solid_angle_sr(self) -> float:
+        """Solid angle of the receiver aperture seen from the sample: 2 pi (1 - cos beta)."""
+        return 4.0 * math.pi * math.sin(0.5 * math.radians(self.aperture_half_angle_deg)) ** 2
+
+    @property
+    def polarised(self) -> bool:
+        """True when the source or the analyser is not unpolarised."""
+        return (self.source_polarisation, self.analyser_polarisation) != ("unpolarised",
+                                                                          "unpolarised")
+
+    def to_json(self) -> dict[str, Any]:
+        """The table's values plus the derived receiver half-angle and solid angle."""
+        return {**asdict(self), "aperture_half_angle_deg": self.aperture_half_angle_deg,
+                "receiver_solid_angle_sr": self.receiver_solid_angle_sr}
+
+
+def _polarisation(f: Fields, key: str) -> str | float:
+    value = f._get(key, "unpolarised")
+    if isinstance(value, str):
+        return f.string(key, "unpolarised", choices=POLARISATIONS)
+    return f.number(key, low=-180.0, high=180.0)
+
+
+def parse_optics(f: Fields) -> Optics:
+    """Validate an [optics] table (every key but the polarisations is required)."""
+    optics = Optics(
+        wavelength_nm=f.number("wavelength_nm", low=200.0, high=20000.0),
+        bandwidth_nm=f.number("bandwidth_nm", low=0.0, high=1000.0),
+        beam_diameter_mm=f.number("beam_diameter_mm", low=0.0, high=1000.0, low_open=True),
+        divergence_deg=f.number("divergence_deg", low=0.0, high=10.0),
+        aperture_diameter_mm=f.number("aperture_diameter_mm", low=0.0, high=1000.0,
+                                      low_open=True),
+        aperture_distance_mm=f.number("aperture_distance_mm", low=0.0, high=10000.0,
+                                      low_open=True),
+        source_polarisation=_polarisation(f, "source_polarisation"),
+        analyser_polarisation=_polarisation(f, "analyser_polarisation"),
+    )
+    f.done()
+    if optics.aperture_diameter_mm >= optics.aperture_distance_mm:
+        raise f.fail("aperture_diameter_mm", f"{optics.aperture_diameter_mm:g} mm must be "
+                     f"smaller than aperture_distance_mm {optics.aperture_distance_mm:g} mm")
+    return optics
+
+
+def optics_of_config(config: dict[str, Any], where: str = "config") -> Optics | None:
+    """The [optics] of a stored (raw) instrument config, or None if it has none."""
+    if "optics" not in config:
+        return None
+    return parse_optics(Fields(config["optics"], f"{where}.optics", ConfigError))

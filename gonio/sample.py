@@ -1,0 +1,72 @@
+"""What is measured: the plan's [sample] table (id, kind, nominal index, lit side, notes).
+
+Reduction takes the sample's kind, index and lit side from here (never from the emulator's
+[sim]); every run's record carries the whole block, as the standards ask.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from gonio.errors import PlanError
+from gonio.fields import Fields
+
+#: Sample kinds as the bench knows them (sim.bench.sample.KINDS names the same).
+KINDS = ("hemisphere", "slab", "conductor")
+#: Which side the light comes from: the rough face's air side, or through the hemisphere.
+LIT_FROM = ("air", "hemisphere")
+#: Nominal indices gonio reduces and fits (glasses, and a conductor's real part).
+ETA_RANGE = (0.01, 10.0)
+
+
+@dataclass(frozen=True)
+class SampleInfo:
+    """[sample]: `eta` is the glass index (a conductor's real part, with `k` its extinction);
+    `azimuth_reference` says what the sample azimuth 0 is lined up with."""
+
+    id: str
+    kind: str
+    eta: float
+    k: float = 0.0
+    lit_from: str = "air"
+    description: str = ""
+    azimuth_reference: str = ""
+    operator: str = ""
+    notes: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """The block as stored in meta.json and exports."""
+        return asdict(self)
+
+
+def parse_sample(f: Fields) -> SampleInfo:
+    """Validate a [sample] table: id, kind and eta are required."""
+    sample_id = f.string("id")
+    if not sample_id.strip():
+        raise f.fail("id", "must not be empty")
+    sample = SampleInfo(
+        id=sample_id,
+        kind=f.string("kind", choices=KINDS),
+        eta=f.number("eta", low=ETA_RANGE[0], high=ETA_RANGE[1]),
+        k=f.number("k", 0.0, low=0.0, high=20.0),
+        lit_from=f.string("lit_from", "air", choices=LIT_FROM),
+        description=f.string("description", ""),
+        azimuth_reference=f.string("azimuth_reference", ""),
+        operator=f.string("operator", ""),
+        notes=f.string("notes", ""),
+    )
+    f.done()
+    if sample.lit_from == "hemisphere" and sample.kind != "hemisphere":
+        raise f.fail("lit_from", f'"hemisphere" needs kind = "hemisphere", not {sample.kind!r}')
+    if sample.k != 0.0 and sample.kind != "conductor":
+        raise f.fail("k", f'the extinction applies to kind = "conductor" only, not '
+                     f"{sample.kind!r}")
+    return sample
+
+
+def sample_of_plan(plan: dict[str, Any], where: str = "plan") -> SampleInfo | None:
+    """The [sample] of a stored (raw) plan, or None if it has none."""
+    if "sample" not in plan:
+        return None
+    return parse_sample(Fields(plan["sample"], f"{where}.sample", PlanError))
