@@ -58,6 +58,10 @@ class Axis(Protocol):
     def home(self) -> None:
         """Start a homing move; wait() waits for it."""
 
+    def identity(self) -> dict[str, str]:
+        """The device's identity as it reports it (model, serial, firmware...; {} if it
+        reports none). Axes of one controller report the controller's identity."""
+
 
 @dataclass(frozen=True)
 class Reading:
@@ -82,3 +86,7 @@ class Detector(Protocol):
 
     def zero(self) -> None:
         """Run the device's dark-zero adjustment."""
+
+    def identity(self) -> dict[str, str]:
+        """The device's identity as it reports it (model, serial, firmware, sensor head...;
+        {} if it reports none)."""

@@ -184,6 +184,10 @@ class EspController:
             return
         self._raise_if_error(code, text)
 
+    def identity(self) -> dict[str, str]:
+        """The controller's VE? reply (model and firmware version), asked when it opened."""
+        return {"version": self.version}
+
     def abort(self) -> None:
         """AB: stop every axis at once (no deceleration)."""
         self.command("AB")
@@ -261,6 +265,10 @@ class EspAxis:
     def home(self) -> None:
         """OR: start a home search."""
         self._command("OR")
+
+    def identity(self) -> dict[str, str]:
+        """The controller's identity (every axis of one ESP reports the same)."""
+        return self.controller.identity()
 
     def define_position(self, position_deg: float = 0.0) -> None:
         """DH: call the current position `position_deg` (defines home)."""

@@ -22,8 +22,13 @@ from pymodbus.pdu import ExceptionResponse
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import RtuSync
-from drivers.register_map import RegisterMap
+from drivers.register_map import RegisterMap, decode_text
 
+READ_DEVICE_IDENTIFICATION = 43  # with MEI type 14
+BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
+# the basic objects VendorName, ProductCode, MajorMinorRevision (Modbus Application Protocol
+# V1.1b3, 6.21) by object id -> the identity keys they give
+BASIC_OBJECTS = {0: "vendor", 1: "model", 2: "firmware"}
 MODBUS_EXCEPTIONS = {
     1: "illegal function",
     2: "illegal data address",
@@ -105,6 +110,15 @@ class ModbusLink:
         what = f"reply to a write of holding registers {address}.. of unit {unit}"
         self._call(device, what, (self._client.write_registers, 16), unit, address,
                    values=values)
+
+    def identification(self, device: str, unit: int) -> dict[int, bytes]:
+        """Read Device Identification (function 43, MEI 14) of the basic objects, sent once
+        (a unit that lacks it may stay silent): {object id: value}."""
+        reply = self._call(device, f"reply to a device identification (43/14) of unit {unit}",
+                           (self._client.read_device_information, READ_DEVICE_IDENTIFICATION),
+                           unit, read_code=BASIC_DEVICE_ID, object_id=0)
+        return {oid: value for oid, value in reply.information.items()
+                if isinstance(value, bytes)}
 
     def _call(self, device: str, what: str, fn, unit: int, *args, **kwargs):
         """fn = (client method, its function code), called for `unit`; a reply to another
@@ -243,6 +257,22 @@ class MappedUnit:
                 self.name, "holding", reg.address, reg.count, self.unit
             ) != words:
                 raise
+
+    def identity(self) -> dict[str, str]:
+        """The unit's identity as it reports it: Read Device Identification (43/14: vendor,
+        model, firmware) where it offers it, then the map's [identity] string registers for
+        the names that did not give; blank strings left out, {} when it reports neither."""
+        try:
+            objects = self.link.identification(self.name, self.unit)
+        except (DeviceError, DeviceTimeout, ProtocolError):  # not offered
+            objects = {}
+        found = {key: decode_text(objects[oid]) for oid, key in BASIC_OBJECTS.items()
+                 if oid in objects}
+        for name, reg in self.map.identity.items():
+            if not found.get(name):
+                found[name] = decode_text(self.link.read(self.name, reg.table, reg.address,
+                                                         reg.count, self.unit))
+        return {key: value for key, value in found.items() if value}
 
     def command(self, command: str) -> None:
         """Write a named value of the map's [commands] to the command register."""

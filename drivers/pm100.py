@@ -20,7 +20,7 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
 from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
@@ -256,3 +256,8 @@ class Pm100:
         except ValueError:
             raise ProtocolError(f"{self.name}: bad SYST:SENS:IDN? reply {fields!r}") from None
         return SensorIdentity(*(f.strip() for f in fields[:3]), kind, subtype, flags)
+
+    def identity(self) -> dict[str, str]:
+        """*IDN? (asked when it opened) and the sensor head's SYST:SENS:IDN? fields."""
+        head = {f"sensor_{key}": str(value) for key, value in asdict(self.sensor()).items()}
+        return {"idn": self.idn, **head}

@@ -2,7 +2,9 @@
 
 A map names each register (table, 0-based address, type, scale, access, range) and the
 drive's command values, status bits and fault codes; `RegisterMap.encode` / `decode`
-turn engineering values into 16-bit words and back in the map's word order.
+turn engineering values into 16-bit words and back in the map's word order. An optional
+`[identity]` table names ASCII string registers (vendor, model, serial, firmware...), two
+characters per register, first character in the high byte; `decode_text` reads them.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ _VALUE_CODECS = {kind: struct.Struct(">" + code) for kind, (code, _) in _TYPES.i
 _WORD_CODECS = {n: struct.Struct(f">{n}H") for n in (1, 2)}  # big-endian 16-bit words
 _TABLES = ("holding", "input")
 _ACCESS = ("r", "rw")
+_TEXT_KEYS = ("table", "address", "count", "description")
+MAX_READ_REGISTERS = 125  # the most registers one Modbus read (03 / 04) may ask for
 
 
 class RegisterMapError(ValueError):
@@ -55,6 +59,16 @@ class Register:
     def writable(self) -> bool:
         """True when a host may write this register."""
         return self.access == "rw"
+
+
+@dataclass(frozen=True)
+class TextRegister:
+    """An identity string of the map's [identity] table: `count` registers of ASCII."""
+
+    name: str
+    table: str
+    address: int
+    count: int
 
 
 @dataclass(frozen=True)
@@ -88,6 +102,8 @@ class RegisterMap:
             for name, spec in _fault_table(_section(table, "fault_codes", source), source).items()
         }
         self.gain_ranges_w = _gain_ranges(_section(table, "gain_ranges", source), source)
+        self.identity = {name: _text_register(name, spec, source)
+                         for name, spec in _section(table, "identity", source).items()}
         self._check_overlap()
 
     @classmethod
@@ -176,14 +192,26 @@ class RegisterMap:
 
     def _check_overlap(self) -> None:
         used: dict[tuple[str, int], str] = {}
-        for reg in self.registers.values():
+        spans = [*self.registers.items(),
+                 *((f"identity.{name}", r) for name, r in self.identity.items())]
+        for name, reg in spans:
             for addr in range(reg.address, reg.address + reg.count):
-                other = used.setdefault((reg.table, addr), reg.name)
-                if other != reg.name:
+                other = used.setdefault((reg.table, addr), name)
+                if other != name:
                     raise RegisterMapError(
-                        f"{self.source}: registers {other!r} and {reg.name!r} overlap at "
+                        f"{self.source}: registers {other!r} and {name!r} overlap at "
                         f"{reg.table} address {addr}"
                     )
+
+
+def decode_text(data: bytes | list[int]) -> str:
+    """ASCII bytes, or string registers (two characters each, high byte first), as text:
+    NUL and space padding at either end dropped, a byte that is not printable ASCII shown
+    as U+FFFD."""
+    if isinstance(data, list):
+        data = b"".join(w.to_bytes(2, "big") for w in data)
+    raw = data.strip(b"\0 ")
+    return "".join(chr(b) if 32 <= b < 127 else "\ufffd" for b in raw)
 
 
 def _field(table: Mapping, key: str, kind: type, where: str):
@@ -232,6 +260,28 @@ def _register(name: str, spec: object, source: str) -> Register:
     return Register(name, table, address, kind, 1.0 if scale is None else scale, access,
                     str(spec.get("unit", "")), _number(spec, "min", where),
                     _number(spec, "max", where))
+
+
+def _text_register(name: str, spec: object, source: str) -> TextRegister:
+    where = f"{source}: identity.{name}"
+    if not isinstance(spec, Mapping):
+        raise RegisterMapError(f"{where} must be a table {{ table, address, count }}")
+    unknown = sorted(set(spec) - set(_TEXT_KEYS))
+    if unknown:
+        raise RegisterMapError(f"{where}: unknown key {unknown[0]!r} (known: "
+                               f"{', '.join(_TEXT_KEYS)})")
+    table = _field(spec, "table", str, where)
+    if table not in _TABLES:
+        raise RegisterMapError(f"{where}: table must be one of {', '.join(_TABLES)}, "
+                               f"got {table!r}")
+    address = _int_field(spec, "address", where)
+    count = _int_field(spec, "count", where)
+    if not 1 <= count <= MAX_READ_REGISTERS:
+        raise RegisterMapError(f"{where}: count must be 1..{MAX_READ_REGISTERS} registers "
+                               f"(2 characters each), got {count}")
+    if address + count > 0x10000:
+        raise RegisterMapError(f"{where}: address {address} past the 16-bit address space")
+    return TextRegister(name, table, address, count)
 
 
 def _section(table: Mapping, key: str, source: str) -> Mapping:

@@ -27,6 +27,8 @@ class Instrument:
     emulators' scale under --sim), so that settle and dwell waits shrink with it.
     last_positions: the stage positions last reported, {role: deg} (what an emulated
     detector sees when the stages are real).
+    devices: per device name, its protocol, endpoint (and Modbus unit) and the identity it
+    reported when opened.
     """
 
     config: InstrumentConfig
@@ -35,6 +37,7 @@ class Instrument:
     closers: list[Callable[[], None]] = field(default_factory=list)
     time_scale: float = 1.0
     last_positions: dict[str, float] = field(default_factory=dict)
+    devices: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def stop_all(self) -> list[str]:
         """Ask every axis to stop; returns the errors of those that could not be told."""
@@ -133,10 +136,33 @@ def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrume
         axes = {role: _stage(cfg.devices[ax.device], ax, controllers, closers)
                 for role, ax in cfg.axes.items()}
         detector = _detector(cfg.devices[cfg.detector.device], closers)
+        drivers: dict[str, Axis | Detector] = {cfg.axes[role].device: axis
+                                               for role, axis in axes.items()}
+        drivers[cfg.detector.device] = detector  # one per device: an ESP's axes report alike
+        devices = {name: _record(cfg.devices[name], drivers[name])
+                   for name in cfg.devices if name in drivers}
     except BaseException:
         _close_all(closers)
         raise
-    return Instrument(cfg, axes, detector, closers, time_scale=float(time_scale))
+    return Instrument(cfg, axes, detector, closers, time_scale=float(time_scale),
+                      devices=devices)
+
+
+def _record(dev: DeviceConfig, driver: Axis | Detector) -> dict[str, Any]:
+    """What a run records of a device: protocol, endpoint (and Modbus unit), and the identity
+    the driver reports; a device that reports none, or fails to, is noted, never fatal."""
+    record: dict[str, Any] = {"protocol": dev.protocol, "endpoint": dev.endpoint}
+    if dev.transport is not None:
+        record.update(transport=dev.transport, unit=dev.unit)
+    try:
+        record["identity"] = driver.identity()
+    except DriverError as exc:
+        record["identity"] = {}
+        record["identity_note"] = f"identity not read: {exc}"
+    else:
+        if not record["identity"]:
+            record["identity_note"] = "the device reported no identity"
+    return record
 
 
 def real_seconds(instrument: Instrument, seconds: float) -> float:

@@ -7,7 +7,6 @@ plan and config happens before any device is opened.
 from __future__ import annotations
 
 import contextlib
-import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -77,7 +76,7 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
         writer = make_writer()
         try:
             writer.start_session(sim=list(dev.emulated), endpoints={
-                n: d.endpoint for n, d in dev.config.devices.items()})
+                n: d.endpoint for n, d in dev.config.devices.items()}, devices=inst.devices)
             inst.last_positions = dev.positions
             bar = Progress(len(sched), writer.next_index, plan.name,
                            disable=None if progress is None else not progress)
@@ -88,13 +87,6 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
             return ScanResult(writer.path, engine.run())
         finally:
             writer.close()
-
-
-def _scale(value: float) -> float | str:
-    """A time scale as the config writes it ("inf" for infinity)."""
-    if not value > 0:
-        raise ConfigError(f"--time-scale must be > 0 (or inf), got {value!r}")
-    return "inf" if math.isinf(value) else float(value)
 
 
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
@@ -117,8 +109,9 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     if time_scale is not None:
         if sim is False:
             raise ConfigError("--time-scale applies to emulated devices: use it with --sim")
-        cfg = parse_config({**cfg.raw, "sim": {**cfg.sim, "time_scale": _scale(time_scale)}},
-                           cfg.path)
+        from gonio.simulate import with_time_scale
+
+        cfg = with_time_scale(cfg, time_scale)
     sched = build_schedule(plan, cfg)
     if isinstance(sim, list):
         from gonio.simulate import resolve_devices
@@ -147,13 +140,17 @@ def with_sample_id(plan: Plan, sample_id: str) -> Plan:
 
 def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                 sim: list[str] | bool | None = None, progress: bool | None = None,
-                control: PauseControl | None = None) -> ScanResult:
+                control: PauseControl | None = None,
+                plan_path: str | Path | None = None) -> ScanResult:
     """Continue a run after its last stored reading, with the plan and config it started with.
 
     instrument: a config to use instead of the stored one (e.g. new endpoints); it must give
-    exactly the same schedule. sim: None = as the run was started.
+    exactly the same schedule. sim: None = as the run was started. plan_path: a plan file
+    that must say what the stored plan says (`same_plan`).
     """
     run = open_run(run_dir)
+    if plan_path is not None:
+        same_plan(plan_path, run.plan, run.path)
     plan = parse_plan(run.plan, run.path / "plan.toml")
     stored = parse_config(run.config, run.path / "instrument.toml")
     cfg = stored if instrument is None else load_config(instrument)
@@ -173,3 +170,17 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
             writer.set_status("completed", "")
         return ScanResult(run.path, Outcome("completed", "", len(run)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control)
+
+
+_MISSING = object()
+
+
+def same_plan(plan_path: str | Path, stored: dict, run_path: Path) -> None:
+    """RunError unless the plan file parses to the run's stored plan (plan.json): the TOML
+    dicts compared, so comments and formatting do not count, and `instrument` as written."""
+    raw = load_plan(plan_path).raw
+    keys = raw.keys() | stored.keys()
+    differ = sorted(k for k in keys if raw.get(k, _MISSING) != stored.get(k, _MISSING))
+    if differ:
+        raise RunError(f"{plan_path}: not the plan {run_path} was started with (differs in "
+                       f"{', '.join(differ)}); resume without PLAN to use the stored one")

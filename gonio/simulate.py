@@ -7,6 +7,7 @@ and by `gonio emulate` (serve a config's devices for another process to use).
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -91,6 +92,18 @@ def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
         bench.stop()
 
 
-def serve(cfg: InstrumentConfig) -> EmulatedBench:
-    """Start every device of a config (for `gonio emulate`); the caller stops the bench."""
+def with_time_scale(cfg: InstrumentConfig, value: float) -> InstrumentConfig:
+    """A copy of the config whose [sim] time_scale is value (`--time-scale X`; inf = instant
+    moves)."""
+    if not value > 0:
+        raise ConfigError(f"--time-scale must be > 0 (or inf), got {value!r}")
+    scale = "inf" if math.isinf(value) else float(value)
+    return parse_config({**cfg.raw, "sim": {**cfg.sim, "time_scale": scale}}, cfg.path)
+
+
+def serve(cfg: InstrumentConfig, time_scale: float | None = None) -> EmulatedBench:
+    """Start every device of a config (for `gonio emulate`), at time_scale if given instead
+    of the config's; the caller stops the bench."""
+    if time_scale is not None:
+        cfg = with_time_scale(cfg, time_scale)
     return _start(cfg, list(cfg.devices), {})

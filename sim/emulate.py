@@ -150,6 +150,11 @@ class _Builder:
     def _seed(self, name: str) -> int:
         return self.seed + list(self.devices).index(name)
 
+    def _serial(self, name: str) -> str:
+        """A Modbus unit's serial number: one per device and seed (another seed, other
+        hardware)."""
+        return f"SIM{self._seed(name):05d}"
+
     def _faults(self, name: str) -> FaultSpec | None:
         table = self.sim.get("faults", {}).get(name)
         if table is None:
@@ -181,7 +186,8 @@ class _Builder:
                     emu = ModbusStageEmulator(self.bench.clock, dev["register_map"],
                                               tuple(ax["limits_deg"]), ax["speed_deg_s"],
                                               ax["accel_deg_s2"], self._faults(name),
-                                              _home(ax["limits_deg"]))
+                                              _home(ax["limits_deg"]),
+                                              serial=self._serial(name))
                     self._add_modbus(name, emu)
                     self.readers[role] = emu.axis.position
 
@@ -198,7 +204,7 @@ class _Builder:
             elif dev["protocol"] == "modbus-detector":
                 self._add_modbus(name, ModbusDetectorEmulator(
                     source, dev["register_map"], self._faults(name), self._seed(name),
-                    detector, light_nm))
+                    detector, light_nm, serial=self._serial(name)))
 
     def serve_modbus(self) -> None:
         """One Modbus server per bus or TCP endpoint, with all its collected units."""

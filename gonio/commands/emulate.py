@@ -13,6 +13,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("emulate", help="serve the emulated devices of a config",
                               description=__doc__)
     p.add_argument("config", help="instrument config TOML file")
+    p.add_argument("--time-scale", type=float, metavar="X",
+                   help="virtual seconds per real second (inf = instant moves), instead of "
+                        "the config's [sim] time_scale")
     p.set_defaults(func=run)
 
 
@@ -25,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
-    with serve(cfg) as bench:
+    with serve(cfg, args.time_scale) as bench:
         for endpoint in bench.endpoints.values():
             print(endpoint.line, flush=True)
         done.wait()

@@ -19,7 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `scan` verb."""
     p = subparsers.add_parser("scan", help="run a scan plan and record it",
                               description=__doc__)
-    p.add_argument("plan", nargs="?", help="plan TOML file (not with --resume)")
+    p.add_argument("plan", nargs="?",
+                   help="plan TOML file (with --resume: optional, must match the run's plan)")
     p.add_argument("--instrument", metavar="CFG",
                    help="instrument config (default: the plan's `instrument`)")
     p.add_argument("--sim", nargs="?", const=True, default=None, type=_sim_names,
@@ -64,10 +65,11 @@ def run(args: argparse.Namespace) -> int:
             and args.sim[0].endswith(".toml"):
         args.plan, args.sim = args.sim[0], True  # `gonio scan --sim PLAN`: the plan, not NAMES
     if args.resume:
-        if args.plan or args.calibration or args.time_scale is not None or args.sample_id:
+        if args.calibration or args.time_scale is not None or args.sample_id:
             raise GonioError("--resume RUN continues a run as it was started: "
-                             "give no PLAN, --calibration, --time-scale or --sample-id with it")
-        result = resume_scan(args.resume, args.instrument, args.sim, progress=progress)
+                             "give no --calibration, --time-scale or --sample-id with it")
+        result = resume_scan(args.resume, args.instrument, args.sim, progress=progress,
+                             plan_path=args.plan)
     else:
         if not args.plan:
             raise GonioError("a PLAN file is needed (or --resume RUN)")

@@ -28,12 +28,13 @@ class ModbusDetectorEmulator(EmulatedUnit):
 
     detector: the instrument config's [sim.detector] table (its ranges_w, if given, must
     equal the map's gain ranges); light_wavelength_nm: the light's true wavelength (None =
-    a perfectly corrected meter).
+    a perfectly corrected meter); serial, device_identification: as for EmulatedUnit.
     """
 
     def __init__(self, source: PowerSource, register_map_path: str | Path,
                  faults: FaultSpec | None = None, seed: int = 0,
-                 detector: Mapping | None = None, light_wavelength_nm: float | None = None):
+                 detector: Mapping | None = None, light_wavelength_nm: float | None = None, *,
+                 serial: str | None = None, device_identification: bool = True):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         if not layout.ranges_w:
@@ -42,7 +43,8 @@ class ModbusDetectorEmulator(EmulatedUnit):
         if "ranges_w" in table and tuple(table["ranges_w"]) != layout.ranges_w:
             raise LayoutError(f"[sim.detector] ranges_w {table['ranges_w']!r} differ from the "
                               f"gain ranges of {layout.source}")
-        super().__init__(layout, faults)
+        super().__init__(layout, faults, serial=serial,
+                         device_identification=device_identification)
         self.source = source
         self.model = PhotodiodeModel({**table, "ranges_w": list(layout.ranges_w)}, seed=seed,
                                      light_wavelength_nm=light_wavelength_nm)

@@ -13,6 +13,7 @@ MBAP header only, and a bad CRC does not apply.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import threading
 import time
 from collections.abc import Mapping
@@ -23,11 +24,13 @@ from pymodbus.constants import ExcCodes
 from pymodbus.datastore import ModbusServerContext
 from pymodbus.exceptions import NoSuchIdException
 from pymodbus.pdu import ExceptionResponse
+from pymodbus.pdu.mei_message import ReadDeviceInformationRequest, ReadDeviceInformationResponse
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.modbus_pty import PtyLine
 from sim.devices.register_map import (
+    ILLEGAL_ADDRESS,
     ILLEGAL_FUNCTION,
     ILLEGAL_VALUE,
     DeviceLayout,
@@ -41,6 +44,10 @@ _WRITE_FUNCTIONS = (6, 16, 23)
 RTU_CHARACTER_BITS = 11  # start, 8 data, parity (or a second stop bit), stop
 RTU_FIXED_T35_S = 0.00175  # the spec's t3.5 above 19200 baud
 _MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
+FIRMWARE = "1.0.0-emulated"
+BASIC_CONFORMITY = 0x81  # basic identification objects, stream and individual access
+_SPECIFIC_OBJECT = 4  # read device id code: one object
+_serials = itertools.count(1)
 
 
 class ModbusUnit(Protocol):  # the server's view; EmulatedUnit is the usual implementation
@@ -54,19 +61,38 @@ class ModbusUnit(Protocol):  # the server's view; EmulatedUnit is the usual impl
     def write(self, address: int, values: list[int]) -> None:
         """Store holding registers and act on them (Rejected -> exception reply)."""
 
+    def identification(self) -> dict[int, bytes] | None:
+        """Basic device identification objects (43/14) by id; None = function 43 not offered."""
+
 
 class EmulatedUnit:
     """A unit whose registers follow a map: live registers are refreshed before a read,
     single-register settings are range-checked on write, and writes are then acted on.
 
+    Its identity: vendor and model (the map's `vendor` and `name`), `serial` (one per unit
+    unless given) and FIRMWARE, in the map's [identity] registers and, unless
+    device_identification is False, answered to function 43 / MEI 14 too.
     Subclasses give `refresh(fields)` (update what a read is about to return) and
     `act(fields)` (do what the written registers ask).
     """
 
-    def __init__(self, layout: DeviceLayout, faults: FaultSpec | None = None):
+    def __init__(self, layout: DeviceLayout, faults: FaultSpec | None = None, *,
+                 serial: str | None = None, device_identification: bool = True):
         self.layout = layout
         self.registers = RegisterFile(layout)
         self.faults = FaultInjector(faults) if faults is not None else None
+        self.identity = {"vendor": layout.vendor, "model": layout.model,
+                         "serial": serial or f"EMU{next(_serials):05d}", "firmware": FIRMWARE}
+        for name in layout.identity:
+            self.registers.set_text(name, self.identity.get(name, ""))
+        self.device_identification = device_identification
+
+    def identification(self) -> dict[int, bytes] | None:
+        """VendorName, ProductCode (the model), MajorMinorRevision, if 43/14 is offered."""
+        if not self.device_identification:
+            return None
+        return {oid: self.identity[key].encode("ascii", "replace")
+                for oid, key in enumerate(("vendor", "model", "firmware"))}
 
     def read(self, table: str, address: int, count: int) -> list[int]:
         """Words of a register range, live values refreshed first."""
@@ -114,14 +140,16 @@ class _UnitsContext(ModbusServerContext):
         self._units = dict(units)
         self._echo: dict[int, list[int]] = {}
 
-    def _unit(self, device_id: int) -> ModbusUnit:
+    def unit(self, device_id: int) -> ModbusUnit:
+        """The unit with this id (NoSuchIdException: pymodbus then answers as for any
+        absent unit)."""
         unit = self._units.get(device_id)
         if unit is None:
             raise NoSuchIdException(f"no unit {device_id}")
         return unit
 
     async def async_getValues(self, device_id, func_code, address, count=1):  # noqa: N802
-        unit = self._unit(device_id)
+        unit = self.unit(device_id)
         if func_code == 6:  # a write-single echo: the word just written
             return self._echo.get(device_id, [0])[:1]
         table = _TABLE_OF_FUNCTION.get(func_code)
@@ -133,7 +161,7 @@ class _UnitsContext(ModbusServerContext):
             return ExcCodes(exc.code)
 
     async def async_setValues(self, device_id, func_code, address, values):  # noqa: N802
-        unit = self._unit(device_id)
+        unit = self.unit(device_id)
         if func_code not in _WRITE_FUNCTIONS:
             return ExcCodes(ILLEGAL_FUNCTION)
         try:
@@ -157,7 +185,7 @@ class _FaultyReplies:
         handler.trace_packet = lambda sending, data: (
             self.emulator.outgoing(handler, data) if sending else data
         )
-        handler.trace_pdu = lambda sending, pdu: pdu if sending else _refuse_reply_codes(pdu)
+        handler.trace_pdu = lambda sending, pdu: pdu if sending else _answer_per_unit(pdu)
         handler.handle_later = _handle_on_this_loop(handler)
         if self.emulator.transport == "rtu":
             gap_s = rtu_silent_interval_s(self.emulator.baudrate)
@@ -181,9 +209,13 @@ def _handle_on_this_loop(handler):
     return handle_later
 
 
-def _refuse_reply_codes(request):
-    """A request whose function code has the exception bit (>= 0x80) is decoded by pymodbus
-    as an exception reply; a device answers it with exception 01 (illegal function)."""
+def _answer_per_unit(request):
+    """Requests pymodbus would answer for the whole server, answered as the unit does.
+
+    A request whose function code has the exception bit (>= 0x80) is decoded by pymodbus as
+    an exception reply; a device answers it with exception 01 (illegal function). Read Device
+    Identification (43/14): pymodbus answers from one process-wide identity; here each unit
+    gives its own (`_identification`)."""
     if isinstance(request, ExceptionResponse):
         code = request.function_code
 
@@ -191,7 +223,34 @@ def _refuse_reply_codes(request):
             return ExceptionResponse(code, ExcCodes(ILLEGAL_FUNCTION))
 
         request.datastore_update = illegal_function
+    elif isinstance(request, ReadDeviceInformationRequest):
+        request.datastore_update = partial(_identification, request)
     return request
+
+
+async def _identification(request: ReadDeviceInformationRequest, context: _UnitsContext,
+                          device_id: int):
+    """A unit's basic identification objects: from object_id on for a stream read (codes 1..3;
+    a unit of basic conformity answers 2 and 3 with its basic objects, and an unknown start
+    with all of them), or the one asked (code 4; exception 02 if it has none such).
+    Exception 01 from a unit that does not offer function 43."""
+    objects = context.unit(device_id).identification()
+    code = request.function_code
+    if objects is None:
+        return ExceptionResponse(code, ExcCodes(ILLEGAL_FUNCTION))
+    if not 1 <= request.read_code <= _SPECIFIC_OBJECT:
+        return ExceptionResponse(code, ExcCodes(ILLEGAL_VALUE))
+    if request.read_code == _SPECIFIC_OBJECT:
+        if request.object_id not in objects:
+            return ExceptionResponse(code, ExcCodes(ILLEGAL_ADDRESS))
+        chosen = {request.object_id: objects[request.object_id]}
+    else:
+        first = request.object_id if request.object_id in objects else 0
+        chosen = {oid: value for oid, value in objects.items() if oid >= first}
+    reply = ReadDeviceInformationResponse(read_code=request.read_code, information=chosen,
+                                          dev_id=device_id)
+    reply.conformity = BASIC_CONFORMITY
+    return reply
 
 
 def rtu_silent_interval_s(baudrate: int) -> float:

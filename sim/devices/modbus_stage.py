@@ -30,14 +30,17 @@ class _Refused(Exception):
 
 
 class ModbusStageEmulator(EmulatedUnit):
-    """One stepper drive unit: a TrapezoidAxis behind the map's registers (degrees)."""
+    """One stepper drive unit: a TrapezoidAxis behind the map's registers (degrees); serial
+    and device_identification as for EmulatedUnit."""
 
     def __init__(self, clock: VirtualClock, register_map_path: str | Path,
                  limits_deg: tuple[float, float], speed_deg_s: float, accel_deg_s2: float,
-                 faults: FaultSpec | None = None, position_deg: float = 0.0):
+                 faults: FaultSpec | None = None, position_deg: float = 0.0, *,
+                 serial: str | None = None, device_identification: bool = True):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
-        super().__init__(layout, faults)
+        super().__init__(layout, faults, serial=serial,
+                         device_identification=device_identification)
         self.axis = TrapezoidAxis(clock, speed_deg_s, accel_deg_s2, tuple(limits_deg),
                                   position_deg)  # homes to 0, or the nearest limit
         for name, value in (("velocity", speed_deg_s), ("acceleration", accel_deg_s2),

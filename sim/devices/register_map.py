@@ -3,7 +3,8 @@
 Written apart from drivers.register_map on purpose (a driver bug cannot hide behind shared
 code). `DeviceLayout` parses the TOML; `RegisterFile` holds a unit's 16-bit words per
 table and answers reads and writes the way a device does: a Modbus exception code for an
-address outside the map or a write to a read-only register.
+address outside the map or a write to a read-only register. The map's `[identity]` strings
+are read-only registers of ASCII, two characters each (first in the high byte), NUL padded.
 """
 
 from __future__ import annotations
@@ -70,6 +71,9 @@ class DeviceLayout:
     bits: dict[str, int]
     faults: dict[str, tuple[int, str]]
     ranges_w: tuple[float, ...] = field(default_factory=tuple)
+    identity: dict[str, Field] = field(default_factory=dict)
+    model: str = ""
+    vendor: str = ""
 
     @classmethod
     def read(cls, path: str | Path) -> DeviceLayout:
@@ -90,9 +94,11 @@ class DeviceLayout:
             ranges = tuple(float(r) for r in doc.get("gain_ranges", {}).get("full_scale_w", ()))
             commands = {str(n): int(v) for n, v in doc.get("commands", {}).items()}
             bits = {str(n): int(v) for n, v in doc.get("status_bits", {}).items()}
+            identity = {n: _text_field(n, spec) for n, spec in doc.get("identity", {}).items()}
         except (AttributeError, KeyError, TypeError, ValueError) as exc:
             raise LayoutError(f"{src}: bad register map entry: {exc!r}") from None
-        return cls(src, order == "little", fields, commands, bits, faults, ranges)
+        return cls(src, order == "little", fields, commands, bits, faults, ranges, identity,
+                   str(doc.get("name", "")), str(doc.get("vendor", "")))
 
     def need(self, fields: tuple[str, ...], commands: tuple[str, ...],
              bits: tuple[str, ...], faults: tuple[str, ...]) -> None:
@@ -142,6 +148,20 @@ def _field(name: str, spec: dict) -> Field:
                  float(spec.get("max", math.inf)))
 
 
+def _text_field(name: str, spec: dict) -> Field:
+    """An [identity] string: `count` read-only registers of ASCII."""
+    missing = [key for key in ("table", "address", "count") if key not in spec]
+    if missing:
+        raise ValueError(f"identity {name}: missing {missing[0]!r}")
+    table, count = spec["table"], int(spec["count"])
+    if table not in ("holding", "input"):
+        raise ValueError(f"identity {name}: unknown table {table!r}")
+    if not 1 <= count <= 125:
+        raise ValueError(f"identity {name}: count must be 1..125 registers, got {count}")
+    return Field(f"identity.{name}", table, int(spec["address"]), f">{2 * count}s", 1.0,
+                 False, -math.inf, math.inf)
+
+
 class RegisterFile:
     """A unit's register memory: words per (table, address), per the layout.
 
@@ -153,7 +173,7 @@ class RegisterFile:
         self.layout = layout
         self.words: dict[tuple[str, int], int] = {}
         self.owner: dict[tuple[str, int], Field] = {}
-        for f in layout.fields.values():
+        for f in (*layout.fields.values(), *layout.identity.values()):
             for addr in f.span():
                 key = (f.table, addr)
                 if key in self.owner:
@@ -192,6 +212,13 @@ class RegisterFile:
         """Engineering value of a field."""
         f = self.layout.fields[name]
         return self.layout.from_words(name, [self.words[(f.table, a)] for a in f.span()])
+
+    def set_text(self, name: str, text: str) -> None:
+        """Store an [identity] string (ASCII, cut to fit, NUL padded)."""
+        f = self.layout.identity[name]
+        raw = text.encode("ascii", "replace")[:2 * f.width].ljust(2 * f.width, b"\0")
+        for offset, addr in enumerate(f.span()):
+            self.words[(f.table, addr)] = int.from_bytes(raw[2 * offset:2 * offset + 2], "big")
 
     def set(self, name: str, value: float) -> None:
         """Store an engineering value into a field (the device's own update)."""

@@ -26,6 +26,7 @@ def test_identity_and_axis_interface(esp_pair):
     assert raw(ctl, "*IDN?").startswith("Newport Corporation,ESP301")
     axis = ctl.axis(1, "sample")
     assert isinstance(axis, Axis) and axis.name == "sample"
+    assert axis.identity() == ctl.identity() == {"version": emu.version}
     assert axis.enabled
     assert ctl.query("1SN?") == "7"  # degrees
 

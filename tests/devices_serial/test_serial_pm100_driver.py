@@ -33,6 +33,12 @@ def test_identity_and_sensor(pm_pair):
     s = pm.sensor()
     assert (s.name, s.type, s.flags & 1, s.flags & 32) == ("S121C", 1, 1, 32)
     assert raw(pm, "SYST:SENSOR:IDN?") == raw(pm, "system:sensor:idn?")
+    sensor = emu.sensor
+    assert pm.identity() == {"idn": emu.idn, "sensor_name": sensor.name,
+                             "sensor_serial": sensor.serial,
+                             "sensor_calibration": sensor.calibration,
+                             "sensor_type": str(sensor.type), "sensor_subtype": str(sensor.subtype),
+                             "sensor_flags": str(sensor.flags)}
 
 
 def test_configure_and_read_back(pm_pair):

@@ -74,6 +74,13 @@ def test_two_process_rehearsal(emulated_lab, tmp_path):
     assert proc.returncode == 0, proc.stderr
     run = open_run(run_dir_of(proc))
     assert run.meta["sim"] is False and run.meta["status"] == "completed"
+    devices = run.meta["sessions"][0]["devices"]  # each named by what it reported
+    assert {n: d["endpoint"] for n, d in devices.items()} == {n: e for n, (_, e) in
+                                                             endpoints.items()}
+    assert devices["esp"]["identity"]["version"].startswith("ESP301 Version")
+    assert devices["pm100"]["identity"]["sensor_serial"]
+    modbus = [d["identity"] for d in devices.values() if d["protocol"] == "modbus-stage"]
+    assert modbus and all({"vendor", "model", "serial", "firmware"} <= set(i) for i in modbus)
     r = run.readings()
     assert len(r) == run.meta["planned"]
     s = r[r["kind"] == "sample"]
