@@ -208,6 +208,12 @@ class _UnitsDecoder(DecodePDU):
     (V1.1b3, 6.8 and 7) asks of an unsupported function or sub-function.
     Function 43/14 is answered per unit (`_identification`)."""
 
+    def lookupPduClass(self, data: bytes) -> type[ModbusPDU] | None:  # noqa: N802
+        """The RTU framer's length rule: a sub-function pymodbus lacks (08/0008) is framed
+        by its function's rule, so that it is answered instead of hunted past in silence."""
+        found = super().lookupPduClass(data)
+        return found or self.pdu_table.get(data[1], (None, None))[self.pdu_inx]
+
     def decode(self, frame: bytes) -> ModbusPDU:
         """The request in a frame's PDU, or a `_Refused` one."""
         if frame[0] not in _ANSWERED_FUNCTIONS:
