@@ -32,6 +32,7 @@ from calibration.detector import (
     ranges_read_together,
 )
 from calibration.values import CalibrationError, Measured
+from gonio.reading_flags import INVALID, flagged
 
 STAGES = ("sample", "arm", "elevation", "azimuth")  # PeakScan's stage order
 
@@ -143,7 +144,9 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
     (an autoranged run reads a position on one range only);
     angle offsets, when eta is given, from the runs holding a specular scan (each normalised by
     its own beam readings: times restart with every run), modelled with the aperture (if given)
-    and the beam's divergence half-angle; a beam summary per run."""
+    and the beam's divergence half-angle; a beam summary per run. Readings flagged invalid
+    (the detector had none) are left out."""
+    runs = [run[~flagged(run, INVALID)] for run in runs]
     readings = np.concatenate(runs)
     darks = dark_offsets(readings)
     cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)

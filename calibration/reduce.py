@@ -22,6 +22,7 @@ from calibration.aperture import solid_angle_sr
 from calibration.beam import beam_power
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
+from gonio.reading_flags import INVALID, flagged
 
 # A net signal below this many sigmas is dark-limited (valid = False). The cut selects on the
 # measured value, so it keeps the noise-only points that fluctuate above it, each with a pull
@@ -174,7 +175,9 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
                     ) -> ReducedData:
     """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
 
-    run: a gonio.store.Run (its config gives the optics unless `optics` is given)."""
+    run: a gonio.store.Run (its config gives the optics unless `optics` is given). Readings
+    flagged invalid (the detector had none) are left out."""
+    readings = readings[~flagged(readings, INVALID)]
     optics = optics or optics_of(run.config, cal, getattr(run, "plan", None),
                                  emulated=(getattr(run, "meta", None) or {}).get("sim") is True)
     kinds = readings["kind"]

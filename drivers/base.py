@@ -34,6 +34,15 @@ class ProtocolError(DriverError):
     """A reply arrived but was garbled or not what the protocol allows."""
 
 
+class InvalidReading(DriverError):
+    """The detector answered that it has no reading (SCPI's not-a-number, 9.91E+37): no
+    power, and not over range either; worth asking again."""
+
+    def __init__(self, device: str, range_w: float, what: str):
+        self.device, self.range_w = device, range_w
+        super().__init__(f"{device}: invalid reading ({what}) on the {range_w:g} W range")
+
+
 @runtime_checkable
 class Axis(Protocol):
     """One rotation axis, positions in degrees."""

@@ -22,12 +22,20 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
+from drivers.base import (
+    DeviceError,
+    DeviceTimeout,
+    DriverError,
+    InvalidReading,
+    ProtocolError,
+    Reading,
+)
 from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
 
 _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
 _NR1 = re.compile(r"[+-]?\d+")
 NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
+SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> Callable[[str], float]:
@@ -225,13 +233,21 @@ class Pm100:
         """READ?: a new (averaged) reading, with the range it was taken on.
 
         saturated: the reading is above the range's full scale (over range).
+        InvalidReading if the meter answers SCPI's not-a-number (9.91E+37).
         """
         power, upper = self.query(":READ?;:SENS:POW:RANG?", self._nr3, self._nr3)
-        return Reading(power_w=power, range_w=upper, saturated=power > upper)
+        return Reading(power_w=self._valid(power, upper), range_w=upper, saturated=power > upper)
 
     def measure(self) -> float:
-        """MEAS:POW?: configure for power and take one reading, W."""
-        return self.query(":MEAS:POW?", self._nr3)[0]
+        """MEAS:POW?: configure for power and take one reading, W (InvalidReading as read)."""
+        power, upper = self.query(":MEAS:POW?;:SENS:POW:RANG?", self._nr3, self._nr3)
+        return self._valid(power, upper)
+
+    def _valid(self, power: float, range_w: float) -> float:
+        """The power, unless it is SCPI's not-a-number (to the NR3's precision)."""
+        if abs(power - SCPI_NAN) <= 10.0 ** -NR3_DECIMALS * SCPI_NAN:
+            raise InvalidReading(self.name, range_w, f"SCPI not-a-number {power:.6E}")
+        return power
 
     def zero(self) -> None:
         """SENS:CORR:COLL:ZERO: dark-zero adjustment (cover the sensor first); waits for it."""

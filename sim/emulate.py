@@ -114,6 +114,9 @@ def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
             raise SimConfigError(f"[sim.faults.{device}]: no device {device!r} under [devices]")
         if not isinstance(table, Mapping):
             raise SimConfigError(f"[sim.faults.{device}] must be a table, got {table!r}")
+        if "invalid_prob" in table and config["devices"][device].get("protocol") != "pm100":
+            raise SimConfigError(f"[sim.faults.{device}] invalid_prob: only a pm100 detector "
+                                 "answers with an invalid reading")
     return dict(sim)
 
 
