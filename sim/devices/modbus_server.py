@@ -1,4 +1,5 @@
-"""Serve emulated Modbus units with a real pymodbus 3.16 server: TCP on 127.0.0.1 or RTU on a pty.
+"""Serve emulated Modbus units with a real pymodbus 3.16 server: TCP (on 127.0.0.1 unless told
+otherwise) or RTU on a pty.
 
 Several units (unit ids) share one endpoint, as on one RTU bus or one TCP gateway. The
 pymodbus server does the framing; each request lands in the addressed unit's `read` /
@@ -56,6 +57,7 @@ _ANSWERED = (ReadHoldingRegistersRequest, ReadInputRegistersRequest, WriteSingle
 _ANSWERED_FUNCTIONS = frozenset(request.function_code for request in _ANSWERED)
 RTU_CHARACTER_BITS = 11  # start, 8 data, parity (or a second stop bit), stop
 RTU_FIXED_T35_S = 0.00175  # the spec's t3.5 above 19200 baud
+LOOPBACK = "127.0.0.1"
 _MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
 FIRMWARE = "1.0.0-emulated"
 BASIC_CONFORMITY = 0x81  # basic identification objects, stream and individual access
@@ -347,14 +349,16 @@ class _SerialServer(_FaultyReplies, ModbusSerialServer):
 
 
 class ModbusEmulatorServer:
-    """One Modbus endpoint (TCP server on 127.0.0.1 or RTU on a pty) serving several units.
+    """One Modbus endpoint (TCP server or RTU on a pty) serving several units.
 
-    faults: a FaultSpec for replies of units without their own injector. start() returns
-    the endpoint ("127.0.0.1:PORT", or the pty path for RTU); stop() ends it.
+    faults: a FaultSpec for replies of units without their own injector; host: the address
+    a TCP server listens on (loopback unless the caller opens it to the network). start()
+    returns the endpoint ("HOST:PORT", or the pty path for RTU); stop() ends it.
     """
 
     def __init__(self, transport: str = "tcp", units: Mapping[int, ModbusUnit] | None = None,
-                 faults: FaultSpec | None = None, *, port: int = 0, baudrate: int = 115200):
+                 faults: FaultSpec | None = None, *, port: int = 0, baudrate: int = 115200,
+                 host: str = LOOPBACK):
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"Modbus transport must be 'tcp' or 'rtu', got {transport!r}")
         if not units:
@@ -367,7 +371,7 @@ class ModbusEmulatorServer:
         self.transport = transport
         self.units = dict(units)
         self.faults = FaultInjector(faults)
-        self.port, self.baudrate = port, baudrate
+        self.host, self.port, self.baudrate = host, port, baudrate
         self.endpoint: str | None = None
         self.disconnected = False
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -440,7 +444,7 @@ class ModbusEmulatorServer:
     async def _listen(self) -> None:
         context = _UnitsContext(self.units)
         if self.transport == "tcp":
-            server = _TcpServer(context, address=("127.0.0.1", self.port))
+            server = _TcpServer(context, address=(self.host, self.port))
         else:
             server = _SerialServer(context, port=self._line.path, baudrate=self.baudrate,
                                    ignore_missing_devices=True)
@@ -450,9 +454,9 @@ class ModbusEmulatorServer:
         await server.serve_forever(background=True)
         if self.transport == "tcp":
             if not server.transport:
-                raise RuntimeError(f"cannot listen on 127.0.0.1:{self.port}")
+                raise RuntimeError(f"cannot listen on {self.host}:{self.port}")
             port = server.transport.sockets[0].getsockname()[1]
-            self.endpoint = f"127.0.0.1:{port}"
+            self.endpoint = f"{self.host}:{port}"
         self._server = server
 
     # -- faults --------------------------------------------------------------------
