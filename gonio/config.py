@@ -133,6 +133,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     _check_register_ranges(devices, axes, where)
     beam = _position(top, "beam")
     dark = _position(top, "dark")
+    top.has("optics")  # temporary: accepted unchecked until gonio.optics parses [optics]
     if top.has("sim") and not isinstance(raw["sim"], dict):
         raise ConfigError(f"{where}.sim: must be a table")
     top.done()
