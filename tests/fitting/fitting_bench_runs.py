@@ -27,11 +27,12 @@ def table(name: str, values: dict) -> str:
 
 
 def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
-               seed: int = 1, time_scale: float | str = "inf") -> Path:
-    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables (the
-    bench's defaults otherwise: multiple scattering "auto", so on for Walter's ground and
-    etched glass). A drifting source drifts in wall seconds since the bench started, the clock
-    of the run's t_s, at any time_scale."""
+               seed: int = 1, time_scale: float | str = "inf", optics: dict | None = None
+               ) -> Path:
+    """The example config with `[detector]` updated, an `[optics]` table if given, and `[sim]`
+    replaced by `sim` tables (the bench's defaults otherwise: multiple scattering "auto", so on
+    for Walter's ground and etched glass). A drifting source drifts in wall seconds since the
+    bench started, the clock of the run's t_s, at any time_scale."""
     text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
     if detector:
         for key, value in detector.items():
@@ -42,6 +43,8 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
                      if not (start < i < end and ln.split("=")[0].strip() == key)]
             lines.insert(start + 1, f"{key} = {toml_value(value)}")
             text = "\n".join(lines)
+    if optics:
+        text += "\n" + table("optics", optics)
     text += "\n" + table("sim", {"time_scale": time_scale, "seed": seed})
     for name, values in sim.items():
         text += "\n" + table(f"sim.{name}", values)
