@@ -81,8 +81,7 @@ def _build(args: argparse.Namespace) -> int:
     if divergence is None:
         divergence = _optics(runs, "divergence_deg") or 0.0
     cal = build([r.readings() for r in runs], utc_now(), [str(r.path) for r in runs],
-                eta=args.eta, aperture=_aperture(args, runs, divergence),
-                divergence_deg=divergence)
+                eta=args.eta, aperture=_aperture(args, runs), divergence_deg=divergence)
     for note in cal.notes:
         print(f"gonio calibrate: {note}", file=sys.stderr)
     print(calfile.save(cal, args.out))
@@ -103,7 +102,7 @@ def _optics(runs: list[Run], key: str) -> float | None:
     return None if value is None else float(value)
 
 
-def _aperture(args: argparse.Namespace, runs: list[Run], divergence_deg: float
+def _aperture(args: argparse.Namespace, runs: list[Run]
               ) -> tuple[Measured, Measured, str] | None:
     """(solid angle, half-angle, method): measured by --aperture-scan, else from
     --aperture-geometry or the runs' [optics] aperture_diameter_mm and aperture_distance_mm;
@@ -116,7 +115,7 @@ def _aperture(args: argparse.Namespace, runs: list[Run], divergence_deg: float
 
     if args.aperture_scan:
         return (*_aperture_from_scan(open_run(args.aperture_scan), args.beam_diameter_mm,
-                                     divergence_deg), "beam-scan")
+                                     args.divergence_deg), "beam-scan")
     diameter_mm, distance_mm = args.aperture_geometry or (
         _optics(runs, "aperture_diameter_mm"), _optics(runs, "aperture_distance_mm"))
     if diameter_mm is None or distance_mm is None:
@@ -127,10 +126,11 @@ def _aperture(args: argparse.Namespace, runs: list[Run], divergence_deg: float
 
 
 def _aperture_from_scan(scan_run: Run, beam_diameter_mm: float | None,
-                        divergence_deg: float) -> tuple[Measured, Measured]:
+                        divergence_deg: float | None) -> tuple[Measured, Measured]:
     """(solid angle, half-angle) from the sample readings of a scan across the beam; the beam's
     diameter at the aperture is --beam-diameter-mm, else the scan run's [optics] beam diameter
-    widened by the divergence over the aperture distance, else 0 (much smaller)."""
+    widened by the divergence (--divergence-deg, else its [optics]) over the aperture
+    distance, else 0 (much smaller)."""
     import math
 
     import numpy as np
@@ -143,6 +143,8 @@ def _aperture_from_scan(scan_run: Run, beam_diameter_mm: float | None,
     distance_mm = _optics([scan_run], "aperture_distance_mm")
     if beam_diameter_mm is None:
         beam_mm = _optics([scan_run], "beam_diameter_mm")
+        if divergence_deg is None:
+            divergence_deg = _optics([scan_run], "divergence_deg") or 0.0
         beam_diameter_mm = 0.0 if beam_mm is None or distance_mm is None else (
             beam_mm + 2.0 * distance_mm * math.tan(math.radians(divergence_deg)))
     beam_rad = 0.0
