@@ -90,6 +90,9 @@ class Detector(Protocol):
     def configure(self, wavelength_nm: float, averaging: int, range_w: float | None) -> None:
         """Set the correction wavelength, samples per reading, and a fixed range (None = auto)."""
 
+    def full_scales_w(self) -> tuple[float, ...]:
+        """Full scale of every range the detector offers, W, increasing."""
+
     def read(self) -> Reading:
         """Take one (averaged) reading."""
 

@@ -36,6 +36,7 @@ _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
 _NR1 = re.compile(r"[+-]?\d+")
 NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
 SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
+MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> Callable[[str], float]:
@@ -88,6 +89,7 @@ class Pm100:
     ):
         self.name = name
         self.zero_timeout_s = zero_timeout_s
+        self._full_scales: tuple[float, ...] | None = None
         self._nr3 = nr3_parser(nr3_decimals)
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
@@ -228,6 +230,27 @@ class Pm100:
             self.command(":SENS:POW:RANG:AUTO ON", lambda: self.range_w is None)
         else:
             self.command(f":SENS:POW:RANG {float(value):.6E}", lambda: self.range_w is not None)
+
+    def full_scales_w(self) -> tuple[float, ...]:
+        """The sensor's ranges (full scale, W, increasing), found once and kept: SCPI lists
+        none, so the range is stepped up from SENS:POW:RANG? MIN (a set value selects the
+        smallest range holding it) to MAX; the range setting is restored afterwards."""
+        if self._full_scales is None:
+            low, high = self.query(":SENS:POW:RANG? MIN;:SENS:POW:RANG? MAX", self._nr3,
+                                   self._nr3)
+            before = self.range_w
+            self.range_w = low
+            found = [low]
+            while found[-1] < high * (1 - 1e-6):
+                self.range_w = found[-1] * (1 + 1e-4)
+                upper = self.range_w
+                if upper is None or upper <= found[-1] or len(found) >= MAX_RANGES:
+                    raise ProtocolError(f"{self.name}: range stepping from {found[-1]:g} W "
+                                        f"gave {upper!r}, not a larger range")
+                found.append(upper)
+            self.range_w = before
+            self._full_scales = tuple(found)
+        return self._full_scales
 
     def read(self) -> Reading:
         """READ?: a new (averaged) reading, with the range it was taken on.

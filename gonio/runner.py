@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drivers.base import Detector
 from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.engine import Engine, Outcome, PauseControl
 from gonio.errors import ConfigError, PlanError, RunError
@@ -22,6 +23,8 @@ from gonio.instrument import build_instrument
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan, positions
 from gonio.progress import Progress
 from gonio.store import RunWriter, open_run
+
+DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
 
 
 @dataclass
@@ -69,10 +72,13 @@ def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan) -> Iterat
 
 def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
-         control: PauseControl | None) -> ScanResult:
-    """Open the devices, then the run (so a device that cannot be opened leaves no new
-    run behind), and measure what is left of the schedule."""
+         control: PauseControl | None, check: DetectorCheck | None = None) -> ScanResult:
+    """Open the devices, check the detector (`check`), then open the run (so a device that
+    cannot be opened or a failed check leaves no new run behind), and measure what is left
+    of the schedule."""
     with _devices(cfg, sim, plan) as dev, build_instrument(dev.config, dev.time_scale) as inst:
+        if check is not None:
+            check(sched.readings, inst.detector)
         writer = make_writer()
         try:
             writer.start_session(sim=list(dev.emulated), endpoints={
@@ -93,13 +99,15 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              sim: list[str] | bool = False, out: str | Path = "runs",
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
-             sample_id: str | None = None) -> ScanResult:
+             sample_id: str | None = None, check: DetectorCheck | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
     calibration: what meta.json records about the calibration file to use (or None);
     time_scale: replaces the config's [sim] time_scale (emulated runs only);
-    sample_id: replaces the plan's [sample] id (the stored plan and the record carry it).
+    sample_id: replaces the plan's [sample] id (the stored plan and the record carry it);
+    check: called with the schedule's readings and the open detector before the run directory
+    exists and before any motion (the scan command checks the calibration's ranges there).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -126,7 +134,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "optics": cfg.optics.to_json() if cfg.optics else None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
-                                         cfg.raw, meta), plan, cfg, sched, sim, progress, control)
+                                         cfg.raw, meta), plan, cfg, sched, sim, progress, control,
+                check)
 
 
 def with_sample_id(plan: Plan, sample_id: str) -> Plan:

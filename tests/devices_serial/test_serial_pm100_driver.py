@@ -54,6 +54,15 @@ def test_configure_and_read_back(pm_pair):
         pm.configure(632.8, 0, None)
 
 
+def test_full_scales_are_the_sensors_ranges_and_leave_the_setting_alone(pm_pair):
+    emu, pm = pm_pair(detector={"ranges_w": [3e-8, 3e-7, 3e-6, 3e-5]})
+    pm.configure(632.8, 1, 3e-6)
+    assert pm.full_scales_w() == (3e-8, 3e-7, 3e-6, 3e-5) == emu.photodiode.ranges_w
+    assert pm.range_w == 3e-6 and not emu.autorange
+    pm.configure(632.8, 1, None)
+    assert pm.full_scales_w() == (3e-8, 3e-7, 3e-6, 3e-5) and emu.autorange  # found once
+
+
 def test_read_autoranges_and_matches_the_true_power(pm_pair):
     emu, pm = pm_pair(power_w=3.3e-6, detector=QUIET)
     reading = pm.read()
