@@ -67,12 +67,15 @@ class AxisConfig:
 
 @dataclass(frozen=True)
 class DetectorConfig:
-    """The detector, its correction wavelength, averaging and range policy (None = auto)."""
+    """The detector, its correction wavelength, averaging and range policy (None = auto);
+    `shot_noise_w`: the shot-noise variance of one sample per watt of signal, W (2 q B / R for
+    a photodiode of responsivity R and noise bandwidth B), None when not known."""
 
     device: str
     wavelength_nm: float
     averaging: int = 1
     range_w: float | None = None
+    shot_noise_w: float | None = None
 
 
 @dataclass(frozen=True)
@@ -278,6 +281,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
         wavelength_nm=wavelength,
         averaging=f.number("averaging", 1, low=1, high=100_000, integer=True),
         range_w=range_w,
+        shot_noise_w=f.number("shot_noise_w", None, low=0.0, high=1.0),
     )
     f.done()
     return det
