@@ -18,10 +18,14 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
     return calfile.used_by(meta)
 
 
-def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) -> ReducedData:
+def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
+               subtract_signature: bool = False, signature_share: float | None = None
+               ) -> ReducedData:
     """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"];
     an emulated bench's [sim] table into meta["sim"] and the [optics] beam divergence into
-    meta["beam_divergence_deg"] for the fit)."""
+    meta["beam_divergence_deg"] for the fit); subtract_signature: subtract the bench's own
+    scatter that the run's signature readings measured, signature_share: the share of the net
+    signal above which a point is flagged (calibration.signature; None: its default)."""
     from calibration.reduce import reduce_readings
     from gonio.store import open_run
 
@@ -30,7 +34,8 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
     cal = calibration_for(run.meta, calibration_file)
     if cal is not None:
         readings = calfile.apply(readings, cal)
-    data = reduce_readings(run, readings, cal)
+    share = {} if signature_share is None else {"signature_share": signature_share}
+    data = reduce_readings(run, readings, cal, subtract_signature=subtract_signature, **share)
     if run.config.get("sim"):  # an emulated run: its bench, for the plot's model curve
         data.meta.setdefault("sim", run.config["sim"])
     divergence = (run.config.get("optics") or {}).get("divergence_deg")
@@ -43,8 +48,9 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
 
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,
-            calibration_file: str | Path | None = None) -> tuple[ReducedData, FitResult]:
+            calibration_file: str | Path | None = None, subtract_signature: bool = False
+            ) -> tuple[ReducedData, FitResult]:
     """Reduce and fit a run."""
-    data = reduce_run(run_dir, calibration_file)
+    data = reduce_run(run_dir, calibration_file, subtract_signature)
     return data, fit(data, options)
 

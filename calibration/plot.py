@@ -145,13 +145,15 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
 
 
 def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
-             calibration_file: str | Path | None = None, fit_options=None) -> Path:
+             calibration_file: str | Path | None = None, fit_options=None,
+             subtract_signature: bool = False) -> Path:
     """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
-    (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png)."""
+    (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png);
+    subtract_signature as calibration.pipeline.reduce_run."""
     from calibration.pipeline import reduce_run
 
     run_dir = Path(run_dir)
-    data = reduce_run(run_dir, calibration_file)
+    data = reduce_run(run_dir, calibration_file, subtract_signature)
     title = f"{run_dir.name}: eta {data.meta.get('eta')}"
     if fit:
         from calibration.fit import fit as fit_model

@@ -8,7 +8,8 @@ the bench applies it, sim.bench.sample.exit_view). Noise of a reading: the scatt
 readings on its range, scaled with the range's full scale (read noise and ADC steps scale so),
 plus the signal's shot noise (`shot_variance_per_w`); the dark level's uncertainty is
 propagated, and the beam curve's, which all points share, both into sigma and as
-ReducedData.shared_rel (the fit's covariance).
+ReducedData.shared_rel (the fit's covariance). Signature readings (the bench without the sample)
+flag, and on request subtract, what the bench adds (calibration.signature).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 from calibration.aperture import solid_angle_sr
 from calibration.beam import beam_power
 from calibration.reduced import ReducedData
+from calibration.signature import DEFAULT_SHARE, apply_signature
 from calibration.values import CalibrationError
 
 # A net signal below this many sigmas is dark-limited (valid = False). The cut selects on the
@@ -170,11 +172,13 @@ class DarkModel:
         return level, level_sigma, noise
 
 
-def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None = None
+def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None = None,
+                    subtract_signature: bool = False, signature_share: float = DEFAULT_SHARE
                     ) -> ReducedData:
     """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
 
-    run: a gonio.store.Run (its config gives the optics unless `optics` is given)."""
+    run: a gonio.store.Run (its config gives the optics unless `optics` is given);
+    signature_share, subtract_signature: calibration.signature.apply_signature."""
     optics = optics or optics_of(run.config, cal, getattr(run, "plan", None),
                                  emulated=(getattr(run, "meta", None) or {}).get("sim") is True)
     kinds = readings["kind"]
@@ -198,15 +202,18 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
     net = rows["power_w"] - level
     averaging = (getattr(run, "plan", None) or {}).get("averaging") \
         or run.config.get("detector", {}).get("averaging", 1)
-    noise = np.sqrt(noise**2 + shot_variance_per_w(run.config, int(averaging))
-                    * np.maximum(net, 0.0))
+    shot = shot_variance_per_w(run.config, int(averaging))
+    noise = np.sqrt(noise**2 + shot * np.maximum(net, 0.0))
     scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
+    signature = apply_signature(readings, rows, dark, beam, shot, net, noise, scale,
+                                signature_share, subtract_signature)
+    net, noise = signature.net_w, signature.noise_w
     with np.errstate(divide="ignore", invalid="ignore"):
         bsdf = np.where(scale > 0, net / scale, np.nan)
         sigma = np.abs(np.where(scale > 0, np.hypot(noise, level_sigma) / scale, np.nan))
         sigma = np.hypot(sigma, np.abs(bsdf) * phi_sigma / phi)
     valid = (~rows["saturated"] & (scale > 0) & (net > DARK_LIMIT_SIGMAS * noise)
-             & np.isfinite(bsdf))
+             & np.isfinite(bsdf) & ~signature.invalid)
     transmission = (wo[:, 2] > 0) != (wi[:, 2] > 0)
     meta = {
         "eta": optics.eta, "k": optics.k, "kind": optics.kind, "lit_from": optics.lit_from,
@@ -217,5 +224,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
         "dark_level_w": {f"{r:.6g}": v for r, v in dark.level.items()},
         "model": optics.model, "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
     }
+    if signature.meta is not None:
+        meta["signature"] = signature.meta
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
-                       phi_shared / phi[:, None])
+                       phi_shared / phi[:, None], signature.flags)

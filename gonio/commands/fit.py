@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from gonio.commands.reduce import add_signature_option
+
 
 def _list(text: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in text.split(",") if part.strip())
@@ -54,6 +56,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "[sim.sample] psd_exponent, else 2)")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to apply (default: the one the run records)")
+    add_signature_option(p)
 
 
 def nano_roughness(config: dict, rms_height_nm: float | None,
@@ -102,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     from gonio.store import open_run
 
     config = open_run(args.run).config if args.diffraction else None
-    data, result = fit_run(args.run, options_from(args, config), args.calibration)
+    data, result = fit_run(args.run, options_from(args, config), args.calibration,
+                           args.subtract_signature)
     out = result.to_dict()
     out["run"] = str(args.run)
     out["calibration"] = data.meta.get("calibration")

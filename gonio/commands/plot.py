@@ -27,6 +27,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = open_run(args.run).config if args.fit and args.diffraction else None
     out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
-                   fit_options=options_from(args, config) if args.fit else None)
+                   fit_options=options_from(args, config) if args.fit else None,
+                   subtract_signature=args.subtract_signature)
     print(out)
     return 0

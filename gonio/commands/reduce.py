@@ -8,8 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.signature import DEFAULT_SHARE
+
 CSV_HEADER = ("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,side,bsdf_per_sr,sigma_per_sr,"
-              "valid")
+              "valid,flags")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -20,7 +22,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="CSV", help="output file (default RUN/reduced.csv)")
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to apply (default: the one the run records)")
+    add_signature_option(p)
+    p.add_argument("--signature-share", type=float, default=DEFAULT_SHARE, metavar="FRACTION",
+                   help="flag points whose signature exceeds this share of the net signal "
+                        f"(default {DEFAULT_SHARE:g})")
     p.set_defaults(func=run)
+
+
+def add_signature_option(p: argparse.ArgumentParser) -> None:
+    """--subtract-signature, which reduce shares with fit and plot."""
+    p.add_argument("--subtract-signature", action="store_true",
+                   help="subtract the bench's own scatter, which the run's signature readings "
+                        "measured, with its uncertainty (default: flag the points it biases "
+                        "and leave them out)")
 
 
 def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -30,14 +44,15 @@ def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def write_csv(data, path: Path) -> Path:
-    """One row per sample reading, in the sample frame, degrees; valid 1/0."""
+    """One row per sample reading, in the sample frame, degrees; valid 1/0; flags separated by
+    ';' (e.g. signature)."""
     ti, pi = spherical_deg(data.wi)
     to, po = spherical_deg(data.wo)
     side = np.where(data.transmission, "transmission", "reflection")
     lines = [CSV_HEADER] + [
-        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{int(v)}"
-        for a, b, c, d, s, f, e, v in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
-                                          data.valid, strict=True)]
+        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{int(v)},{g.replace(',', ';')}"
+        for a, b, c, d, s, f, e, v, g in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
+                                             data.valid, data.flags, strict=True)]
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -64,13 +79,16 @@ def summary(data) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
     from calibration.pipeline import reduce_run
+    from calibration.signature import summary as signature_summary
 
-    data = reduce_run(args.run, args.calibration)
+    data = reduce_run(args.run, args.calibration, args.subtract_signature, args.signature_share)
     out = write_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv")
     m = data.meta
     print(f"run {args.run}: eta {m['eta']:g}, aperture {m['aperture_half_angle_deg']:.4g} deg "
           f"({m['aperture_sr']:.4g} sr), beam {m['beam_mean_w']:.4g} W "
           f"(drift rms {m['beam_drift_rms']:.2%})")
     print("\n".join(summary(data)))
+    if "signature" in m:
+        print("\n".join(signature_summary(m["signature"])))
     print(out)
     return 0
