@@ -129,7 +129,7 @@ def apply_signature(readings: np.ndarray, rows: np.ndarray, dark: DarkModel, bea
         "dark_floor_per_sr": _listed(floor), "ranges": _per_range(rows["range_w"], nebsdf, floor),
     }
     return SignatureOutcome(net_w, noise_w, np.where(flagged, FLAG, ""),
-                            flagged & ~subtract, meta)
+                            flagged & (not subtract), meta)
 
 
 def _per_range(range_w: np.ndarray, nebsdf: np.ndarray, floor: np.ndarray) -> dict:

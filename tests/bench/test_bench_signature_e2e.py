@@ -130,3 +130,19 @@ def test_a_prompted_pass_without_an_answer_aborts_before_it(tmp_path):
     assert run.meta["status"] == "aborted"
     assert "aborted by the user at: signature pass" in run.meta["reason"]
     assert "signature" not in set(run.readings()["kind"])
+
+
+def test_gonio_reduce_reports_the_signature(interleaved):
+    plain = gonio_cli("reduce", interleaved)
+    assert plain.returncode == 0, plain.stderr
+    assert f"signature: {len(THETA_O)} readings, not subtracted;" in plain.stdout
+    assert "(left out; --subtract-signature keeps them)" in plain.stdout
+    assert "dark floor 1/sr" in plain.stdout
+    assert " 22      8       92.3" in plain.stdout  # points, valid, peak (the straight wings)
+    csv = (interleaved / "reduced.csv").read_text().splitlines()
+    assert csv[0].endswith(",valid,flags") and sum(ln.endswith(",signature") for ln in csv) >= 6
+    sub = gonio_cli("reduce", interleaved, "--subtract-signature", "--signature-share", "0.2")
+    assert sub.returncode == 0, sub.stderr
+    assert "subtracted; " in sub.stdout and "exceeds 20% of the net signal" in sub.stdout
+    for verb in ("fit", "plot"):
+        assert "--subtract-signature" in gonio_cli(verb, "--help").stdout
