@@ -332,6 +332,7 @@ class Engine:
         return int(rest["index"][first[0]]) if len(first) else -1
 
     def _signature_message(self) -> str:
+        """The operator prompt before a prompted signature pass."""
         n = int((self.schedule["kind"][self.writer.next_index:] == "signature").sum())
         return (f"signature pass: remove the sample (nothing but the bench in the beam) for the "
                 f"next {n} readings")
