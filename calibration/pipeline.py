@@ -19,11 +19,14 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
 
 
 def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
-               shot_noise_w: float | None = None) -> ReducedData:
+               shot_noise_w: float | None = None, subtract_signature: bool = False,
+               signature_share: float | None = None) -> ReducedData:
     """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"],
     the [optics] beam divergence into meta["beam_divergence_deg"] for the fit; an all-emulated
     run's [sim] table is meta["sim"], calibration.reduce). shot_noise_w: the --shot-noise-w
-    flag (calibration.reduce.optics_of)."""
+    flag (calibration.reduce.optics_of); subtract_signature: subtract the bench's own scatter
+    that the run's signature readings measured, signature_share: the share of the net signal
+    above which a point is flagged (calibration.signature; None: its default)."""
     from calibration.reduce import optics_of, reduce_readings
     from gonio.record import emulator_config
     from gonio.store import open_run
@@ -34,7 +37,9 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
     if cal is not None:
         readings = calfile.apply(readings, cal)
     optics = optics_of(run.config, cal, run.plan, emulator_config(run), shot_noise_w)
-    data = reduce_readings(run, readings, cal, optics)
+    share = {} if signature_share is None else {"signature_share": signature_share}
+    data = reduce_readings(run, readings, cal, optics, subtract_signature=subtract_signature,
+                           **share)
     if optics.optics is not None:
         data.meta["beam_divergence_deg"] = optics.optics.divergence_deg
     if cal is not None:
@@ -44,9 +49,9 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
 
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,
-            calibration_file: str | Path | None = None, shot_noise_w: float | None = None
-            ) -> tuple[ReducedData, FitResult]:
+            calibration_file: str | Path | None = None, shot_noise_w: float | None = None,
+            subtract_signature: bool = False) -> tuple[ReducedData, FitResult]:
     """Reduce and fit a run."""
-    data = reduce_run(run_dir, calibration_file, shot_noise_w)
+    data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature)
     return data, fit(data, options)
 

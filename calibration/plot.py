@@ -152,13 +152,14 @@ def plot_title(name: str, meta: dict) -> str:
 
 def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
              calibration_file: str | Path | None = None, fit_options=None,
-             shot_noise_w: float | None = None) -> Path:
+             shot_noise_w: float | None = None, subtract_signature: bool = False) -> Path:
     """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
-    (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png)."""
+    (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png);
+    subtract_signature as calibration.pipeline.reduce_run."""
     from calibration.pipeline import reduce_run
 
     run_dir = Path(run_dir)
-    data = reduce_run(run_dir, calibration_file, shot_noise_w)
+    data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature)
     title = plot_title(run_dir.name, data.meta)
     if fit:
         from calibration.fit import fit as fit_model

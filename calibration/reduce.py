@@ -10,7 +10,8 @@ plus the signal's shot noise where something states it (`optics_of`: the --shot-
 the config's [detector] shot_noise_w, or the emulated meter of an all-emulated run; otherwise
 it is not modelled, and meta["noise_model"] says so); the dark level's uncertainty is
 propagated, and the beam curve's, which all points share, both into sigma and as
-ReducedData.shared_rel (the fit's covariance).
+ReducedData.shared_rel (the fit's covariance). Signature readings (the bench without the sample)
+flag, and on request subtract, what the bench adds (calibration.signature).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 from calibration.aperture import solid_angle_sr
 from calibration.beam import beam_power
 from calibration.reduced import ReducedData
+from calibration.signature import DEFAULT_SHARE, apply_signature
 from calibration.values import CalibrationError
 from gonio.errors import GonioError
 from gonio.optics import Optics, optics_of_config
@@ -202,12 +204,14 @@ class DarkModel:
         return level, level_sigma, noise
 
 
-def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics | None = None
+def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics | None = None,
+                    subtract_signature: bool = False, signature_share: float = DEFAULT_SHARE
                     ) -> ReducedData:
     """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
 
     run: a gonio.store.Run (its description gives the optics unless `optics` is given).
-    Readings flagged invalid (the detector had none) are left out."""
+    Readings flagged invalid (the detector had none) are left out; signature_share,
+    subtract_signature: calibration.signature.apply_signature."""
     from gonio.record import emulator_config
 
     readings = readings[~flagged(readings, INVALID)]
@@ -232,14 +236,18 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     level, level_sigma, noise = dark.at(rows["range_w"])
     phi, phi_sigma, phi_shared = beam.smooth(rows["t_s"])
     net = rows["power_w"] - level
-    noise = np.sqrt(noise**2 + optics.shot_variance_per_w * np.maximum(net, 0.0))
+    shot = optics.shot_variance_per_w
+    noise = np.sqrt(noise**2 + shot * np.maximum(net, 0.0))
     scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
+    signature = apply_signature(readings, rows, dark, beam, shot, net, noise, scale,
+                                signature_share, subtract_signature)
+    net, noise = signature.net_w, signature.noise_w
     with np.errstate(divide="ignore", invalid="ignore"):
         bsdf = np.where(scale > 0, net / scale, np.nan)
         sigma = np.abs(np.where(scale > 0, np.hypot(noise, level_sigma) / scale, np.nan))
         sigma = np.hypot(sigma, np.abs(bsdf) * phi_sigma / phi)
     valid = (~rows["saturated"] & (scale > 0) & (net > DARK_LIMIT_SIGMAS * noise)
-             & np.isfinite(bsdf))
+             & np.isfinite(bsdf) & ~signature.invalid)
     transmission = (wo[:, 2] > 0) != (wi[:, 2] > 0)
     meta = {
         "eta": sample.eta, "k": sample.k, "kind": sample.kind, "lit_from": sample.lit_from,
@@ -255,5 +263,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
         "sim": optics.sim, "emulator_truth": optics.truth,
         "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
     }
+    if signature.meta is not None:
+        meta["signature"] = signature.meta
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
-                       phi_shared / phi[:, None])
+                       phi_shared / phi[:, None], signature.flags)

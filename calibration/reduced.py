@@ -13,7 +13,9 @@ class ReducedData:
 
     Directions are unit vectors in the sample (BSDF) frame of DESIGN.md; `wi` toward the
     source, `wo` toward the detector. `valid` is False for saturated, dark-limited or
-    otherwise flagged points, which fits and plots leave out.
+    otherwise flagged points, which fits and plots leave out. `flags` says why a point is
+    suspect (comma-separated, e.g. "signature": the bench's own scatter exceeds the stated
+    share of its signal, calibration.signature).
 
     `shared_rel` (N, k) holds the relative errors the points share: the values carry a common
     relative error shared_rel @ z, z ~ N(0, I_k) (the beam curve's error, common to every point
@@ -29,17 +31,20 @@ class ReducedData:
     transmission: np.ndarray  # (N,) bool: wo on the interior side
     meta: dict = field(default_factory=dict)  # eta, wavelength_nm, run path, calibration used
     shared_rel: np.ndarray | None = None  # (N, k) relative errors shared between points
+    flags: np.ndarray | None = None  # (N,) str, comma-separated; None: no flags
 
     def __post_init__(self) -> None:
         n = len(self.bsdf)
         if self.shared_rel is None:
             self.shared_rel = np.zeros((n, 0))
+        if self.flags is None:
+            self.flags = np.full(n, "")
         if self.shared_rel.ndim != 2 or len(self.shared_rel) != n:
             raise ValueError(f"ReducedData.shared_rel must have shape ({n}, k)")
         for name in ("wi", "wo"):
             if getattr(self, name).shape != (n, 3):
                 raise ValueError(f"ReducedData.{name} must have shape ({n}, 3)")
-        for name in ("sigma", "valid", "transmission"):
+        for name in ("sigma", "valid", "transmission", "flags"):
             if getattr(self, name).shape != (n,):
                 raise ValueError(f"ReducedData.{name} must have shape ({n},)")
 
@@ -63,6 +68,7 @@ class ReducedData:
         return ReducedData(
             self.wi[keep], self.wo[keep], self.bsdf[keep], self.sigma[keep],
             self.valid[keep], self.transmission[keep], dict(self.meta), self.shared_rel[keep],
+            self.flags[keep],
         )
 
     @property

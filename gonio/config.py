@@ -1,4 +1,5 @@
-"""Instrument configs (TOML): devices, axes, detector, safety, beam/dark positions, optics, [sim].
+"""Instrument configs (TOML): devices, axes, detector, safety, beam/dark/signature positions,
+optics, [sim].
 
 `load_config(path)` parses and validates a file into an `InstrumentConfig`; every error is a
 one-line ConfigError naming the file and the field. The raw (path-resolved) dict is kept for
@@ -80,10 +81,11 @@ class DetectorConfig:
 
 @dataclass(frozen=True)
 class Position:
-    """A fixed stage position (for beam and dark readings), degrees."""
+    """A fixed stage position (for beam and dark readings), degrees; a [signature] position
+    fixes the sample only (arm_deg None: the arm goes where the sample readings go)."""
 
     sample_deg: float
-    arm_deg: float
+    arm_deg: float | None
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,7 @@ class InstrumentConfig:
     dark: Position | None
     raw: dict[str, Any] = field(repr=False)
     optics: Optics | None = None
+    signature: Position | None = None  # [signature]: the sample retracted (arm_deg None)
 
     @property
     def sim(self) -> dict[str, Any]:
@@ -140,6 +143,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     _check_register_ranges(devices, axes, where)
     beam = _position(top, "beam")
     dark = _position(top, "dark")
+    signature = _position(top, "signature", arm=False)
     if top.has("sim") and not isinstance(raw["sim"], dict):
         raise ConfigError(f"{where}.sim: must be a table")
     top.done()
@@ -147,7 +151,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
         if dev.register_map:
             raw["devices"][dev.name]["register_map"] = dev.register_map
     return InstrumentConfig(name, path, devices, axes, detector, clearance, forbidden,
-                            beam, dark, raw, optics)
+                            beam, dark, raw, optics, signature)
 
 
 def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
@@ -298,12 +302,13 @@ def _zones(f: Fields) -> tuple[tuple[float, float], ...]:
     return tuple(out)
 
 
-def _position(top: Fields, key: str) -> Position | None:
+def _position(top: Fields, key: str, arm: bool = True) -> Position | None:
+    """[beam], [dark] (sample_deg, arm_deg) or, without `arm`, [signature] (sample_deg)."""
     if not top.has(key):
         return None
     f = top.table_of(key)
     pos = Position(f.number("sample_deg", low=-360.0, high=360.0),
-                   f.number("arm_deg", low=-360.0, high=360.0))
+                   f.number("arm_deg", low=-360.0, high=360.0) if arm else None)
     f.done()
     return pos
 

@@ -6,7 +6,9 @@ up to `retries` times, after which the run stops cleanly with the reason recorde
 reading (the detector has none: InvalidReading) is retried the same way and, if every try
 gives one, recorded with power NaN and the flag "invalid", and the run goes on. Ctrl-C once
 pauses at the next point (resume or abort at the prompt); a second Ctrl-C aborts at once; an
-abort stops every axis.
+abort stops every axis. A plan's prompted signature pass (`[signature] pass = "prompted"`) waits
+for the operator to remove the sample before its first reading (in every session that reaches
+it: a resume inside the pass asks again).
 """
 
 from __future__ import annotations
@@ -83,6 +85,22 @@ def ask_resume() -> bool:
             return False
 
 
+def ask_continue(message: str) -> bool:
+    """Default operator prompt (on stderr, answer on stdin): True to continue, False to abort.
+    End of input counts as abort."""
+    while True:
+        sys.stderr.write(f"{message}: [c]ontinue or [a]bort? ")
+        sys.stderr.flush()
+        line = sys.stdin.readline()
+        if not line:
+            return False
+        answer = line.strip().lower()
+        if answer in ("c", "continue", ""):
+            return True
+        if answer in ("a", "abort"):
+            return False
+
+
 def _notify(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
@@ -91,8 +109,9 @@ class PauseControl:
     """Ctrl-C handling: the first SIGINT asks for a pause at the next point, the second aborts."""
 
     def __init__(self, prompt: Callable[[], bool] = ask_resume,
-                 notify: Callable[[str], Any] = _notify):
-        self.prompt, self.notify = prompt, notify
+                 notify: Callable[[str], Any] = _notify,
+                 confirm: Callable[[str], bool] = ask_continue):
+        self.prompt, self.notify, self.confirm = prompt, notify, confirm
         self.pause_requested = False
         self._previous: Any = None
 
@@ -124,6 +143,17 @@ class PauseControl:
         self.pause_requested = False
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._on_sigint)
+        on_pause("running")
+
+    def operator_step(self, message: str, on_pause: Callable[..., None]) -> None:
+        """Wait for the operator to do what `message` asks by hand; raise Aborted to abort."""
+        on_pause("paused", message)
+        try:
+            go_on = self.confirm(message)
+        except (KeyboardInterrupt, EOFError):
+            go_on = False
+        if not go_on:
+            raise Aborted(f"aborted by the user at: {message}")
         on_pause("running")
 
 
@@ -281,8 +311,11 @@ class Engine:
         try:
             with self.control:
                 self._prepare()
+                prompt_at = self._operator_prompt_index()
                 for row in self.schedule[self.writer.next_index:]:
                     self.control.checkpoint(self._paused)
+                    if int(row["index"]) == prompt_at:
+                        self.control.operator_step(self._signature_message(), self._paused)
                     record = self._with_retries(row)
                     self.writer.append(record)
                     if self.progress:
@@ -298,8 +331,23 @@ class Engine:
         self._finish(status, reason)
         return Outcome(status, reason, self.writer.next_index)
 
-    def _paused(self, status: str) -> None:
-        self.writer.set_status(status, "paused by the user" if status == "paused" else "")
+    def _operator_prompt_index(self) -> int:
+        """Index of the first remaining reading of a prompted signature pass (-1: none)."""
+        sig = self.plan.signature
+        if sig is None or sig.mode != "prompted":
+            return -1
+        rest = self.schedule[self.writer.next_index:]
+        first = np.flatnonzero(rest["kind"] == "signature")
+        return int(rest["index"][first[0]]) if len(first) else -1
+
+    def _signature_message(self) -> str:
+        """The operator prompt before a prompted signature pass."""
+        n = int((self.schedule["kind"][self.writer.next_index:] == "signature").sum())
+        return (f"signature pass: remove the sample (nothing but the bench in the beam) for the "
+                f"next {n} readings")
+
+    def _paused(self, status: str, reason: str = "paused by the user") -> None:
+        self.writer.set_status(status, reason if status == "paused" else "")
 
     def _finish(self, status: str, reason: str) -> None:
         if status != "completed":

@@ -2,9 +2,11 @@
 
 A plan lists sample points (grids and single points of incidence, outgoing angle in and out of
 the plane of incidence, reflection/transmission side, sample azimuth) plus repeats, dwell,
-averaging and dark/beam readings interleaved at a rate, and the detector range of each reading
-(`range`: "auto" or a fixed full scale in W; per grid, point, [dark] and [beam], else the plan's,
-else the instrument's [detector] range; a grid may list several ranges to step through).
+averaging and dark/beam readings interleaved at a rate, signature readings (the sample retracted,
+the arm where the sample readings go: [signature], interleaved or in one pass), and the detector
+range of each reading (`range`: "auto" or a fixed full scale in W; per grid, point, [dark],
+[beam] and [signature], else the plan's, else the instrument's [detector] range; a grid may list
+several ranges to step through).
 `build_schedule` turns it into the exact, ordered list of readings the engine runs: every reading
 has an index, and the same plan and config always give the same schedule, which is what makes
 `--resume` possible.
@@ -29,6 +31,8 @@ from gonio.geometry import into_limits, stage_angles
 from gonio.sample import SampleInfo, parse_sample
 
 SIDES = ("reflection", "transmission")
+KINDS = ("sample", "dark", "beam", "signature")
+SIGNATURE_PASSES = ("interleaved", "after", "prompted")
 ORDERS = ("optimal", "as-written")
 MOTION_ROLES = ("sample", "arm", "azimuth", "elevation")
 AUTO_RANGE = 0.0  # a schedule's range_w when the detector autoranges (else a full scale in W)
@@ -51,6 +55,17 @@ SCHEDULE_DTYPE = np.dtype([
 
 
 @dataclass(frozen=True)
+class SignaturePlan:
+    """[signature]: readings with the sample retracted ([signature] position of the instrument)
+    that measure what the bench adds to a sample reading at the same arm position."""
+
+    every: int  # interleaved: one after every N-th sample reading, at its position; else 0
+    mode: str  # "interleaved" | "after" (one pass after the sample readings) | "prompted"
+    arm_deg: tuple[float, ...] = ()  # a pass's own arm positions; (): the sample readings'
+    range_w: float = UNSET  # UNSET: the range of the sample reading it shadows (own grid: plan's)
+
+
+@dataclass(frozen=True)
 class Plan:
     """A parsed plan: sample points as written plus how to run them."""
 
@@ -70,6 +85,7 @@ class Plan:
     dark_range_w: float = UNSET  # UNSET: a dark reading on every range the samples use
     beam_range_w: float = UNSET  # UNSET: the plan's range
     sample: SampleInfo | None = None  # [sample]: what is measured
+    signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
 
 
 @dataclass(frozen=True)
@@ -129,6 +145,7 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         dark_range_w=dark_range,
         beam_range_w=beam_range,
         sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
+        signature=_signature(top),
     )
     top.done()
     return plan
@@ -222,6 +239,29 @@ def _every(top: Fields, key: str) -> tuple[int, float]:
     return every, range_w
 
 
+def _signature(top: Fields) -> SignaturePlan | None:
+    """[signature]: `every = N` (interleaved), or one pass (`pass = "after"`, the default
+    without `every`, or "prompted") at its own `arm_deg` or the sample readings' positions."""
+    if not top.has("signature"):
+        return None
+    f = top.table_of("signature")
+    every = f.number("every", 0, low=1, high=1_000_000, integer=True)
+    mode = f.string("pass", "interleaved" if every else "after", choices=SIGNATURE_PASSES)
+    arm = f.values("arm_deg", (), low=-360.0, high=360.0)
+    range_w = _ranges(f)[0]
+    f.done()
+    if mode == "interleaved" and not every:
+        raise f.fail("pass", '"interleaved" needs every = N (a signature reading after every '
+                             "N-th sample reading)")
+    if every and mode != "interleaved":
+        raise f.fail("every", f'interleaves the signature readings; pass = "{mode}" takes them '
+                              "in one pass after the sample readings: give one of the two")
+    if every and arm:
+        raise f.fail("arm_deg", 'a grid of its own is measured in one pass (pass = "after" or '
+                                '"prompted"); every = N reads at each sample reading\'s arm')
+    return SignaturePlan(every, mode, arm, range_w)
+
+
 # -- validation against the instrument --------------------------------------------------------
 
 def _describe(p: np.void) -> str:
@@ -273,19 +313,36 @@ def stage_targets(plan: Plan, cfg: InstrumentConfig) -> tuple[np.ndarray, np.nda
 
 
 def _fixed_position(cfg: InstrumentConfig, kind: str, where: str) -> np.ndarray:
-    pos = cfg.beam if kind == "beam" else cfg.dark
+    """Stage targets of a dark, beam or signature reading (a signature's arm: NaN, filled in
+    per reading), checked against the travel and the forbidden zones."""
+    pos = {"beam": cfg.beam, "dark": cfg.dark, "signature": cfg.signature}[kind]
     if pos is None:
-        raise PlanError(f"{where}: {kind}.every asks for {kind} readings but the instrument "
-                        f"{cfg.name!r} has no [{kind}] position")
+        what = "[signature]" if kind == "signature" else f"{kind}.every"
+        raise PlanError(f"{where}: {what} asks for {kind} readings but the instrument "
+                        f"{cfg.name!r} ({cfg.path or 'config'}) has no [{kind}] position"
+                        + (" (add [signature] sample_deg = 90: the sample retracted)"
+                           if kind == "signature" else ""))
     for role, value in (("sample", pos.sample_deg), ("arm", pos.arm_deg)):
         lo, hi = cfg.axes[role].limits_deg
-        if not lo <= value <= hi:
+        if value is not None and not lo <= value <= hi:
             raise PlanError(f"{where}: the instrument's [{kind}] {role}_deg {value:g} is outside "
                             f"the {role} travel [{lo:g}, {hi:g}]")
+    if pos.arm_deg is None:
+        return np.array([pos.sample_deg, math.nan, 0.0, 0.0])
     reason = forbidden_reason(cfg, pos.arm_deg)
     if reason:
         raise PlanError(f"{where}: the instrument's [{kind}] position: {reason}")
     return np.array([pos.sample_deg, pos.arm_deg, 0.0, 0.0])
+
+
+def _signature_grid(plan: Plan, cfg: InstrumentConfig, where: str) -> None:
+    """A [signature] arm_deg grid: inside the arm's travel and out of the forbidden zones."""
+    lo, hi = cfg.axes["arm"].limits_deg
+    for arm in plan.signature.arm_deg:
+        reason = (None if lo - 1e-9 <= arm <= hi + 1e-9 else
+                  f"outside the arm travel [{lo:g}, {hi:g}]") or forbidden_reason(cfg, arm)
+        if reason:
+            raise PlanError(f"{where}: [signature] arm_deg {arm:g}: {reason}")
 
 
 # -- ordering and estimates -------------------------------------------------------------------
@@ -346,30 +403,57 @@ def _best_order(points: np.ndarray, targets: np.ndarray, cfg: InstrumentConfig
     return candidates[int(np.argmin(costs))]
 
 
-def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, ranges: Ranges
-                ) -> list[tuple[str, int, int, float]]:
-    """(kind, repeat, point, range) for every reading: sample points with dark/beam ones
-    interleaved; a dark slot holds one dark reading per range of ranges.dark."""
-    out: list[tuple[str, int, int, float]] = []
+Slot = tuple[str, int, int, float, np.ndarray]  # kind, repeat, point, range_w, stage targets
+
+
+def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, ranges: Ranges,
+                targets: np.ndarray, fixed: dict[str, np.ndarray]) -> list[Slot]:
+    """Every reading in order: sample points with dark/beam ones interleaved (a dark slot holds
+    one dark reading per range of ranges.dark) and signature ones: right after every N-th
+    sample reading, at its arm, elevation and azimuth; or in one pass after the last sample
+    reading, before a closing dark and beam reading."""
+    out: list[Slot] = []
+    sig = plan.signature
     extras = [(k, n) for k, n in (("dark", plan.dark_every), ("beam", plan.beam_every)) if n]
 
     def extra(kind: str, repeat: int) -> None:
         for r in (ranges.dark if kind == "dark" else (ranges.beam,)):
-            out.append((kind, repeat, -1, r))
+            out.append((kind, repeat, -1, r, fixed[kind]))
+
+    def shadow(repeat: int, k: int) -> Slot:
+        """The signature reading of sample point k: the sample retracted, the rest as k's."""
+        range_w = ranges.sample[k] if math.isnan(ranges.signature) else ranges.signature
+        pos = np.concatenate([fixed["signature"][:1], targets[k][1:]])
+        return "signature", repeat, k, float(range_w), pos
 
     for kind, _ in extras:
         extra(kind, 0)
     done = 0
     for repeat, order in passes:
         for k in order:
-            out.append(("sample", repeat, int(k), float(ranges.sample[k])))
+            out.append(("sample", repeat, int(k), float(ranges.sample[k]), targets[k]))
             done += 1
+            if sig is not None and sig.every and done % sig.every == 0:
+                out.append(shadow(repeat, int(k)))
             for kind, every in extras:
                 if done % every == 0:
                     extra(kind, repeat)
     last_repeat = passes[-1][0]
+    one_pass = sig is not None and not sig.every
+    if one_pass and sig.arm_deg:
+        for arm in sig.arm_deg:
+            pos = fixed["signature"].copy()
+            pos[1] = arm
+            out.append(("signature", last_repeat, -1, ranges.signature, pos))
+    elif one_pass:  # each distinct position (and range) of the last pass's sample readings
+        seen: set[tuple[float, ...]] = set()
+        for k in passes[-1][1]:
+            key = (*targets[k][1:], ranges.sample[k])
+            if key not in seen:
+                seen.add(key)
+                out.append(shadow(last_repeat, int(k)))
     for kind, every in extras:
-        if done % every:
+        if done % every or one_pass:
             extra(kind, last_repeat)
     return out
 
@@ -381,13 +465,16 @@ class Ranges:
     sample: np.ndarray  # per plan point
     dark: tuple[float, ...]  # one dark reading per range in each dark slot
     beam: float
+    signature: float = UNSET  # UNSET: the range of the sample reading a signature one shadows
 
 
 def resolve_ranges(plan: Plan, cfg: InstrumentConfig, keep: np.ndarray) -> Ranges:
     """Each reading's range: its grid's or point's, else the plan's, else the instrument's
     [detector] range; beam readings their [beam] range, else the same fallbacks; dark readings
-    their [dark] range, else one on each range the (kept) sample points use. Checked against
-    the ranges a Modbus detector's register map lists (a PM100's sensor: when the run starts)."""
+    their [dark] range, else one on each range the (kept) sample points use; signature readings
+    their [signature] range, else the sample reading's (an arm_deg grid: the plan's). Checked
+    against the ranges a Modbus detector's register map lists (a PM100's sensor: when the run
+    starts)."""
     base = plan.range_w
     if math.isnan(base):
         base = AUTO_RANGE if cfg.detector.range_w is None else cfg.detector.range_w
@@ -395,17 +482,21 @@ def resolve_ranges(plan: Plan, cfg: InstrumentConfig, keep: np.ndarray) -> Range
     beam = base if math.isnan(plan.beam_range_w) else plan.beam_range_w
     dark = (tuple(sorted({float(r) for r in sample[keep]})) if math.isnan(plan.dark_range_w)
             else (plan.dark_range_w,))
+    sig = plan.signature
+    signature = UNSET if sig is None else (
+        sig.range_w if not math.isnan(sig.range_w) else base if sig.arm_deg else UNSET)
     where = str(plan.path) if plan.path else "plan"
     largest = detector_largest_range(cfg)
     if largest is not None:
         named = [(f"{p['source']} point", r) for p, r in zip(plan.points[keep], sample[keep],
                                                               strict=True)]
         named += [("[dark]", r) for r in dark] + [("[beam]", beam)]
+        named += [("[signature]", signature)] if not math.isnan(signature) else []
         for what, r in named:
             if r > largest * (1.0 + 1e-9):
                 raise PlanError(f"{where}: {what}: range {r:g} W is above the largest range "
                                 f"{largest:g} W of the detector {cfg.detector.device!r}")
-    return Ranges(sample, dark, beam)
+    return Ranges(sample, dark, beam, signature)
 
 
 def detector_largest_range(cfg: InstrumentConfig) -> float | None:
@@ -423,7 +514,10 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
     where = str(plan.path) if plan.path else "plan"
     targets, keep = stage_targets(plan, cfg)
     fixed = {k: _fixed_position(cfg, k, where) for k, n in
-             (("dark", plan.dark_every), ("beam", plan.beam_every)) if n}
+             (("dark", plan.dark_every), ("beam", plan.beam_every),
+              ("signature", plan.signature is not None)) if n}
+    if plan.signature is not None and plan.signature.arm_deg:
+        _signature_grid(plan, cfg, where)
     ranges = resolve_ranges(plan, cfg, keep)
     kept = np.flatnonzero(keep)
     naive = [(r, kept) for r in range(plan.repeats)]
@@ -433,9 +527,9 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
         passes = [(r, order if r % 2 == 0 else order[::-1]) for r in range(plan.repeats)]
     else:
         passes, nesting = naive, ()
-    readings = _assemble(_interleave(passes, plan, ranges), plan, targets, fixed)
+    readings = _assemble(_interleave(passes, plan, ranges, targets, fixed), plan)
     _check_sweeps(readings, where)
-    naive_readings = _assemble(_interleave(naive, plan, ranges), plan, targets, fixed)
+    naive_readings = _assemble(_interleave(naive, plan, ranges, targets, fixed), plan)
     return Schedule(readings, estimate_seconds(readings, cfg, plan),
                     estimate_seconds(naive_readings, cfg, plan), nesting,
                     int(len(keep) - keep.sum()))
@@ -458,23 +552,23 @@ def _check_sweeps(readings: np.ndarray, where: str) -> None:
                         f"limits that exclude 0, e.g. limits_deg = [6, 354]")
 
 
-def _assemble(items: list[tuple[str, int, int, float]], plan: Plan, targets: np.ndarray,
-              fixed: dict[str, np.ndarray]) -> np.ndarray:
+def _assemble(items: list[Slot], plan: Plan) -> np.ndarray:
+    """The schedule array of the slots; plan angles for sample readings, NaN for the others (a
+    signature reading keeps the point it shadows, -1 on a grid of its own)."""
     out = np.zeros(len(items), SCHEDULE_DTYPE)
     out["index"] = np.arange(len(items))
     pos = np.empty((len(items), 4))
-    for i, (kind, repeat, k, range_w) in enumerate(items):
+    for i, (kind, repeat, k, range_w, target) in enumerate(items):
         out[i]["kind"], out[i]["repeat"], out[i]["point"] = kind, repeat, k
         out[i]["range_w"] = range_w
+        pos[i] = target
         if kind == "sample":
             p = plan.points[k]
             out[i]["side"] = p["side"]
             out[i]["theta_i_deg"], out[i]["theta_o_deg"] = p["theta_i_deg"], p["theta_o_deg"]
             out[i]["phi_o_deg"] = p["phi_o_deg"]
-            pos[i] = targets[k]
         else:
             out[i]["theta_i_deg"] = out[i]["theta_o_deg"] = out[i]["phi_o_deg"] = math.nan
-            pos[i] = fixed[kind]
     for j, role in enumerate(MOTION_ROLES):
         out[f"{role}_deg"] = pos[:, j]
     return out
@@ -498,15 +592,18 @@ def estimate_seconds(readings: np.ndarray, cfg: InstrumentConfig, plan: Plan,
 def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
     """Human summary: what is measured, how many readings, and the time estimates."""
     r = sched.readings
-    kinds = {k: int((r["kind"] == k).sum()) for k in ("sample", "dark", "beam")}
+    kinds = {k: int((r["kind"] == k).sum()) for k in KINDS}
     samples = r[r["kind"] == "sample"]
     lines = [
         f"plan {plan.name!r} on instrument {cfg.name!r}",
         f"  sample points: {len(plan.points) - sched.skipped} x {plan.repeats} repeat(s)"
         + (f" ({sched.skipped} in forbidden zones skipped)" if sched.skipped else ""),
         f"  readings: {len(r)} ({kinds['sample']} sample, {kinds['dark']} dark, "
-        f"{kinds['beam']} beam)",
+        f"{kinds['beam']} beam" + (f", {kinds['signature']} signature" if kinds["signature"]
+                                   else "") + ")",
     ]
+    if plan.signature is not None:
+        lines.append(f"  signature: {describe_signature(plan.signature)}")
     for side in SIDES:
         s = samples[samples["side"] == side]
         if len(s):
@@ -524,6 +621,18 @@ def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
     return "\n".join(lines)
 
 
+def describe_signature(sig: SignaturePlan) -> str:
+    """How a plan takes its signature readings, in words."""
+    if sig.every:
+        return (f"the sample retracted after every {sig.every} sample reading(s), at its arm "
+                "position")
+    where = (f"{len(sig.arm_deg)} arm positions of its own" if sig.arm_deg
+             else "each sample reading's arm position")
+    prompt = (": the scan waits for the operator to remove the sample first"
+              if sig.mode == "prompted" else "")
+    return f"one pass after the sample readings, the sample retracted, at {where}{prompt}"
+
+
 def describe_range(range_w: float) -> str:
     """A schedule's range as text: "auto" or the full scale in W."""
     return "auto" if range_w == AUTO_RANGE else f"{range_w:g} W"
@@ -536,11 +645,11 @@ def describe_ranges(ranges_w: np.ndarray) -> str:
 
 def listing(sched: Schedule) -> str:
     """Every scheduled reading, one line each: what it measures and where the stages go."""
-    head = (f"{'index':>6} {'kind':<6} {'side':<12} {'rep':>3} {'theta_i':>8} {'theta_o':>8} "
+    head = (f"{'index':>6} {'kind':<9} {'side':<12} {'rep':>3} {'theta_i':>8} {'theta_o':>8} "
             f"{'phi_o':>7}  {'sample':>8} {'arm':>8} {'azimuth':>8} {'elev':>7} {'range':>9}")
     lines = [head]
     for r in sched.readings:
-        lines.append(f"{r['index']:>6} {r['kind']:<6} {r['side']:<12} {r['repeat']:>3} "
+        lines.append(f"{r['index']:>6} {r['kind']:<9} {r['side']:<12} {r['repeat']:>3} "
                      f"{r['theta_i_deg']:>8.3f} {r['theta_o_deg']:>8.3f} {r['phi_o_deg']:>7.2f}  "
                      f"{r['sample_deg']:>8.3f} {r['arm_deg']:>8.3f} {r['azimuth_deg']:>8.3f} "
                      f"{r['elevation_deg']:>7.3f} {describe_range(r['range_w']):>9}")

@@ -27,7 +27,7 @@ from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
 from sim.devices.pm100 import Pm100Emulator
 
-SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "detector",
+SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
             "faults")
 ROLES = ("sample", "arm", "azimuth", "elevation")
 DETECTORS = ("pm100", "modbus-detector")

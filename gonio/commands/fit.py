@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from gonio.commands.reduce import add_reduce_options
+
 
 def _list(text: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in text.split(",") if part.strip())
@@ -53,16 +55,6 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="K-correlation PSD exponent for --diffraction (default 2, or an "
                         "all-emulated run's [sim.sample] psd_exponent)")
     add_reduce_options(p)
-
-
-def add_reduce_options(p: argparse.ArgumentParser) -> None:
-    """The reduction options `reduce`, `fit` and `plot` share."""
-    p.add_argument("--calibration", metavar="FILE",
-                   help="calibration file to apply (default: the one the run records)")
-    p.add_argument("--shot-noise-w", type=float, metavar="W",
-                   help="the detector's shot-noise variance of one sample per watt of signal, "
-                        "W (2 q B / R); default: the config's [detector] shot_noise_w, else the "
-                        "emulated meter's for an all-emulated run, else not modelled")
 
 
 def nano_roughness(sim: dict | None, rms_height_nm: float | None,
@@ -120,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
 
     sim = emulator_sim(args.run) if args.diffraction else None
     data, result = fit_run(args.run, options_from(args, sim), args.calibration,
-                           args.shot_noise_w)
+                           args.shot_noise_w, args.subtract_signature)
     out = result.to_dict()
     out["run"] = str(args.run)
     out["sample"] = data.meta["sample"]

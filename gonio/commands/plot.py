@@ -28,6 +28,6 @@ def run(args: argparse.Namespace) -> int:
     sim = emulator_sim(args.run) if args.fit and args.diffraction else None
     out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
                    fit_options=options_from(args, sim) if args.fit else None,
-                   shot_noise_w=args.shot_noise_w)
+                   shot_noise_w=args.shot_noise_w, subtract_signature=args.subtract_signature)
     print(out)
     return 0

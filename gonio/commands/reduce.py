@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gonio.commands.fit import add_reduce_options
+from calibration.signature import DEFAULT_SHARE
 
 CSV_HEADER = ("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,side,bsdf_per_sr,sigma_per_sr,"
-              "valid")
+              "valid,flags")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,7 +21,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("run", help="run directory")
     p.add_argument("--out", metavar="CSV", help="output file (default RUN/reduced.csv)")
     add_reduce_options(p)
+    p.add_argument("--signature-share", type=float, default=DEFAULT_SHARE, metavar="FRACTION",
+                   help="flag points whose signature exceeds this share of the net signal "
+                        f"(default {DEFAULT_SHARE:g})")
     p.set_defaults(func=run)
+
+
+def add_reduce_options(p: argparse.ArgumentParser) -> None:
+    """The reduction options `reduce`, `fit` and `plot` share."""
+    p.add_argument("--calibration", metavar="FILE",
+                   help="calibration file to apply (default: the one the run records)")
+    p.add_argument("--shot-noise-w", type=float, metavar="W",
+                   help="the detector's shot-noise variance of one sample per watt of signal, "
+                        "W (2 q B / R); default: the config's [detector] shot_noise_w, else the "
+                        "emulated meter's for an all-emulated run, else not modelled")
+    p.add_argument("--subtract-signature", action="store_true",
+                   help="subtract the bench's own scatter, which the run's signature readings "
+                        "measured, with its uncertainty (default: flag the points it biases "
+                        "and leave them out)")
 
 
 def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -31,14 +48,15 @@ def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def write_csv(data, path: Path) -> Path:
-    """One row per sample reading, in the sample frame, degrees; valid 1/0."""
+    """One row per sample reading, in the sample frame, degrees; valid 1/0; flags separated by
+    ';' (e.g. signature)."""
     ti, pi = spherical_deg(data.wi)
     to, po = spherical_deg(data.wo)
     side = np.where(data.transmission, "transmission", "reflection")
     lines = [CSV_HEADER] + [
-        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{int(v)}"
-        for a, b, c, d, s, f, e, v in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
-                                          data.valid, strict=True)]
+        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{int(v)},{g.replace(',', ';')}"
+        for a, b, c, d, s, f, e, v, g in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
+                                             data.valid, data.flags, strict=True)]
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -65,8 +83,10 @@ def summary(data) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
     from calibration.pipeline import reduce_run
+    from calibration.signature import summary as signature_summary
 
-    data = reduce_run(args.run, args.calibration, args.shot_noise_w)
+    data = reduce_run(args.run, args.calibration, args.shot_noise_w, args.subtract_signature,
+                      args.signature_share)
     out = write_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv")
     m = data.meta
     print(f"run {args.run}: sample {m['sample']['id']}, eta {m['eta']:g}, aperture "
@@ -75,5 +95,7 @@ def run(args: argparse.Namespace) -> int:
           f"(drift rms {m['beam_drift_rms']:.2%})")
     print(f"noise: {m['noise_model']}")
     print("\n".join(summary(data)))
+    if "signature" in m:
+        print("\n".join(signature_summary(m["signature"])))
     print(out)
     return 0

@@ -1,8 +1,9 @@
 """The [sim] section of an instrument config -> the emulated bench and its PowerSource.
 
-Reads the tables this package owns, [sim.source], [sim.sample], [sim.aperture] and
-[sim.alignment] (docs/bench.md has the schema); every bad field raises one SimConfigError
-naming it. [sim.detector] belongs to sim.devices.photodiode, the other keys to the emulators.
+Reads the tables this package owns, [sim.source], [sim.sample], [sim.aperture],
+[sim.alignment] and [sim.stray] (docs/bench.md has the schema); every bad field raises one
+SimConfigError naming it. [sim.detector] belongs to sim.devices.photodiode, the other keys to
+the emulators.
 
 The bench's geometry comes from what the experimenter describes, the instrument config's
 [optics] and the plan's [sample] (passed in as plain tables); a key [sim] states itself wins
@@ -25,6 +26,7 @@ from sim.bench.sample import (
 )
 from sim.bench.scene import Alignment, Bench, BenchPowerSource
 from sim.bench.source import Source
+from sim.bench.stray import InstrumentScatter
 from sim.devices.photodiode import PhotodiodeModel, SimConfigError
 
 Check = Callable[[str, object], object]
@@ -130,6 +132,13 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "sample_offset_deg": (0.0, _number(-10.0, 10.0)),
         "arm_offset_deg": (0.0, _number(-10.0, 10.0)),
     },
+    "stray": {  # sim.bench.stray: the instrument's own scatter (default: none)
+        "halo_fraction": (0.0, _number(0.0, 0.1)),
+        "halo_width_deg": (1.0, _number(0.1, 30.0)),
+        "halo_slope": (3.0, _number(1.0, 6.0)),
+        "arm_fraction": (0.0, _number(0.0, 1e-2)),
+        "arm_variation": (0.0, _number(0.0, 1.0)),
+    },
 }
 
 
@@ -207,6 +216,7 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
         rtol=aperture["rtol"], order=aperture["order"],
         alignment=Alignment(**read_table(sim_config, "alignment")),
         retracted_beyond_deg=retracted,
+        stray=InstrumentScatter(**read_table(sim_config, "stray")),
     )
 
 

@@ -3,6 +3,8 @@
 With the sample in the beam the detector sees the sample's scattering (the aperture integral,
 only the lobe on the detector's side evaluated); with the sample retracted (edge-on) it sees the
 direct beam, clipped by the aperture when the beam is wider or the arm is off the beam axis.
+Either way the instrument's own scatter (sim.bench.stray: a halo about the beam, stray light
+from the arm) adds to it.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
 from sim.bench.sample import LobeScales, Sample
 from sim.bench.source import Source
+from sim.bench.stray import InstrumentScatter
 
 ONE_POINT = LobeScales(1.0, 1.0, 1.0, 1.0)  # scales for a probe whose order is fixed anyway
 NEGLIGIBLE = 1e-14  # fraction of the incident power below which a tail is not refined
@@ -52,7 +55,8 @@ def disk_overlap_fraction(r_beam: float, r_aperture: float, offset: float) -> fl
 
 @dataclass
 class Bench:
-    """Source, sample, aperture (diameter and distance) and alignment: `power_w(positions, t)`."""
+    """Source, sample, aperture (diameter and distance), alignment and the instrument's own
+    scatter: `power_w(positions, t)`."""
 
     source: Source
     sample: Sample
@@ -62,6 +66,7 @@ class Bench:
     alignment: Alignment = field(default_factory=Alignment)
     retracted_beyond_deg: float = 89.0
     order: tuple[int, int] | None = None
+    stray: InstrumentScatter = field(default_factory=InstrumentScatter)
 
     def __post_init__(self) -> None:
         self.integral = ApertureIntegral(
@@ -122,6 +127,7 @@ class Bench:
             fraction = self.direct_beam_fraction(true["arm"], true["elevation"])
         else:
             fraction = self.scattered_fraction(true)
+        fraction += self.stray.fraction(true["arm"], true["elevation"], self.integral.aperture_rad)
         return self.source.power_at(t_s) * fraction
 
 

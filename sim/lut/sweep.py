@@ -24,7 +24,7 @@ from sim.devices.photodiode import PhotodiodeModel
 from sim.lut.cluster import map_tasks
 
 #: [sim] tables a sweep may vary (owned by sim.bench and sim.devices.photodiode).
-TABLES = ("source", "sample", "aperture", "alignment", "detector")
+TABLES = ("source", "sample", "aperture", "alignment", "stray", "detector")
 #: Stage roles of a measurement position, in output order, and their defaults (degrees).
 ROLES = {"sample": None, "arm": None, "elevation": 0.0, "azimuth": 0.0}
 #: Per position: true power, the meter's reading, its range (all W) and the clip flag.
