@@ -1,6 +1,7 @@
 """The import rules of docs/architecture.md: drivers and sim stay independent."""
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -44,3 +45,18 @@ def test_gonio_imports_sim_only_where_documented():
         if "sim" in imported_packages(path)
     }
     assert users <= allowed
+
+
+def test_only_the_record_hands_a_runs_sim_table_to_reduction():
+    # The emulator's truth ([sim]) reaches reduction, fits, plots and exports only through
+    # gonio.record.emulator_config, which withholds it from any run with a real device;
+    # configs, the runner and --sim read it to build or describe the emulators.
+    allowed = {"gonio/record.py", "gonio/config.py", "gonio/simulate.py", "gonio/runner.py"}
+    reads = re.compile(r"""(config|raw)\s*(\.get\(\s*|\[\s*)["']sim["']""")
+    readers = {
+        str(path.relative_to(ROOT))
+        for package in ("gonio", "calibration")
+        for path in (ROOT / package).rglob("*.py")
+        if reads.search(path.read_text())
+    }
+    assert readers <= allowed
