@@ -240,7 +240,7 @@ class Engine:
         """Before any motion: the detector accepts every range the remaining readings use (each
         set once; a PM100 refuses a range its sensor lacks, a Modbus amplifier one above its
         largest), so a bad plan range stops the run with one clear error."""
-        remaining = self.schedule["range_w"][self.writer.next_index:]
+        remaining = self.schedule["range_w"][self.writer.todo(len(self.schedule))]
         for range_w in np.unique(remaining):
             try:
                 self._use_range(float(range_w))
@@ -272,7 +272,7 @@ class Engine:
         try:
             with self.control:
                 self._prepare()
-                for row in self.schedule[self.writer.next_index:]:
+                for row in self.schedule[self.writer.todo(len(self.schedule))]:
                     self.control.checkpoint(self._paused)
                     record = self._with_retries(row)
                     self.writer.append(record)
@@ -287,7 +287,7 @@ class Engine:
             self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
             raise
         self._finish(status, reason)
-        return Outcome(status, reason, self.writer.next_index)
+        return Outcome(status, reason, self.writer.stored)
 
     def _paused(self, status: str) -> None:
         self.writer.set_status(status, "paused by the user" if status == "paused" else "")
