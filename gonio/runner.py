@@ -157,6 +157,9 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
     plan_path: a plan file that must say what the stored plan says (`same_plan`).
     """
     run = open_run(run_dir)
+    lines = run.lines()
+    if lines.damaged:
+        raise DamagedRunError(damage_message(run.path, lines, resume=True))
     if run.status == "completed":
         raise RunError(f"{run.path}: run already completed; nothing to resume")
     if plan_path is not None:
@@ -171,9 +174,6 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
     problems = digest_problems(run, cfg.raw)
     if problems:
         raise RunError(f"{run.path}: {'; '.join(problems)}; cannot resume")
-    lines = run.lines()
-    if lines.damaged:
-        raise DamagedRunError(damage_message(run.path, lines, resume=True))
     sched = build_schedule(plan, cfg)
     if sim is None:
         sim = run.meta.get("sim", False)

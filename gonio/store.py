@@ -400,13 +400,13 @@ class RunWriter:
         """Reopen a run to continue it: refuse a damaged one, cut a torn last line, and go on
         with the indices a repair dropped, then after the last reading."""
         run = open_run(path)
-        if run.status == "completed":
-            raise RunError(f"{path}: run already completed; nothing to resume")
         writer = cls(path, run.meta, 0)  # takes the lock before touching the file
         try:
             lines = run.lines()
             if lines.damaged:
                 raise DamagedRunError(damage_message(path, lines, resume=True))
+            if run.status == "completed":
+                raise RunError(f"{path}: run already completed; nothing to resume")
         except BaseException:
             writer._fh.close()
             raise
