@@ -77,10 +77,6 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
         writer = make_writer()
         try:
             swapped = identity_changes(writer.meta["sessions"], inst.devices)
-            for name, change in swapped.items():
-                print(f"gonio scan: warning: device {name!r} reports another identity than "
-                      f"in the last session ({change['from']} -> {change['to']}); "
-                      f"recorded in meta.json", file=sys.stderr)
             writer.start_session(sim=list(dev.emulated), endpoints={
                 n: d.endpoint for n, d in dev.config.devices.items()}, devices=inst.devices,
                 **({"identity_changes": swapped} if swapped else {}), **(session or {}))
@@ -231,13 +227,17 @@ def _endpoint_changes(stored: dict, new: dict, cfg_path: str | Path,
 def identity_changes(sessions: list[dict[str, Any]], devices: dict[str, dict[str, Any]]
                      ) -> dict[str, dict[str, Any]]:
     """Devices whose reported identity differs from the last session's record of it (both
-    known): {name: {"from": identity, "to": identity}}."""
+    known), each warned about on stderr: {name: {"from": identity, "to": identity}}."""
     before = next((s["devices"] for s in reversed(sessions) if s.get("devices")), {})
     out = {}
     for name, dev in devices.items():
         was, now = before.get(name, {}).get("identity"), dev.get("identity")
         if was and now and was != now:
             out[name] = {"from": was, "to": now}
+            differ = ", ".join(f"{k} {was.get(k)!r} -> {now.get(k)!r}"
+                               for k in sorted(was.keys() | now.keys()) if was.get(k) != now.get(k))
+            print(f"gonio scan: warning: device {name!r} reports another identity than in the "
+                  f"last session ({differ}); recorded in meta.json", file=sys.stderr)
     return out
 
 

@@ -115,12 +115,11 @@ def encode_line(row: dict[str, Any], checksum: bool = True) -> bytes:
 
 @dataclass
 class Damage:
-    """A damaged line of readings.jsonl: its number (from 1) and what is wrong; `kept` when
-    the line itself is valid but readings before it are missing."""
+    """A damaged line of readings.jsonl: its number (from 1) and what is wrong (a valid line
+    that follows missing indices is kept as a reading but still reported)."""
 
     line: int
     problem: str
-    kept: bool = False
 
 
 @dataclass
@@ -188,7 +187,7 @@ def scan_lines(data: bytes, checked: bool, refill: Collection[int] = ()) -> Line
                 problem = f"index {index} out of order (after index {top})"
             elif len(gap) > since_valid:
                 damaged.append(Damage(n, f"index {index} follows index {top}: "
-                                         f"{describe_indices(gap)} missing", kept=True))
+                                         f"{describe_indices(gap)} missing"))
         if problem:
             damaged.append(Damage(n, problem))
             since_valid += 1
@@ -400,13 +399,13 @@ class RunWriter:
         """Reopen a run to continue it: refuse a damaged one, cut a torn last line, and go on
         with the indices a repair dropped, then after the last reading."""
         run = open_run(path)
+        if run.status == "completed":
+            raise RunError(f"{path}: run already completed; nothing to resume")
         writer = cls(path, run.meta, 0)  # takes the lock before touching the file
         try:
             lines = run.lines()
             if lines.damaged:
                 raise DamagedRunError(damage_message(path, lines, resume=True))
-            if run.status == "completed":
-                raise RunError(f"{path}: run already completed; nothing to resume")
         except BaseException:
             writer._fh.close()
             raise

@@ -31,12 +31,11 @@ def run(args: argparse.Namespace) -> int:
     except DamagedRunError as exc:  # meta.json, plan.json or config.json unreadable
         print(f"{exc}\ndamaged")
         return 1
+    out = repair(report, Path(args.repair)) if args.repair and report.lines.damaged else None
     print(report.text())
-    if args.repair:
-        if report.lines.damaged:
-            out = repair(report, Path(args.repair))
-            print(f"repaired copy: {len(report.lines.rows)} readings kept; "
-                  f"`gonio scan --resume {out}` measures the missing ones\n{out}")
-        else:
-            print("nothing to repair in readings.jsonl (--repair mends only its lines)")
+    if out is not None:
+        print(f"repaired copy: {len(report.lines.rows)} readings kept; "
+              f"`gonio scan --resume {out}` measures the missing ones\n{out}")
+    elif args.repair:
+        print("nothing to repair in readings.jsonl (--repair mends only its lines)")
     return 1 if report.damaged else 0

@@ -86,6 +86,11 @@ def test_a_damaged_line_is_reported_refused_and_repaired(completed, tmp_path, ki
     assert copy.meta["repair"]["dropped"] == dropped
     assert copy.rows() == [r for r in open_run(run_dir).rows() if r["index"] not in dropped]
     assert gonio_cli("check", fixed).returncode == 0
+    if kind == "garbage":
+        proc = gonio_cli("check", run, "--repair", fixed)
+        assert proc.returncode == 2 and "already exists" in one_line_error(proc.stderr)
+    if kind != "nul":
+        return  # the copies are alike: resume one of them
 
     proc = gonio_cli("scan", "--resume", fixed, "--no-plot", "--no-progress")
     assert proc.returncode == 0, proc.stderr

@@ -83,7 +83,8 @@ def test_resume_with_its_plan_on_other_hardware_records_that_hardware(tmp_path):
     session records the endpoint change and the other identities, and the scan warns."""
     cfg = fast_config("sim-modbus")
     with emulating(write_toml(tmp_path / "bench1.toml", cfg)) as endpoints:
-        plan = write_plan(tmp_path, PLAN, pointed(cfg, endpoints))
+        first = pointed(cfg, endpoints)
+        plan = write_plan(tmp_path, PLAN, first)
         result = new_scan(plan, out=tmp_path / "runs", progress=False, control=AbortAfter(1))
     run_dir = result.path
     assert result.outcome.status == "aborted"
@@ -92,7 +93,8 @@ def test_resume_with_its_plan_on_other_hardware_records_that_hardware(tmp_path):
     same.write_text("# the plan again, written by hand\n\n" + text.replace("\n[", "\n# a table\n["))
     bench2 = write_toml(tmp_path / "bench2.toml", {**cfg, "sim": {**cfg["sim"], "seed": 40}})
     with emulating(bench2) as endpoints:
-        other = write_toml(tmp_path / "other.toml", pointed(cfg, endpoints))
+        second = pointed(cfg, endpoints)
+        other = write_toml(tmp_path / "other.toml", second)
         proc = gonio_cli("scan", same, "--resume", run_dir, "--instrument", other, "--no-plot",
                          "--no-progress")
     assert proc.returncode == 0, proc.stderr
@@ -101,8 +103,10 @@ def test_resume_with_its_plan_on_other_hardware_records_that_hardware(tmp_path):
     run = open_run(run_dir)
     assert run.meta["status"] == "completed" and len(run) == run.meta["planned"]
     session = run.meta["sessions"][-1]
-    assert session["endpoint_changes"]["devices.photodiode.port"]["to"] == endpoints[
-        "photodiode"][1]
+    moved = {f"devices.{name}.{key}": {"from": dev.get(key), "to": second["devices"][name][key]}
+             for name, dev in first["devices"].items() for key in ("port", "host", "tcp_port")
+             if dev.get(key) != second["devices"][name].get(key)}
+    assert session.get("endpoint_changes", {}) == moved
     assert set(session["identity_changes"]) == set(cfg["devices"])
     first, second = (s["devices"] for s in run.meta["sessions"])
     for name in cfg["devices"]:
