@@ -6,6 +6,7 @@ import json
 import math
 import os
 import re
+import shutil
 import signal
 import threading
 import time
@@ -16,7 +17,7 @@ import pytest
 import gonio.store
 from gonio.errors import RunError
 from gonio.integrity import check, repair
-from gonio.store import READING_DTYPE, DamagedRunError, RunWriter, open_run
+from gonio.store import READING_DTYPE, DamagedRunError, RunWriter, digest_problems, open_run
 
 
 def row(i, **kw):
@@ -119,9 +120,8 @@ def test_a_damaged_line_is_an_error_for_every_reader_and_for_resume(writer, kind
     with pytest.raises(DamagedRunError, match=r"cannot resume: `gonio check .* --repair "):
         RunWriter.resume(writer.path)
     assert path.read_bytes() == before  # nothing cut
-    again = RunWriter.resume  # the refusal released the lock
-    with pytest.raises(DamagedRunError):
-        again(writer.path)
+    with pytest.raises(DamagedRunError):  # again, not "in use": the refusal freed the lock
+        RunWriter.resume(writer.path)
 
 
 def test_a_run_without_checksums_reads_as_unchecked(writer):
@@ -251,3 +251,23 @@ def test_ctrl_c_while_waiting_for_an_fsync_leaves_it_awaited(writer, monkeypatch
     writer.set_status("aborted", "aborted by the user (Ctrl-C)")
     assert len(fsyncs) == 1  # set_status waited for it
     assert len(open_run(writer.path)) == 1
+
+
+def test_register_maps_count_by_content_not_path(tmp_path):
+    """The digests of a run cover its register maps' contents: a moved copy of the same map
+    passes, an edited one (or plan.json) does not."""
+    regmap = tmp_path / "drive.toml"
+    regmap.write_text("[registers]\n")
+    config = {"name": "c", "devices": {"drive": {"register_map": str(regmap)}}}
+    w = RunWriter.create(tmp_path / "runs", "t", None, None, {"name": "t"}, config, {})
+    w.close()
+    run = open_run(w.path)
+    moved = tmp_path / "elsewhere.toml"
+    shutil.copyfile(regmap, moved)
+    assert digest_problems(run, {"devices": {"drive": {"register_map": str(moved)}}}) == []
+    moved.write_text("[registers]\nvelocity = 1\n")
+    assert digest_problems(run, {"devices": {"drive": {"register_map": str(moved)}}}) == [
+        "the register map of device 'drive' differs in content from the one the run started with"]
+    (w.path / "plan.json").write_text('{"name": "u"}')
+    assert digest_problems(open_run(w.path)) == [
+        "plan.json changed since the run started (its digest differs)"]
