@@ -40,6 +40,7 @@ class Calibration:
     aperture_half_angle_deg: Measured | None = None
     aperture_method: str | None = None  # "geometry" | "beam-scan"
     beam: list[dict[str, Any]] | None = None  # per source run: its beam readings' summary
+    notes: list[str] = field(default_factory=list)  # what was not calibrated, bad fits
 
     def to_json(self) -> dict[str, Any]:
         """The file's content."""
@@ -60,7 +61,7 @@ class Calibration:
             "aperture": {"solid_angle_sr": value(self.aperture_solid_angle_sr),
                          "half_angle_deg": value(self.aperture_half_angle_deg),
                          "method": self.aperture_method},
-            "beam": self.beam,
+            "beam": self.beam, "notes": self.notes,
         }
 
     @classmethod
@@ -104,6 +105,7 @@ class Calibration:
             aperture_half_angle_deg=value(ap, "half_angle_deg", "aperture"),
             aperture_method=ap.get("method"),
             beam=data.get("beam"),
+            notes=[str(n) for n in data.get("notes", [])],
         )
 
 

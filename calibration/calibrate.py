@@ -32,8 +32,15 @@ from calibration.detector import (
     ranges_read_together,
 )
 from calibration.values import CalibrationError, Measured
+from gonio.reading_flags import INVALID, flagged
 
 STAGES = ("sample", "arm", "elevation", "azimuth")  # PeakScan's stage order
+# chi2/dof above which a fit is reported as bad: the 99.9 % point of chi2/dof at 10 degrees of
+# freedom (2.96), the fewest a calibration fit gets from the calib-*.toml plans (they give tens
+# to hundreds), so a right model under honest noise stays below it. Above it the model misses
+# the readings (a peak outside its scan, source drift, a nonlinear range, noise underestimated);
+# the fits scale their sigmas by sqrt(chi2/dof), which does not cover a biased value.
+CHI2_DOF_WARN = 3.0
 
 
 def averaged_points(rows: np.ndarray, side: str) -> angle_cal.PeakScan:
@@ -135,6 +142,38 @@ def beam_summary(readings: np.ndarray, darks: dict[str, Measured] | None,
             "noise_w": model.noise_w, "interpolation_rel": model.interp_rel}
 
 
+def detector_notes(readings: np.ndarray, darks: dict[str, Measured],
+                   gains: dict[str, Measured] | None) -> list[str]:
+    """What the detector part lacks, one line each: ranges that sample or beam readings use with
+    no dark readings of their own, or with no gain."""
+    used = {range_key(r) for r in readings["range_w"][readings["kind"] != "dark"]}
+    notes = []
+    if no_dark := sorted(used - set(darks), key=float):
+        notes.append(f"darks: none on {_ranges_text(no_dark)}, which sample or beam readings "
+                     "use: reduction takes the nearest range's offset (let each dark slot read "
+                     "every range, as examples/plans/calib-detector.toml does)")
+    if gains is None:
+        notes.append("gains: not calibrated: no run reads the same positions on two ranges or "
+                     "more (a grid stepping through ranges, as examples/plans/calib-detector.toml)")
+    elif no_gain := sorted(used - set(gains), key=float):
+        notes.append(f"gains: not calibrated on {_ranges_text(no_gain)}: no position was read "
+                     "with enough signal on it and on another range")
+    return notes
+
+
+def fit_warning(part: str, fit: str, chi2_dof: float) -> list[str]:
+    """A warning line if a fit's chi2/dof exceeds CHI2_DOF_WARN, else none."""
+    if chi2_dof <= CHI2_DOF_WARN:
+        return []
+    return [f"{part}: warning: the {fit} fit has chi2/dof {chi2_dof:.3g} > {CHI2_DOF_WARN:g}: "
+            "the model misses the readings by more than their noise (its sigmas are scaled by "
+            "sqrt(chi2/dof), but its values may be biased)"]
+
+
+def _ranges_text(keys: list[str]) -> str:
+    return ("range " if len(keys) == 1 else "ranges ") + ", ".join(f"{k} W" for k in keys)
+
+
 def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
           eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
           divergence_deg: float = 0.0) -> Calibration:
@@ -143,7 +182,10 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
     (an autoranged run reads a position on one range only);
     angle offsets, when eta is given, from the runs holding a specular scan (each normalised by
     its own beam readings: times restart with every run), modelled with the aperture (if given)
-    and the beam's divergence half-angle; a beam summary per run."""
+    and the beam's divergence half-angle; a beam summary per run. `notes` says what could not
+    be calibrated and why, and which fit fits badly; a CalibrationError for what eta asks.
+    Readings flagged invalid (the detector had none) are left out."""
+    runs = [run[~flagged(run, INVALID)] for run in runs]
     readings = np.concatenate(runs)
     darks = dark_offsets(readings)
     cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
@@ -155,25 +197,40 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
         cal.gains, cal.gain_reference = gains.gains, gains.reference
         cal.linearity = {"chi2_dof": gains.chi2_dof, "max_deviation": gains.max_deviation,
                          "exponents": {k: v.to_json() for k, v in gains.exponents.items()}}
-    if eta is not None:
-        peak_runs = []
-        for k, run in enumerate(runs):
-            if np.any((run["kind"] == "sample") & (run["side"] == "reflection")):
-                normalised = beam_normalised(run, darks, cal.gains)
-                normalised["point"] += k * 10_000_000  # plan points are per run
-                peak_runs.append(normalised)
-        if not peak_runs:
-            raise CalibrationError("angle calibration (--eta) needs a run with a specular "
-                                   "scan (examples/plans/calib-angles.toml)")
-        half_angle = 0.0 if aperture is None else aperture[1].value
-        offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle, divergence_deg)
-        cal.sample_offset_deg, cal.arm_offset_deg = offsets.sample_offset, offsets.arm_offset
-        cal.angle_fit = {"distribution": offsets.distribution, "alpha": offsets.alpha.to_json(),
-                         "chi2_dof": offsets.chi2_dof, "points": offsets.n_points,
-                         "aperture_half_angle_deg": half_angle, "divergence_deg": divergence_deg}
-    if aperture is not None:
+    cal.notes += detector_notes(readings, darks, cal.gains)
+    if cal.linearity is not None:
+        cal.notes += fit_warning("gains", "gain", cal.linearity["chi2_dof"])
+    if eta is None:
+        cal.notes.append("angles: not calibrated: no eta (--eta) of a reference sample given")
+    else:
+        _angles(cal, runs, eta, aperture, divergence_deg)
+    if aperture is None:
+        cal.notes.append("aperture: not calibrated: no geometry (--aperture-geometry or the "
+                         "runs' [optics]) and no beam scan (--aperture-scan) given")
+    else:
         cal.aperture_solid_angle_sr, cal.aperture_half_angle_deg, cal.aperture_method = aperture
     summaries = [dict(run=name, **summary) for name, run in zip(source_runs, runs, strict=True)
                  if (summary := beam_summary(run, darks, cal.gains)) is not None]
     cal.beam = summaries or None
     return cal
+
+
+def _angles(cal: Calibration, runs: list[np.ndarray], eta: float,
+            aperture: tuple[Measured, Measured, str] | None, divergence_deg: float) -> None:
+    """The angle zero offsets into cal, from the runs holding a specular scan."""
+    peak_runs = []
+    for k, run in enumerate(runs):
+        if np.any((run["kind"] == "sample") & (run["side"] == "reflection")):
+            normalised = beam_normalised(run, cal.dark_offsets_w, cal.gains)
+            normalised["point"] += k * 10_000_000  # plan points are per run
+            peak_runs.append(normalised)
+    if not peak_runs:
+        raise CalibrationError("angle calibration (--eta) needs a run with a specular "
+                               "scan (examples/plans/calib-angles.toml)")
+    half_angle = 0.0 if aperture is None else aperture[1].value
+    offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle, divergence_deg)
+    cal.sample_offset_deg, cal.arm_offset_deg = offsets.sample_offset, offsets.arm_offset
+    cal.angle_fit = {"distribution": offsets.distribution, "alpha": offsets.alpha.to_json(),
+                     "chi2_dof": offsets.chi2_dof, "points": offsets.n_points,
+                     "aperture_half_angle_deg": half_angle, "divergence_deg": divergence_deg}
+    cal.notes += fit_warning("angles", "zero-offset", offsets.chi2_dof)

@@ -65,11 +65,12 @@ def gain_ratios(readings: np.ndarray, darks: dict[str, Measured],
     missing = [range_key(r) for r in ranges if range_key(r) not in darks]
     if missing:
         raise CalibrationError(f"range {missing[0]} W has readings but no dark offset")
-    # Average repeats of one (position, range); keep cells with a good signal.
+    # Average repeats of one (position, range); keep cells with a good signal. Positions are
+    # numbered over all ranges at once: ranges may read different sets of positions.
+    position = position_key(rows)
     cells = []
     for k, r in enumerate(ranges):
-        on_range = rows[rows["range_w"] == r]
-        where = position_key(on_range)
+        on_range, where = rows[rows["range_w"] == r], position[rows["range_w"] == r]
         groups = [on_range["power_w"][where == p] for p in np.unique(where)]
         points = [int(p) for p, g in zip(np.unique(where), groups, strict=True) if len(g) >= 2]
         groups = [g for g in groups if len(g) >= 2]

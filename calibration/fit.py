@@ -143,8 +143,8 @@ def _check_diffraction_options(options: FitOptions) -> None:
                if getattr(options, name) is None]
     if missing:
         raise FitError(f"fit: diffraction needs the nano-roughness {' and '.join(missing)} "
-                       "(from the run's [sim.sample], or --rms-height-nm and "
-                       "--correlation-length-um)")
+                       "(--rms-height-nm and --correlation-length-um; an all-emulated "
+                       "run's [sim.sample] gives them)")
     for name in ("rms_height_nm", "correlation_length_um", "wavelength_nm"):
         value = getattr(options, name)
         if value is not None and not (math.isfinite(value) and value > 0):

@@ -73,9 +73,11 @@ def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
                 top.legend(fontsize=7)
     a = np.atleast_1d(result.alpha)
     held = "–" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.2f}"
-    fig.suptitle(f"{title} {result.distribution} α = {', '.join(f'{v:.4g}' for v in a)}, "
-                 f"η = {result.eta:.4g}; χ²/dof fitted {result.chi2_dof_fit:.2f}, "
-                 f"held out {held}", fontsize=10)
+    lines = [title] if title else []
+    lines += [f"{result.distribution} fit α = {', '.join(f'{v:.4g}' for v in a)}, "
+              f"η = {result.eta:.4g}",
+              f"χ²/dof fitted {result.chi2_dof_fit:.4g}, held out {held}"]
+    fig.suptitle("\n".join(lines), fontsize=9)
     fig.tight_layout()
     out_png = Path(out_png)
     fig.savefig(out_png, dpi=110)

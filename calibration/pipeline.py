@@ -18,11 +18,14 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
     return calfile.used_by(meta)
 
 
-def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) -> ReducedData:
-    """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"];
-    an emulated bench's [sim] table into meta["sim"] and the [optics] beam divergence into
-    meta["beam_divergence_deg"] for the fit)."""
-    from calibration.reduce import reduce_readings
+def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
+               shot_noise_w: float | None = None) -> ReducedData:
+    """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"],
+    the [optics] beam divergence into meta["beam_divergence_deg"] for the fit; an all-emulated
+    run's [sim] table is meta["sim"], calibration.reduce). shot_noise_w: the --shot-noise-w
+    flag (calibration.reduce.optics_of)."""
+    from calibration.reduce import optics_of, reduce_readings
+    from gonio.record import emulator_config
     from gonio.store import open_run
 
     run = open_run(run_dir)
@@ -30,12 +33,10 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
     cal = calibration_for(run.meta, calibration_file)
     if cal is not None:
         readings = calfile.apply(readings, cal)
-    data = reduce_readings(run, readings, cal)
-    if run.config.get("sim"):  # an emulated run: its bench, for the plot's model curve
-        data.meta.setdefault("sim", run.config["sim"])
-    divergence = (run.config.get("optics") or {}).get("divergence_deg")
-    if divergence is not None:
-        data.meta.setdefault("beam_divergence_deg", float(divergence))
+    optics = optics_of(run.config, cal, run.plan, emulator_config(run), shot_noise_w)
+    data = reduce_readings(run, readings, cal, optics)
+    if optics.optics is not None:
+        data.meta["beam_divergence_deg"] = optics.optics.divergence_deg
     if cal is not None:
         data.meta["calibration"] = (str(calibration_file) if calibration_file is not None
                                     else run.meta.get("calibration"))
@@ -43,8 +44,9 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None) 
 
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,
-            calibration_file: str | Path | None = None) -> tuple[ReducedData, FitResult]:
+            calibration_file: str | Path | None = None, shot_noise_w: float | None = None
+            ) -> tuple[ReducedData, FitResult]:
     """Reduce and fit a run."""
-    data = reduce_run(run_dir, calibration_file)
+    data = reduce_run(run_dir, calibration_file, shot_noise_w)
     return data, fit(data, options)
 

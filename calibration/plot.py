@@ -1,7 +1,8 @@
 """Paper-style plots of a run (`gonio plot RUN`): per incidence angle, the measured BSDF with its
-error bars against the signed outgoing angle on a log scale, reflection and transmission, with
-the model curve (the generating model of an emulated run, point values and aperture-averaged),
-as in Walter et al. 2007's figures. `--fit` hands over to calibration.fitplot's overlay."""
+error bars against the signed outgoing angle on a log scale, reflection and transmission, as in
+Walter et al. 2007's figures; for a run whose devices were all emulated, with the emulator's
+truth ("emulator truth": the bench's own BSDF, point values and aperture-averaged). A real run
+has no truth curve. `--fit` hands over to calibration.fitplot's overlay."""
 
 from __future__ import annotations
 
@@ -35,52 +36,50 @@ def in_plane_directions(theta_i_deg: float, theta_o_deg: np.ndarray, transmissio
     return wi, wo
 
 
-def model_curves(meta: dict, theta_i_deg: float, transmission: bool
+#: The legend label of the emulated bench's own BSDF (never "model": it is no fit).
+TRUTH = "emulator truth"
+
+
+def emulated_sample(meta: dict):  # -> sim.bench.sample.Sample | None
+    """The sample of the bench an all-emulated run was measured on (meta["sim"], built on the
+    run's [optics] and [sample] as the scan built it), or None for any other run."""
+    if not meta.get("sim"):
+        return None
+    from sim.bench import build_bench
+
+    return build_bench(meta["sim"], meta.get("optics"), meta.get("sample")).sample
+
+
+def truth_curves(meta: dict, sample, theta_i_deg: float, transmission: bool
                  ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{label: (signed theta_o deg, BSDF)} of the run's model ("model" in meta): point values,
-    and averaged over the aperture when meta gives its half-angle."""
-    spec = meta.get("model")
-    if not spec:
+    """{label: (signed theta_o deg, BSDF)} of the emulator's truth (`sample`:
+    emulated_sample(meta), with the multiple scattering and diffraction its "auto" switches
+    turn on): point values, and averaged over the aperture when meta gives its half-angle.
+    Empty for a run that was not all emulated (sample None)."""
+    if sample is None:
         return {}
     from sim.bench.aperture import order_for
     from sim.bench.quadrature import cap_rule
 
-    alpha = spec["alpha"] if np.isscalar(spec["alpha"]) else tuple(spec["alpha"])
+    spec = sample.spec
+    alpha = spec.alpha if spec.alpha[0] != spec.alpha[1] else spec.alpha[0]
     theta = np.linspace(-89.5, 89.5, CURVE_POINTS)
     wi, wo = in_plane_directions(theta_i_deg, theta, transmission)
-    model_eval, extras = _generating_model(meta, spec, alpha, float(np.radians(theta_i_deg)),
-                                           "transmission" if transmission else "reflection")
-    label = f"{spec['distribution']} alpha {np.round(alpha, 4)}{extras}"
-    curves = {f"model ({label})": (theta, model_eval(wi, wo))}
+    theta_i = math.radians(theta_i_deg)
+    extras = "".join(f" + {name}" for name, on in (
+        ("multiple scattering", sample.multiple_scattering_on(theta_i)),
+        ("diffraction", sample.diffraction_on(theta_i, "transmission" if transmission
+                                              else "reflection"))) if on)
+    label = f"{spec.distribution} alpha {np.round(alpha, 4)}{extras}"
+    curves = {f"{TRUTH} ({label})": (theta, sample.bsdf(wi, wo))}
     half_angle = math.radians(float(meta.get("aperture_half_angle_deg") or 0.0))
     if half_angle > 0:
         # a transmitted lobe is about 0.3 alpha rad wide: resolve it across the aperture
         order = order_for(half_angle / (0.3 * float(np.min(alpha))), 1e-3)
         nodes, weights = cap_rule(wo, half_angle, order)
-        f = model_eval(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
-        curves["model through the aperture"] = (theta, f @ weights / weights.sum())
+        f = sample.bsdf(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
+        curves[f"{TRUTH} through the aperture"] = (theta, f @ weights / weights.sum())
     return curves
-
-
-def _generating_model(meta: dict, spec: dict, alpha, theta_i: float, lobe: str):
-    """(eval(wi, wo), label suffix) of the run's model: an emulated run's bench sample (with
-    the multiple scattering and diffraction its "auto" switches turn on), else the plain
-    microfacet model of meta["model"]."""
-    if meta.get("sim"):
-        from sim.bench import build_bench
-
-        sample = build_bench(meta["sim"]).sample
-        extras = [name for name, on in (
-            ("multiple scattering", sample.multiple_scattering_on(theta_i)),
-            ("diffraction", sample.diffraction_on(theta_i, lobe))) if on]
-        return sample.bsdf, "".join(f" + {name}" for name in extras)
-    from sim.bsdf import RoughConductor, RoughDielectric
-
-    common = {"distribution": spec["distribution"], "alpha": alpha, "masking": spec["masking"]}
-    k = meta.get("k") or 0.0
-    model = (RoughConductor(eta_complex=complex(spec["eta"], k), **common)
-             if meta.get("kind") == "conductor" else RoughDielectric(eta=spec["eta"], **common))
-    return model.eval, ""
 
 
 def x_range(theta_deg: np.ndarray) -> tuple[float, float]:
@@ -106,6 +105,7 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
     incidences = sorted(set(theta_i.tolist()))
     sides = [s for s in (False, True) if (data.transmission == s).any()]
     theta_o = signed_theta_o_deg(data)
+    truth = emulated_sample(data.meta)
     fig, axes = plt.subplots(len(sides), len(incidences), squeeze=False,
                              figsize=(3.4 * len(incidences) + 0.8, 3.0 * len(sides) + 0.8))
     for col, ti in enumerate(incidences):
@@ -119,8 +119,8 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
             if bad.any():
                 ax.plot(theta_o[bad], data.bsdf[bad], "o", ms=3, mfc="none", color="0.6",
                         label="flagged (dark-limited / saturated)")
-            for (label, (x, y)), style in zip(model_curves(data.meta, ti, transmission).items(),
-                                              ("-", "--"), strict=False):
+            curves = truth_curves(data.meta, truth, ti, transmission)
+            for (label, (x, y)), style in zip(curves.items(), ("-", "--"), strict=False):
                 ax.plot(x, np.where(y > 0, y, np.nan), style, color="C3", lw=1.2, label=label)
             ax.set_yscale("log")
             lobe = good & (data.bsdf > 1e-5 * data.bsdf[good].max()) if good.any() else good
@@ -144,15 +144,22 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
     return out_png
 
 
+def plot_title(name: str, meta: dict) -> str:
+    """The run's name and what was measured: the [sample] id and nominal eta."""
+    sample = meta.get("sample") or {}
+    return f"{name}: sample {sample.get('id', '?')}, eta {meta.get('eta', float('nan')):g}"
+
+
 def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
-             calibration_file: str | Path | None = None, fit_options=None) -> Path:
+             calibration_file: str | Path | None = None, fit_options=None,
+             shot_noise_w: float | None = None) -> Path:
     """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
     (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png)."""
     from calibration.pipeline import reduce_run
 
     run_dir = Path(run_dir)
-    data = reduce_run(run_dir, calibration_file)
-    title = f"{run_dir.name}: eta {data.meta.get('eta')}"
+    data = reduce_run(run_dir, calibration_file, shot_noise_w)
+    title = plot_title(run_dir.name, data.meta)
     if fit:
         from calibration.fit import fit as fit_model
         from calibration.fitplot import plot_fit

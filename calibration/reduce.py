@@ -6,7 +6,9 @@ time through all of them, at least a line, calibration.beam), the aperture solid
 and the faces the light crosses (`factor`: the hemisphere's T_exit on the transmitted side, as
 the bench applies it, sim.bench.sample.exit_view). Noise of a reading: the scatter of the dark
 readings on its range, scaled with the range's full scale (read noise and ADC steps scale so),
-plus the signal's shot noise (`shot_variance_per_w`); the dark level's uncertainty is
+plus the signal's shot noise where something states it (`optics_of`: the --shot-noise-w flag,
+the config's [detector] shot_noise_w, or the emulated meter of an all-emulated run; otherwise
+it is not modelled, and meta["noise_model"] says so); the dark level's uncertainty is
 propagated, and the beam curve's, which all points share, both into sigma and as
 ReducedData.shared_rel (the fit's covariance).
 """
@@ -22,6 +24,10 @@ from calibration.aperture import solid_angle_sr
 from calibration.beam import beam_power
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
+from gonio.errors import GonioError
+from gonio.optics import Optics, optics_of_config
+from gonio.reading_flags import INVALID, flagged
+from gonio.sample import SampleInfo, sample_of_plan
 
 # A net signal below this many sigmas is dark-limited (valid = False). The cut selects on the
 # measured value, so it keeps the noise-only points that fluctuate above it, each with a pull
@@ -30,18 +36,27 @@ from calibration.values import CalibrationError
 DARK_LIMIT_SIGMAS = 5.0
 
 
-@dataclass(frozen=True)
-class Optics:
-    """What reduction needs to know of the bench: the sample (kind, eta, k, lit_from) and the
-    aperture's half-angle; `model` is the generating model of an emulated run (for plots)."""
+#: The noise model of a run whose shot noise nothing states.
+SHOT_NOT_MODELLED = ("dark scatter per range; shot noise not modelled (give [detector] "
+                     "shot_noise_w or --shot-noise-w)")
 
-    kind: str
-    eta: float
-    k: float
-    lit_from: str
+
+@dataclass(frozen=True)
+class ReductionOptics:
+    """What reduction takes from a run's description: the sample ([sample]), the aperture's
+    half-angle (a calibration's, else [optics]) and where it came from, the wavelength, the
+    shot noise of one reading per watt of net signal and the noise model in words; `sim` and
+    `truth` are the emulator's [sim] table and its sample of an all-emulated run (for plots)."""
+
+    sample: SampleInfo
     aperture_half_angle_deg: float
+    aperture_from: str
     wavelength_nm: float
-    model: dict | None = None
+    optics: Optics | None = None
+    shot_variance_per_w: float = 0.0
+    noise_model: str = SHOT_NOT_MODELLED
+    sim: dict | None = None
+    truth: dict | None = None
 
     @property
     def aperture_sr(self) -> float:
@@ -49,16 +64,14 @@ class Optics:
         return solid_angle_sr(math.radians(self.aperture_half_angle_deg))
 
 
-def optics_of(config: dict, cal=None, plan: dict | None = None, emulated: bool = False
-              ) -> Optics:
+def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None = None,
+              shot_noise_w: float | None = None) -> ReductionOptics:
     """What reduction needs, from what the experimenter describes: the run config's [optics]
-    (aperture, wavelength), the plan's [sample] (kind, eta, k, lit side) and a calibration (its
-    measured aperture wins over the geometry). `emulated`: every device was emulated, so
-    `model` may carry the emulator's truth ([sim.sample]) for plots; nothing else reads [sim]."""
-    from gonio.errors import GonioError
-    from gonio.optics import optics_of_config
-    from gonio.sample import sample_of_plan
-
+    (aperture, wavelength) and [detector] (averaging, shot noise), the plan's [sample] (kind,
+    eta, k, lit side), a calibration (its measured aperture wins over the geometry) and the
+    --shot-noise-w flag. `sim`: the [sim] table of an all-emulated run
+    (gonio.record.emulator_config), the only way the emulator's truth comes in: its meter's
+    shot noise when nothing else states one, and its sample for plots."""
     try:
         optics = optics_of_config(config, "run config")
         sample = sample_of_plan(plan or {}, "run plan")
@@ -74,22 +87,48 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, emulated: bool =
                        "aperture (gonio calibrate build --aperture-geometry | --aperture-scan)")
     if missing:
         raise CalibrationError(f"cannot reduce: the run lacks {' and '.join(missing)}")
-    half_angle = (cal.aperture_half_angle_deg.value if measured_aperture
-                  else optics.aperture_half_angle_deg)
+    half_angle, aperture_from = ((cal.aperture_half_angle_deg.value, "calibration")
+                                 if measured_aperture
+                                 else (optics.aperture_half_angle_deg, "[optics]"))
+    detector = config.get("detector", {})
     wavelength = (optics.wavelength_nm if optics is not None
-                  else float(config.get("detector", {}).get("wavelength_nm", math.nan)))
-    return Optics(sample.kind, sample.eta, sample.k, sample.lit_from, half_angle, wavelength,
-                  _emulator_truth(config, plan or {}) if emulated else None)
+                  else float(detector.get("wavelength_nm", math.nan)))
+    averaging = int((plan or {}).get("averaging") or detector.get("averaging", 1))
+    variance, noise_model = _shot_noise(detector, sim, shot_noise_w, wavelength, averaging)
+    return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
+                           noise_model, sim, _emulator_truth(sim, plan or {}) if sim else None)
 
 
-def _emulator_truth(config: dict, plan: dict) -> dict | None:
-    """The generating model of an emulated run ([sim.sample]: distribution, alpha, masking,
-    and the index it emulates), for plots that overlay the emulator's truth."""
+def _shot_noise(detector: dict, sim: dict | None, shot_noise_w: float | None,
+                wavelength_nm: float, averaging: int) -> tuple[float, str]:
+    """(shot-noise variance of one reading per watt of net signal, the noise model in words):
+    the per-sample coefficient of the --shot-noise-w flag, else of [detector] shot_noise_w,
+    else (all-emulated runs only) of the emulated meter, divided by the samples averaged."""
+    if shot_noise_w is not None:
+        if not (math.isfinite(shot_noise_w) and shot_noise_w >= 0):
+            raise CalibrationError(f"--shot-noise-w must be a finite number >= 0 (W per W of "
+                                   f"signal), got {shot_noise_w!r}")
+        coefficient, source = float(shot_noise_w), "--shot-noise-w"
+    elif detector.get("shot_noise_w") is not None:
+        coefficient, source = float(detector["shot_noise_w"]), "[detector] shot_noise_w"
+    elif sim is not None:
+        coefficient = emulator_shot_noise_w(sim.get("detector"), wavelength_nm)
+        source = "the emulated meter's [sim.detector] (2 q B / R)"
+    else:
+        return 0.0, SHOT_NOT_MODELLED
+    return coefficient / averaging, (f"dark scatter per range; shot noise {coefficient:.4g} W "
+                                     f"per W of signal per sample from {source}, averaged "
+                                     f"over {averaging}")
+
+
+def _emulator_truth(sim: dict, plan: dict) -> dict:
+    """The emulated sample of an all-emulated run ([sim.sample]: distribution, alpha, masking,
+    and the index it emulates)."""
     from sim.bench.config import read_table
     from sim.devices.photodiode import SimConfigError
 
     try:
-        sample = read_table(config.get("sim") or {}, "sample", plan.get("sample"))
+        sample = read_table(sim, "sample", plan.get("sample"))
     except SimConfigError as exc:
         raise CalibrationError(f"run config: {exc}") from None
     alpha = sample["alpha"]
@@ -98,26 +137,19 @@ def _emulator_truth(config: dict, plan: dict) -> dict | None:
             "eta": sample["eta"], "masking": sample["masking"]}
 
 
-def shot_variance_per_w(config: dict, averaging: int) -> float:
-    """Shot-noise variance of one reading per watt of net signal, W^2/W: 2 q B / (R N) of the
-    emulated meter ([sim.detector] bandwidth B and responsivity R at the set wavelength, N
-    samples averaged). The dark readings' scatter holds only the read noise and the dark
-    current's shot noise; a signal of 1e-9 W or more on the 1e-8 W range has shot noise above
-    that (up to 2.5 times its sigma at full scale). 0 without a [sim] table: a real meter's
-    shot noise is then not modelled."""
+def emulator_shot_noise_w(sim_detector: dict | None, wavelength_nm: float) -> float:
+    """Shot-noise variance of one sample of the emulated meter per watt of signal, W^2/W:
+    2 q B / R ([sim.detector] bandwidth B, responsivity R at the wavelength). The dark
+    readings' scatter holds only the read noise and the dark current's shot noise; a signal of
+    1e-9 W or more on the 1e-8 W range has shot noise above that (up to 2.5 times its sigma at
+    full scale)."""
     from sim.devices.photodiode import ELEMENTARY_CHARGE_C, PhotodiodeModel, SimConfigError
 
-    sim = config.get("sim") or {}
-    if not sim:
-        return 0.0
-    detector = config.get("detector", {})
     try:
-        meter = PhotodiodeModel(sim.get("detector"))
+        meter = PhotodiodeModel(sim_detector)
     except SimConfigError as exc:
         raise CalibrationError(f"run config: {exc}") from None
-    wavelength = float(detector.get("wavelength_nm", 632.8))
-    return (2.0 * ELEMENTARY_CHARGE_C * meter.bandwidth_hz
-            / (meter.responsivity_a_w(wavelength) * averaging))
+    return 2.0 * ELEMENTARY_CHARGE_C * meter.bandwidth_hz / meter.responsivity_a_w(wavelength_nm)
 
 
 def directions(theta_deg: np.ndarray, phi_deg: np.ndarray, flipped: bool) -> np.ndarray:
@@ -170,13 +202,16 @@ class DarkModel:
         return level, level_sigma, noise
 
 
-def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None = None
+def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics | None = None
                     ) -> ReducedData:
     """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
 
-    run: a gonio.store.Run (its config gives the optics unless `optics` is given)."""
-    optics = optics or optics_of(run.config, cal, getattr(run, "plan", None),
-                                 emulated=(getattr(run, "meta", None) or {}).get("sim") is True)
+    run: a gonio.store.Run (its description gives the optics unless `optics` is given).
+    Readings flagged invalid (the detector had none) are left out."""
+    from gonio.record import emulator_config
+
+    readings = readings[~flagged(readings, INVALID)]
+    optics = optics or optics_of(run.config, cal, run.plan, emulator_config(run))
     kinds = readings["kind"]
     dark = DarkModel.from_readings(readings[(kinds == "dark") & ~readings["saturated"]])
     beam_rows = readings[(kinds == "beam") & ~readings["saturated"]]
@@ -186,20 +221,18 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
     beam = beam_power(beam_rows["t_s"], beam_rows["power_w"] - b_level, float(np.mean(b_noise)))
 
     rows = readings[kinds == "sample"]
-    flipped = optics.lit_from == "hemisphere"
+    sample = optics.sample
+    flipped = sample.lit_from == "hemisphere"
     wi = directions(rows["theta_i_deg"], rows["phi_i_deg"], flipped)
     wo = directions(rows["theta_o_deg"], rows["phi_o_deg"], flipped)
     from sim.bench.sample import SampleSpec, exit_view
 
-    spec = SampleSpec(kind=optics.kind, eta=optics.eta, k=optics.k, lit_from=optics.lit_from)
+    spec = SampleSpec(kind=sample.kind, eta=sample.eta, k=sample.k, lit_from=sample.lit_from)
     w_eval, factor = exit_view(spec, wi, wo)
     level, level_sigma, noise = dark.at(rows["range_w"])
     phi, phi_sigma, phi_shared = beam.smooth(rows["t_s"])
     net = rows["power_w"] - level
-    averaging = (getattr(run, "plan", None) or {}).get("averaging") \
-        or run.config.get("detector", {}).get("averaging", 1)
-    noise = np.sqrt(noise**2 + shot_variance_per_w(run.config, int(averaging))
-                    * np.maximum(net, 0.0))
+    noise = np.sqrt(noise**2 + optics.shot_variance_per_w * np.maximum(net, 0.0))
     scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
     with np.errstate(divide="ignore", invalid="ignore"):
         bsdf = np.where(scale > 0, net / scale, np.nan)
@@ -209,13 +242,18 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: Optics | None =
              & np.isfinite(bsdf))
     transmission = (wo[:, 2] > 0) != (wi[:, 2] > 0)
     meta = {
-        "eta": optics.eta, "k": optics.k, "kind": optics.kind, "lit_from": optics.lit_from,
+        "eta": sample.eta, "k": sample.k, "kind": sample.kind, "lit_from": sample.lit_from,
+        "sample": sample.to_json(),
+        "optics": optics.optics.to_json() if optics.optics is not None else None,
         "wavelength_nm": optics.wavelength_nm,
         "aperture_half_angle_deg": optics.aperture_half_angle_deg,
-        "aperture_sr": optics.aperture_sr, "run": str(getattr(run, "path", "")),
+        "aperture_sr": optics.aperture_sr, "aperture_from": optics.aperture_from,
+        "noise_model": optics.noise_model, "shot_variance_per_w": optics.shot_variance_per_w,
+        "run": str(getattr(run, "path", "")),
         "beam_mean_w": beam.mean_w, "beam_drift_rms": beam.drift_rms,
         "dark_level_w": {f"{r:.6g}": v for r, v in dark.level.items()},
-        "model": optics.model, "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
+        "sim": optics.sim, "emulator_truth": optics.truth,
+        "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
     }
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
                        phi_shared / phi[:, None])

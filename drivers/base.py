@@ -34,6 +34,15 @@ class ProtocolError(DriverError):
     """A reply arrived but was garbled or not what the protocol allows."""
 
 
+class InvalidReading(DriverError):
+    """The detector answered that it has no reading (SCPI's not-a-number, 9.91E+37): no
+    power, and not over range either; worth asking again."""
+
+    def __init__(self, device: str, range_w: float, what: str):
+        self.device, self.range_w = device, range_w
+        super().__init__(f"{device}: invalid reading ({what}) on the {range_w:g} W range")
+
+
 @runtime_checkable
 class Axis(Protocol):
     """One rotation axis, positions in degrees."""
@@ -80,6 +89,9 @@ class Detector(Protocol):
 
     def configure(self, wavelength_nm: float, averaging: int, range_w: float | None) -> None:
         """Set the correction wavelength, samples per reading, and a fixed range (None = auto)."""
+
+    def full_scales_w(self) -> tuple[float, ...]:
+        """Full scale of every range the detector offers, W, increasing."""
 
     def read(self) -> Reading:
         """Take one (averaged) reading."""

@@ -42,6 +42,10 @@ class ModbusDetector(MappedUnit):
         """Full scale of each gain range, W, by index (from the map)."""
         return self.map.gain_ranges_w
 
+    def full_scales_w(self) -> tuple[float, ...]:
+        """Full scale of each gain range, W, increasing (drivers.base.Detector)."""
+        return self.ranges_w
+
     def range_index(self, range_w: float) -> int:
         """Index of the smallest gain range whose full scale holds range_w (ValueError past the
         largest)."""

@@ -22,12 +22,21 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError, Reading
+from drivers.base import (
+    DeviceError,
+    DeviceTimeout,
+    DriverError,
+    InvalidReading,
+    ProtocolError,
+    Reading,
+)
 from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
 
 _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
 _NR1 = re.compile(r"[+-]?\d+")
 NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
+SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
+MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> Callable[[str], float]:
@@ -80,6 +89,7 @@ class Pm100:
     ):
         self.name = name
         self.zero_timeout_s = zero_timeout_s
+        self._full_scales: tuple[float, ...] | None = None
         self._nr3 = nr3_parser(nr3_decimals)
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
@@ -221,17 +231,46 @@ class Pm100:
         else:
             self.command(f":SENS:POW:RANG {float(value):.6E}", lambda: self.range_w is not None)
 
+    def full_scales_w(self) -> tuple[float, ...]:
+        """The sensor's ranges (full scale, W, increasing), found once and kept: SCPI lists
+        none, so the range is stepped up from SENS:POW:RANG? MIN (a set value selects the
+        smallest range holding it) to MAX; the range setting is restored afterwards."""
+        if self._full_scales is None:
+            low, high = self.query(":SENS:POW:RANG? MIN;:SENS:POW:RANG? MAX", self._nr3,
+                                   self._nr3)
+            before = self.range_w
+            self.range_w = low
+            found = [low]
+            while found[-1] < high * (1 - 1e-6):
+                self.range_w = found[-1] * (1 + 1e-4)
+                upper = self.range_w
+                if upper is None or upper <= found[-1] or len(found) >= MAX_RANGES:
+                    raise ProtocolError(f"{self.name}: range stepping from {found[-1]:g} W "
+                                        f"gave {upper!r}, not a larger range")
+                found.append(upper)
+            self.range_w = before
+            self._full_scales = tuple(found)
+        return self._full_scales
+
     def read(self) -> Reading:
         """READ?: a new (averaged) reading, with the range it was taken on.
 
         saturated: the reading is above the range's full scale (over range).
+        InvalidReading if the meter answers SCPI's not-a-number (9.91E+37).
         """
         power, upper = self.query(":READ?;:SENS:POW:RANG?", self._nr3, self._nr3)
-        return Reading(power_w=power, range_w=upper, saturated=power > upper)
+        return Reading(power_w=self._valid(power, upper), range_w=upper, saturated=power > upper)
 
     def measure(self) -> float:
-        """MEAS:POW?: configure for power and take one reading, W."""
-        return self.query(":MEAS:POW?", self._nr3)[0]
+        """MEAS:POW?: configure for power and take one reading, W (InvalidReading as read)."""
+        power, upper = self.query(":MEAS:POW?;:SENS:POW:RANG?", self._nr3, self._nr3)
+        return self._valid(power, upper)
+
+    def _valid(self, power: float, range_w: float) -> float:
+        """The power, unless it is SCPI's not-a-number (to the NR3's precision)."""
+        if abs(power - SCPI_NAN) <= 10.0 ** -NR3_DECIMALS * SCPI_NAN:
+            raise InvalidReading(self.name, range_w, f"SCPI not-a-number {power:.6E}")
+        return power
 
     def zero(self) -> None:
         """SENS:CORR:COLL:ZERO: dark-zero adjustment (cover the sensor first); waits for it."""

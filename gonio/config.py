@@ -8,6 +8,7 @@ the run store and for the emulators, which read the [sim] section themselves.
 from __future__ import annotations
 
 import copy
+import ipaddress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,12 +67,15 @@ class AxisConfig:
 
 @dataclass(frozen=True)
 class DetectorConfig:
-    """The detector, its correction wavelength, averaging and range policy (None = auto)."""
+    """The detector, its correction wavelength, averaging and range policy (None = auto);
+    `shot_noise_w`: the shot-noise variance of one sample per watt of signal, W (2 q B / R for
+    a photodiode of responsivity R and noise bandwidth B), None when not known."""
 
     device: str
     wavelength_nm: float
     averaging: int = 1
     range_w: float | None = None
+    shot_noise_w: float | None = None
 
 
 @dataclass(frozen=True)
@@ -165,7 +169,7 @@ def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
                 raise d.fail("register_map", f"no such file {str(reg_path)!r}")
             kw["register_map"] = str(reg_path)
             if transport == "tcp":
-                kw["host"] = d.string("host")
+                kw["host"] = _device_host(d)
                 kw["tcp_port"] = d.number("tcp_port", 502, low=1, high=65535, integer=True)
             else:
                 kw["port"] = d.string("port")
@@ -177,6 +181,20 @@ def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
         out[name] = DeviceConfig(name=name, protocol=protocol, **kw)
     f.done()
     return out
+
+
+def _device_host(d: Fields) -> str:
+    """A Modbus TCP device's address. A wildcard (0.0.0.0, ::) is a listen address, not a
+    device's: refused, since emulators never take their listen address from the config."""
+    host = d.string("host")
+    try:
+        wildcard = ipaddress.ip_address(host).is_unspecified
+    except ValueError:  # a host name
+        wildcard = not host.strip()
+    if wildcard:
+        raise d.fail("host", f"{host!r} is a listen address, not a device's; emulators listen "
+                             "on 127.0.0.1 (gonio emulate --bind HOST serves them on another)")
+    return host
 
 
 def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
@@ -263,6 +281,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
         wavelength_nm=wavelength,
         averaging=f.number("averaging", 1, low=1, high=100_000, integer=True),
         range_w=range_w,
+        shot_noise_w=f.number("shot_noise_w", None, low=0.0, high=1.0),
     )
     f.done()
     return det

@@ -2,13 +2,16 @@
 
 Failures: a device that reports an error (DeviceError) is not retried; a timeout, garbled reply
 or lost connection is retried (the whole point: absolute moves and reads are safe to repeat)
-up to `retries` times, after which the run stops cleanly with the reason recorded. Ctrl-C once
+up to `retries` times, after which the run stops cleanly with the reason recorded. An invalid
+reading (the detector has none: InvalidReading) is retried the same way and, if every try
+gives one, recorded with power NaN and the flag "invalid", and the run goes on. Ctrl-C once
 pauses at the next point (resume or abort at the prompt); a second Ctrl-C aborts at once; an
 abort stops every axis.
 """
 
 from __future__ import annotations
 
+import math
 import signal
 import sys
 import termios
@@ -20,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import DeviceError, DriverError
+from drivers.base import DeviceError, DriverError, InvalidReading, Reading
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
 from gonio.plan import (
@@ -32,6 +35,7 @@ from gonio.plan import (
     sweeps_source,
 )
 from gonio.progress import Progress
+from gonio.reading_flags import INVALID, RETRIED
 from gonio.store import RunWriter
 
 # Failures worth retrying: driver timeouts/garbles and lost connections (pyserial lets
@@ -201,7 +205,10 @@ class Engine:
         if pause > 0:  # instant time: no sleep(0), which only yields the core away
             time.sleep(pause)
         self._doing = f"reading the detector ({self.inst.detector.name})"
-        reading = self.inst.detector.read()
+        return self._record(row, self.inst.detector.read(), flags)
+
+    def _record(self, row: np.void, reading: Reading, flags: list[str]) -> dict[str, Any]:
+        """The stored line of a reading taken at the axes' reported positions."""
         pos = self._reported
         ang = sample_angles(pos["sample"], pos["arm"], pos["elevation"], pos["azimuth"])
         return {
@@ -228,11 +235,13 @@ class Engine:
                 raise StopRun(f"{where}: {self._doing}: {exc}") from exc
             except TRANSIENT as exc:
                 last = exc
-                if "retried" not in flags:
-                    flags.append("retried")
+                if RETRIED not in flags:
+                    flags.append(RETRIED)
                 self._commanded = dict.fromkeys(self._commanded)
                 if attempt < self.retries:
                     time.sleep(RETRY_PAUSE_S)
+        if isinstance(last, InvalidReading):  # the axes arrived; the detector had no reading
+            return self._record(row, Reading(math.nan, last.range_w), [*flags, INVALID])
         raise StopRun(f"{where}: {self._doing}: {last} (after {self.retries + 1} attempts)")
 
     # -- the run ----------------------------------------------------------------

@@ -1,15 +1,16 @@
-"""Export a run's readings, one row per reading: CSV (with a commented header of run facts)
-and NetCDF4 (one variable per field along a `reading` dimension, run facts as attributes)."""
+"""Export a run's readings, one row per reading: CSV (with a commented header of the run's
+record) and NetCDF4 (one variable per field along a `reading` dimension, the record as
+attributes); the record is gonio.record.run_record's."""
 
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
 import numpy as np
 
 from gonio.errors import GonioError
+from gonio.record import record_attributes, record_lines, run_record
 from gonio.store import READING_DTYPE, Run
 
 UNITS = {"_deg": "degree", "_w": "W", "t_s": "s"}
@@ -19,24 +20,13 @@ def _unit(name: str) -> str:
     return next((u for suffix, u in UNITS.items() if name.endswith(suffix)), "")
 
 
-def _facts(run: Run) -> dict[str, str]:
-    meta = run.meta
-    return {"run": run.path.name, "plan": str(meta.get("plan_name", "")),
-            "instrument": str(meta.get("instrument_name", "")),
-            "status": str(meta.get("status", "")), "reason": str(meta.get("reason", "")),
-            "started_utc": str(meta.get("started_utc", "")),
-            "stopped_utc": str(meta.get("stopped_utc", "")),
-            "wavelength_nm": str(run.config.get("detector", {}).get("wavelength_nm", "")),
-            "sim": json.dumps(meta.get("sim")), "seeds": json.dumps(meta.get("seeds", {})),
-            "calibration": json.dumps(meta.get("calibration"))}
-
-
 def write_csv(run: Run, out: Path) -> Path:
-    """CSV with a header row of field names; lines starting with '#' hold run facts."""
+    """CSV with a header row of field names; lines `# key: JSON value` before it hold the run's
+    record (gonio.record.run_record)."""
     r = run.readings()
     with open(out, "w", newline="") as fh:
-        for key, value in _facts(run).items():
-            fh.write(f"# {key}: {value}\n")
+        for line in record_lines(run_record(run)):
+            fh.write(f"# {line}\n")
         writer = csv.writer(fh)
         writer.writerow(READING_DTYPE.names)
         for row in r.tolist():
@@ -68,7 +58,6 @@ def write_netcdf(run: Run, out: Path) -> Path:
                 var[:] = col
             if _unit(name):
                 var.units = _unit(name)
-        for key, value in _facts(run).items():
-            setattr(ds, key, value)
+        ds.setncatts(record_attributes(run_record(run)))
         ds.Conventions = "gonio run export; angles in the sample frame of docs/architecture.md"
     return out

@@ -31,7 +31,7 @@ def write_quicklook(run_dir: str | Path, out: str | Path | None = None) -> Path:
     for kind, style in (("dark", ":"), ("beam", "--")):
         pick = r[r["kind"] == kind]
         if len(pick):
-            ax.axhline(max(float(np.median(pick["power_w"])), 1e-15), ls=style, color="k",
+            ax.axhline(max(float(np.nanmedian(pick["power_w"])), 1e-15), ls=style, color="k",
                        lw=0.8, label=f"{kind} (median of {len(pick)})")
     ax.set_yscale("log")
     ax.set_xlabel("outgoing angle from the normal of its side (deg; < 0: toward the source)")

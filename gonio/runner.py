@@ -15,6 +15,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from drivers.base import Detector
 from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.engine import Engine, Outcome, PauseControl
 from gonio.errors import ConfigError, PlanError, RunError
@@ -22,6 +25,8 @@ from gonio.instrument import build_instrument
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
 from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
+
+DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
 
 
 @dataclass
@@ -69,11 +74,14 @@ def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan) -> Iterat
 
 def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
-         control: PauseControl | None, session: dict[str, Any] | None = None) -> ScanResult:
-    """Open the devices, then the run (so a device that cannot be opened leaves no new
-    run behind), and measure what is left of the schedule. session: more for meta.json's
-    record of this session."""
+         control: PauseControl | None, check: DetectorCheck | None = None,
+         session: dict[str, Any] | None = None) -> ScanResult:
+    """Open the devices, check the detector (`check`), then open the run (so a device that
+    cannot be opened or a failed check leaves no new run behind), and measure what is left
+    of the schedule. session: more for meta.json's record of this session."""
     with _devices(cfg, sim, plan) as dev, build_instrument(dev.config, dev.time_scale) as inst:
+        if check is not None:
+            check(sched.readings, inst.detector)
         writer = make_writer()
         try:
             swapped = identity_changes(writer.meta["sessions"], inst.devices)
@@ -96,13 +104,15 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              sim: list[str] | bool = False, out: str | Path = "runs",
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
-             sample_id: str | None = None) -> ScanResult:
+             sample_id: str | None = None, check: DetectorCheck | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
     calibration: what meta.json records about the calibration file to use (or None);
     time_scale: replaces the config's [sim] time_scale (emulated runs only);
-    sample_id: replaces the plan's [sample] id (the stored plan and the record carry it).
+    sample_id: replaces the plan's [sample] id (the stored plan and the record carry it);
+    check: called with the schedule's readings and the open detector before the run directory
+    exists and before any motion (the scan command checks the calibration's ranges there).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -129,7 +139,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "optics": cfg.optics.to_json() if cfg.optics else None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
-                                         cfg.raw, meta), plan, cfg, sched, sim, progress, control)
+                                         cfg.raw, meta), plan, cfg, sched, sim, progress, control,
+                check)
 
 
 def with_sample_id(plan: Plan, sample_id: str) -> Plan:
@@ -178,7 +189,7 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
             writer.set_status("completed", "")
         return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
-                session)
+                session=session)
 
 
 _MISSING = object()

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
+from sim.devices.modbus_server import LOOPBACK
 from sim.emulate import EmulatedBench, start, time_scale_of
 
 
@@ -68,9 +69,9 @@ def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConf
 
 
 def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float],
-           sample: dict | None = None) -> EmulatedBench:
+           sample: dict | None = None, bind: str = LOOPBACK) -> EmulatedBench:
     try:
-        return start(cfg.raw, devices, lambda: positions, sample)
+        return start(cfg.raw, devices, lambda: positions, sample, bind)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
 
@@ -101,9 +102,10 @@ def with_time_scale(cfg: InstrumentConfig, value: float) -> InstrumentConfig:
     return parse_config({**cfg.raw, "sim": {**cfg.sim, "time_scale": scale}}, cfg.path)
 
 
-def serve(cfg: InstrumentConfig, time_scale: float | None = None) -> EmulatedBench:
+def serve(cfg: InstrumentConfig, time_scale: float | None = None,
+          bind: str = LOOPBACK) -> EmulatedBench:
     """Start every device of a config (for `gonio emulate`), at time_scale if given instead
-    of the config's; the caller stops the bench."""
+    of the config's, Modbus TCP ones listening on `bind`; the caller stops the bench."""
     if time_scale is not None:
         cfg = with_time_scale(cfg, time_scale)
-    return _start(cfg, list(cfg.devices), {})
+    return _start(cfg, list(cfg.devices), {}, bind=bind)

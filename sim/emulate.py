@@ -1,7 +1,9 @@
 """Start every emulated device of an instrument config, and the optical bench behind them.
 
 `start(config)` takes the config as a plain dict (the parsed TOML) and serves each device
-on a real pty (serial, Modbus RTU) or loopback TCP socket (Modbus TCP), with motion on one
+on a real pty (serial, Modbus RTU) or TCP socket (Modbus TCP; on loopback unless `bind`
+names another address: the config's hosts are the real devices', never listen addresses),
+with motion on one
 VirtualClock and the detectors' light from the bench at the stages' positions. It returns
 the endpoints, so a caller can point the config's ports at them. `devices` limits it to
 some of the devices (hardware in the loop); then `positions()` must say where the real
@@ -19,7 +21,7 @@ from sim.bench import build_power_source
 from sim.devices.esp import EspEmulator
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.modbus_detector import ModbusDetectorEmulator
-from sim.devices.modbus_server import ModbusEmulatorServer
+from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
 from sim.devices.modbus_stage import ModbusStageEmulator
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
@@ -114,6 +116,9 @@ def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
             raise SimConfigError(f"[sim.faults.{device}]: no device {device!r} under [devices]")
         if not isinstance(table, Mapping):
             raise SimConfigError(f"[sim.faults.{device}] must be a table, got {table!r}")
+        if "invalid_prob" in table and config["devices"][device].get("protocol") != "pm100":
+            raise SimConfigError(f"[sim.faults.{device}] invalid_prob: only a pm100 detector "
+                                 "answers with an invalid reading")
     return dict(sim)
 
 
@@ -139,8 +144,8 @@ class _Builder:
     """Creates the emulators of one config, stages first, then the bench and the detectors."""
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
-                 bench: EmulatedBench):
-        self.config, self.sim, self.bench = config, sim, bench
+                 bench: EmulatedBench, bind: str):
+        self.config, self.sim, self.bench, self.bind = config, sim, bench, bind
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen = chosen
         self.seed = sim.get("seed", 0)
@@ -211,7 +216,8 @@ class _Builder:
         for (transport, _), units in self.modbus.items():
             first = self.devices[next(iter(units.values()))[0]]  # a bus has one baud rate
             server = ModbusEmulatorServer(transport, {u: emu for u, (_, emu) in units.items()},
-                                          baudrate=int(first.get("baudrate", 19200)))
+                                          baudrate=int(first.get("baudrate", 19200)),
+                                          host=self.bind)
             endpoint = server.start()
             self.bench._stops.append(server.stop)
             for name, _ in units.values():
@@ -221,12 +227,13 @@ class _Builder:
 
 def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
           positions: Callable[[], Mapping[str, float]] | None = None,
-          sample: Mapping[str, Any] | None = None) -> EmulatedBench:
+          sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK) -> EmulatedBench:
     """Serve the config's devices (all, or those named) and return the running bench.
 
     positions: where the stages that are not emulated are ({role: deg}); needed when a
     detector is emulated but some stage is real. The bench is the config's [optics] with the
     plan's [sample] table (`sample`, if a plan is known) and the [sim] truth (sim.bench.config).
+    bind: the address Modbus TCP emulators listen on (loopback by default).
     """
     sim = _sim_table(config)
     all_devices = config["devices"]
@@ -236,7 +243,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             raise SimConfigError(f"no device {name!r} to emulate (devices: "
                                  f"{', '.join(all_devices)})")
     bench = EmulatedBench(VirtualClock(time_scale_of(sim)))
-    build = _Builder(config, sim, chosen, bench)
+    build = _Builder(config, sim, chosen, bench, bind)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)

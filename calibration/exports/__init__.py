@@ -6,6 +6,7 @@ and fits the run (calibration.pipeline) and writes the file(s)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -19,21 +20,23 @@ from calibration.values import CalibrationError
 FORMATS = ("zemax", "mitsuba")
 
 
-def _notes(result: FitResult, source: str) -> list[str]:
+def _notes(result: FitResult, source: str, record: Sequence[str]) -> list[str]:
+    """The fit in one line, then the run's record (gonio.record.record_lines)."""
     params = ", ".join(f"{n} = {v:.6g} +- {e:.2g}"
                        for n, v, e in zip(result.names, result.values, result.errors, strict=True))
     held = ("n/a" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.3g}")
     return [f"gonio fit of {source}: {result.distribution} ({result.masking} masking), {params}, "
             f"eta = {result.eta:.6g}; chi2/dof fitted {result.chi2_dof_fit:.3g} "
-            f"({result.n_fit} points), held out {held} ({result.n_heldout} points)"]
+            f"({result.n_fit} points), held out {held} ({result.n_heldout} points)",
+            *record]
 
 
 def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
-                source: str = "") -> list[Path]:
+                source: str = "", record: Sequence[str] = ()) -> list[Path]:
     """Tabulate the fitted model (at a point, no aperture average) at the data's incidence
     angles: one file per measured side,
     the BTDF at out_path when transmission was measured, else the BRDF; the other side goes
-    next to it as <stem>-BRDF<suffix>."""
+    next to it as <stem>-BRDF<suffix>. `record`: the run's record lines, as header comments."""
     out_path = Path(out_path)
     theta_i = np.unique(np.round(data.theta_i_deg[data.valid], 3))
     if len(theta_i) == 0:
@@ -42,7 +45,7 @@ def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
                                   ("BRDF", (~data.transmission[data.valid]).any())) if present]
     alpha = np.atleast_1d(result.alpha)
     width_deg = math.degrees(float(alpha.min()))
-    notes = _notes(result, source) + [
+    notes = _notes(result, source, record) + [
         "AngleOfIncidence = specular reflection angle (BRDF) or refracted direct-transmission "
         "angle asin(sin(theta_i)/eta) (BTDF); incidence angles theta_i: "
         + " ".join(f"{t:g}" for t in theta_i)]
@@ -61,9 +64,11 @@ def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
     return paths
 
 
-def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "") -> Path:
-    """The fitted material as a Mitsuba 3 scene fragment."""
-    notes = _notes(result, source)
+def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
+                 record: Sequence[str] = ()) -> Path:
+    """The fitted material as a Mitsuba 3 scene fragment (`record`: the run's record lines, as
+    comments)."""
+    notes = _notes(result, source, record)
     if result.distribution == "phong":
         notes.append("Mitsuba 3 has no Phong distribution: written as Beckmann of the same alpha "
                      "(Walter's mapping)")
@@ -78,10 +83,13 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path) -> Path:
     """Reduce and fit a run, then write its model as `fmt` (zemax | mitsuba); returns the path
     (for zemax with both sides measured, the main file; the other side sits beside it)."""
     from calibration.pipeline import fit_run
+    from gonio.record import record_lines, run_record
+    from gonio.store import open_run
 
     if fmt not in FORMATS:
         raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     data, result = fit_run(run_dir)
+    record = record_lines(run_record(open_run(run_dir)))
     if fmt == "zemax":
-        return zemax_files(data, result, out_path, source=str(run_dir))[0]
-    return mitsuba_file(result, out_path, source=str(run_dir))
+        return zemax_files(data, result, out_path, source=str(run_dir), record=record)[0]
+    return mitsuba_file(result, out_path, source=str(run_dir), record=record)

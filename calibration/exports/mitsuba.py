@@ -43,8 +43,8 @@ def write_mitsuba(material: dict[str, Any], path: str | Path, notes: list[str],
     """Write `<scene version=...><bsdf type=... id=...>` with typed parameters and notes."""
     path = Path(path)
     scene = ET.Element("scene", version=SCENE_VERSION)
-    for note in notes:
-        scene.append(ET.Comment(f" {note} "))
+    for note in notes:  # "--" may not appear inside an XML comment
+        scene.append(ET.Comment(f" {note.replace('--', '- -')} "))
     bsdf = ET.SubElement(scene, "bsdf", type=material["type"], id=bsdf_id)
     for name, value in material["params"].items():
         if isinstance(value, str):

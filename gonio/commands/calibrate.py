@@ -1,11 +1,19 @@
 """`gonio calibrate`: build a calibration file from calibration runs, record one in a run, show
 one. `build RUN [RUN...] --out CAL.json [--eta N] [--aperture-geometry D_MM DIST_MM |
---aperture-scan RUN]`; `use RUN CAL.json`; `show CAL.json`."""
+--aperture-scan RUN]`; `use RUN CAL.json`; `show CAL.json`. The aperture, the beam and its
+divergence come from the runs' [optics] where no option gives them; build says on stderr, one
+line each, what it could not calibrate and which fit fits badly."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from calibration.values import Measured
+    from gonio.store import Run
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,14 +29,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "from the transmitted and specular peaks in the runs")
     group = b.add_mutually_exclusive_group()
     group.add_argument("--aperture-geometry", nargs=2, type=float, metavar=("D_MM", "DIST_MM"),
-                       help="aperture diameter and distance from the sample, mm")
+                       help="aperture diameter and distance from the sample, mm (default: "
+                       "the runs' [optics] aperture_diameter_mm and aperture_distance_mm)")
     group.add_argument("--aperture-scan", metavar="RUN",
                        help="run with an arm scan across the straight beam (sample retracted)")
-    b.add_argument("--beam-diameter-mm", type=float, default=0.0,
-                   help="beam diameter for --aperture-scan (default 0: beam much smaller)")
+    b.add_argument("--beam-diameter-mm", type=float,
+                   help="beam diameter at the aperture for --aperture-scan (default: the "
+                   "run's [optics] beam_diameter_mm widened by divergence_deg over "
+                   "aperture_distance_mm; 0, a beam much smaller, without them)")
     b.add_argument("--divergence-deg", type=_half_angle_deg, metavar="DEG",
                    help="beam divergence half-angle for the angle-offset fit (default: the "
-                   "run's [optics] divergence_deg, else 0)")
+                   "runs' [optics] divergence_deg, else 0)")
     u = actions.add_parser("use", help="record in a run which calibration applies to it")
     u.add_argument("run", help="run directory")
     u.add_argument("calibration", help="calibration file")
@@ -61,56 +72,105 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _build(args: argparse.Namespace) -> int:
-    import math
-
-    from calibration import aperture, calfile
+    from calibration import calfile
     from calibration.calibrate import build
-    from calibration.values import Measured
     from gonio.store import open_run, utc_now
 
     runs = [open_run(r) for r in args.runs]
-    ap = None
-    if args.aperture_geometry:
-        diameter_mm, distance_mm = args.aperture_geometry
-        omega = aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm)
-        half = math.degrees(math.atan2(0.5 * diameter_mm, distance_mm))
-        ap = (Measured(omega, 0.0), Measured(half, 0.0), "geometry")
-    elif args.aperture_scan:
-        ap = (*_aperture_from_scan(open_run(args.aperture_scan), args.beam_diameter_mm),
-              "beam-scan")
     divergence = args.divergence_deg
     if divergence is None:
-        divergence = float((runs[0].config.get("optics") or {}).get("divergence_deg", 0.0))
+        divergence = _optics(runs, "divergence_deg") or 0.0
     cal = build([r.readings() for r in runs], utc_now(), [str(r.path) for r in runs],
-                eta=args.eta, aperture=ap, divergence_deg=divergence)
+                eta=args.eta, aperture=_aperture(args, runs), divergence_deg=divergence)
+    for note in cal.notes:
+        print(f"gonio calibrate: {note}", file=sys.stderr)
     print(calfile.save(cal, args.out))
     return 0
 
 
-def _aperture_from_scan(scan_run, beam_diameter_mm: float):
-    """(solid angle, half-angle) from the sample readings of a scan across the beam."""
+def _optics(runs: list[Run], key: str) -> float | None:
+    """A value of the runs' [optics] tables (None where they have none); the one place the
+    calibrate command reads [optics]. Runs that disagree on it cannot be calibrated together."""
+    from calibration.values import CalibrationError
+
+    values = {str(r.path): (r.config.get("optics") or {}).get(key) for r in runs}
+    if len(set(values.values())) > 1:
+        raise CalibrationError(f"the runs' [optics] {key} differ ("
+                               + ", ".join(f"{v} in {p}" for p, v in values.items())
+                               + "): calibrate each bench set-up on its own")
+    value = next(iter(values.values()))
+    return None if value is None else float(value)
+
+
+def _aperture(args: argparse.Namespace, runs: list[Run]
+              ) -> tuple[Measured, Measured, str] | None:
+    """(solid angle, half-angle, method): measured by --aperture-scan, else from
+    --aperture-geometry or the runs' [optics] aperture_diameter_mm and aperture_distance_mm;
+    None without any of them."""
+    import math
+
+    from calibration import aperture
+    from calibration.values import Measured
+    from gonio.store import open_run
+
+    if args.aperture_scan:
+        return (*_aperture_from_scan(open_run(args.aperture_scan), args.beam_diameter_mm,
+                                     args.divergence_deg), "beam-scan")
+    diameter_mm, distance_mm = args.aperture_geometry or (
+        _optics(runs, "aperture_diameter_mm"), _optics(runs, "aperture_distance_mm"))
+    if diameter_mm is None or distance_mm is None:
+        return None
+    omega = aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm)
+    half = math.degrees(math.atan2(0.5 * diameter_mm, distance_mm))
+    return Measured(omega, 0.0), Measured(half, 0.0), "geometry"
+
+
+def _aperture_from_scan(scan_run: Run, beam_diameter_mm: float | None,
+                        divergence_deg: float | None) -> tuple[Measured, Measured]:
+    """(solid angle, half-angle) from the sample readings of a scan across the beam; the beam's
+    diameter at the aperture is --beam-diameter-mm, else the scan run's [optics] beam diameter
+    widened by the divergence (--divergence-deg, else its [optics]) over the aperture
+    distance, else 0 (much smaller)."""
+    import math
+
     import numpy as np
 
     from calibration import aperture
     from calibration.detector import correct_power, dark_offsets
     from calibration.values import CalibrationError
 
-    r = scan_run.readings()
-    sample = r[r["kind"] == "sample"]
-    if len(sample) == 0:
-        raise CalibrationError(f"{scan_run.path}: no sample readings to scan the beam with")
-    power = correct_power(sample["power_w"], sample["range_w"], dark_offsets(r), None)
-    distance_mm = float((scan_run.config.get("optics") or {})
-                        .get("aperture_distance_mm", 0.0)) or None
+    where = f"--aperture-scan {scan_run.path}"
+    distance_mm = _optics([scan_run], "aperture_distance_mm")
+    if beam_diameter_mm is None:
+        beam_mm = _optics([scan_run], "beam_diameter_mm")
+        if divergence_deg is None:
+            divergence_deg = _optics([scan_run], "divergence_deg") or 0.0
+        beam_diameter_mm = 0.0 if beam_mm is None or distance_mm is None else (
+            beam_mm + 2.0 * distance_mm * math.tan(math.radians(divergence_deg)))
     beam_rad = 0.0
     if beam_diameter_mm > 0:
         if distance_mm is None:
-            raise CalibrationError("--beam-diameter-mm needs the aperture distance "
+            raise CalibrationError(f"{where}: --beam-diameter-mm needs the aperture distance "
                                    "([optics] aperture_distance_mm) in the run's config")
         beam_rad = 0.5 * beam_diameter_mm / distance_mm
-    noise = np.std(power[power < 0.02 * power.max()]) if np.any(power < 0.02 * power.max()) else 0
-    sigma = np.hypot(noise, 1e-3 * np.abs(power))
-    return aperture.from_beam_scan(sample["arm_deg"], power, sigma, beam_radius_rad=beam_rad)
+    r = scan_run.readings()
+    sample = r[r["kind"] == "sample"]
+    try:
+        if len(sample) == 0:
+            raise CalibrationError("no sample readings to scan the beam with")
+        angles = np.unique(np.round(sample["sample_deg"], 3))
+        if len(angles) > 1:
+            raise CalibrationError(f"its sample readings are at {len(angles)} sample angles, "
+                                   "not a scan of the arm alone across the beam with the "
+                                   "sample retracted (examples/plans/calib-aperture.toml)")
+        power = correct_power(sample["power_w"], sample["range_w"], dark_offsets(r), None)
+        low = power < 0.02 * power.max()
+        noise = np.std(power[low]) if np.any(low) else 0.0
+        sigma = np.hypot(noise, 1e-3 * np.abs(power))
+        return aperture.from_beam_scan(sample["arm_deg"], power, sigma,
+                                       beam_radius_rad=beam_rad)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{where}: {exc}") from None
 
 
 def _use(args: argparse.Namespace) -> int:

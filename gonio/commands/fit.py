@@ -44,24 +44,34 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="fit the two-scale diffraction model (Holzschuch-Pacanowski) around the "
                         "microfacet one, at the run's wavelength; nano-roughness held fixed")
     p.add_argument("--rms-height-nm", type=float, metavar="NM",
-                   help="nano-roughness rms height for --diffraction (default: the run's "
-                        "[sim.sample] rms_height_nm)")
+                   help="nano-roughness rms height for --diffraction (required, but for a run "
+                        "whose devices were all emulated: its [sim.sample] rms_height_nm)")
     p.add_argument("--correlation-length-um", type=float, metavar="UM",
-                   help="nano-roughness correlation length for --diffraction (default: the "
-                        "run's [sim.sample] correlation_length_um)")
+                   help="nano-roughness correlation length for --diffraction (required, but "
+                        "for an all-emulated run: its [sim.sample] correlation_length_um)")
     p.add_argument("--psd-exponent", type=float, metavar="C",
-                   help="K-correlation PSD exponent for --diffraction (default: the run's "
-                        "[sim.sample] psd_exponent, else 2)")
+                   help="K-correlation PSD exponent for --diffraction (default 2, or an "
+                        "all-emulated run's [sim.sample] psd_exponent)")
+    add_reduce_options(p)
+
+
+def add_reduce_options(p: argparse.ArgumentParser) -> None:
+    """The reduction options `reduce`, `fit` and `plot` share."""
     p.add_argument("--calibration", metavar="FILE",
                    help="calibration file to apply (default: the one the run records)")
+    p.add_argument("--shot-noise-w", type=float, metavar="W",
+                   help="the detector's shot-noise variance of one sample per watt of signal, "
+                        "W (2 q B / R); default: the config's [detector] shot_noise_w, else the "
+                        "emulated meter's for an all-emulated run, else not modelled")
 
 
-def nano_roughness(config: dict, rms_height_nm: float | None,
+def nano_roughness(sim: dict | None, rms_height_nm: float | None,
                    correlation_length_um: float | None,
                    psd_exponent: float | None) -> tuple[float | None, float | None, float]:
     """(rms height nm, correlation length um, PSD exponent) for --diffraction: each flag given
-    wins, else the run config's [sim.sample] value, else None (the exponent: 2)."""
-    sample = (config.get("sim") or {}).get("sample") or {}
+    wins, else the [sim.sample] value of `sim` (the [sim] table of an all-emulated run,
+    gonio.record.emulator_config; None for any other run), else None (the exponent: 2)."""
+    sample = (sim or {}).get("sample") or {}
     given = (rms_height_nm, correlation_length_um, psd_exponent)
     keys = ("rms_height_nm", "correlation_length_um", "psd_exponent")
     rms, length, exponent = (value if value is not None else sample.get(key)
@@ -71,12 +81,12 @@ def nano_roughness(config: dict, rms_height_nm: float | None,
 
 
 def options_from(args: argparse.Namespace,
-                 config: dict | None = None):  # -> calibration.fit.FitOptions
-    """FitOptions from parsed arguments; `config` (the run's instrument config) supplies the
-    nano-roughness of --diffraction that no flag gives."""
+                 sim: dict | None = None):  # -> calibration.fit.FitOptions
+    """FitOptions from parsed arguments; `sim` (an all-emulated run's [sim] table) supplies
+    the nano-roughness of --diffraction that no flag gives."""
     from calibration.fit import FitOptions
 
-    rms, length, exponent = nano_roughness(config or {}, args.rms_height_nm,
+    rms, length, exponent = nano_roughness(sim, args.rms_height_nm,
                                            args.correlation_length_um, args.psd_exponent)
     return FitOptions(distributions=args.distribution, maskings=args.masking,
                       anisotropic=args.anisotropic, fit_eta=args.fit_eta,
@@ -85,6 +95,14 @@ def options_from(args: argparse.Namespace,
                       multiple_scattering=args.multiple_scattering, ms_walks=args.ms_walks,
                       diffraction=args.diffraction, rms_height_nm=rms,
                       correlation_length_um=length, psd_exponent=exponent)
+
+
+def emulator_sim(run_dir: str) -> dict | None:
+    """The [sim] table of a run whose devices were all emulated, else None."""
+    from gonio.record import emulator_config
+    from gonio.store import open_run
+
+    return emulator_config(open_run(run_dir))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -99,15 +117,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit and print the result (a summary, or one JSON object with --json)."""
     from calibration.pipeline import fit_run
-    from gonio.store import open_run
 
-    config = open_run(args.run).config if args.diffraction else None
-    data, result = fit_run(args.run, options_from(args, config), args.calibration)
+    sim = emulator_sim(args.run) if args.diffraction else None
+    data, result = fit_run(args.run, options_from(args, sim), args.calibration,
+                           args.shot_noise_w)
     out = result.to_dict()
     out["run"] = str(args.run)
+    out["sample"] = data.meta["sample"]
     out["calibration"] = data.meta.get("calibration")
-    if data.meta.get("model"):
-        out["emulated_sample"] = data.meta["model"]
+    out["noise_model"] = data.meta["noise_model"]
+    if data.meta.get("emulator_truth"):
+        out["emulator_truth"] = data.meta["emulator_truth"]
     if args.json:
         print(json.dumps(out))
         return 0
@@ -121,7 +141,10 @@ ROUGH_ALPHA = 0.1
 
 def summary(out: dict) -> str:
     """Human-readable lines of a fit result dict."""
-    lines = [f"run {out['run']}: {out['distribution']} ({out['masking']} masking)"]
+    sample = out.get("sample")
+    measured = (f" sample {sample['id']} ({sample['kind']}, eta {sample['eta']:g}):"
+                if sample else "")
+    lines = [f"run {out['run']}:{measured} {out['distribution']} ({out['masking']} masking)"]
     for name, p in out["parameters"].items():
         fixed = " (fixed)" if p.get("fixed") else ""
         sigma = f" +- {p['sigma']:.3g}" if "sigma" in p and not p.get("fixed") else ""
@@ -155,6 +178,8 @@ def summary(out: dict) -> str:
                      f"{d['psd_exponent']:g}, at {d['wavelength_nm']:g} nm (held fixed)")
     if "fit_time_s" in out:
         lines.append(f"  fit time {out['fit_time_s']:.2f} s")
-    if out.get("emulated_sample"):
-        lines.append(f"  emulated sample: {out['emulated_sample']}")
+    if out.get("noise_model"):
+        lines.append(f"  noise: {out['noise_model']}")
+    if out.get("emulator_truth"):
+        lines.append(f"  emulator truth: {out['emulator_truth']}")
     return "\n".join(lines)

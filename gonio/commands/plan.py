@@ -4,6 +4,11 @@ estimate (optimised order beside the order as written). Nothing moves."""
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from gonio.config import InstrumentConfig
+    from gonio.plan import Plan
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -18,6 +23,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def description(plan: Plan, cfg: InstrumentConfig) -> str:
+    """What the run's record will say of the sample and the bench ([sample], [optics]), or
+    where to add them: a run lacking either reduces only with a calibration's help."""
+    sample, optics = plan.sample, cfg.optics
+    lines = [f"  sample: {sample.id!r}, {sample.kind}, eta {sample.eta:g}"
+             + (f", k {sample.k:g}" if sample.k else "") + f", lit from {sample.lit_from}"
+             if sample else "  sample: none (add a [sample] table to the plan: id, kind, eta)"]
+    if optics:
+        lines.append(f"  optics: {optics.wavelength_nm:g} nm ({optics.bandwidth_nm:g} nm FWHM), "
+                     f"beam {optics.beam_diameter_mm:g} mm, divergence "
+                     f"{optics.divergence_deg:g} deg; receiver {optics.aperture_diameter_mm:g} mm"
+                     f" at {optics.aperture_distance_mm:g} mm = "
+                     f"{optics.receiver_solid_angle_sr:.4g} sr; polarisation source "
+                     f"{optics.source_polarisation}, analyser {optics.analyser_polarisation}")
+    else:
+        lines.append("  optics: none (add an [optics] table to the instrument config, or "
+                     "reduce with a calibration that measured the aperture)")
+    return "\n".join(lines)
+
+
 def run(args: argparse.Namespace) -> int:
     """Print the summary; errors are PlanError/ConfigError lines."""
     from gonio.config import load_config
@@ -28,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(instrument_path(plan, args.instrument))
     sched = build_schedule(plan, cfg)
     print(summary(plan, cfg, sched))
+    print(description(plan, cfg))
     if args.list:
         print(listing(sched))
     return 0

@@ -1,11 +1,12 @@
 """`gonio plot RUN [--fit]`: the paper-style figure of a run (measured BSDF per incidence angle,
-log scale, with the model curve); --fit overlays a fitted model and its residuals."""
+log scale, with the emulator's truth for an all-emulated run); --fit overlays a fitted model
+and its residuals."""
 
 from __future__ import annotations
 
 import argparse
 
-from gonio.commands.fit import add_fit_options, options_from
+from gonio.commands.fit import add_fit_options, emulator_sim, options_from
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -23,10 +24,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Reduce, (fit,) plot; print the PNG's path."""
     from calibration.plot import plot_run
-    from gonio.store import open_run
 
-    config = open_run(args.run).config if args.fit and args.diffraction else None
+    sim = emulator_sim(args.run) if args.fit and args.diffraction else None
     out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
-                   fit_options=options_from(args, config) if args.fit else None)
+                   fit_options=options_from(args, sim) if args.fit else None,
+                   shot_noise_w=args.shot_noise_w)
     print(out)
     return 0

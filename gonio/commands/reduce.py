@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gonio.commands.fit import add_reduce_options
+
 CSV_HEADER = ("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,side,bsdf_per_sr,sigma_per_sr,"
               "valid")
 
@@ -18,8 +20,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__)
     p.add_argument("run", help="run directory")
     p.add_argument("--out", metavar="CSV", help="output file (default RUN/reduced.csv)")
-    p.add_argument("--calibration", metavar="FILE",
-                   help="calibration file to apply (default: the one the run records)")
+    add_reduce_options(p)
     p.set_defaults(func=run)
 
 
@@ -65,12 +66,14 @@ def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
     from calibration.pipeline import reduce_run
 
-    data = reduce_run(args.run, args.calibration)
+    data = reduce_run(args.run, args.calibration, args.shot_noise_w)
     out = write_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv")
     m = data.meta
-    print(f"run {args.run}: eta {m['eta']:g}, aperture {m['aperture_half_angle_deg']:.4g} deg "
-          f"({m['aperture_sr']:.4g} sr), beam {m['beam_mean_w']:.4g} W "
+    print(f"run {args.run}: sample {m['sample']['id']}, eta {m['eta']:g}, aperture "
+          f"{m['aperture_half_angle_deg']:.4g} deg ({m['aperture_sr']:.4g} sr, from "
+          f"{m['aperture_from']}), beam {m['beam_mean_w']:.4g} W "
           f"(drift rms {m['beam_drift_rms']:.2%})")
+    print(f"noise: {m['noise_model']}")
     print("\n".join(summary(data)))
     print(out)
     return 0

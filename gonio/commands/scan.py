@@ -7,8 +7,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from gonio.errors import GonioError
+
+if TYPE_CHECKING:
+    from gonio.runner import DetectorCheck
 
 
 def _sim_names(value: str) -> list[str]:
@@ -56,6 +60,16 @@ def _plot(run_dir) -> None:
         print(f"gonio scan: note: plot.png shows raw power ({exc})", file=sys.stderr)
 
 
+def _covers(path: str) -> DetectorCheck:
+    """The check, once the detector is open and before any motion, that the calibration file
+    covers every range the schedule can read on (calibration.coverage)."""
+    from calibration import calfile, coverage
+
+    cal = calfile.load(path)
+    return lambda readings, detector: coverage.require(cal, path, readings,
+                                                       detector.full_scales_w())
+
+
 def run(args: argparse.Namespace) -> int:
     """Start or resume the scan; exit 0 when it completed."""
     from gonio.runner import new_scan, resume_scan
@@ -73,14 +87,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         if not args.plan:
             raise GonioError("a PLAN file is needed (or --resume RUN)")
-        calibration = None
+        calibration, check = None, None
         if args.calibration:
             from calibration.calfile import reference
 
-            calibration = reference(args.calibration)
+            calibration, check = reference(args.calibration), _covers(args.calibration)
         result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
                           progress=progress, calibration=calibration,
-                          time_scale=args.time_scale, sample_id=args.sample_id)
+                          time_scale=args.time_scale, sample_id=args.sample_id, check=check)
     outcome = result.outcome
     plotted = False
     if not args.no_plot and outcome.done:

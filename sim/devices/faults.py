@@ -1,5 +1,6 @@
 """Seeded fault injection for emulated devices: latency, dropped or corrupted bytes, bad CRC,
-stalled replies and disconnects, configured per device by a `[sim.faults.<device>]` table.
+stalled replies, disconnects and (a PM100's) invalid readings, configured per device by a
+`[sim.faults.<device>]` table.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ class FaultConfigError(ValueError):
     """A fault table with an unknown key or a value out of range (the message names it)."""
 
 
-_PROBABILITIES = ("drop_prob", "corrupt_prob", "bad_crc_prob", "stall_prob")
+_PROBABILITIES = ("drop_prob", "corrupt_prob", "bad_crc_prob", "stall_prob", "invalid_prob")
 
 
 def _is_number(value: object) -> bool:
@@ -30,8 +31,9 @@ class FaultSpec:
 
     latency_s: added delay before every reply; *_prob: per-reply probabilities of one
     dropped byte, one corrupted byte (high bit flipped: not valid ASCII, so a host can
-    tell), a wrong Modbus CRC, a stalled (never sent) reply; disconnect_after: the
-    device hangs up after this many replies (None = never); seed: the RNG seed.
+    tell), a wrong Modbus CRC, a stalled (never sent) reply; invalid_prob: per reading, the
+    meter has none and answers SCPI's not-a-number 9.91E+37 (PM100 only); disconnect_after:
+    the device hangs up after this many replies (None = never); seed: the RNG seed.
     """
 
     latency_s: float = 0.0
@@ -39,6 +41,7 @@ class FaultSpec:
     corrupt_prob: float = 0.0
     bad_crc_prob: float = 0.0
     stall_prob: float = 0.0
+    invalid_prob: float = 0.0
     disconnect_after: int | None = None
     seed: int = 0
 
@@ -96,7 +99,7 @@ class FaultInjector:
         self._rng = random.Random(mixed)
         self._lock = threading.Lock()
         self.replies = 0
-        self.counts = {"stall": 0, "drop": 0, "corrupt": 0, "bad_crc": 0}
+        self.counts = {"stall": 0, "drop": 0, "corrupt": 0, "bad_crc": 0, "invalid": 0}
 
     def delay(self) -> float:
         """Seconds (real) to wait before sending a reply."""
@@ -128,6 +131,12 @@ class FaultInjector:
             if 0 < crc_bytes <= len(out) and self._hit(spec.bad_crc_prob, "bad_crc"):
                 out[-1] ^= self._rng.randrange(1, 256)
             return bytes(out)
+
+    def invalid_reading(self) -> bool:
+        """True if this reading is to be invalid (drawn only when invalid_prob > 0, so the
+        reply faults of a seed are the same with it off)."""
+        with self._lock:
+            return self._hit(self.spec.invalid_prob, "invalid")
 
     def _hit(self, prob: float, kind: str) -> bool:
         if prob <= 0.0:

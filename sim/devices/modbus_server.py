@@ -1,4 +1,5 @@
-"""Serve emulated Modbus units with a real pymodbus 3.16 server: TCP on 127.0.0.1 or RTU on a pty.
+"""Serve emulated Modbus units with a real pymodbus 3.16 server: TCP (on 127.0.0.1 unless told
+otherwise) or RTU on a pty.
 
 Several units (unit ids) share one endpoint, as on one RTU bus or one TCP gateway. The
 pymodbus server does the framing; each request lands in the addressed unit's `read` /
@@ -16,6 +17,7 @@ import asyncio
 import itertools
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping
 from functools import partial
 from typing import Protocol
@@ -23,8 +25,16 @@ from typing import Protocol
 from pymodbus.constants import ExcCodes
 from pymodbus.datastore import ModbusServerContext
 from pymodbus.exceptions import NoSuchIdException
-from pymodbus.pdu import ExceptionResponse
+from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
+from pymodbus.pdu.diag_message import ReturnQueryDataRequest
 from pymodbus.pdu.mei_message import ReadDeviceInformationRequest, ReadDeviceInformationResponse
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    ReadWriteMultipleRegistersRequest,
+    WriteMultipleRegistersRequest,
+    WriteSingleRegisterRequest,
+)
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from sim.devices.faults import FaultInjector, FaultSpec
@@ -40,9 +50,14 @@ from sim.devices.register_map import (
 )
 
 _TABLE_OF_FUNCTION = {3: "holding", 4: "input", 23: "holding"}
-_WRITE_FUNCTIONS = (6, 16, 23)
+# The requests the units answer; any other function or sub-function gets exception 01.
+_ANSWERED = (ReadHoldingRegistersRequest, ReadInputRegistersRequest, WriteSingleRegisterRequest,
+             WriteMultipleRegistersRequest, ReadWriteMultipleRegistersRequest,
+             ReturnQueryDataRequest, ReadDeviceInformationRequest)
+_ANSWERED_FUNCTIONS = frozenset(request.function_code for request in _ANSWERED)
 RTU_CHARACTER_BITS = 11  # start, 8 data, parity (or a second stop bit), stop
 RTU_FIXED_T35_S = 0.00175  # the spec's t3.5 above 19200 baud
+LOOPBACK = "127.0.0.1"
 _MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
 FIRMWARE = "1.0.0-emulated"
 BASIC_CONFORMITY = 0x81  # basic identification objects, stream and individual access
@@ -152,18 +167,13 @@ class _UnitsContext(ModbusServerContext):
         unit = self.unit(device_id)
         if func_code == 6:  # a write-single echo: the word just written
             return self._echo.get(device_id, [0])[:1]
-        table = _TABLE_OF_FUNCTION.get(func_code)
-        if table is None:
-            return ExcCodes(ILLEGAL_FUNCTION)
         try:
-            return unit.read(table, address, count)
+            return unit.read(_TABLE_OF_FUNCTION[func_code], address, count)
         except Rejected as exc:
             return ExcCodes(exc.code)
 
     async def async_setValues(self, device_id, func_code, address, values):  # noqa: N802
         unit = self.unit(device_id)
-        if func_code not in _WRITE_FUNCTIONS:
-            return ExcCodes(ILLEGAL_FUNCTION)
         try:
             unit.write(address, list(values))
         except Rejected as exc:
@@ -175,57 +185,126 @@ class _UnitsContext(ModbusServerContext):
         return list(self._units)
 
 
+class _Refused(ModbusPDU):
+    """A request the units do not answer as asked: an exception reply with its own function
+    code (01 for a function or sub-function they lack, 03 for one of theirs too short to
+    decode). An absent unit stays absent (11 on TCP, silence on RTU)."""
+
+    def __init__(self, function_code: int, exception_code: int):
+        super().__init__()
+        self.function_code, self.exception_code = function_code, exception_code
+
+    async def datastore_update(self, context: _UnitsContext, device_id: int) -> ModbusPDU:
+        """Exception reply of the addressed unit."""
+        context.unit(device_id)
+        return ExceptionResponse(self.function_code, ExcCodes(self.exception_code))
+
+
+class _UnitsDecoder(DecodePDU):
+    """pymodbus's request decoder limited to what the units answer (`_ANSWERED`).
+
+    pymodbus would answer a function it does not know with function byte 0x80, and its
+    process-wide diagnostics (function 08 other than the echo, 07, 11, 12, 17, ...) with its
+    own defaults or, for a reserved sub-function such as 08/0008, exception 04. Here each of
+    those is the unit's exception 01 (illegal function), as the Modbus application protocol
+    (V1.1b3, 6.8 and 7) asks of an unsupported function or sub-function.
+    Function 43/14 is answered per unit (`_identification`)."""
+
+    def lookupPduClass(self, data: bytes) -> type[ModbusPDU] | None:  # noqa: N802
+        """The RTU framer's length rule: a sub-function pymodbus lacks (08/0008) is framed
+        by its function's rule, so that it is answered instead of hunted past in silence."""
+        found = super().lookupPduClass(data)
+        return found or self.pdu_table.get(data[1], (None, None))[self.pdu_inx]
+
+    def decode(self, frame: bytes) -> ModbusPDU:
+        """The request in a frame's PDU, or a `_Refused` one."""
+        if frame[0] not in _ANSWERED_FUNCTIONS:
+            return _Refused(frame[0], ILLEGAL_FUNCTION)
+        request = super().decode(frame)
+        if request is None:
+            return _Refused(frame[0], ILLEGAL_VALUE)
+        if type(request) not in _ANSWERED:
+            return _Refused(frame[0], ILLEGAL_FUNCTION)
+        if isinstance(request, ReadDeviceInformationRequest):
+            request.datastore_update = partial(_identification, request)
+        return request
+
+
+class _Connection:
+    """One client connection (or the RTU line), answered as a device does: every request in
+    the bytes received, one after another in arrival order. On TCP each reply is sent (after
+    any injected latency) before the connection's next request is handled; an RTU master
+    sends one request at a time, and there each reply keeps its own delay, so a late reply
+    can overlap the next exchange, as on a line.
+
+    pymodbus 3.16 takes one request per receive, clears its receive buffer whenever it
+    sends, and empties it when it holds more than 264 bytes: of three requests in one TCP
+    segment only the first was answered, of 100 none. Here the connection keeps its own
+    buffer and takes every complete frame from it. pymodbus's request handler
+    (`handle_request`) answers the request in `last_pdu`; the units answer without
+    suspending, so each request is answered whole before the next is put there.
+    On RTU a silence of t3.5 (`gap_s`) ends a frame: leftovers of a truncated or garbled
+    frame are dropped before the bytes after the silence are parsed. (A complete frame needs
+    no silence: pymodbus's framer takes it as soon as its function code's length has arrived
+    and its CRC checks, so the interval never delays a reply.)
+    """
+
+    def __init__(self, handler, emulator: ModbusEmulatorServer):
+        self.handler = handler
+        self.in_order = emulator.transport == "tcp"
+        self.gap_s = None if self.in_order else rtu_silent_interval_s(emulator.baudrate)
+        self.received = b""
+        self.last_byte_s = 0.0
+        self.requests: deque[ModbusPDU] = deque()
+        self.reply_sent: asyncio.Future | None = None
+        self._answering: asyncio.Task | None = None
+        handler.trace_packet = lambda sending, data: (
+            emulator.outgoing(self, data) if sending else data)
+        handler.trace_pdu = lambda sending, pdu: pdu if sending else self._queue(pdu)
+        handler.handle_later = self._answer_soon
+        handler.data_received = self.data_received
+
+    def data_received(self, data: bytes) -> None:
+        """Take every complete request frame from the bytes received so far."""
+        now = time.monotonic()
+        if self.gap_s is not None and now - self.last_byte_s > self.gap_s:
+            self.received = b""
+        self.last_byte_s = now
+        self.received += data
+        while self.received:
+            used = self.handler.callback_data(self.received)
+            if not used:
+                break
+            self.received = self.received[used:]
+        if len(self.received) > self.handler.max_buffer_size:  # no frame can start here
+            self.received = b""
+
+    def _queue(self, request: ModbusPDU) -> ModbusPDU:
+        self.requests.append(request)
+        return request
+
+    def _answer_soon(self) -> None:
+        if self._answering is None or self._answering.done():
+            self._answering = self.handler.loop.create_task(self._answer_all())
+
+    async def _answer_all(self) -> None:
+        while self.requests and self.handler.transport is not None:
+            self.handler.last_pdu = self.requests.popleft()
+            await self.handler.handle_request()
+            if self.reply_sent is not None:
+                await self.reply_sent
+                self.reply_sent = None
+
+
 class _FaultyReplies:
-    """Mixin for the pymodbus servers: route each reply frame through a fault injector."""
+    """Mixin for the pymodbus servers: each connection a `_Connection`."""
 
     emulator: ModbusEmulatorServer
 
     def callback_new_connection(self):
         handler = super().callback_new_connection()
-        handler.trace_packet = lambda sending, data: (
-            self.emulator.outgoing(handler, data) if sending else data
-        )
-        handler.trace_pdu = lambda sending, pdu: pdu if sending else _answer_per_unit(pdu)
-        handler.handle_later = _handle_on_this_loop(handler)
-        if self.emulator.transport == "rtu":
-            gap_s = rtu_silent_interval_s(self.emulator.baudrate)
-            handler.data_received = _after_silence_new_frame(handler, gap_s)
+        _Connection(handler, self.emulator)
         return handler
-
-
-def _handle_on_this_loop(handler):
-    """pymodbus 3.16 hands each decoded request to its handler with run_coroutine_threadsafe,
-    from the loop's own thread: a self-pipe write and read and an extra loop pass per
-    request. A task made on the loop directly does the same, in order (with the immediate
-    send in `outgoing`, raw TCP requests went from ~11 000 to ~18 000 per s here); the tasks
-    are kept referenced until done."""
-    pending: set[asyncio.Task] = set()
-
-    def handle_later() -> None:
-        task = handler.loop.create_task(handler.handle_request())
-        pending.add(task)
-        task.add_done_callback(pending.discard)
-
-    return handle_later
-
-
-def _answer_per_unit(request):
-    """Requests pymodbus would answer for the whole server, answered as the unit does.
-
-    A request whose function code has the exception bit (>= 0x80) is decoded by pymodbus as
-    an exception reply; a device answers it with exception 01 (illegal function). Read Device
-    Identification (43/14): pymodbus answers from one process-wide identity; here each unit
-    gives its own (`_identification`)."""
-    if isinstance(request, ExceptionResponse):
-        code = request.function_code
-
-        async def illegal_function(_context, _device_id):
-            return ExceptionResponse(code, ExcCodes(ILLEGAL_FUNCTION))
-
-        request.datastore_update = illegal_function
-    elif isinstance(request, ReadDeviceInformationRequest):
-        request.datastore_update = partial(_identification, request)
-    return request
 
 
 async def _identification(request: ReadDeviceInformationRequest, context: _UnitsContext,
@@ -261,24 +340,6 @@ def rtu_silent_interval_s(baudrate: int) -> float:
     return 3.5 * RTU_CHARACTER_BITS / baudrate
 
 
-def _after_silence_new_frame(handler, gap_s: float):
-    """RTU's framing rule: a silent interval (t3.5) ends a frame, so leftovers of a truncated
-    or garbled frame are dropped before the bytes after the silence are parsed. (A complete
-    frame needs no silence: pymodbus's framer takes it as soon as its function code's length
-    has arrived and its CRC checks, so the interval never delays a reply.)"""
-    receive = handler.data_received
-    last = [0.0]
-
-    def data_received(data: bytes) -> None:
-        now = time.monotonic()
-        if now - last[0] > gap_s:
-            handler.recv_buffer = b""
-        last[0] = now
-        receive(data)
-
-    return data_received
-
-
 class _TcpServer(_FaultyReplies, ModbusTcpServer):
     pass
 
@@ -288,14 +349,16 @@ class _SerialServer(_FaultyReplies, ModbusSerialServer):
 
 
 class ModbusEmulatorServer:
-    """One Modbus endpoint (TCP server on 127.0.0.1 or RTU on a pty) serving several units.
+    """One Modbus endpoint (TCP server or RTU on a pty) serving several units.
 
-    faults: a FaultSpec for replies of units without their own injector. start() returns
-    the endpoint ("127.0.0.1:PORT", or the pty path for RTU); stop() ends it.
+    faults: a FaultSpec for replies of units without their own injector; host: the address
+    a TCP server listens on (loopback unless the caller opens it to the network). start()
+    returns the endpoint ("HOST:PORT", or the pty path for RTU); stop() ends it.
     """
 
     def __init__(self, transport: str = "tcp", units: Mapping[int, ModbusUnit] | None = None,
-                 faults: FaultSpec | None = None, *, port: int = 0, baudrate: int = 115200):
+                 faults: FaultSpec | None = None, *, port: int = 0, baudrate: int = 115200,
+                 host: str = LOOPBACK):
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"Modbus transport must be 'tcp' or 'rtu', got {transport!r}")
         if not units:
@@ -308,7 +371,7 @@ class ModbusEmulatorServer:
         self.transport = transport
         self.units = dict(units)
         self.faults = FaultInjector(faults)
-        self.port, self.baudrate = port, baudrate
+        self.host, self.port, self.baudrate = host, port, baudrate
         self.endpoint: str | None = None
         self.disconnected = False
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -381,27 +444,28 @@ class ModbusEmulatorServer:
     async def _listen(self) -> None:
         context = _UnitsContext(self.units)
         if self.transport == "tcp":
-            server = _TcpServer(context, address=("127.0.0.1", self.port))
+            server = _TcpServer(context, address=(self.host, self.port))
         else:
             server = _SerialServer(context, port=self._line.path, baudrate=self.baudrate,
                                    ignore_missing_devices=True)
             server.call_create = partial(self._line.open, server.handle_new_connection)
         server.emulator = self
+        server.decoder = _UnitsDecoder(True)
         await server.serve_forever(background=True)
         if self.transport == "tcp":
             if not server.transport:
-                raise RuntimeError(f"cannot listen on 127.0.0.1:{self.port}")
+                raise RuntimeError(f"cannot listen on {self.host}:{self.port}")
             port = server.transport.sockets[0].getsockname()[1]
-            self.endpoint = f"127.0.0.1:{port}"
+            self.endpoint = f"{self.host}:{port}"
         self._server = server
 
     # -- faults --------------------------------------------------------------------
-    def outgoing(self, handler, frame: bytes) -> bytes:
+    def outgoing(self, connection: _Connection, frame: bytes) -> bytes:
         """Called by pymodbus with each reply frame: send it through the unit's faults.
 
         A delayed frame (injected latency) or the last before a hang-up goes out later from
-        the event loop, so a slow unit does not block the server; any other goes out now.
-        pymodbus itself sends nothing.
+        the event loop, so a slow unit does not block the server (on TCP the connection's next
+        request waits for it); any other goes out now. pymodbus itself sends nothing.
         """
         unit_id = frame[0] if self.transport == "rtu" else frame[6] if len(frame) > 6 else 0
         unit = self.units.get(unit_id)
@@ -414,12 +478,17 @@ class ModbusEmulatorServer:
             out = faults.reply(frame, keep_tail=max(len(frame) - _MBAP_BYTES, 0))
         hang_up, delay_s = faults.should_disconnect(), faults.delay()
         if delay_s or hang_up:
-            self._loop.call_later(delay_s, self._deliver, handler, out, hang_up)
+            if connection.in_order:
+                connection.reply_sent = self._loop.create_future()
+            self._loop.call_later(delay_s, self._deliver, connection, out, hang_up)
         else:
-            self._deliver(handler, out, False)
+            self._deliver(connection, out, False)
         return b""
 
-    def _deliver(self, handler, data: bytes | None, hang_up: bool) -> None:
+    def _deliver(self, connection: _Connection, data: bytes | None, hang_up: bool) -> None:
+        if connection.reply_sent is not None and not connection.reply_sent.done():
+            connection.reply_sent.set_result(None)
+        handler = connection.handler
         transport = handler.transport
         if transport is None or self.disconnected:
             return

@@ -112,6 +112,9 @@ def _nr3(value: float) -> str:
     return f"{value:.6E}"
 
 
+SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: what the meter answers when it has no reading
+
+
 class Pm100Emulator(PtyDevice):
     """A PM100-series meter with a photodiode sensor, served on a pty.
 
@@ -326,7 +329,11 @@ class Pm100Emulator(PtyDevice):
         return f"{s.name},{s.serial},{s.calibration},{s.type},{s.subtype},{s.flags}"
 
     def _measure(self) -> float:
-        """Take one averaged reading of the source's power now (autoranging if on)."""
+        """Take one averaged reading of the source's power now (autoranging if on); SCPI_NAN
+        when the invalid-reading fault strikes."""
+        if self._server.faults.invalid_reading():
+            self.last_reading = SCPI_NAN
+            return SCPI_NAN
         try:
             power = float(self._power())
             result = self.photodiode.measure(

@@ -28,7 +28,7 @@ class SettablePower:
 def test_configure_writes_every_setting(rig, link):
     r = rig(*link)
     assert isinstance(r.detector, Detector)
-    assert r.detector.ranges_w == RANGES
+    assert r.detector.ranges_w == r.detector.full_scales_w() == RANGES
     r.detector.configure(532.1, 25, 1e-6)
     assert r.detector.settings() == {"wavelength": 532.1, "averaging": 25.0, "autorange": 0.0,
                                      "gain_range": 2.0}

@@ -10,6 +10,7 @@ from drivers.base import (
     DeviceError,
     DeviceTimeout,
     DriverError,
+    InvalidReading,
     ProtocolError,
     Reading,
 )
@@ -53,6 +54,15 @@ def test_configure_and_read_back(pm_pair):
         pm.configure(632.8, 0, None)
 
 
+def test_full_scales_are_the_sensors_ranges_and_leave_the_setting_alone(pm_pair):
+    emu, pm = pm_pair(detector={"ranges_w": [3e-8, 3e-7, 3e-6, 3e-5]})
+    pm.configure(632.8, 1, 3e-6)
+    assert pm.full_scales_w() == (3e-8, 3e-7, 3e-6, 3e-5) == emu.photodiode.ranges_w
+    assert pm.range_w == 3e-6 and not emu.autorange
+    pm.configure(632.8, 1, None)
+    assert pm.full_scales_w() == (3e-8, 3e-7, 3e-6, 3e-5) and emu.autorange  # found once
+
+
 def test_read_autoranges_and_matches_the_true_power(pm_pair):
     emu, pm = pm_pair(power_w=3.3e-6, detector=QUIET)
     reading = pm.read()
@@ -68,6 +78,29 @@ def test_fixed_range_saturates(pm_pair):
     reading = pm.read()
     assert reading.saturated and reading.range_w == 1e-6
     assert reading.power_w == pytest.approx(1.1e-6)  # the ADC clips at 1.1 x full scale
+
+
+def test_scpi_not_a_number_is_an_invalid_reading_not_an_over_range(pm_pair):
+    emu, pm = pm_pair(power_w=5e-6, detector=QUIET)
+    pm.configure(632.8, 1, 1e-6)
+    inject(emu, invalid_prob=1.0)
+    assert raw(pm, "READ?").startswith("9.910000E+37")
+    with pytest.raises(InvalidReading, match=r"^pm100: invalid reading \(SCPI not-a-number "
+                                             r"9.910000E\+37\) on the 1e-06 W range$"):
+        pm.read()
+    with pytest.raises(InvalidReading):
+        pm.measure()
+    inject(emu)  # the same light without the fault is over range: a power, flagged saturated
+    assert pm.read().saturated
+
+
+def test_invalid_readings_follow_the_seed():
+    def pattern(seed):
+        faults = FaultInjector(FaultSpec(invalid_prob=0.3, seed=seed))
+        return [faults.invalid_reading() for _ in range(400)]
+
+    assert pattern(7) == pattern(7) != pattern(8)
+    assert abs(sum(pattern(7)) - 120) < 5 * (400 * 0.3 * 0.7) ** 0.5
 
 
 def test_averaging_reduces_noise_as_one_over_sqrt_n(pm_pair):

@@ -39,11 +39,13 @@ def table(name: str, values: dict) -> str:
 
 
 def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
-               seed: int = 1, time_scale: float | str = "inf") -> Path:
-    """The example config with `[detector]` updated and `[sim]` replaced by `sim` tables (the
-    bench's defaults otherwise: multiple scattering "auto", so on for Walter's ground and
-    etched glass). A drifting source drifts in wall seconds since the bench started, the clock
-    of the run's t_s, at any time_scale."""
+               seed: int = 1, time_scale: float | str = "inf", optics: dict | None = None
+               ) -> Path:
+    """The example config with `[detector]` updated, `[optics]` from the sim tables' geometry
+    (OPTICS_FROM_SIM) and `optics` (which wins), and `[sim]`
+    replaced by `sim` tables (the bench's defaults otherwise: multiple scattering "auto", so on
+    for Walter's ground and etched glass). A drifting source drifts in wall seconds since the
+    bench started, the clock of the run's t_s, at any time_scale."""
     text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
     if detector:
         for key, value in detector.items():
@@ -54,15 +56,16 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
                      if not (start < i < end and ln.split("=")[0].strip() == key)]
             lines.insert(start + 1, f"{key} = {toml_value(value)}")
             text = "\n".join(lines)
-    optics = dict(OPTICS)
+    described = dict(OPTICS)
     for name, keys in OPTICS_FROM_SIM.items():  # the geometry is the bench's description
         for key, theirs in keys.items():
             if key in sim.get(name, {}):
-                optics[theirs] = sim[name][key]
+                described[theirs] = sim[name][key]
+    described.update(optics or {})
     sim = {name: {k: v for k, v in values.items() if k not in OPTICS_FROM_SIM.get(name, {})}
            for name, values in sim.items()}
     head, _, rest = text.partition("\n[optics]")
-    text = head + "\n" + table("optics", optics) + "\n[" + rest.split("\n[", 1)[1]
+    text = head + "\n" + table("optics", described) + "\n[" + rest.split("\n[", 1)[1]
     text += "\n" + table("sim", {"time_scale": time_scale, "seed": seed})
     for name, values in sim.items():
         text += "\n" + table(f"sim.{name}", values)

@@ -21,6 +21,11 @@ from sim.devices.photodiode import SILICON_RESPONSIVITY
 SAMPLE_OFFSET, ARM_OFFSET, DARK_CURRENT_A = 0.3, -0.2, 1e-10
 DIVERGENCE_DEG = 0.03
 APERTURE = (Measured(0.0, 0.0), Measured(math.degrees(math.atan(5.0 / 500.0)), 0.0), "geometry")
+# what the experimenter knows of the bench below, as its instrument config's [optics] states it
+OPTICS = {"wavelength_nm": 632.8, "bandwidth_nm": 0.002, "beam_diameter_mm": 2.0,
+          "divergence_deg": DIVERGENCE_DEG, "aperture_diameter_mm": 10.0,
+          "aperture_distance_mm": 500.0, "source_polarisation": "unpolarised",
+          "analyser_polarisation": "unpolarised"}
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +41,7 @@ def angle_run(tmp_path_factory):
         "aperture": {"diameter_mm": 10.0, "distance_mm": 500.0},
         "alignment": {"sample_offset_deg": SAMPLE_OFFSET, "arm_offset_deg": ARM_OFFSET},
         "detector": {"dark_current_a": DARK_CURRENT_A},
-    })
+    }, optics=OPTICS)
     p = plan(tmp, "calib-angles-short", [
         {"side": "transmission", "theta_i_deg": 0.0,
          "theta_o_deg": {"start": -2.5, "stop": 2.5, "step": 0.25}},
@@ -103,17 +108,29 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
     from gonio.cli import main
 
     cal = tmp_path / "cal.json"
-    assert main(["calibrate", "build", str(angle_run.path), "--out", str(cal), "--eta", "1.51",
-                 "--aperture-geometry", "10", "500"]) == 0
-    assert capsys.readouterr().out.strip() == str(cal)
+    # the aperture and the divergence come from the run's [optics]
+    assert main(["calibrate", "build", str(angle_run.path), "--out", str(cal), "--eta",
+                 "1.51"]) == 0
+    out, err = capsys.readouterr()
+    assert out.strip() == str(cal)
+    # the angle run autoranges and darks autorange to the smallest range: no gains, and darks
+    # on the smallest range only, both said; angles and aperture were calibrated
+    assert [line.split(":")[1].strip() for line in err.splitlines()] == ["darks", "gains"]
     assert main(["calibrate", "show", str(cal)]) == 0
     shown = json.loads(capsys.readouterr().out)
     assert shown["source_runs"] == [str(angle_run.path)]
     assert abs(shown["angles"]["arm_offset_deg"]["value"] - ARM_OFFSET) < 0.03
     assert shown["aperture"]["method"] == "geometry"
-    divergence = angle_run.config["sim"]["source"].get("divergence_deg", 0.0)
-    assert json.dumps(shown["angles"]).count(f'"divergence_deg": {divergence}') == 1
+    assert shown["angles"]["fit"]["divergence_deg"] == OPTICS["divergence_deg"]
     assert shown["aperture"]["half_angle_deg"]["value"] == pytest.approx(0.5729, abs=1e-3)
+    assert shown["angles"]["fit"]["aperture_half_angle_deg"] == pytest.approx(0.5729, abs=1e-3)
+    assert shown["notes"] == err.replace("gonio calibrate: ", "").splitlines()
+    # an option wins over [optics]
+    assert main(["calibrate", "build", str(angle_run.path), "--out", str(tmp_path / "c2.json"),
+                 "--aperture-geometry", "8", "500"]) == 0
+    assert "angles: not calibrated: no eta (--eta)" in capsys.readouterr().err
+    assert calfile.load(tmp_path / "c2.json").aperture_half_angle_deg.value == pytest.approx(
+        math.degrees(math.atan(4.0 / 500.0)))
     assert main(["calibrate", "use", str(angle_run.path), str(cal)]) == 0
     meta = json.loads((angle_run.path / "meta.json").read_text())
     assert meta["calibration"] == calfile.reference(cal)
@@ -136,14 +153,14 @@ def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
                    "divergence_deg": divergence_deg},
         "sample": {"kind": "hemisphere", "distribution": "ggx", "alpha": 0.394, "eta": 1.51},
         "aperture": {"diameter_mm": diameter_mm, "distance_mm": distance_mm},
-    })
+    }, optics=OPTICS)
     plan_path = ROOT / "examples" / "plans" / "calib-aperture.toml"
     run = scan(plan_path, cfg, tmp_path / "runs")
-    # the beam's diameter where it meets the aperture, divergence included
-    beam_at_aperture = beam_mm + 2 * distance_mm * np.tan(np.radians(divergence_deg))
+    # the beam's diameter where it meets the aperture, divergence included, as the build works
+    # it out from [optics] (beam diameter at the sample, divergence, aperture distance)
     cal = tmp_path / "cal.json"
     assert main(["calibrate", "build", str(run), "--out", str(cal), "--aperture-scan",
-                 str(run), "--beam-diameter-mm", str(beam_at_aperture)]) == 0
+                 str(run)]) == 0
     measured = calfile.load(cal)
     half = measured.aperture_half_angle_deg
     truth = np.degrees(np.arctan(0.5 * diameter_mm / distance_mm))
@@ -154,16 +171,17 @@ def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
 
 
 # true gain / nominal per range of the default ranges_w (1e-8 ... 1e-2 W); the reference range
-# of the calibration is the largest one measured (1e-5 W), whose gain is 1
-RANGE_GAINS = [1.0, 1.03, 0.985, 1.0, 1.0, 1.0, 1.0]
-TRUE_GAIN = {"1e-07": 1.03, "1e-06": 0.985, "1e-05": 1.0}
+# of the calibration is the largest one measured (1e-2 W), whose gain is 1
+RANGE_GAINS = [1.0, 1.03, 0.985, 1.0, 1.0, 1.01, 1.0]
+TRUE_GAIN = dict(zip(["1e-08", "1e-07", "1e-06", "1e-05", "0.0001", "0.001", "0.01"],
+                     RANGE_GAINS, strict=True))
 
 
 def test_range_gains_from_one_plan_stepping_through_ranges(angle_run, tmp_path):
     # The emulated meter's ranges carry known gain errors ([sim.detector] range_gains) and the
-    # source drifts: one run of the calib-detector plan (its grid steps through 1e-7, 1e-6 and
-    # 1e-5 W at each point) must recover each gain within its uncertainty, see a linear
-    # detector, and find a dark offset on each range.
+    # source drifts: one run of the calib-detector plan (its grids step through every range of
+    # the meter, 1e-8 ... 1e-2 W, at each point) must recover each gain within its
+    # uncertainty, see a linear detector, and find a dark offset on each range.
     cfg = instrument(tmp_path, {
         "source": {"power_w": 1e-3, "drift_fraction": 0.05, "drift_period_s": 20.0},
         "sample": {"kind": "hemisphere", "distribution": "ggx", "alpha": 0.394, "eta": 1.51},
@@ -174,19 +192,19 @@ def test_range_gains_from_one_plan_stepping_through_ranges(angle_run, tmp_path):
                         tmp_path / "runs"))
     readings = run.readings()
     samples = readings[readings["kind"] == "sample"]
-    assert {float(r) for r in samples["range_w"]} == {1e-7, 1e-6, 1e-5}
+    assert {float(r) for r in samples["range_w"]} == {1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2}
     beam = readings[readings["kind"] == "beam"]
     assert beam["power_w"].std() / beam["power_w"].mean() > 1e-3  # the source drifted
     # given together with an (autoranged) angle run, as `gonio calibrate build` allows
     cal = build([readings, angle_run.readings()], "", ["detector", "angles"], eta=1.51,
                 aperture=APERTURE, divergence_deg=DIVERGENCE_DEG)
     assert abs(cal.sample_offset_deg.pull(SAMPLE_OFFSET)) < 3.0
-    assert {"1e-07", "1e-06", "1e-05"} <= set(cal.dark_offsets_w)
-    assert set(cal.gains) == set(TRUE_GAIN)
+    assert set(cal.dark_offsets_w) == set(cal.gains) == set(TRUE_GAIN)
     for key, gain in cal.gains.items():
         assert abs(gain.pull(TRUE_GAIN[key])) < 3.0 and gain.sigma < 2e-3, key
-    # the errors are seen, not assumed away: 1.5 and 3 % are many sigmas from 1
-    assert abs(cal.gains["1e-07"].pull(1.0)) > 10 and abs(cal.gains["1e-06"].pull(1.0)) > 5
+    # the errors are seen, not assumed away: 1, 1.5 and 3 % are many sigmas from 1
+    assert abs(cal.gains["1e-07"].pull(1.0)) > 8 and abs(cal.gains["1e-06"].pull(1.0)) > 4
+    assert abs(cal.gains["0.001"].pull(1.0)) > 8
     assert cal.linearity["chi2_dof"] < 3.0
     for gamma in cal.linearity["exponents"].values():
         assert abs(gamma["value"] - 1.0) < 3 * gamma["sigma"] + 1e-3

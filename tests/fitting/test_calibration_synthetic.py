@@ -73,6 +73,13 @@ def test_nonlinear_detector_is_flagged_by_the_linearity_check():
     # power-law exponent against the reference range departs from 1
     assert gains.chi2_dof > 3.0
     assert abs(gains.exponents["1e-06"].pull(1.0)) > 3.0
+    # and building a calibration from it warns of the bad fit, which a linear detector's does not
+    warned = [n for n in build([data], "", ["run"]).notes if n.startswith("gains: warning")]
+    assert warned == [f"gains: warning: the gain fit has chi2/dof {gains.chi2_dof:.3g} > 3: "
+                      "the model misses the readings by more than their noise (its sigmas are "
+                      "scaled by sqrt(chi2/dof), but its values may be biased)"]
+    linear = build([detector_runs(np.random.default_rng(2))], "", ["run"])
+    assert not [n for n in linear.notes if "warning" in n]
 
 
 def test_one_range_only_gives_a_clear_error():

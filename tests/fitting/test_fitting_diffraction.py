@@ -105,13 +105,22 @@ def test_cli_flags_set_the_option():
                                                      maskings=off.maskings)
 
 
-def test_cli_takes_the_nano_roughness_from_the_run(tmp_path):
-    from gonio.commands.fit import nano_roughness
+def test_cli_takes_the_nano_roughness_from_an_emulated_run_only(tmp_path):
+    """An all-emulated run's [sim.sample] supplies what no flag gives; any other run's [sim]
+    is never read (gonio.record.emulator_config gives None for it)."""
+    from types import SimpleNamespace
 
-    config = {"sim": {"sample": {"rms_height_nm": 40.0, "correlation_length_um": 3.0}}}
-    assert nano_roughness(config, None, None, None) == (40.0, 3.0, 2.0)
-    assert nano_roughness(config, 20.0, None, 3.0) == (20.0, 3.0, 3.0)  # a flag wins
-    assert nano_roughness({}, None, None, None) == (None, None, 2.0)
+    from gonio.commands.fit import nano_roughness
+    from gonio.record import emulator_config
+
+    sim = {"sample": {"rms_height_nm": 40.0, "correlation_length_um": 3.0}}
+    emulated = SimpleNamespace(config={"sim": sim}, meta={"sim": True})
+    assert nano_roughness(emulator_config(emulated), None, None, None) == (40.0, 3.0, 2.0)
+    assert nano_roughness(sim, 20.0, None, 3.0) == (20.0, 3.0, 3.0)  # a flag wins
+    for meta in ({"sim": False}, {"sim": ["detector"]},
+                 {"sim": True, "sessions": [{"sim": [], "endpoints": {"pm100": "/dev/tty1"}}]}):
+        real = SimpleNamespace(config={"sim": sim}, meta=meta)
+        assert nano_roughness(emulator_config(real), None, None, None) == (None, None, 2.0)
 
 
 @pytest.mark.parametrize("settings, message", [

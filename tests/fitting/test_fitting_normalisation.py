@@ -10,7 +10,7 @@ import pytest
 
 from calibration.beam import beam_power
 from calibration.fit import FitOptions, fit
-from calibration.reduce import shot_variance_per_w
+from calibration.reduce import emulator_shot_noise_w
 from calibration.reduced import ReducedData
 from calibration.synthetic import synthesize
 from sim.devices.photodiode import PhotodiodeModel
@@ -134,13 +134,12 @@ def test_fit_with_a_common_scale_error_has_a_chi_square_distributed_score():
 
 def test_reduction_shot_noise_matches_the_emulated_meter():
     """Independent route: the scatter of many emulated readings of a bright signal on the
-    1e-8 W range against the dark scatter plus shot_variance_per_w times the signal."""
+    1e-8 W range against the dark scatter plus emulator_shot_noise_w / averaging times the
+    signal."""
     table = {"dark_current_a": 5e-11, "read_noise_fraction": 1e-4}
-    config = {"sim": {"detector": table}, "detector": {"wavelength_nm": 632.8}}
     meter = PhotodiodeModel(table, seed=4)
     dark = np.array([meter.measure(0.0, 1e-8, 4).reading_w for _ in range(4000)])
     bright = np.array([meter.measure(8e-9, 1e-8, 4).reading_w for _ in range(4000)])
-    predicted = dark.var() + shot_variance_per_w(config, 4) * 8e-9
+    predicted = dark.var() + emulator_shot_noise_w(table, 632.8) / 4 * 8e-9
     assert bright.var() == pytest.approx(predicted, rel=0.1)
     assert bright.var() > 4.0 * dark.var()  # shot noise dominates: the dark scatter alone fails
-    assert shot_variance_per_w({"detector": {}}, 4) == 0.0  # no [sim]: not modelled

@@ -117,3 +117,10 @@ def test_scan_records_optics_and_sample_and_takes_sample_id(tmp_path):
     refused = gonio_cli("scan", bare, "--sim", "--sample-id", "x", "--out", tmp_path / "runs")
     assert refused.returncode != 0
     assert "needs a [sample] table" in one_line_error(refused.stderr)
+
+
+def test_plan_summary_says_what_the_record_will_hold():
+    done = gonio_cli("plan", EXAMPLES / "plans" / "walter-antiglare.toml")
+    assert done.returncode == 0, done.stderr
+    assert "sample: 'walter-antiglare', hemisphere, eta 1.51, lit from air" in done.stdout
+    assert "receiver 3 mm at 500 mm = 2.827e-05 sr" in done.stdout
