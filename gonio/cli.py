@@ -22,6 +22,7 @@ COMMANDS = [
     "plot",
     "fit",
     "export",
+    "check",
     "calibrate",
     "lut",
     "sweep",

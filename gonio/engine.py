@@ -279,7 +279,7 @@ class Engine:
         """Before any motion: the detector accepts every range the remaining readings use (each
         set once; a PM100 refuses a range its sensor lacks, a Modbus amplifier one above its
         largest), so a bad plan range stops the run with one clear error."""
-        remaining = self.schedule["range_w"][self.writer.next_index:]
+        remaining = self.schedule["range_w"][self.writer.todo(len(self.schedule))]
         for range_w in np.unique(remaining):
             try:
                 self._use_range(float(range_w))
@@ -311,11 +311,12 @@ class Engine:
         try:
             with self.control:
                 self._prepare()
-                prompt_at = self._operator_prompt_index()
-                for row in self.schedule[self.writer.next_index:]:
+                rest = self.schedule[self.writer.todo(len(self.schedule))]
+                prompt_at = self._operator_prompt_index(rest)
+                for row in rest:
                     self.control.checkpoint(self._paused)
                     if int(row["index"]) == prompt_at:
-                        self.control.operator_step(self._signature_message(), self._paused)
+                        self.control.operator_step(self._signature_message(rest), self._paused)
                     record = self._with_retries(row)
                     self.writer.append(record)
                     if self.progress:
@@ -329,20 +330,20 @@ class Engine:
             self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
             raise
         self._finish(status, reason)
-        return Outcome(status, reason, self.writer.next_index)
+        return Outcome(status, reason, self.writer.stored)
 
-    def _operator_prompt_index(self) -> int:
-        """Index of the first remaining reading of a prompted signature pass (-1: none)."""
+    def _operator_prompt_index(self, rest: np.ndarray) -> int:
+        """Index of the first of the remaining readings `rest` in a prompted signature pass
+        (-1: none)."""
         sig = self.plan.signature
         if sig is None or sig.mode != "prompted":
             return -1
-        rest = self.schedule[self.writer.next_index:]
         first = np.flatnonzero(rest["kind"] == "signature")
         return int(rest["index"][first[0]]) if len(first) else -1
 
-    def _signature_message(self) -> str:
-        """The operator prompt before a prompted signature pass."""
-        n = int((self.schedule["kind"][self.writer.next_index:] == "signature").sum())
+    def _signature_message(self, rest: np.ndarray) -> str:
+        """The operator prompt before a prompted signature pass among the readings `rest`."""
+        n = int((rest["kind"] == "signature").sum())
         return (f"signature pass: remove the sample (nothing but the bench in the beam) for the "
                 f"next {n} readings")
 

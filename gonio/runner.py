@@ -7,11 +7,13 @@ plan and config happens before any device is opened.
 from __future__ import annotations
 
 import contextlib
+import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -20,9 +22,9 @@ from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.engine import Engine, Outcome, PauseControl
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.instrument import build_instrument
-from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan, positions
+from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
-from gonio.store import RunWriter, open_run
+from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
 
 DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
 
@@ -72,19 +74,22 @@ def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan) -> Iterat
 
 def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
-         control: PauseControl | None, check: DetectorCheck | None = None) -> ScanResult:
+         control: PauseControl | None, check: DetectorCheck | None = None,
+         session: dict[str, Any] | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
-    of the schedule."""
+    of the schedule. session: more for meta.json's record of this session."""
     with _devices(cfg, sim, plan) as dev, build_instrument(dev.config, dev.time_scale) as inst:
         if check is not None:
             check(sched.readings, inst.detector)
         writer = make_writer()
         try:
+            swapped = identity_changes(writer.meta["sessions"], inst.devices)
             writer.start_session(sim=list(dev.emulated), endpoints={
-                n: d.endpoint for n, d in dev.config.devices.items()}, devices=inst.devices)
+                n: d.endpoint for n, d in dev.config.devices.items()}, devices=inst.devices,
+                **({"identity_changes": swapped} if swapped else {}), **(session or {}))
             inst.last_positions = dev.positions
-            bar = Progress(len(sched), writer.next_index, plan.name,
+            bar = Progress(len(sched), writer.stored, plan.name,
                            disable=None if progress is None else not progress)
             engine = Engine(inst, plan, sched.readings, writer, progress=bar, control=control,
                             t0_epoch=writer.meta["t0_epoch"],
@@ -151,45 +156,106 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                 sim: list[str] | bool | None = None, progress: bool | None = None,
                 control: PauseControl | None = None,
                 plan_path: str | Path | None = None) -> ScanResult:
-    """Continue a run after its last stored reading, with the plan and config it started with.
+    """Continue a run after its last stored reading (first measuring any a repair dropped),
+    with the plan and config it started with, both checked against their digests.
 
-    instrument: a config to use instead of the stored one (e.g. new endpoints); it must give
-    exactly the same schedule. sim: None = as the run was started. plan_path: a plan file
-    that must say what the stored plan says (`same_plan`).
+    instrument: a config to use instead of the stored one, differing from it in device
+    endpoints only (recorded in the session). sim: None = as the run was started.
+    plan_path: a plan file that must say what the stored plan says (`same_plan`).
     """
     run = open_run(run_dir)
+    lines = run.lines()
+    if lines.damaged:
+        raise DamagedRunError(damage_message(run.path, lines, resume=True))
+    if run.status == "completed":
+        raise RunError(f"{run.path}: run already completed; nothing to resume")
     if plan_path is not None:
         same_plan(plan_path, run.plan, run.path)
     plan = parse_plan(run.plan, run.path / "plan.toml")
-    stored = parse_config(run.config, run.path / "instrument.toml")
-    cfg = stored if instrument is None else load_config(instrument)
+    session: dict[str, Any] = {}
+    if instrument is None:
+        cfg = parse_config(run.config, run.path / "instrument.toml")
+    else:
+        cfg = load_config(instrument)
+        session = _endpoint_changes(run.config, cfg.raw, instrument, run.path)
+    problems = digest_problems(run, cfg.raw)
+    if problems:
+        raise RunError(f"{run.path}: {'; '.join(problems)}; cannot resume")
     sched = build_schedule(plan, cfg)
-    if instrument is not None:
-        same = build_schedule(plan, stored)
-        if len(same) != len(sched) or not np.allclose(positions(same.readings),
-                                                      positions(sched.readings)):
-            raise RunError(f"{run.path}: {instrument} gives a different schedule than the "
-                           f"config the run started with; cannot resume on it")
     if sim is None:
         sim = run.meta.get("sim", False)
-    if run.status == "completed":
-        raise RunError(f"{run.path}: run already completed; nothing to resume")
-    if len(run) >= len(sched):  # killed after its last reading
+    if len(lines.rows) >= len(sched):  # killed after its last reading
         with contextlib.closing(RunWriter.resume(run.path)) as writer:
             writer.set_status("completed", "")
-        return ScanResult(run.path, Outcome("completed", "", len(run)))
-    return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control)
+        return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
+    return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
+                session=session)
 
 
 _MISSING = object()
+ENDPOINT_KEYS = ("port", "host", "tcp_port")
+
+
+def _flat(data: dict, prefix: str = "") -> dict[str, Any]:
+    """A nested dict as {dotted.path: value} (lists are values)."""
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def _differing(a: dict, b: dict) -> dict[str, tuple[Any, Any]]:
+    """Dotted paths where two nested dicts differ, with both values (_MISSING if absent)."""
+    fa, fb = _flat(a), _flat(b)
+    return {k: (fa.get(k, _MISSING), fb.get(k, _MISSING)) for k in sorted(fa.keys() | fb.keys())
+            if fa.get(k, _MISSING) != fb.get(k, _MISSING)}
+
+
+def _endpoint_changes(stored: dict, new: dict, cfg_path: str | Path,
+                      run_path: Path) -> dict[str, Any]:
+    """RunError unless the config differs from the run's in device endpoints only (register
+    maps are compared by content elsewhere); the endpoint changes for the session record."""
+    changes, refused = {}, []
+    for key, (was, now) in _differing(stored, new).items():
+        parts = key.split(".")
+        if len(parts) == 3 and parts[0] == "devices" and parts[2] == "register_map":
+            continue
+        if len(parts) == 3 and parts[0] == "devices" and parts[2] in ENDPOINT_KEYS:
+            changes[key] = {"from": None if was is _MISSING else was,
+                            "to": None if now is _MISSING else now}
+        else:
+            refused.append(key)
+    if refused:
+        raise RunError(f"{cfg_path}: differs from the config {run_path} was started with in "
+                       f"{', '.join(refused)}; on resume only device endpoints "
+                       f"({', '.join(ENDPOINT_KEYS)}) may change")
+    return {"endpoint_changes": changes} if changes else {}
+
+
+def identity_changes(sessions: list[dict[str, Any]], devices: dict[str, dict[str, Any]]
+                     ) -> dict[str, dict[str, Any]]:
+    """Devices whose reported identity differs from the last session's record of it (both
+    known), each warned about on stderr: {name: {"from": identity, "to": identity}}."""
+    before = next((s["devices"] for s in reversed(sessions) if s.get("devices")), {})
+    out = {}
+    for name, dev in devices.items():
+        was, now = before.get(name, {}).get("identity"), dev.get("identity")
+        if was and now and was != now:
+            out[name] = {"from": was, "to": now}
+            differ = ", ".join(f"{k} {was.get(k)!r} -> {now.get(k)!r}"
+                               for k in sorted(was.keys() | now.keys()) if was.get(k) != now.get(k))
+            print(f"gonio scan: warning: device {name!r} reports another identity than in the "
+                  f"last session ({differ}); recorded in meta.json", file=sys.stderr)
+    return out
 
 
 def same_plan(plan_path: str | Path, stored: dict, run_path: Path) -> None:
     """RunError unless the plan file parses to the run's stored plan (plan.json): the TOML
     dicts compared, so comments and formatting do not count, and `instrument` as written."""
-    raw = load_plan(plan_path).raw
-    keys = raw.keys() | stored.keys()
-    differ = sorted(k for k in keys if raw.get(k, _MISSING) != stored.get(k, _MISSING))
+    differ = _differing(load_plan(plan_path).raw, stored)
     if differ:
         raise RunError(f"{plan_path}: not the plan {run_path} was started with (differs in "
                        f"{', '.join(differ)}); resume without PLAN to use the stored one")

@@ -7,8 +7,13 @@ Layout of a run directory:
     meta.json                    versions, seeds, sim devices, calibration, sessions, status
     readings.jsonl               one JSON object per reading, appended and fsynced in order
 
-A run killed at any moment keeps every completed line; a torn last line (no newline or not
-JSON) is ignored when reading and cut off when the run is resumed.
+Each line carries a `crc32` field over its canonical JSON without it (runs made before line
+checksums have none and are read as unchecked). A run killed at any moment keeps every
+completed line; a torn last line (the bytes after the last newline: a half-written line, or
+the NUL padding a power loss leaves) is ignored when reading and cut off when the run is
+resumed. Any other damaged line (not JSON, a bad checksum, a duplicated or out-of-order
+index, missing indices) is an error for every reader and for resume: `gonio check RUN`
+reports it and `--repair` writes a copy that resume can complete (gonio.integrity).
 
 Each reading's line is written to the file at once (so a killed process never loses it) and
 then fsynced on a helper thread while the engine goes on to the next point; the next line is
@@ -20,12 +25,15 @@ count) has been fsynced.
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import platform
 import re
 import shutil
 import sys
+import zlib
+from collections.abc import Collection
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -38,6 +46,7 @@ from gonio.errors import RunError
 
 READINGS = "readings.jsonl"
 META = "meta.json"
+CRC = "crc32"  # the line checksum's field; meta.json's "line_checksum" says lines carry it
 
 READING_DTYPE = np.dtype([
     ("index", "i8"), ("kind", "U12"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
@@ -57,7 +66,8 @@ def utc_now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
 
-def _fsync_dir(path: Path) -> None:
+def fsync_dir(path: Path) -> None:
+    """fsync a directory (so a rename or a new file in it survives a power loss)."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -74,7 +84,7 @@ def write_json_atomic(path: Path, data: Any) -> None:
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
-    _fsync_dir(path.parent)
+    fsync_dir(path.parent)
 
 
 def _json_default(obj: Any) -> Any:
@@ -85,21 +95,176 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"cannot store {type(obj).__name__} in JSON")
 
 
-def _parse_lines(data: bytes) -> tuple[list[dict[str, Any]], int]:
-    """Complete, valid JSON lines and the byte length they cover (a torn tail is left out)."""
-    rows, good = [], 0
-    for line in data.splitlines(keepends=True):
-        if not line.endswith(b"\n"):
-            break
-        try:
-            row = json.loads(line)
-        except ValueError:
-            break
-        if not isinstance(row, dict) or row.get("index") != len(rows):
-            break
-        rows.append(row)
-        good += len(line)
-    return rows, good
+class DamagedRunError(RunError):
+    """A run directory's files are damaged (not merely missing or in use)."""
+
+
+def canonical_json(data: Any) -> bytes:
+    """The JSON that checksums and digests are computed over: sorted keys, no spaces."""
+    return json.dumps(data, sort_keys=True, separators=(",", ":"),
+                      default=_json_default).encode()
+
+
+def encode_line(row: dict[str, Any], checksum: bool = True) -> bytes:
+    """A reading's line: JSON (NaN as null, +-inf as Infinity) with its crc32, and a newline."""
+    clean = {k: None if isinstance(v, float) and v != v else v for k, v in row.items()}
+    if checksum:
+        clean[CRC] = zlib.crc32(canonical_json(clean))
+    return json.dumps(clean, default=_json_default).encode() + b"\n"
+
+
+@dataclass
+class Damage:
+    """A damaged line of readings.jsonl: its number (from 1) and what is wrong (a valid line
+    that follows missing indices is kept as a reading but still reported)."""
+
+    line: int
+    problem: str
+
+
+@dataclass
+class Lines:
+    """What readings.jsonl holds: the valid readings (by index), the damage, the torn tail."""
+
+    rows: list[dict[str, Any]]
+    damaged: list[Damage]
+    keep_bytes: int  # up to the last newline: what resume keeps
+    torn_bytes: int  # after it: a torn last line, cut on resume
+    unchecked: int  # valid lines without a checksum (written before line checksums)
+    count: int  # complete lines
+
+    @property
+    def top(self) -> int:
+        """The highest stored index (-1 for none)."""
+        return self.rows[-1]["index"] if self.rows else -1
+
+    def missing(self) -> list[int]:
+        """Indices below the highest stored one that are not stored."""
+        present = {r["index"] for r in self.rows}
+        return [i for i in range(self.top + 1) if i not in present]
+
+
+def _check_line(line: bytes, checked: bool) -> tuple[dict[str, Any] | None, str, bool]:
+    """The reading of one complete line and "", or None and what is wrong with it; and
+    whether the line carried a checksum."""
+    try:
+        row = json.loads(line)
+    except ValueError:
+        return None, "NUL bytes" if b"\0" in line else ("empty line" if not line.strip()
+                                                        else "not JSON"), False
+    if not isinstance(row, dict):
+        return None, "not a JSON object", False
+    crc = row.pop(CRC, None)
+    index = row.get("index")
+    at = f" (index {index})" if isinstance(index, int) else ""
+    if crc is None and checked:
+        return None, f"no {CRC} checksum{at}", False
+    if crc is not None and crc != zlib.crc32(canonical_json(row)):
+        return None, f"{CRC} checksum mismatch{at}", True
+    if not isinstance(index, int) or isinstance(index, bool) or index < 0:
+        return None, "no valid index", crc is not None
+    return row, "", crc is not None
+
+
+def scan_lines(data: bytes, checked: bool, refill: Collection[int] = ()) -> Lines:
+    """Check every complete line of readings.jsonl (JSON object, checksum if `checked` or
+    present, index neither repeated nor out of order, no indices missing unless damaged lines
+    account for them). `refill`: indices a repair dropped, which may come later, out of order."""
+    keep = data.rfind(b"\n") + 1
+    rows: dict[int, dict[str, Any]] = {}
+    where: dict[int, int] = {}
+    damaged: list[Damage] = []
+    top, unchecked, since_valid = -1, 0, 0
+    lines = data[:keep].split(b"\n")[:-1]
+    for n, line in enumerate(lines, 1):
+        row, problem, has_crc = _check_line(line, checked)
+        if row is not None:
+            index = row["index"]
+            gap = [i for i in range(top + 1, index) if i not in refill]
+            if index in rows:
+                problem = f"duplicate of index {index} (line {where[index]})"
+            elif index < top and index not in refill:
+                problem = f"index {index} out of order (after index {top})"
+            elif len(gap) > since_valid:
+                damaged.append(Damage(n, f"index {index} follows index {top}: "
+                                         f"{describe_indices(gap)} missing"))
+        if problem:
+            damaged.append(Damage(n, problem))
+            since_valid += 1
+            continue
+        rows[index], where[index], since_valid = row, n, 0
+        top = max(top, index)
+        unchecked += not has_crc
+    return Lines([rows[i] for i in sorted(rows)], damaged, keep, len(data) - keep, unchecked,
+                 len(lines))
+
+
+def describe_indices(indices: list[int]) -> str:
+    """Indices as "index 4" or "indices 4-6, 9"."""
+    parts, start = [], None
+    for i, k in enumerate(indices):
+        if start is None:
+            start = k
+        if i + 1 == len(indices) or indices[i + 1] != k + 1:
+            parts.append(str(k) if start == k else f"{start}-{k}")
+            start = None
+    return ("index " if len(indices) == 1 else "indices ") + ", ".join(parts)
+
+
+def damage_message(path: Path, lines: Lines, resume: bool = False) -> str:
+    """One line: the first damaged line, how many more, and what to do about it."""
+    first = lines.damaged[0]
+    more = len(lines.damaged) - 1
+    text = (f"{path / READINGS} line {first.line}: {first.problem}"
+            + (f" (and {more} more damaged line{'s' * (more > 1)})" if more else ""))
+    if resume:
+        return (f"{text}; cannot resume: `gonio check {path} --repair OUT_DIR` writes a "
+                f"repaired copy to resume instead")
+    return f"{text}; `gonio check {path}` reports the damage"
+
+
+def digest(data: Any) -> str:
+    """sha256 of a JSON value's canonical form."""
+    return "sha256:" + hashlib.sha256(canonical_json(data)).hexdigest()
+
+
+def map_digests(config: dict[str, Any]) -> dict[str, str | None]:
+    """sha256 of each device's register-map file contents (None: the file is not there)."""
+    out: dict[str, str | None] = {}
+    for name, dev in config.get("devices", {}).items():
+        if isinstance(dev, dict) and "register_map" in dev:
+            try:
+                out[name] = "sha256:" + hashlib.sha256(
+                    Path(dev["register_map"]).read_bytes()).hexdigest()
+            except OSError:
+                out[name] = None
+    return out
+
+
+def digests(plan: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
+    """What meta.json records at the start: digests of plan.json, config.json and the
+    register maps' contents (not their paths: a moved checkout still resumes)."""
+    return {"plan.json": digest(plan), "config.json": digest(config),
+            "register_maps": map_digests(config)}
+
+
+def digest_problems(run: Run, config: dict[str, Any] | None = None) -> list[str]:
+    """How plan.json, config.json and the register maps of `config` (default: the run's)
+    differ from the digests recorded at the start ([] for a run that recorded none)."""
+    recorded = run.meta.get("digests")
+    if not recorded:
+        return []
+    problems = [f"{name} changed since the run started (its digest differs)"
+                for name, data in (("plan.json", run.plan), ("config.json", run.config))
+                if digest(data) != recorded[name]]
+    now = map_digests(run.config if config is None else config)
+    for name, was in recorded["register_maps"].items():
+        if now.get(name, was) is None:
+            problems.append(f"the register map of device {name!r} is not found, cannot check it")
+        elif now.get(name, was) != was:
+            problems.append(f"the register map of device {name!r} differs in content from "
+                            f"the one the run started with")
+    return problems
 
 
 def _locked(path: Path) -> Any:
@@ -123,9 +288,19 @@ class Run:
     config: dict[str, Any]
     meta: dict[str, Any]
 
+    def lines(self) -> Lines:
+        """Every line of readings.jsonl checked (see `scan_lines`)."""
+        return scan_lines((self.path / READINGS).read_bytes(),
+                          checked=self.meta.get("line_checksum") == CRC,
+                          refill=set(self.meta.get("repair", {}).get("dropped", ())))
+
     def rows(self) -> list[dict[str, Any]]:
-        """The complete readings as dicts, in order (a torn last line is ignored)."""
-        return _parse_lines((self.path / READINGS).read_bytes())[0]
+        """The readings as dicts, by index (a torn last line is ignored); DamagedRunError
+        naming the file and line if any other line is damaged."""
+        lines = self.lines()
+        if lines.damaged:
+            raise DamagedRunError(damage_message(self.path, lines))
+        return lines.rows
 
     def readings(self) -> np.ndarray:
         """The readings as a numpy structured array with READING_DTYPE fields."""
@@ -159,7 +334,7 @@ def open_run(path: str | Path) -> Run:
     except FileNotFoundError as exc:
         raise RunError(f"{path}: not a run directory (missing {Path(exc.filename).name})") from None
     except (OSError, ValueError) as exc:
-        raise RunError(f"{path}: damaged run directory ({exc})") from None
+        raise DamagedRunError(f"{path}: damaged run directory ({exc})") from None
     if not (path / READINGS).exists():
         raise RunError(f"{path}: not a run directory (missing {READINGS})")
     return Run(path, plan, config, meta)
@@ -185,7 +360,8 @@ class RunWriter:
     def __init__(self, path: Path, meta: dict[str, Any], next_index: int):
         self.path = path
         self.meta = meta
-        self.next_index = next_index
+        self.next_index = next_index  # after the highest stored index
+        self.missing: list[int] = []  # indices below it a repair dropped: measured first
         self._fh = _locked(path / READINGS)
         self._syncer: ThreadPoolExecutor | None = None  # started by the first append
         self._pending: Future | None = None  # the fsync of the last line written
@@ -213,30 +389,52 @@ class RunWriter:
         write_json_atomic(path / "config.json", config)
         (path / READINGS).touch()
         meta = {**meta, "created_utc": utc_now(), "versions": versions(), "sessions": [],
-                "status": "created", "reason": ""}
+                "status": "created", "reason": "", "line_checksum": CRC,
+                "digests": digests(plan, config)}
         write_json_atomic(path / META, meta)
         return cls(path, meta, 0)
 
     @classmethod
     def resume(cls, path: Path) -> RunWriter:
-        """Reopen a run to continue it: cut a torn last line, continue after the last reading."""
+        """Reopen a run to continue it: refuse a damaged one, cut a torn last line, and go on
+        with the indices a repair dropped, then after the last reading."""
         run = open_run(path)
         if run.status == "completed":
             raise RunError(f"{path}: run already completed; nothing to resume")
         writer = cls(path, run.meta, 0)  # takes the lock before touching the file
-        data = (path / READINGS).read_bytes()
-        rows, good = _parse_lines(data)
-        if good < len(data):
-            writer._fh.truncate(good)
+        try:
+            lines = run.lines()
+            if lines.damaged:
+                raise DamagedRunError(damage_message(path, lines, resume=True))
+        except BaseException:
+            writer._fh.close()
+            raise
+        if lines.torn_bytes:
+            writer._fh.truncate(lines.keep_bytes)
             writer._fh.flush()
             os.fsync(writer._fh.fileno())
-        writer.next_index = len(rows)
+        writer.next_index, writer.missing = lines.top + 1, lines.missing()
         return writer
+
+    @property
+    def stored(self) -> int:
+        """How many readings the run holds."""
+        return self.next_index - len(self.missing)
+
+    @property
+    def expected(self) -> int:
+        """The index the next `append` takes."""
+        return self.missing[0] if self.missing else self.next_index
+
+    def todo(self, planned: int) -> list[int]:
+        """The indices still to measure, in the order `append` takes them."""
+        return [*self.missing, *range(self.next_index, planned)]
 
     def start_session(self, **info: Any) -> None:
         """Record that a (new or resumed) session starts now."""
-        self.meta["sessions"].append({"start_utc": utc_now(), "first_index": self.next_index,
-                                      **info})
+        refill = {"refill": list(self.missing)} if self.missing else {}
+        self.meta["sessions"].append({"start_utc": utc_now(), "first_index": self.expected,
+                                      **refill, **info})
         self.meta.setdefault("started_utc", self.meta["sessions"][0]["start_utc"])
         self.set_status("running", "")
 
@@ -254,15 +452,17 @@ class RunWriter:
     def append(self, row: dict[str, Any]) -> None:
         """Write one reading (its index must be the next one) and start its fsync, once the
         previous reading's fsync has returned (see the module docstring)."""
-        if row["index"] != self.next_index:
+        if row["index"] != self.expected:
             raise RunError(f"{self.path}: reading {row['index']} out of order "
-                           f"(expected {self.next_index})")
-        clean = {k: None if isinstance(v, float) and v != v else v for k, v in row.items()}
-        line = json.dumps(clean, default=_json_default).encode() + b"\n"  # +-inf: Infinity
+                           f"(expected {self.expected})")
+        line = encode_line(row)
         self.wait_stored()
         self._fh.write(line)
         self._fh.flush()  # in the kernel's hands: a killed process no longer loses it
-        self.next_index += 1
+        if self.missing:
+            self.missing.pop(0)
+        else:
+            self.next_index += 1
         if self._syncer is None:
             self._syncer = ThreadPoolExecutor(1, thread_name_prefix="run-fsync")
         self._pending = self._syncer.submit(os.fsync, self._fh.fileno())

@@ -1,17 +1,23 @@
 """Helpers for the gonio tests (a plain module, not a conftest, so its name is unique):
 example configs made fast (instant motion, cheap aperture integral), a small TOML writer,
-and running the real `gonio` CLI in a subprocess."""
+running the real `gonio` CLI (and `gonio emulate`) in a subprocess, and a Ctrl-C stand-in
+that aborts a scan after some points."""
 
 from __future__ import annotations
 
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import tomllib
+
+from gonio.engine import PauseControl
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
@@ -128,3 +134,47 @@ def write_plan(folder: Path, plan: dict, config: dict | None = None, name: str =
         write_toml(folder / f"{name}-instrument.toml", config)
         plan["instrument"] = f"{name}-instrument.toml"
     return write_toml(folder / f"{name}.toml", plan)
+
+
+class AbortAfter(PauseControl):
+    """A Ctrl-C answered with "abort" once `points` readings are taken: leaves a run to resume."""
+
+    def __init__(self, points: int = 0) -> None:
+        super().__init__(prompt=lambda: False, notify=lambda _message: None)
+        self.left = points
+
+    def checkpoint(self, on_pause) -> None:
+        self.pause_requested = self.left <= 0
+        self.left -= 1
+        super().checkpoint(on_pause)
+
+
+@contextmanager
+def emulating(config_path: Path) -> Iterator[dict[str, tuple[str, str]]]:
+    """`gonio emulate CFG` in its own process; yields {device: (protocol, endpoint)}."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(config_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        endpoints = {}
+        for _ in tomllib.loads(config_path.read_text())["devices"]:
+            name, protocol, endpoint = proc.stdout.readline().split()
+            endpoints[name] = (protocol, endpoint)
+        yield endpoints
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+        assert proc.returncode == 0, err
+
+
+def pointed(cfg: dict, endpoints: dict[str, tuple[str, str]]) -> dict:
+    """What a user does by hand: a config with the endpoints `gonio emulate` printed."""
+    cfg = {**cfg, "devices": {n: dict(d) for n, d in cfg["devices"].items()}}
+    for name, (protocol, endpoint) in endpoints.items():
+        dev = cfg["devices"][name]
+        if protocol == "modbus-tcp":
+            host, port = endpoint.rsplit(":", 1)
+            dev.update(host=host, tcp_port=int(port))
+        else:
+            dev["port"] = endpoint
+    return cfg

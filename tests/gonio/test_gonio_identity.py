@@ -1,7 +1,8 @@
 """Each session of a run records every device by the identity it reported (ESP VE?, PM100
 *IDN? and sensor head, Modbus 43/14 and [identity] registers); a resume on other hardware
-records the other identity; `gonio scan PLAN --resume RUN` takes a PLAN only if it is the
-run's own; `gonio emulate --time-scale X` runs the emulated clock X times real time."""
+records the other identity and warns about it; `gonio scan PLAN --resume RUN` takes a PLAN
+only if it is the run's own; `gonio emulate --time-scale X` runs the emulated clock X times
+real time."""
 
 import os
 import signal
@@ -12,17 +13,19 @@ import time
 import pytest
 from gonio_testkit import (
     ROOT,
+    AbortAfter,
     dump_toml,
+    emulating,
     fast_config,
     gonio_cli,
     one_line_error,
+    pointed,
     run_dir_of,
     write_plan,
     write_toml,
 )
 
 from drivers.esp import EspController
-from gonio.engine import PauseControl
 from gonio.runner import new_scan
 from gonio.store import open_run
 from sim.devices.modbus_server import FIRMWARE
@@ -32,19 +35,11 @@ PLAN = {"name": "identity", "averaging": 2, "beam": {"every": 2}, "grid": [
     {"side": "reflection", "theta_i_deg": [20.0], "theta_o_deg": [10.0, 30.0, 50.0]}]}
 
 
-class AbortAtFirstPoint(PauseControl):
-    """A Ctrl-C answered with "abort" before the first point: leaves a run to resume."""
-
-    def __init__(self) -> None:
-        super().__init__(prompt=lambda: False, notify=lambda _message: None)
-        self.pause_requested = True
-
-
 def aborted_run(tmp_path, cfg):
     """An emulated run of PLAN on cfg, aborted at once: (plan file, run directory)."""
     plan = write_plan(tmp_path, PLAN, cfg)
     result = new_scan(plan, sim=True, out=tmp_path / "runs", progress=False,
-                      control=AbortAtFirstPoint())
+                      control=AbortAfter(0))
     assert result.outcome.status == "aborted" and result.outcome.done < 4
     return plan, result.path
 
@@ -83,20 +78,36 @@ def test_meta_names_every_device_by_its_identity(tmp_path, instrument):
 
 
 def test_resume_with_its_plan_on_other_hardware_records_that_hardware(tmp_path):
-    """The same plan (reformatted, with comments) resumes the run; the second session, on a
-    bench with other serial numbers, records those."""
+    """A run on one bench (`gonio emulate`) resumed with the same plan (reformatted, with
+    comments) on another, at other endpoints and with other serial numbers: the second
+    session records the endpoint change and the other identities, and the scan warns."""
     cfg = fast_config("sim-modbus")
-    plan, run_dir = aborted_run(tmp_path, cfg)
-    other = write_toml(tmp_path / "other.toml", {**cfg, "sim": {**cfg["sim"], "seed": 40}})
+    with emulating(write_toml(tmp_path / "bench1.toml", cfg)) as endpoints:
+        first = pointed(cfg, endpoints)
+        plan = write_plan(tmp_path, PLAN, first)
+        result = new_scan(plan, out=tmp_path / "runs", progress=False, control=AbortAfter(1))
+    run_dir = result.path
+    assert result.outcome.status == "aborted"
     same = tmp_path / "same.toml"
     text = dump_toml(dict(reversed({**PLAN, "instrument": "plan-instrument.toml"}.items())))
     same.write_text("# the plan again, written by hand\n\n" + text.replace("\n[", "\n# a table\n["))
-    proc = gonio_cli("scan", same, "--resume", run_dir, "--instrument", other, "--no-plot",
-                     "--no-progress")
+    bench2 = write_toml(tmp_path / "bench2.toml", {**cfg, "sim": {**cfg["sim"], "seed": 40}})
+    with emulating(bench2) as endpoints:
+        second = pointed(cfg, endpoints)
+        other = write_toml(tmp_path / "other.toml", second)
+        proc = gonio_cli("scan", same, "--resume", run_dir, "--instrument", other, "--no-plot",
+                         "--no-progress")
     assert proc.returncode == 0, proc.stderr
     assert run_dir_of(proc) == run_dir
+    assert "warning: device 'photodiode' reports another identity" in proc.stderr
     run = open_run(run_dir)
     assert run.meta["status"] == "completed" and len(run) == run.meta["planned"]
+    session = run.meta["sessions"][-1]
+    moved = {f"devices.{name}.{key}": {"from": dev.get(key), "to": second["devices"][name][key]}
+             for name, dev in first["devices"].items() for key in ("port", "host", "tcp_port")
+             if dev.get(key) != second["devices"][name].get(key)}
+    assert session.get("endpoint_changes", {}) == moved
+    assert set(session["identity_changes"]) == set(cfg["devices"])
     first, second = (s["devices"] for s in run.meta["sessions"])
     for name in cfg["devices"]:
         before, after = first[name]["identity"], second[name]["identity"]
@@ -115,7 +126,7 @@ def test_resume_with_another_plan_is_refused_naming_the_keys(tmp_path):
     assert proc.returncode == 2, proc.stderr
     line = one_line_error(proc.stderr)
     assert f"{changed}: not the plan {run_dir} was started with" in line
-    assert "(differs in averaging, beam, dwell_s)" in line
+    assert "(differs in averaging, beam.every, dwell_s)" in line
     after = open_run(run_dir)
     assert len(after) == len(stored) and after.meta["sessions"] == stored.meta["sessions"]
     matching = gonio_cli("scan", plan, "--resume", run_dir, "--no-plot", "--no-progress")

@@ -1,9 +1,12 @@
-"""The run store: append-only readings, torn last lines, resume without duplicates."""
+"""The run store: append-only readings, torn last lines, damaged lines refused everywhere,
+resume without duplicates, repaired runs resumed."""
 
 import errno
 import json
 import math
 import os
+import re
+import shutil
 import signal
 import threading
 import time
@@ -13,7 +16,8 @@ import pytest
 
 import gonio.store
 from gonio.errors import RunError
-from gonio.store import READING_DTYPE, RunWriter, open_run
+from gonio.integrity import check, repair
+from gonio.store import READING_DTYPE, DamagedRunError, RunWriter, digest_problems, open_run
 
 
 def row(i, **kw):
@@ -59,9 +63,10 @@ def test_out_of_order_append_is_refused(writer):
         writer.append(row(2))
 
 
-@pytest.mark.parametrize("tail", [b'{"index": 3, "kind": "sam', b'{"index": 3}garbage\n',
-                                  b'{"index": 7, "kind": "sample"}\n', b"\x00\x00\x00"])
-def test_torn_or_bad_tail_is_ignored_and_cut_on_resume(writer, tail):
+@pytest.mark.parametrize("tail", [b'{"index": 3, "kind": "sam', b"\x00" * 300,
+                                  b'{"index": 3, "ki' + b"\x00" * 40])
+def test_torn_tail_is_ignored_and_cut_on_resume(writer, tail):
+    """A torn last line: the bytes after the last newline (half a line, NUL padding)."""
     for i in range(3):
         writer.append(row(i))
     writer.close()
@@ -76,6 +81,92 @@ def test_torn_or_bad_tail_is_ignored_and_cut_on_resume(writer, tail):
     assert list(r["index"]) == [0, 1, 2, 3]
     lines = (writer.path / "readings.jsonl").read_bytes().splitlines()
     assert [json.loads(x)["index"] for x in lines] == [0, 1, 2, 3]
+
+
+def _crc_flipped(line: bytes) -> bytes:
+    return line.replace(b'"power_w": ', b'"power_w": 9', 1)
+
+
+DAMAGE = {  # how line 3 (index 2) of 6 is damaged -> what every reader says
+    "garbage": (lambda lines: lines[:2] + [b"}{garbage"] + lines[3:], "line 3: not JSON"),
+    "nul": (lambda lines: lines[:2] + [b"\x00" * 80] + lines[3:], "line 3: NUL bytes"),
+    "duplicated": (lambda lines: lines[:2] + [lines[1]] + lines[2:],
+                   "line 3: duplicate of index 1 (line 2)"),
+    "crc": (lambda lines: lines[:2] + [_crc_flipped(lines[2])] + lines[3:],
+            "line 3: crc32 checksum mismatch (index 2)"),
+    "no crc": (lambda lines: lines[:2] + [re.sub(rb', "crc32": \d+', b"", lines[2])]
+               + lines[3:], "line 3: no crc32 checksum (index 2)"),
+    "swapped": (lambda lines: lines[:2] + [lines[3], lines[2]] + lines[4:],
+                "line 3: index 3 follows index 1: index 2 missing (and 1 more damaged line)"),
+    "deleted": (lambda lines: lines[:2] + lines[3:],
+                "line 3: index 3 follows index 1: index 2 missing"),
+    "last line": (lambda lines: lines[:5] + [b"{not json"], "line 6: not JSON"),
+}
+
+
+@pytest.mark.parametrize("kind", DAMAGE)
+def test_a_damaged_line_is_an_error_for_every_reader_and_for_resume(writer, kind):
+    damage, said = DAMAGE[kind]
+    for i in range(6):
+        writer.append(row(i))
+    writer.close()
+    path = writer.path / "readings.jsonl"
+    path.write_bytes(b"\n".join(damage(path.read_bytes().splitlines())) + b"\n")
+    run = open_run(writer.path)
+    for read in (run.rows, run.readings, run.__len__):
+        with pytest.raises(DamagedRunError, match=re.escape(f"readings.jsonl {said}")):
+            read()
+    before = path.read_bytes()
+    with pytest.raises(DamagedRunError, match=r"cannot resume: `gonio check .* --repair "):
+        RunWriter.resume(writer.path)
+    assert path.read_bytes() == before  # nothing cut
+    with pytest.raises(DamagedRunError):  # again, not "in use": the refusal freed the lock
+        RunWriter.resume(writer.path)
+
+
+def test_a_run_without_checksums_reads_as_unchecked(writer):
+    """Runs written before line checksums: lines without crc32 are read, not refused."""
+    for i in range(3):
+        writer.append(row(i))
+    writer.close()
+    path = writer.path / "readings.jsonl"
+    path.write_bytes(re.sub(rb', "crc32": \d+', b"", path.read_bytes()))
+    meta = json.loads((writer.path / "meta.json").read_text())
+    del meta["line_checksum"], meta["digests"]
+    (writer.path / "meta.json").write_text(json.dumps(meta))
+    assert open_run(writer.path).lines().unchecked == 3
+    assert len(open_run(writer.path)) == 3
+    resumed = RunWriter.resume(writer.path)
+    resumed.append(row(3))
+    resumed.close()
+    lines = open_run(writer.path).lines()
+    assert (len(lines.rows), lines.unchecked, lines.damaged) == (4, 3, [])
+
+
+def test_a_repaired_run_measures_its_dropped_indices_first(writer, tmp_path):
+    for i in range(5):
+        writer.append(row(i))
+    writer.close()
+    path = writer.path / "readings.jsonl"
+    lines = path.read_bytes().splitlines(keepends=True)
+    path.write_bytes(b"".join(lines[:1] + [b"garbage\n"] + lines[2:3] + [b"\x00\n"] + lines[4:]))
+    copy = repair(check(open_run(writer.path)), tmp_path / "copy")
+    run = open_run(copy)
+    assert run.meta["repair"]["dropped"] == [1, 3] and list(run.readings()["index"]) == [0, 2, 4]
+    resumed = RunWriter.resume(copy)
+    assert (resumed.todo(7), resumed.stored) == ([1, 3, 5, 6], 3)
+    resumed.start_session()
+    with pytest.raises(RunError, match="out of order"):
+        resumed.append(row(5))
+    for i in resumed.todo(7):
+        resumed.append(row(i))
+    resumed.set_status("completed", "")
+    resumed.close()
+    run = open_run(copy)
+    assert list(run.readings()["index"]) == list(range(7))
+    assert run.meta["sessions"][-1]["refill"] == [1, 3]
+    report = check(run)
+    assert not report.damaged, report.text()
 
 
 def test_completed_run_cannot_be_resumed(writer):
@@ -160,3 +251,23 @@ def test_ctrl_c_while_waiting_for_an_fsync_leaves_it_awaited(writer, monkeypatch
     writer.set_status("aborted", "aborted by the user (Ctrl-C)")
     assert len(fsyncs) == 1  # set_status waited for it
     assert len(open_run(writer.path)) == 1
+
+
+def test_register_maps_count_by_content_not_path(tmp_path):
+    """The digests of a run cover its register maps' contents: a moved copy of the same map
+    passes, an edited one (or plan.json) does not."""
+    regmap = tmp_path / "drive.toml"
+    regmap.write_text("[registers]\n")
+    config = {"name": "c", "devices": {"drive": {"register_map": str(regmap)}}}
+    w = RunWriter.create(tmp_path / "runs", "t", None, None, {"name": "t"}, config, {})
+    w.close()
+    run = open_run(w.path)
+    moved = tmp_path / "elsewhere.toml"
+    shutil.copyfile(regmap, moved)
+    assert digest_problems(run, {"devices": {"drive": {"register_map": str(moved)}}}) == []
+    moved.write_text("[registers]\nvelocity = 1\n")
+    assert digest_problems(run, {"devices": {"drive": {"register_map": str(moved)}}}) == [
+        "the register map of device 'drive' differs in content from the one the run started with"]
+    (w.path / "plan.json").write_text('{"name": "u"}')
+    assert digest_problems(open_run(w.path)) == [
+        "plan.json changed since the run started (its digest differs)"]
