@@ -201,7 +201,8 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
     if cal.linearity is not None:
         cal.notes += fit_warning("gains", "gain", cal.linearity["chi2_dof"])
     if eta is None:
-        cal.notes.append("angles: not calibrated: no eta (--eta) of a reference sample given")
+        cal.notes.append("angles: not calibrated: no eta of a reference sample (--eta, or the "
+                         "[sample] of a run with a specular scan)")
     else:
         _angles(cal, runs, eta, aperture, divergence_deg)
     if aperture is None:

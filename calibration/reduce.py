@@ -36,6 +36,9 @@ from gonio.sample import SampleInfo, sample_of_plan
 # beyond the cut: at 3 sigma 0.13 % of them (about one in an anti-glare run's ~500, adding ~0.5
 # to the chi-square per dof of its 20-point fit); at 5 sigma 3e-7.
 DARK_LIMIT_SIGMAS = 5.0
+#: Flag of a point whose aperture reaches across the sample's horizon or whose sample is edge-on.
+HORIZON = "horizon"
+EDGE_ON_COS = 1e-6  # |cos theta_i| below this: the beam grazes the sample (it is retracted)
 
 
 #: The noise model of a run whose shot noise nothing states.
@@ -246,9 +249,16 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
         bsdf = np.where(scale > 0, net / scale, np.nan)
         sigma = np.abs(np.where(scale > 0, np.hypot(noise, level_sigma) / scale, np.nan))
         sigma = np.hypot(sigma, np.abs(bsdf) * phi_sigma / phi)
+    # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
+    # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept
+    horizon = ((np.abs(wo[:, 2]) < math.sin(math.radians(optics.aperture_half_angle_deg)))
+               | (np.abs(wi[:, 2]) < EDGE_ON_COS))
     valid = (~rows["saturated"] & (scale > 0) & (net > DARK_LIMIT_SIGMAS * noise)
-             & np.isfinite(bsdf) & ~signature.invalid)
-    transmission = (wo[:, 2] > 0) != (wi[:, 2] > 0)
+             & np.isfinite(bsdf) & ~signature.invalid & ~horizon)
+    transmission = np.where(horizon, rows["side"] == "transmission",
+                            (wo[:, 2] > 0) != (wi[:, 2] > 0))
+    flags = np.array([",".join(f for f in (why, HORIZON if edge else "") if f)
+                      for why, edge in zip(signature.flags, horizon, strict=True)], dtype=object)
     meta = {
         "eta": sample.eta, "k": sample.k, "kind": sample.kind, "lit_from": sample.lit_from,
         "sample": sample.to_json(),
@@ -266,4 +276,4 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     if signature.meta is not None:
         meta["signature"] = signature.meta
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
-                       phi_shared / phi[:, None], signature.flags)
+                       phi_shared / phi[:, None], flags.astype(str))

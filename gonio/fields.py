@@ -6,6 +6,7 @@ key (a typo) is an error rather than silently ignored.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -40,7 +41,10 @@ class Fields:
         if key in self.table:
             return self.table[key]
         if default is REQUIRED:
-            raise self.error(f"{self.where}: missing required key {key!r}")
+            near = difflib.get_close_matches(key, [k for k in self.table if isinstance(k, str)],
+                                             n=1, cutoff=0.75)
+            typo = f" (is {near[0]!r} a typo for it?)" if near else ""
+            raise self.error(f"{self.where}: missing required key {key!r}{typo}")
         return default
 
     def number(

@@ -58,8 +58,11 @@ class Optics:
 
 def _polarisation(f: Fields, key: str) -> str | float:
     value = f._get(key, "unpolarised")
+    if isinstance(value, str) and value not in POLARISATIONS:
+        raise f.fail(key, f'must be "unpolarised", "s", "p" or a linear polariser\'s angle in '
+                     f"degrees; got {value!r}")
     if isinstance(value, str):
-        return f.string(key, "unpolarised", choices=POLARISATIONS)
+        return value
     return f.number(key, low=-180.0, high=180.0)
 
 

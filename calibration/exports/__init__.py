@@ -79,9 +79,9 @@ def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
     return write_mitsuba(material, out_path, notes)
 
 
-def write(run_dir: str | Path, fmt: str, out_path: str | Path) -> Path:
-    """Reduce and fit a run, then write its model as `fmt` (zemax | mitsuba); returns the path
-    (for zemax with both sides measured, the main file; the other side sits beside it)."""
+def write(run_dir: str | Path, fmt: str, out_path: str | Path) -> list[Path]:
+    """Reduce and fit a run, then write its model as `fmt` (zemax | mitsuba); returns every
+    file written (zemax with both sides measured: the main file, then the other side's)."""
     from calibration.pipeline import fit_run
     from gonio.record import record_lines, run_record
     from gonio.store import open_run
@@ -91,5 +91,5 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path) -> Path:
     data, result = fit_run(run_dir)
     record = record_lines(run_record(open_run(run_dir)))
     if fmt == "zemax":
-        return zemax_files(data, result, out_path, source=str(run_dir), record=record)[0]
-    return mitsuba_file(result, out_path, source=str(run_dir), record=record)
+        return list(zemax_files(data, result, out_path, source=str(run_dir), record=record))
+    return [mitsuba_file(result, out_path, source=str(run_dir), record=record)]

@@ -26,7 +26,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("runs", nargs="+", metavar="RUN", help="calibration run directories")
     b.add_argument("--out", required=True, metavar="FILE", help="calibration file (.json)")
     b.add_argument("--eta", type=float, help="sample eta: also find the angle zero offsets "
-                   "from the transmitted and specular peaks in the runs")
+                   "from the transmitted and specular peaks in the runs (default: the [sample] "
+                   "eta of the runs with a specular scan)")
     group = b.add_mutually_exclusive_group()
     group.add_argument("--aperture-geometry", nargs=2, type=float, metavar=("D_MM", "DIST_MM"),
                        help="aperture diameter and distance from the sample, mm (default: "
@@ -80,12 +81,32 @@ def _build(args: argparse.Namespace) -> int:
     divergence = args.divergence_deg
     if divergence is None:
         divergence = _optics(runs, "divergence_deg") or 0.0
-    cal = build([r.readings() for r in runs], utc_now(), [str(r.path) for r in runs],
-                eta=args.eta, aperture=_aperture(args, runs), divergence_deg=divergence)
+    readings = [r.readings() for r in runs]
+    eta = args.eta if args.eta is not None else _sample_eta(runs, readings)
+    cal = build(readings, utc_now(), [str(r.path) for r in runs],
+                eta=eta, aperture=_aperture(args, runs), divergence_deg=divergence)
     for note in cal.notes:
         print(f"gonio calibrate: {note}", file=sys.stderr)
     print(calfile.save(cal, args.out))
     return 0
+
+
+def _sample_eta(runs: list[Run], readings: list) -> float | None:
+    """The reference sample's index for the angle offsets when --eta is not given: the [sample]
+    eta of the runs holding a specular scan, if they have one and agree (else None)."""
+    from calibration.values import CalibrationError
+    from gonio.sample import sample_of_plan
+
+    etas = {}
+    for run, r in zip(runs, readings, strict=True):
+        sample = sample_of_plan(run.plan, str(run.path))
+        if sample is not None and ((r["kind"] == "sample") & (r["side"] == "reflection")).any():
+            etas[str(run.path)] = sample.eta
+    if len(set(etas.values())) > 1:
+        raise CalibrationError("the specular scans' [sample] eta differ ("
+                               + ", ".join(f"{v:g} in {p}" for p, v in etas.items())
+                               + "): give the reference sample's --eta")
+    return next(iter(etas.values()), None)
 
 
 def _optics(runs: list[Run], key: str) -> float | None:

@@ -20,12 +20,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Write the file and print its path."""
+    """Write the file(s) and print each path."""
     out = Path(args.out)
     if args.format in ("zemax", "mitsuba"):
         from calibration.exports import write
 
-        print(write(args.run, args.format, out))
+        for path in write(args.run, args.format, out):
+            print(path)
         return 0
     from gonio.export import write_csv, write_netcdf
     from gonio.store import open_run

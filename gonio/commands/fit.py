@@ -173,5 +173,7 @@ def summary(out: dict) -> str:
     if out.get("noise_model"):
         lines.append(f"  noise: {out['noise_model']}")
     if out.get("emulator_truth"):
-        lines.append(f"  emulator truth: {out['emulator_truth']}")
+        t = out["emulator_truth"]
+        lines.append(f"  emulator truth ([sim.sample]): {t['distribution']} alpha {t['alpha']}, "
+                     f"eta {t['eta']:g}, {t['masking']} masking")
     return "\n".join(lines)

@@ -36,11 +36,17 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
                      f"{optics.divergence_deg:g} deg; receiver {optics.aperture_diameter_mm:g} mm"
                      f" at {optics.aperture_distance_mm:g} mm = "
                      f"{optics.receiver_solid_angle_sr:.4g} sr; polarisation source "
-                     f"{optics.source_polarisation}, analyser {optics.analyser_polarisation}")
+                     f"{_state(optics.source_polarisation)}, analyser "
+                     f"{_state(optics.analyser_polarisation)}")
     else:
         lines.append("  optics: none (add an [optics] table to the instrument config, or "
                      "reduce with a calibration that measured the aperture)")
     return "\n".join(lines)
+
+
+def _state(polarisation: str | float) -> str:
+    """A polarisation state as text: its name, or a linear polariser's angle in degrees."""
+    return polarisation if isinstance(polarisation, str) else f"linear at {polarisation:g} deg"
 
 
 def run(args: argparse.Namespace) -> int:

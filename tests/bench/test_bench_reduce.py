@@ -141,3 +141,13 @@ def test_optics_and_errors():
         reduce_readings(run, readings[readings["kind"] != "beam"])
     with pytest.raises(CalibrationError, match="dark"):
         reduce_readings(run, readings[readings["kind"] != "dark"])
+
+
+def test_an_aperture_across_the_horizon_is_no_bsdf():
+    """At theta_o = 90 the aperture straddles the sample's horizon: |cos o| -> 0 would turn any
+    power into a huge 'BSDF'; such a point is flagged and invalid, and keeps its planned side."""
+    run, readings, _ = simulate_run(SIM, [(0.0, 30.0, "reflection"), (0.0, 90.0, "transmission"),
+                                          (0.0, 89.0, "transmission")])
+    data = reduce_readings(run, readings)
+    assert list(data.flags) == ["", "horizon", ""]
+    assert not data.valid[1] and data.transmission[1]

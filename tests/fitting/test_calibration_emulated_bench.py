@@ -125,12 +125,13 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
     assert shown["aperture"]["half_angle_deg"]["value"] == pytest.approx(0.5729, abs=1e-3)
     assert shown["angles"]["fit"]["aperture_half_angle_deg"] == pytest.approx(0.5729, abs=1e-3)
     assert shown["notes"] == err.replace("gonio calibrate: ", "").splitlines()
-    # an option wins over [optics]
+    # an option wins over [optics]; without --eta the angle run's [sample] eta serves
     assert main(["calibrate", "build", str(angle_run.path), "--out", str(tmp_path / "c2.json"),
                  "--aperture-geometry", "8", "500"]) == 0
-    assert "angles: not calibrated: no eta (--eta)" in capsys.readouterr().err
-    assert calfile.load(tmp_path / "c2.json").aperture_half_angle_deg.value == pytest.approx(
-        math.degrees(math.atan(4.0 / 500.0)))
+    assert "angles: not calibrated" not in capsys.readouterr().err
+    c2 = calfile.load(tmp_path / "c2.json")
+    assert c2.aperture_half_angle_deg.value == pytest.approx(math.degrees(math.atan(4.0 / 500.0)))
+    assert abs(c2.arm_offset_deg.value - ARM_OFFSET) < 0.03
     assert main(["calibrate", "use", str(angle_run.path), str(cal)]) == 0
     meta = json.loads((angle_run.path / "meta.json").read_text())
     assert meta["calibration"] == calfile.reference(cal)

@@ -171,8 +171,11 @@ def test_export_and_plot_cli(quick_run, tmp_path, capsys):
     assert material["type"] == "roughdielectric"
     assert material["params"]["distribution"] == fitted["distribution"] == "ggx"
     assert material["params"]["alpha"] == pytest.approx(alpha, rel=1e-8)
+    capsys.readouterr()
     assert main(["export", str(quick_run), "--format", "zemax",
                  "--out", str(tmp_path / "glass.bsdf")]) == 0
+    assert capsys.readouterr().out.split() == [str(tmp_path / "glass.bsdf"),
+                                               str(tmp_path / "glass-BRDF.bsdf")]
     btdf, brdf = read_zemax(tmp_path / "glass.bsdf"), read_zemax(tmp_path / "glass-BRDF.bsdf")
     assert (btdf.scatter_type, brdf.scatter_type) == ("BTDF", "BRDF")
     assert list(btdf.angle_deg) == [0.0] and 0.0 < btdf.tis[0, 0] < 1.0

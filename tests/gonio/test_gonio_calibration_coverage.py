@@ -43,7 +43,8 @@ def test_a_calibration_from_the_calib_plan_covers_the_shipped_plans(tmp_path):
     # darks and gains on every range, the aperture from the run's [optics]: only the angles
     # (no --eta) are missing, and said so, on stderr and in the file
     assert build.stderr.splitlines() == [
-        "gonio calibrate: angles: not calibrated: no eta (--eta) of a reference sample given"]
+        "gonio calibrate: angles: not calibrated: no eta of a reference sample (--eta, or the "
+        "[sample] of a run with a specular scan)"]
     cal = calfile.load(cal_path)
     assert cal.notes == [build.stderr.removeprefix("gonio calibrate: ").strip()]
     assert sorted(cal.dark_offsets_w, key=float) == sorted(cal.gains, key=float) == ALL_RANGES

@@ -39,7 +39,8 @@ def test_receiver_solid_angle_from_the_aperture():
 
 @pytest.mark.parametrize("change, message", [
     ({"aperture_diameter_mm": 600.0}, "aperture_diameter_mm: 600 mm must be smaller"),
-    ({"source_polarisation": "circular"}, "source_polarisation: must be one of"),
+    ({"source_polarisation": "circular"}, "source_polarisation: must be \"unpolarised\", \"s\", "
+                                          "\"p\" or a linear polariser's angle in degrees"),
     ({"wavelength_nm": "red"}, "wavelength_nm: must be a number"),
     ({"apperture_mm": 1.0}, "unknown key 'apperture_mm'"),
 ])
@@ -50,10 +51,13 @@ def test_bad_optics_is_one_error_naming_the_field(change, message):
         parse_config(cfg)
 
 
-def test_missing_optics_key_is_named():
+def test_missing_optics_key_is_named_with_the_typo_that_hides_it():
     cfg = fast_config()
     del cfg["optics"]["bandwidth_nm"]
-    with pytest.raises(ConfigError, match="optics: missing required key 'bandwidth_nm'"):
+    with pytest.raises(ConfigError, match="optics: missing required key 'bandwidth_nm'$"):
+        parse_config(cfg)
+    cfg["optics"]["bandwith_nm"] = 0.002
+    with pytest.raises(ConfigError, match="'bandwidth_nm' \\(is 'bandwith_nm' a typo for it"):
         parse_config(cfg)
 
 
@@ -114,6 +118,9 @@ def test_scan_records_optics_and_sample_and_takes_sample_id(tmp_path):
     assert json.loads((run / "plan.json").read_text())["sample"]["id"] == "GG-0042"
     del plan["sample"]
     bare = write_toml(tmp_path / "bare.toml", plan)
+    warned = gonio_cli("scan", bare, "--sim", "--out", tmp_path / "runs", "--no-plot")
+    assert warned.returncode == 0, warned.stderr  # it scans, and says before it moves why
+    assert "has no [sample] table (id, kind, eta): the run will not reduce" in warned.stderr
     refused = gonio_cli("scan", bare, "--sim", "--sample-id", "x", "--out", tmp_path / "runs")
     assert refused.returncode != 0
     assert "needs a [sample] table" in one_line_error(refused.stderr)

@@ -175,8 +175,8 @@ def test_every_export_carries_the_record(emulated, tmp_path):
         assert ds.source_polarisation == "unpolarised"
         assert json.loads(ds.sample)["id"] == "GG-7"
         assert json.loads(ds.sessions)[0]["devices"] == IDENTITY
-    zemax = write_model(run.path, "zemax", tmp_path / "glass.bsdf").read_text()
-    mitsuba = write_model(run.path, "mitsuba", tmp_path / "glass.xml").read_text()
+    zemax = write_model(run.path, "zemax", tmp_path / "glass.bsdf")[0].read_text()
+    mitsuba = write_model(run.path, "mitsuba", tmp_path / "glass.xml")[0].read_text()
     for line in ('# receiver_solid_angle_sr: ', '# sample: {"id": "GG-7"',
                  '# sessions: [{"session": 0'):
         assert line in zemax
