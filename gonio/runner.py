@@ -104,7 +104,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              sim: list[str] | bool = False, out: str | Path = "runs",
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
-             sample_id: str | None = None, check: DetectorCheck | None = None) -> ScanResult:
+             sample_id: str | None = None, check: DetectorCheck | None = None,
+             warn: Callable[[str], None] | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
@@ -112,7 +113,9 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     time_scale: replaces the config's [sim] time_scale (emulated runs only);
     sample_id: replaces the plan's [sample] id (the stored plan and the record carry it);
     check: called with the schedule's readings and the open detector before the run directory
-    exists and before any motion (the scan command checks the calibration's ranges there).
+    exists and before any motion (the scan command checks the calibration's ranges there);
+    warn: told, once plan and config are valid and before any device opens, what the run will
+    lack that reduction needs (undescribed).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -130,6 +133,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
         from gonio.simulate import resolve_devices
 
         resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
+    for text in undescribed(plan, cfg) if warn else ():
+        warn(text)
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
     meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
@@ -141,6 +146,19 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
                 check)
+
+
+def undescribed(plan: Plan, cfg: InstrumentConfig) -> list[str]:
+    """What a run of this plan on this instrument will lack that reduction needs (the plan's
+    [sample], the config's [optics]); the scan itself can go ahead."""
+    out = []
+    if plan.sample is None:
+        out.append(f"{plan.path} has no [sample] table (id, kind, eta): the run will not "
+                   f"reduce until the plan says what is measured")
+    if cfg.optics is None:
+        out.append(f"{cfg.path} has no [optics] table: the run reduces only with a "
+                   f"calibration that measured the aperture")
+    return out
 
 
 def with_sample_id(plan: Plan, sample_id: str) -> Plan:

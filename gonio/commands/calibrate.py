@@ -91,16 +91,24 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Incidence beyond which the sample is edge-on (retracted): no specular scan there.
+RETRACTED_DEG = 89.0
+
+
 def _sample_eta(runs: list[Run], readings: list) -> float | None:
     """The reference sample's index for the angle offsets when --eta is not given: the [sample]
     eta of the runs holding a specular scan, if they have one and agree (else None)."""
+    import numpy as np
+
     from calibration.values import CalibrationError
     from gonio.sample import sample_of_plan
 
     etas = {}
     for run, r in zip(runs, readings, strict=True):
         sample = sample_of_plan(run.plan, str(run.path))
-        if sample is not None and ((r["kind"] == "sample") & (r["side"] == "reflection")).any():
+        specular = ((r["kind"] == "sample") & (r["side"] == "reflection")
+                    & (np.abs(r["plan_theta_i_deg"]) < RETRACTED_DEG))
+        if sample is not None and specular.any():
             etas[str(run.path)] = sample.eta
     if len(set(etas.values())) > 1:
         raise CalibrationError("the specular scans' [sample] eta differ ("

@@ -70,24 +70,6 @@ def _covers(path: str) -> DetectorCheck:
                                                        detector.full_scales_w())
 
 
-def _warn_undescribed(plan_path: str, instrument: str | None, sample_id: str | None) -> None:
-    """Before anything moves: say so when the run will lack the description reduction needs
-    (the plan's [sample], the config's [optics]); the scan itself goes ahead (a --sample-id
-    without a [sample] is refused by the runner instead)."""
-    from gonio.config import load_config
-    from gonio.plan import load_plan
-    from gonio.runner import instrument_path
-
-    plan = load_plan(plan_path)
-    cfg = load_config(instrument_path(plan, instrument))
-    if plan.sample is None and sample_id is None:
-        print(f"gonio scan: warning: {plan_path} has no [sample] table (id, kind, eta): the run "
-              f"will not reduce until the plan says what is measured", file=sys.stderr)
-    if cfg.optics is None:
-        print(f"gonio scan: warning: {cfg.path} has no [optics] table: the run reduces only "
-              f"with a calibration that measured the aperture", file=sys.stderr)
-
-
 def run(args: argparse.Namespace) -> int:
     """Start or resume the scan; exit 0 when it completed."""
     from gonio.runner import new_scan, resume_scan
@@ -110,10 +92,11 @@ def run(args: argparse.Namespace) -> int:
             from calibration.calfile import reference
 
             calibration, check = reference(args.calibration), _covers(args.calibration)
-        _warn_undescribed(args.plan, args.instrument, args.sample_id)
         result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
                           progress=progress, calibration=calibration,
-                          time_scale=args.time_scale, sample_id=args.sample_id, check=check)
+                          time_scale=args.time_scale, sample_id=args.sample_id, check=check,
+                          warn=lambda text: print(f"gonio scan: warning: {text}",
+                                                  file=sys.stderr))
     outcome = result.outcome
     plotted = False
     if not args.no_plot and outcome.done:

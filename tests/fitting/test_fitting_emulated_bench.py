@@ -106,7 +106,7 @@ def test_fit_json_cli(quick_run, capsys):
     assert main(["fit", str(run), "--distribution", "ggx,beckmann"]) == 0
     text = capsys.readouterr().out
     assert "run " in text and "alpha" in text and "clearly preferred" in text
-    assert "emulator truth: {'distribution': 'ggx', 'alpha': 0.394" in text
+    assert "emulator truth ([sim.sample]): ggx alpha 0.394, eta 1.51" in text
     assert "sample test-glass (hemisphere, eta 1.51)" in text
     assert main(["fit", str(run), "--incidence", "45"]) == 2  # one clear error line
     assert "usable points at incidence 45 deg" in capsys.readouterr().err
