@@ -150,10 +150,11 @@ class AbortAfter(PauseControl):
 
 
 @contextmanager
-def emulating(config_path: Path) -> Iterator[dict[str, tuple[str, str]]]:
-    """`gonio emulate CFG` in its own process; yields {device: (protocol, endpoint)}."""
+def emulating(config_path: Path, *options: str) -> Iterator[dict[str, tuple[str, str]]]:
+    """`gonio emulate CFG [OPTIONS]` in its own process; yields {device: (protocol, endpoint)}."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(config_path)],
+    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(config_path),
+                             *options],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         endpoints = {}

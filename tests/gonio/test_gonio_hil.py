@@ -4,14 +4,10 @@ the lab's devices (ESP301 and PM100 on ptys, a Modbus TCP drive on loopback) and
 mixed run: the stages from the other process, the detector emulated in the scanning process
 (`--sim detector`), seeing the positions the stages report."""
 
-import os
-import signal
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from gonio_testkit import ROOT, gonio_cli, load_example, run_dir_of, write_toml
+from gonio_testkit import emulating, gonio_cli, load_example, pointed, run_dir_of, write_toml
 
 from gonio.store import open_run
 
@@ -34,33 +30,8 @@ def rehearsal_config():
 def emulated_lab(tmp_path):
     """`gonio emulate` in its own process; yields (config, {device: (protocol, endpoint)})."""
     cfg = rehearsal_config()
-    path = write_toml(tmp_path / "lab.toml", cfg)
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        endpoints = {}
-        for _ in cfg["devices"]:
-            name, protocol, endpoint = proc.stdout.readline().split()
-            endpoints[name] = (protocol, endpoint)
+    with emulating(write_toml(tmp_path / "lab.toml", cfg)) as endpoints:
         yield cfg, endpoints
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=20)
-        assert proc.returncode == 0, err
-
-
-def pointed(cfg, endpoints):
-    """What a user does by hand: the lab config with the printed endpoints."""
-    cfg = {**cfg, "devices": {n: dict(d) for n, d in cfg["devices"].items()}}
-    for name, (protocol, endpoint) in endpoints.items():
-        dev = cfg["devices"][name]
-        if protocol == "modbus-tcp":
-            host, port = endpoint.rsplit(":", 1)
-            dev.update(host=host, tcp_port=int(port))
-        else:
-            dev["port"] = endpoint
-    return cfg
 
 
 def test_two_process_rehearsal(emulated_lab, tmp_path):

@@ -8,15 +8,11 @@ whose [sim] is deliberately wrong reduces the same run identically and scans to 
 """
 
 import json
-import os
 import shutil
-import signal
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from gonio_testkit import ROOT, gonio_cli, load_example, run_dir_of, write_toml
+from gonio_testkit import emulating, gonio_cli, load_example, pointed, run_dir_of, write_toml
 
 from calibration.pipeline import reduce_run
 from gonio.store import open_run
@@ -40,41 +36,18 @@ WRONG_SIM = {"time_scale": 3.0, "seed": 99,
 def lab(tmp_path_factory):
     """`gonio emulate lab.toml --time-scale inf` in its own process (the lab's own [sim]
     truth: ground glass, GGX alpha 0.394); yields (lab config, {device: (protocol, endpoint)})."""
-    tmp = tmp_path_factory.mktemp("lab")
     cfg = load_example("lab")
     for axis in cfg["axes"].values():
         axis["settle_s"] = 0.0
-    path = write_toml(tmp / "lab.toml", cfg)
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(path),
-                             "--time-scale", "inf"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        endpoints = {}
-        for _ in cfg["devices"]:
-            name, protocol, endpoint = proc.stdout.readline().split()
-            endpoints[name] = (protocol, endpoint)
+    path = write_toml(tmp_path_factory.mktemp("lab") / "lab.toml", cfg)
+    with emulating(path, "--time-scale", "inf") as endpoints:
         yield cfg, endpoints
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=20)
-        assert proc.returncode == 0, err
 
 
 def lab_copy(cfg, endpoints, sim=None):
     """The lab's own copy of lab.toml: the printed endpoints, and `sim` as its [sim] (none)."""
-    copy = {k: v for k, v in cfg.items() if k != "sim"}
-    copy["devices"] = {n: dict(d) for n, d in cfg["devices"].items()}
-    for name, (protocol, endpoint) in endpoints.items():
-        dev = copy["devices"][name]
-        if protocol == "modbus-tcp":
-            host, port = endpoint.rsplit(":", 1)
-            dev.update(host=host, tcp_port=int(port))
-        else:
-            dev["port"] = endpoint
-    if sim is not None:
-        copy["sim"] = sim
-    return copy
+    copy = {k: v for k, v in pointed(cfg, endpoints).items() if k != "sim"}
+    return copy if sim is None else {**copy, "sim": sim}
 
 
 def scan(tmp_path, name, instrument):
