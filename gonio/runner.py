@@ -20,7 +20,7 @@ from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.engine import Engine, Outcome, PauseControl
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.instrument import build_instrument
-from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan, positions
+from gonio.plan import AUTO_RANGE, Plan, Schedule, build_schedule, load_plan, parse_plan, positions
 from gonio.progress import Progress
 from gonio.store import RunWriter, open_run
 
@@ -58,25 +58,37 @@ class _Devices:
     request_counts: Callable[[], dict] = dict
 
 
+def _visited(sched: Schedule, cfg: InstrumentConfig, done: int) -> list[tuple[dict, float | None]]:
+    """The first `done` readings' commanded positions and range settings (None = autorange):
+    what an emulated detector of a resumed run has measured already."""
+    return [({role: float(row[f"{role}_deg"]) for role in cfg.axes},
+             None if row["range_w"] == AUTO_RANGE else float(row["range_w"]))
+            for row in sched.readings[:done]]
+
+
 @contextmanager
-def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan) -> Iterator[_Devices]:
+def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch: float,
+             visited: list[tuple[dict, float | None]]) -> Iterator[_Devices]:
     if sim is False:
         yield _Devices(cfg)
         return
     from gonio.simulate import simulation  # only --sim touches sim
 
-    with simulation(cfg, None if sim is True else sim, plan.raw.get("sample")) as s:
+    with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
+                    visited) as s:
         yield _Devices(s.config, s.time_scale, tuple(s.devices), s.positions,
                        s.bench.fault_counts, s.bench.request_counts)
 
 
 def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
-         control: PauseControl | None, check: DetectorCheck | None = None) -> ScanResult:
+         control: PauseControl | None, t0_epoch: float, done: int = 0,
+         check: DetectorCheck | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
-    of the schedule."""
-    with _devices(cfg, sim, plan) as dev, build_instrument(dev.config, dev.time_scale) as inst:
+    of the schedule (`done` readings are stored; the run started at t0_epoch)."""
+    with _devices(cfg, sim, plan, t0_epoch, _visited(sched, cfg, done)) as dev, \
+            build_instrument(dev.config, dev.time_scale) as inst:
         if check is not None:
             check(sched.readings, inst.detector)
         writer = make_writer()
@@ -135,7 +147,7 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
-                check)
+                meta["t0_epoch"], check=check)
 
 
 def with_sample_id(plan: Plan, sample_id: str) -> Plan:
@@ -178,7 +190,8 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
         with contextlib.closing(RunWriter.resume(run.path)) as writer:
             writer.set_status("completed", "")
         return ScanResult(run.path, Outcome("completed", "", len(run)))
-    return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control)
+    return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
+                run.meta["t0_epoch"], done=len(run))
 
 
 _MISSING = object()
