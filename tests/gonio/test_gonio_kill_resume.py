@@ -29,8 +29,9 @@ PAUSE_S = 0.5  # a stall mid-session (SIGSTOP ... SIGCONT): load, a swapped-out 
 
 def config(**kw) -> dict:
     """The fast sim-serial config with a PM100 timeout no emulator reply misses under load (the
-    first reading at a new incidence takes 0.2 s at load 8): a query re-sent after a timeout
-    is a new measurement, the next visit's noise, as on a real meter."""
+    first reading at a new incidence walks a multiple-scattering column: 0.2-0.5 s at load
+    8): a query re-sent after a timeout is a new measurement, the next visit's noise, as on
+    a real meter."""
     return fast_config(pm100={"timeout_s": 10.0}, **kw)
 
 
