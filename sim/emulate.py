@@ -14,6 +14,7 @@ noise is keyed on the seed, the device, the commanded positions (the emulated st
 targets), the range setting and the visit count (sim.devices.photodiode), and the source
 drifts in wall seconds since the run's own start (`t0_epoch`, the clock of a reading's
 `t_s`). A resumed run passes its stored readings as `visited` so the visit counts go on.
+A request a client re-sends after its timeout is a new measurement (docs/bench.md).
 """
 
 from __future__ import annotations
@@ -209,12 +210,11 @@ class _Builder:
                     self.readers[role], self.targets[role] = emu.axis.position, emu.axis.target
 
     def detectors(self, source: Any, place: Callable[[], tuple[float, ...]],
-                  visited: Iterable[tuple[tuple[float, ...], float | None]]) -> None:
+                  visited: list[tuple[tuple[float, ...], float | None]]) -> None:
         """Emulators of the chosen detectors, lit by `source` (the bench's PowerSource), their
         noise keyed on `place()` (the commanded positions) and counting `visited` as taken."""
         light_nm = source.bench.source.wavelength_nm
         detector = self.sim.get("detector")
-        visited = list(visited)
         for name in self.chosen:
             dev = self.devices[name]
             if dev["protocol"] == "pm100":
