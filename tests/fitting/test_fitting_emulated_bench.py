@@ -59,13 +59,13 @@ def narrow_lobe_grids() -> list[dict]:
     ]
 
 
-#: (value - truth) / sigma of alpha over 8 seeds (1-8, keyed noise, bench tables walked from the
-#: same seed): mean (the estimator's bias) and spread. The anti-glare fit sits low (cause not
-#: traced: single scattering, -0.002 % at most); the ground-glass fit high (the bench's
-#: multiple-scattering tables carry an error the fit's sigma does not know, docs/
-#: multiple-scattering.md: +2.9 sigma in its own scan). 4 sigma about the bias covers 3
-#: spreads (1.16 at most) and the bias's own error (spread / sqrt(8) = 0.4).
-PULL_BIAS = {0.023: -1.52, 0.394: +1.58, 0.553: +0.36}  # spreads 0.93, 1.16, 0.74
+#: (value - truth) / sigma of alpha over seeds 1-8 (1-16 for ground glass; keyed noise, bench
+#: tables walked from the same seed): mean (the estimator's bias) and spread. The anti-glare
+#: fit sits low (cause not traced: single scattering, -0.002 % at most); the ground-glass fit
+#: high (the bench's multiple-scattering tables carry an error the fit's sigma does not know,
+#: docs/multiple-scattering.md: +2.9 sigma in its own scan). 4 sigma about the bias covers 3
+#: spreads (1.0 at most) and the bias's own error (spread / sqrt(8) = 0.35).
+PULL_BIAS = {0.023: -1.52, 0.394: +1.67, 0.553: +0.36}  # spreads 0.93, 0.98, 0.74
 PULL_TOLERANCE = 4.0
 
 
@@ -88,10 +88,13 @@ def test_walter_samples_round_trip(distribution, alpha, tmp_path):
     assert abs(value / alpha - 1.0) < 0.03
     # reduce's noise law (dark scatter scaled with the range, plus shot noise) and the beam
     # curve's shared error as a covariance; the noise level is estimated from 13 dark readings
-    # (+-20 % in sigma, docs/fitting.md, so chi2 x 0.7-1.6 at one sigma of it): over the 24
-    # runs above, fitted 0.49-1.75, held out 0.40-2.04 (ground glass, seed 3: 2.02)
+    # (+-20 % in sigma, docs/fitting.md, so chi2 x 0.7-1.6 at one sigma of it). Over the 32
+    # runs above: fitted 0.49-1.75 (mean 0.98, spread 0.36); held out 0.40-2.49, the most
+    # for ground glass (mean 1.59, spread 0.47: its held-out incidences add the fit's walked
+    # orders >= 2 and their Monte Carlo error). Bands: mean + 3 spreads above, 3/4 of the
+    # least seen below.
     assert 0.3 < result.chi2_dof_fit < 2.5
-    assert result.n_heldout > 10 and 0.3 < result.chi2_dof_heldout < 2.5
+    assert result.n_heldout > 10 and 0.3 < result.chi2_dof_heldout < 3.0
     # the CLI prints the same fit as one JSON object
     assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]
                 + ["--multiple-scattering"] * rough) == 0
