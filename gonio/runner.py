@@ -9,7 +9,7 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +22,7 @@ from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.engine import Engine, Outcome, PauseControl
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.instrument import build_instrument
-from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
+from gonio.plan import AUTO_RANGE, Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
 from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
 
@@ -60,26 +60,40 @@ class _Devices:
     request_counts: Callable[[], dict] = dict
 
 
+def _visited(sched: Schedule, cfg: InstrumentConfig, done: Sequence[int]
+             ) -> list[tuple[dict, float | None]]:
+    """The stored readings' (indices `done`) commanded positions and range settings (None =
+    autorange): what an emulated detector of a resumed run has measured already."""
+    return [({role: float(row[f"{role}_deg"]) for role in cfg.axes},
+             None if row["range_w"] == AUTO_RANGE else float(row["range_w"]))
+            for row in sched.readings[list(done)]]
+
+
 @contextmanager
-def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan) -> Iterator[_Devices]:
+def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch: float,
+             visited: list[tuple[dict, float | None]]) -> Iterator[_Devices]:
     if sim is False:
         yield _Devices(cfg)
         return
     from gonio.simulate import simulation  # only --sim touches sim
 
-    with simulation(cfg, None if sim is True else sim, plan.raw.get("sample")) as s:
+    with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
+                    visited) as s:
         yield _Devices(s.config, s.time_scale, tuple(s.devices), s.positions,
                        s.bench.fault_counts, s.bench.request_counts)
 
 
 def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
-         control: PauseControl | None, check: DetectorCheck | None = None,
+         control: PauseControl | None, t0_epoch: float, done: Sequence[int] = (),
+         check: DetectorCheck | None = None,
          session: dict[str, Any] | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
-    of the schedule. session: more for meta.json's record of this session."""
-    with _devices(cfg, sim, plan) as dev, build_instrument(dev.config, dev.time_scale) as inst:
+    of the schedule (the readings of indices `done` are stored; the run started at t0_epoch).
+    session: more for meta.json's record of this session."""
+    with _devices(cfg, sim, plan, t0_epoch, _visited(sched, cfg, done)) as dev, \
+            build_instrument(dev.config, dev.time_scale) as inst:
         if check is not None:
             check(sched.readings, inst.detector)
         writer = make_writer()
@@ -114,8 +128,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     sample_id: replaces the plan's [sample] id (the stored plan and the record carry it);
     check: called with the schedule's readings and the open detector before the run directory
     exists and before any motion (the scan command checks the calibration's ranges there);
-    warn: told, once plan and config are valid and before any device opens, what the run will
-    lack that reduction needs (undescribed).
+    warn: told, once the devices are open and checked and before any motion, what the run
+    will lack that reduction needs (undescribed).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -133,8 +147,6 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
         from gonio.simulate import resolve_devices
 
         resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
-    for text in undescribed(plan, cfg) if warn else ():
-        warn(text)
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
     meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
@@ -145,7 +157,19 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
-                check)
+                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn))
+
+
+def _then_warn(check: DetectorCheck | None, texts: list[str],
+               warn: Callable[[str], None] | None) -> DetectorCheck:
+    """The detector check, then the warnings: once every device is open and has passed, so
+    no warning precedes an error that stops the scan anyway."""
+    def checked(readings: np.ndarray, detector: Detector) -> None:
+        if check is not None:
+            check(readings, detector)
+        for text in texts if warn else ():
+            warn(text)
+    return checked
 
 
 def undescribed(plan: Plan, cfg: InstrumentConfig) -> list[str]:
@@ -207,6 +231,7 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
             writer.set_status("completed", "")
         return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
+                run.meta["t0_epoch"], done=[row["index"] for row in lines.rows],
                 session=session)
 
 

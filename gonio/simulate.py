@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
 from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
 from sim.devices.modbus_server import LOOPBACK
-from sim.emulate import EmulatedBench, start, time_scale_of
+from sim.emulate import EmulatedBench, Visit, start, time_scale_of
 
 
 @dataclass
@@ -69,21 +69,24 @@ def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConf
 
 
 def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float],
-           sample: dict | None = None, bind: str = LOOPBACK) -> EmulatedBench:
+           sample: dict | None = None, bind: str = LOOPBACK, t0_epoch: float | None = None,
+           visited: Iterable[Visit] = ()) -> EmulatedBench:
     try:
-        return start(cfg.raw, devices, lambda: positions, sample, bind)
+        return start(cfg.raw, devices, lambda: positions, sample, bind, t0_epoch, visited)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
 
 
 @contextmanager
 def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
-               sample: dict | None = None) -> Iterator[Simulation]:
+               sample: dict | None = None, t0_epoch: float | None = None,
+               visited: Iterable[Visit] = ()) -> Iterator[Simulation]:
     """Run the emulators of a config for the duration of a `with` block; `sample` is the
-    plan's [sample] table (the emulated sample's kind and index unless [sim] states them)."""
+    plan's [sample] table (the emulated sample's kind and index unless [sim] states them);
+    t0_epoch the run's start and visited its stored readings (sim.emulate.start)."""
     devices = resolve_devices(cfg, names)
     positions: dict[str, float] = {}
-    bench = _start(cfg, devices, positions, sample)
+    bench = _start(cfg, devices, positions, sample, t0_epoch=t0_epoch, visited=visited)
     try:
         pointed = point_at(cfg, {n: e.endpoint for n, e in bench.endpoints.items()})
         stages_emulated = all(ax.device in devices for ax in cfg.axes.values())

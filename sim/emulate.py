@@ -8,11 +8,19 @@ VirtualClock and the detectors' light from the bench at the stages' positions. I
 the endpoints, so a caller can point the config's ports at them. `devices` limits it to
 some of the devices (hardware in the loop); then `positions()` must say where the real
 stages are.
+
+A seeded emulated run does not depend on the machine's load or on a resume: the detectors'
+noise is keyed on the seed, the device, the commanded positions (the emulated stages'
+targets), the range setting and the visit count (sim.devices.photodiode), and the source
+drifts in wall seconds since the run's own start (`t0_epoch`, the clock of a reading's
+`t_s`). A resumed run passes its stored readings as `visited` so the visit counts go on.
+A request a client re-sends after its timeout is a new measurement (docs/bench.md).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,6 +38,9 @@ from sim.devices.pm100 import Pm100Emulator
 SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
             "faults")
 ROLES = ("sample", "arm", "azimuth", "elevation")
+#: A reading taken before this bench started: its commanded positions ({role: deg}) and its
+#: range setting (full scale in W; None = autorange).
+Visit = tuple[Mapping[str, float], float | None]
 DETECTORS = ("pm100", "modbus-detector")
 
 
@@ -149,7 +160,8 @@ class _Builder:
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen = chosen
         self.seed = sim.get("seed", 0)
-        self.readers: dict[str, Callable[[], float]] = {}
+        self.readers: dict[str, Callable[[], float]] = {}  # where each stage is
+        self.targets: dict[str, Callable[[], float]] = {}  # where it was told to go
         self.modbus: dict[tuple[str, str], dict[int, tuple[str, Any]]] = {}
 
     def _seed(self, name: str) -> int:
@@ -185,7 +197,8 @@ class _Builder:
                 emu = EspEmulator(self.bench.clock, tables, self._faults(name), self._seed(name))
                 _serve(self.bench, name, emu)
                 for role, ax in roles.items():
-                    self.readers[role] = _esp_reader(emu, ax.get("axis", 1))
+                    motion = emu.axes[ax.get("axis", 1)].motion
+                    self.readers[role], self.targets[role] = motion.position, motion.target
             elif dev["protocol"] == "modbus-stage":
                 for role, ax in roles.items():
                     emu = ModbusStageEmulator(self.bench.clock, dev["register_map"],
@@ -194,22 +207,32 @@ class _Builder:
                                               _home(ax["limits_deg"]),
                                               serial=self._serial(name))
                     self._add_modbus(name, emu)
-                    self.readers[role] = emu.axis.position
+                    self.readers[role], self.targets[role] = emu.axis.position, emu.axis.target
 
-    def detectors(self, source: Any) -> None:
-        """Emulators of the chosen detectors, lit by `source` (the bench's PowerSource)."""
+    def detectors(self, source: Any, place: Callable[[], tuple[float, ...]],
+                  visited: list[tuple[tuple[float, ...], float | None]]) -> None:
+        """Emulators of the chosen detectors, lit by `source` (the bench's PowerSource), their
+        noise keyed on `place()` (the commanded positions) and counting `visited` as taken."""
         light_nm = source.bench.source.wavelength_nm
         detector = self.sim.get("detector")
         for name in self.chosen:
             dev = self.devices[name]
             if dev["protocol"] == "pm100":
                 emu = Pm100Emulator(source, faults=self._faults(name), seed=self._seed(name),
-                                    detector=detector, light_wavelength_nm=light_nm)
+                                    detector=detector, light_wavelength_nm=light_nm,
+                                    place=place)
+                meter = emu.photodiode
                 _serve(self.bench, name, emu)
             elif dev["protocol"] == "modbus-detector":
-                self._add_modbus(name, ModbusDetectorEmulator(
+                unit = ModbusDetectorEmulator(
                     source, dev["register_map"], self._faults(name), self._seed(name),
-                    detector, light_nm, serial=self._serial(name)))
+                    detector, light_nm, serial=self._serial(name), place=place)
+                meter = unit.model
+                self._add_modbus(name, unit)
+            else:
+                continue
+            for where, range_w in visited:
+                meter.visited(where, range_w)
 
     def serve_modbus(self) -> None:
         """One Modbus server per bus or TCP endpoint, with all its collected units."""
@@ -227,13 +250,16 @@ class _Builder:
 
 def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
           positions: Callable[[], Mapping[str, float]] | None = None,
-          sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK) -> EmulatedBench:
+          sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK,
+          t0_epoch: float | None = None, visited: Iterable[Visit] = ()) -> EmulatedBench:
     """Serve the config's devices (all, or those named) and return the running bench.
 
     positions: where the stages that are not emulated are ({role: deg}); needed when a
     detector is emulated but some stage is real. The bench is the config's [optics] with the
     plan's [sample] table (`sample`, if a plan is known) and the [sim] truth (sim.bench.config).
-    bind: the address Modbus TCP emulators listen on (loopback by default).
+    bind: the address Modbus TCP emulators listen on (loopback by default). t0_epoch: the
+    run's start (`time.time()` seconds; default now), the origin of the source's drift;
+    visited: the readings the run took before this bench (a resume), see Visit.
     """
     sim = _sim_table(config)
     all_devices = config["devices"]
@@ -252,19 +278,22 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             raise SimConfigError(f"emulating {detectors[0]!r} without the stages "
                                  f"{', '.join(sorted(missing))} needs their positions")
 
-        def stage_positions() -> dict[str, float]:
+        def read(stages: dict[str, Callable[[], float]]) -> dict[str, float]:
             """Emulated stages read directly, real ones from the caller's positions()."""
             real = dict(positions()) if missing else {}
-            return {role: (build.readers[role]() if role in build.readers else
-                           float(real.get(role, 0.0))) for role in ROLES}
+            return {role: stages[role]() if role in stages else float(real.get(role, 0.0))
+                    for role in ROLES}
 
-        # the source drifts in wall time since the bench started (a lamp does not follow the
+        # the source drifts in wall time since the run started (a lamp does not follow the
         # motion's virtual clock), as the run store's t_s does: drift normalisation needs both
-        source = build_power_source(sim, stage_positions, optics=config.get("optics"),
+        t0 = time.time() if t0_epoch is None else t0_epoch
+        source = build_power_source(sim, lambda: read(build.readers),
+                                    lambda: time.time() - t0, optics=config.get("optics"),
                                     sample=sample)
         if detectors:  # a first reading must not stall for a compile: timeouts are short
             source.bench.warm_up()
-        build.detectors(source)
+        build.detectors(source, lambda: _place(read(build.targets)),
+                        [(_place(where), range_w) for where, range_w in visited])
         build.serve_modbus()
     except BaseException:
         bench.stop()
@@ -272,8 +301,9 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     return bench
 
 
-def _esp_reader(emu: EspEmulator, number: int) -> Callable[[], float]:
-    return lambda: emu.axis_position_deg(number)
+def _place(positions: Mapping[str, float]) -> tuple[float, ...]:
+    """A reading's place for the noise key: the positions of every role, in ROLES order."""
+    return tuple(float(positions.get(role, 0.0)) for role in ROLES)
 
 
 def _serve(bench: EmulatedBench, name: str, emu: Any) -> None:

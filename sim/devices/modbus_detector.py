@@ -8,7 +8,7 @@ saturation, noise); status, range in use and fault code describe that measuremen
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from sim.devices.faults import FaultSpec
@@ -28,13 +28,16 @@ class ModbusDetectorEmulator(EmulatedUnit):
 
     detector: the instrument config's [sim.detector] table (its ranges_w, if given, must
     equal the map's gain ranges); light_wavelength_nm: the light's true wavelength (None =
-    a perfectly corrected meter); serial, device_identification: as for EmulatedUnit.
+    a perfectly corrected meter); place: the commanded stage positions now (deg), which key
+    the noise (None: the range and the visit count only); serial, device_identification: as
+    for EmulatedUnit.
     """
 
     def __init__(self, source: PowerSource, register_map_path: str | Path,
                  faults: FaultSpec | None = None, seed: int = 0,
                  detector: Mapping | None = None, light_wavelength_nm: float | None = None, *,
-                 serial: str | None = None, device_identification: bool = True):
+                 serial: str | None = None, device_identification: bool = True,
+                 place: Callable[[], Sequence[float]] | None = None):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         if not layout.ranges_w:
@@ -46,6 +49,7 @@ class ModbusDetectorEmulator(EmulatedUnit):
         super().__init__(layout, faults, serial=serial,
                          device_identification=device_identification)
         self.source = source
+        self._place = place or tuple
         self.model = PhotodiodeModel({**table, "ranges_w": list(layout.ranges_w)}, seed=seed,
                                      light_wavelength_nm=light_wavelength_nm)
         for name, value in (("gain_range", len(layout.ranges_w) - 1), ("autorange", 1),
@@ -84,7 +88,8 @@ class ModbusDetectorEmulator(EmulatedUnit):
             int(self.registers.get("gain_range"))]
         m = self.model.measure(power, range_w=fixed,
                                averaging=int(self.registers.get("averaging")),
-                               wavelength_nm=self.registers.get("wavelength"))
+                               wavelength_nm=self.registers.get("wavelength"),
+                               place=self._place())
         self.fault, self.saturated = None, m.saturated
         self.range_index = self.layout.ranges_w.index(m.range_w)
         return m.reading_w

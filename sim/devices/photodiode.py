@@ -4,7 +4,7 @@ A detector emulator (PM100 SCPI, Modbus amplifier + ADC) asks a `PowerSource` fo
 optical power at the detector and passes it through a `PhotodiodeModel`: silicon responsivity
 at the light's wavelength, the device's wavelength correction, gain ranges with autoranging,
 ADC clipping (the saturation flag) and quantisation, dark current, stray light, shot and read
-noise, and averaging of N samples. Every random draw comes from one seeded generator.
+noise, and averaging of N samples. Every random draw is seeded (reproducible noise, below).
 
 Noise and averaging: each of the N averaged samples carries independent shot noise
 (std sqrt(2 q I B) in current, I the total photocurrent, B `bandwidth_hz`) and read noise
@@ -12,11 +12,19 @@ Noise and averaging: each of the N averaged samples carries independent shot noi
 The reported mean therefore has a standard deviation that falls as 1/sqrt(N); quantisation
 adds step/sqrt(12) per sample, which the noise dithers, so it also averages down as 1/sqrt(N)
 as long as the per-sample noise is at least about one step (`expected_sigma_w`).
+
+Reproducible noise: a measurement's draws do not come from one stream in call order (where a
+retried request or a resumed run would shift every later reading) but from a generator of its
+own, keyed on the seed (one per device), the place it is taken at (the commanded stage
+positions, in millidegrees), the range setting (autorange or a fixed range) and the
+visit count: how many measurements this meter has taken at that place and range before.
+`visited` counts measurements taken before this process (a resumed run's stored readings).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
@@ -33,6 +41,8 @@ SILICON_RESPONSIVITY = np.array(
         [1100.0, 0.18],
     ]
 )
+
+PLACE_STEPS_PER_DEG = 1000  # a place key counts millidegrees, as the Modbus drives do
 
 DEFAULT_RANGES_W = (1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
 
@@ -142,12 +152,12 @@ class PhotodiodeModel:
     def __init__(
         self,
         config: Mapping | None = None,
-        seed: int | None = 0,
+        seed: int = 0,
         light_wavelength_nm: float | None = None,
     ):
         """config: the [sim.detector] table (missing keys take DETECTOR_DEFAULTS); seed: the
-        generator's seed; light_wavelength_nm: the light's true wavelength (None = whatever
-        correction wavelength the device is set to, i.e. a perfectly corrected meter)."""
+        noise's seed (one per device); light_wavelength_nm: the light's true wavelength (None =
+        whatever correction wavelength the device is set to, i.e. a perfectly corrected meter)."""
         table = dict(config or {})
         unknown = sorted(set(table) - set(DETECTOR_DEFAULTS))
         if unknown:
@@ -186,7 +196,8 @@ class PhotodiodeModel:
             raise SimConfigError(f"light wavelength must be > 0 nm, got {light_wavelength_nm!r}")
         self.light_wavelength_nm = light_wavelength_nm
         self.zero_offset_w = 0.0
-        self._rng = np.random.default_rng(seed)
+        self.seed = int(seed) % (1 << 64)  # SeedSequence takes unsigned words
+        self._visits: Counter[tuple[int, ...]] = Counter()
 
     @property
     def ranges_w(self) -> tuple[float, ...]:
@@ -258,29 +269,52 @@ class PhotodiodeModel:
                               self.adc_step_w(range_w) / np.sqrt(12.0))
         return float(per_sample / np.sqrt(averaging))
 
+    def _reading_key(self, place: Sequence[float], range_w: float | None) -> tuple[int, ...]:
+        """What identifies a measurement but its visit count: the place (stage positions in
+        millidegrees, as unsigned 64-bit words) and the range setting (0 = autorange, else
+        the range's number from 1)."""
+        steps = (round(deg * PLACE_STEPS_PER_DEG) % (1 << 64) for deg in place)
+        setting = 0 if range_w is None else self._ranges.index(self.range_for(range_w)) + 1
+        return len(place), *steps, setting
+
+    def visited(self, place: Sequence[float], range_w: float | None) -> None:
+        """Count a measurement taken at place with the range setting range_w (None =
+        autorange) before this meter existed: a resumed run's stored reading."""
+        self._visits[self._reading_key(place, range_w)] += 1
+
+    def _generator(self, place: Sequence[float], range_w: float | None) -> np.random.Generator:
+        """The noise generator of the next measurement at place and range setting range_w."""
+        key = self._reading_key(place, range_w)
+        visit = self._visits[key]
+        self._visits[key] += 1
+        return np.random.default_rng(np.random.SeedSequence([self.seed, *key, visit]))
+
     def measure(
         self,
         power_w: float,
         range_w: float | None = None,
         averaging: int = 1,
         wavelength_nm: float = 632.8,
+        place: Sequence[float] = (),
     ) -> Measurement:
         """One reading of the true power power_w (W): range_w one of `ranges_w` or None for
         autoranging; averaging the number of samples averaged (>= 1); wavelength_nm the
-        correction wavelength the device is set to."""
+        correction wavelength the device is set to; place the commanded stage positions, deg
+        (keys the noise with the range setting and the visit count; () = anywhere)."""
         if not np.isfinite(power_w) or power_w < 0:
             raise ValueError(f"measure: power_w must be finite and >= 0, got {power_w!r}")
         if isinstance(averaging, bool) or int(averaging) != averaging or averaging < 1:
             raise ValueError(f"measure: averaging must be an integer >= 1, got {averaging!r}")
         if not wavelength_nm > 0:
             raise ValueError(f"measure: wavelength_nm must be > 0, got {wavelength_nm!r}")
+        if range_w is not None and range_w not in self._ranges:
+            raise ValueError(f"measure: range_w {range_w!r} is not one of {self._ranges}")
+        rng = self._generator(place, range_w)
         if range_w is None:
             range_w = self.autorange(power_w, wavelength_nm)
-        elif range_w not in self._ranges:
-            raise ValueError(f"measure: range_w {range_w!r} is not one of {self._ranges}")
         mean = self._mean_reading_w(power_w, wavelength_nm, self.gain(range_w))
         sigma = self.sample_sigma_w(power_w, range_w, wavelength_nm)
-        samples = mean + sigma * self._rng.standard_normal(int(averaging))
+        samples = mean + sigma * rng.standard_normal(int(averaging))
         clip = self.overrange * range_w
         saturated = bool(np.any(np.abs(samples) >= clip))
         step = self.adc_step_w(range_w)

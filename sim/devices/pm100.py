@@ -17,7 +17,7 @@ import math
 import re
 import threading
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from sim.devices.faults import FaultInjector, FaultSpec
@@ -120,7 +120,8 @@ class Pm100Emulator(PtyDevice):
 
     source: a PowerSource (or any callable returning watts) giving the true power at the
     detector now; detector: the [sim.detector] table for PhotodiodeModel; seed: noise and
-    fault seed.
+    fault seed; place: the commanded stage positions now (deg), which key the noise (None:
+    the noise keys on the range and the visit count only).
     """
 
     protocol = "pm100"
@@ -135,7 +136,9 @@ class Pm100Emulator(PtyDevice):
         light_wavelength_nm: float | None = None,
         sensor: SensorInfo | None = None,
         model: str = "PM100D",
+        place: Callable[[], Sequence[float]] | None = None,
     ):
+        self._place = place or tuple
         self._power = source.power_w if hasattr(source, "power_w") else source
         if not callable(self._power):
             raise TypeError("pm100: source must be a PowerSource or a callable returning W")
@@ -338,7 +341,7 @@ class Pm100Emulator(PtyDevice):
             power = float(self._power())
             result = self.photodiode.measure(
                 power, None if self.autorange else self.range_w, self.averaging,
-                self.wavelength_nm,
+                self.wavelength_nm, self._place(),
             )
         except (ValueError, TypeError, ArithmeticError):
             self.last_reading = None

