@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import math
+import termios
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,14 +40,15 @@ class Instrument:
     last_positions: dict[str, float] = field(default_factory=dict)
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
 
-    def stop_all(self) -> list[str]:
-        """Ask every axis to stop; returns the errors of those that could not be told."""
-        failed = []
+    def stop_all(self) -> dict[str, str]:
+        """Ask every axis to stop, each whatever the others did; returns {role: error} for
+        those that could not be told (a lost device: its port gone, no reply)."""
+        failed = {}
         for role, axis in self.axes.items():
             try:
                 axis.stop()
-            except (DriverError, OSError) as exc:
-                failed.append(f"{role}: {exc}")
+            except (DriverError, OSError, termios.error) as exc:
+                failed[role] = str(exc) or type(exc).__name__
         return failed
 
     def close(self) -> None:
