@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + signal.SIGPIPE
     except OSError as exc:
         print(f"{verb}: error: {os_error_text(exc)}", file=sys.stderr)
-        return 1
+        return 2
     except KeyboardInterrupt:
         print(f"{verb}: interrupted", file=sys.stderr)
         return 130

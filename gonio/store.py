@@ -23,7 +23,9 @@ count) has been fsynced.
 
 A disk that refuses a write (full, a file-size limit, an I/O error) is a StoreError naming the
 file: a new run directory is made whole or not at all (in a hidden folder of the root, then
-renamed into place), and a line the disk cut short is a torn last line, cut on resume.
+renamed into place), and a line the disk cut short is a torn last line, cut on resume. Each
+run keeps a small `.reserve` file that a full disk frees, so that meta.json can still record
+why the run failed; resume makes it again.
 """
 
 from __future__ import annotations
@@ -49,10 +51,11 @@ from typing import Any
 
 import numpy as np
 
-from gonio.errors import RunError, os_error_text
+from gonio.errors import RunError
 
 READINGS = "readings.jsonl"
 META = "meta.json"
+RESERVE, RESERVE_BYTES = ".reserve", 65536  # room kept for meta.json on a full disk
 CRC = "crc32"  # the line checksum's field; meta.json's "line_checksum" says lines carry it
 
 READING_DTYPE = np.dtype([
@@ -373,6 +376,12 @@ def versions() -> dict[str, str]:
 PARTIAL = ".partial"  # under a run root: run directories being made
 
 
+def _keep_reserve(run_dir: Path) -> None:
+    """Write the run's reserve (random bytes: never sparse), as much of it as the disk takes."""
+    with contextlib.suppress(OSError), open(run_dir / RESERVE, "wb") as fh:
+        fh.write(os.urandom(RESERVE_BYTES))
+
+
 def _move_into(tmp: Path, root: Path, base: str) -> Path:
     """Rename a complete run directory into root under the first free name base[-n]."""
     for n in range(1000):
@@ -416,7 +425,7 @@ class RunWriter:
             tmp.mkdir()
         except OSError as exc:
             raise StoreError(f"{root}: cannot make a run directory there "
-                             f"({os_error_text(exc)})") from None
+                             f"({exc.strerror or exc})") from None
         try:
             for src, dest in ((plan_file, "plan.toml"), (config_file, "instrument.toml")):
                 if src is not None:
@@ -424,6 +433,7 @@ class RunWriter:
             write_json_atomic(tmp / "plan.json", plan)
             write_json_atomic(tmp / "config.json", config)
             (tmp / READINGS).touch()
+            _keep_reserve(tmp)
             meta = {**meta, "created_utc": utc_now(), "versions": versions(), "sessions": [],
                     "status": "created", "reason": "", "line_checksum": CRC,
                     "digests": digests(plan, config)}
@@ -431,7 +441,7 @@ class RunWriter:
             path = _move_into(tmp, root, base)
         except OSError as exc:
             raise StoreError(f"{root}: cannot make a run directory there "
-                             f"({os_error_text(exc)})") from None
+                             f"({exc.strerror or exc})") from None
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
             with contextlib.suppress(OSError):
@@ -457,6 +467,8 @@ class RunWriter:
             writer._fh.truncate(lines.keep_bytes)
             writer._fh.flush()
             os.fsync(writer._fh.fileno())
+        if not (path / RESERVE).exists():  # freed by a full disk, or an older run
+            _keep_reserve(path)
         writer.next_index, writer.missing = lines.top + 1, lines.missing()
         return writer
 
@@ -495,7 +507,11 @@ class RunWriter:
         try:
             write_json_atomic(self.path / META, self.meta)
         except OSError as exc:
-            raise StoreError(f"cannot write {self.path / META}: {exc.strerror or exc}") from None
+            if exc.errno != errno.ENOSPC or not (self.path / RESERVE).exists():
+                raise StoreError(f"cannot write {self.path / META}: "
+                                 f"{exc.strerror or exc}") from None
+            (self.path / RESERVE).unlink()  # the disk is full: use the room kept for this
+            self.set_status(status, reason)
 
     def append(self, row: dict[str, Any]) -> None:
         """Write one reading (its index must be the next one) and start its fsync, once the
