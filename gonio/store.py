@@ -56,6 +56,7 @@ from gonio.errors import RunError
 READINGS = "readings.jsonl"
 META = "meta.json"
 RESERVE, RESERVE_BYTES = ".reserve", 65536  # room kept for meta.json on a full disk
+PARTIAL = ".partial"  # under a run root: run directories being made
 CRC = "crc32"  # the line checksum's field; meta.json's "line_checksum" says lines carry it
 
 READING_DTYPE = np.dtype([
@@ -371,9 +372,6 @@ def versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             out[dist] = "not installed"
     return out
-
-
-PARTIAL = ".partial"  # under a run root: run directories being made
 
 
 def _keep_reserve(run_dir: Path) -> None:
