@@ -143,8 +143,11 @@ def interrupted_chain(plan: Path, runs: Path, emu: Emulator, planned: int, time_
             moving = emu.moving_axes()
             if sig == signal.SIGTERM:
                 tally.moving_after_sigterm += moving
-                tally.sigterm_recorded += (proc.returncode == 143 and meta["status"] == "aborted"
-                                           and meta["reason"] == "SIGTERM")
+                recorded = (meta["status"], meta["reason"]) == ("aborted", "SIGTERM")
+                tally.sigterm_recorded += recorded
+                if not recorded:
+                    print(f"soak: {run_dir.name}: a SIGTERM ending recorded as "
+                          f"{meta['status']}: {meta['reason']}", file=sys.stderr)
             else:
                 tally.moving_after_sigkill += moving
         elif meta["status"] == "failed":

@@ -19,6 +19,8 @@ from drivers.base import Axis, Detector, DriverError
 from gonio.config import AxisConfig, DeviceConfig, InstrumentConfig
 from gonio.errors import ConfigError
 
+STOP_ATTEMPTS = 2
+
 
 @dataclass
 class Instrument:
@@ -41,14 +43,19 @@ class Instrument:
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def stop_all(self) -> dict[str, str]:
-        """Ask every axis to stop, each whatever the others did; returns {role: error} for
-        those that could not be told (a lost device: its port gone, no reply)."""
+        """Ask every axis to stop, each whatever the others did, twice if the first answer is
+        lost (a stop is safe to repeat; a fault or a transaction a signal cut short can eat
+        its confirmation); returns {role: error} for those that could not be told (a lost
+        device: its port gone, no reply)."""
         failed = {}
         for role, axis in self.axes.items():
-            try:
-                axis.stop()
-            except (DriverError, OSError, termios.error) as exc:
-                failed[role] = str(exc) or type(exc).__name__
+            for attempt in range(STOP_ATTEMPTS):
+                try:
+                    axis.stop()
+                    break
+                except (DriverError, OSError, termios.error) as exc:
+                    if attempt + 1 == STOP_ATTEMPTS:
+                        failed[role] = str(exc) or type(exc).__name__
         return failed
 
     def close(self) -> None:
