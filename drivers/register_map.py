@@ -144,10 +144,9 @@ class RegisterMap:
                 f"{self.source}: {name} = {value!r} outside [{reg.min}, {reg.max}] {reg.unit}"
             )
         code, _ = _TYPES[reg.type]
-        if reg.type == "float32":
-            raw: float | int = float(value) * reg.scale
-        else:
-            raw = round(float(value) * reg.scale) if math.isfinite(value) else value
+        scaled = float(value) * reg.scale  # a huge value times the scale may overflow to inf
+        raw: float | int = scaled if reg.type == "float32" or not math.isfinite(scaled) \
+            else round(scaled)
         try:
             data = struct.pack(">" + code, raw)
         except (struct.error, OverflowError, ValueError):

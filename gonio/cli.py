@@ -1,17 +1,31 @@
 """The `gonio` command line: one sub-command per module in gonio.commands.
 
 Each command module defines `register(subparsers)`, which adds its parser and sets
-`func(args) -> int`. Errors meant for the user are one line and a non-zero exit.
+`func(args) -> int`. Errors meant for the user are one line and a non-zero exit; so are a
+Ctrl-C at any moment (even while the modules load), a file the system refuses (a full disk,
+a missing folder) and a signal that ends a command; a closed pipe on stdout (`| head`) ends
+the command quietly, as it does any Unix filter.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
+import signal
 import sys
 
-from drivers.base import DriverError
-from gonio.errors import GonioError
+
+def _interrupted_loading(signum: int, frame: object) -> None:
+    print("gonio: interrupted", file=sys.stderr)
+    raise SystemExit(128 + signum)
+
+
+signal.signal(signal.SIGINT, _interrupted_loading)  # until main() runs: no import traceback
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import os  # noqa: E402
+
+from drivers.base import DriverError  # noqa: E402
+from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
 
 # Module names under gonio.commands, in the order `gonio --help` lists them.
 COMMANDS = [
@@ -42,18 +56,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that flushing it at exit raises nothing more."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    verb = "gonio"
     try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        args = build_parser().parse_args(argv)
+        verb = f"gonio {args.command}"
         return int(args.func(args) or 0)
     except (GonioError, DriverError) as exc:
-        print(f"gonio {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{verb}: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 128 + signal.SIGPIPE
+    except OSError as exc:
+        print(f"{verb}: error: {os_error_text(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"gonio {args.command}: interrupted", file=sys.stderr)
+        print(f"{verb}: interrupted", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print(f"{verb}: terminated by {exc}", file=sys.stderr)
+        return 128 + exc.signum
 
 
 if __name__ == "__main__":

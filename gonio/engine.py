@@ -5,10 +5,14 @@ or lost connection is retried (the whole point: absolute moves and reads are saf
 up to `retries` times, after which the run stops cleanly with the reason recorded. An invalid
 reading (the detector has none: InvalidReading) is retried the same way and, if every try
 gives one, recorded with power NaN and the flag "invalid", and the run goes on. Ctrl-C once
-pauses at the next point (resume or abort at the prompt); a second Ctrl-C aborts at once; an
-abort stops every axis. A plan's prompted signature pass (`[signature] pass = "prompted"`) waits
-for the operator to remove the sample before its first reading (in every session that reaches
-it: a resume inside the pass asks again).
+pauses at the next point (resume or abort at the prompt; end of input aborts); a second Ctrl-C
+aborts at once; SIGTERM and SIGHUP abort at once (reason: the signal's name). However a run
+ends short of completion (abort, signal, failure, an exception, a full disk), every axis that
+can be reached is told to stop, those that cannot are recorded, and meta.json gets the status
+and reason where the disk allows it; while that happens further signals are ignored. A plan's
+prompted signature pass (`[signature] pass = "prompted"`) waits for the operator to remove the
+sample before its first reading (in every session that reaches it: a resume inside the pass
+asks again).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from drivers.base import DeviceError, DriverError, InvalidReading, Reading
+from gonio.errors import Terminated
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
 from gonio.plan import (
@@ -38,7 +43,7 @@ from gonio.plan import (
 )
 from gonio.progress import Progress
 from gonio.reading_flags import INVALID, RETRIED
-from gonio.store import RunWriter
+from gonio.store import RunWriter, StoreError
 
 # Failures worth retrying: driver timeouts/garbles and lost connections (pyserial lets
 # termios.error, which is no OSError, through when a pty or USB port goes away).
@@ -60,6 +65,10 @@ class Aborted(Exception):
     """The user aborted the run."""
 
 
+TERMINATING = (signal.SIGTERM, signal.SIGHUP)
+HANDLED = (signal.SIGINT, *TERMINATING)
+
+
 @dataclass
 class Outcome:
     """How a run (session) ended."""
@@ -67,6 +76,7 @@ class Outcome:
     status: str  # completed | aborted | failed
     reason: str
     done: int  # readings stored in total
+    signum: int | None = None  # the signal that ended it (SIGTERM, SIGHUP)
 
 
 def ask_resume() -> bool:
@@ -106,28 +116,55 @@ def _notify(message: str) -> None:
 
 
 class PauseControl:
-    """Ctrl-C handling: the first SIGINT asks for a pause at the next point, the second aborts."""
+    """Signal handling for a run: the first SIGINT asks for a pause at the next point, the
+    second aborts (KeyboardInterrupt); SIGTERM and SIGHUP raise Terminated. Entered more than
+    once (the runner before it makes the run directory, the engine), the outermost counts."""
 
     def __init__(self, prompt: Callable[[], bool] = ask_resume,
                  notify: Callable[[str], Any] = _notify,
                  confirm: Callable[[str], bool] = ask_continue):
         self.prompt, self.notify, self.confirm = prompt, notify, confirm
         self.pause_requested = False
-        self._previous: Any = None
+        self._previous: dict[int, Any] = {}
+        self._depth = 0
 
     def _on_sigint(self, signum: int, frame: Any) -> None:
         self.pause_requested = True
         self.notify("pausing after this point (Ctrl-C again to abort)")
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, self._on_second_sigint)
+
+    def _on_second_sigint(self, signum: int, frame: Any) -> None:
+        self.hold()
+        raise KeyboardInterrupt
+
+    def _on_terminate(self, signum: int, frame: Any) -> None:
+        self.hold()
+        raise Terminated(signum)
+
+    def hold(self) -> None:
+        """Ignore these signals from now on (until the outermost exit): the run is ending, and
+        stopping the axes and recording why must not be interrupted."""
+        if self._previous:
+            for sig in HANDLED:
+                signal.signal(sig, signal.SIG_IGN)
 
     def __enter__(self) -> PauseControl:
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        self._depth += 1
+        if self._depth == 1 and threading.current_thread() is threading.main_thread():
+            self.pause_requested = False
+            self._previous = {sig: signal.getsignal(sig) or signal.SIG_DFL for sig in HANDLED}
+            for sig in HANDLED:  # one ignored on entry (nohup, a background job) stays so
+                if self._previous[sig] is not signal.SIG_IGN:
+                    signal.signal(sig, self._on_sigint if sig == signal.SIGINT
+                                  else self._on_terminate)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        self._depth -= 1
+        if self._depth == 0:
+            for sig, previous in self._previous.items():
+                signal.signal(sig, previous)
+            self._previous = {}
 
     def checkpoint(self, on_pause: Callable[[str], None]) -> None:
         """Between points: if a pause was asked for, prompt; raise Aborted to abort."""
@@ -141,7 +178,7 @@ class PauseControl:
         if not resume:
             raise Aborted("aborted by the user")
         self.pause_requested = False
-        if self._previous is not None:
+        if self._previous.get(signal.SIGINT, signal.SIG_IGN) is not signal.SIG_IGN:
             signal.signal(signal.SIGINT, self._on_sigint)
         on_pause("running")
 
@@ -163,13 +200,15 @@ class Engine:
     def __init__(self, instrument: Instrument, plan: Plan, schedule: np.ndarray,
                  writer: RunWriter, *, retries: int = 2, progress: Progress | None = None,
                  control: PauseControl | None = None, t0_epoch: float | None = None,
-                 session_info: Callable[[], dict[str, Any]] | None = None):
+                 session_info: Callable[[], dict[str, Any]] | None = None,
+                 session: dict[str, Any] | None = None):
         self.inst, self.plan, self.schedule, self.writer = instrument, plan, schedule, writer
         self.retries = retries
         self.progress = progress
         self.control = control or PauseControl()
         self.t0 = t0_epoch if t0_epoch is not None else time.time()
         self.session_info = session_info
+        self.session = session  # what RunWriter.start_session records; None: started already
         self._doing = "starting"
         self._commanded: dict[str, float | None] = {role: None for role in instrument.axes}
         self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
@@ -306,10 +345,13 @@ class Engine:
             raise StopRun(f"preparing the instrument: {exc}") from exc
 
     def run(self) -> Outcome:
-        """Measure every reading not yet stored; always leaves meta.json with the outcome."""
-        status, reason = "completed", ""
-        try:
-            with self.control:
+        """Start the session (if given one), measure every reading not yet stored; always
+        stops the axes and leaves meta.json with the outcome where the disk allows it."""
+        status, reason, signum = "completed", "", None
+        with self.control:
+            try:
+                if self.session is not None:
+                    self.writer.start_session(**self.session)
                 self._prepare()
                 rest = self.schedule[self.writer.todo(len(self.schedule))]
                 prompt_at = self._operator_prompt_index(rest)
@@ -322,16 +364,19 @@ class Engine:
                     if self.progress:
                         self.progress.update(record)
                 self.writer.wait_stored()  # the last fsync: a disk error fails here, not in _finish
-        except StopRun as exc:
-            status, reason = "failed", str(exc)
-        except (Aborted, KeyboardInterrupt) as exc:
-            status, reason = "aborted", str(exc) or "aborted by the user (Ctrl-C)"
-        except BaseException as exc:
-            self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
-            raise
-        self._finish(status, reason)
-        return Outcome(status, reason, self.writer.stored)
-
+            except (StopRun, StoreError) as exc:
+                status, reason = "failed", str(exc)
+            except Terminated as exc:
+                status, reason, signum = "aborted", str(exc), exc.signum
+            except (Aborted, KeyboardInterrupt) as exc:
+                status, reason = "aborted", str(exc) or "aborted by the user (Ctrl-C)"
+            except BaseException as exc:
+                self.control.hold()
+                self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
+                raise
+            self.control.hold()
+            reason = self._finish(status, reason)
+        return Outcome(status, reason, self.writer.stored, signum)
     def _operator_prompt_index(self, rest: np.ndarray) -> int:
         """Index of the first of the remaining readings `rest` in a prompted signature pass
         (-1: none)."""
@@ -350,13 +395,21 @@ class Engine:
     def _paused(self, status: str, reason: str = "paused by the user") -> None:
         self.writer.set_status(status, reason if status == "paused" else "")
 
-    def _finish(self, status: str, reason: str) -> None:
+    def _finish(self, status: str, reason: str) -> str:
+        """Stop every axis unless completed, record the outcome; returns the reason as
+        recorded (with the axes that could not be stopped, or why it could not be recorded)."""
         if status != "completed":
-            failed = self.inst.stop_all()
-            if failed:
-                reason += f"; could not stop: {'; '.join(failed)}"
+            unstopped = self.inst.stop_all()
+            if unstopped:
+                self.writer.meta["unstopped"] = unstopped
+                reason += "; could not stop: " + "; ".join(f"{role}: {why}"
+                                                           for role, why in unstopped.items())
         if self.progress:
             self.progress.close()
         if self.session_info and self.writer.meta["sessions"]:
             self.writer.meta["sessions"][-1].update(self.session_info())
-        self.writer.set_status(status, reason)
+        try:
+            self.writer.set_status(status, reason)
+        except StoreError as exc:
+            reason += f" (not recorded in meta.json: {exc})"
+        return reason

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import math
+import termios
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -17,6 +18,8 @@ from typing import Any
 from drivers.base import Axis, Detector, DriverError
 from gonio.config import AxisConfig, DeviceConfig, InstrumentConfig
 from gonio.errors import ConfigError
+
+STOP_ATTEMPTS = 2
 
 
 @dataclass
@@ -39,14 +42,20 @@ class Instrument:
     last_positions: dict[str, float] = field(default_factory=dict)
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
 
-    def stop_all(self) -> list[str]:
-        """Ask every axis to stop; returns the errors of those that could not be told."""
-        failed = []
+    def stop_all(self) -> dict[str, str]:
+        """Ask every axis to stop, each whatever the others did, twice if the first answer is
+        lost (a stop is safe to repeat; a fault or a transaction a signal cut short can eat
+        its confirmation); returns {role: error} for those that could not be told (a lost
+        device: its port gone, no reply)."""
+        failed = {}
         for role, axis in self.axes.items():
-            try:
-                axis.stop()
-            except (DriverError, OSError) as exc:
-                failed.append(f"{role}: {exc}")
+            for attempt in range(STOP_ATTEMPTS):
+                try:
+                    axis.stop()
+                    break
+                except (DriverError, OSError, termios.error) as exc:
+                    if attempt + 1 == STOP_ATTEMPTS:
+                        failed[role] = str(exc) or type(exc).__name__
         return failed
 
     def close(self) -> None:

@@ -91,27 +91,34 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
     of the schedule (the readings of indices `done` are stored; the run started at t0_epoch).
-    session: more for meta.json's record of this session."""
+    session: more for meta.json's record of this session. The run's signal handling
+    (`control`) starts before the run directory is made: a signal in the first milliseconds
+    of a run ends it as one at any other moment does."""
+    control = control or PauseControl()
     with _devices(cfg, sim, plan, t0_epoch, _visited(sched, cfg, done)) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
         if check is not None:
             check(sched.readings, inst.detector)
-        writer = make_writer()
-        try:
-            swapped = identity_changes(writer.meta["sessions"], inst.devices)
-            writer.start_session(sim=list(dev.emulated), endpoints={
-                n: d.endpoint for n, d in dev.config.devices.items()}, devices=inst.devices,
-                **({"identity_changes": swapped} if swapped else {}), **(session or {}))
-            inst.last_positions = dev.positions
-            bar = Progress(len(sched), writer.stored, plan.name,
-                           disable=None if progress is None else not progress)
-            engine = Engine(inst, plan, sched.readings, writer, progress=bar, control=control,
-                            t0_epoch=writer.meta["t0_epoch"],
-                            session_info=lambda: {"faults_injected": dev.fault_counts(),
-                                                  "requests_served": dev.request_counts()})
-            return ScanResult(writer.path, engine.run())
-        finally:
-            writer.close()
+        with control:
+            writer = make_writer()
+            try:
+                swapped = identity_changes(writer.meta["sessions"], inst.devices)
+                inst.last_positions = dev.positions
+                bar = Progress(len(sched), writer.stored, plan.name,
+                               disable=None if progress is None else not progress)
+                engine = Engine(inst, plan, sched.readings, writer, progress=bar,
+                                control=control, t0_epoch=writer.meta["t0_epoch"],
+                                session_info=lambda: {"faults_injected": dev.fault_counts(),
+                                                      "requests_served": dev.request_counts()},
+                                session={"sim": list(dev.emulated),
+                                         "endpoints": {n: d.endpoint
+                                                       for n, d in dev.config.devices.items()},
+                                         "devices": inst.devices,
+                                         **({"identity_changes": swapped} if swapped else {}),
+                                         **(session or {})})
+                return ScanResult(writer.path, engine.run())
+            finally:
+                writer.close()
 
 
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,

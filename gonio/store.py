@@ -20,16 +20,25 @@ then fsynced on a helper thread while the engine goes on to the next point; the 
 written only after that fsync has returned, so at most one line is on its way to the disk,
 lines reach it in order, and whatever the writer reports as stored (meta.json, the final
 count) has been fsynced.
+
+A disk that refuses a write (full, a file-size limit, an I/O error) is a StoreError naming the
+file: a new run directory is made whole or not at all (in a hidden folder of the root, then
+renamed into place), and a line the disk cut short is a torn last line, cut on resume. Each
+run keeps a small `.reserve` file that a full disk frees, so that meta.json can still record
+why the run failed; resume makes it again.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import fcntl
 import hashlib
 import json
 import os
 import platform
 import re
+import secrets
 import shutil
 import sys
 import zlib
@@ -46,6 +55,8 @@ from gonio.errors import RunError
 
 READINGS = "readings.jsonl"
 META = "meta.json"
+RESERVE, RESERVE_BYTES = ".reserve", 65536  # room kept for meta.json on a full disk
+PARTIAL = ".partial"  # under a run root: run directories being made
 CRC = "crc32"  # the line checksum's field; meta.json's "line_checksum" says lines carry it
 
 READING_DTYPE = np.dtype([
@@ -76,14 +87,19 @@ def fsync_dir(path: Path) -> None:
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON via a temporary file, fsync and rename: never a half-written file."""
+    """Write JSON via a temporary file, fsync and rename: never a half-written file (nor a
+    temporary one left behind when the disk refuses)."""
     tmp = path.with_suffix(path.suffix + ".tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=2, default=_json_default)
-        fh.write("\n")
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w") as fh:
+            json.dump(data, fh, indent=2, default=_json_default)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     fsync_dir(path.parent)
 
 
@@ -97,6 +113,10 @@ def _json_default(obj: Any) -> Any:
 
 class DamagedRunError(RunError):
     """A run directory's files are damaged (not merely missing or in use)."""
+
+
+class StoreError(RunError):
+    """The disk refused a write to a run (full, a file-size limit, read-only, an I/O error)."""
 
 
 def canonical_json(data: Any) -> bytes:
@@ -270,7 +290,7 @@ def digest_problems(run: Run, config: dict[str, Any] | None = None) -> list[str]
 def _locked(path: Path) -> Any:
     """Open the readings file for appending with an exclusive lock (released when the
     process ends, even by SIGKILL): two processes can never write one run."""
-    fh = open(path, "ab")
+    fh = open(path, "ab", buffering=0)  # unbuffered: a refused write keeps nothing back
     try:
         fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -354,6 +374,29 @@ def versions() -> dict[str, str]:
     return out
 
 
+def _keep_reserve(run_dir: Path) -> None:
+    """Write the run's reserve (random bytes: never sparse), as much of it as the disk takes."""
+    with contextlib.suppress(OSError), open(run_dir / RESERVE, "wb") as fh:
+        fh.write(os.urandom(RESERVE_BYTES))
+
+
+def _move_into(tmp: Path, root: Path, base: str) -> Path:
+    """Rename a complete run directory into root under the first free name base[-n]."""
+    for n in range(1000):
+        path = root / (base + (f"-{n}" if n else ""))
+        if path.exists():
+            continue
+        try:
+            tmp.rename(path)  # fails on an existing (never empty) run directory
+        except OSError as exc:
+            if exc.errno in (errno.EEXIST, errno.ENOTEMPTY):
+                continue
+            raise
+        fsync_dir(root)
+        return path
+    raise RunError(f"{root}: cannot make a new run directory (1000 named {base}-n exist)")
+
+
 class RunWriter:
     """Appends readings to a run directory, one fsynced line each, and keeps meta.json."""
 
@@ -369,29 +412,38 @@ class RunWriter:
     @classmethod
     def create(cls, root: Path, name: str, plan_file: Path | None, config_file: Path | None,
                plan: dict[str, Any], config: dict[str, Any], meta: dict[str, Any]) -> RunWriter:
-        """Make a new run directory under root (name + UTC timestamp, unique)."""
-        root.mkdir(parents=True, exist_ok=True)
+        """Make a new run directory under root (name + UTC timestamp, unique), whole or not at
+        all: StoreError (one line) if the disk refuses, and nothing is left behind."""
         stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
         name = re.sub(r"[^A-Za-z0-9._-]", "_", name)[:60].lstrip(".") or "run"
-        for n in range(1000):
-            path = root / (f"{stamp}-{name}" + (f"-{n}" if n else ""))
-            try:
-                path.mkdir()
-                break
-            except FileExistsError:
-                continue
-        else:
-            raise RunError(f"{root}: cannot make a new run directory")
-        for src, dest in ((plan_file, "plan.toml"), (config_file, "instrument.toml")):
-            if src is not None:
-                shutil.copyfile(src, path / dest)
-        write_json_atomic(path / "plan.json", plan)
-        write_json_atomic(path / "config.json", config)
-        (path / READINGS).touch()
-        meta = {**meta, "created_utc": utc_now(), "versions": versions(), "sessions": [],
-                "status": "created", "reason": "", "line_checksum": CRC,
-                "digests": digests(plan, config)}
-        write_json_atomic(path / META, meta)
+        making, base = root / PARTIAL, f"{stamp}-{name}"
+        tmp = making / f"{base}-{secrets.token_hex(4)}"
+        try:
+            making.mkdir(parents=True, exist_ok=True)
+            tmp.mkdir()
+        except OSError as exc:
+            raise StoreError(f"{root}: cannot make a run directory there "
+                             f"({exc.strerror or exc})") from None
+        try:
+            for src, dest in ((plan_file, "plan.toml"), (config_file, "instrument.toml")):
+                if src is not None:
+                    shutil.copyfile(src, tmp / dest)
+            write_json_atomic(tmp / "plan.json", plan)
+            write_json_atomic(tmp / "config.json", config)
+            (tmp / READINGS).touch()
+            _keep_reserve(tmp)
+            meta = {**meta, "created_utc": utc_now(), "versions": versions(), "sessions": [],
+                    "status": "created", "reason": "", "line_checksum": CRC,
+                    "digests": digests(plan, config)}
+            write_json_atomic(tmp / META, meta)
+            path = _move_into(tmp, root, base)
+        except OSError as exc:
+            raise StoreError(f"{root}: cannot make a run directory there "
+                             f"({exc.strerror or exc})") from None
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+            with contextlib.suppress(OSError):
+                making.rmdir()  # unless another run is being made there
         return cls(path, meta, 0)
 
     @classmethod
@@ -413,6 +465,8 @@ class RunWriter:
             writer._fh.truncate(lines.keep_bytes)
             writer._fh.flush()
             os.fsync(writer._fh.fileno())
+        if not (path / RESERVE).exists():  # freed by a full disk, or an older run
+            _keep_reserve(path)
         writer.next_index, writer.missing = lines.top + 1, lines.missing()
         return writer
 
@@ -439,7 +493,8 @@ class RunWriter:
         self.set_status("running", "")
 
     def set_status(self, status: str, reason: str) -> None:
-        """Update status and reason in meta.json (atomically), once every reading is stored."""
+        """Update status and reason in meta.json (atomically), once every reading is stored
+        (StoreError if the disk refuses either)."""
         self.wait_stored()
         self.meta["status"], self.meta["reason"] = status, reason
         if status != "running":
@@ -447,7 +502,14 @@ class RunWriter:
             if self.meta["sessions"]:
                 self.meta["sessions"][-1].update(stop_utc=self.meta["stopped_utc"],
                                                  status=status, last_index=self.next_index - 1)
-        write_json_atomic(self.path / META, self.meta)
+        try:
+            write_json_atomic(self.path / META, self.meta)
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC or not (self.path / RESERVE).exists():
+                raise StoreError(f"cannot write {self.path / META}: "
+                                 f"{exc.strerror or exc}") from None
+            (self.path / RESERVE).unlink()  # the disk is full: use the room kept for this
+            self.set_status(status, reason)
 
     def append(self, row: dict[str, Any]) -> None:
         """Write one reading (its index must be the next one) and start its fsync, once the
@@ -457,8 +519,13 @@ class RunWriter:
                            f"(expected {self.expected})")
         line = encode_line(row)
         self.wait_stored()
-        self._fh.write(line)
-        self._fh.flush()  # in the kernel's hands: a killed process no longer loses it
+        try:  # in the kernel's hands once written: a killed process no longer loses it
+            written = 0
+            while written < len(line):
+                written += self._fh.write(line[written:])
+        except OSError as exc:  # what the disk took of the line is a torn tail
+            raise StoreError(f"cannot store reading {row['index']} in "
+                             f"{self.path / READINGS}: {exc.strerror or exc}") from None
         if self.missing:
             self.missing.pop(0)
         else:
@@ -468,13 +535,16 @@ class RunWriter:
         self._pending = self._syncer.submit(os.fsync, self._fh.fileno())
 
     def wait_stored(self) -> None:
-        """Return once every appended reading is fsynced (OSError, once, if the disk refused).
-        Interrupted (Ctrl-C), the fsync stays pending: the next call waits for it again."""
+        """Return once every appended reading is fsynced (StoreError, once, if the disk
+        refused). Interrupted (Ctrl-C), the fsync stays pending: the next call waits again."""
         pending = self._pending
         if pending is None:
             return
         try:
             pending.result()
+        except OSError as exc:
+            raise StoreError(f"cannot store {self.path / READINGS}: "
+                             f"{exc.strerror or exc}") from None
         finally:
             if pending.done():
                 self._pending = None

@@ -1,6 +1,8 @@
 """`gonio scan PLAN`: run a plan on an instrument (real, emulated, or mixed) into a run directory.
 
-Once a run directory exists it is the last line printed on stdout, whatever the outcome.
+Once a run directory exists it is the last line printed on stdout, whatever the outcome. The
+exit status: 0 completed, 1 failed, 130 aborted by Ctrl-C, 128 + N ended by signal N (SIGTERM,
+SIGHUP).
 """
 
 from __future__ import annotations
@@ -105,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
             plotted = True
         except Exception as exc:  # the data are stored; a plot problem must not hide the run
             print(f"gonio scan: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
+        except KeyboardInterrupt:
+            print("gonio scan: warning: no plot: interrupted", file=sys.stderr)
     if outcome.status != "completed":
         print(f"gonio scan: run {outcome.status} after {outcome.done} readings: "
               f"{outcome.reason}", file=sys.stderr)
@@ -112,4 +116,6 @@ def run(args: argparse.Namespace) -> int:
         plot = f"; plot {result.path / 'plot.png'}" if plotted else ""
         print(f"gonio scan: completed, {outcome.done} readings stored{plot}", file=sys.stderr)
     print(result.path, flush=True)
+    if outcome.signum:
+        return 128 + outcome.signum
     return {"completed": 0, "aborted": 130}.get(outcome.status, 1)

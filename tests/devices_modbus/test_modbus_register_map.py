@@ -166,3 +166,10 @@ def test_a_section_that_is_not_a_table_is_named(tmp_path):
 def test_missing_file_is_named(tmp_path):
     with pytest.raises(RegisterMapError, match="no-such.toml: cannot read register map"):
         RegisterMap.load(tmp_path / "no-such.toml")
+
+
+@pytest.mark.parametrize("value", [-1.797693134862316e305, 1e306])
+def test_a_value_whose_scaling_overflows_is_a_clear_error(value):
+    # millidegrees of 1e306 deg overflow float64 to inf: refused, not an OverflowError
+    with pytest.raises(RegisterMapError, match="does not fit a int32 register"):
+        RegisterMap.load(STAGE_MAP).encode("target_position", value)

@@ -17,7 +17,14 @@ import pytest
 import gonio.store
 from gonio.errors import RunError
 from gonio.integrity import check, repair
-from gonio.store import READING_DTYPE, DamagedRunError, RunWriter, digest_problems, open_run
+from gonio.store import (
+    READING_DTYPE,
+    DamagedRunError,
+    RunWriter,
+    StoreError,
+    digest_problems,
+    open_run,
+)
 
 
 def row(i, **kw):
@@ -233,7 +240,7 @@ def test_each_line_is_written_at_once_and_fsynced_before_the_next(writer, monkey
 def test_a_failed_fsync_stops_the_writing(writer, monkeypatch):
     _readings_fsyncs(monkeypatch, fail=True)
     writer.append(row(0))
-    with pytest.raises(OSError, match="Input/output error"):
+    with pytest.raises(StoreError, match=r"readings.jsonl: Input/output error"):
         writer.append(row(1))
     assert len(open_run(writer.path)) == 1  # no line after the one the disk refused
 
