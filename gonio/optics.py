@@ -44,12 +44,6 @@ class Optics:
         """Solid angle of the receiver aperture seen from the sample: 2 pi (1 - cos beta)."""
         return 4.0 * math.pi * math.sin(0.5 * math.radians(self.aperture_half_angle_deg)) ** 2
 
-    @property
-    def polarised(self) -> bool:
-        """True when the source or the analyser is not unpolarised."""
-        return (self.source_polarisation, self.analyser_polarisation) != ("unpolarised",
-                                                                          "unpolarised")
-
     def to_json(self) -> dict[str, Any]:
         """The table's values plus the derived receiver half-angle and solid angle."""
         return {**asdict(self), "aperture_half_angle_deg": self.aperture_half_angle_deg,
