@@ -69,7 +69,7 @@ class Tally:
 
 
 def gonio(*args: object) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "gonio.cli", *map(str, args)], env=ENV,
+    return subprocess.Popen([sys.executable, "-m", "gonio_cli", *map(str, args)], env=ENV,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

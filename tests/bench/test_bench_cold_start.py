@@ -25,7 +25,7 @@ def test_first_reading_with_an_empty_kernel_cache_is_within_the_modbus_timeout(t
     plan.write_text(PLAN.format(instrument=ROOT / "examples/instruments/sim-modbus.toml"))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     done = subprocess.run(
-        [sys.executable, "-m", "gonio.cli", "scan", str(plan), "--sim", "--no-plot", "--out",
+        [sys.executable, "-m", "gonio_cli", "scan", str(plan), "--sim", "--no-plot", "--out",
          str(tmp_path / "runs")], capture_output=True, text=True, timeout=300, env=env, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     assert any((tmp_path / "numba-cache").rglob("*.nbi")), "the kernels were not compiled afresh"

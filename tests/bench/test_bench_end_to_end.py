@@ -50,7 +50,7 @@ def run_dir(request, tmp_path_factory):
         instrument.write_text(config.replace("drift_fraction = 0.01", "drift_fraction = 0.0"))
     (tmp / "plan.toml").write_text(PLAN.format(instrument=instrument))
     done = subprocess.run(
-        [sys.executable, "-m", "gonio.cli", "scan", str(tmp / "plan.toml"), "--sim", "--out",
+        [sys.executable, "-m", "gonio_cli", "scan", str(tmp / "plan.toml"), "--sim", "--out",
          str(tmp / "runs")], capture_output=True, text=True, timeout=240, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     return Path(done.stdout.strip().splitlines()[-1])
@@ -92,13 +92,13 @@ def test_reduced_run_matches_the_bench_within_the_noise(run_dir):
 
 
 def test_reduce_and_plot_commands(run_dir):
-    out = subprocess.run([sys.executable, "-m", "gonio.cli", "reduce", str(run_dir)],
+    out = subprocess.run([sys.executable, "-m", "gonio_cli", "reduce", str(run_dir)],
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     csv = Path(out.stdout.strip().splitlines()[-1])
     table = np.genfromtxt(csv, delimiter=",", names=True, dtype=None, encoding=None)
     assert len(table) > 20 and np.all(table["sigma_per_sr"][table["valid"] == 1] > 0)
-    out = subprocess.run([sys.executable, "-m", "gonio.cli", "plot", str(run_dir), "--out",
+    out = subprocess.run([sys.executable, "-m", "gonio_cli", "plot", str(run_dir), "--out",
                           str(run_dir / "p.png")], capture_output=True, text=True, timeout=120,
                          cwd=ROOT)
     assert out.returncode == 0, out.stderr
@@ -106,6 +106,6 @@ def test_reduce_and_plot_commands(run_dir):
 
 
 def test_reduce_of_a_missing_run_is_one_clear_error(tmp_path):
-    out = subprocess.run([sys.executable, "-m", "gonio.cli", "reduce", str(tmp_path / "nope")],
+    out = subprocess.run([sys.executable, "-m", "gonio_cli", "reduce", str(tmp_path / "nope")],
                          capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert out.returncode != 0 and out.stderr.count("\n") == 1 and "run" in out.stderr

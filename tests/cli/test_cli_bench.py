@@ -2,8 +2,8 @@
 
 import pytest
 
-from gonio.commands.bench import update_readme
 from gonio.errors import GonioError
+from gonio_cli.commands.bench import update_readme
 
 
 def test_update_readme_replaces_only_the_marked_block(tmp_path):

@@ -113,7 +113,7 @@ def test_beam_normalisation_removes_the_drift(angle_run):
 
 
 def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
-    from gonio.cli import main
+    from gonio_cli.main import main
 
     cal = tmp_path / "cal.json"
     # the aperture and the divergence come from the run's [optics]
@@ -154,7 +154,7 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
 
 
 def test_aperture_from_a_scan_across_the_beam(tmp_path, capsys):
-    from gonio.cli import main
+    from gonio_cli.main import main
 
     diameter_mm, distance_mm, beam_mm, divergence_deg = 10.0, 500.0, 2.0, 0.03
     cfg = instrument(tmp_path, {

@@ -64,7 +64,7 @@ def test_fit_with_diffraction_recovers_alpha(data):
     assert out["diffraction"]["wavelength_nm"] == 632.8
     assert out["diffraction"]["rms_height_nm"] == NANO["rms_height_nm"]
     assert plain.to_dict()["diffraction"] is None
-    from gonio.commands.fit import summary
+    from gonio_cli.commands.fit import summary
 
     text = summary({**out, "run": "emulated"})
     assert "diffraction: two-scale model, rms height 30 nm" in text and "fit time" in text
@@ -91,7 +91,7 @@ def test_diffraction_model_reduces_to_microfacet_for_a_smooth_nanosurface():
 
 
 def test_cli_flags_set_the_option():
-    from gonio.commands.fit import add_fit_options, options_from
+    from gonio_cli.commands.fit import add_fit_options, options_from
 
     parser = argparse.ArgumentParser()
     add_fit_options(parser)
@@ -110,8 +110,8 @@ def test_cli_takes_the_nano_roughness_from_an_emulated_run_only(tmp_path):
     is never read (gonio.record.emulator_config gives None for it)."""
     from types import SimpleNamespace
 
-    from gonio.commands.fit import nano_roughness
     from gonio.record import emulator_config
+    from gonio_cli.commands.fit import nano_roughness
 
     sim = {"sample": {"rms_height_nm": 40.0, "correlation_length_um": 3.0}}
     emulated = SimpleNamespace(config={"sim": sim}, meta={"sim": True})
@@ -152,7 +152,7 @@ def test_scanned_run_fits_with_diffraction_from_the_cli(tmp_path, capsys):
 
     from fitting_bench_runs import instrument, plan, scan
 
-    from gonio.cli import main
+    from gonio_cli.main import main
 
     cfg = instrument(tmp_path, {"sample": SAMPLE, "aperture": {**APERTURE, "rtol": 1e-5}},
                      seed=3)

@@ -16,8 +16,8 @@ from calibration.exports.zemax import read_zemax
 from calibration.fit import FitOptions
 from calibration.pipeline import fit_run
 from calibration.values import Measured
-from gonio.cli import main
 from gonio.store import open_run
+from gonio_cli.main import main
 
 SOURCE = {"power_w": 1e-3, "beam_diameter_mm": 2.0, "divergence_deg": 0.03}
 APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-5}  # bench accuracy << noise

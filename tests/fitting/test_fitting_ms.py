@@ -90,7 +90,7 @@ def test_prediction_error_is_the_walks_monte_carlo_error(data):
 def test_cli_flag_sets_the_option():
     import argparse
 
-    from gonio.commands.fit import add_fit_options, options_from
+    from gonio_cli.commands.fit import add_fit_options, options_from
 
     parser = argparse.ArgumentParser()
     add_fit_options(parser)

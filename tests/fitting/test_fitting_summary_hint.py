@@ -3,7 +3,7 @@ to add it; a good fit, a smooth sample or a fit that has it gets none."""
 
 import pytest
 
-from gonio.commands.fit import summary
+from gonio_cli.commands.fit import summary
 
 
 def fit_dict(alpha: float, chi2: float, multiple_scattering: bool) -> dict:

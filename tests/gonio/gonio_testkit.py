@@ -104,9 +104,9 @@ def write_toml(path: Path, data: dict) -> Path:
 
 def gonio_cli(*args, timeout: float = 120.0, input: str | None = None, cwd=None
               ) -> subprocess.CompletedProcess:
-    """Run `python -m gonio.cli ARGS` and return the completed process (text output)."""
+    """Run `python -m gonio_cli ARGS` and return the completed process (text output)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.run([sys.executable, "-m", "gonio.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "gonio_cli", *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, input=input,
                           cwd=cwd or ROOT, env=env)
 
@@ -153,7 +153,7 @@ class AbortAfter(PauseControl):
 def emulating(config_path: Path, *options: str) -> Iterator[dict[str, tuple[str, str]]]:
     """`gonio emulate CFG [OPTIONS]` in its own process; yields {device: (protocol, endpoint)}."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(config_path),
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "emulate", str(config_path),
                              *options],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:

@@ -13,9 +13,9 @@ import pytest
 from gonio_testkit import ROOT, fast_config, gonio_cli, one_line_error, write_toml
 from pymodbus.client import ModbusTcpClient
 
-from gonio.cli import main
 from gonio.config import parse_config
 from gonio.errors import ConfigError
+from gonio_cli.main import main
 
 
 def own_address() -> str | None:
@@ -44,7 +44,7 @@ def emulate(path, *extra) -> tuple[dict[str, str], bool | None, str]:
     returns the endpoints by device, whether they answer at the machine's own address (None:
     it has none) and stderr."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(path), *extra],
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "emulate", str(path), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         endpoints = {}

@@ -29,7 +29,7 @@ def limited_scan(plan: Path, out: Path, max_file_bytes: int) -> subprocess.Compl
     def limit() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (max_file_bytes, max_file_bytes))
 
-    return subprocess.run([sys.executable, "-m", "gonio.cli", "scan", str(plan), "--sim",
+    return subprocess.run([sys.executable, "-m", "gonio_cli", "scan", str(plan), "--sim",
                            "--out", str(out), "--no-plot", "--no-progress"],
                           capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=120,
                           preexec_fn=limit)
@@ -128,7 +128,7 @@ def test_a_full_disk_fails_the_run_and_it_resumes_once_there_is_room(tmp_path, s
 
 
 def test_a_closed_pipe_ends_quietly():
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "plan", "--list",
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "plan", "--list",
                              "examples/plans/demo.toml"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, cwd=ROOT, env=ENV)
     proc.stdout.close()  # `| head` that has read all it wanted

@@ -15,7 +15,7 @@ from gonio_testkit import EXAMPLES, dump_toml, fast_config, one_line_error
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from gonio.cli import main
+from gonio_cli.main import main
 
 PLAN = tomllib.loads((EXAMPLES / "plans" / "demo.toml").read_text())
 PLAN.pop("instrument")

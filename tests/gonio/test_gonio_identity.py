@@ -137,7 +137,7 @@ def test_emulate_time_scale_runs_moves_that_much_faster(tmp_path):
     cfg = fast_config("sim-serial", time_scale=1.0)  # real time in the file
     path = write_toml(tmp_path / "bench.toml", cfg)
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "emulate", str(path),
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "emulate", str(path),
                              "--time-scale", "10"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
     try:

@@ -44,7 +44,7 @@ def start_and_kill(args, run_root, kill_after, extra_sleep_s, pause_after=None):
     """Start `gonio ARGS`, SIGKILL it once `kill_after` readings are stored (+ a little);
     with pause_after, stop it for PAUSE_S once that many are stored."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", *map(str, args)],
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     deadline = time.monotonic() + 60
 

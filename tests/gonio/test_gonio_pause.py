@@ -22,7 +22,7 @@ def start(tmp_path):
     write_toml(tmp_path / "cfg.toml", cfg)
     plan = write_toml(tmp_path / "plan.toml", {**PLAN, "instrument": "cfg.toml"})
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.Popen([sys.executable, "-m", "gonio.cli", "scan", str(plan), "--sim",
+    return subprocess.Popen([sys.executable, "-m", "gonio_cli", "scan", str(plan), "--sim",
                              "--out", str(tmp_path / "runs"), "--no-plot", "--no-progress"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)

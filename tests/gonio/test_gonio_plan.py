@@ -164,7 +164,7 @@ def test_skip_forbidden_drops_only_forbidden_points():
 
 
 def test_gonio_plan_cli_prints_summary_estimates_and_listing(capsys):
-    from gonio.cli import main
+    from gonio_cli.main import main
 
     assert main(["plan", str(EXAMPLES / "plans" / "demo.toml"), "--list"]) == 0
     out = capsys.readouterr().out.splitlines()

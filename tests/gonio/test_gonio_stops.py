@@ -33,7 +33,7 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def scan(*args: object, stdin=subprocess.DEVNULL) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "gonio.cli", "scan", *map(str, args),
+    return subprocess.Popen([sys.executable, "-m", "gonio_cli", "scan", *map(str, args),
                              "--no-plot", "--no-progress"], stdin=stdin,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
 
@@ -107,7 +107,7 @@ def test_sigint_as_the_run_directory_appears_pauses_and_end_of_input_aborts(tmp_
 
 @pytest.mark.parametrize("module", ["argparse", "numpy"])
 def test_sigint_while_loading_is_one_line(module):
-    """SIGINT the moment `module` is first imported: in gonio.cli's own imports (argparse)
+    """SIGINT the moment `module` is first imported: in gonio_cli.main's own imports (argparse)
     and in a command's (numpy)."""
     code = ("import os, runpy, signal, sys\n"
             "def hook(event, args):\n"
@@ -115,7 +115,7 @@ def test_sigint_while_loading_is_one_line(module):
             "        os.kill(os.getpid(), signal.SIGINT)\n"
             "sys.addaudithook(hook)\n"
             "sys.argv = ['gonio', 'plan', 'examples/plans/demo.toml']\n"
-            "runpy.run_module('gonio.cli', run_name='__main__', alter_sys=True)\n")
+            "runpy.run_module('gonio_cli', run_name='__main__', alter_sys=True)\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           cwd=ROOT, env=ENV, timeout=60)
     assert proc.returncode == 130, proc.stderr

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from gonio.cli import main
+from gonio_cli.main import main
 from sim.lut import TableSpec, bake, load_table
 from sim.lut.cluster import dask_client
 

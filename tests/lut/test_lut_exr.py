@@ -9,7 +9,7 @@ import os
 import numpy as np
 import pytest
 
-from gonio.cli import main
+from gonio_cli.main import main
 from sim.lut import TableSpec, bake, load_table
 from sim.lut.table import Table, interpolate
 

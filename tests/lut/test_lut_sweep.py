@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from gonio.cli import main
+from gonio_cli.main import main
 from sim.bench import build_power_source
 from sim.devices.photodiode import PhotodiodeModel
 from sim.lut.sweep import load_sweep, parse_sweep, run_sweep, setting_seed

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from gonio.commands.fit import add_fit_options, emulator_sim, options_from
+from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from gonio.commands.reduce import add_reduce_options
+from gonio_cli.commands.reduce import add_reduce_options
 
 
 def _list(text: str) -> tuple[str, ...]:

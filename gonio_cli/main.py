@@ -1,4 +1,4 @@
-"""The `gonio` command line: one sub-command per module in gonio.commands.
+"""The `gonio` command line: one sub-command per module in gonio_cli.commands.
 
 Each command module defines `register(subparsers)`, which adds its parser and sets
 `func(args) -> int`. Errors meant for the user are one line and a non-zero exit; so are a
@@ -27,7 +27,7 @@ import os  # noqa: E402
 from drivers.base import DriverError  # noqa: E402
 from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
 
-# Module names under gonio.commands, in the order `gonio --help` lists them.
+# Module names under gonio_cli.commands, in the order `gonio --help` lists them.
 COMMANDS = [
     "scan",
     "plan",
@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
-        importlib.import_module(f"gonio.commands.{name}").register(sub)
+        importlib.import_module(f"gonio_cli.commands.{name}").register(sub)
     return parser
 
 
@@ -86,6 +86,3 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{verb}: terminated by {exc}", file=sys.stderr)
         return 128 + exc.signum
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,1 +1,0 @@
-"""CLI verbs, one module each; gonio.cli discovers them from COMMANDS."""
