@@ -1,12 +1,12 @@
 """`gonio export RUN --format csv|netcdf|zemax|mitsuba --out FILE`: write a run's readings
-(csv, netcdf: one row per reading) or its fitted model (zemax, mitsuba: calibration.exports)."""
+(csv, netcdf: one row per reading) or its fitted model (zemax, mitsuba); calibration.exports."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-FORMATS = ("csv", "netcdf", "zemax", "mitsuba")
+from calibration.exports import FORMATS, write
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,16 +21,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the file(s) and print each path."""
-    out = Path(args.out)
-    if args.format in ("zemax", "mitsuba"):
-        from calibration.exports import write
-
-        for path in write(args.run, args.format, out):
-            print(path)
-        return 0
-    from gonio.export import write_csv, write_netcdf
-    from gonio.store import open_run
-
-    writer = write_csv if args.format == "csv" else write_netcdf
-    print(writer(open_run(args.run), out))
+    for path in write(args.run, args.format, Path(args.out)):
+        print(path)
     return 0

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from calibration.exports import mitsuba_file, zemax_files
 from calibration.exports.mitsuba import read_mitsuba
+from calibration.exports.model import mitsuba_file, zemax_files
 from calibration.exports.zemax import read_zemax, table_tis
 from calibration.fit import FitOptions, fit
 from calibration.synthetic import synthesize

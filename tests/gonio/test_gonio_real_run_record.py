@@ -153,7 +153,7 @@ def test_every_export_carries_the_record(emulated, tmp_path):
     import netCDF4
 
     from calibration.exports import write as write_model
-    from gonio.export import write_csv, write_netcdf
+    from calibration.exports.raw import write_csv, write_netcdf
 
     run = open_run(as_real(emulated, tmp_path / "real", WRONG_SIM, sessions_devices=IDENTITY))
     record = run_record(run)
