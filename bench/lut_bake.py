@@ -10,7 +10,7 @@ cannot be faster: its speed-up measures what the process boundary costs (seriali
 and results, one scheduler), not added compute. A cluster pays off with more machines.
 
 Thread policy, on a smaller table (median of 3 interleaved runs, wall and CPU seconds): the
-policy of sim.lut.cluster (Dask threads own the cores, kernels one thread per task) against
+policy of sim.cluster (Dask threads own the cores, kernels one thread per task) against
 numba owning the cores (a plain loop over tiles in this thread, kernels on every core) and
 against no policy (Dask threads x numba threads, oversubscribed); all must give equal bits.
 
@@ -31,9 +31,9 @@ import time
 
 import numpy as np
 
+from sim.cluster import dask_client, describe, usable_cores
 from sim.lut import Table, TableSpec, bake
 from sim.lut.bake import grid_points, integrate_tile, integrate_tiles, tile_arguments
-from sim.lut.cluster import dask_client, describe, usable_cores
 from sim.lut.model import ModelEstimator
 from sim.lut.validate import (
     TIR_BAND,

@@ -55,8 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Bake (and validate) the table and write it; one line per result on stdout."""
     # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
+    from sim.cluster import dask_client, describe
     from sim.lut import TableSpec, bake, parse_size, validate
-    from sim.lut.cluster import dask_client, describe
     from sim.lut.table import check_storable
 
     try:

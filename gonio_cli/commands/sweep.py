@@ -27,8 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Check every setting first, then measure; prints a summary line and the output path."""
     # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
-    from sim.lut.cluster import dask_client, describe
-    from sim.lut.sweep import load_sweep, run_sweep
+    from sim.cluster import dask_client, describe
+    from sim.sweep import load_sweep, run_sweep
 
     try:
         sweep = load_sweep(args.sweep)

@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 from scipy.stats import qmc
 
-from sim.lut.cluster import map_tasks, total_threads
+from sim.cluster import map_tasks, total_threads
 from sim.lut.spec import TableSpec
 from sim.lut.table import Table
 

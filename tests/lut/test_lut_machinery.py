@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
+from sim.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worker, usable_cores
 from sim.lut import TableSpec, bake, load_table, parse_size, validate
 from sim.lut.axes import ETA_MAX, axes_for
 from sim.lut.bake import grid_points, integrate_tile
-from sim.lut.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worker, usable_cores
 from sim.lut.table import Table, interpolate
 from sim.lut.validate import TIR_BAND, near_critical
 
@@ -195,7 +195,7 @@ def test_a_non_finite_estimate_is_named():
 
 
 def test_tasks_run_kernels_on_one_thread_and_workers_share_the_cores(client):
-    """The thread policy of sim.lut.cluster: inside a task numba runs one thread (restored
+    """The thread policy of sim.cluster: inside a task numba runs one thread (restored
     after), in-process and on a cluster; local workers x threads never exceed the cores."""
     numba = pytest.importorskip("numba")
     before = numba.get_num_threads()

@@ -11,7 +11,7 @@ import pytest
 from gonio_cli.main import main
 from sim.bench import build_power_source
 from sim.devices.photodiode import PhotodiodeModel
-from sim.lut.sweep import load_sweep, parse_sweep, run_sweep, setting_seed
+from sim.sweep import load_sweep, parse_sweep, run_sweep, setting_seed
 
 SWEEP = """
 seed = 4

@@ -20,8 +20,8 @@ import numpy as np
 import tomllib
 
 from sim.bench import build_power_source
+from sim.cluster import map_tasks
 from sim.devices.photodiode import PhotodiodeModel
-from sim.lut.cluster import map_tasks
 
 #: [sim] tables a sweep may vary (owned by sim.bench and sim.devices.photodiode).
 TABLES = ("source", "sample", "aperture", "alignment", "stray", "detector")
