@@ -60,16 +60,18 @@ PARTIAL = ".partial"  # under a run root: run directories being made
 CRC = "crc32"  # the line checksum's field; meta.json's "line_checksum" says lines carry it
 
 READING_DTYPE = np.dtype([
-    ("index", "i8"), ("kind", "U12"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
+    ("index", "i8"), ("kind", object), ("side", object), ("repeat", "i4"), ("point", "i8"),
     ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
     ("theta_i_deg", "f8"), ("phi_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
     ("plan_theta_i_deg", "f8"), ("plan_theta_o_deg", "f8"), ("plan_phi_o_deg", "f8"),
-    ("power_w", "f8"), ("range_w", "f8"), ("saturated", "?"), ("t_s", "f8"), ("flags", "U64"),
+    ("power_w", "f8"), ("range_w", "f8"), ("saturated", "?"), ("t_s", "f8"), ("flags", object),
 ])
 """Fields of `Run.readings()`: angles in degrees (stage angles as the stages reported them,
 sample-frame spherical angles computed from those; plan_* the nominal plan angles, NaN for
 dark and beam readings), power and range in W, t_s seconds since
-the run's first start (wall clock), flags a comma-separated list (e.g. "retried")."""
+the run's first start (wall clock), flags a comma-separated list (e.g. "retried"). kind, side and
+flags are Python strings (object fields), so no name is cut to a fixed width; "" where a line
+has none."""
 
 
 def utc_now() -> str:
@@ -328,7 +330,7 @@ class Run:
         out = np.zeros(len(rows), READING_DTYPE)
         for name in READING_DTYPE.names:
             if rows:
-                out[name] = [_value(r.get(name)) for r in rows]
+                out[name] = [_value(r.get(name), READING_DTYPE[name]) for r in rows]
         return out
 
     def __len__(self) -> int:
@@ -340,7 +342,10 @@ class Run:
         return self.meta.get("status", "unknown")
 
 
-def _value(v: Any) -> Any:
+def _value(v: Any, dtype: np.dtype) -> Any:
+    """A line's value for a readings field: missing text is "", a missing number NaN."""
+    if dtype.kind == "O":
+        return "" if v is None else str(v)
     return np.nan if v is None else v
 
 

@@ -47,9 +47,9 @@ def write_netcdf(run: Run, out: Path) -> Path:
         ds.createDimension("reading", len(r))
         for name in READING_DTYPE.names:
             col = r[name]
-            if col.dtype.kind == "U":
+            if col.dtype.kind == "O":  # text
                 var = ds.createVariable(name, str, ("reading",))
-                var[:] = col.astype(object)
+                var[:] = col
             elif col.dtype.kind == "b":
                 var = ds.createVariable(name, "i1", ("reading",))
                 var[:] = col.astype(np.int8)

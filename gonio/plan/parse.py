@@ -32,8 +32,9 @@ MOTION_ROLES = ("sample", "arm", "azimuth", "elevation")
 AUTO_RANGE = 0.0  # a schedule's range_w when the detector autoranges (else a full scale in W)
 UNSET = math.nan  # a plan's range not given at that level: the enclosing level's applies
 
+# Names (source, side) are Python strings (object fields): a fixed width would cut a long one.
 POINT_DTYPE = np.dtype([
-    ("source", "U24"), ("side", "U12"), ("theta_i_deg", "f8"), ("theta_o_deg", "f8"),
+    ("source", object), ("side", object), ("theta_i_deg", "f8"), ("theta_o_deg", "f8"),
     ("phi_o_deg", "f8"), ("sample_azimuth_deg", "f8"), ("skip_forbidden", "?"),
     ("range_w", "f8"),
 ])

@@ -24,8 +24,9 @@ from gonio.plan.validate import (
     stage_targets,
 )
 
+# kind and side are Python strings (object fields): a fixed width would cut a long name.
 SCHEDULE_DTYPE = np.dtype([
-    ("index", "i8"), ("kind", "U12"), ("side", "U12"), ("repeat", "i4"), ("point", "i8"),
+    ("index", "i8"), ("kind", object), ("side", object), ("repeat", "i4"), ("point", "i8"),
     ("theta_i_deg", "f8"), ("theta_o_deg", "f8"), ("phi_o_deg", "f8"),
     ("sample_deg", "f8"), ("arm_deg", "f8"), ("azimuth_deg", "f8"), ("elevation_deg", "f8"),
     ("range_w", "f8"),
@@ -164,6 +165,7 @@ def _assemble(items: list[Slot], plan: Plan) -> np.ndarray:
     signature reading keeps the point it shadows, -1 on a grid of its own)."""
     out = np.zeros(len(items), SCHEDULE_DTYPE)
     out["index"] = np.arange(len(items))
+    out["side"] = ""  # a sample reading's side is its point's; no other reading has one
     pos = np.empty((len(items), 4))
     for i, (kind, repeat, k, range_w, target) in enumerate(items):
         out[i]["kind"], out[i]["repeat"], out[i]["point"] = kind, repeat, k

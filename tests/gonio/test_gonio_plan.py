@@ -49,6 +49,8 @@ def test_demo_plan_schedule():
     assert sched.estimate_s < sched.naive_estimate_s
     # every point measured exactly once
     assert sorted(samples["point"]) == sorted(set(samples["point"]))
+    # whole names: a side for each sample reading, none for the others
+    assert set(samples["side"]) == {"reflection", "transmission"} and set(r["side"][extra]) == {""}
 
 
 def test_schedule_is_deterministic():

@@ -17,6 +17,9 @@ import pytest
 import gonio.store
 from gonio.errors import RunError
 from gonio.integrity import check, repair
+from gonio.plan.parse import POINT_DTYPE
+from gonio.plan.schedule import SCHEDULE_DTYPE
+from gonio.reading_flags import INVALID, RETRIED, flagged
 from gonio.store import (
     READING_DTYPE,
     DamagedRunError,
@@ -42,6 +45,27 @@ def writer(tmp_path):
     w.start_session()
     yield w
     w.close()
+
+
+def test_long_kind_side_and_flag_names_survive_the_store(writer):
+    """Text fields have no fixed width: names far longer than today's come back whole."""
+    long = {"kind": "signature-" + "k" * 60, "side": "transmission-" + "s" * 40,
+            "flags": ",".join([RETRIED, INVALID, "f" * 80])}
+    writer.append(row(0, **long))
+    r = open_run(writer.path).readings()
+    assert {name: r[name][0] for name in long} == long
+    assert flagged(r, "f" * 80).tolist() == flagged(r, INVALID).tolist() == [True]
+
+
+@pytest.mark.parametrize("dtype", [POINT_DTYPE, SCHEDULE_DTYPE, READING_DTYPE],
+                         ids=["plan points", "schedule", "readings"])
+def test_no_text_field_has_a_fixed_width(dtype):
+    text = [name for name in dtype.names if dtype[name].kind in "OSU"]
+    assert text  # source, side, kind, flags
+    a = np.zeros(1, dtype)
+    for name in text:
+        a[name] = name * 50
+        assert a[name][0] == name * 50, name
 
 
 def test_append_and_read_back(writer):
