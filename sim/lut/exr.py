@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sim.lut.spec import TableSpec
-from sim.lut.table import FORMAT, Table
+from sim.lut.spec import FORMAT, TableSpec
+
+if TYPE_CHECKING:  # sim.lut.table calls this module to store and read .exr tables
+    from sim.lut.table import Table
 
 #: EXR channel carrying each table channel (texture-style names: R, G).
 EXR_CHANNELS = ("R", "G")
@@ -75,8 +78,9 @@ def save_exr(table: Table, path: str | Path) -> Path:
     return path
 
 
-def load_exr(path: str | Path) -> Table:
-    """Read a table written by save_exr: the same array (dtype included) and metadata."""
+def read_exr(path: str | Path) -> tuple[TableSpec, np.ndarray, dict]:
+    """Read a table written by save_exr: its spec, the same array (dtype included) and its
+    metadata (sim.lut.table.load_table makes the Table)."""
     exr = _openexr()
     try:
         with exr.File(str(path)) as f:  # the header and channels live only while it is open
@@ -96,6 +100,4 @@ def load_exr(path: str | Path) -> Table:
     data = np.stack([channels[name] for name in names], axis=-1)
     if data.dtype != np.dtype(spec.dtype) or data.size != int(np.prod(spec.array_shape)):
         raise ValueError(f"{path}: image {data.shape} {data.dtype} does not match its metadata")
-    return Table(spec=spec, data=data.reshape(spec.array_shape),
-                 bake_seconds=meta["bake_seconds"], model=meta["model"],
-                 validation=meta.get("validation"))
+    return spec, data.reshape(spec.array_shape), meta

@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass
 
 from sim.lut.axes import Axis, axes_for
 
+FORMAT = "gonio-lut/1"  # the stored table's format, in every table file's metadata
 KINDS = ("reflection", "transmission")
 DTYPES = ("float16", "float32", "float64")
 CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",)}

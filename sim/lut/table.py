@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.lut.spec import TableSpec
-
-FORMAT = "gonio-lut/1"
+from sim.lut.exr import check_exr, read_exr, save_exr
+from sim.lut.spec import FORMAT, TableSpec
 
 DEFINITIONS = {
     "reflection": {
@@ -65,8 +64,6 @@ class Table:
         path ending in .exr, an OpenEXR image (sim.lut.exr)."""
         path = Path(path)
         if is_exr(path):
-            from sim.lut.exr import save_exr
-
             return save_exr(self, path)
         axes = {f"axis_{a.name}": a.values() for a in self.spec.axes}
         with open(path, "wb") as fh:
@@ -113,18 +110,19 @@ def is_exr(path: str | Path) -> bool:
 def check_storable(spec: TableSpec, path: str | Path) -> None:
     """Raise ValueError now if the file format of path cannot hold a table of spec."""
     if is_exr(path):
-        from sim.lut.exr import check_exr
-
         check_exr(spec)
 
 
 def load_table(path: str | Path) -> Table:
     """Read a table written by Table.save (.npz, or .exr); a file that is not one is a clear
     ValueError."""
-    if is_exr(path):
-        from sim.lut.exr import load_exr
+    spec, data, meta = read_exr(path) if is_exr(path) else _read_npz(path)
+    return Table(spec=spec, data=data, bake_seconds=meta["bake_seconds"], model=meta["model"],
+                 validation=meta.get("validation"))
 
-        return load_exr(path)
+
+def _read_npz(path: str | Path) -> tuple[TableSpec, np.ndarray, dict]:
+    """The spec, stored array and metadata of an .npz table, checked against each other."""
     try:
         with np.load(path, allow_pickle=False) as f:
             meta = json.loads(str(f["metadata"]))
@@ -136,5 +134,4 @@ def load_table(path: str | Path) -> Table:
     spec = TableSpec.from_dict(meta["spec"])
     if data.shape != spec.array_shape or data.dtype != np.dtype(spec.dtype):
         raise ValueError(f"{path}: table {data.shape} {data.dtype} does not match its metadata")
-    return Table(spec=spec, data=data, bake_seconds=meta["bake_seconds"], model=meta["model"],
-                 validation=meta.get("validation"))
+    return spec, data, meta
