@@ -1,1 +1,2 @@
-"""gonio: the instrument — configs, plans, scan engine, run store, geometry and CLI."""
+"""gonio: the instrument — configs, plans, scan engine, run store and geometry (its command
+line is gonio_cli)."""
