@@ -26,7 +26,7 @@ import tomllib
 from drivers.register_map import RegisterMap
 from gonio.config import InstrumentConfig, forbidden_reason
 from gonio.errors import PlanError
-from gonio.fields import Fields
+from gonio.fields import Fields, location
 from gonio.geometry import into_limits, stage_angles
 from gonio.sample import SampleInfo, parse_sample
 
@@ -191,7 +191,7 @@ def _sides(f: Fields) -> tuple[str, ...]:
 
 
 def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
-    f = Fields(table, f"{top.where}: grid[{i}]", PlanError)
+    f = Fields(table, top.source, PlanError, f"grid[{i}]")
     sides = _sides(f)
     ti = f.values("theta_i_deg", low=-90.0, high=90.0)
     to = f.values("theta_o_deg", low=-90.0, high=90.0)
@@ -216,7 +216,7 @@ def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
 
 
 def _single(top: Fields, i: int, table: Any) -> np.ndarray:
-    f = Fields(table, f"{top.where}: point[{i}]", PlanError)
+    f = Fields(table, top.source, PlanError, f"point[{i}]")
     side = f.string("side", "reflection", choices=SIDES)
     out = np.zeros(1, POINT_DTYPE)
     out[0] = (f"point[{i}]", side, f.number("theta_i_deg", low=-90.0, high=90.0),
@@ -317,8 +317,8 @@ def _fixed_position(cfg: InstrumentConfig, kind: str, where: str) -> np.ndarray:
     per reading), checked against the travel and the forbidden zones."""
     pos = {"beam": cfg.beam, "dark": cfg.dark, "signature": cfg.signature}[kind]
     if pos is None:
-        what = "[signature]" if kind == "signature" else f"{kind}.every"
-        raise PlanError(f"{where}: {what} asks for {kind} readings but the instrument "
+        what = location(where, kind, "" if kind == "signature" else "every")
+        raise PlanError(f"{what}: asks for {kind} readings but the instrument "
                         f"{cfg.name!r} ({cfg.path or 'config'}) has no [{kind}] position"
                         + (" (add [signature] sample_deg = 90: the sample retracted)"
                            if kind == "signature" else ""))
