@@ -97,6 +97,7 @@ class Schedule:
     naive_estimate_s: float
     nesting: tuple[str, ...]
     skipped: int  # grid points dropped by skip_forbidden
+    time_scale: float | None = None  # the emulated bench's the estimates are for; None: real
 
     def __len__(self) -> int:
         return len(self.readings)
@@ -509,8 +510,10 @@ def detector_largest_range(cfg: InstrumentConfig) -> float | None:
     return max(ranges) if ranges else None
 
 
-def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
-    """Validate the plan on the instrument and return its ordered readings and estimates."""
+def build_schedule(plan: Plan, cfg: InstrumentConfig, time_scale: float | None = None
+                   ) -> Schedule:
+    """Validate the plan on the instrument and return its ordered readings and estimates: on
+    the real bench, or (time_scale: its [sim] time_scale) on the emulated one."""
     where = str(plan.path) if plan.path else "plan"
     targets, keep = stage_targets(plan, cfg)
     fixed = {k: _fixed_position(cfg, k, where) for k, n in
@@ -530,9 +533,10 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
     readings = _assemble(_interleave(passes, plan, ranges, targets, fixed), plan)
     _check_sweeps(readings, where)
     naive_readings = _assemble(_interleave(naive, plan, ranges, targets, fixed), plan)
-    return Schedule(readings, estimate_seconds(readings, cfg, plan),
-                    estimate_seconds(naive_readings, cfg, plan), nesting,
-                    int(len(keep) - keep.sum()))
+    scale = 1.0 if time_scale is None else time_scale
+    return Schedule(readings, estimate_seconds(readings, cfg, plan, time_scale=scale),
+                    estimate_seconds(naive_readings, cfg, plan, time_scale=scale), nesting,
+                    int(len(keep) - keep.sum()), time_scale)
 
 
 def sweeps_source(start_deg: Any, end_deg: Any) -> np.ndarray:
@@ -580,13 +584,16 @@ def positions(readings: np.ndarray) -> np.ndarray:
 
 
 def estimate_seconds(readings: np.ndarray, cfg: InstrumentConfig, plan: Plan,
-                     start: np.ndarray | None = None) -> float:
-    """Estimated run time: motion profiles (axes together) + settle + dwell + read time."""
+                     start: np.ndarray | None = None, time_scale: float = 1.0) -> float:
+    """Estimated run time: motion profiles (axes together) + settle + dwell, which an emulated
+    bench runs time_scale times faster (its virtual seconds per real second; inf: at once, as
+    the engine waits), + read time."""
     if len(readings) == 0:
         return 0.0
     averaging = plan.averaging or cfg.detector.averaging
-    per_read = plan.dwell_s + READ_OVERHEAD_S + READ_PER_SAMPLE_S * averaging
-    return float(move_times(positions(readings), cfg, start).sum() + per_read * len(readings))
+    device_s = move_times(positions(readings), cfg, start).sum() + plan.dwell_s * len(readings)
+    read_s = (READ_OVERHEAD_S + READ_PER_SAMPLE_S * averaging) * len(readings)
+    return float((0.0 if math.isinf(time_scale) else device_s / time_scale) + read_s)
 
 
 def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
@@ -616,7 +623,8 @@ def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
         f"order {plan.order}" + (f" (nesting {' > '.join(sched.nesting)})" if sched.nesting
                                  else ""),
         f"  estimated duration: {format_duration(sched.estimate_s)}"
-        f" (as written: {format_duration(sched.naive_estimate_s)})",
+        f" (as written: {format_duration(sched.naive_estimate_s)})"
+        + _emulated(sched.time_scale),
     ]
     return "\n".join(lines)
 
@@ -659,6 +667,15 @@ def listing(sched: Schedule) -> str:
 def _span(values: np.ndarray) -> str:
     u = np.unique(values)
     return f"{u[0]:g}" if len(u) == 1 else f"{u[0]:g}..{u[-1]:g} ({len(u)} values)"
+
+
+def _emulated(time_scale: float | None) -> str:
+    """What the estimates are for when not for the real bench."""
+    if time_scale is None:
+        return ""
+    pace = ("moves, settling and dwell at once" if math.isinf(time_scale) else "in real time"
+            if time_scale == 1.0 else f"moves, settling and dwell {time_scale:g}x faster")
+    return f" on the emulated bench (time_scale {time_scale:g}: {pace})"
 
 
 def format_duration(seconds: float) -> str:
