@@ -34,6 +34,8 @@ SIDES = ("reflection", "transmission")
 KINDS = ("sample", "dark", "beam", "signature")
 SIGNATURE_PASSES = ("interleaved", "after", "prompted")
 ORDERS = ("optimal", "as-written")
+#: What a calibration plan measures (its `calibrates`, recorded in the run); none: a BSDF.
+CALIBRATES = ("detector", "aperture", "angles")
 MOTION_ROLES = ("sample", "arm", "azimuth", "elevation")
 AUTO_RANGE = 0.0  # a schedule's range_w when the detector autoranges (else a full scale in W)
 UNSET = math.nan  # a plan's range not given at that level: the enclosing level's applies
@@ -86,6 +88,7 @@ class Plan:
     beam_range_w: float = UNSET  # UNSET: the plan's range
     sample: SampleInfo | None = None  # [sample]: what is measured
     signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
+    calibrates: str | None = None  # one of CALIBRATES for a calibration run; None: a BSDF
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,7 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         beam_range_w=beam_range,
         sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
         signature=_signature(top),
+        calibrates=top.string("calibrates", None, choices=CALIBRATES),
     )
     top.done()
     return plan

@@ -155,7 +155,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
 
         resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
-    meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
+    meta = {"plan_name": plan.name, "calibrates": plan.calibrates,
+            "instrument_name": cfg.name, "planned": len(sched),
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
             "sim": sim if isinstance(sim, list) else bool(sim), "seeds": seeds,
             "time_scale": cfg.sim.get("time_scale", 1.0) if sim is not False else 1.0,
