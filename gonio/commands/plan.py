@@ -59,21 +59,16 @@ def _state(polarisation: str | float) -> str:
 def run(args: argparse.Namespace) -> int:
     """Print the summary; errors are PlanError/ConfigError lines."""
     from gonio.config import load_config
-    from gonio.errors import ConfigError
     from gonio.plan import build_schedule, listing, load_plan, summary
-    from gonio.runner import instrument_path
+    from gonio.runner import instrument_path, scaled
 
     plan = load_plan(args.plan)
-    cfg = load_config(instrument_path(plan, args.instrument))
+    cfg = scaled(load_config(instrument_path(plan, args.instrument)), args.sim, args.time_scale)
     time_scale = None
     if args.sim:
-        from gonio.simulate import emulated_time_scale, with_time_scale
+        from gonio.simulate import emulated_time_scale
 
-        if args.time_scale is not None:
-            cfg = with_time_scale(cfg, args.time_scale)
         time_scale = emulated_time_scale(cfg)
-    elif args.time_scale is not None:
-        raise ConfigError("--time-scale applies to emulated devices: use it with --sim")
     sched = build_schedule(plan, cfg, time_scale)
     print(summary(plan, cfg, sched))
     print(description(plan, cfg))
