@@ -1,4 +1,6 @@
-"""Round trips per second of a position query through each driver and emulator, beside the
+"""Position-query round trips per second of each driver and emulator, beside bare echo.
+
+Round trips per second of a position query through each driver and emulator, beside the
 bare transport's echo round trip measured in the same run (the floor no protocol can beat).
 
 - ESP300/301 over a pty: EspAxis.position() (a "1TP?" query) vs a pty echo of the same bytes

@@ -1,4 +1,6 @@
-"""Points per second of a 2,000-point scan through the full stack (plan -> engine -> ESP and
+"""Points per second of a 2,000-point scan through the full stack, beside its floor.
+
+Points per second of a 2,000-point scan through the full stack (plan -> engine -> ESP and
 PM100 drivers -> emulators on real ptys -> run store with an fsync per point), with zero
 emulator latency and instant motion, beside its floor measured in the same run:
 

@@ -1,4 +1,6 @@
-"""The fit's forward model of a reading (calibration.smearing) across a lobe edge: error against
+"""Error and time per call of the fit's model of a reading across a lobe edge.
+
+The fit's forward model of a reading (calibration.smearing) across a lobe edge: error against
 the emulated bench's own noiseless aperture integral, and time per call.
 
 Walter's ground glass (GGX 0.394, n 1.51; aperture 0.57 deg, beam 0.03 deg) at incidence 30

@@ -1,4 +1,6 @@
-"""Soak: N scans on the two-process bench (the emulators served from this process as `gonio
+"""Scans killed and terminated at random, resumed until complete, checked: nothing lost.
+
+Soak: N scans on the two-process bench (the emulators served from this process as `gonio
 emulate` serves them, each `gonio scan` in a process of its own) with random reply faults at a
 stated rate, each ended by SIGKILL or SIGTERM at random moments and resumed (`gonio scan
 --resume RUN`) until completed, then `gonio check` on each. Beside it, in the same run, its

@@ -74,7 +74,7 @@ class Calibration:
         def table(name: str) -> dict[str, Any]:
             t = data.get(name) or {}
             if not isinstance(t, dict):
-                raise CalibrationError(f"{where}: {name} must be a table")
+                raise CalibrationError(f"{where}: [{name}]: must be a table")
             return t
 
         def values(t: dict[str, Any], key: str, section: str) -> Any:
@@ -82,13 +82,13 @@ class Calibration:
             if d is None:
                 return None
             if not isinstance(d, dict):
-                raise CalibrationError(f"{where}: {section}.{key} must be a table")
-            return {k: Measured.from_json(v, f"{where}: {section}.{key}.{k}")
+                raise CalibrationError(f"{where}: [{section}] {key}: must be a table")
+            return {k: Measured.from_json(v, f"{where}: [{section}.{key}] {k}")
                     for k, v in d.items()}
 
         def value(t: dict[str, Any], key: str, section: str) -> Measured | None:
             v = t.get(key)
-            return None if v is None else Measured.from_json(v, f"{where}: {section}.{key}")
+            return None if v is None else Measured.from_json(v, f"{where}: [{section}] {key}")
 
         det, ang, ap = table("detector"), table("angles"), table("aperture")
         return cls(

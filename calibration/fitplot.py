@@ -25,6 +25,24 @@ def model_curve(result: FitResult, theta_i_deg: float, transmission: bool,
     return np.degrees(theta), result.predict(wi, wo)
 
 
+def fit_title(data: ReducedData, result: FitResult, title: str = "") -> str:
+    """The overlay's title: the run's (title: its name, sample and nominal eta), then the fitted
+    parameters, eta only where it tells something new (fitted, or held at another value),
+    then chi2/dof on the fitted and held-out points."""
+    a = np.atleast_1d(result.alpha)
+    eta = ""
+    if "eta" in result.names:
+        value, sigma = result.param("eta")
+        eta = f", η = {value:.4g} ± {sigma:.2g} (fitted)"
+    elif data.meta.get("eta") is None or abs(result.eta - data.meta["eta"]) > 1e-12:
+        eta = f", η = {result.eta:.4g} (held)"
+    held = "–" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.4g}"
+    lines = [title] if title else []
+    lines += [f"{result.distribution} fit α = {', '.join(f'{v:.4g}' for v in a)}{eta}",
+              f"χ²/dof fitted {result.chi2_dof_fit:.4g}, held out {held}"]
+    return "\n".join(lines)
+
+
 def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
              options: FitOptions | None = None, title: str = "") -> Path:
     """Write the overlay figure (a column per incidence, BSDF and residual rows per measured side)
@@ -71,13 +89,7 @@ def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
                 bottom.set_ylabel("(data − model)/σ", fontsize=8)  # σ: data ⊕ model
             if sel.any():
                 top.legend(fontsize=7)
-    a = np.atleast_1d(result.alpha)
-    held = "–" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.2f}"
-    lines = [title] if title else []
-    lines += [f"{result.distribution} fit α = {', '.join(f'{v:.4g}' for v in a)}, "
-              f"η = {result.eta:.4g}",
-              f"χ²/dof fitted {result.chi2_dof_fit:.4g}, held out {held}"]
-    fig.suptitle("\n".join(lines), fontsize=9)
+    fig.suptitle(fit_title(data, result, title), fontsize=9)
     fig.tight_layout()
     out_png = Path(out_png)
     fig.savefig(out_png, dpi=110)

@@ -155,10 +155,23 @@ def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool =
              shot_noise_w: float | None = None, subtract_signature: bool = False) -> Path:
     """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
     (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png);
-    subtract_signature as calibration.pipeline.reduce_run."""
+    subtract_signature as calibration.pipeline.reduce_run. A calibration run (its record's
+    `calibrates`) gets the plot of what it measures instead (calibration.calplot)."""
     from calibration.pipeline import reduce_run
+    from gonio.record import run_record
+    from gonio.store import open_run
 
     run_dir = Path(run_dir)
+    run = open_run(run_dir)
+    kind = run_record(run)["calibrates"]
+    if kind is not None:
+        from calibration.calplot import plot_calibration
+
+        if fit:
+            raise CalibrationError(f"{run_dir} calibrates the {kind}: no BSDF to fit (gonio "
+                                   f"calibrate build {run_dir} --out CAL.json uses it)")
+        title = f"{run_dir.name}: {kind} calibration"
+        return plot_calibration(run.readings(), kind, out_png or run_dir / "plot.png", title)
     data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature)
     title = plot_title(run_dir.name, data.meta)
     if fit:

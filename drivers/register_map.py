@@ -94,9 +94,9 @@ class RegisterMap:
         regs = _field(table, "registers", dict, source)
         self.registers = {name: _register(name, spec, source) for name, spec in regs.items()}
         commands = _section(table, "commands", source)
-        self.commands = {n: _int_field(commands, n, f"{source}: commands") for n in commands}
+        self.commands = {n: _int_field(commands, n, f"{source}: [commands]") for n in commands}
         bits = _section(table, "status_bits", source)
-        self.status_bits = {n: _int_field(bits, n, f"{source}: status_bits") for n in bits}
+        self.status_bits = {n: _int_field(bits, n, f"{source}: [status_bits]") for n in bits}
         self.fault_codes = {
             spec["code"]: FaultCode(name, spec["code"], spec["text"])
             for name, spec in _fault_table(_section(table, "fault_codes", source), source).items()
@@ -239,9 +239,9 @@ def _number(spec: Mapping, key: str, where: str) -> float | None:
 
 
 def _register(name: str, spec: object, source: str) -> Register:
-    where = f"{source}: registers.{name}"
+    where = f"{source}: [registers.{name}]"
     if not isinstance(spec, Mapping):
-        raise RegisterMapError(f"{where} must be a table")
+        raise RegisterMapError(f"{where}: must be a table")
     table = _field(spec, "table", str, where)
     kind = _field(spec, "type", str, where)
     access = spec.get("access", "r")
@@ -262,9 +262,9 @@ def _register(name: str, spec: object, source: str) -> Register:
 
 
 def _text_register(name: str, spec: object, source: str) -> TextRegister:
-    where = f"{source}: identity.{name}"
+    where = f"{source}: [identity.{name}]"
     if not isinstance(spec, Mapping):
-        raise RegisterMapError(f"{where} must be a table {{ table, address, count }}")
+        raise RegisterMapError(f"{where}: must be a table {{ table, address, count }}")
     unknown = sorted(set(spec) - set(_TEXT_KEYS))
     if unknown:
         raise RegisterMapError(f"{where}: unknown key {unknown[0]!r} (known: "
@@ -287,7 +287,7 @@ def _section(table: Mapping, key: str, source: str) -> Mapping:
     """An optional sub-table of the map (empty when absent)."""
     value = table.get(key, {})
     if not isinstance(value, Mapping):
-        raise RegisterMapError(f"{source}: [{key}] must be a table, got {value!r}")
+        raise RegisterMapError(f"{source}: [{key}]: must be a table, got {value!r}")
     return value
 
 
@@ -297,7 +297,7 @@ def _gain_ranges(table: Mapping, source: str) -> tuple[float, ...]:
         isinstance(r, int | float) and not isinstance(r, bool) and r > 0 for r in ranges
     ) and all(a < b for a, b in zip(ranges, ranges[1:], strict=False))
     if not ok:
-        raise RegisterMapError(f"{source}: gain_ranges.full_scale_w must be increasing powers "
+        raise RegisterMapError(f"{source}: [gain_ranges] full_scale_w: must be increasing powers "
                                f"> 0 W, got {ranges!r}")
     return tuple(float(r) for r in ranges)
 
@@ -305,9 +305,9 @@ def _gain_ranges(table: Mapping, source: str) -> tuple[float, ...]:
 def _fault_table(table: Mapping, source: str) -> dict[str, dict]:
     out = {}
     for name, spec in table.items():
-        where = f"{source}: fault_codes.{name}"
+        where = f"{source}: [fault_codes.{name}]"
         if not isinstance(spec, Mapping):
-            raise RegisterMapError(f"{where} must be a table with code and text")
+            raise RegisterMapError(f"{where}: must be a table with code and text")
         out[name] = {"code": _int_field(spec, "code", where),
                      "text": _field(spec, "text", str, where)}
     return out

@@ -19,7 +19,7 @@ import tomllib
 
 from drivers.register_map import RegisterMap
 from gonio.errors import ConfigError
-from gonio.fields import REQUIRED, Fields
+from gonio.fields import REQUIRED, Fields, location
 from gonio.optics import Optics, parse_optics
 
 PROTOCOLS = ("esp", "pm100", "modbus-stage", "modbus-detector")
@@ -145,7 +145,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     dark = _position(top, "dark")
     signature = _position(top, "signature", arm=False)
     if top.has("sim") and not isinstance(raw["sim"], dict):
-        raise ConfigError(f"{where}.sim: must be a table")
+        raise ConfigError(f"{location(where, 'sim')}: must be a table")
     top.done()
     for dev in devices.values():  # write resolved paths back for the store and emulators
         if dev.register_map:
@@ -245,7 +245,8 @@ def _check_register_ranges(devices: dict[str, DeviceConfig], axes: dict[str, Axi
             try:
                 maps[dev.name] = RegisterMap.load(dev.register_map)
             except (OSError, ValueError) as exc:
-                raise ConfigError(f"{where}.devices.{dev.name}.register_map: {exc}") from None
+                raise ConfigError(f"{location(where, f'devices.{dev.name}', 'register_map')}: "
+                                  f"{exc}") from None
     for ax in axes.values():
         if devices[ax.device].protocol != "modbus-stage":
             continue
@@ -256,8 +257,8 @@ def _check_register_ranges(devices: dict[str, DeviceConfig], axes: dict[str, Axi
             try:
                 maps[ax.device].encode(register, value)
             except (KeyError, ValueError) as exc:
-                raise ConfigError(f"{where}.axes.{ax.role}.{key}: the drive's register map "
-                                  f"refuses it ({exc})") from None
+                raise ConfigError(f"{location(where, f'axes.{ax.role}', key)}: the drive's "
+                                  f"register map refuses it ({exc})") from None
 
 
 def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
@@ -297,8 +298,8 @@ def _zones(f: Fields) -> tuple[tuple[float, float], ...]:
         raise f.fail("arm_forbidden_deg", "must be a list of [lo, hi] pairs")
     out = []
     for i, zone in enumerate(zones):
-        sub = Fields({"zone": zone}, f"{f.where}.arm_forbidden_deg[{i}]", ConfigError)
-        out.append(sub.pair("zone"))
+        key = f"arm_forbidden_deg[{i}]"
+        out.append(Fields({key: zone}, f.source, ConfigError, f.name).pair(key))
     return tuple(out)
 
 

@@ -1,7 +1,8 @@
 """Typed reading of TOML tables with one-line errors naming the file, the table and the key.
 
-Configs and plans both use it, so every bad field is reported the same way and an unknown
-key (a typo) is an error rather than silently ignored.
+Configs and plans both use it, so every bad field is reported the same way, `FILE: [TABLE]
+KEY: message` (location()), and an unknown key (a typo) is an error rather than silently
+ignored.
 """
 
 from __future__ import annotations
@@ -18,18 +19,32 @@ from gonio.errors import GonioError
 REQUIRED = object()
 
 
-class Fields:
-    """One TOML table being read: each accessor checks type and range, `done()` rejects extras."""
+def location(source: str, table: str = "", key: str = "") -> str:
+    """Where a value is, as every error names it: `FILE: [TABLE] KEY`, leaving out what does
+    not apply (`FILE: KEY` at the top level, `FILE: [TABLE]` for a whole table)."""
+    place = " ".join(part for part in (f"[{table}]" if table else "", key) if part)
+    return f"{source}: {place}" if place else source
 
-    def __init__(self, table: Any, where: str, error: type[GonioError]):
+
+class Fields:
+    """One TOML table being read: each accessor checks type and range, `done()` rejects extras.
+
+    source: the file (or "config", "plan"); name: the table's dotted TOML name, "" at the top
+    level ("detector", "axes.arm", "grid[0]" for an array of tables' first); prefix: the key
+    path of an inline table within it ("theta_o_deg.")."""
+
+    def __init__(self, table: Any, source: str, error: type[GonioError], name: str = "",
+                 prefix: str = ""):
+        self.source, self.name, self.prefix, self.error = source, name, prefix, error
+        self.where = location(source, name, prefix.rstrip("."))
         if not isinstance(table, Mapping):
-            raise error(f"{where}: must be a table, got {_show(table)}")
-        self.table, self.where, self.error = table, where, error
+            raise error(f"{self.where}: must be a table, got {_show(table)}")
+        self.table = table
         self._used: set[str] = set()
 
     def fail(self, key: str, message: str) -> GonioError:
         """The error for `key` (raise it)."""
-        return self.error(f"{self.where}.{key}: {message}")
+        return self.error(f"{location(self.source, self.name, self.prefix + key)}: {message}")
 
     def has(self, key: str) -> bool:
         """True if the key is present (and marks it known)."""
@@ -105,13 +120,15 @@ class Fields:
                 raise self.fail(key, "must not be empty")
             return tuple(check_number(v, self.fail, key, low, high) for v in value)
         if isinstance(value, Mapping):
-            return _range(Fields(value, f"{self.where}.{key}", self.error), low, high)
+            return _range(Fields(value, self.source, self.error, self.name,
+                                 f"{self.prefix}{key}."), low, high)
         raise self.fail(key, f"must be a number, a list of numbers or a table "
                              f"{{start, stop, step}}, got {_show(value)}")
 
     def table_of(self, key: str) -> Fields:
         """A sub-table (empty if absent)."""
-        return Fields(self._get(key, {}), f"{self.where}.{key}", self.error)
+        name = f"{self.name}.{key}" if self.name else key
+        return Fields(self._get(key, {}), self.source, self.error, name)
 
     def done(self) -> None:
         """Reject any key no accessor asked for."""

@@ -85,4 +85,4 @@ def optics_of_config(config: dict[str, Any], where: str = "config") -> Optics | 
     """The [optics] of a stored (raw) instrument config, or None if it has none."""
     if "optics" not in config:
         return None
-    return parse_optics(Fields(config["optics"], f"{where}.optics", ConfigError))
+    return parse_optics(Fields(config["optics"], where, ConfigError, "optics"))

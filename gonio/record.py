@@ -47,8 +47,9 @@ def _sessions(meta: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 
 def run_record(run: Run) -> dict[str, Any]:
-    """The run's record, flat and ordered: run facts, the optics, the sample, the calibration
-    and the devices per session (None where the run does not know a value)."""
+    """The run's record, flat and ordered: run facts (`calibrates`: what a calibration run
+    measures, None for a BSDF run), the optics, the sample, the calibration and the devices
+    per session (None where the run does not know a value)."""
     meta = run.meta
     optics = meta.get("optics")
     if optics is None and "optics" in run.config:
@@ -60,6 +61,7 @@ def run_record(run: Run) -> dict[str, Any]:
     wavelength = o.get("wavelength_nm", run.config.get("detector", {}).get("wavelength_nm"))
     return {
         "run": run.path.name, "plan": meta.get("plan_name"),
+        "calibrates": meta.get("calibrates"),
         "instrument": meta.get("instrument_name"), "status": meta.get("status"),
         "reason": meta.get("reason"), "started_utc": meta.get("started_utc"),
         "stopped_utc": meta.get("stopped_utc"), "emulated": meta.get("sim"),

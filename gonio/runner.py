@@ -142,20 +142,15 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     if sample_id is not None:
         plan = with_sample_id(plan, sample_id)
     cfg_path = instrument_path(plan, instrument)
-    cfg = load_config(cfg_path)
-    if time_scale is not None:
-        if sim is False:
-            raise ConfigError("--time-scale applies to emulated devices: use it with --sim")
-        from gonio.simulate import with_time_scale
-
-        cfg = with_time_scale(cfg, time_scale)
+    cfg = scaled(load_config(cfg_path), sim, time_scale)
     sched = build_schedule(plan, cfg)
     if isinstance(sim, list):
         from gonio.simulate import resolve_devices
 
         resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
-    meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
+    meta = {"plan_name": plan.name, "calibrates": plan.calibrates,
+            "instrument_name": cfg.name, "planned": len(sched),
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
             "sim": sim if isinstance(sim, list) else bool(sim), "seeds": seeds,
             "time_scale": cfg.sim.get("time_scale", 1.0) if sim is not False else 1.0,
@@ -165,6 +160,19 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
                 meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn))
+
+
+def scaled(cfg: InstrumentConfig, sim: list[str] | bool, time_scale: float | None
+           ) -> InstrumentConfig:
+    """The config with `--time-scale` as its [sim] time_scale (None: as it is); a ConfigError
+    for a run with no emulated device (sim False)."""
+    if time_scale is None:
+        return cfg
+    if sim is False:
+        raise ConfigError("--time-scale applies to emulated devices: use it with --sim")
+    from gonio.simulate import with_time_scale
+
+    return with_time_scale(cfg, time_scale)
 
 
 def _then_warn(check: DetectorCheck | None, texts: list[str],

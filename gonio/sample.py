@@ -69,4 +69,4 @@ def sample_of_plan(plan: dict[str, Any], where: str = "plan") -> SampleInfo | No
     """The [sample] of a stored (raw) plan, or None if it has none."""
     if "sample" not in plan:
         return None
-    return parse_sample(Fields(plan["sample"], f"{where}.sample", PlanError))
+    return parse_sample(Fields(plan["sample"], where, PlanError, "sample"))

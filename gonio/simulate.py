@@ -90,10 +90,19 @@ def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
     try:
         pointed = point_at(cfg, {n: e.endpoint for n, e in bench.endpoints.items()})
         stages_emulated = all(ax.device in devices for ax in cfg.axes.values())
-        scale = time_scale_of(cfg.sim) if stages_emulated else 1.0
+        scale = emulated_time_scale(cfg) if stages_emulated else 1.0
         yield Simulation(pointed, scale, devices, positions, bench)
     finally:
         bench.stop()
+
+
+def emulated_time_scale(cfg: InstrumentConfig) -> float:
+    """The [sim] time_scale the emulated stages move at: virtual seconds per real second
+    (inf: moves complete at once)."""
+    try:
+        return time_scale_of(cfg.sim)
+    except ValueError as exc:
+        raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
 
 
 def with_time_scale(cfg: InstrumentConfig, value: float) -> InstrumentConfig:

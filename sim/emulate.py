@@ -104,7 +104,7 @@ def time_scale_of(sim: Mapping[str, Any]) -> float:
     if value == "inf":
         return math.inf
     if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 1:
-        raise SimConfigError(f'[sim] time_scale must be a number >= 1 (1 = real time) or '
+        raise SimConfigError(f'[sim] time_scale: must be a number >= 1 (1 = real time) or '
                              f'"inf", got {value!r}')
     return float(value)
 
@@ -112,21 +112,21 @@ def time_scale_of(sim: Mapping[str, Any]) -> float:
 def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
     sim = config.get("sim", {})
     if not isinstance(sim, Mapping):
-        raise SimConfigError("[sim] must be a table")
+        raise SimConfigError("[sim]: must be a table")
     unknown = sorted(set(sim) - set(SIM_KEYS))
     if unknown:
-        raise SimConfigError(f"[sim] unknown key {unknown[0]!r}; known: {', '.join(SIM_KEYS)}")
+        raise SimConfigError(f"[sim]: unknown key {unknown[0]!r}; known: {', '.join(SIM_KEYS)}")
     seed = sim.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int):
-        raise SimConfigError(f"[sim] seed must be an integer, got {seed!r}")
+        raise SimConfigError(f"[sim] seed: must be an integer, got {seed!r}")
     faults = sim.get("faults", {})
     if not isinstance(faults, Mapping):
-        raise SimConfigError(f"[sim.faults] must be a table of device tables, got {faults!r}")
+        raise SimConfigError(f"[sim.faults]: must be a table of device tables, got {faults!r}")
     for device, table in faults.items():
         if device not in config.get("devices", {}):
             raise SimConfigError(f"[sim.faults.{device}]: no device {device!r} under [devices]")
         if not isinstance(table, Mapping):
-            raise SimConfigError(f"[sim.faults.{device}] must be a table, got {table!r}")
+            raise SimConfigError(f"[sim.faults.{device}]: must be a table, got {table!r}")
         if "invalid_prob" in table and config["devices"][device].get("protocol") != "pm100":
             raise SimConfigError(f"[sim.faults.{device}] invalid_prob: only a pm100 detector "
                                  "answers with an invalid reading")

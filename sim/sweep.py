@@ -67,7 +67,7 @@ class Sweep:
 
 def _list(where: str, value: object) -> list:
     if not isinstance(value, list) or not value:
-        raise ValueError(f"{where} must be a non-empty list, got {value!r}")
+        raise ValueError(f"{where}: must be a non-empty list, got {value!r}")
     return value
 
 
@@ -75,7 +75,7 @@ def _angles(where: str, value: object) -> list[float]:
     values = _list(where, value)
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
                for v in values):
-        raise ValueError(f"{where} must be a list of angles in degrees, got {value!r}")
+        raise ValueError(f"{where}: must be a list of angles in degrees, got {value!r}")
     return [float(v) for v in values]
 
 
@@ -94,31 +94,31 @@ def parse_sweep(doc: Mapping, base_dir: Path = Path(".")) -> Sweep:
             raise ValueError(f"instrument {str(path)!r}: {exc}") from None
     for table, values in doc.get("sim", {}).items():
         if not isinstance(values, Mapping):
-            raise ValueError(f"[sim.{table}] must be a table")
+            raise ValueError(f"[sim.{table}]: must be a table")
         base.setdefault(table, {}).update(values)
     vary = {}
     for key, values in doc.get("vary", {}).items():
         table, _, name = key.partition(".")
         if table not in TABLES or not name or "." in name:
-            raise ValueError(f"[vary] key {key!r} must be <table>.<key> with table one of "
+            raise ValueError(f"[vary] {key!r}: must be <table>.<key> with table one of "
                              f"{', '.join(TABLES)}")
         vary[key] = _list(f"[vary] {key!r}", values)
     positions_doc = doc.get("positions", {})
     extra = sorted(set(positions_doc) - {f"{r}_deg" for r in ROLES})
     if extra:
-        raise ValueError(f"[positions] unknown key {extra[0]!r}; known: "
+        raise ValueError(f"[positions]: unknown key {extra[0]!r}; known: "
                          f"{', '.join(f'{r}_deg' for r in ROLES)}")
     positions = {}
     for role, default in ROLES.items():
         value = positions_doc.get(f"{role}_deg", None if default is None else [default])
         if value is None:
-            raise ValueError(f"[positions] {role}_deg is required")
+            raise ValueError(f"[positions]: missing required key '{role}_deg'")
         positions[role] = _angles(f"[positions] {role}_deg", value)
     seed, averaging = doc.get("seed", 0), doc.get("averaging", 1)
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        raise ValueError(f"seed must be an integer in [0, 2^63), got {seed!r}")
+        raise ValueError(f"seed: must be an integer in [0, 2^63), got {seed!r}")
     if isinstance(averaging, bool) or not isinstance(averaging, int) or averaging < 1:
-        raise ValueError(f"averaging must be an integer >= 1, got {averaging!r}")
+        raise ValueError(f"averaging: must be an integer >= 1, got {averaging!r}")
     sweep = Sweep(base, vary, positions, seed, averaging)
     for k, cfg in enumerate(sweep.settings()):
         try:

@@ -5,6 +5,7 @@ in words (report). The names other code uses are re-exported here."""
 from gonio.plan.estimate import estimate_seconds, positions, profile_seconds
 from gonio.plan.parse import (
     AUTO_RANGE,
+    CALIBRATES,
     KINDS,
     MOTION_ROLES,
     SIDES,
@@ -18,7 +19,7 @@ from gonio.plan.schedule import Schedule, build_schedule, serpentine
 from gonio.plan.validate import stage_targets, sweeps_source
 
 __all__ = [
-    "AUTO_RANGE", "KINDS", "MOTION_ROLES", "SIDES", "Plan", "Schedule", "SignaturePlan",
+    "AUTO_RANGE", "CALIBRATES", "KINDS", "MOTION_ROLES", "SIDES", "Plan", "Schedule", "SignaturePlan",
     "build_schedule", "describe_range", "describe_ranges", "estimate_seconds", "format_duration",
     "listing", "load_plan", "parse_plan", "positions", "profile_seconds", "serpentine",
     "stage_targets", "summary", "sweeps_source",

@@ -3,6 +3,7 @@ settling, dwell and the detector's read time."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -44,10 +45,13 @@ def positions(readings: np.ndarray) -> np.ndarray:
 
 
 def estimate_seconds(readings: np.ndarray, cfg: InstrumentConfig, plan: Plan,
-                     start: np.ndarray | None = None) -> float:
-    """Estimated run time: motion profiles (axes together) + settle + dwell + read time."""
+                     start: np.ndarray | None = None, time_scale: float = 1.0) -> float:
+    """Estimated run time: motion profiles (axes together) + settle + dwell, which an emulated
+    bench runs time_scale times faster (its virtual seconds per real second; inf: at once, as
+    the engine waits), + read time."""
     if len(readings) == 0:
         return 0.0
     averaging = plan.averaging or cfg.detector.averaging
-    per_read = plan.dwell_s + READ_OVERHEAD_S + READ_PER_SAMPLE_S * averaging
-    return float(move_times(positions(readings), cfg, start).sum() + per_read * len(readings))
+    device_s = move_times(positions(readings), cfg, start).sum() + plan.dwell_s * len(readings)
+    read_s = (READ_OVERHEAD_S + READ_PER_SAMPLE_S * averaging) * len(readings)
+    return float((0.0 if math.isinf(time_scale) else device_s / time_scale) + read_s)

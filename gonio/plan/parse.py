@@ -28,6 +28,8 @@ SIDES = ("reflection", "transmission")
 KINDS = ("sample", "dark", "beam", "signature")
 SIGNATURE_PASSES = ("interleaved", "after", "prompted")
 ORDERS = ("optimal", "as-written")
+#: What a calibration plan measures (its `calibrates`, recorded in the run); none: a BSDF.
+CALIBRATES = ("detector", "aperture", "angles")
 MOTION_ROLES = ("sample", "arm", "azimuth", "elevation")
 AUTO_RANGE = 0.0  # a schedule's range_w when the detector autoranges (else a full scale in W)
 UNSET = math.nan  # a plan's range not given at that level: the enclosing level's applies
@@ -72,6 +74,7 @@ class Plan:
     beam_range_w: float = UNSET  # UNSET: the plan's range
     sample: SampleInfo | None = None  # [sample]: what is measured
     signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
+    calibrates: str | None = None  # one of CALIBRATES for a calibration run; None: a BSDF
 
 
 def load_plan(path: str | Path) -> Plan:
@@ -118,6 +121,7 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         beam_range_w=beam_range,
         sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
         signature=_signature(top),
+        calibrates=top.string("calibrates", None, choices=CALIBRATES),
     )
     top.done()
     return plan
@@ -163,7 +167,7 @@ def _sides(f: Fields) -> tuple[str, ...]:
 
 
 def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
-    f = Fields(table, f"{top.where}: grid[{i}]", PlanError)
+    f = Fields(table, top.source, PlanError, f"grid[{i}]")
     sides = _sides(f)
     ti = f.values("theta_i_deg", low=-90.0, high=90.0)
     to = f.values("theta_o_deg", low=-90.0, high=90.0)
@@ -188,7 +192,7 @@ def _grid(top: Fields, i: int, table: Any) -> np.ndarray:
 
 
 def _single(top: Fields, i: int, table: Any) -> np.ndarray:
-    f = Fields(table, f"{top.where}: point[{i}]", PlanError)
+    f = Fields(table, top.source, PlanError, f"point[{i}]")
     side = f.string("side", "reflection", choices=SIDES)
     out = np.zeros(1, POINT_DTYPE)
     out[0] = (f"point[{i}]", side, f.number("theta_i_deg", low=-90.0, high=90.0),

@@ -3,6 +3,8 @@ reading (`gonio plan --list`), and the phrases for ranges, signature passes and 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gonio.config import InstrumentConfig
@@ -37,7 +39,8 @@ def summary(plan: Plan, cfg: InstrumentConfig, sched: Schedule) -> str:
         f"order {plan.order}" + (f" (nesting {' > '.join(sched.nesting)})" if sched.nesting
                                  else ""),
         f"  estimated duration: {format_duration(sched.estimate_s)}"
-        f" (as written: {format_duration(sched.naive_estimate_s)})",
+        f" (as written: {format_duration(sched.naive_estimate_s)})"
+        + _emulated(sched.time_scale),
     ]
     return "\n".join(lines)
 
@@ -80,6 +83,15 @@ def listing(sched: Schedule) -> str:
 def _span(values: np.ndarray) -> str:
     u = np.unique(values)
     return f"{u[0]:g}" if len(u) == 1 else f"{u[0]:g}..{u[-1]:g} ({len(u)} values)"
+
+
+def _emulated(time_scale: float | None) -> str:
+    """What the estimates are for when not for the real bench."""
+    if time_scale is None:
+        return ""
+    pace = ("moves, settling and dwell at once" if math.isinf(time_scale) else "in real time"
+            if time_scale == 1.0 else f"moves, settling and dwell {time_scale:g}x faster")
+    return f" on the emulated bench (time_scale {time_scale:g}: {pace})"
 
 
 def format_duration(seconds: float) -> str:

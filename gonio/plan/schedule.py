@@ -42,6 +42,7 @@ class Schedule:
     naive_estimate_s: float
     nesting: tuple[str, ...]
     skipped: int  # grid points dropped by skip_forbidden
+    time_scale: float | None = None  # the emulated bench's the estimates are for; None: real
 
     def __len__(self) -> int:
         return len(self.readings)
@@ -134,8 +135,10 @@ def _interleave(passes: list[tuple[int, np.ndarray]], plan: Plan, ranges: Ranges
     return out
 
 
-def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
-    """Validate the plan on the instrument and return its ordered readings and estimates."""
+def build_schedule(plan: Plan, cfg: InstrumentConfig, time_scale: float | None = None
+                   ) -> Schedule:
+    """Validate the plan on the instrument and return its ordered readings and estimates: on
+    the real bench, or (time_scale: its [sim] time_scale) on the emulated one."""
     where = str(plan.path) if plan.path else "plan"
     targets, keep = stage_targets(plan, cfg)
     fixed = {k: fixed_position(cfg, k, where) for k, n in
@@ -155,9 +158,10 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig) -> Schedule:
     readings = _assemble(_interleave(passes, plan, ranges, targets, fixed), plan)
     check_sweeps(readings, where)
     naive_readings = _assemble(_interleave(naive, plan, ranges, targets, fixed), plan)
-    return Schedule(readings, estimate_seconds(readings, cfg, plan),
-                    estimate_seconds(naive_readings, cfg, plan), nesting,
-                    int(len(keep) - keep.sum()))
+    scale = 1.0 if time_scale is None else time_scale
+    return Schedule(readings, estimate_seconds(readings, cfg, plan, time_scale=scale),
+                    estimate_seconds(naive_readings, cfg, plan, time_scale=scale), nesting,
+                    int(len(keep) - keep.sum()), time_scale)
 
 
 def _assemble(items: list[Slot], plan: Plan) -> np.ndarray:

@@ -13,6 +13,7 @@ import numpy as np
 from drivers.register_map import RegisterMap
 from gonio.config import InstrumentConfig, forbidden_reason
 from gonio.errors import PlanError
+from gonio.fields import location
 from gonio.geometry import into_limits, stage_angles
 from gonio.plan.parse import AUTO_RANGE, MOTION_ROLES, UNSET, Plan
 
@@ -70,8 +71,8 @@ def fixed_position(cfg: InstrumentConfig, kind: str, where: str) -> np.ndarray:
     per reading), checked against the travel and the forbidden zones."""
     pos = {"beam": cfg.beam, "dark": cfg.dark, "signature": cfg.signature}[kind]
     if pos is None:
-        what = "[signature]" if kind == "signature" else f"{kind}.every"
-        raise PlanError(f"{where}: {what} asks for {kind} readings but the instrument "
+        what = location(where, kind, "" if kind == "signature" else "every")
+        raise PlanError(f"{what}: asks for {kind} readings but the instrument "
                         f"{cfg.name!r} ({cfg.path or 'config'}) has no [{kind}] position"
                         + (" (add [signature] sample_deg = 90: the sample retracted)"
                            if kind == "signature" else ""))

@@ -1,9 +1,11 @@
-"""`gonio bench`: run the performance and accuracy scripts in bench/ and, with --readme,
-write their latest output into the README's performance section."""
+"""`gonio bench`: list the performance and accuracy scripts in bench/, run one, some or all of
+them and, with --doc, write their latest output into the generated blocks of
+docs/performance.md (or another file)."""
 
 from __future__ import annotations
 
 import argparse
+import ast
 import re
 import subprocess
 import sys
@@ -13,14 +15,20 @@ from gonio.errors import GonioError
 
 BENCH_DIR = Path(__file__).resolve().parents[2] / "bench"
 BEGIN, END = "<!-- bench:{name}:begin -->", "<!-- bench:{name}:end -->"
+DEFAULT_DOC = BENCH_DIR.parent / "docs" / "performance.md"
+ALL = "all"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the `bench` verb."""
-    p = sub.add_parser("bench", help="run the scripts in bench/ (speed, error vs run time)")
-    p.add_argument("names", nargs="*", help="scripts to run, e.g. bsdf_throughput (default: all)")
-    p.add_argument("--list", action="store_true", help="list the scripts and exit")
-    p.add_argument("--readme", type=Path, help="write each output into this README's section")
+    p = sub.add_parser("bench", help="run the scripts in bench/ (speed, error vs run time)",
+                       description=__doc__)
+    p.add_argument("names", nargs="*", metavar="NAME",
+                   help=f"scripts to run, e.g. bsdf_throughput, or {ALL!r} for every one "
+                        "(none: list them, one line each)")
+    p.add_argument("--doc", type=Path, nargs="?", const=DEFAULT_DOC, metavar="FILE",
+                   help="write each output between its markers in FILE (default: "
+                        "docs/performance.md)")
     p.set_defaults(func=run)
 
 
@@ -31,34 +39,63 @@ def available() -> dict[str, Path]:
     return {p.stem: p for p in sorted(BENCH_DIR.glob("*.py")) if not p.stem.startswith("_")}
 
 
-def update_readme(readme: Path, name: str, output: str) -> None:
+def summary(script: Path) -> str:
+    """The first line of a script's docstring: what it measures, in one line."""
+    doc = ast.get_docstring(ast.parse(script.read_text(), filename=str(script))) or ""
+    return doc.strip().splitlines()[0] if doc.strip() else "(no description)"
+
+
+def listing(scripts: dict[str, Path]) -> str:
+    """One line per script: its name and what it measures."""
+    width = max(map(len, scripts), default=0)
+    return "\n".join(f"{name:<{width}}  {summary(path)}" for name, path in scripts.items())
+
+
+def check_markers(doc: Path, names: list[str]) -> None:
+    """Raise a GonioError naming the first script whose begin/end markers the file lacks."""
+    text = doc.read_text()
+    for name in names:
+        begin, end = BEGIN.format(name=name), END.format(name=name)
+        if begin not in text or end not in text:
+            raise GonioError(f"{doc}: no '{begin}' ... '{end}' markers for bench script {name}")
+
+
+def update_doc(doc: Path, name: str, output: str) -> None:
     """Replace the text between the script's begin/end markers with its output."""
-    text = readme.read_text()
+    check_markers(doc, [name])
+    text = doc.read_text()
     begin, end = BEGIN.format(name=name), END.format(name=name)
-    if begin not in text or end not in text:
-        raise GonioError(f"{readme}: no '{begin}' ... '{end}' markers for bench script {name}")
     block = f"{begin}\n```\n{output.rstrip()}\n```\n{end}"
     pattern = re.escape(begin) + ".*?" + re.escape(end)
-    readme.write_text(re.sub(pattern, lambda _: block, text, flags=re.S))
+    doc.write_text(re.sub(pattern, lambda _: block, text, flags=re.S))
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the chosen scripts one after another, echoing their output."""
+    """With no name, list the scripts; else run the chosen ones (all: every one) one after
+    another, echoing their output."""
     scripts = available()
-    if args.list:
-        print("\n".join(scripts))
+    if args.doc and not args.doc.is_file():
+        hint = (f" (`gonio bench {args.doc} --doc` writes into {DEFAULT_DOC.name}: the names "
+                "go before a bare --doc)" if str(args.doc) in (*scripts, ALL) else "")
+        raise GonioError(f"--doc {args.doc}: no such file{hint}")
+    if not args.names:
+        print(listing(scripts))
         return 0
-    unknown = sorted(set(args.names) - set(scripts))
+    names = list(scripts) if args.names == [ALL] else args.names
+    unknown = sorted(set(names) - set(scripts))
     if unknown:
-        raise GonioError(f"unknown bench script(s) {', '.join(unknown)}; see gonio bench --list")
+        raise GonioError(f"unknown bench script(s) {', '.join(unknown)}; `gonio bench` lists "
+                         f"them, `gonio bench {ALL}` runs every one")
+    if args.doc:
+        check_markers(args.doc, names)  # before any script runs (some take minutes)
     status = 0
-    for name in args.names or list(scripts):
+    for name in names:
         print(f"== {name}", flush=True)
         done = subprocess.run([sys.executable, str(scripts[name])], capture_output=True, text=True)
         print(done.stdout, end="")
         if done.returncode != 0:
             print(done.stderr, end="", file=sys.stderr)
             status = 1
-        elif args.readme:
-            update_readme(args.readme, name, done.stdout)
+        elif args.doc:
+            update_doc(args.doc, name, done.stdout)
     return status

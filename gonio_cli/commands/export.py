@@ -15,7 +15,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__)
     p.add_argument("run", help="run directory")
     p.add_argument("--format", required=True, choices=FORMATS)
-    p.add_argument("--out", required=True, metavar="FILE", help="output file")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="output file; zemax writes one file per measured side, as Zemax reads "
+                        "a BRDF and a BTDF from separate files: the BTDF here (the BRDF if "
+                        "only reflection was measured) and the BRDF beside it as "
+                        "STEM-BRDF.SUFFIX. Every file written is printed, one per line")
     p.set_defaults(func=run)
 
 

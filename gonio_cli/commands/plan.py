@@ -1,5 +1,6 @@
 """`gonio plan PLAN`: validate a plan against an instrument, print its summary and duration
-estimate (optimised order beside the order as written). Nothing moves."""
+estimate (optimised order beside the order as written), with --sim on the emulated bench at its
+[sim] time_scale. Nothing moves."""
 
 from __future__ import annotations
 
@@ -20,6 +21,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="instrument config (default: the plan's `instrument`)")
     p.add_argument("--list", action="store_true",
                    help="also print every reading in run order with its stage targets")
+    p.add_argument("--sim", action="store_true",
+                   help="estimate the duration on the emulated bench (`gonio scan --sim`): "
+                        "moves, settling and dwell at the config's [sim] time_scale")
+    p.add_argument("--time-scale", type=float, metavar="X",
+                   help="with --sim: virtual seconds per real second (inf = instant moves), "
+                        "instead of the config's [sim] time_scale")
     p.set_defaults(func=run)
 
 
@@ -53,11 +60,16 @@ def run(args: argparse.Namespace) -> int:
     """Print the summary; errors are PlanError/ConfigError lines."""
     from gonio.config import load_config
     from gonio.plan import build_schedule, listing, load_plan, summary
-    from gonio.runner import instrument_path
+    from gonio.runner import instrument_path, scaled
 
     plan = load_plan(args.plan)
-    cfg = load_config(instrument_path(plan, args.instrument))
-    sched = build_schedule(plan, cfg)
+    cfg = scaled(load_config(instrument_path(plan, args.instrument)), args.sim, args.time_scale)
+    time_scale = None
+    if args.sim:
+        from gonio.simulate import emulated_time_scale
+
+        time_scale = emulated_time_scale(cfg)
+    sched = build_schedule(plan, cfg, time_scale)
     print(summary(plan, cfg, sched))
     print(description(plan, cfg))
     if args.list:

@@ -5,6 +5,7 @@ Dask like `gonio lut`; writes an .npz of true powers and meter readings. See doc
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from gonio.errors import GonioError
 
@@ -30,6 +31,9 @@ def run(args: argparse.Namespace) -> int:
     from sim.cluster import dask_client, describe
     from sim.sweep import load_sweep, run_sweep
 
+    if Path(args.out).suffix.lower() != ".npz":
+        raise GonioError(f"{args.out}: a sweep is written as .npz (NumPy): give the file that "
+                         "extension")
     try:
         sweep = load_sweep(args.sweep)
         with dask_client(args.workers, args.scheduler) as client:

@@ -41,7 +41,7 @@ def _number(low: float = -math.inf, high: float = math.inf, *, open_low: bool = 
         if not ok:
             bound = f"> {low:g}" if open_low else f">= {low:g}"
             limit = bound if high == math.inf else f"{bound} and <= {high:g}"
-            raise SimConfigError(f"{where} must be a number {limit}, got {value!r}")
+            raise SimConfigError(f"{where}: must be a number {limit}, got {value!r}")
         return float(value)
     return check
 
@@ -49,7 +49,7 @@ def _number(low: float = -math.inf, high: float = math.inf, *, open_low: bool = 
 def _choice(options: tuple[str, ...]) -> Check:
     def check(where: str, value: object) -> str:
         if value not in options:
-            raise SimConfigError(f"{where} must be one of {', '.join(options)}; got {value!r}")
+            raise SimConfigError(f"{where}: must be one of {', '.join(options)}; got {value!r}")
         return value
     return check
 
@@ -63,14 +63,14 @@ ETA_RANGE = (0.01, 10.0)
 def _alpha(where: str, value: object) -> tuple[float, float]:
     pair = value if isinstance(value, (list, tuple)) else [value, value]
     if len(pair) != 2:
-        raise SimConfigError(f"{where} must be a number or [alpha_x, alpha_y], got {value!r}")
+        raise SimConfigError(f"{where}: must be a number or [alpha_x, alpha_y], got {value!r}")
     in_range = _number(ALPHA_RANGE[0], ALPHA_RANGE[1])  # where sim.bsdf is verified
     return in_range(where, pair[0]), in_range(where, pair[1])
 
 
 def _switch(where: str, value: object) -> bool | str:
     if not (isinstance(value, bool) or value == "auto"):
-        raise SimConfigError(f'{where} must be true, false or "auto", got {value!r}')
+        raise SimConfigError(f'{where}: must be true, false or "auto", got {value!r}')
     return value
 
 
@@ -83,7 +83,7 @@ def _optional(check: Check) -> Check:
 def _walks(where: str, value: object) -> int:
     # walks per incidence table (HigherOrderLobe); more than 2^22 would take minutes per table
     if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 22:
-        raise SimConfigError(f"{where} must be an integer in [2, 4194304], got {value!r}")
+        raise SimConfigError(f"{where}: must be an integer in [2, 4194304], got {value!r}")
     return value
 
 
@@ -93,7 +93,7 @@ def _order(where: str, value: object) -> tuple[int, int] | None:
     if (isinstance(value, (list, tuple)) and len(value) == 2 and all(
             isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 64 for v in value)):
         return int(value[0]), int(value[1])
-    raise SimConfigError(f'{where} must be "auto" or [n_beam, n_aperture] (integers 0..64), '
+    raise SimConfigError(f'{where}: must be "auto" or [n_beam, n_aperture] (integers 0..64), '
                          f"got {value!r}")
 
 
@@ -160,12 +160,12 @@ def read_table(sim_config: Mapping, name: str, described: Mapping | None = None
     [optics] or [sample] table DESCRIBED maps it from), else the defaults."""
     table = sim_config.get(name, {})
     if not isinstance(table, Mapping):
-        raise SimConfigError(f"[sim.{name}] must be a table, got {table!r}")
+        raise SimConfigError(f"[sim.{name}]: must be a table, got {table!r}")
     fields = SCHEMA[name]
     unknown = sorted(set(table) - set(fields))
     if unknown:
         raise SimConfigError(
-            f"[sim.{name}] unknown key {unknown[0]!r}; known: {', '.join(fields)}")
+            f"[sim.{name}]: unknown key {unknown[0]!r}; known: {', '.join(fields)}")
     source, keys = DESCRIBED.get(name, ("", {}))
     base = {key: described[theirs] for key, theirs in keys.items()
             if described is not None and theirs in described}
@@ -200,13 +200,13 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
     retracted = sample_table.pop("retracted_beyond_deg")
     spec = SampleSpec(**sample_table)
     if spec.kind != "hemisphere" and spec.lit_from != "air":
-        raise SimConfigError(f'[sim.sample] lit_from = "hemisphere" needs kind = "hemisphere", '
+        raise SimConfigError(f'[sim.sample] lit_from: "hemisphere" needs kind = "hemisphere", '
                              f"not {spec.kind!r}")
     if spec.kind != "conductor" and spec.k != 0.0:
-        raise SimConfigError(f"[sim.sample] k (extinction) applies to kind = \"conductor\" only, "
-                             f"not {spec.kind!r}")
+        raise SimConfigError(f"[sim.sample] k: the extinction applies to kind = \"conductor\" "
+                             f"only, not {spec.kind!r}")
     if aperture["diameter_mm"] >= aperture["distance_mm"]:
-        raise SimConfigError("[sim.aperture] diameter_mm must be smaller than distance_mm")
+        raise SimConfigError("[sim.aperture] diameter_mm: must be smaller than distance_mm")
     _check_switches(spec)
     sample = Sample(spec, source.wavelength_nm, _visible_fraction(sim_config, source, aperture),
                     seed=int(sim_config.get("seed", 0) or 0))
@@ -223,16 +223,16 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
 def _check_switches(spec: SampleSpec) -> None:
     """What multiple_scattering = true and diffraction = true need from the rest of the table."""
     if spec.multiple_scattering is True and spec.distribution == "phong":
-        raise SimConfigError('[sim.sample] multiple_scattering = true needs distribution '
+        raise SimConfigError('[sim.sample] multiple_scattering: true needs distribution '
                              '"beckmann" or "ggx" (the random walk has no phong microsurface)')
     surface = {"rms_height_nm": spec.rms_height_nm,
                "correlation_length_um": spec.correlation_length_um}
     missing = [key for key, value in surface.items() if value is None]
     if len(missing) == 1:
-        raise SimConfigError(f"[sim.sample] {missing[0]} is needed with "
+        raise SimConfigError(f"[sim.sample] {missing[0]}: needed with "
                              f"{({*surface} - {missing[0]}).pop()} (the nano-roughness PSD)")
     if spec.diffraction is True and missing:
-        raise SimConfigError("[sim.sample] rms_height_nm and correlation_length_um are needed "
+        raise SimConfigError("[sim.sample] rms_height_nm: needed, with correlation_length_um, "
                              "by diffraction = true (the nano-roughness PSD)")
 
 

@@ -48,23 +48,23 @@ class FaultSpec:
     def __post_init__(self) -> None:
         if not (_is_number(self.latency_s) and 0.0 <= self.latency_s < math.inf):
             raise FaultConfigError(
-                f"faults: latency_s must be a number >= 0, got {self.latency_s!r}"
+                f"[faults] latency_s: must be a number >= 0, got {self.latency_s!r}"
             )
         for name in _PROBABILITIES:
             value = getattr(self, name)
             if not (_is_number(value) and 0.0 <= value <= 1.0):
-                raise FaultConfigError(f"faults: {name} must be in [0, 1], got {value!r}")
+                raise FaultConfigError(f"[faults] {name}: must be in [0, 1], got {value!r}")
         n = self.disconnect_after
         if n is not None and not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
-            raise FaultConfigError(f"faults: disconnect_after must be an integer >= 0, got {n!r}")
+            raise FaultConfigError(f"[faults] disconnect_after: must be an integer >= 0, got {n!r}")
         if not (isinstance(self.seed, int) and not isinstance(self.seed, bool)):
-            raise FaultConfigError(f"faults: seed must be an integer, got {self.seed!r}")
+            raise FaultConfigError(f"[faults] seed: must be an integer, got {self.seed!r}")
 
     @classmethod
     def from_dict(cls, table: Mapping[str, Any], device: str = "") -> FaultSpec:
         """Build from a config table; an unknown key raises FaultConfigError naming it."""
         known = {f.name for f in dataclasses.fields(cls)}
-        where = f"sim.faults.{device}" if device else "faults"
+        where = f"[sim.faults.{device}]" if device else "[faults]"
         for key in table:
             if key not in known:
                 raise FaultConfigError(
@@ -73,7 +73,7 @@ class FaultSpec:
         try:
             return cls(**dict(table))
         except FaultConfigError as exc:
-            raise FaultConfigError(str(exc).replace("faults:", f"{where}:", 1)) from None
+            raise FaultConfigError(str(exc).replace("[faults]", where, 1)) from None
 
     @property
     def active(self) -> bool:

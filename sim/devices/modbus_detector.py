@@ -41,10 +41,10 @@ class ModbusDetectorEmulator(EmulatedUnit):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         if not layout.ranges_w:
-            raise LayoutError(f"{layout.source}: [gain_ranges] full_scale_w is missing")
+            raise LayoutError(f"{layout.source}: [gain_ranges] full_scale_w: missing")
         table = dict(detector or {})
         if "ranges_w" in table and tuple(table["ranges_w"]) != layout.ranges_w:
-            raise LayoutError(f"[sim.detector] ranges_w {table['ranges_w']!r} differ from the "
+            raise LayoutError(f"[sim.detector] ranges_w: {table['ranges_w']!r} differ from the "
                               f"gain ranges of {layout.source}")
         super().__init__(layout, faults, serial=serial,
                          device_identification=device_identification)

@@ -97,9 +97,9 @@ class Measurement(NamedTuple):
 def _number(table: Mapping, key: str, low: float, high: float = np.inf) -> float:
     value = table[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SimConfigError(f"[sim.detector] {key} must be a number, got {value!r}")
+        raise SimConfigError(f"[sim.detector] {key}: must be a number, got {value!r}")
     if not (low <= value <= high) or not np.isfinite(value):
-        raise SimConfigError(f"[sim.detector] {key} must be in [{low:g}, {high:g}], got {value!r}")
+        raise SimConfigError(f"[sim.detector] {key}: must be in [{low:g}, {high:g}], got {value!r}")
     return float(value)
 
 
@@ -108,7 +108,7 @@ def _responsivity_table(value: object) -> np.ndarray:
         return SILICON_RESPONSIVITY
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         if not value > 0:
-            raise SimConfigError(f"[sim.detector] responsivity must be > 0 A/W, got {value!r}")
+            raise SimConfigError(f"[sim.detector] responsivity: must be > 0 A/W, got {value!r}")
         return np.array([[0.0, float(value)], [1.0, float(value)]])
     try:
         table = np.asarray(value, dtype=np.float64)
@@ -120,7 +120,7 @@ def _responsivity_table(value: object) -> np.ndarray:
     )
     if not ok:
         raise SimConfigError(
-            '[sim.detector] responsivity must be "silicon", a number in A/W, or a list of '
+            '[sim.detector] responsivity: must be "silicon", a number in A/W, or a list of '
             f"[wavelength_nm, A_per_W] pairs with increasing wavelength, got {value!r}"
         )
     return table
@@ -136,7 +136,7 @@ def _range_gains(value: object, n_ranges: int) -> np.ndarray:
         gains = np.empty(0)
     if gains.shape != (n_ranges,) or not np.all((gains >= 0.5) & (gains <= 2.0)):
         raise SimConfigError(
-            f"[sim.detector] range_gains must be a list of {n_ranges} factors in [0.5, 2], "
+            f"[sim.detector] range_gains: must be a list of {n_ranges} factors in [0.5, 2], "
             f"one per range of ranges_w, got {value!r}"
         )
     return gains
@@ -162,7 +162,7 @@ class PhotodiodeModel:
         unknown = sorted(set(table) - set(DETECTOR_DEFAULTS))
         if unknown:
             raise SimConfigError(
-                f"[sim.detector] unknown key {unknown[0]!r}; known: {', '.join(DETECTOR_DEFAULTS)}"
+                f"[sim.detector]: unknown key {unknown[0]!r}; known: {', '.join(DETECTOR_DEFAULTS)}"
             )
         table = {**DETECTOR_DEFAULTS, **table}
         self._responsivity = _responsivity_table(table["responsivity"])
@@ -175,7 +175,7 @@ class PhotodiodeModel:
             np.diff(ranges_arr) <= 0
         ):
             raise SimConfigError(
-                f"[sim.detector] ranges_w must be a non-empty increasing list of powers > 0 W, "
+                f"[sim.detector] ranges_w: must be a non-empty increasing list of powers > 0 W, "
                 f"got {ranges!r}"
             )
         self._ranges = tuple(float(r) for r in ranges_arr)
@@ -183,7 +183,7 @@ class PhotodiodeModel:
         bits = table["adc_bits"]
         if isinstance(bits, bool) or not isinstance(bits, int) or not 4 <= bits <= 32:
             raise SimConfigError(
-                f"[sim.detector] adc_bits must be an integer in [4, 32], got {bits!r}"
+                f"[sim.detector] adc_bits: must be an integer in [4, 32], got {bits!r}"
             )
         self.adc_bits = bits
         self.overrange = _number(table, "overrange", 1.0, 10.0)

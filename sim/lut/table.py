@@ -61,8 +61,9 @@ class Table:
     def save(self, path: str | Path) -> Path:
         """Write an .npz: `table`, one `axis_<name>` array of node values per axis and a
         JSON `metadata` string (readable with numpy.load(allow_pickle=False)); or, for a
-        path ending in .exr, an OpenEXR image (sim.lut.exr)."""
+        path ending in .exr, an OpenEXR image (sim.lut.exr). Any other ending: ValueError."""
         path = Path(path)
+        check_storable(self.spec, path)
         if is_exr(path):
             return save_exr(self, path)
         axes = {f"axis_{a.name}": a.values() for a in self.spec.axes}
@@ -107,8 +108,18 @@ def is_exr(path: str | Path) -> bool:
     return Path(path).suffix.lower() == ".exr"
 
 
+#: File name endings a table is written as: NumPy's .npz, or OpenEXR.
+SUFFIXES = (".npz", ".exr")
+
+
 def check_storable(spec: TableSpec, path: str | Path) -> None:
-    """Raise ValueError now if the file format of path cannot hold a table of spec."""
+    """Raise ValueError now if path names no format a table is written as (.npz or .exr, any
+    case), or one that cannot hold a table of spec."""
+    suffix = Path(path).suffix
+    if suffix.lower() not in SUFFIXES:
+        instead = f" instead of {suffix!r}" if suffix else ""
+        raise ValueError(f"{path}: a table is written as .npz (NumPy) or .exr (OpenEXR): give "
+                         f"the file one of those extensions{instead}")
     if is_exr(path):
         check_exr(spec)
 

@@ -9,7 +9,7 @@ from sim.devices.photodiode import SimConfigError
 
 @pytest.mark.parametrize("eta", [9.8e-248, 0.0, 0.009, 10.5])
 def test_eta_outside_the_range_is_refused(eta):
-    refused = r"\[sim.sample\] eta must be a number >= 0.01 and <= 10, got "
+    refused = r"\[sim.sample\] eta: must be a number >= 0.01 and <= 10, got "
     with pytest.raises(SimConfigError, match=refused):
         build_bench({"sample": {"eta": eta}})
 

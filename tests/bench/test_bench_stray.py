@@ -73,13 +73,13 @@ def test_off_by_default_and_alike_with_the_sample_in_and_out():
 
 
 @pytest.mark.parametrize("table, message", [
-    ({"halo_fraction": -1e-3}, "[sim.stray] halo_fraction must be a number >= 0"),
-    ({"halo_fraction": 0.5}, "[sim.stray] halo_fraction must be a number >= 0 and <= 0.1"),
-    ({"halo_width_deg": 0.0}, "[sim.stray] halo_width_deg must be a number >= 0.1"),
-    ({"halo_slope": "steep"}, "[sim.stray] halo_slope must be a number"),
-    ({"arm_fraction": 1.0}, "[sim.stray] arm_fraction must be a number >= 0 and <= 0.01"),
-    ({"arm_variation": 2.0}, "[sim.stray] arm_variation must be a number >= 0 and <= 1"),
-    ({"halo": 1e-3}, "[sim.stray] unknown key 'halo'"),
+    ({"halo_fraction": -1e-3}, "[sim.stray] halo_fraction: must be a number >= 0"),
+    ({"halo_fraction": 0.5}, "[sim.stray] halo_fraction: must be a number >= 0 and <= 0.1"),
+    ({"halo_width_deg": 0.0}, "[sim.stray] halo_width_deg: must be a number >= 0.1"),
+    ({"halo_slope": "steep"}, "[sim.stray] halo_slope: must be a number"),
+    ({"arm_fraction": 1.0}, "[sim.stray] arm_fraction: must be a number >= 0 and <= 0.01"),
+    ({"arm_variation": 2.0}, "[sim.stray] arm_variation: must be a number >= 0 and <= 1"),
+    ({"halo": 1e-3}, "[sim.stray]: unknown key 'halo'"),
 ])
 def test_bad_stray_keys_are_one_clear_error(table, message):
     with pytest.raises(SimConfigError) as err:

@@ -64,16 +64,16 @@ def test_both_readers_agree_on_the_identity_strings():
 
 
 @pytest.mark.parametrize("table, message", [
-    ('serial = 5', "identity.serial must be a table"),
+    ('serial = 5', "[identity.serial]: must be a table"),
     ('serial = { table = "holding", address = 100, count = 4, kind = "x" }',
-     "identity.serial: unknown key 'kind'"),
+     "[identity.serial]: unknown key 'kind'"),
     ('serial = { table = "coils", address = 100, count = 4 }',
-     "identity.serial: table must be one of holding, input, got 'coils'"),
-    ('serial = { table = "holding", address = 100 }', "identity.serial: missing field 'count'"),
+     "[identity.serial]: table must be one of holding, input, got 'coils'"),
+    ('serial = { table = "holding", address = 100 }', "[identity.serial]: missing field 'count'"),
     ('serial = { table = "holding", address = 100, count = 0 }',
-     "identity.serial: count must be 1..125"),
+     "[identity.serial]: count must be 1..125"),
     ('serial = { table = "holding", address = -1, count = 4 }',
-     "identity.serial: address must be an integer >= 0"),
+     "[identity.serial]: address must be an integer >= 0"),
     ('serial = { table = "holding", address = 65534, count = 4 }',
      "past the 16-bit address space"),
     ('serial = { table = "holding", address = 12, count = 2 }',

@@ -130,7 +130,7 @@ BROKEN = [
     ("code = 1,", 'code = "one",', "code must be a int"),
     ("start = 1 ", "start = -1 ", "start must be an integer >= 0"),
     ("[status_bits]    #", "[gain_ranges]\nfull_scale_w = [1e-3, 1e-4]\n[status_bits] #",
-     "full_scale_w must be increasing powers"),
+     "full_scale_w: must be increasing powers"),
 ]
 
 
@@ -159,7 +159,7 @@ def test_emulator_reader_refuses_broken_maps(tmp_path, text):
 def test_a_section_that_is_not_a_table_is_named(tmp_path):
     path = tmp_path / "flat.toml"
     path.write_text('name = "x"\nword_order = "big"\ncommands = 5\n[registers]\n')
-    with pytest.raises(RegisterMapError, match=r"\[commands\] must be a table, got 5"):
+    with pytest.raises(RegisterMapError, match=r"\[commands\]: must be a table, got 5"):
         RegisterMap.load(path)
 
 

@@ -11,7 +11,8 @@ from sim.devices.pty_server import PtyServer
 
 
 def test_faultspec_unknown_key_is_named():
-    with pytest.raises(FaultConfigError, match=r"sim\.faults\.esp: unknown key 'drop_probability'"):
+    with pytest.raises(FaultConfigError,
+                       match=r"\[sim\.faults\.esp\]: unknown key 'drop_probability'"):
         FaultSpec.from_dict({"drop_probability": 0.1}, device="esp")
 
 
@@ -27,7 +28,7 @@ def test_faultspec_unknown_key_is_named():
     ],
 )
 def test_faultspec_bad_values_are_named(table, field):
-    with pytest.raises(FaultConfigError, match=rf"sim\.faults\.pm: {field}"):
+    with pytest.raises(FaultConfigError, match=rf"\[sim\.faults\.pm\] {field}: "):
         FaultSpec.from_dict(table, device="pm")
 
 

@@ -66,8 +66,8 @@ def emulate(path, *extra) -> tuple[dict[str, str], bool | None, str]:
 def test_a_wildcard_device_host_is_refused(host):
     cfg = fast_config("sim-modbus")
     cfg["devices"]["sample_drive"]["host"] = host
-    with pytest.raises(ConfigError, match=r"^config\.devices\.sample_drive\.host: .* is a listen "
-                                          r"address, not a device's; emulators listen on "
+    with pytest.raises(ConfigError, match=r"^config: \[devices\.sample_drive\] host: .* is a "
+                                          r"listen address, not a device's; emulators listen on "
                                           r"127\.0\.0\.1 \(gonio emulate --bind HOST"):
         parse_config(cfg)
 

@@ -179,4 +179,4 @@ def test_slow_motion_or_nonsense_time_scale_is_refused(scale):
     cfg = {**SIM_CONFIG, "sim": {**SIM_CONFIG["sim"], "time_scale": scale}}
     code, err, runs = scan(dump_toml(SIM_PLAN), dump_toml(cfg), "--sim")
     assert code == 2 and runs == []
-    assert "time_scale must be a number >= 1" in one_line_error(err)
+    assert "[sim] time_scale: must be a number >= 1" in one_line_error(err)

@@ -54,7 +54,8 @@ def test_bad_optics_is_one_error_naming_the_field(change, message):
 def test_missing_optics_key_is_named_with_the_typo_that_hides_it():
     cfg = fast_config()
     del cfg["optics"]["bandwidth_nm"]
-    with pytest.raises(ConfigError, match="optics: missing required key 'bandwidth_nm'$"):
+    with pytest.raises(ConfigError,
+                       match=r"config: \[optics\]: missing required key 'bandwidth_nm'$"):
         parse_config(cfg)
     cfg["optics"]["bandwith_nm"] = 0.002
     with pytest.raises(ConfigError, match="'bandwidth_nm' \\(is 'bandwith_nm' a typo for it"):
@@ -64,7 +65,8 @@ def test_missing_optics_key_is_named_with_the_typo_that_hides_it():
 def test_detector_wavelength_must_agree_with_the_source():
     cfg = fast_config()
     cfg["detector"]["wavelength_nm"] = 532.0
-    with pytest.raises(ConfigError, match="detector.wavelength_nm: 532 nm differs from"):
+    with pytest.raises(ConfigError,
+                       match=r"config: \[detector\] wavelength_nm: 532 nm differs from"):
         parse_config(cfg)
 
 
@@ -73,10 +75,10 @@ PLAN = {"name": "p", "grid": [{"theta_i_deg": 0.0, "theta_o_deg": 20.0}]}
 
 @pytest.mark.parametrize("sample, message", [
     ({"kind": "hemisphere", "eta": 1.5}, "missing required key 'id'"),
-    ({"id": "a", "kind": "prism", "eta": 1.5}, "sample.kind: must be one of"),
+    ({"id": "a", "kind": "prism", "eta": 1.5}, "plan: \\[sample\\] kind: must be one of"),
     ({"id": "a", "kind": "slab", "eta": 1.5, "lit_from": "hemisphere"}, "needs kind"),
     ({"id": "a", "kind": "slab", "eta": 1.5, "k": 2.0}, "applies to kind = \"conductor\""),
-    ({"id": "a", "kind": "slab", "eta": 1e-9}, "sample.eta: must be in"),
+    ({"id": "a", "kind": "slab", "eta": 1e-9}, "plan: \\[sample\\] eta: must be in"),
 ])
 def test_bad_sample_is_one_error_naming_the_field(sample, message):
     with pytest.raises(PlanError, match=message):

@@ -127,7 +127,7 @@ def test_serpentine_alternates_inner_direction():
     (grid(theta_i_deg=[80.0], theta_o_deg=[85.0], phi_o_deg=[90.0]), OOP,
      "elevation at 85 deg outside travel [-60, 60]"),
     ({"point": [{"theta_i_deg": 10.0, "theta_o_deg": 10.0, "sidee": "reflection"}]}, SERIAL,
-     "point[0]: unknown key 'sidee'"),
+     "[point[0]]: unknown key 'sidee'"),
     ({**grid(), "dark": {"every": 2}}, NO_DARK, "no [dark] position"),
     (grid(theta_o_deg={"start": 0, "stop": 10}), SERIAL, "exactly one of 'step' or 'num'"),
     ({**grid(), "repeats": 0}, SERIAL, "repeats: must be in [1, 10000], got 0"),

@@ -62,12 +62,12 @@ def test_plan_point_and_dark_ranges_override_in_order():
 
 
 @pytest.mark.parametrize("where,value,message", [
-    ("top", -1e-6, "plan.range: must be \"auto\" or a fixed full scale in W > 0; got -1e-06"),
-    ("top", "manual", "plan.range: must be \"auto\" or a fixed full scale in W > 0; got 'manual'"),
-    ("top", [1e-6], "plan.range: must be \"auto\" or a fixed full scale in W > 0; got [1e-06]"),
-    ("grid", [1e-6, 0.0], "grid[0].range: must be \"auto\" or a fixed full scale in W > 0 or a "
-                          "list of them; got 0.0"),
-    ("dark", True, "plan.dark.range: must be \"auto\""),
+    ("top", -1e-6, "plan: range: must be \"auto\" or a fixed full scale in W > 0; got -1e-06"),
+    ("top", "manual", "plan: range: must be \"auto\" or a fixed full scale in W > 0; got 'manual'"),
+    ("top", [1e-6], "plan: range: must be \"auto\" or a fixed full scale in W > 0; got [1e-06]"),
+    ("grid", [1e-6, 0.0], "plan: [grid[0]] range: must be \"auto\" or a fixed full scale in W > 0 "
+                          "or a list of them; got 0.0"),
+    ("dark", True, "plan: [dark] range: must be \"auto\""),
 ])
 def test_bad_range_is_one_error_naming_the_field(where, value, message):
     raw = plan_dict()
@@ -132,7 +132,7 @@ def test_any_range_value_is_taken_exactly_or_refused_by_name(value):
     valid = value == "auto" or (not isinstance(value, bool | str) and np.isfinite(value)
                                 and value > 0)
     if not valid:
-        with pytest.raises(PlanError, match=r"grid\[0\]\.range: must be"):
+        with pytest.raises(PlanError, match=r"\[grid\[0\]\] range: must be"):
             parse_plan(raw)
         return
     r = build_schedule(parse_plan(raw), SERIAL).readings

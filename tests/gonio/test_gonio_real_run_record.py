@@ -108,7 +108,7 @@ def test_a_real_run_reduces_the_same_under_a_wrong_sim_and_none(emulated, tmp_pa
     np.testing.assert_array_equal(own.sigma, from_config.sigma, strict=True)
     assert "from [detector] shot_noise_w" in from_config.meta["noise_model"]
     described["detector"]["shot_noise_w"] = -1.0
-    with pytest.raises(ConfigError, match="detector.shot_noise_w: must be in"):
+    with pytest.raises(ConfigError, match=r"config: \[detector\] shot_noise_w: must be in"):
         parse_config(described)
 
 

@@ -94,15 +94,15 @@ def test_a_prompted_pass_on_a_grid_of_its_own():
 
 
 @pytest.mark.parametrize("signature, message", [
-    ({"every": 0}, "p.toml.signature.every: must be in [1, 1e+06], got 0"),
-    ({"every": 2, "pass": "after"}, "p.toml.signature.every: interleaves"),
-    ({"pass": "interleaved"}, 'p.toml.signature.pass: "interleaved" needs every = N'),
-    ({"pass": "sometimes"}, "p.toml.signature.pass: must be one of interleaved, after, "
+    ({"every": 0}, "p.toml: [signature] every: must be in [1, 1e+06], got 0"),
+    ({"every": 2, "pass": "after"}, "p.toml: [signature] every: interleaves"),
+    ({"pass": "interleaved"}, 'p.toml: [signature] pass: "interleaved" needs every = N'),
+    ({"pass": "sometimes"}, "p.toml: [signature] pass: must be one of interleaved, after, "
                             "prompted; got 'sometimes'"),
-    ({"every": 2, "arm_deg": [170.0]}, "p.toml.signature.arm_deg: a grid of its own"),
-    ({"arm_deg": []}, "p.toml.signature.arm_deg: must not be empty"),
-    ({"range": "high"}, 'p.toml.signature.range: must be "auto" or a fixed full scale'),
-    ({"evry": 2}, "p.toml.signature: unknown key 'evry'"),
+    ({"every": 2, "arm_deg": [170.0]}, "p.toml: [signature] arm_deg: a grid of its own"),
+    ({"arm_deg": []}, "p.toml: [signature] arm_deg: must not be empty"),
+    ({"range": "high"}, 'p.toml: [signature] range: must be "auto" or a fixed full scale'),
+    ({"evry": 2}, "p.toml: [signature]: unknown key 'evry'"),
     ({"arm_deg": [3.0]}, "[signature] arm_deg 3: outside the arm travel [6, 354]"),
     ({"arm_deg": [140.0, 272.0]}, "[signature] arm_deg 272: arm 272 deg inside the forbidden"),
 ])
@@ -117,15 +117,15 @@ def test_bad_signature_fields_are_one_clear_error(signature, message):
 def test_an_instrument_without_a_signature_position_is_refused_naming_both():
     with pytest.raises(PlanError) as err:
         build_schedule(plan({"every": 2}), NO_SIGNATURE)
-    assert str(err.value).startswith("p.toml: [signature] asks for signature readings but the "
+    assert str(err.value).startswith("p.toml: [signature]: asks for signature readings but the "
                                      "instrument 'sim-serial'")
     assert "has no [signature] position" in str(err.value)
 
 
 @pytest.mark.parametrize("table, message", [
-    ({"sample_deg": 90.0, "arm_deg": 180.0}, "config.signature: unknown key 'arm_deg'"),
-    ({}, "config.signature: missing required key 'sample_deg'"),
-    ({"sample_deg": "out"}, "config.signature.sample_deg: must be a number"),
+    ({"sample_deg": 90.0, "arm_deg": 180.0}, "config: [signature]: unknown key 'arm_deg'"),
+    ({}, "config: [signature]: missing required key 'sample_deg'"),
+    ({"sample_deg": "out"}, "config: [signature] sample_deg: must be a number"),
 ])
 def test_bad_instrument_signature_positions(table, message):
     with pytest.raises(ConfigError) as err:

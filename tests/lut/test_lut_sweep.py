@@ -90,7 +90,7 @@ def test_cli_writes_axes_quantities_and_metadata(sweep_file, tmp_path, capsys):
 @pytest.mark.parametrize("doc, message", [
     ({"vary": {"alpha": [1]}, "positions": {"sample_deg": [0], "arm_deg": [180]}},
      "must be <table>.<key>"),
-    ({"positions": {"sample_deg": [0]}}, "arm_deg is required"),
+    ({"positions": {"sample_deg": [0]}}, "missing required key 'arm_deg'"),
     ({"positions": {"sample_deg": [0], "arm_deg": ["x"]}}, "list of angles"),
     ({"positions": {"sample_deg": [0], "arm_deg": [180], "tilt_deg": [1]}}, "tilt_deg"),
     ({"vary": {"sample.alpha": [0.3, -1.0]}, "positions": {"sample_deg": [0], "arm_deg": [180]}},
@@ -107,4 +107,4 @@ def test_cli_error_is_one_line(tmp_path, capsys):
     bad.write_text('[positions]\nsample_deg = [0]\n')
     assert main(["sweep", str(bad), "--out", str(tmp_path / "x.npz")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("gonio sweep: error:") and "arm_deg is required" in err
+    assert err.startswith("gonio sweep: error:") and "missing required key 'arm_deg'" in err
