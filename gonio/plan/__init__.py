@@ -19,7 +19,8 @@ from gonio.plan.schedule import Schedule, build_schedule, serpentine
 from gonio.plan.validate import stage_targets, sweeps_source
 
 __all__ = [
-    "AUTO_RANGE", "CALIBRATES", "KINDS", "MOTION_ROLES", "SIDES", "Plan", "Schedule", "SignaturePlan",
+    "AUTO_RANGE", "CALIBRATES", "KINDS", "MOTION_ROLES", "SIDES", "Plan", "Schedule",
+    "SignaturePlan",
     "build_schedule", "describe_range", "describe_ranges", "estimate_seconds", "format_duration",
     "listing", "load_plan", "parse_plan", "positions", "profile_seconds", "serpentine",
     "stage_targets", "summary", "sweeps_source",

@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 
 from calibration.calplot import PLOTS
-from gonio_cli.main import main
 from gonio.errors import PlanError
 from gonio.plan import CALIBRATES, load_plan, parse_plan
 from gonio.record import run_record
 from gonio.store import open_run
+from gonio_cli.main import main
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

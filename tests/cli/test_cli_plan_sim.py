@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from gonio_cli.main import main
 from gonio.config import load_config
-from gonio.plan import READ_OVERHEAD_S, READ_PER_SAMPLE_S, build_schedule, load_plan
+from gonio.plan import build_schedule, load_plan
+from gonio.plan.estimate import READ_OVERHEAD_S, READ_PER_SAMPLE_S
+from gonio_cli.main import main
 
 DEMO = Path(__file__).resolve().parents[2] / "examples" / "plans" / "demo.toml"
 
