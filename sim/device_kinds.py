@@ -28,23 +28,27 @@ from sim.emulator_factories import (
 
 
 @dataclass(frozen=True, kw_only=True)
-class StageEmulator:
-    """An emulated stage kind: `start` serves a device's emulator with all its axes."""
+class _Kind:
+    """What every emulated kind declares: its name and the fault keys only it acts on."""
 
-    role: ClassVar[str] = "stage"
     name: str
-    start: StageFactory
     own_faults: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
-class DetectorEmulator:
+class StageEmulator(_Kind):
+    """An emulated stage kind: `start` serves a device's emulator with all its axes."""
+
+    role: ClassVar[str] = "stage"
+    start: StageFactory
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorEmulator(_Kind):
     """An emulated detector kind: `start` serves a device's emulator lit by the bench."""
 
     role: ClassVar[str] = "detector"
-    name: str
     start: DetectorFactory
-    own_faults: tuple[str, ...] = ()
 
 
 EmulatorKind = StageEmulator | DetectorEmulator

@@ -35,28 +35,31 @@ Check = Callable[["DeviceConfig", Sequence["AxisConfig"], str], None]
 
 
 @dataclass(frozen=True, kw_only=True)
-class StageKind:
-    """A kind of rotation stage. multi_axis: `open` gives a StageController that every axis
-    of the device shares; otherwise `open` gives the Axis itself, one connection per axis."""
+class _Kind:
+    """What every kind declares: its name (a config's `protocol`), its settings, its check."""
 
-    role: ClassVar[str] = "stage"
     name: str
     settings: tuple[Setting, ...]
-    open: Callable[[DeviceConfig], StageController | Axis]
-    multi_axis: bool = False
     check: Check | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
-class DetectorKind:
+class StageKind(_Kind):
+    """A kind of rotation stage. multi_axis: `open` gives a StageController that every axis
+    of the device shares; otherwise `open` gives the Axis itself, one connection per axis."""
+
+    role: ClassVar[str] = "stage"
+    open: Callable[[DeviceConfig], StageController | Axis]
+    multi_axis: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorKind(_Kind):
     """A kind of power detector. config_full_scales_w: the ranges a device of this kind
     offers as far as its config tells, before it is opened (a register map's gain ranges)."""
 
     role: ClassVar[str] = "detector"
-    name: str
-    settings: tuple[Setting, ...]
     open: Callable[[DeviceConfig], Detector]
-    check: Check | None = None
     config_full_scales_w: Callable[[DeviceConfig], tuple[float, ...]] | None = None
 
 
