@@ -49,6 +49,10 @@ class Axis(Protocol):
 
     name: str
 
+    def configure(self, speed_deg_s: float, accel_deg_s2: float,
+                  limits_deg: tuple[float, float]) -> None:
+        """Set the speed and acceleration of the next moves and the software travel limits."""
+
     def move_to(self, position_deg: float) -> None:
         """Start an absolute move and return at once (never blocks for the motion)."""
 

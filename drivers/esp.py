@@ -217,6 +217,13 @@ class EspAxis:
         self.controller.command(self._p + cmd, verify)
 
     # -- Axis interface ---------------------------------------------------------
+    def configure(self, speed_deg_s: float, accel_deg_s2: float,
+                  limits_deg: tuple[float, float]) -> None:
+        """VA, AC, then SL/SR: the next moves' speed and acceleration, the travel limits."""
+        self.speed_deg_s = speed_deg_s
+        self.accel_deg_s2 = accel_deg_s2
+        self.limits_deg = limits_deg
+
     def move_to(self, position_deg: float) -> None:
         """PA: start an absolute move (returns at once)."""
         target = float(position_deg)

@@ -67,6 +67,12 @@ class ModbusStage(MappedUnit):
         return v["limit_negative"], v["limit_positive"]
 
     # -- settings ---------------------------------------------------------------
+    def configure(self, speed_deg_s: float, accel_deg_s2: float,
+                  limits_deg: tuple[float, float]) -> None:
+        """The Axis settings: speed and acceleration (set_motion), then travel limits."""
+        self.set_motion(speed_deg_s, accel_deg_s2)
+        self.set_limits(*limits_deg)
+
     def set_motion(self, speed_deg_s: float, accel_deg_s2: float) -> None:
         """Set the cruise speed and acceleration used by the next move (map range checked)."""
         self.write_value("velocity", speed_deg_s)

@@ -9,7 +9,6 @@ the run store and for the emulators, which read the [sim] section themselves.
 from __future__ import annotations
 
 import copy
-import ipaddress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,38 +16,13 @@ from typing import Any
 import numpy as np
 import tomllib
 
-from drivers.register_map import RegisterMap
+from gonio.device_kinds import KINDS, DeviceConfig
+from gonio.device_kinds.settings import read_settings
 from gonio.errors import ConfigError
 from gonio.fields import REQUIRED, Fields, location
 from gonio.optics import Optics, parse_optics
 
-PROTOCOLS = ("esp", "pm100", "modbus-stage", "modbus-detector")
-STAGE_PROTOCOLS = ("esp", "modbus-stage")
-DETECTOR_PROTOCOLS = ("pm100", "modbus-detector")
 ROLES = ("sample", "arm", "azimuth", "elevation")
-
-
-@dataclass(frozen=True)
-class DeviceConfig:
-    """One physical controller, drive or meter and how to reach it."""
-
-    name: str
-    protocol: str
-    port: str | None = None
-    baudrate: int = 19200
-    timeout_s: float = 1.0
-    transport: str | None = None  # modbus: "tcp" | "rtu"
-    host: str | None = None
-    tcp_port: int = 502
-    unit: int = 1
-    register_map: str | None = None  # absolute path
-
-    @property
-    def endpoint(self) -> str:
-        """Where the device is reached: a serial port or host:port."""
-        if self.transport == "tcp":
-            return f"{self.host}:{self.tcp_port}"
-        return str(self.port)
 
 
 @dataclass(frozen=True)
@@ -140,7 +114,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     clearance = safety.number("beam_clearance_deg", default=5.0, low=0.0, high=90.0)
     forbidden = _zones(safety)
     safety.done()
-    _check_register_ranges(devices, axes, where)
+    _check_devices(devices, axes, where)
     beam = _position(top, "beam")
     dark = _position(top, "dark")
     signature = _position(top, "signature", arm=False)
@@ -148,57 +122,27 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
         raise ConfigError(f"{location(where, 'sim')}: must be a table")
     top.done()
     for dev in devices.values():  # write resolved paths back for the store and emulators
-        if dev.register_map:
-            raw["devices"][dev.name]["register_map"] = dev.register_map
+        for setting in dev.kind.settings:
+            if setting.type == "file" and setting.key in dev.settings:
+                raw["devices"][dev.name][setting.key] = dev.settings[setting.key]
     return InstrumentConfig(name, path, devices, axes, detector, clearance, forbidden,
                             beam, dark, raw, optics, signature)
 
 
 def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
+    """[devices]: each device's protocol names its kind, whose settings it is read by."""
     if not f.table:
         raise ConfigError(f"{f.where}: at least one device is needed")
+    base = path.parent if path else Path.cwd()
     out = {}
     for name in f.table:
         d = f.table_of(name)
-        protocol = d.string("protocol", choices=PROTOCOLS)
-        kw: dict[str, Any] = {"timeout_s": d.number("timeout_s", 1.0, low=0.0, low_open=True)}
-        if protocol.startswith("modbus"):
-            transport = d.string("transport", choices=("tcp", "rtu"))
-            kw["transport"] = transport
-            kw["unit"] = d.number("unit", 1, low=0, high=247, integer=True)
-            reg = d.string("register_map")
-            base = path.parent if path else Path.cwd()
-            reg_path = (base / reg).resolve()
-            if not reg_path.is_file():
-                raise d.fail("register_map", f"no such file {str(reg_path)!r}")
-            kw["register_map"] = str(reg_path)
-            if transport == "tcp":
-                kw["host"] = _device_host(d)
-                kw["tcp_port"] = d.number("tcp_port", 502, low=1, high=65535, integer=True)
-            else:
-                kw["port"] = d.string("port")
-                kw["baudrate"] = d.number("baudrate", 19200, low=1, integer=True)
-        else:
-            kw["port"] = d.string("port")
-            kw["baudrate"] = d.number("baudrate", 19200, low=1, integer=True)
+        kind = KINDS[d.string("protocol", choices=tuple(KINDS))]
+        settings = read_settings(d, kind.settings, base)
         d.done()
-        out[name] = DeviceConfig(name=name, protocol=protocol, **kw)
+        out[name] = DeviceConfig(name, kind, settings)
     f.done()
     return out
-
-
-def _device_host(d: Fields) -> str:
-    """A Modbus TCP device's address. A wildcard (0.0.0.0, ::) is a listen address, not a
-    device's: refused, since emulators never take their listen address from the config."""
-    host = d.string("host")
-    try:
-        wildcard = ipaddress.ip_address(host).is_unspecified
-    except ValueError:  # a host name
-        wildcard = not host.strip()
-    if wildcard:
-        raise d.fail("host", f"{host!r} is a listen address, not a device's; emulators listen "
-                             "on 127.0.0.1 (gonio emulate --bind HOST serves them on another)")
-    return host
 
 
 def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
@@ -216,7 +160,7 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
         device = a.string("device")
         if device not in devices:
             raise a.fail("device", f"no device {device!r} under [devices]")
-        if devices[device].protocol not in STAGE_PROTOCOLS:
+        if devices[device].kind.role != "stage":
             raise a.fail("device", f"{device!r} is a {devices[device].protocol}, not a stage")
         axis = a.number("axis", 1, low=1, high=99, integer=True)
         if (device, axis) in used:
@@ -236,29 +180,13 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
     return out
 
 
-def _check_register_ranges(devices: dict[str, DeviceConfig], axes: dict[str, AxisConfig],
-                           where: str) -> None:
-    """Modbus maps bound what a drive accepts: check the config's values fit, before motion."""
-    maps: dict[str, RegisterMap] = {}
+def _check_devices(devices: dict[str, DeviceConfig], axes: dict[str, AxisConfig],
+                   where: str) -> None:
+    """Each kind's own checks of its devices (a Modbus map bounds what a drive accepts),
+    before motion."""
     for dev in devices.values():
-        if dev.register_map:
-            try:
-                maps[dev.name] = RegisterMap.load(dev.register_map)
-            except (OSError, ValueError) as exc:
-                raise ConfigError(f"{location(where, f'devices.{dev.name}', 'register_map')}: "
-                                  f"{exc}") from None
-    for ax in axes.values():
-        if devices[ax.device].protocol != "modbus-stage":
-            continue
-        for key, register, value in (("speed_deg_s", "velocity", ax.speed_deg_s),
-                                     ("accel_deg_s2", "acceleration", ax.accel_deg_s2),
-                                     ("limits_deg", "limit_negative", ax.limits_deg[0]),
-                                     ("limits_deg", "limit_positive", ax.limits_deg[1])):
-            try:
-                maps[ax.device].encode(register, value)
-            except (KeyError, ValueError) as exc:
-                raise ConfigError(f"{location(where, f'axes.{ax.role}', key)}: the drive's "
-                                  f"register map refuses it ({exc})") from None
+        if dev.kind.check is not None:
+            dev.kind.check(dev, [ax for ax in axes.values() if ax.device == dev.name], where)
 
 
 def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
@@ -268,7 +196,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
     device = f.string("device")
     if device not in devices:
         raise f.fail("device", f"no device {device!r} under [devices]")
-    if devices[device].protocol not in DETECTOR_PROTOCOLS:
+    if devices[device].kind.role != "detector":
         raise f.fail("device", f"{device!r} is a {devices[device].protocol}, not a detector")
     rng = f._get("range", "auto")
     if rng == "auto":

@@ -1,14 +1,14 @@
 """Build an instrument (Axis and Detector drivers) from a validated config.
 
-The config names each device's protocol; this module is the one place that maps a protocol
-to its driver class, pushes the config's motion settings and travel limits to the devices,
-and closes everything again.
+Each device opens through its kind (gonio.device_kinds); this module opens them, shares a
+multi-axis controller among its axes, pushes the config's motion settings and travel limits
+to every axis (`Axis.configure`), records what each device reports, and closes everything
+again.
 """
 
 from __future__ import annotations
 
 import contextlib
-import importlib
 import math
 import termios
 from collections.abc import Callable
@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.base import Axis, Detector, DriverError
-from gonio.config import AxisConfig, DeviceConfig, InstrumentConfig
+from gonio.config import AxisConfig, InstrumentConfig
+from gonio.device_kinds import DeviceConfig
 from gonio.errors import ConfigError
 
 STOP_ATTEMPTS = 2
@@ -76,63 +77,32 @@ def _close_all(closers: list[Callable[[], None]]) -> None:
     closers.clear()
 
 
-def _modbus_kwargs(dev: DeviceConfig) -> dict[str, Any]:
-    from drivers.modbus_transport import ModbusTimeouts
-
-    kw: dict[str, Any] = {"name": dev.name, "timeouts": ModbusTimeouts(reply_s=dev.timeout_s)}
-    if dev.transport == "tcp":
-        return {**kw, "tcp_port": dev.tcp_port}
-    return {**kw, "baudrate": dev.baudrate}
-
-
-def _host(dev: DeviceConfig) -> str:
-    return str(dev.host if dev.transport == "tcp" else dev.port)
-
-
-def _open(dev: DeviceConfig, make: Callable[[], Any]) -> Any:
+def _opened(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Any:
+    """The device opened through its kind (one ConfigError if it cannot be reached), its
+    close kept for the end."""
     try:
-        return make()
+        opened = dev.kind.open(dev)
     except DriverError:
         raise
     except (OSError, ValueError) as exc:
         raise ConfigError(f"devices.{dev.name}: cannot open {dev.protocol} at "
                           f"{dev.endpoint}: {exc}") from None
+    closers.append(opened.close)
+    return opened
 
 
 def _stage(dev: DeviceConfig, ax: AxisConfig, controllers: dict[str, Any],
            closers: list[Callable[[], None]]) -> Axis:
-    """An Axis driver for a role, with the config's speed, acceleration and limits set."""
-    if dev.protocol == "esp":
+    """An Axis driver for a role, with the config's speed, acceleration and limits set; the
+    axes of a multi-axis controller share its one connection."""
+    if dev.kind.multi_axis:
         if dev.name not in controllers:
-            esp = importlib.import_module("drivers.esp")
-            controllers[dev.name] = _open(dev, lambda: esp.EspController(
-                dev.port, baudrate=dev.baudrate, timeout_s=dev.timeout_s, name=dev.name))
-            closers.append(controllers[dev.name].close)
-        axis = controllers[dev.name].axis(ax.axis, name=f"{dev.name}.{ax.role}")
-        axis.speed_deg_s = ax.speed_deg_s
-        axis.accel_deg_s2 = ax.accel_deg_s2
-        axis.limits_deg = ax.limits_deg
-        return axis
-    stage_mod = importlib.import_module("drivers.modbus_stage")
-    stage = _open(dev, lambda: stage_mod.ModbusStage(
-        dev.transport, _host(dev), dev.unit, dev.register_map, **_modbus_kwargs(dev)))
-    closers.append(stage.close)
-    stage.set_motion(ax.speed_deg_s, ax.accel_deg_s2)
-    stage.set_limits(*ax.limits_deg)
-    return stage
-
-
-def _detector(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Detector:
-    if dev.protocol == "pm100":
-        pm100 = importlib.import_module("drivers.pm100")
-        det = _open(dev, lambda: pm100.Pm100(dev.port, baudrate=dev.baudrate,
-                                             timeout_s=dev.timeout_s, name=dev.name))
+            controllers[dev.name] = _opened(dev, closers)
+        axis = controllers[dev.name].axis(ax.axis, f"{dev.name}.{ax.role}")
     else:
-        mod = importlib.import_module("drivers.modbus_detector")
-        det = _open(dev, lambda: mod.ModbusDetector(
-            dev.transport, _host(dev), dev.unit, dev.register_map, **_modbus_kwargs(dev)))
-    closers.append(det.close)
-    return det
+        axis = _opened(dev, closers)
+    axis.configure(ax.speed_deg_s, ax.accel_deg_s2, ax.limits_deg)
+    return axis
 
 
 def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrument:
@@ -144,7 +114,7 @@ def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrume
     try:
         axes = {role: _stage(cfg.devices[ax.device], ax, controllers, closers)
                 for role, ax in cfg.axes.items()}
-        detector = _detector(cfg.devices[cfg.detector.device], closers)
+        detector = _opened(cfg.devices[cfg.detector.device], closers)
         drivers: dict[str, Axis | Detector] = {cfg.axes[role].device: axis
                                                for role, axis in axes.items()}
         drivers[cfg.detector.device] = detector  # one per device: an ESP's axes report alike
@@ -158,11 +128,11 @@ def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrume
 
 
 def _record(dev: DeviceConfig, driver: Axis | Detector) -> dict[str, Any]:
-    """What a run records of a device: protocol, endpoint (and Modbus unit), and the identity
-    the driver reports; a device that reports none, or fails to, is noted, never fatal."""
-    record: dict[str, Any] = {"protocol": dev.protocol, "endpoint": dev.endpoint}
-    if dev.transport is not None:
-        record.update(transport=dev.transport, unit=dev.unit)
+    """What a run records of a device: protocol, endpoint, the settings its kind records (a
+    Modbus transport and unit), and the identity the driver reports; a device that reports
+    none, or fails to, is noted, never fatal."""
+    record: dict[str, Any] = {"protocol": dev.protocol, "endpoint": dev.endpoint,
+                              **dev.recorded}
     try:
         record["identity"] = driver.identity()
     except DriverError as exc:

@@ -19,6 +19,7 @@ import numpy as np
 
 from drivers.base import Detector
 from gonio.config import InstrumentConfig, load_config, parse_config
+from gonio.device_kinds import endpoint_keys
 from gonio.engine import Engine, Outcome, PauseControl
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.instrument import build_instrument
@@ -251,7 +252,7 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
 
 
 _MISSING = object()
-ENDPOINT_KEYS = ("port", "host", "tcp_port")
+ENDPOINT_KEYS = endpoint_keys()
 
 
 def _flat(data: dict, prefix: str = "") -> dict[str, Any]:

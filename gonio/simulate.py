@@ -59,12 +59,7 @@ def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConf
     """A copy of the config whose named devices' ports / hosts are the given endpoints."""
     raw = copy.deepcopy(cfg.raw)
     for name, endpoint in endpoints.items():
-        dev = raw["devices"][name]
-        if cfg.devices[name].transport == "tcp":
-            host, port = endpoint.rsplit(":", 1)
-            dev["host"], dev["tcp_port"] = host, int(port)
-        else:
-            dev["port"] = endpoint
+        raw["devices"][name].update(cfg.devices[name].endpoint_values(endpoint))
     return parse_config(raw, cfg.path)
 
 

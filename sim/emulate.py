@@ -26,14 +26,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sim.bench import build_power_source
-from sim.devices.esp import EspEmulator
+from sim.device_kinds import DetectorEmulator, EmulatorKind, StageEmulator, check_faults, kind_of
 from sim.devices.faults import FaultInjector, FaultSpec
-from sim.devices.modbus_detector import ModbusDetectorEmulator
 from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
-from sim.devices.modbus_stage import ModbusStageEmulator
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
-from sim.devices.pm100 import Pm100Emulator
+from sim.emulator_factories import EmulatedDevice, Light
 
 SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
             "faults")
@@ -41,7 +39,6 @@ ROLES = ("sample", "arm", "azimuth", "elevation")
 #: A reading taken before this bench started: its commanded positions ({role: deg}) and its
 #: range setting (full scale in W; None = autorange).
 Visit = tuple[Mapping[str, float], float | None]
-DETECTORS = ("pm100", "modbus-detector")
 
 
 @dataclass(frozen=True)
@@ -109,7 +106,13 @@ def time_scale_of(sim: Mapping[str, Any]) -> float:
     return float(value)
 
 
-def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
+def _kinds(config: Mapping[str, Any]) -> dict[str, EmulatorKind]:
+    """Every device's kind, by device name (an unknown protocol is an error, never skipped)."""
+    devices = config.get("devices", {})
+    return {name: kind_of(name, dev) for name, dev in devices.items()}
+
+
+def _sim_table(config: Mapping[str, Any], kinds: Mapping[str, EmulatorKind]) -> dict[str, Any]:
     sim = config.get("sim", {})
     if not isinstance(sim, Mapping):
         raise SimConfigError("[sim]: must be a table")
@@ -127,21 +130,8 @@ def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
             raise SimConfigError(f"[sim.faults.{device}]: no device {device!r} under [devices]")
         if not isinstance(table, Mapping):
             raise SimConfigError(f"[sim.faults.{device}]: must be a table, got {table!r}")
-        if "invalid_prob" in table and config["devices"][device].get("protocol") != "pm100":
-            raise SimConfigError(f"[sim.faults.{device}] invalid_prob: only a pm100 detector "
-                                 "answers with an invalid reading")
+        check_faults(device, kinds[device], table)
     return dict(sim)
-
-
-def _home(limits: Any) -> float:
-    """Where an emulated stage powers up: 0, or the nearest limit if 0 is outside travel."""
-    return min(max(0.0, float(limits[0])), float(limits[1]))
-
-
-def _axis_table(axis: Mapping[str, Any]) -> dict[str, Any]:
-    """The emulated ESP axis's settings from a config [axes.<role>] table."""
-    return {"limits_deg": tuple(axis["limits_deg"]), "speed_deg_s": axis["speed_deg_s"],
-            "accel_deg_s2": axis["accel_deg_s2"], "position_deg": _home(axis["limits_deg"])}
 
 
 def _modbus_group(dev: Mapping[str, Any]) -> tuple[str, str]:
@@ -155,10 +145,10 @@ class _Builder:
     """Creates the emulators of one config, stages first, then the bench and the detectors."""
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
-                 bench: EmulatedBench, bind: str):
+                 kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str):
         self.config, self.sim, self.bench, self.bind = config, sim, bench, bind
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
-        self.chosen = chosen
+        self.chosen, self.kinds = chosen, kinds
         self.seed = sim.get("seed", 0)
         self.readers: dict[str, Callable[[], float]] = {}  # where each stage is
         self.targets: dict[str, Callable[[], float]] = {}  # where it was told to go
@@ -181,6 +171,16 @@ class _Builder:
     def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
         return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
 
+    def _device(self, name: str) -> EmulatedDevice:
+        """What the device's kind starts its emulator from, and where it serves it."""
+        def stage(role: str, position: Callable[[], float], target: Callable[[], float]) -> None:
+            self.readers[role], self.targets[role] = position, target
+
+        return EmulatedDevice(name, self.devices[name], self._roles(name), self.bench.clock,
+                              self._seed(name), self._faults(name), self._serial(name),
+                              serve=lambda emu: _serve(self.bench, name, emu),
+                              join_bus=lambda unit: self._add_modbus(name, unit), stage=stage)
+
     def _add_modbus(self, name: str, unit: Any) -> None:
         dev = self.devices[name]
         units = self.modbus.setdefault(_modbus_group(dev), {})
@@ -189,50 +189,23 @@ class _Builder:
             self.bench.injectors.setdefault(name, []).append(unit.faults)
 
     def stages(self) -> None:
-        """Emulators of the chosen stage devices (ESP served now, Modbus units collected)."""
+        """Emulators of the chosen stage devices (served on ptys now, Modbus units collected)."""
         for name in self.chosen:
-            dev, roles = self.devices[name], self._roles(name)
-            if dev["protocol"] == "esp":
-                tables = {ax.get("axis", 1): _axis_table(ax) for ax in roles.values()}
-                emu = EspEmulator(self.bench.clock, tables, self._faults(name), self._seed(name))
-                _serve(self.bench, name, emu)
-                for role, ax in roles.items():
-                    motion = emu.axes[ax.get("axis", 1)].motion
-                    self.readers[role], self.targets[role] = motion.position, motion.target
-            elif dev["protocol"] == "modbus-stage":
-                for role, ax in roles.items():
-                    emu = ModbusStageEmulator(self.bench.clock, dev["register_map"],
-                                              tuple(ax["limits_deg"]), ax["speed_deg_s"],
-                                              ax["accel_deg_s2"], self._faults(name),
-                                              _home(ax["limits_deg"]),
-                                              serial=self._serial(name))
-                    self._add_modbus(name, emu)
-                    self.readers[role], self.targets[role] = emu.axis.position, emu.axis.target
+            kind = self.kinds[name]
+            if isinstance(kind, StageEmulator):
+                kind.start(self._device(name))
 
     def detectors(self, source: Any, place: Callable[[], tuple[float, ...]],
                   visited: list[tuple[tuple[float, ...], float | None]]) -> None:
         """Emulators of the chosen detectors, lit by `source` (the bench's PowerSource), their
         noise keyed on `place()` (the commanded positions) and counting `visited` as taken."""
-        light_nm = source.bench.source.wavelength_nm
-        detector = self.sim.get("detector")
+        light = Light(source, self.sim.get("detector"), source.bench.source.wavelength_nm, place)
         for name in self.chosen:
-            dev = self.devices[name]
-            if dev["protocol"] == "pm100":
-                emu = Pm100Emulator(source, faults=self._faults(name), seed=self._seed(name),
-                                    detector=detector, light_wavelength_nm=light_nm,
-                                    place=place)
-                meter = emu.photodiode
-                _serve(self.bench, name, emu)
-            elif dev["protocol"] == "modbus-detector":
-                unit = ModbusDetectorEmulator(
-                    source, dev["register_map"], self._faults(name), self._seed(name),
-                    detector, light_nm, serial=self._serial(name), place=place)
-                meter = unit.model
-                self._add_modbus(name, unit)
-            else:
-                continue
-            for where, range_w in visited:
-                meter.visited(where, range_w)
+            kind = self.kinds[name]
+            if isinstance(kind, DetectorEmulator):
+                meter = kind.start(self._device(name), light)
+                for where, range_w in visited:
+                    meter.visited(where, range_w)
 
     def serve_modbus(self) -> None:
         """One Modbus server per bus or TCP endpoint, with all its collected units."""
@@ -261,7 +234,8 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     run's start (`time.time()` seconds; default now), the origin of the source's drift;
     visited: the readings the run took before this bench (a resume), see Visit.
     """
-    sim = _sim_table(config)
+    kinds = _kinds(config)
+    sim = _sim_table(config, kinds)
     all_devices = config["devices"]
     chosen = list(all_devices) if devices is None else list(devices)
     for name in chosen:
@@ -269,11 +243,11 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             raise SimConfigError(f"no device {name!r} to emulate (devices: "
                                  f"{', '.join(all_devices)})")
     bench = EmulatedBench(VirtualClock(time_scale_of(sim)))
-    build = _Builder(config, sim, chosen, bench, bind)
+    build = _Builder(config, sim, chosen, kinds, bench, bind)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)
-        detectors = [n for n in chosen if all_devices[n]["protocol"] in DETECTORS]
+        detectors = [n for n in chosen if isinstance(kinds[n], DetectorEmulator)]
         if missing and positions is None and detectors:
             raise SimConfigError(f"emulating {detectors[0]!r} without the stages "
                                  f"{', '.join(sorted(missing))} needs their positions")

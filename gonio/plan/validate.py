@@ -10,7 +10,6 @@ from typing import Any
 
 import numpy as np
 
-from drivers.register_map import RegisterMap
 from gonio.config import InstrumentConfig, forbidden_reason
 from gonio.errors import PlanError
 from gonio.fields import location
@@ -141,12 +140,11 @@ def resolve_ranges(plan: Plan, cfg: InstrumentConfig, keep: np.ndarray) -> Range
 
 
 def detector_largest_range(cfg: InstrumentConfig) -> float | None:
-    """The largest full scale the instrument's detector offers, if the config knows it (a
-    Modbus amplifier's register map lists its gain ranges), else None."""
+    """The largest full scale the instrument's detector offers, if its kind knows it from the
+    config (a Modbus amplifier's register map lists its gain ranges), else None."""
     device = cfg.devices[cfg.detector.device]
-    if not device.register_map:
-        return None
-    ranges = RegisterMap.load(device.register_map).gain_ranges_w
+    known = device.kind.config_full_scales_w
+    ranges = known(device) if known is not None else ()
     return max(ranges) if ranges else None
 
 

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     if not is_loopback(args.bind):
-        tcp = [name for name, dev in cfg.devices.items() if dev.transport == "tcp"]
+        tcp = [name for name, dev in cfg.devices.items() if dev.networked]
         if not tcp:
             raise ConfigError(f"--bind {args.bind}: {args.config} has no Modbus TCP device "
                               "(serial and RTU devices are ptys, local only)")

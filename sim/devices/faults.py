@@ -19,6 +19,9 @@ class FaultConfigError(ValueError):
 
 
 _PROBABILITIES = ("drop_prob", "corrupt_prob", "bad_crc_prob", "stall_prob", "invalid_prob")
+#: Fault keys only some device kinds act on, with what such a device then does (each kind in
+#: sim.device_kinds names those it takes; any other kind refuses them).
+KIND_FAULTS = {"invalid_prob": "answers with an invalid reading"}
 
 
 def _is_number(value: object) -> bool:

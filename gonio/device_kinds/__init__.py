@@ -1,0 +1,43 @@
+"""The device kinds an instrument config may name as a device's `protocol`, each declared
+once: stage or detector, its settings, how it opens, its own config checks.
+
+Config parsing (gonio.config) reads a device's settings from its kind, instrument building
+(gonio.instrument) opens it through its kind. sim.device_kinds declares the emulator of
+each of these names, with the same role; tests/test_device_kinds.py checks they agree.
+Adding a kind is one entry here pointing at its driver module (docs/extending.md).
+"""
+
+from __future__ import annotations
+
+from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind
+from gonio.device_kinds.modbus import (
+    MODBUS_SETTINGS,
+    check_register_map,
+    check_stage_registers,
+    map_full_scales_w,
+    modbus_unit,
+)
+from gonio.device_kinds.serial_line import serial_device
+from gonio.device_kinds.settings import SERIAL_SETTINGS, Setting
+
+KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
+    StageKind(name="esp", settings=SERIAL_SETTINGS, multi_axis=True,
+              open=serial_device("drivers.esp:EspController")),
+    DetectorKind(name="pm100", settings=SERIAL_SETTINGS,
+                 open=serial_device("drivers.pm100:Pm100")),
+    StageKind(name="modbus-stage", settings=MODBUS_SETTINGS, check=check_stage_registers,
+              open=modbus_unit("drivers.modbus_stage:ModbusStage")),
+    DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS, check=check_register_map,
+                 config_full_scales_w=map_full_scales_w,
+                 open=modbus_unit("drivers.modbus_detector:ModbusDetector")),
+)}
+
+
+def endpoint_keys() -> tuple[str, ...]:
+    """Every setting key that is part of some kind's endpoint (what a resume may change)."""
+    keys = [s.key for kind in KINDS.values() for s in kind.settings if s.endpoint]
+    return tuple(dict.fromkeys(keys))
+
+
+__all__ = ["KINDS", "DetectorKind", "DeviceConfig", "DeviceKind", "Setting", "StageKind",
+           "endpoint_keys"]

@@ -1,0 +1,113 @@
+"""What a device kind is (`StageKind`, `DetectorKind`) and a device of a config
+(`DeviceConfig`: its name, its kind and the values of the kind's settings).
+
+A kind says once what the rest of gonio asks of a protocol: its config settings, how a
+device of it opens as `Axis` drivers or a `Detector`, and its own config checks.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+from drivers.base import Axis, Detector
+from gonio.device_kinds.settings import Setting
+
+if TYPE_CHECKING:
+    from gonio.config import AxisConfig
+
+
+class StageController(Protocol):
+    """A controller driving several axes over one connection (an ESP300/301)."""
+
+    def axis(self, number: int, name: str) -> Axis:
+        """The Axis driver of axis `number`, called `name`."""
+
+    def close(self) -> None:
+        """Close the connection every axis shares."""
+
+
+#: A kind's own config check, after the whole config is read: (device, the axes it drives,
+#: the config's name for messages) -> None, or a ConfigError naming the field.
+Check = Callable[["DeviceConfig", Sequence["AxisConfig"], str], None]
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Kind:
+    """What every kind declares: its name (a config's `protocol`), its settings, its check."""
+
+    name: str
+    settings: tuple[Setting, ...]
+    check: Check | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class StageKind(_Kind):
+    """A kind of rotation stage. multi_axis: `open` gives a StageController that every axis
+    of the device shares; otherwise `open` gives the Axis itself, one connection per axis."""
+
+    role: ClassVar[str] = "stage"
+    open: Callable[[DeviceConfig], StageController | Axis]
+    multi_axis: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorKind(_Kind):
+    """A kind of power detector. config_full_scales_w: the ranges a device of this kind
+    offers as far as its config tells, before it is opened (a register map's gain ranges)."""
+
+    role: ClassVar[str] = "detector"
+    open: Callable[[DeviceConfig], Detector]
+    config_full_scales_w: Callable[[DeviceConfig], tuple[float, ...]] | None = None
+
+
+DeviceKind = StageKind | DetectorKind
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """One physical controller, drive or meter: its kind and the values of the kind's
+    settings that apply to it (`settings`, by key; defaults filled in)."""
+
+    name: str
+    kind: DeviceKind
+    settings: Mapping[str, Any]
+
+    @property
+    def protocol(self) -> str:
+        """The kind's name, as the config spells it."""
+        return self.kind.name
+
+    def _applied(self, flag: str) -> list[Setting]:
+        return [s for s in self.kind.settings if getattr(s, flag) and s.key in self.settings]
+
+    @property
+    def endpoint(self) -> str:
+        """Where the device is reached: a serial port, or host:port."""
+        return ":".join(str(self.settings[s.key]) for s in self._applied("endpoint"))
+
+    def endpoint_values(self, endpoint: str) -> dict[str, Any]:
+        """The endpoint settings that point this device at `endpoint` (an `endpoint` string
+        of the same shape, e.g. an emulator's), by key."""
+        keys = self._applied("endpoint")
+        parts = endpoint.rsplit(":", len(keys) - 1) if len(keys) > 1 else [endpoint]
+        return {s.key: s.value_of(part) for s, part in zip(keys, parts, strict=True)}
+
+    @property
+    def networked(self) -> bool:
+        """True if the device is reached at a network address (a host setting applies)."""
+        return any(s.type == "host" for s in self._applied("endpoint"))
+
+    @property
+    def recorded(self) -> dict[str, Any]:
+        """The settings each session's record of the device keeps (a Modbus transport, unit)."""
+        return {s.key: self.settings[s.key] for s in self._applied("recorded")}
+
+
+def driver_class(path: str) -> Any:
+    """The class (or other attribute) `module:name`, imported when first needed: opening a
+    device loads its driver (and pymodbus) only then."""
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)

@@ -1,0 +1,81 @@
+"""The Modbus kinds' part: their settings (RTU or TCP, unit, register map), opening a unit,
+and the config checks their register maps allow before anything moves.
+
+A Modbus device is described by its register-map file, so a new drive or amplifier of the
+same shape needs a map and no code (docs/modbus.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from drivers.register_map import RegisterMap
+from gonio.device_kinds.kind import DeviceConfig, driver_class
+from gonio.device_kinds.settings import BAUDRATE, PORT, TIMEOUT_S, Setting, only_when
+from gonio.errors import ConfigError
+from gonio.fields import location
+
+if TYPE_CHECKING:
+    from gonio.config import AxisConfig
+
+MODBUS_SETTINGS = (
+    TIMEOUT_S,
+    Setting("transport", "string", choices=("tcp", "rtu"), recorded=True),
+    Setting("unit", "integer", 1, low=0, high=247, recorded=True),
+    Setting("register_map", "file"),
+    *only_when("transport", "tcp",
+               Setting("host", "host", endpoint=True),
+               Setting("tcp_port", "integer", 502, low=1, high=65535, endpoint=True)),
+    *only_when("transport", "rtu", PORT, BAUDRATE),
+)
+
+
+def modbus_unit(driver: str) -> Callable[[DeviceConfig], Any]:
+    """An opener for the driver class `driver` ("module:Class", a drivers.modbus_transport
+    MappedUnit), constructed from the MODBUS_SETTINGS of a device and named after it."""
+    def open_unit(dev: DeviceConfig) -> Any:
+        s = dev.settings
+        timeouts = driver_class("drivers.modbus_transport:ModbusTimeouts")(reply_s=s["timeout_s"])
+        if s["transport"] == "tcp":
+            address, link = s["host"], {"tcp_port": s["tcp_port"]}
+        else:
+            address, link = s["port"], {"baudrate": s["baudrate"]}
+        return driver_class(driver)(s["transport"], address, s["unit"], s["register_map"],
+                                    name=dev.name, timeouts=timeouts, **link)
+    return open_unit
+
+
+def register_map(dev: DeviceConfig, where: str) -> RegisterMap:
+    """The device's register map, or a ConfigError naming its register_map field."""
+    try:
+        return RegisterMap.load(dev.settings["register_map"])
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{location(where, f'devices.{dev.name}', 'register_map')}: "
+                          f"{exc}") from None
+
+
+def check_register_map(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str) -> None:
+    """A Modbus detector's check: its register map loads."""
+    register_map(dev, where)
+
+
+def check_stage_registers(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str) -> None:
+    """A Modbus stage's check: the map bounds what the drive accepts, so each of its axes'
+    speed, acceleration and limits must encode, before motion."""
+    registers = register_map(dev, where)
+    for ax in axes:
+        for key, register, value in (("speed_deg_s", "velocity", ax.speed_deg_s),
+                                     ("accel_deg_s2", "acceleration", ax.accel_deg_s2),
+                                     ("limits_deg", "limit_negative", ax.limits_deg[0]),
+                                     ("limits_deg", "limit_positive", ax.limits_deg[1])):
+            try:
+                registers.encode(register, value)
+            except (KeyError, ValueError) as exc:
+                raise ConfigError(f"{location(where, f'axes.{ax.role}', key)}: the drive's "
+                                  f"register map refuses it ({exc})") from None
+
+
+def map_full_scales_w(dev: DeviceConfig) -> tuple[float, ...]:
+    """A Modbus amplifier's ranges as its register map lists them (its gain ranges)."""
+    return RegisterMap.load(dev.settings["register_map"]).gain_ranges_w

@@ -1,0 +1,113 @@
+"""The config fields a device kind declares (`Setting`), and reading them from a
+`[devices.<name>]` table with gonio.fields' one-line errors.
+
+A kind lists its settings once; `read_settings` checks a device's table against that list,
+so a typo, a wrong type or a value out of bounds is refused the same way for every kind.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import ipaddress
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gonio.fields import REQUIRED, Fields
+
+#: "string" (one of `choices` if given), "integer" and "number" (within low..high), "file"
+#: (a path relative to the config's folder, made absolute; it must exist) and "host" (a
+#: device's network address; a wildcard listen address is refused). file and host are required.
+TYPES = ("string", "integer", "number", "file", "host")
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One config field of a device kind: key, type (TYPES), default (REQUIRED: none), unit,
+    bounds (low..high, low excluded if low_open) or choices.
+
+    when: (key, value) of an earlier setting this one applies under (a Modbus TCP device has
+    a host, an RTU one a port); endpoint: part of where the device is reached (joined by ":"
+    in declaration order; may change when a run resumes); recorded: kept in each session's
+    record of the device in meta.json.
+    """
+
+    key: str
+    type: str
+    default: Any = REQUIRED
+    unit: str = ""
+    low: float = -math.inf
+    high: float = math.inf
+    low_open: bool = False
+    choices: tuple[str, ...] = ()
+    when: tuple[str, str] | None = None
+    endpoint: bool = False
+    recorded: bool = False
+
+    def __post_init__(self) -> None:
+        if self.type not in TYPES:
+            raise ValueError(f"setting {self.key!r}: type {self.type!r} is not one of {TYPES}")
+
+    def applies(self, values: Mapping[str, Any]) -> bool:
+        """True if this setting belongs to a device whose earlier settings are `values`."""
+        return self.when is None or values.get(self.when[0]) == self.when[1]
+
+    def read(self, f: Fields, base: Path) -> Any:
+        """This setting's value from a device table (relative files resolve against base)."""
+        if self.type in ("integer", "number"):
+            return f.number(self.key, self.default, self.low, self.high,
+                            integer=self.type == "integer", low_open=self.low_open)
+        value = f.string(self.key, self.default, self.choices)
+        if self.type == "file":
+            return _existing_file(f, self.key, value, base)
+        if self.type == "host":
+            return _device_host(f, self.key, value)
+        return value
+
+    def value_of(self, text: str) -> Any:
+        """A value of this setting from its text in an endpoint (an integer's digits)."""
+        return int(text) if self.type == "integer" else text
+
+
+def read_settings(f: Fields, settings: tuple[Setting, ...], base: Path) -> dict[str, Any]:
+    """The values of the settings that apply to the device table `f`, by key, defaults
+    filled in (the caller's f.done() then refuses any key no setting asked for)."""
+    values: dict[str, Any] = {}
+    for setting in settings:
+        if setting.applies(values):
+            values[setting.key] = setting.read(f, base)
+    return values
+
+
+def _existing_file(f: Fields, key: str, value: str, base: Path) -> str:
+    path = (base / value).resolve()
+    if not path.is_file():
+        raise f.fail(key, f"no such file {str(path)!r}")
+    return str(path)
+
+
+def _device_host(f: Fields, key: str, host: str) -> str:
+    """A device's network address. A wildcard (0.0.0.0, ::) is a listen address, not a
+    device's: refused, since emulators never take their listen address from the config."""
+    try:
+        wildcard = ipaddress.ip_address(host).is_unspecified
+    except ValueError:  # a host name
+        wildcard = not host.strip()
+    if wildcard:
+        raise f.fail(key, f"{host!r} is a listen address, not a device's; emulators listen "
+                          "on 127.0.0.1 (gonio emulate --bind HOST serves them on another)")
+    return host
+
+
+TIMEOUT_S = Setting("timeout_s", "number", 1.0, unit="s", low=0.0, low_open=True)
+PORT = Setting("port", "string", endpoint=True)
+BAUDRATE = Setting("baudrate", "integer", 19200, unit="baud", low=1)
+#: A device on a serial line of its own: the reply timeout, the port and its baud rate.
+SERIAL_SETTINGS = (TIMEOUT_S, PORT, BAUDRATE)
+
+
+def only_when(key: str, value: str, *settings: Setting) -> tuple[Setting, ...]:
+    """The settings, each applying only when the setting `key` is `value`."""
+    return tuple(dataclasses.replace(s, when=(key, value)) for s in settings)

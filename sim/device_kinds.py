@@ -1,0 +1,83 @@
+"""The device kinds sim emulates, each declared once: its name (a config's `protocol`),
+stage or detector, the factory that starts its emulator, and the fault keys only it acts on.
+
+gonio.device_kinds declares the same names with the same roles (how the real devices are
+configured and opened); sim never imports it, and tests/test_device_kinds.py checks that the
+two registries agree. Adding a kind is one entry here pointing at its emulator module
+(docs/extending.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from sim.devices.esp import EspEmulator
+from sim.devices.faults import KIND_FAULTS
+from sim.devices.photodiode import SimConfigError
+from sim.devices.pm100 import Pm100Emulator
+from sim.emulator_factories import (
+    DetectorFactory,
+    StageFactory,
+    controller_on_pty,
+    meter_on_pty,
+    modbus_detector_unit,
+    modbus_stage_units,
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Kind:
+    """What every emulated kind declares: its name and the fault keys only it acts on."""
+
+    name: str
+    own_faults: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class StageEmulator(_Kind):
+    """An emulated stage kind: `start` serves a device's emulator with all its axes."""
+
+    role: ClassVar[str] = "stage"
+    start: StageFactory
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorEmulator(_Kind):
+    """An emulated detector kind: `start` serves a device's emulator lit by the bench."""
+
+    role: ClassVar[str] = "detector"
+    start: DetectorFactory
+
+
+EmulatorKind = StageEmulator | DetectorEmulator
+
+KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
+    StageEmulator(name="esp", start=controller_on_pty(EspEmulator)),
+    DetectorEmulator(name="pm100", start=meter_on_pty(Pm100Emulator),
+                     own_faults=("invalid_prob",)),
+    StageEmulator(name="modbus-stage", start=modbus_stage_units),
+    DetectorEmulator(name="modbus-detector", start=modbus_detector_unit),
+)}
+
+
+def kind_of(name: str, device: Mapping[str, Any]) -> EmulatorKind:
+    """The kind of the config's device `name` (its [devices.<name>] table), or a
+    SimConfigError listing the kinds sim emulates."""
+    protocol = device.get("protocol")
+    if protocol not in KINDS:
+        raise SimConfigError(f"[devices.{name}] protocol {protocol!r}: no such device kind "
+                             f"(kinds: {', '.join(KINDS)})")
+    return KINDS[protocol]
+
+
+def check_faults(name: str, kind: EmulatorKind, faults: Mapping[str, Any]) -> None:
+    """Refuse a [sim.faults.<name>] key that only other kinds act on (the kind's own, or any
+    kind's common fault keys, pass)."""
+    for key in faults:
+        if key in KIND_FAULTS and key not in kind.own_faults:
+            takers = " or a ".join(f"{k.name} {k.role}" for k in KINDS.values()
+                                   if key in k.own_faults)
+            raise SimConfigError(f"[sim.faults.{name}] {key}: only a {takers} "
+                                 f"{KIND_FAULTS[key]}")
