@@ -87,12 +87,6 @@ def blocks_motion(flag: str) -> bool:
     return flag.startswith("F") or flag == "WR"
 
 
-def _integer(text: str) -> int:
-    if _INTEGER.fullmatch(text) is None:
-        raise ProtocolError(f"garbled integer {text!r}")
-    return int(text)
-
-
 @dataclass(frozen=True)
 class Reply:
     """One parsed reply: OK or RJ, BUSY or IDLE, the warning flag and the data."""
@@ -157,6 +151,7 @@ class ZaberController:
         self._checksummed: set[int] = set()  # devices whose replies must carry a checksum
         self._devices: dict[int, dict[str, str]] = {}  # opened devices: their identity
         self._axis_counts: dict[int, int] = {}
+        self.latest: dict[tuple[int, int], Reply] = {}  # (device, axis): its latest reply
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries,
@@ -217,15 +212,19 @@ class ZaberController:
         meaning = REJECTIONS.get(reply.data, "rejected")
         return DeviceError(who, reply.data, f"{meaning} ({command!r})")
 
-    def query(self, address: int, axis: int, command: str, who: str) -> Reply:
-        """Ask something that changes nothing; retried on timeout or garble, an RJ raises
-        DeviceError (not retried)."""
+    def query(self, address: int, axis: int, command: str, who: str,
+              integer: bool = False) -> Reply:
+        """Ask something that changes nothing (integer: its data must be an integer);
+        retried on timeout or garble, an RJ raises DeviceError (not retried)."""
         message_id = next(self._ids)
 
         def checked(text: str) -> Reply:
             reply = self._parse(text, address, axis, message_id)
+            self.latest[address, axis] = reply
             if reply.flag == "RJ":
                 raise self._rejected(who, command, reply)
+            if integer and _INTEGER.fullmatch(reply.data) is None:
+                raise ProtocolError(f"{who}: {command}: not an integer: {reply.data!r}")
             return reply
 
         return self.transport.query(self._line(address, axis, message_id, command), checked,
@@ -246,16 +245,14 @@ class ZaberController:
                 raise DriverError(f"{who}: {command!r} not confirmed ({exc}); not re-sent") \
                     from exc
             return None
+        self.latest[address, axis] = reply
         if reply.flag == "RJ":
             raise self._rejected(who, command, reply)
         return reply
 
     def get(self, address: int, axis: int, setting: str, who: str) -> int:
         """An integer setting of one axis (or of the device, axis 0)."""
-        try:
-            return _integer(self.query(address, axis, f"get {setting}", who).data)
-        except ProtocolError as exc:
-            raise ProtocolError(f"{who}: get {setting}: {exc}") from None
+        return int(self.query(address, axis, f"get {setting}", who, integer=True).data)
 
     def set_verified(self, address: int, axis: int, setting: str, value: int, who: str) -> None:
         """Set an integer setting once, then read it back: DriverError unless it holds."""
@@ -310,32 +307,28 @@ class ZaberAxis:
 
     def __init__(self, controller: ZaberController, address: int, number: int, name: str):
         self.controller, self.address, self.number, self.name = controller, address, number, name
-        self.warning = "--"  # the flag of the latest reply from this axis
-        self.idle = True  # the status of the latest reply from this axis
         resolution = self._get("resolution")
         if resolution < 1:
             raise ProtocolError(f"{name}: resolution {resolution} is not a microstep count")
         self.microstep_deg = controller.full_step_deg / resolution
 
     # -- messages ---------------------------------------------------------------
-    def _seen(self, reply: Reply | None) -> Reply | None:
-        if reply is not None:
-            self.warning, self.idle = reply.warning, not reply.busy
-        return reply
+    @property
+    def warning(self) -> str:
+        """The warning flag of the latest reply from this axis."""
+        return self.controller.latest[self.address, self.number].warning
 
-    def _query(self, command: str) -> Reply:
-        return self._seen(self.controller.query(self.address, self.number, command, self.name))
+    def _query(self, command: str, integer: bool = False) -> Reply:
+        return self.controller.query(self.address, self.number, command, self.name, integer)
 
     def _command(self, command: str, verify: Callable[[], bool] | None = None) -> Reply | None:
-        return self._seen(self.controller.command(self.address, self.number, command,
-                                                  self.name, verify))
+        return self.controller.command(self.address, self.number, command, self.name, verify)
 
     def _get(self, setting: str) -> int:
-        reply = self._query(f"get {setting}")
-        try:
-            return _integer(reply.data)
-        except ProtocolError as exc:
-            raise ProtocolError(f"{self.name}: get {setting}: {exc}") from None
+        return self.controller.get(self.address, self.number, setting, self.name)
+
+    def _set(self, setting: str, value: int) -> None:
+        self.controller.set_verified(self.address, self.number, setting, value, self.name)
 
     def _data(self, deg: float, per: float = 1.0) -> int:
         """Degrees (or deg/s, deg/s^2 with the unit `per`) as the device's integer data."""
@@ -344,13 +337,17 @@ class ZaberAxis:
             raise ValueError(f"{self.name}: not a finite number: {deg!r}")
         return round(value / self.microstep_deg * per)
 
+    def _idle(self) -> bool:
+        """IDLE in the latest reply from this axis."""
+        return not self.controller.latest[self.address, self.number].busy
+
     def _blocked(self, why: str) -> DeviceError:
         return DeviceError(self.name, self.warning, f"{flag_text(self.warning)}; {why}")
 
     def _started(self, was_idle: bool, arrived: Callable[[Reply], bool]) -> bool:
         """After a lost reply to a motion command: did the device take it? Busy when it was
         idle before, or at rest where the command leads."""
-        reply = self._query("get pos")
+        reply = self._query("get pos", integer=True)
         return (was_idle and reply.busy) or (not reply.busy and arrived(reply))
 
     # -- Axis interface ---------------------------------------------------------
@@ -359,9 +356,9 @@ class ZaberAxis:
         target = self._data(position_deg)
         if blocks_motion(self.warning):
             raise self._blocked("home() the axis before moving it")
-        was_idle = self.idle
+        was_idle = self._idle()
         reply = self._command(f"move abs {target}", lambda: self._started(
-            was_idle, lambda r: _integer(r.data) == target))
+            was_idle, lambda r: int(r.data) == target))
         if reply is not None and blocks_motion(reply.warning):
             self.stop()
             raise self._blocked("stopped; home() the axis before moving it")
@@ -380,11 +377,11 @@ class ZaberAxis:
         DeviceTimeout after timeout_s."""
         deadline = time.monotonic() + timeout_s
         while True:
-            reply = self._query("get pos")
+            reply = self._query("get pos", integer=True)
             if not reply.busy:
                 if blocks_motion(reply.warning):
                     raise self._blocked("the motion did not end where it was sent")
-                return _integer(reply.data) * self.microstep_deg
+                return int(reply.data) * self.microstep_deg
             if time.monotonic() > deadline:
                 raise DeviceTimeout(self.name, "the motion to end (IDLE)", timeout_s)
             time.sleep(self.controller.poll_s)
@@ -403,7 +400,7 @@ class ZaberAxis:
         if self.warning.startswith("F"):
             self._command("warnings clear",
                           lambda: not self._query("warnings").warning.startswith("F"))
-        was_idle = self.idle
+        was_idle = self._idle()
         self._command("home", lambda: self._started(was_idle, lambda r: r.warning != "WR"))
 
     def identity(self) -> dict[str, str]:
@@ -424,12 +421,12 @@ class ZaberAxis:
         if not lo < hi:
             raise ValueError(f"{self.name}: limits must be (lo, hi) with lo < hi, "
                              f"got {limits_deg!r}")
-        self.controller.set_verified(self.address, self.number, "maxspeed", speed, self.name)
-        self.controller.set_verified(self.address, self.number, "accel", accel, self.name)
+        self._set("maxspeed", speed)
+        self._set("accel", accel)
         # order the two limits so that limit.min < limit.max holds in between
         pair = [("limit.min", lo), ("limit.max", hi)]
         for setting, value in pair if lo < self._get("limit.max") else reversed(pair):
-            self.controller.set_verified(self.address, self.number, setting, value, self.name)
+            self._set(setting, value)
 
     @property
     def speed_deg_s(self) -> float:

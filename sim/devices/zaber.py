@@ -73,6 +73,11 @@ def lrc(text: str) -> str:
     return f"{-sum(text.encode('ascii')) & 0xFF:02X}"
 
 
+def _by_priority(flags: list[str]) -> list[str]:
+    """Warning flags, faults (F) first, then warnings (W), then notices (N)."""
+    return sorted(flags, key=lambda flag: "FWN".index(flag[0]))
+
+
 def _integer(text: str) -> int:
     if _INTEGER.fullmatch(text) is None:
         raise _Reject("BADDATA")
@@ -106,13 +111,12 @@ class _EmulatedAxis:
             accel = self.accel_data(number("accel_deg_s2"))
             if not (0 < speed <= self.max_speed and 0 < accel <= self.max_accel):
                 raise ValueError("speed/accel must be > 0 and within max_speed/max_accel")
-            unit = self.microstep_deg
-            self.motion = TrapezoidAxis(clock, speed / SPEED_UNIT * unit,
-                                        accel / ACCEL_UNIT * unit, (lo * unit, hi * unit),
-                                        self.data(number("position_deg")) * unit)
+            self.motion = TrapezoidAxis(clock, 1.0, 1.0, (lo * self.microstep_deg,
+                                                          hi * self.microstep_deg),
+                                        self.data(number("position_deg")) * self.microstep_deg)
         except (TypeError, ValueError) as exc:
             raise ZaberConfigError(f"{where}: {exc}") from None
-        self.maxspeed, self.accel, self.limit_min, self.limit_max = speed, accel, lo, hi
+        self._use(speed, accel, lo, hi)
         self.referenced = bool(cfg["homed"])  # a reference held before any home
         self.fault: str | None = None  # a latched fault flag (F*), cleared by `warnings clear`
         self.interrupted = False  # NI: the last movement command cut another one short
@@ -133,16 +137,21 @@ class _EmulatedAxis:
     def accel_data(self, deg_s2: float) -> int:
         return round(deg_s2 / self.microstep_deg * ACCEL_UNIT)
 
+    def _use(self, maxspeed: int, accel: int, limit_min: int, limit_max: int) -> None:
+        """Take these settings (protocol units) and run the motion with them."""
+        self.maxspeed, self.accel, self.limit_min, self.limit_max = \
+            maxspeed, accel, limit_min, limit_max
+        unit = self.microstep_deg
+        self.motion.speed = maxspeed / SPEED_UNIT * unit
+        self.motion.accel = self.motion.decel = accel / ACCEL_UNIT * unit
+        self.motion.limits = (limit_min * unit, limit_max * unit)
+
     def busy(self) -> bool:
         return self.motion.is_moving()
 
     def warning(self) -> str:
-        """The highest-priority flag now: a fault, then no reference, then interrupted."""
-        if self.fault:
-            return self.fault
-        if not (self.referenced or self.motion.homed):
-            return "WR"
-        return "NI" if self.interrupted else "--"
+        """The highest-priority flag now (-- for none)."""
+        return (self.flags() or ["--"])[0]
 
     def flags(self) -> list[str]:
         """Every active flag, highest priority first (the `warnings` command's list)."""
@@ -187,21 +196,13 @@ class _EmulatedAxis:
                 raise _Reject("STATUSBUSY")
             self.motion.define_position(value * self.microstep_deg)
             self.referenced = True
-        elif name == "maxspeed":
-            if not 0 < value <= self.max_speed:
+        elif name in ("maxspeed", "accel", "limit.min", "limit.max"):
+            new = {"maxspeed": self.maxspeed, "accel": self.accel,
+                   "limit.min": self.limit_min, "limit.max": self.limit_max, name: value}
+            if not (0 < new["maxspeed"] <= self.max_speed and 0 < new["accel"] <= self.max_accel
+                    and new["limit.min"] < new["limit.max"]):
                 raise _Reject("BADDATA")
-            self.maxspeed, self.motion.speed = value, value / SPEED_UNIT * self.microstep_deg
-        elif name == "accel":
-            if not 0 < value <= self.max_accel:
-                raise _Reject("BADDATA")
-            self.accel = value
-            self.motion.accel = self.motion.decel = value / ACCEL_UNIT * self.microstep_deg
-        elif name in ("limit.min", "limit.max"):
-            lo, hi = (value, self.limit_max) if name == "limit.min" else (self.limit_min, value)
-            if not lo < hi:
-                raise _Reject("BADDATA")
-            self.limit_min, self.limit_max = lo, hi
-            self.motion.limits = (lo * self.microstep_deg, hi * self.microstep_deg)
+            self._use(*new.values())
         else:
             raise _Reject("BADCOMMAND")  # unknown, or read-only (resolution)
 
@@ -219,10 +220,13 @@ class _EmulatedDevice:
         """BUSY/IDLE and the warning flag of an axis, or of the device (axis 0): busy if any
         axis is, and the highest-priority flag of any axis."""
         chosen = [self.axes[axis]] if axis else list(self.axes.values())
-        busy = any(a.busy() for a in chosen)
-        flags = [a.warning() for a in chosen if a.warning() != "--"]
-        flags.sort(key=lambda f: "FWN".index(f[0]))
-        return ("BUSY" if busy else "IDLE"), (flags[0] if flags else "--")
+        flags = _by_priority([a.warning() for a in chosen if a.warning() != "--"])
+        return ("BUSY" if any(a.busy() for a in chosen) else "IDLE"), (flags + ["--"])[0]
+
+    @property
+    def alerting(self) -> bool:
+        """comm.alert is on: motions that end send an alert."""
+        return bool(self.settings["comm.alert"])
 
     def alerts(self) -> list[str]:
         """Alerts of the axes whose motion has ended since it started (comm.alert 1)."""
@@ -317,9 +321,6 @@ class ZaberEmulator(PtyDevice):
         numbers: list[int] = []
         while words and len(numbers) < 3 and words[0].isdigit():
             numbers.append(int(words.pop(0)))
-        if len(numbers) < 3 and words and words[0] == "--":  # an explicit "no message id"
-            words.pop(0)
-            numbers += [0] * (2 - len(numbers))
         address, axis = (numbers + [0, 0])[:2]
         message_id = numbers[2] if len(numbers) == 3 else None
         bad_id = message_id is not None and message_id > 99
@@ -370,7 +371,7 @@ class ZaberEmulator(PtyDevice):
         for a, target in zip(chosen, targets, strict=True):
             a.check_move(target)
         for a, target in zip(chosen, targets, strict=True):
-            a.move_to(target, bool(dev.settings["comm.alert"]))
+            a.move_to(target, dev.alerting)
         return "0"
 
     def _home(self, dev, axis, chosen, args: list[str]) -> str:
@@ -378,7 +379,7 @@ class ZaberEmulator(PtyDevice):
         if args:
             raise _Reject("BADDATA")
         for a in chosen:
-            a.home(bool(dev.settings["comm.alert"]))
+            a.home(dev.alerting)
         return "0"
 
     def _stop(self, dev, axis, chosen, args: list[str]) -> str:
@@ -386,7 +387,7 @@ class ZaberEmulator(PtyDevice):
         if args:
             raise _Reject("BADDATA")
         for a in chosen:
-            a.start(a.motion.stop, bool(dev.settings["comm.alert"]) and a.busy())
+            a.start(a.motion.stop, dev.alerting and a.busy())
         return "0"
 
     def _estop(self, dev, axis, chosen, args: list[str]) -> str:
@@ -394,7 +395,7 @@ class ZaberEmulator(PtyDevice):
         if args:
             raise _Reject("BADDATA")
         for a in chosen:
-            a.start(a.motion.abort, bool(dev.settings["comm.alert"]) and a.busy())
+            a.start(a.motion.abort, dev.alerting and a.busy())
         return "0"
 
     def _warnings(self, dev, axis, chosen, args: list[str]) -> str:
@@ -402,7 +403,7 @@ class ZaberEmulator(PtyDevice):
         faults and NI (WR stays until the axis is homed or its position set)."""
         if args not in ([], ["clear"]):
             raise _Reject("BADDATA")
-        flags = sorted({f for a in chosen for f in a.flags()}, key=lambda f: "FWN".index(f[0]))
+        flags = _by_priority(list(dict.fromkeys(f for a in chosen for f in a.flags())))
         if args:
             for a in chosen:
                 a.fault, a.interrupted = None, False

@@ -256,6 +256,24 @@ def test_a_motion_command_is_never_resent_when_its_reply_is_lost(zaber_pair):
     assert confirmed >= 9  # lost replies were settled by reading the position back
 
 
+def test_settings_are_sent_once_and_hold_whenever_configure_returns(zaber_pair):
+    emu, ctl = zaber_pair(timeout_s=0.05, retries=6)
+    axis = ctl.axis(1)
+    inject(emu, stall_prob=0.2, seed=3)
+    returned = 0
+    for i in range(8):
+        speed = 10.0 + i
+        try:
+            axis.configure(speed, 80.0, (-95.0, 95.0))
+        except DriverError as exc:
+            assert "not re-sent" in str(exc) or isinstance(exc, DeviceTimeout)
+            continue
+        returned += 1
+        assert emu.axes[1].maxspeed == round(speed / UNIT * 1.6384)
+    assert emu.received["set maxspeed"] == 8  # once per configure, never re-sent
+    assert returned >= 4 and emu.server.faults.counts["stall"] > 0
+
+
 def test_disconnect_is_a_named_driver_error(zaber_pair):
     emu, ctl = zaber_pair()
     axis = ctl.axis(1)
