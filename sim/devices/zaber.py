@@ -28,6 +28,7 @@ import re
 import threading
 from collections import Counter
 from collections.abc import Callable, Mapping
+from functools import partial
 from itertools import takewhile
 
 from sim.devices.faults import FaultInjector, FaultSpec
@@ -382,20 +383,13 @@ class ZaberEmulator(PtyDevice):
             a.home(dev.alerting)
         return "0"
 
-    def _stop(self, dev, axis, chosen, args: list[str]) -> str:
-        """stop: decelerate to rest (a home it cuts short leaves no reference)."""
+    def _halt(self, dev, axis, chosen, args: list[str], how: str) -> str:
+        """stop (how="stop"): decelerate to rest, a home it cuts short leaving no reference;
+        estop (how="abort"): stop at once, without deceleration."""
         if args:
             raise _Reject("BADDATA")
         for a in chosen:
-            a.start(a.motion.stop, dev.alerting and a.busy())
-        return "0"
-
-    def _estop(self, dev, axis, chosen, args: list[str]) -> str:
-        """estop: stop at once, without deceleration."""
-        if args:
-            raise _Reject("BADDATA")
-        for a in chosen:
-            a.start(a.motion.abort, dev.alerting and a.busy())
+            a.start(getattr(a.motion, how), dev.alerting and a.busy())
         return "0"
 
     def _warnings(self, dev, axis, chosen, args: list[str]) -> str:
@@ -442,6 +436,7 @@ class ZaberEmulator(PtyDevice):
 
 _COMMANDS = {
     "": ZaberEmulator._status, "move": ZaberEmulator._move, "home": ZaberEmulator._home,
-    "stop": ZaberEmulator._stop, "estop": ZaberEmulator._estop,
+    "stop": partial(ZaberEmulator._halt, how="stop"),
+    "estop": partial(ZaberEmulator._halt, how="abort"),
     "warnings": ZaberEmulator._warnings, "get": ZaberEmulator._get, "set": ZaberEmulator._set,
 }

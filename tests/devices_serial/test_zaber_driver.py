@@ -46,6 +46,17 @@ def inject(emu, **spec):
     emu.server.faults = FaultInjector(FaultSpec(**spec))
 
 
+def confirmed(call) -> bool:
+    """Run call(): True if it returned, False if a lost reply left its command unconfirmed
+    (which the driver must say it did not re-send)."""
+    try:
+        call()
+    except DriverError as exc:
+        assert "not re-sent" in str(exc) or isinstance(exc, DeviceTimeout)
+        return False
+    return True
+
+
 def test_open_sets_checksums_and_reads_identity(zaber_pair):
     emu, ctl = zaber_pair()
     assert emu.devices[1].settings["comm.checksum"] == 1
@@ -244,16 +255,10 @@ def test_a_motion_command_is_never_resent_when_its_reply_is_lost(zaber_pair):
     emu, ctl = zaber_pair(timeout_s=0.1, retries=4)
     axis = ctl.axis(1)
     inject(emu, stall_prob=0.3, seed=11)
-    confirmed = 0
-    for i in range(12):
-        try:
-            axis.move_to(float(i))
-            confirmed += 1
-        except DriverError as exc:
-            assert "not re-sent" in str(exc) or isinstance(exc, DeviceTimeout)
+    moved = sum(confirmed(lambda i=i: axis.move_to(float(i))) for i in range(12))
     assert emu.received["move abs"] == 12  # each move_to sent exactly one move abs
     assert emu.server.faults.counts["stall"] > 0
-    assert confirmed >= 9  # lost replies were settled by reading the position back
+    assert moved >= 9  # lost replies were settled by reading the position back
 
 
 def test_settings_are_sent_once_and_hold_whenever_configure_returns(zaber_pair):
@@ -261,15 +266,10 @@ def test_settings_are_sent_once_and_hold_whenever_configure_returns(zaber_pair):
     axis = ctl.axis(1)
     inject(emu, stall_prob=0.2, seed=3)
     returned = 0
-    for i in range(8):
-        speed = 10.0 + i
-        try:
-            axis.configure(speed, 80.0, (-95.0, 95.0))
-        except DriverError as exc:
-            assert "not re-sent" in str(exc) or isinstance(exc, DeviceTimeout)
-            continue
-        returned += 1
-        assert emu.axes[1].maxspeed == round(speed / UNIT * 1.6384)
+    for speed in range(10, 18):
+        if confirmed(lambda speed=speed: axis.configure(speed, 80.0, (-95.0, 95.0))):
+            returned += 1
+            assert emu.axes[1].maxspeed == round(speed / UNIT * 1.6384)
     assert emu.received["set maxspeed"] == 8  # once per configure, never re-sent
     assert returned >= 4 and emu.server.faults.counts["stall"] > 0
 
