@@ -72,7 +72,9 @@ class VirtualClock:
         with self._lock:
             now = self._now_locked()
             if t > now:
-                self._offset += t - now
+                # exactly t when only advances move the clock: an end time reached must not
+                # fall one rounding short of itself
+                self._offset = t if now == self._offset else self._offset + t - now
             return self._now_locked()
 
     def real_seconds(self, virtual_s: float) -> float:

@@ -199,3 +199,13 @@ def test_define_position_rebases_and_marks_homed():
     axis.move_to(5.0)
     with pytest.raises(MotionError, match="while moving"):
         axis.define_position(1.0)
+
+
+def test_instant_moves_end_exactly_however_the_clock_sums_round():
+    # 0.1 + (t_end - 0.1) need not round back to t_end: a move ended on an instant clock must
+    # not still be reported moving, one unit in the last place short of its end
+    clock = VirtualClock(math.inf)
+    clock.advance(0.1)
+    axis = TrapezoidAxis(clock, 20.0, 80.0, (-170.0, 170.0))
+    axis.move_to(-2.732)
+    assert not axis.is_moving() and axis.position() == -2.732

@@ -123,7 +123,8 @@ def test_sigint_while_loading_is_one_line(module):
 
 
 def test_a_lost_device_is_recorded_as_not_stopped(tmp_path):
-    cfg = fast_config(faults={"esp": {"disconnect_after": 40}})  # the controller of both axes
+    # the controller of both axes hangs up during the second reading (the scan takes 30 replies)
+    cfg = fast_config(faults={"esp": {"disconnect_after": 24}})
     proc = gonio_cli("scan", write_plan(tmp_path, FAR, cfg), "--sim", "--out",
                      tmp_path / "runs", "--no-plot")
     assert proc.returncode == 1, proc.stderr
