@@ -17,6 +17,7 @@ from sim.devices.esp import EspEmulator
 from sim.devices.faults import KIND_FAULTS
 from sim.devices.photodiode import SimConfigError
 from sim.devices.pm100 import Pm100Emulator
+from sim.devices.zaber import ZaberEmulator
 from sim.emulator_factories import (
     DetectorFactory,
     StageFactory,
@@ -59,6 +60,7 @@ KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
                      own_faults=("invalid_prob",)),
     StageEmulator(name="modbus-stage", start=modbus_stage_units),
     DetectorEmulator(name="modbus-detector", start=modbus_detector_unit),
+    StageEmulator(name="zaber", start=controller_on_pty(ZaberEmulator, ("address",))),
 )}
 
 

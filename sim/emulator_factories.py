@@ -67,17 +67,19 @@ def _axis_number(axis: Mapping[str, Any]) -> int:
     return axis.get("axis", 1)
 
 
-def controller_on_pty(emulator: type) -> StageFactory:
+def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = ()) -> StageFactory:
     """A multi-axis controller served on a pty of its own, built as `emulator(clock,
-    {axis number: {limits_deg, speed_deg_s, accel_deg_s2, position_deg}}, faults, seed)`
-    with each axis's TrapezoidAxis at `.axes[number].motion` (the ESP emulator's shape)."""
+    {axis number: {limits_deg, speed_deg_s, accel_deg_s2, position_deg}}, faults, seed,
+    **device_keys the [devices] table gives)` with each axis's TrapezoidAxis at
+    `.axes[number].motion` (the ESP emulator's shape)."""
     def start(device: EmulatedDevice) -> None:
         tables = {_axis_number(ax): {"limits_deg": tuple(ax["limits_deg"]),
                                      "speed_deg_s": ax["speed_deg_s"],
                                      "accel_deg_s2": ax["accel_deg_s2"],
                                      "position_deg": home_deg(ax["limits_deg"])}
                   for ax in device.axes.values()}
-        emu = emulator(device.clock, tables, device.faults, device.seed)
+        given = {key: device.table[key] for key in device_keys if key in device.table}
+        emu = emulator(device.clock, tables, device.faults, device.seed, **given)
         device.serve(emu)
         for role, ax in device.axes.items():
             motion = emu.axes[_axis_number(ax)].motion

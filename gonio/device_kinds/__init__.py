@@ -9,6 +9,8 @@ Adding a kind is one entry here pointing at its driver module (docs/extending.md
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind
 from gonio.device_kinds.modbus import (
     MODBUS_SETTINGS,
@@ -18,7 +20,7 @@ from gonio.device_kinds.modbus import (
     modbus_unit,
 )
 from gonio.device_kinds.serial_line import serial_device
-from gonio.device_kinds.settings import SERIAL_SETTINGS, Setting
+from gonio.device_kinds.settings import BAUDRATE, PORT, SERIAL_SETTINGS, TIMEOUT_S, Setting
 
 KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
     StageKind(name="esp", settings=SERIAL_SETTINGS, multi_axis=True,
@@ -30,6 +32,9 @@ KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
     DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS, check=check_register_map,
                  config_full_scales_w=map_full_scales_w,
                  open=modbus_unit("drivers.modbus_detector:ModbusDetector")),
+    StageKind(name="zaber", multi_axis=True, open=serial_device("drivers.zaber:ZaberController"),
+              settings=(TIMEOUT_S, PORT, replace(BAUDRATE, default=115200),
+                        Setting("address", "integer", 1, low=1, high=99))),
 )}
 
 

@@ -77,10 +77,11 @@ def fast_config(name: str = "sim-serial", *, elevation: bool = False, time_scale
     cfg["sim"]["time_scale"] = time_scale
     cfg["sim"].setdefault("aperture", {})["order"] = [0, 0]  # one node: the centre ray
     if elevation:
-        if "esp" in cfg["devices"]:
-            cfg["axes"]["elevation"] = {"device": "esp", "axis": 3, "limits_deg": [-60.0, 60.0],
-                                        "speed_deg_s": 10.0, "accel_deg_s2": 40.0,
-                                        "settle_s": 0.01}
+        controller = next((d for d in ("esp", "zaber") if d in cfg["devices"]), None)
+        if controller:
+            cfg["axes"]["elevation"] = {"device": controller, "axis": 3,
+                                        "limits_deg": [-60.0, 60.0], "speed_deg_s": 10.0,
+                                        "accel_deg_s2": 40.0, "settle_s": 0.01}
         else:
             drive = dict(cfg["devices"]["arm_drive"], unit=4)
             cfg["devices"]["elevation_drive"] = drive

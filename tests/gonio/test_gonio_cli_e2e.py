@@ -1,5 +1,5 @@
 """End to end through the `gonio` CLI in a subprocess: emulators on real ptys and loopback
-TCP, real drivers, the engine and the store; in-plane and out-of-plane, ESP and Modbus."""
+TCP, real drivers, the engine and the store; in-plane and out-of-plane, ESP, Zaber and Modbus."""
 
 import math
 
@@ -44,7 +44,7 @@ def check_run(run_dir, plan_raw, cfg_raw):
     return run
 
 
-@pytest.mark.parametrize("instrument", ["sim-serial", "sim-modbus"])
+@pytest.mark.parametrize("instrument", ["sim-serial", "sim-zaber", "sim-modbus"])
 @pytest.mark.parametrize("plan", [IN_PLANE, OUT_OF_PLANE], ids=["in-plane", "out-of-plane"])
 def test_scan_end_to_end(tmp_path, instrument, plan):
     cfg = fast_config(instrument, elevation=plan is OUT_OF_PLANE)
