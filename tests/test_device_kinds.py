@@ -17,9 +17,9 @@ from sim.devices.faults import KIND_FAULTS
 from sim.devices.photodiode import SimConfigError
 from sim.emulate import start
 
-KIND_NAMES = "esp, pm100, modbus-stage, modbus-detector"
+KIND_NAMES = "esp, pm100, modbus-stage, modbus-detector, zaber"
 SIM_SERIAL = Path(__file__).resolve().parents[1] / "examples" / "instruments" / "sim-serial.toml"
-UNKNOWN_KIND = SIM_SERIAL.read_text().replace('protocol = "pm100"', 'protocol = "zaber"', 1)
+UNKNOWN_KIND = SIM_SERIAL.read_text().replace('protocol = "pm100"', 'protocol = "pm400"', 1)
 
 
 def test_both_registries_name_the_same_kinds_in_the_same_roles():
@@ -37,14 +37,14 @@ def test_an_unknown_protocol_is_one_config_error_listing_the_kinds():
     with pytest.raises(ConfigError) as err:
         parse_config(tomllib.loads(UNKNOWN_KIND))
     assert str(err.value) == (f"config: [devices.pm100] protocol: must be one of {KIND_NAMES}; "
-                              "got 'zaber'")
+                              "got 'pm400'")
 
 
 def test_an_unknown_protocol_is_an_emulator_error_never_skipped():
     # only the stages are asked for: the detector of no known kind is refused all the same
     with pytest.raises(SimConfigError) as err:
         start(tomllib.loads(UNKNOWN_KIND), devices=["esp"])
-    assert str(err.value) == (f"[devices.pm100] protocol 'zaber': no such device kind "
+    assert str(err.value) == (f"[devices.pm100] protocol 'pm400': no such device kind "
                               f"(kinds: {KIND_NAMES})")
 
 
@@ -56,4 +56,4 @@ def test_gonio_emulate_refuses_an_unknown_protocol_in_one_line(tmp_path):
         code = main(["emulate", str(path)])
     assert code == 2
     assert err.getvalue() == (f"gonio emulate: error: {path}: [devices.pm100] protocol: must be "
-                              f"one of {KIND_NAMES}; got 'zaber'\n")
+                              f"one of {KIND_NAMES}; got 'pm400'\n")
