@@ -29,6 +29,7 @@ from gonio.errors import PlanError
 from gonio.fields import Fields
 from gonio.geometry import into_limits, stage_angles
 from gonio.sample import SampleInfo, parse_sample
+from gonio.suspenders import SuspendSpec, parse_suspend
 
 SIDES = ("reflection", "transmission")
 KINDS = ("sample", "dark", "beam", "signature")
@@ -86,6 +87,7 @@ class Plan:
     beam_range_w: float = UNSET  # UNSET: the plan's range
     sample: SampleInfo | None = None  # [sample]: what is measured
     signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
+    suspend: SuspendSpec | None = None  # [suspend]: conditions that hold the scan (suspenders)
 
 
 @dataclass(frozen=True)
@@ -146,6 +148,7 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         beam_range_w=beam_range,
         sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
         signature=_signature(top),
+        suspend=parse_suspend(top.table_of("suspend"), beam_every) if top.has("suspend") else None,
     )
     top.done()
     return plan

@@ -66,6 +66,7 @@ class EmulatedBench:
     endpoints: dict[str, Endpoint] = field(default_factory=dict)
     emulators: dict[str, Any] = field(default_factory=dict)
     injectors: dict[str, list[FaultInjector]] = field(default_factory=dict)
+    meters: list[Any] = field(default_factory=list)  # the emulated detectors' models
     _stops: list[Callable[[], None]] = field(default_factory=list)
 
     def fault_counts(self) -> dict[str, dict[str, int]]:
@@ -83,6 +84,13 @@ class EmulatedBench:
         """Requests served so far by each pty-served device (ESP, PM100)."""
         return {name: emu.server.requests for name, emu in self.emulators.items()
                 if hasattr(emu, "server")}
+
+    def forget(self, visit: Visit) -> None:
+        """A reading taken at `visit` was thrown away by the client: it does not count as a
+        visit there (a re-measured reading gets the noise an undisturbed run gives it)."""
+        where, range_w = visit
+        for meter in self.meters:
+            meter.forget(_place(where), range_w)
 
     def stop(self) -> None:
         """Stop every emulator (idempotent)."""
@@ -231,6 +239,7 @@ class _Builder:
                 self._add_modbus(name, unit)
             else:
                 continue
+            self.bench.meters.append(meter)
             for where, range_w in visited:
                 meter.visited(where, range_w)
 
