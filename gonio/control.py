@@ -122,29 +122,49 @@ def _error(message: str) -> dict[str, Any]:
     return {"ok": False, "error": message}
 
 
+@contextmanager
+def _address(path: Path) -> Iterator[str]:
+    """An address for bind or connect at `path`: the path itself, or when it is too long for
+    sun_path, the same file through the directory's /proc/self/fd entry (Linux)."""
+    if len(os.fsencode(str(path))) <= UNIX_PATH_MAX:
+        yield str(path)
+        return
+    dir_fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        yield f"/proc/self/fd/{dir_fd}/{path.name}"
+    finally:
+        os.close(dir_fd)
+
+
 def _listen(path: Path) -> socket.socket:
     """A listening socket at path (a stale one from a killed scan replaced), mode 0600 from
-    the start: made under umask 077. A path too long for sun_path is bound through the run
-    directory's /proc/self/fd entry."""
+    the start: made under umask 177."""
     with contextlib.suppress(FileNotFoundError):
         path.unlink()
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     mask = os.umask(0o177)
-    dir_fd = None
     try:
-        address = str(path)
-        if len(os.fsencode(address)) > UNIX_PATH_MAX:
-            dir_fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
-            address = f"/proc/self/fd/{dir_fd}/{path.name}"
-        sock.bind(address)
+        with _address(path) as address:
+            sock.bind(address)
         sock.listen(8)
     except BaseException:
         sock.close()
         raise
     finally:
         os.umask(mask)
-        if dir_fd is not None:
-            os.close(dir_fd)
+    return sock
+
+
+def connect(run_dir: str | Path, timeout_s: float = 5.0) -> socket.socket:
+    """A client connection to a run's control channel (OSError if the run is not running)."""
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.settimeout(timeout_s)
+    try:
+        with _address(Path(run_dir) / SOCKET) as address:
+            sock.connect(address)
+    except BaseException:
+        sock.close()
+        raise
     return sock
 
 
