@@ -27,7 +27,7 @@ from typing import Any
 
 from sim.bench import build_power_source
 from sim.devices.esp import EspEmulator
-from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.modbus_detector import ModbusDetectorEmulator
 from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
 from sim.devices.modbus_stage import ModbusStageEmulator
@@ -138,6 +138,9 @@ def _sim_table(config: Mapping[str, Any]) -> dict[str, Any]:
         if "invalid_prob" in table and config["devices"][device].get("protocol") != "pm100":
             raise SimConfigError(f"[sim.faults.{device}] invalid_prob: only a pm100 detector "
                                  "answers with an invalid reading")
+        if "interlock" in table and config["devices"][device].get("protocol") == "pm100":
+            raise SimConfigError(f"[sim.faults.{device}] interlock: a pm100 has no interlock "
+                                 "input (an esp's emergency stop or a Modbus unit's has)")
     return dict(sim)
 
 
@@ -163,8 +166,8 @@ class _Builder:
     """Creates the emulators of one config, stages first, then the bench and the detectors."""
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
-                 bench: EmulatedBench, bind: str):
-        self.config, self.sim, self.bench, self.bind = config, sim, bench, bind
+                 bench: EmulatedBench, bind: str, wall: Callable[[], float]):
+        self.config, self.sim, self.bench, self.bind, self.wall = config, sim, bench, bind, wall
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen = chosen
         self.seed = sim.get("seed", 0)
@@ -186,6 +189,13 @@ class _Builder:
             return None
         return FaultSpec.from_dict({"seed": self._seed(name), **table}, name)
 
+    def _interlock(self, name: str) -> InterlockInput | None:
+        """The device's interlock input, if its faults open it (on the bench's wall clock)."""
+        spec = self._faults(name)
+        if spec is None or spec.interlock is None:
+            return None
+        return InterlockInput(spec.interlock, self.wall)
+
     def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
         return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
 
@@ -202,7 +212,8 @@ class _Builder:
             dev, roles = self.devices[name], self._roles(name)
             if dev["protocol"] == "esp":
                 tables = {ax.get("axis", 1): _axis_table(ax) for ax in roles.values()}
-                emu = EspEmulator(self.bench.clock, tables, self._faults(name), self._seed(name))
+                emu = EspEmulator(self.bench.clock, tables, self._faults(name), self._seed(name),
+                                  estop=self._interlock(name))
                 _serve(self.bench, name, emu)
                 for role, ax in roles.items():
                     motion = emu.axes[ax.get("axis", 1)].motion
@@ -213,7 +224,8 @@ class _Builder:
                                               tuple(ax["limits_deg"]), ax["speed_deg_s"],
                                               ax["accel_deg_s2"], self._faults(name),
                                               _home(ax["limits_deg"]),
-                                              serial=self._serial(name))
+                                              serial=self._serial(name),
+                                              interlock=self._interlock(name))
                     self._add_modbus(name, emu)
                     self.readers[role], self.targets[role] = emu.axis.position, emu.axis.target
 
@@ -234,7 +246,8 @@ class _Builder:
             elif dev["protocol"] == "modbus-detector":
                 unit = ModbusDetectorEmulator(
                     source, dev["register_map"], self._faults(name), self._seed(name),
-                    detector, light_nm, serial=self._serial(name), place=place)
+                    detector, light_nm, serial=self._serial(name), place=place,
+                    interlock=self._interlock(name))
                 meter = unit.model
                 self._add_modbus(name, unit)
             else:
@@ -278,7 +291,11 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             raise SimConfigError(f"no device {name!r} to emulate (devices: "
                                  f"{', '.join(all_devices)})")
     bench = EmulatedBench(VirtualClock(time_scale_of(sim)))
-    build = _Builder(config, sim, chosen, bench, bind)
+    # the source drifts (and the faults' interlocks open) in wall time since the run started
+    # (a lamp does not follow the motion's virtual clock), as the run store's t_s does: drift
+    # normalisation needs both
+    t0 = time.time() if t0_epoch is None else t0_epoch
+    build = _Builder(config, sim, chosen, bench, bind, lambda: time.time() - t0)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)
@@ -293,12 +310,8 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             return {role: stages[role]() if role in stages else float(real.get(role, 0.0))
                     for role in ROLES}
 
-        # the source drifts in wall time since the run started (a lamp does not follow the
-        # motion's virtual clock), as the run store's t_s does: drift normalisation needs both
-        t0 = time.time() if t0_epoch is None else t0_epoch
-        source = build_power_source(sim, lambda: read(build.readers),
-                                    lambda: time.time() - t0, optics=config.get("optics"),
-                                    sample=sample)
+        source = build_power_source(sim, lambda: read(build.readers), build.wall,
+                                    optics=config.get("optics"), sample=sample)
         if detectors:  # a first reading must not stall for a compile: timeouts are short
             source.bench.warm_up()
         build.detectors(source, lambda: _place(read(build.targets)),
