@@ -30,6 +30,11 @@ class DeviceTimeout(DriverError):
         super().__init__(f"{device}: timeout after {timeout_s:g} s waiting for {what}")
 
 
+class Interlocked(DeviceError):
+    """The device reports an interlock or emergency stop: it has stopped, and refuses to run
+    until the condition clears (Interlock.release_interlock says when)."""
+
+
 class ProtocolError(DriverError):
     """A reply arrived but was garbled or not what the protocol allows."""
 
@@ -74,6 +79,17 @@ class Axis(Protocol):
     def identity(self) -> dict[str, str]:
         """The device's identity as it reports it (model, serial, firmware...; {} if it
         reports none). Axes of one controller report the controller's identity."""
+
+
+@runtime_checkable
+class Interlock(Protocol):
+    """A device that reports an interlock input (an emergency stop, a door switch)."""
+
+    name: str
+
+    def release_interlock(self) -> str | None:
+        """Get ready to run again if the interlock has cleared (None), else say what still
+        holds it."""
 
 
 @dataclass(frozen=True)

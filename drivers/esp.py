@@ -1,16 +1,19 @@
 """Driver for the Newport ESP300/ESP301 motion controller (RS-232 ASCII command set).
 
-Byte-level details from the ESP301 user's manual (EDH0235En1030, section 3): a command
-is `[axis]XX[parameter]` ended by CR (we send CR), replies end in CR LF, commands are
-silent and errors go to a FIFO read with TB? ("code, timestamp, MESSAGE"; axis errors are
-axis*100 + code). Every exchange appends ";TB?" so the error status comes back with it
-(queries on one line answer on one line, comma-separated). Queries are retried after a
-timeout or garble; a state-changing command is sent once, and if its status reply is lost
-the driver re-reads the device state (error buffer, target) instead of re-sending it.
-Numeric replies must have the controller's fixed shape (optional minus, digits, point,
-DECIMALS decimals, as in `-12.50000`); any other shape is a garbled reply (retried). After
-a timeout a bare VE? (its reply is the only one without an error status) brings late
-replies and requests back in step before the next exchange (drivers.serial_transport).
+Byte-level details from the ESP301 user's manual (EDH0235En1030, section 3): a command is
+`[axis]XX[parameter]` ended by CR (we send CR), replies end in CR LF, commands are silent and
+errors go to a FIFO read with TB? ("code, timestamp, MESSAGE"; axis errors are axis*100 +
+code). Every exchange appends ";TB?" so the error status comes back with it (queries on one
+line answer on one line, comma-separated). Queries are retried after a timeout or garble; a
+state-changing command is sent once, and if its status reply is lost the driver re-reads the
+device state (error buffer, target) instead of re-sending it. An emergency stop (the E-stop
+input: the controller stops the axes and, as configured by ZE, switches their motors off) is
+error 4, EMERGENCY STOP ACTIVATED, in that buffer: the driver raises Interlocked for it, and
+`EspAxis.release_interlock` gets the axis ready again once the input is released. Numeric
+replies must have the controller's fixed shape (optional minus, digits, point, DECIMALS
+decimals, as in `-12.50000`); any other shape is a garbled reply (retried). After a timeout a
+bare VE? (its reply is the only one without an error status) brings late replies and requests
+back in step before the next exchange (drivers.serial_transport).
 """
 
 from __future__ import annotations
@@ -21,13 +24,14 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.base import DeviceError, DeviceTimeout, DriverError, Interlocked, ProtocolError
 from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
 
 T = TypeVar("T")
 _TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
 _INTEGER = re.compile(r"\d+")
 DECIMALS = 5  # the ESP301's (and the emulator's) position and rate replies: 12.50000
+EMERGENCY_STOP = 4  # general error EMERGENCY STOP ACTIVATED: the E-stop input stopped the axes
 
 
 def decimal_parser(decimals: int = DECIMALS) -> Callable[[str], float]:
@@ -133,6 +137,8 @@ class EspController:
         return found
 
     def _raise_if_error(self, code: int, text: str) -> None:
+        if code == EMERGENCY_STOP:
+            raise Interlocked(self.name, code, text)
         if code != 0:
             raise DeviceError(self.name, code, text)
 
@@ -272,6 +278,17 @@ class EspAxis:
     def home(self) -> None:
         """OR: start a home search."""
         self._command("OR")
+
+    def release_interlock(self) -> str | None:
+        """After an emergency stop (Interlocked): drop the errors it left in the buffer and
+        switch the motor on again (MO); what still holds it (the E-stop input still asserted:
+        MO refused with EMERGENCY STOP ACTIVATED), or None once the axis is ready."""
+        try:
+            self.controller.errors()
+            self.enable()
+        except Interlocked as exc:
+            return str(exc)
+        return None
 
     def identity(self) -> dict[str, str]:
         """The controller's identity (every axis of one ESP reports the same)."""

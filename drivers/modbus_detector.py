@@ -1,6 +1,7 @@
 """Photodiode amplifier + ADC on Modbus (RTU or TCP), addressed through its register map.
 
-Implements drivers.base.Detector: wavelength correction, averaging, a fixed gain range
+Implements drivers.base.Detector (and Interlock: a reading whose status has the map's optional
+`interlock` bit set raises Interlocked): wavelength correction, averaging, a fixed gain range
 or autorange, one reading per call, and the dark zero.
 """
 
@@ -79,6 +80,7 @@ class ModbusDetector(MappedUnit):
         """Take one averaged reading; DeviceError if the amplifier reports a fault."""
         v = self.read_values("reading", "status", "range_in_use", "fault_code")
         bits = self.bits(v["status"])
+        self.check_interlock(bits)
         if bits["fault"]:
             code = int(v["fault_code"])
             raise DeviceError(self.name, code, self.map.fault_text(code))

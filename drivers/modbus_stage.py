@@ -1,8 +1,9 @@
 """Rotation stage on a Modbus stepper drive (RTU or TCP), addressed through its register map.
 
-Implements drivers.base.Axis. Motion commands are written once; if the reply to one is
-lost the driver re-reads the drive's state to learn whether it was taken, instead of
-sending it again.
+Implements drivers.base.Axis (and Interlock, through the map's optional `interlock` status bit:
+a move or wait that finds it set raises Interlocked). Motion commands are written once; if the
+reply to one is lost the driver re-reads the drive's state to learn whether it was taken,
+instead of sending it again.
 """
 
 from __future__ import annotations
@@ -120,6 +121,7 @@ class ModbusStage(MappedUnit):
         while True:
             v = self.read_values("status", "fault_code", "actual_position")
             bits = self.bits(v["status"])
+            self.check_interlock(bits)
             if bits["fault"]:
                 self._raise_fault(int(v["fault_code"]))
             if not bits["moving"]:
@@ -136,7 +138,9 @@ class ModbusStage(MappedUnit):
             if not self._was_taken(target_deg):
                 raise
         v = self.read_values("status", "fault_code")
-        if self.bits(v["status"])["fault"]:
+        bits = self.bits(v["status"])
+        self.check_interlock(bits)
+        if bits["fault"]:
             self._raise_fault(int(v["fault_code"]))
 
     def _was_taken(self, target_deg: float | None) -> bool:

@@ -19,11 +19,13 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.pdu import ExceptionResponse
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.base import DeviceError, DeviceTimeout, DriverError, Interlocked, ProtocolError
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import RtuSync
 from drivers.register_map import RegisterMap, decode_text
 
+INTERLOCK_BIT = "interlock"  # optional [status_bits] entry: the unit's interlock input is open
+INTERLOCK_TEXT = "interlock input open (the unit stopped and refuses to run)"
 READ_DEVICE_IDENTIFICATION = 43  # with MEI type 14
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
 # the basic objects VendorName, ProductCode, MajorMinorRevision (Modbus Application Protocol
@@ -282,6 +284,19 @@ class MappedUnit:
         """Status register value -> {bit name: set} by the map's [status_bits]."""
         word = int(status)
         return {bit: bool(word >> n & 1) for bit, n in self.map.status_bits.items()}
+
+    def check_interlock(self, bits: dict[str, bool]) -> None:
+        """Interlocked if the status `bits` show the map's optional `interlock` bit set."""
+        if bits.get(INTERLOCK_BIT):
+            raise Interlocked(self.name, INTERLOCK_BIT, INTERLOCK_TEXT)
+
+    def release_interlock(self) -> str | None:
+        """What holds the unit's interlock (its status bit set), or None (also for a map
+        without an interlock bit)."""
+        if INTERLOCK_BIT not in self.map.status_bits:
+            return None
+        held = self.bits(self.read_value("status"))[INTERLOCK_BIT]
+        return f"{self.name}: {INTERLOCK_TEXT}" if held else None
 
     def close(self) -> None:
         """Release the link (the last unit on it closes the connection); idempotent."""

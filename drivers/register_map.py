@@ -4,7 +4,9 @@ A map names each register (table, 0-based address, type, scale, access, range) a
 drive's command values, status bits and fault codes; `RegisterMap.encode` / `decode`
 turn engineering values into 16-bit words and back in the map's word order. An optional
 `[identity]` table names ASCII string registers (vendor, model, serial, firmware...), two
-characters per register, first character in the high byte; `decode_text` reads them.
+characters per register, first character in the high byte; `decode_text` reads them. An
+optional `interlock` entry of [status_bits] names the bit of `status` a unit sets while its
+interlock input is open (it stops and refuses to run until the input closes again).
 """
 
 from __future__ import annotations
@@ -97,6 +99,7 @@ class RegisterMap:
         self.commands = {n: _int_field(commands, n, f"{source}: [commands]") for n in commands}
         bits = _section(table, "status_bits", source)
         self.status_bits = {n: _int_field(bits, n, f"{source}: [status_bits]") for n in bits}
+        _check_interlock_bit(self.status_bits, source)
         self.fault_codes = {
             spec["code"]: FaultCode(name, spec["code"], spec["text"])
             for name, spec in _fault_table(_section(table, "fault_codes", source), source).items()
@@ -281,6 +284,17 @@ def _text_register(name: str, spec: object, source: str) -> TextRegister:
     if address + count > 0x10000:
         raise RegisterMapError(f"{where}: address {address} past the 16-bit address space")
     return TextRegister(name, table, address, count)
+
+
+def _check_interlock_bit(bits: Mapping[str, int], source: str) -> None:
+    """The optional interlock bit: one of the 16 bits of `status`, shared with no other bit."""
+    if "interlock" not in bits:
+        return
+    bit = bits["interlock"]
+    others = [name for name, n in bits.items() if n == bit and name != "interlock"]
+    if bit > 15 or others:
+        why = f"is also {others[0]!r}" if others else "is past bit 15 of the status register"
+        raise RegisterMapError(f"{source}: status_bits.interlock = {bit} {why}")
 
 
 def _section(table: Mapping, key: str, source: str) -> Mapping:

@@ -1,36 +1,51 @@
-"""The scan engine: for each scheduled reading move the axes together, wait, settle, read, record.
+"""The scan engine: for each scheduled reading move the axes together, wait, settle, read, and
+publish what happened (gonio.events); the run store, progress, the live view and the emulators
+subscribe, and the engine knows none of them.
+
+The engine runs the compiled, index-addressed schedule (what makes resume after a kill exact).
+Of a schedule row it reads the index, the stage targets (`<role>_deg`) and the detector range
+(`range_w`); every other field is a tag it copies into the stored line unread (a tag the
+measurement also writes, such as theta_i_deg, is stored as plan_<name>).
 
 Failures: a device that reports an error (DeviceError) is not retried; a timeout, garbled reply
-or lost connection is retried (the whole point: absolute moves and reads are safe to repeat)
-up to `retries` times, after which the run stops cleanly with the reason recorded. An invalid
-reading (the detector has none: InvalidReading) is retried the same way and, if every try
-gives one, recorded with power NaN and the flag "invalid", and the run goes on. Ctrl-C once
-pauses at the next point (resume or abort at the prompt; end of input aborts); a second Ctrl-C
-aborts at once; SIGTERM and SIGHUP abort at once (reason: the signal's name). However a run
-ends short of completion (abort, signal, failure, an exception, a full disk), every axis that
-can be reached is told to stop, those that cannot are recorded, and meta.json gets the status
-and reason where the disk allows it; while that happens further signals are ignored. A plan's
-prompted signature pass (`[signature] pass = "prompted"`) waits for the operator to remove the
-sample before its first reading (in every session that reaches it: a resume inside the pass
-asks again).
+or lost connection is retried (absolute moves and reads are safe to repeat) up to `retries`
+times, after which the run stops cleanly with the reason recorded. An invalid reading
+(InvalidReading) is retried the same way and, if every try gives one, recorded with power NaN
+and the flag "invalid", and the run goes on. Pause, resume and abort come from the terminal and
+the control channel (gonio.run_control); suspenders (gonio.suspenders) hold the run while a
+condition lasts and measure the interrupted point again. However a run ends short of
+completion (abort, signal, failure, an exception, a full disk), every axis that can be reached
+is told to stop, those that cannot are recorded, and the Stopped event carries the status and
+reason; while that happens further signals are ignored. Operator prompts (a prompted
+signature pass) wait before the readings whose indices `prompts` names.
 """
 
 from __future__ import annotations
 
 import math
-import signal
-import sys
 import termios
-import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from drivers.base import DeviceError, DriverError, InvalidReading, Reading
+from drivers.base import DeviceError, DriverError, Interlock, Interlocked, InvalidReading, Reading
 from gonio.errors import Terminated
+from gonio.events import (
+    EventBus,
+    Moved,
+    Paused,
+    ReadingDiscarded,
+    ReadingStored,
+    Resumed,
+    RunStarted,
+    State,
+    Stopped,
+    Stopping,
+    Suspended,
+    Suspension,
+)
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
 from gonio.plan import (
@@ -41,9 +56,10 @@ from gonio.plan import (
     profile_seconds,
     sweeps_source,
 )
-from gonio.progress import Progress
 from gonio.reading_flags import INVALID, RETRIED
-from gonio.store import RunWriter, StoreError
+from gonio.run_control import Aborted, PauseControl
+from gonio.store import StoreError
+from gonio.suspenders import Watch
 
 # Failures worth retrying: driver timeouts/garbles and lost connections (pyserial lets
 # termios.error, which is no OSError, through when a pty or USB port goes away).
@@ -51,6 +67,8 @@ TRANSIENT = (DriverError, OSError, termios.error)
 WAIT_FACTOR = 2.0  # motion timeout = WAIT_FACTOR x profile time + WAIT_MARGIN_S
 WAIT_MARGIN_S = 5.0
 RETRY_PAUSE_S = 0.05
+MEASURED = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "power_w", "saturated",
+            "t_s", "flags")  # what a stored line says of the measurement itself
 
 
 class StopRun(Exception):
@@ -59,14 +77,6 @@ class StopRun(Exception):
 
 class PositionMismatch(DriverError):
     """An axis reports a position other than the target it was sent to (twice running)."""
-
-
-class Aborted(Exception):
-    """The user aborted the run."""
-
-
-TERMINATING = (signal.SIGTERM, signal.SIGHUP)
-HANDLED = (signal.SIGINT, *TERMINATING)
 
 
 @dataclass
@@ -79,137 +89,42 @@ class Outcome:
     signum: int | None = None  # the signal that ended it (SIGTERM, SIGHUP)
 
 
-def ask_resume() -> bool:
-    """Default pause prompt (on stderr, answer on stdin): True to resume, False to abort.
-    End of input counts as abort."""
-    while True:
-        sys.stderr.write("paused: [r]esume or [a]bort? ")
-        sys.stderr.flush()
-        line = sys.stdin.readline()
-        if not line:
-            return False
-        answer = line.strip().lower()
-        if answer in ("r", "resume", ""):
-            return True
-        if answer in ("a", "abort"):
-            return False
+def _plain(value: Any) -> Any:
+    """A schedule field's value as JSON takes it: a numpy scalar's Python value; an object
+    field (text) as it is."""
+    return value.item() if isinstance(value, np.generic) else value
 
 
-def ask_continue(message: str) -> bool:
-    """Default operator prompt (on stderr, answer on stdin): True to continue, False to abort.
-    End of input counts as abort."""
-    while True:
-        sys.stderr.write(f"{message}: [c]ontinue or [a]bort? ")
-        sys.stderr.flush()
-        line = sys.stdin.readline()
-        if not line:
-            return False
-        answer = line.strip().lower()
-        if answer in ("c", "continue", ""):
-            return True
-        if answer in ("a", "abort"):
-            return False
-
-
-def _notify(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
-class PauseControl:
-    """Signal handling for a run: the first SIGINT asks for a pause at the next point, the
-    second aborts (KeyboardInterrupt); SIGTERM and SIGHUP raise Terminated. Entered more than
-    once (the runner before it makes the run directory, the engine), the outermost counts."""
-
-    def __init__(self, prompt: Callable[[], bool] = ask_resume,
-                 notify: Callable[[str], Any] = _notify,
-                 confirm: Callable[[str], bool] = ask_continue):
-        self.prompt, self.notify, self.confirm = prompt, notify, confirm
-        self.pause_requested = False
-        self._previous: dict[int, Any] = {}
-        self._depth = 0
-
-    def _on_sigint(self, signum: int, frame: Any) -> None:
-        self.pause_requested = True
-        self.notify("pausing after this point (Ctrl-C again to abort)")
-        signal.signal(signal.SIGINT, self._on_second_sigint)
-
-    def _on_second_sigint(self, signum: int, frame: Any) -> None:
-        self.hold()
-        raise KeyboardInterrupt
-
-    def _on_terminate(self, signum: int, frame: Any) -> None:
-        self.hold()
-        raise Terminated(signum)
-
-    def hold(self) -> None:
-        """Ignore these signals from now on (until the outermost exit): the run is ending, and
-        stopping the axes and recording why must not be interrupted."""
-        if self._previous:
-            for sig in HANDLED:
-                signal.signal(sig, signal.SIG_IGN)
-
-    def __enter__(self) -> PauseControl:
-        self._depth += 1
-        if self._depth == 1 and threading.current_thread() is threading.main_thread():
-            self.pause_requested = False
-            self._previous = {sig: signal.getsignal(sig) or signal.SIG_DFL for sig in HANDLED}
-            for sig in HANDLED:  # one ignored on entry (nohup, a background job) stays so
-                if self._previous[sig] is not signal.SIG_IGN:
-                    signal.signal(sig, self._on_sigint if sig == signal.SIGINT
-                                  else self._on_terminate)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._depth -= 1
-        if self._depth == 0:
-            for sig, previous in self._previous.items():
-                signal.signal(sig, previous)
-            self._previous = {}
-
-    def checkpoint(self, on_pause: Callable[[str], None]) -> None:
-        """Between points: if a pause was asked for, prompt; raise Aborted to abort."""
-        if not self.pause_requested:
-            return
-        on_pause("paused")
-        try:
-            resume = self.prompt()
-        except (KeyboardInterrupt, EOFError):
-            resume = False
-        if not resume:
-            raise Aborted("aborted by the user")
-        self.pause_requested = False
-        if self._previous.get(signal.SIGINT, signal.SIG_IGN) is not signal.SIG_IGN:
-            signal.signal(signal.SIGINT, self._on_sigint)
-        on_pause("running")
-
-    def operator_step(self, message: str, on_pause: Callable[..., None]) -> None:
-        """Wait for the operator to do what `message` asks by hand; raise Aborted to abort."""
-        on_pause("paused", message)
-        try:
-            go_on = self.confirm(message)
-        except (KeyboardInterrupt, EOFError):
-            go_on = False
-        if not go_on:
-            raise Aborted(f"aborted by the user at: {message}")
-        on_pause("running")
+def schedule_tags(readings: np.ndarray) -> list[tuple[str, str]]:
+    """(schedule field, stored field) of every tag of a schedule: the fields the engine does
+    not interpret, stored under their own name, or plan_<name> where the measurement writes
+    that name."""
+    interpreted = {"index", "range_w", *(f"{role}_deg" for role in MOTION_ROLES)}
+    return [(name, f"plan_{name}" if name in MEASURED else name)
+            for name in readings.dtype.names if name not in interpreted]
 
 
 class Engine:
-    """Runs the remaining readings of a schedule on an instrument into a run writer."""
+    """Runs the readings `todo` (indices into the schedule `readings`) on an instrument and
+    publishes what happens on `bus`; `session` is what the RunStarted event carries for the
+    session record, `prompts` the operator prompts by reading index, `watch` the suspenders
+    (None: none)."""
 
-    def __init__(self, instrument: Instrument, plan: Plan, schedule: np.ndarray,
-                 writer: RunWriter, *, retries: int = 2, progress: Progress | None = None,
+    def __init__(self, instrument: Instrument, plan: Plan, readings: np.ndarray,
+                 todo: list[int], bus: EventBus, *, stored: int = 0, retries: int = 2,
                  control: PauseControl | None = None, t0_epoch: float | None = None,
-                 session_info: Callable[[], dict[str, Any]] | None = None,
-                 session: dict[str, Any] | None = None):
-        self.inst, self.plan, self.schedule, self.writer = instrument, plan, schedule, writer
-        self.retries = retries
-        self.progress = progress
+                 session: dict[str, Any] | None = None, prompts: dict[int, str] | None = None,
+                 watch: Watch | None = None):
+        self.inst, self.plan, self.readings, self.todo = instrument, plan, readings, todo
+        self.bus, self.stored, self.retries = bus, stored, retries
         self.control = control or PauseControl()
         self.t0 = t0_epoch if t0_epoch is not None else time.time()
-        self.session_info = session_info
-        self.session = session  # what RunWriter.start_session records; None: started already
+        self.session = session or {}
+        self.prompts = prompts or {}
+        self.watch = watch
+        self._tags = schedule_tags(readings)
         self._doing = "starting"
+        self._sent: Stopping | None = None  # the last Stopping published
         self._commanded: dict[str, float | None] = {role: None for role in instrument.axes}
         self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
         cfg = instrument.config
@@ -240,7 +155,7 @@ class Engine:
             self._reported[role] = self._arrived(role, axis.wait(self._wait_timeout(role, target)),
                                                  target)
             self._commanded[role] = target
-        self.inst.last_positions.update(self._reported)
+        self.bus.publish(Moved(int(row["index"]), dict(self._reported)))
         return moved
 
     def _arrived(self, role: str, position: float, target: float) -> float:
@@ -277,30 +192,35 @@ class Engine:
         return self._record(row, self.inst.detector.read(), flags)
 
     def _record(self, row: np.void, reading: Reading, flags: list[str]) -> dict[str, Any]:
-        """The stored line of a reading taken at the axes' reported positions."""
+        """The stored line of a reading taken at the axes' reported positions: the row's
+        index and tags, the positions and the measurement."""
         pos = self._reported
         ang = sample_angles(pos["sample"], pos["arm"], pos["elevation"], pos["azimuth"])
         return {
-            "index": int(row["index"]), "kind": str(row["kind"]), "side": str(row["side"]),
-            "repeat": int(row["repeat"]), "point": int(row["point"]),
+            "index": int(row["index"]),
+            **{stored: _plain(row[name]) for name, stored in self._tags},
             **{f"{r}_deg": pos[r] for r in MOTION_ROLES},
             "theta_i_deg": float(ang.theta_i_deg), "phi_i_deg": float(ang.phi_i_deg),
             "theta_o_deg": float(ang.theta_o_deg), "phi_o_deg": float(ang.phi_o_deg),
-            "plan_theta_i_deg": float(row["theta_i_deg"]),
-            "plan_theta_o_deg": float(row["theta_o_deg"]),
-            "plan_phi_o_deg": float(row["phi_o_deg"]),
             "power_w": float(reading.power_w), "range_w": float(reading.range_w),
-            "saturated": bool(reading.saturated), "t_s": time.time() - self.t0,
+            "saturated": bool(reading.saturated), "t_s": self._now(),
             "flags": ",".join(flags),
         }
 
+    def _now(self) -> float:
+        """Seconds since the run's first start (the clock of t_s)."""
+        return time.time() - self.t0
+
     def _with_retries(self, row: np.void) -> dict[str, Any]:
-        where = f"reading {int(row['index'])} ({row['kind']})"
+        where = f"reading {int(row['index'])} ({row['kind']})" if "kind" in row.dtype.names \
+            else f"reading {int(row['index'])}"
         flags: list[str] = []
         for attempt in range(self.retries + 1):
             try:
                 return self._measure(row, flags)
             except DeviceError as exc:
+                if isinstance(exc, Interlocked) and self.watch and self.watch.spec.interlock:
+                    raise
                 raise StopRun(f"{where}: {self._doing}: {exc}") from exc
             except TRANSIENT as exc:
                 last = exc
@@ -313,12 +233,68 @@ class Engine:
             return self._record(row, Reading(math.nan, last.range_w), [*flags, INVALID])
         raise StopRun(f"{where}: {self._doing}: {last} (after {self.retries + 1} attempts)")
 
+    # -- suspenders -------------------------------------------------------------
+    def _attempt(self, row: np.void, interlocked: bool) -> tuple[str | None, dict | None]:
+        """One try at a reading under the suspenders: (None, record) to store, or (why, None)
+        while a suspender holds (the reading, if one was taken, discarded)."""
+        if interlocked:
+            held = self._interlock_held()
+            if held:
+                return held, None
+        try:
+            record = self._with_retries(row)
+        except Interlocked as exc:
+            self._commanded = dict.fromkeys(self._commanded)  # stopped wherever it was
+            return f"interlock: {exc}", None
+        why = self.watch.verdict(record)
+        if why:
+            self.bus.publish(ReadingDiscarded(row, why))
+            return why, None
+        return None, record
+
+    def _interlock_held(self) -> str | None:
+        """What still holds an interlock (each device that reports one asked to get ready)."""
+        devices = {id(d): d for d in (*self.inst.axes.values(), self.inst.detector)}
+        for device in devices.values():
+            if isinstance(device, Interlock):
+                try:
+                    held = device.release_interlock()
+                except TRANSIENT as exc:
+                    held = f"{device.name}: {exc}"
+                if held:
+                    return f"interlock: {held}"
+        return None
+
+    def _reading(self, row: np.void) -> dict[str, Any]:
+        """The reading of a row; with suspenders, held while one of them objects and measured
+        again until none does (StopRun past the suspenders' timeout)."""
+        if self.watch is None:
+            return self._with_retries(row)
+        index, suspension, deadline = int(row["index"]), None, 0.0
+        while True:
+            why, record = self._attempt(row, suspension is not None)
+            if why is None:
+                if suspension is not None:
+                    suspension.resumed_t_s = self._now()
+                    self.control.enter(State.RUNNING)
+                    self.bus.publish(Resumed(index, suspension))
+                return record
+            if suspension is None:
+                suspension = Suspension(why, index, self._now())
+                deadline = time.monotonic() + self.watch.spec.timeout_s
+                self.control.enter(State.SUSPENDED)
+                self.bus.publish(Suspended(suspension))
+            elif time.monotonic() > deadline:
+                raise StopRun(f"reading {index}: suspended ({suspension.reason}) and not "
+                              f"cleared within {self.watch.spec.timeout_s:g} s: {why}")
+            self.control.wait(self.watch.spec.recheck_s)
+
     # -- the run ----------------------------------------------------------------
     def _check_ranges(self) -> None:
         """Before any motion: the detector accepts every range the remaining readings use (each
         set once; a PM100 refuses a range its sensor lacks, a Modbus amplifier one above its
         largest), so a bad plan range stops the run with one clear error."""
-        remaining = self.schedule["range_w"][self.writer.todo(len(self.schedule))]
+        remaining = self.readings["range_w"][self.todo]
         for range_w in np.unique(remaining):
             try:
                 self._use_range(float(range_w))
@@ -345,71 +321,67 @@ class Engine:
             raise StopRun(f"preparing the instrument: {exc}") from exc
 
     def run(self) -> Outcome:
-        """Start the session (if given one), measure every reading not yet stored; always
-        stops the axes and leaves meta.json with the outcome where the disk allows it."""
+        """Start the session, measure every reading of `todo`; always stops the axes and ends
+        with a Stopped event carrying the outcome."""
         status, reason, signum = "completed", "", None
         with self.control:
             try:
-                if self.session is not None:
-                    self.writer.start_session(**self.session)
+                self.bus.publish(RunStarted(len(self.readings), self.stored, tuple(self.todo),
+                                            self.session))
                 self._prepare()
-                rest = self.schedule[self.writer.todo(len(self.schedule))]
-                prompt_at = self._operator_prompt_index(rest)
-                for row in rest:
-                    self.control.checkpoint(self._paused)
-                    if int(row["index"]) == prompt_at:
-                        self.control.operator_step(self._signature_message(rest), self._paused)
-                    record = self._with_retries(row)
-                    self.writer.append(record)
-                    if self.progress:
-                        self.progress.update(record)
-                self.writer.wait_stored()  # the last fsync: a disk error fails here, not in _finish
+                self.control.enter(State.RUNNING)
+                for index in self.todo:
+                    row = self.readings[index]
+                    self.control.checkpoint(lambda i=index: self._paused(i),
+                                            lambda i=index: self.bus.publish(Resumed(i)))
+                    if index in self.prompts:
+                        self.control.operator_step(
+                            self.prompts[index], lambda why, i=index: self.bus.publish(
+                                Paused(i, why)), lambda i=index: self.bus.publish(Resumed(i)))
+                    record = self._reading(row)
+                    self.bus.publish(ReadingStored(record, row))
+                    self.stored += 1
+                    if self.watch:
+                        self.watch.accept(record)
+                self._stopping("completed", "")  # the last fsync: a refused one fails the run
             except (StopRun, StoreError) as exc:
                 status, reason = "failed", str(exc)
             except Terminated as exc:
                 status, reason, signum = "aborted", str(exc), exc.signum
             except (Aborted, KeyboardInterrupt) as exc:
-                status, reason = "aborted", str(exc) or "aborted by the user (Ctrl-C)"
+                status = "aborted"
+                reason = self.control.abort_reason or str(exc) or "aborted by the user (Ctrl-C)"
             except BaseException as exc:
                 self.control.hold()
                 self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
                 raise
             self.control.hold()
             reason = self._finish(status, reason)
-        return Outcome(status, reason, self.writer.stored, signum)
-    def _operator_prompt_index(self, rest: np.ndarray) -> int:
-        """Index of the first of the remaining readings `rest` in a prompted signature pass
-        (-1: none)."""
-        sig = self.plan.signature
-        if sig is None or sig.mode != "prompted":
-            return -1
-        first = np.flatnonzero(rest["kind"] == "signature")
-        return int(rest["index"][first[0]]) if len(first) else -1
+        return Outcome(status, reason, self.stored, signum)
 
-    def _signature_message(self, rest: np.ndarray) -> str:
-        """The operator prompt before a prompted signature pass among the readings `rest`."""
-        n = int((rest["kind"] == "signature").sum())
-        return (f"signature pass: remove the sample (nothing but the bench in the beam) for the "
-                f"next {n} readings")
+    def _paused(self, index: int) -> None:
+        self.bus.publish(Paused(index, self.control.pause_reason()))
 
-    def _paused(self, status: str, reason: str = "paused by the user") -> None:
-        self.writer.set_status(status, reason if status == "paused" else "")
+    def _stopping(self, status: str, reason: str) -> None:
+        """Publish that the run ends with `status` (once per status)."""
+        self.control.enter(State.STOPPING)
+        if self._sent is None or self._sent.status != status:
+            self._sent = Stopping(status, reason)
+            self.bus.publish(self._sent)
 
     def _finish(self, status: str, reason: str) -> str:
-        """Stop every axis unless completed, record the outcome; returns the reason as
-        recorded (with the axes that could not be stopped, or why it could not be recorded)."""
-        if status != "completed":
-            unstopped = self.inst.stop_all()
-            if unstopped:
-                self.writer.meta["unstopped"] = unstopped
-                reason += "; could not stop: " + "; ".join(f"{role}: {why}"
-                                                           for role, why in unstopped.items())
-        if self.progress:
-            self.progress.close()
-        if self.session_info and self.writer.meta["sessions"]:
-            self.writer.meta["sessions"][-1].update(self.session_info())
+        """Stop every axis unless completed, publish the end; returns the reason as recorded
+        (with the axes that could not be stopped, or what a subscriber could not do)."""
+        unstopped = self.inst.stop_all() if status != "completed" else {}
+        if unstopped:
+            reason += "; could not stop: " + "; ".join(f"{role}: {why}"
+                                                       for role, why in unstopped.items())
         try:
-            self.writer.set_status(status, reason)
-        except StoreError as exc:
-            reason += f" (not recorded in meta.json: {exc})"
-        return reason
+            self._stopping(status, reason)
+        except StoreError:
+            pass  # the store notes at Stopped whether meta.json could record the end
+        stopped = Stopped(status, reason, self.stored, unstopped,
+                          self._sent.session if self._sent else {})
+        self.bus.publish(stopped)
+        self.control.enter(State(status))
+        return reason + "".join(f" ({note})" for note in stopped.notes)

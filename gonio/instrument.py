@@ -29,8 +29,6 @@ class Instrument:
 
     time_scale: virtual seconds per real second of the devices (1 on a real bench; the
     emulators' scale under --sim), so that settle and dwell waits shrink with it.
-    last_positions: the stage positions last reported, {role: deg} (what an emulated
-    detector sees when the stages are real).
     devices: per device name, its protocol, endpoint (and Modbus unit) and the identity it
     reported when opened.
     """
@@ -40,7 +38,6 @@ class Instrument:
     detector: Detector
     closers: list[Callable[[], None]] = field(default_factory=list)
     time_scale: float = 1.0
-    last_positions: dict[str, float] = field(default_factory=dict)
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def stop_all(self) -> dict[str, str]:

@@ -1,4 +1,5 @@
-"""Progress bar for a scan (tqdm on stderr): readings done, rate, ETA and the current angles."""
+"""Progress bar for a scan (tqdm on stderr): readings done, rate, ETA and the current angles;
+a subscriber of the engine's events (gonio.events)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,8 @@ import sys
 from typing import Any
 
 from tqdm import tqdm
+
+from gonio.events import ReadingStored, Stopping
 
 
 class Progress:
@@ -17,6 +20,13 @@ class Progress:
         self._bar = tqdm(total=total, initial=done, desc=description, unit="pt",
                          file=sys.stderr, dynamic_ncols=True, disable=disable,
                          smoothing=0.1)
+
+    def __call__(self, event: Any) -> None:
+        """Count a stored reading; close at the end of the run."""
+        if isinstance(event, ReadingStored):
+            self.update(event.record)
+        elif isinstance(event, Stopping):
+            self.close()
 
     def update(self, row: dict[str, Any]) -> None:
         """Count one reading and show where the stages are."""

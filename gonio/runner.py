@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,13 +19,18 @@ import numpy as np
 
 from drivers.base import Detector
 from gonio.config import InstrumentConfig, load_config, parse_config
+from gonio.control import RunStatus, serving
 from gonio.device_kinds import endpoint_keys
-from gonio.engine import Engine, Outcome, PauseControl
+from gonio.engine import Engine, Outcome
 from gonio.errors import ConfigError, PlanError, RunError
+from gonio.events import EventBus, Subscriber
 from gonio.instrument import build_instrument
-from gonio.plan import AUTO_RANGE, Plan, Schedule, build_schedule, load_plan, parse_plan
+from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
+from gonio.recorder import RunRecorder
+from gonio.run_control import PauseControl
 from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
+from gonio.suspenders import Watch
 
 DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
 
@@ -51,52 +56,57 @@ def instrument_path(plan: Plan, instrument: str | Path | None) -> Path:
 @dataclass
 class _Devices:
     """What to open: the config (pointed at emulators under --sim), its time scale, the
-    emulated devices, the shared stage-position dict and the emulators' fault counter."""
+    emulated devices and the emulation's subscribers to the engine's events."""
 
     config: InstrumentConfig
     time_scale: float = 1.0
     emulated: tuple[str, ...] = ()
-    positions: dict[str, float] = field(default_factory=dict)
-    fault_counts: Callable[[], dict] = dict
-    request_counts: Callable[[], dict] = dict
-
-
-def _visited(sched: Schedule, cfg: InstrumentConfig, done: Sequence[int]
-             ) -> list[tuple[dict, float | None]]:
-    """The stored readings' (indices `done`) commanded positions and range settings (None =
-    autorange): what an emulated detector of a resumed run has measured already."""
-    return [({role: float(row[f"{role}_deg"]) for role in cfg.axes},
-             None if row["range_w"] == AUTO_RANGE else float(row["range_w"]))
-            for row in sched.readings[list(done)]]
+    subscribers: tuple[Subscriber, ...] = ()
 
 
 @contextmanager
 def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch: float,
-             visited: list[tuple[dict, float | None]]) -> Iterator[_Devices]:
+             stored: np.ndarray) -> Iterator[_Devices]:
+    """The devices to open; under --sim the emulators, told the `stored` schedule rows (what
+    an emulated detector of a resumed run has measured already)."""
     if sim is False:
         yield _Devices(cfg)
         return
-    from gonio.simulate import simulation  # only --sim touches sim
+    from gonio.simulate import simulation, visit  # only --sim touches sim
 
     with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
-                    visited) as s:
-        yield _Devices(s.config, s.time_scale, tuple(s.devices), s.positions,
-                       s.bench.fault_counts, s.bench.request_counts)
+                    [visit(row, cfg.axes) for row in stored]) as s:
+        yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,))
+
+
+def operator_prompts(plan: Plan, readings: np.ndarray, todo: Sequence[int]) -> dict[int, str]:
+    """The operator prompts of the readings still to measure (`todo`), by index: before the
+    first of them in a prompted signature pass, the prompt to remove the sample."""
+    sig = plan.signature
+    rest = readings[list(todo)]
+    signature = rest[rest["kind"] == "signature"]
+    if sig is None or sig.mode != "prompted" or not len(signature):
+        return {}
+    return {int(signature["index"][0]): f"signature pass: remove the sample (nothing but the "
+                                        f"bench in the beam) for the next {len(signature)} "
+                                        f"readings"}
 
 
 def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig,
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
-         control: PauseControl | None, t0_epoch: float, done: Sequence[int] = (),
-         check: DetectorCheck | None = None,
-         session: dict[str, Any] | None = None) -> ScanResult:
+         control: PauseControl | None, t0_epoch: float, stored: Sequence[dict] = (),
+         check: DetectorCheck | None = None, session: dict[str, Any] | None = None,
+         channel: bool = False) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
-    of the schedule (the readings of indices `done` are stored; the run started at t0_epoch).
-    session: more for meta.json's record of this session. The run's signal handling
-    (`control`) starts before the run directory is made: a signal in the first milliseconds
-    of a run ends it as one at any other moment does."""
+    of the schedule (`stored`: the readings stored already; the run started at t0_epoch).
+    session: more for meta.json's record of this session; channel: serve the control channel
+    (gonio.control) in the run directory. The run's signal handling (`control`) starts before
+    the run directory is made: a signal in the first milliseconds of a run ends it as one at
+    any other moment does."""
     control = control or PauseControl()
-    with _devices(cfg, sim, plan, t0_epoch, _visited(sched, cfg, done)) as dev, \
+    done = sched.readings[[row["index"] for row in stored]]
+    with _devices(cfg, sim, plan, t0_epoch, done) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
         if check is not None:
             check(sched.readings, inst.detector)
@@ -104,20 +114,24 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
             writer = make_writer()
             try:
                 swapped = identity_changes(writer.meta["sessions"], inst.devices)
-                inst.last_positions = dev.positions
+                todo = writer.todo(len(sched))
+                status = RunStatus()
                 bar = Progress(len(sched), writer.stored, plan.name,
                                disable=None if progress is None else not progress)
-                engine = Engine(inst, plan, sched.readings, writer, progress=bar,
+                bus = EventBus([RunRecorder(writer), bar, *dev.subscribers, status])
+                engine = Engine(inst, plan, sched.readings, todo, bus, stored=writer.stored,
                                 control=control, t0_epoch=writer.meta["t0_epoch"],
-                                session_info=lambda: {"faults_injected": dev.fault_counts(),
-                                                      "requests_served": dev.request_counts()},
+                                prompts=operator_prompts(plan, sched.readings, todo),
+                                watch=Watch(plan.suspend, stored) if plan.suspend else None,
                                 session={"sim": list(dev.emulated),
                                          "endpoints": {n: d.endpoint
                                                        for n, d in dev.config.devices.items()},
                                          "devices": inst.devices,
                                          **({"identity_changes": swapped} if swapped else {}),
                                          **(session or {})})
-                return ScanResult(writer.path, engine.run())
+                with serving(writer.path, control, status) if channel \
+                        else contextlib.nullcontext():
+                    return ScanResult(writer.path, engine.run())
             finally:
                 writer.close()
 
@@ -127,7 +141,7 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
              sample_id: str | None = None, check: DetectorCheck | None = None,
-             warn: Callable[[str], None] | None = None) -> ScanResult:
+             warn: Callable[[str], None] | None = None, channel: bool = False) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
@@ -137,7 +151,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     check: called with the schedule's readings and the open detector before the run directory
     exists and before any motion (the scan command checks the calibration's ranges there);
     warn: told, once the devices are open and checked and before any motion, what the run
-    will lack that reduction needs (undescribed).
+    will lack that reduction needs (undescribed);
+    channel: serve the control channel in the run directory (gonio.control; token on stderr).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -160,7 +175,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
-                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn))
+                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn),
+                channel=channel)
 
 
 def scaled(cfg: InstrumentConfig, sim: list[str] | bool, time_scale: float | None
@@ -213,13 +229,14 @@ def with_sample_id(plan: Plan, sample_id: str) -> Plan:
 def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                 sim: list[str] | bool | None = None, progress: bool | None = None,
                 control: PauseControl | None = None,
-                plan_path: str | Path | None = None) -> ScanResult:
+                plan_path: str | Path | None = None, channel: bool = False) -> ScanResult:
     """Continue a run after its last stored reading (first measuring any a repair dropped),
     with the plan and config it started with, both checked against their digests.
 
     instrument: a config to use instead of the stored one, differing from it in device
     endpoints only (recorded in the session). sim: None = as the run was started.
-    plan_path: a plan file that must say what the stored plan says (`same_plan`).
+    plan_path: a plan file that must say what the stored plan says (`same_plan`);
+    channel: as for new_scan.
     """
     run = open_run(run_dir)
     lines = run.lines()
@@ -247,8 +264,7 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
             writer.set_status("completed", "")
         return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
-                run.meta["t0_epoch"], done=[row["index"] for row in lines.rows],
-                session=session)
+                run.meta["t0_epoch"], stored=lines.rows, session=session, channel=channel)
 
 
 _MISSING = object()

@@ -11,9 +11,14 @@ import math
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
 
 from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
+from gonio.events import Moved, ReadingDiscarded, Stopping
+from gonio.plan import AUTO_RANGE
 from sim.devices.modbus_server import LOOPBACK
 from sim.emulate import EmulatedBench, Visit, start, time_scale_of
 
@@ -23,7 +28,7 @@ class Simulation:
     """A running emulation: the config pointed at it, its time scale, what is emulated.
 
     positions: the dict the emulated detector reads real stages' positions from (the
-    engine keeps it current: hand it to Instrument.last_positions).
+    hardware-in-the-loop feed, `telemetry`, keeps it current).
     """
 
     config: InstrumentConfig
@@ -31,6 +36,26 @@ class Simulation:
     devices: list[str]
     positions: dict[str, float]
     bench: EmulatedBench
+
+
+    def telemetry(self, event: Any) -> None:
+        """The emulation's subscriber to the engine's events: where the (real) stages are
+        before each reading, the readings thrown away (no visits: sim.emulate), and what the
+        emulators did in the session (faults injected, requests served)."""
+        if isinstance(event, Moved):
+            self.positions.update(event.positions)
+        elif isinstance(event, ReadingDiscarded):
+            self.bench.forget(visit(event.row, self.config.axes))
+        elif isinstance(event, Stopping):
+            event.session.update(faults_injected=self.bench.fault_counts(),
+                                 requests_served=self.bench.request_counts())
+
+
+def visit(row: np.void, roles: Iterable[str]) -> Visit:
+    """A scheduled reading as the emulated detector counts it: the commanded positions of
+    `roles` and the range setting (None = autorange)."""
+    return ({role: float(row[f"{role}_deg"]) for role in roles},
+            None if row["range_w"] == AUTO_RANGE else float(row["range_w"]))
 
 
 def resolve_devices(cfg: InstrumentConfig, names: list[str] | None) -> list[str]:

@@ -338,7 +338,8 @@ class Run:
 
     @property
     def status(self) -> str:
-        """created | running | paused | completed | aborted | failed ("running" after a kill)."""
+        """created | running | paused | suspended | completed | aborted | failed ("running" after
+        a kill)."""
         return self.meta.get("status", "unknown")
 
 

@@ -55,11 +55,13 @@ class DetectorEmulator(_Kind):
 EmulatorKind = StageEmulator | DetectorEmulator
 
 KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
-    StageEmulator(name="esp", start=controller_on_pty(EspEmulator)),
+    StageEmulator(name="esp", start=controller_on_pty(EspEmulator, interlock_arg="estop"),
+                  own_faults=("interlock",)),
     DetectorEmulator(name="pm100", start=meter_on_pty(Pm100Emulator),
                      own_faults=("invalid_prob",)),
-    StageEmulator(name="modbus-stage", start=modbus_stage_units),
-    DetectorEmulator(name="modbus-detector", start=modbus_detector_unit),
+    StageEmulator(name="modbus-stage", start=modbus_stage_units, own_faults=("interlock",)),
+    DetectorEmulator(name="modbus-detector", start=modbus_detector_unit,
+                     own_faults=("interlock",)),
     StageEmulator(name="zaber", start=controller_on_pty(ZaberEmulator, ("address",))),
 )}
 

@@ -27,7 +27,7 @@ from typing import Any
 
 from sim.bench import build_power_source
 from sim.device_kinds import DetectorEmulator, EmulatorKind, StageEmulator, check_faults, kind_of
-from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
@@ -63,6 +63,7 @@ class EmulatedBench:
     endpoints: dict[str, Endpoint] = field(default_factory=dict)
     emulators: dict[str, Any] = field(default_factory=dict)
     injectors: dict[str, list[FaultInjector]] = field(default_factory=dict)
+    meters: list[Any] = field(default_factory=list)  # the emulated detectors' models
     _stops: list[Callable[[], None]] = field(default_factory=list)
 
     def fault_counts(self) -> dict[str, dict[str, int]]:
@@ -80,6 +81,13 @@ class EmulatedBench:
         """Requests served so far by each pty-served device (ESP, PM100)."""
         return {name: emu.server.requests for name, emu in self.emulators.items()
                 if hasattr(emu, "server")}
+
+    def forget(self, visit: Visit) -> None:
+        """A reading taken at `visit` was thrown away by the client: it does not count as a
+        visit there (a re-measured reading gets the noise an undisturbed run gives it)."""
+        where, range_w = visit
+        for meter in self.meters:
+            meter.forget(_place(where), range_w)
 
     def stop(self) -> None:
         """Stop every emulator (idempotent)."""
@@ -145,8 +153,9 @@ class _Builder:
     """Creates the emulators of one config, stages first, then the bench and the detectors."""
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
-                 kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str):
-        self.config, self.sim, self.bench, self.bind = config, sim, bench, bind
+                 kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str,
+                 wall: Callable[[], float]):
+        self.config, self.sim, self.bench, self.bind, self.wall = config, sim, bench, bind, wall
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen, self.kinds = chosen, kinds
         self.seed = sim.get("seed", 0)
@@ -168,6 +177,13 @@ class _Builder:
             return None
         return FaultSpec.from_dict({"seed": self._seed(name), **table}, name)
 
+    def _interlock(self, name: str) -> InterlockInput | None:
+        """The device's interlock input, if its faults open it (on the bench's wall clock)."""
+        spec = self._faults(name)
+        if spec is None or spec.interlock is None:
+            return None
+        return InterlockInput(spec.interlock, self.wall)
+
     def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
         return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
 
@@ -178,6 +194,7 @@ class _Builder:
 
         return EmulatedDevice(name, self.devices[name], self._roles(name), self.bench.clock,
                               self._seed(name), self._faults(name), self._serial(name),
+                              self._interlock(name),
                               serve=lambda emu: _serve(self.bench, name, emu),
                               join_bus=lambda unit: self._add_modbus(name, unit), stage=stage)
 
@@ -204,6 +221,7 @@ class _Builder:
             kind = self.kinds[name]
             if isinstance(kind, DetectorEmulator):
                 meter = kind.start(self._device(name), light)
+                self.bench.meters.append(meter)
                 for where, range_w in visited:
                     meter.visited(where, range_w)
 
@@ -243,7 +261,11 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             raise SimConfigError(f"no device {name!r} to emulate (devices: "
                                  f"{', '.join(all_devices)})")
     bench = EmulatedBench(VirtualClock(time_scale_of(sim)))
-    build = _Builder(config, sim, chosen, kinds, bench, bind)
+    # the source drifts (and the faults' interlocks open) in wall time since the run started
+    # (a lamp does not follow the motion's virtual clock), as the run store's t_s does: drift
+    # normalisation needs both
+    t0 = time.time() if t0_epoch is None else t0_epoch
+    build = _Builder(config, sim, chosen, kinds, bench, bind, lambda: time.time() - t0)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)
@@ -258,12 +280,8 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             return {role: stages[role]() if role in stages else float(real.get(role, 0.0))
                     for role in ROLES}
 
-        # the source drifts in wall time since the run started (a lamp does not follow the
-        # motion's virtual clock), as the run store's t_s does: drift normalisation needs both
-        t0 = time.time() if t0_epoch is None else t0_epoch
-        source = build_power_source(sim, lambda: read(build.readers),
-                                    lambda: time.time() - t0, optics=config.get("optics"),
-                                    sample=sample)
+        source = build_power_source(sim, lambda: read(build.readers), build.wall,
+                                    optics=config.get("optics"), sample=sample)
         if detectors:  # a first reading must not stall for a compile: timeouts are short
             source.bench.warm_up()
         build.detectors(source, lambda: _place(read(build.targets)),

@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from sim.devices.faults import FaultSpec
+from sim.devices.faults import FaultSpec, InterlockInput
 from sim.devices.modbus_detector import ModbusDetectorEmulator
 from sim.devices.modbus_server import EmulatedUnit
 from sim.devices.modbus_stage import ModbusStageEmulator
@@ -25,11 +25,12 @@ from sim.devices.pty_server import PtyDevice
 @dataclass(frozen=True)
 class EmulatedDevice:
     """One device of a config as its factory sees it: its [devices.<name>] table, the
-    [axes.<role>] tables of the roles it drives, the bench's clock, its seed, faults and
-    serial number, and where to serve it and report its stages: `serve` starts a PtyDevice
-    on a pty of its own (its `protocol` names it in `gonio emulate`'s output), `join_bus` puts
-    a Modbus unit on the one server of its bus or TCP endpoint, `stage(role, position,
-    target)` says where an emulated stage is and where it was told to go."""
+    [axes.<role>] tables of the roles it drives, the bench's clock, its seed, faults, serial
+    number and interlock input (its faults open it), and where to serve it and report its
+    stages: `serve` starts a PtyDevice on a pty of its own (its `protocol` names it in `gonio
+    emulate`'s output), `join_bus` puts a Modbus unit on the one server of its bus or TCP
+    endpoint, `stage(role, position, target)` says where an emulated stage is and where it
+    was told to go."""
 
     name: str
     table: Mapping[str, Any]
@@ -38,6 +39,7 @@ class EmulatedDevice:
     seed: int
     faults: FaultSpec | None
     serial: str
+    interlock: InterlockInput | None
     serve: Callable[[PtyDevice], None]
     join_bus: Callable[[EmulatedUnit], None]
     stage: Callable[[str, Callable[[], float], Callable[[], float]], None]
@@ -67,11 +69,13 @@ def _axis_number(axis: Mapping[str, Any]) -> int:
     return axis.get("axis", 1)
 
 
-def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = ()) -> StageFactory:
+def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = (),
+                      interlock_arg: str | None = None) -> StageFactory:
     """A multi-axis controller served on a pty of its own, built as `emulator(clock,
     {axis number: {limits_deg, speed_deg_s, accel_deg_s2, position_deg}}, faults, seed,
     **device_keys the [devices] table gives)` with each axis's TrapezoidAxis at
-    `.axes[number].motion` (the ESP emulator's shape)."""
+    `.axes[number].motion` (the ESP emulator's shape); interlock_arg: the constructor argument
+    that takes its interlock input (the ESP's `estop`), if it has one."""
     def start(device: EmulatedDevice) -> None:
         tables = {_axis_number(ax): {"limits_deg": tuple(ax["limits_deg"]),
                                      "speed_deg_s": ax["speed_deg_s"],
@@ -79,6 +83,8 @@ def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = ()) -> Stag
                                      "position_deg": home_deg(ax["limits_deg"])}
                   for ax in device.axes.values()}
         given = {key: device.table[key] for key in device_keys if key in device.table}
+        if interlock_arg is not None:
+            given[interlock_arg] = device.interlock
         emu = emulator(device.clock, tables, device.faults, device.seed, **given)
         device.serve(emu)
         for role, ax in device.axes.items():
@@ -105,7 +111,7 @@ def modbus_stage_units(device: EmulatedDevice) -> None:
         unit = ModbusStageEmulator(device.clock, device.table["register_map"],
                                    tuple(ax["limits_deg"]), ax["speed_deg_s"],
                                    ax["accel_deg_s2"], device.faults, home_deg(ax["limits_deg"]),
-                                   serial=device.serial)
+                                   serial=device.serial, interlock=device.interlock)
         device.join_bus(unit)
         device.stage(role, unit.axis.position, unit.axis.target)
 
@@ -114,6 +120,7 @@ def modbus_detector_unit(device: EmulatedDevice, light: Light) -> PhotodiodeMode
     """A Modbus photodiode amplifier, as its register map describes it, on its bus."""
     unit = ModbusDetectorEmulator(light.source, device.table["register_map"], device.faults,
                                   device.seed, light.detector, light.wavelength_nm,
-                                  serial=device.serial, place=light.place)
+                                  serial=device.serial, place=light.place,
+                                  interlock=device.interlock)
     device.join_bus(unit)
     return unit.model

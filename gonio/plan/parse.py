@@ -23,6 +23,7 @@ import tomllib
 from gonio.errors import PlanError
 from gonio.fields import Fields
 from gonio.sample import SampleInfo, parse_sample
+from gonio.suspenders import SuspendSpec, parse_suspend
 
 SIDES = ("reflection", "transmission")
 KINDS = ("sample", "dark", "beam", "signature")
@@ -75,6 +76,7 @@ class Plan:
     sample: SampleInfo | None = None  # [sample]: what is measured
     signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
     calibrates: str | None = None  # one of CALIBRATES for a calibration run; None: a BSDF
+    suspend: SuspendSpec | None = None  # [suspend]: conditions that hold the scan (suspenders)
 
 
 def load_plan(path: str | Path) -> Plan:
@@ -122,6 +124,7 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
         signature=_signature(top),
         calibrates=top.string("calibrates", None, choices=CALIBRATES),
+        suspend=parse_suspend(top.table_of("suspend"), beam_every) if top.has("suspend") else None,
     )
     top.done()
     return plan

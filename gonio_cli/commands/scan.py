@@ -1,6 +1,7 @@
 """`gonio scan PLAN`: run a plan on an instrument (real, emulated, or mixed) into a run directory.
 
-Once a run directory exists it is the last line printed on stdout, whatever the outcome. The
+Once a run directory exists it is the last line printed on stdout, whatever the outcome; while
+it measures, RUN_DIR/control.sock serves the control channel (its token on stderr). The
 exit status: 0 completed, 1 failed, 130 aborted by Ctrl-C, 128 + N ended by signal N (SIGTERM,
 SIGHUP).
 """
@@ -85,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             raise GonioError("--resume RUN continues a run as it was started: "
                              "give no --calibration, --time-scale or --sample-id with it")
         result = resume_scan(args.resume, args.instrument, args.sim, progress=progress,
-                             plan_path=args.plan)
+                             plan_path=args.plan, channel=True)
     else:
         if not args.plan:
             raise GonioError("a PLAN file is needed (or --resume RUN)")
@@ -98,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
                           progress=progress, calibration=calibration,
                           time_scale=args.time_scale, sample_id=args.sample_id, check=check,
                           warn=lambda text: print(f"gonio scan: warning: {text}",
-                                                  file=sys.stderr))
+                                                  file=sys.stderr), channel=True)
     outcome = result.outcome
     plotted = False
     if not args.no_plot and outcome.done:

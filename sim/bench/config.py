@@ -25,7 +25,7 @@ from sim.bench.sample import (
     SampleSpec,
 )
 from sim.bench.scene import Alignment, Bench, BenchPowerSource
-from sim.bench.source import Source
+from sim.bench.source import Dip, Source
 from sim.bench.stray import InstrumentScatter
 from sim.devices.photodiode import PhotodiodeModel, SimConfigError
 
@@ -97,6 +97,18 @@ def _order(where: str, value: object) -> tuple[int, int] | None:
                          f"got {value!r}")
 
 
+def _dip(where: str, value: object) -> Dip | None:
+    """[sim.source] dip = {start_s, duration_s, depth}: the power falls by the share depth."""
+    if value is None:
+        return None
+    keys = {"start_s": _number(0.0), "duration_s": _number(0.0, open_low=True),
+            "depth": _number(0.0, 1.0)}
+    if not isinstance(value, Mapping) or set(value) != set(keys):
+        raise SimConfigError(f"{where} must be a table {{start_s, duration_s, depth}}, "
+                             f"got {value!r}")
+    return Dip(**{key: check(f"{where}.{key}", value[key]) for key, check in keys.items()})
+
+
 SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
     "source": {
         "wavelength_nm": (632.8, _number(100.0, 20000.0)),
@@ -105,6 +117,7 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "divergence_deg": (0.0, _number(0.0, 10.0)),
         "drift_fraction": (0.0, _number(0.0, 0.5)),
         "drift_period_s": (3600.0, _number(0.0, open_low=True)),
+        "dip": (None, _dip),
     },
     "sample": {
         "kind": ("hemisphere", _choice(KINDS)),

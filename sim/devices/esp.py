@@ -19,13 +19,14 @@ import time
 from collections import Counter, deque
 from collections.abc import Mapping
 
-from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.motion import LimitError, MotionError, TrapezoidAxis, VirtualClock
 from sim.devices.pty_server import PtyDevice, PtyServer
 
 # General errors (ESP301 manual, Appendix A "Error messages"), the ones this emulator raises.
 GENERAL_ERRORS = {
     0: "NO ERROR DETECTED",
+    4: "EMERGENCY STOP ACTIVATED",
     6: "COMMAND DOES NOT EXIST",
     7: "PARAMETER OUT OF RANGE",
     9: "AXIS NUMBER OUT OF RANGE",
@@ -130,7 +131,9 @@ class EspEmulator(PtyDevice):
     """An ESP300/ESP301 controller with rotary stages on a virtual clock, served on a pty.
 
     axes: {axis number: table} with keys of AXIS_KEYS (degrees); faults: injected on
-    replies; seed: mixed into the fault RNG seed.
+    replies; seed: mixed into the fault RNG seed; estop: the emergency-stop input. When it
+    opens the controller stops every axis at once, switches the motors off and logs error 4
+    EMERGENCY STOP ACTIVATED; while it is open, MO is refused with that error.
     """
 
     protocol = "esp"
@@ -142,6 +145,7 @@ class EspEmulator(PtyDevice):
         faults: FaultSpec | None = None,
         seed: int = 0,
         model: str = "ESP301",
+        estop: InterlockInput | None = None,
     ):
         self.clock = clock or VirtualClock(1.0)
         tables = axes if axes is not None else {1: {}, 2: {}}
@@ -155,6 +159,7 @@ class EspEmulator(PtyDevice):
         self.version = f"{model} Version 3.0.2 (emulated)"
         self.errors: deque[tuple[int, int]] = deque(maxlen=10)
         self.received: Counter[str] = Counter()  # commands executed, by mnemonic
+        self.estop, self._estop_open = estop, False
         self._lock = threading.RLock()
         self._stopping = threading.Event()
         self._server = PtyServer(
@@ -178,6 +183,7 @@ class EspEmulator(PtyDevice):
         text = line.decode("ascii", errors="replace")
         replies: list[str] = []
         with self._lock:
+            self._watch_estop()
             for unit in text.split(";"):
                 unit = unit.strip().replace(" ", "").replace("\t", "")
                 if not unit:
@@ -190,6 +196,17 @@ class EspEmulator(PtyDevice):
                 if reply is not None:
                     replies.append(reply)
         return (",".join(replies) + "\r\n").encode("ascii") if replies else None
+
+    def _watch_estop(self) -> None:
+        """Act on the emergency-stop input: stop everything the moment it opens."""
+        if self.estop is None:
+            return
+        tripped, self._estop_open = self.estop.poll()
+        if tripped:
+            for axis in self.axes.values():
+                axis.motion.abort()
+                axis.homing, axis.motor_on = False, False
+            self._log_error(4)
 
     def _ticks(self) -> int:
         return int(self.clock.now() / SERVO_TICK_S)
@@ -278,6 +295,8 @@ class EspEmulator(PtyDevice):
         """MO: motor on; MO? 1 if on, 0 if off."""
         if query:
             return "1" if axis.motor_on else "0"
+        if self._estop_open:
+            raise _Fail(4)
         axis.motor_on = True
         return None
 

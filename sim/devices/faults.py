@@ -1,5 +1,6 @@
 """Seeded fault injection for emulated devices: latency, dropped or corrupted bytes, bad CRC,
-stalled replies, disconnects and (a PM100's) invalid readings, configured per device by a
+stalled replies, disconnects, (a PM100's) invalid readings and an interlock (an ESP's
+emergency stop, a Modbus unit's interlock input), configured per device by a
 `[sim.faults.<device>]` table.
 """
 
@@ -9,7 +10,7 @@ import dataclasses
 import math
 import random
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,11 +22,34 @@ class FaultConfigError(ValueError):
 _PROBABILITIES = ("drop_prob", "corrupt_prob", "bad_crc_prob", "stall_prob", "invalid_prob")
 #: Fault keys only some device kinds act on, with what such a device then does (each kind in
 #: sim.device_kinds names those it takes; any other kind refuses them).
-KIND_FAULTS = {"invalid_prob": "answers with an invalid reading"}
+KIND_FAULTS = {"invalid_prob": "answers with an invalid reading",
+               "interlock": "has an interlock input"}
 
 
 def _is_number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class InterlockWindow:
+    """The device's interlock input opens at start_s and closes duration_s later (seconds of
+    the bench's wall clock: since the run started)."""
+
+    start_s: float
+    duration_s: float
+
+    @classmethod
+    def from_table(cls, table: object) -> InterlockWindow:
+        """From `interlock = {start_s, duration_s}` (FaultConfigError naming what is wrong)."""
+        if not (isinstance(table, Mapping) and set(table) == {"start_s", "duration_s"}
+                and all(_is_number(v) and 0.0 <= v < math.inf for v in table.values())):
+            raise FaultConfigError(f"faults: interlock must be {{start_s, duration_s}}, numbers "
+                                   f">= 0, got {table!r}")
+        return cls(float(table["start_s"]), float(table["duration_s"]))
+
+    def holds(self, t_s: float) -> bool:
+        """True while the interlock input is open at time t_s."""
+        return self.start_s <= t_s < self.start_s + self.duration_s
 
 
 @dataclass(frozen=True)
@@ -36,7 +60,8 @@ class FaultSpec:
     dropped byte, one corrupted byte (high bit flipped: not valid ASCII, so a host can
     tell), a wrong Modbus CRC, a stalled (never sent) reply; invalid_prob: per reading, the
     meter has none and answers SCPI's not-a-number 9.91E+37 (PM100 only); disconnect_after:
-    the device hangs up after this many replies (None = never); seed: the RNG seed.
+    the device hangs up after this many replies (None = never); interlock: when the device's
+    interlock input is open (an InterlockWindow, or its table); seed: the RNG seed.
     """
 
     latency_s: float = 0.0
@@ -46,9 +71,12 @@ class FaultSpec:
     stall_prob: float = 0.0
     invalid_prob: float = 0.0
     disconnect_after: int | None = None
+    interlock: InterlockWindow | None = None
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.interlock is not None and not isinstance(self.interlock, InterlockWindow):
+            object.__setattr__(self, "interlock", InterlockWindow.from_table(self.interlock))
         if not (_is_number(self.latency_s) and 0.0 <= self.latency_s < math.inf):
             raise FaultConfigError(
                 f"[faults] latency_s: must be a number >= 0, got {self.latency_s!r}"
@@ -86,6 +114,23 @@ class FaultSpec:
             or any(getattr(self, name) > 0.0 for name in _PROBABILITIES)
             or self.disconnect_after is not None
         )
+
+
+class InterlockInput:
+    """An emulated device's interlock input, open while its InterlockWindow holds on `clock`
+    (seconds). A device polls it as it handles requests: the opening is reported once, however
+    briefly it was open between two polls (a real device latches it)."""
+
+    def __init__(self, window: InterlockWindow, clock: Callable[[], float]):
+        self.window, self.clock = window, clock
+        self._tripped = False
+
+    def poll(self) -> tuple[bool, bool]:
+        """(the input opened since the last poll, it is open now)."""
+        now = self.clock()
+        tripped = not self._tripped and now >= self.window.start_s
+        self._tripped = self._tripped or tripped
+        return tripped, self.window.holds(now)
 
 
 class FaultInjector:

@@ -11,7 +11,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from sim.devices.faults import FaultSpec
+from sim.devices.faults import FaultSpec, InterlockInput
 from sim.devices.modbus_server import EmulatedUnit
 from sim.devices.photodiode import PhotodiodeModel, PowerSource
 from sim.devices.register_map import ILLEGAL_VALUE, DeviceLayout, Field, LayoutError, Rejected
@@ -30,14 +30,16 @@ class ModbusDetectorEmulator(EmulatedUnit):
     equal the map's gain ranges); light_wavelength_nm: the light's true wavelength (None =
     a perfectly corrected meter); place: the commanded stage positions now (deg), which key
     the noise (None: the range and the visit count only); serial, device_identification: as
-    for EmulatedUnit.
+    for EmulatedUnit; interlock: the amplifier's interlock input (while it is open a reading
+    measures nothing: NaN with the map's `interlock` status bit set).
     """
 
     def __init__(self, source: PowerSource, register_map_path: str | Path,
                  faults: FaultSpec | None = None, seed: int = 0,
                  detector: Mapping | None = None, light_wavelength_nm: float | None = None, *,
                  serial: str | None = None, device_identification: bool = True,
-                 place: Callable[[], Sequence[float]] | None = None):
+                 place: Callable[[], Sequence[float]] | None = None,
+                 interlock: InterlockInput | None = None):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         if not layout.ranges_w:
@@ -58,6 +60,7 @@ class ModbusDetectorEmulator(EmulatedUnit):
         self.fault: str | None = None
         self.saturated = False
         self.range_index = len(layout.ranges_w) - 1
+        self.interlock, self.interlocked = interlock, False
 
     def check(self, field: Field, value: float) -> None:
         super().check(field, value)
@@ -66,11 +69,14 @@ class ModbusDetectorEmulator(EmulatedUnit):
 
     def refresh(self, fields: list[Field]) -> None:
         names = {f.name for f in fields}
+        if self.interlock is not None:
+            self.interlocked = self.interlock.poll()[1]
         if "reading" in names:
-            self.registers.set("reading", self._measure())
-        bits = {"saturated": self.saturated, "fault": self.fault is not None}
+            self.registers.set("reading", math.nan if self.interlocked else self._measure())
+        bits = {"saturated": self.saturated, "fault": self.fault is not None,
+                "interlock": self.interlocked}
         self.registers.set("status", sum(1 << self.layout.bits[b] for b, on in bits.items()
-                                         if on))
+                                         if on and b in self.layout.bits))
         self.registers.set("range_in_use", self.range_index)
         self.registers.set("fault_code", self.layout.faults[self.fault][0] if self.fault else 0)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sim.devices.faults import FaultSpec
+from sim.devices.faults import FaultSpec, InterlockInput
 from sim.devices.modbus_server import EmulatedUnit
 from sim.devices.motion import LimitError, TrapezoidAxis, VirtualClock
 from sim.devices.register_map import DeviceLayout, Field
@@ -31,12 +31,15 @@ class _Refused(Exception):
 
 class ModbusStageEmulator(EmulatedUnit):
     """One stepper drive unit: a TrapezoidAxis behind the map's registers (degrees); serial
-    and device_identification as for EmulatedUnit."""
+    and device_identification as for EmulatedUnit; interlock: the drive's interlock input
+    (when it opens the drive stops at once; while it is open the map's `interlock` status bit
+    is set and start and home are ignored)."""
 
     def __init__(self, clock: VirtualClock, register_map_path: str | Path,
                  limits_deg: tuple[float, float], speed_deg_s: float, accel_deg_s2: float,
                  faults: FaultSpec | None = None, position_deg: float = 0.0, *,
-                 serial: str | None = None, device_identification: bool = True):
+                 serial: str | None = None, device_identification: bool = True,
+                 interlock: InterlockInput | None = None):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         super().__init__(layout, faults, serial=serial,
@@ -49,20 +52,30 @@ class ModbusStageEmulator(EmulatedUnit):
             self.registers.set(name, value)
         self.fault: str | None = None
         self.limit_hit = False
+        self.interlock, self.interlocked = interlock, False
 
     def axis_position_deg(self) -> float:
         """Actual position now, degrees (what a bench model looks at)."""
         return self.axis.position()
 
+    def _watch_interlock(self) -> None:
+        if self.interlock is None:
+            return
+        tripped, self.interlocked = self.interlock.poll()
+        if tripped:
+            self.axis.abort()
+
     def refresh(self, fields: list[Field]) -> None:
+        self._watch_interlock()
         names = {f.name for f in fields}
         # status before position: the clock runs on between the two, and a "not moving" read
         # first guarantees the position read next is the final one
         if "status" in names:
             flags = {"moving": self.axis.is_moving(), "homed": self.axis.homed,
-                     "limit": self.limit_hit, "fault": self.fault is not None}
+                     "limit": self.limit_hit, "fault": self.fault is not None,
+                     "interlock": self.interlocked}
             self.registers.set("status", sum(1 << self.layout.bits[b] for b, on in flags.items()
-                                             if on))
+                                             if on and b in self.layout.bits))
         if "actual_position" in names:
             self.registers.set("actual_position", self.axis.position())
         if "fault_code" in names:
@@ -72,7 +85,10 @@ class ModbusStageEmulator(EmulatedUnit):
     def act(self, fields: list[Field]) -> None:
         if "command" not in {f.name for f in fields}:
             return
+        self._watch_interlock()
         command = self.take_command()
+        if command in ("start", "home") and self.interlocked:
+            return
         if command == "stop":
             self.axis.stop()
         elif command == "abort":

@@ -282,6 +282,14 @@ class PhotodiodeModel:
         autorange) before this meter existed: a resumed run's stored reading."""
         self._visits[self._reading_key(place, range_w)] += 1
 
+    def forget(self, place: Sequence[float], range_w: float | None) -> None:
+        """Uncount the last measurement at place and range setting range_w: the client threw
+        it away (a run stores the reading again), so later readings there keep the noise an
+        undisturbed run gives them."""
+        key = self._reading_key(place, range_w)
+        if self._visits[key] > 0:
+            self._visits[key] -= 1
+
     def _generator(self, place: Sequence[float], range_w: float | None) -> np.random.Generator:
         """The noise generator of the next measurement at place and range setting range_w."""
         key = self._reading_key(place, range_w)

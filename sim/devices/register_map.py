@@ -3,7 +3,8 @@
 Written apart from drivers.register_map on purpose (a driver bug cannot hide behind shared
 code). `DeviceLayout` parses the TOML; `RegisterFile` holds a unit's 16-bit words per
 table and answers reads and writes the way a device does: a Modbus exception code for an
-address outside the map or a write to a read-only register. The map's `[identity]` strings
+address outside the map or a write to a read-only register. A map's optional `interlock` status
+bit is the one an emulated unit sets while its interlock fault holds. The map's `[identity]` strings
 are read-only registers of ASCII, two characters each (first in the high byte), NUL padded.
 """
 
@@ -97,6 +98,10 @@ class DeviceLayout:
             identity = {n: _text_field(n, spec) for n, spec in doc.get("identity", {}).items()}
         except (AttributeError, KeyError, TypeError, ValueError) as exc:
             raise LayoutError(f"{src}: bad register map entry: {exc!r}") from None
+        if "interlock" in bits and (not 0 <= bits["interlock"] <= 15 or list(
+                bits.values()).count(bits["interlock"]) > 1):
+            raise LayoutError(f"{src}: status bit interlock {bits['interlock']} is not a bit of "
+                              f"its own in the 16-bit status register")
         return cls(src, order == "little", fields, commands, bits, faults, ranges, identity,
                    str(doc.get("name", "")), str(doc.get("vendor", "")))
 

@@ -17,7 +17,10 @@ from pathlib import Path
 
 import tomllib
 
-from gonio.engine import PauseControl
+from gonio.engine import Engine, Outcome
+from gonio.events import EventBus
+from gonio.recorder import RunRecorder
+from gonio.run_control import TERMINAL, PauseControl
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
@@ -119,6 +122,12 @@ def run_dir_of(proc: subprocess.CompletedProcess) -> Path:
     return Path(lines[-1])
 
 
+def scan_messages(stderr: str) -> list[str]:
+    """A scan's stderr lines, less the control channel's token line (gonio.control)."""
+    return [ln for ln in stderr.splitlines()
+            if ln.strip() and not ln.startswith("gonio: control token ")]
+
+
 def one_line_error(stderr: str) -> str:
     """Assert stderr is exactly one `gonio VERB: error: ...` line without a traceback."""
     lines = [ln for ln in stderr.splitlines() if ln.strip()]
@@ -137,6 +146,12 @@ def write_plan(folder: Path, plan: dict, config: dict | None = None, name: str =
     return write_toml(folder / f"{name}.toml", plan)
 
 
+def run_engine(inst, plan, readings, writer, control: PauseControl | None = None) -> Outcome:
+    """Run an engine over the readings a writer has not stored, into that writer."""
+    return Engine(inst, plan, readings, writer.todo(len(readings)),
+                  EventBus([RunRecorder(writer)]), stored=writer.stored, control=control).run()
+
+
 class AbortAfter(PauseControl):
     """A Ctrl-C answered with "abort" once `points` readings are taken: leaves a run to resume."""
 
@@ -144,10 +159,11 @@ class AbortAfter(PauseControl):
         super().__init__(prompt=lambda: False, notify=lambda _message: None)
         self.left = points
 
-    def checkpoint(self, on_pause) -> None:
-        self.pause_requested = self.left <= 0
+    def checkpoint(self, on_pause, on_resume) -> None:
+        if self.left <= 0:
+            self.request_pause(TERMINAL)
         self.left -= 1
-        super().checkpoint(on_pause)
+        super().checkpoint(on_pause, on_resume)
 
 
 @contextmanager

@@ -13,7 +13,15 @@ import sys
 from pathlib import Path
 
 import pytest
-from gonio_testkit import ROOT, fast_config, gonio_cli, one_line_error, run_dir_of, write_plan
+from gonio_testkit import (
+    ROOT,
+    fast_config,
+    gonio_cli,
+    one_line_error,
+    run_dir_of,
+    scan_messages,
+    write_plan,
+)
 
 from gonio.store import open_run
 
@@ -38,7 +46,7 @@ def limited_scan(plan: Path, out: Path, max_file_bytes: int) -> subprocess.Compl
 def refused_then_resumed(proc: subprocess.CompletedProcess, why: str) -> Path:
     """The scan ended on one stderr line naming `why` and printed its run directory; resumed,
     it completes and `gonio check` finds it clean. Returns the run directory."""
-    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    lines = scan_messages(proc.stderr)
     assert proc.returncode == 1 and len(lines) == 1 and why in lines[0], proc.stderr
     assert lines[0].startswith("gonio scan: run failed after ")
     run_dir = run_dir_of(proc)

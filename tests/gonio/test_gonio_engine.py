@@ -7,12 +7,12 @@ import threading
 import time
 
 import pytest
-from gonio_testkit import fast_config
+from gonio_testkit import fast_config, run_engine
 
 from gonio.config import parse_config
-from gonio.engine import Engine, PauseControl
 from gonio.instrument import build_instrument
 from gonio.plan import build_schedule, parse_plan
+from gonio.run_control import PauseControl
 from gonio.simulate import simulation
 from gonio.store import RunWriter, open_run
 
@@ -28,9 +28,8 @@ def bench(tmp_path):
             plan = parse_plan(raw_plan)
             sched = build_schedule(plan, cfg)
             writer = RunWriter.create(tmp_path, plan.name, None, None, raw_plan, cfg.raw, {})
-            writer.start_session()
             try:
-                return Engine(inst, plan, sched.readings, writer, control=control).run(), writer
+                return run_engine(inst, plan, sched.readings, writer, control), writer
             finally:
                 writer.close()
         yield sim.bench.emulators["esp"], run

@@ -12,10 +12,9 @@ import time
 
 import numpy as np
 import pytest
-from gonio_testkit import fast_config
+from gonio_testkit import fast_config, run_engine
 
 from gonio.config import parse_config
-from gonio.engine import Engine
 from gonio.instrument import build_instrument
 from gonio.plan import build_schedule, parse_plan
 from gonio.simulate import simulation
@@ -75,9 +74,8 @@ def test_late_replies_never_answer_a_later_query(tmp_path, instrument, late):
             emulator = sim.bench.emulators[dev]
             (emulator.server if hasattr(emulator, "server") else emulator).faults = injector
         writer = RunWriter.create(tmp_path, plan.name, None, None, PLAN, cfg.raw, {})
-        writer.start_session()
         try:
-            outcome = Engine(inst, plan, sched.readings, writer).run()
+            outcome = run_engine(inst, plan, sched.readings, writer)
         finally:
             writer.close()
     assert outcome.status == "completed", outcome.reason

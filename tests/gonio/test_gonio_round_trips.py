@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from gonio_testkit import fast_config
+from gonio_testkit import fast_config, run_engine
 
 from drivers.base import ProtocolError
 from drivers.esp import EspController
 from gonio.config import parse_config
-from gonio.engine import Engine
 from gonio.instrument import build_instrument
 from gonio.plan import MOTION_ROLES, build_schedule, parse_plan
 from gonio.simulate import simulation
@@ -38,10 +37,9 @@ def test_round_trips_per_point(tmp_path):
     sched = build_schedule(plan, cfg)
     with simulation(cfg) as sim, build_instrument(sim.config, sim.time_scale) as inst:
         writer = RunWriter.create(tmp_path, plan.name, None, None, PLAN, cfg.raw, {})
-        writer.start_session()
         before = sim.bench.request_counts()
         try:
-            outcome = Engine(inst, plan, sched.readings, writer).run()
+            outcome = run_engine(inst, plan, sched.readings, writer)
         finally:
             writer.close()
         after = sim.bench.request_counts()

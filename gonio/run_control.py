@@ -1,0 +1,242 @@
+"""Who may pause, resume and abort a run, and the engine's state they act on.
+
+The terminal (SIGINT, SIGTERM, SIGHUP and the prompts on stderr/stdin) and the control channel
+(gonio.control, another thread) ask; the engine's thread acts, before the next reading. The
+first Ctrl-C asks for a pause, answered at the terminal prompt; a Ctrl-C while a pause is asked
+for or in effect aborts at once; SIGTERM and SIGHUP raise Terminated. A pause asked for on the
+channel waits on the channel (resume or abort there, or Ctrl-C: abort), never on the terminal.
+An abort from the channel interrupts the engine's thread as a second Ctrl-C does.
+"""
+
+from __future__ import annotations
+
+import _thread
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from gonio.errors import Terminated
+from gonio.events import State
+
+TERMINATING = (signal.SIGTERM, signal.SIGHUP)
+HANDLED = (signal.SIGINT, *TERMINATING)
+TERMINAL, CHANNEL = "terminal", "channel"  # where a pause was asked for
+POLL_S = 0.05  # how often a wait looks at the requests
+
+
+class Aborted(Exception):
+    """The user aborted the run."""
+
+
+def _ask(question: str, yes: tuple[str, ...]) -> bool:
+    """Ask on stderr, read stdin: True for an answer in `yes` (or empty), False for abort or
+    end of input."""
+    while True:
+        sys.stderr.write(f"{question} ")
+        sys.stderr.flush()
+        line = sys.stdin.readline()
+        if not line:
+            return False
+        answer = line.strip().lower()
+        if answer in (*yes, ""):
+            return True
+        if answer in ("a", "abort"):
+            return False
+
+
+def ask_resume() -> bool:
+    """Default pause prompt: True to resume, False to abort (end of input: abort)."""
+    return _ask("paused: [r]esume or [a]bort?", ("r", "resume"))
+
+
+def ask_continue(message: str) -> bool:
+    """Default operator prompt: True to continue, False to abort (end of input: abort)."""
+    return _ask(f"{message}: [c]ontinue or [a]bort?", ("c", "continue"))
+
+
+def _notify(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+class PauseControl:
+    """The run's state and the requests that change it; also the run's signal handling.
+    Entered more than once (the runner before it makes the run directory, the engine), the
+    outermost entry counts."""
+
+    def __init__(self, prompt: Callable[[], bool] = ask_resume,
+                 notify: Callable[[str], Any] = _notify,
+                 confirm: Callable[[str], bool] = ask_continue):
+        self.prompt, self.notify, self.confirm = prompt, notify, confirm
+        self._lock = threading.RLock()  # a signal handler may run while the engine holds it
+        self._state = State.STARTING
+        self._pause_source: str | None = None  # asked for, or in effect
+        self._pending: str | None = None  # asked for while starting or suspended
+        self._answer: str | None = None  # the channel's answer to its pause: resume | abort
+        self.abort_reason: str | None = None
+        self._previous: dict[int, Any] = {}
+        self._depth = 0
+        self._engine_thread: int | None = None
+
+    # -- the state --------------------------------------------------------------
+    @property
+    def state(self) -> State:
+        """The engine's state now."""
+        with self._lock:
+            return self._state
+
+    def enter(self, state: State) -> None:
+        """The engine's thread moves to `state` (a pause asked for while starting or
+        suspended takes effect on entering RUNNING)."""
+        with self._lock:
+            if state is State.RUNNING and self._pending:
+                self._state, self._pause_source, self._pending = State.PAUSING, self._pending, None
+            else:
+                self._state = state
+
+    # -- requests (any thread) --------------------------------------------------
+    def request_pause(self, source: str = CHANNEL) -> State:
+        """Ask for a pause before the next reading; returns the state it leaves."""
+        with self._lock:
+            if self._state is State.RUNNING:
+                self._state, self._pause_source = State.PAUSING, source
+            elif self._state in (State.STARTING, State.SUSPENDED) and not self._pending:
+                self._pending = source
+            return self._state
+
+    def request_resume(self) -> State:
+        """Resume a pause the channel asked for; ValueError (one line) if there is none."""
+        with self._lock:
+            if self._state is State.PAUSING and self._pause_source == CHANNEL:
+                self._state, self._pause_source = State.RUNNING, None
+            elif self._state is State.PAUSED and self._pause_source == CHANNEL:
+                self._answer, self._state = "resume", State.RUNNING
+            elif self._state is State.PAUSED:
+                raise ValueError("paused at the terminal prompt: answer it there")
+            else:
+                raise ValueError(f"not paused ({self._state.value})")
+            return self._state
+
+    def request_abort(self, reason: str) -> State:
+        """End the run (axes stopped) as a Ctrl-C abort does, with `reason`."""
+        with self._lock:
+            if self._state.final or self.abort_reason is not None:
+                return self._state
+            self.abort_reason, self._answer = reason, "abort"
+            interrupt = self._state is not State.PAUSED or self._pause_source != CHANNEL
+            self._state = State.STOPPING
+        if interrupt and self._previous and self._engine_thread == threading.main_thread().ident:
+            _thread.interrupt_main(signal.SIGINT)  # as a second Ctrl-C: at once, mid-move too
+        return State.STOPPING
+
+    # -- signals ----------------------------------------------------------------
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        with self._lock:
+            aborting = (self.abort_reason is not None or self._pending is not None
+                        or self._state in (State.PAUSING, State.PAUSED))
+        if aborting:
+            self.hold()
+            raise KeyboardInterrupt
+        self.request_pause(TERMINAL)
+        self.notify("pausing after this point (Ctrl-C again to abort)")
+
+    def _on_terminate(self, signum: int, frame: Any) -> None:
+        self.hold()
+        raise Terminated(signum)
+
+    def hold(self) -> None:
+        """Ignore these signals from now on (until the outermost exit): the run is ending, and
+        stopping the axes and recording why must not be interrupted."""
+        if self._previous:
+            for sig in HANDLED:
+                signal.signal(sig, signal.SIG_IGN)
+
+    def __enter__(self) -> PauseControl:
+        self._depth += 1
+        if self._depth == 1:
+            self._engine_thread = threading.get_ident()
+            if self._engine_thread == threading.main_thread().ident:
+                self._previous = {sig: signal.getsignal(sig) or signal.SIG_DFL for sig in HANDLED}
+                for sig in HANDLED:  # one ignored on entry (nohup, a background job) stays so
+                    if self._previous[sig] is not signal.SIG_IGN:
+                        signal.signal(sig, self._on_sigint if sig == signal.SIGINT
+                                      else self._on_terminate)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._depth -= 1
+        if self._depth == 0:
+            for sig, previous in self._previous.items():
+                signal.signal(sig, previous)
+            self._previous = {}
+
+    # -- the engine's side ------------------------------------------------------
+    def check_abort(self) -> None:
+        """Raise Aborted if the channel asked for an abort."""
+        if self.abort_reason is not None:
+            raise Aborted(self.abort_reason)
+
+    def checkpoint(self, on_pause: Callable[[], None], on_resume: Callable[[], None]) -> None:
+        """Between points: if a pause was asked for, pause (on_pause), wait for the answer
+        where it was asked, then go on (on_resume) or raise Aborted."""
+        self.check_abort()
+        with self._lock:
+            if self._state is not State.PAUSING:
+                return
+            self._state, source = State.PAUSED, self._pause_source
+        on_pause()
+        resume = self._answer_on_channel() if source == CHANNEL else self._answer_on_terminal()
+        if not resume:
+            raise Aborted(self.abort_reason or "aborted by the user")
+        self.enter(State.RUNNING)
+        with self._lock:
+            self._pause_source = None
+        on_resume()
+
+    def pause_reason(self) -> str:
+        """Who asked for the pause in effect, as meta.json records it."""
+        return ("paused from the control channel" if self._pause_source == CHANNEL
+                else "paused by the user")
+
+    def _answer_on_terminal(self) -> bool:
+        try:
+            return self.prompt()
+        except (KeyboardInterrupt, EOFError):
+            return False
+
+    def _answer_on_channel(self) -> bool:
+        """Wait for the channel's resume or abort (a Ctrl-C meanwhile aborts)."""
+        try:
+            while True:
+                with self._lock:
+                    answer, self._answer = self._answer, None
+                if answer is not None:
+                    return answer == "resume"
+                threading.Event().wait(POLL_S)
+        except KeyboardInterrupt:
+            return False
+
+    def wait(self, seconds: float) -> None:
+        """Sleep `seconds` (a suspension's wait) unless the channel aborts (Aborted)."""
+        done = threading.Event()
+        remaining = seconds
+        while remaining > 0:
+            self.check_abort()
+            done.wait(min(POLL_S, remaining))
+            remaining -= POLL_S
+        self.check_abort()
+
+    def operator_step(self, message: str, on_pause: Callable[[str], None],
+                      on_resume: Callable[[], None]) -> None:
+        """Wait for the operator to do what `message` asks by hand; raise Aborted to abort."""
+        self.enter(State.PAUSED)
+        on_pause(message)
+        try:
+            go_on = self.confirm(message)
+        except (KeyboardInterrupt, EOFError):
+            go_on = False
+        if not go_on:
+            raise Aborted(self.abort_reason or f"aborted by the user at: {message}")
+        self.enter(State.RUNNING)
+        on_resume()
