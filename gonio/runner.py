@@ -27,6 +27,7 @@ from gonio.progress import Progress
 from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
 
 DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
+Started = Callable[[Path, str | None], None]  # the run directory, the control token
 
 
 @dataclass
@@ -87,11 +88,14 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
          control: PauseControl | None, t0_epoch: float, done: Sequence[int] = (),
          check: DetectorCheck | None = None,
-         session: dict[str, Any] | None = None) -> ScanResult:
+         session: dict[str, Any] | None = None,
+         started: Started | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
     of the schedule (the readings of indices `done` are stored; the run started at t0_epoch).
-    session: more for meta.json's record of this session. The run's signal handling
+    session: more for meta.json's record of this session; started: told the run directory
+    once it exists, and the control channel's token (None: no channel), before the engine
+    starts (`gonio scan --watch`). The run's signal handling
     (`control`) starts before the run directory is made: a signal in the first milliseconds
     of a run ends it as one at any other moment does."""
     control = control or PauseControl()
@@ -102,6 +106,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
         with control:
             writer = make_writer()
             try:
+                if started is not None:
+                    started(writer.path, None)
                 swapped = identity_changes(writer.meta["sessions"], inst.devices)
                 inst.last_positions = dev.positions
                 bar = Progress(len(sched), writer.stored, plan.name,
@@ -126,7 +132,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
              sample_id: str | None = None, check: DetectorCheck | None = None,
-             warn: Callable[[str], None] | None = None) -> ScanResult:
+             warn: Callable[[str], None] | None = None,
+             started: Started | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
@@ -136,7 +143,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     check: called with the schedule's readings and the open detector before the run directory
     exists and before any motion (the scan command checks the calibration's ranges there);
     warn: told, once the devices are open and checked and before any motion, what the run
-    will lack that reduction needs (undescribed).
+    will lack that reduction needs (undescribed); started: told the run directory once it
+    exists and the control channel's token (None: none), before any reading.
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -164,7 +172,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
-                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn))
+                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn),
+                started=started)
 
 
 def _then_warn(check: DetectorCheck | None, texts: list[str],
@@ -204,13 +213,15 @@ def with_sample_id(plan: Plan, sample_id: str) -> Plan:
 def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                 sim: list[str] | bool | None = None, progress: bool | None = None,
                 control: PauseControl | None = None,
-                plan_path: str | Path | None = None) -> ScanResult:
+                plan_path: str | Path | None = None,
+                started: Started | None = None) -> ScanResult:
     """Continue a run after its last stored reading (first measuring any a repair dropped),
     with the plan and config it started with, both checked against their digests.
 
     instrument: a config to use instead of the stored one, differing from it in device
     endpoints only (recorded in the session). sim: None = as the run was started.
     plan_path: a plan file that must say what the stored plan says (`same_plan`).
+    started: as new_scan's.
     """
     run = open_run(run_dir)
     lines = run.lines()
@@ -239,7 +250,7 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
         return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
                 run.meta["t0_epoch"], done=[row["index"] for row in lines.rows],
-                session=session)
+                session=session, started=started)
 
 
 _MISSING = object()

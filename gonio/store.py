@@ -228,6 +228,11 @@ class LineChecker:
             new.append(row)
         return new
 
+    def lines(self, keep_bytes: int, torn_bytes: int) -> Lines:
+        """What the lines fed so far hold (`keep_bytes` of them, `torn_bytes` after)."""
+        return Lines([self.rows[i] for i in sorted(self.rows)], self.damaged, keep_bytes,
+                     torn_bytes, self.unchecked, self.count)
+
 
 def scan_lines(data: bytes, checked: bool, refill: Collection[int] = ()) -> Lines:
     """Check every complete line of readings.jsonl (JSON object, checksum if `checked` or
@@ -236,8 +241,7 @@ def scan_lines(data: bytes, checked: bool, refill: Collection[int] = ()) -> Line
     keep = data.rfind(b"\n") + 1
     checker = LineChecker(checked, refill)
     checker.feed(data[:keep])
-    return Lines([checker.rows[i] for i in sorted(checker.rows)], checker.damaged, keep,
-                 len(data) - keep, checker.unchecked, checker.count)
+    return checker.lines(keep, len(data) - keep)
 
 
 def describe_indices(indices: list[int]) -> str:
