@@ -16,9 +16,11 @@ from typing import Any
 import numpy as np
 
 from calibration.pipeline import reduce_stored
-from calibration.plot import in_plane, panel_limits, signed_theta_o_deg
+from calibration.plot import in_plane, panel_limits, signed_theta_o_deg, x_range
 from calibration.reduced import ReducedData
+from gonio.config import parse_config
 from gonio.errors import GonioError
+from gonio.plan import build_schedule, parse_plan
 from gonio.store import Run, readings_array
 
 MIN_INTERVAL_S = 1.0  # between two reductions of a growing run
@@ -64,9 +66,27 @@ def points_of(data: ReducedData, by_index: dict[int, dict[str, Any]]
     return out
 
 
-def panels_of(points: dict[int, dict[str, Any]]) -> list[dict[str, Any]]:
+def planned_angles(run: Run) -> dict[str, np.ndarray]:
+    """The plan's in-plane outgoing angles per panel, from the run's schedule (the plan's
+    angles have the figures' sign: forward > 0); {} if the schedule cannot be built."""
+    try:
+        schedule = build_schedule(parse_plan(run.plan, run.path / "plan.toml"),
+                                  parse_config(run.config, run.path / "instrument.toml"))
+    except GonioError:
+        return {}
+    rows = schedule.readings[schedule.readings["kind"] == "sample"]
+    rows = rows[np.abs(np.sin(np.radians(rows["phi_o_deg"]))) < 1e-9]
+    keys = [panel_key(round(float(t), 1), str(side))
+            for t, side in zip(rows["theta_i_deg"], rows["side"], strict=True)]
+    return {key: rows["theta_o_deg"][[k == key for k in keys]] for key in set(keys)}
+
+
+def panels_of(points: dict[int, dict[str, Any]], planned: dict[str, np.ndarray]
+              ) -> list[dict[str, Any]]:
     """One figure panel per (incidence, side) with points: reflection first, incidences
-    rising, each with its axis ranges (calibration.plot.panel_limits)."""
+    rising, each with its axis ranges (calibration.plot.panel_limits, as `gonio plot` draws
+    them; while a panel still lacks planned points, its outgoing angles span the planned
+    ones, so the axis stays put as they come)."""
     keys = sorted({p["key"] for p in points.values()},
                   key=lambda k: (SIDES.index(k.split("|")[1]), float(k.split("|")[0])))
     panels = []
@@ -76,6 +96,8 @@ def panels_of(points: dict[int, dict[str, Any]]) -> list[dict[str, Any]]:
         f = np.array([np.nan if p["f"] is None else p["f"] for p in mine])
         good = np.array([p["valid"] for p in mine]) & (np.nan_to_num(f) > 0)
         x_lim, y_lim = panel_limits(x, f, good)
+        if len(mine) < len(planned.get(key, ())):
+            x_lim = x_range(planned[key])
         theta_i, side = key.split("|")
         panels.append({"key": key, "theta_i_deg": float(theta_i), "side": side,
                        "x": list(x_lim), "y": None if y_lim is None else list(y_lim),
@@ -99,6 +121,7 @@ class LiveReduction:
         self._points: dict[int, dict[str, Any]] = {}
         self._changed: dict[int, int] = {}
         self._out_of_plane = 0
+        self._planned = planned_angles(run)
 
     def update(self, rows: list[dict[str, Any]]) -> None:
         """Reduce `rows` (the readings stored so far) unless their number is the one last
@@ -141,7 +164,8 @@ class LiveReduction:
             meta = self.meta or {}
             return {"state": self.state, "reason": self.reason, "version": self.version,
                     "replace": replace, "readings": max(self._count, 0), "points": points,
-                    "panels": panels_of(self._points), "out_of_plane": self._out_of_plane,
+                    "panels": panels_of(self._points, self._planned),
+                    "out_of_plane": self._out_of_plane,
                     "noise_model": meta.get("noise_model"),
                     "aperture_from": meta.get("aperture_from")}
 

@@ -19,11 +19,12 @@ import pytest
 from gonio_testkit import ROOT, fast_config, gonio_cli, one_line_error, write_toml
 
 from calibration.pipeline import reduce_run
+from calibration.plot import x_range
 from gonio.runner import new_scan
 from gonio.store import READINGS, RunWriter, encode_line, open_run
 from gonio_watch.follow import RunFollower
 from gonio_watch.model import NO_MODEL, ModelCurves
-from gonio_watch.reduction import LiveReduction
+from gonio_watch.reduction import LiveReduction, panels_of
 from gonio_watch.status import Live, combined_status, eta_s, status_of
 from gonio_watch.viewer import serving
 
@@ -176,6 +177,17 @@ def test_reduction_waits_for_dark_and_beam_then_sends_only_what_changed(source):
     assert [by_index[i]["f"] for i in full.meta["index"]] == full.bsdf.tolist()
     panels = {p["key"]: p["points"] for p in out["panels"]}
     assert panels == {"0|reflection": 8, "30|reflection": 7, "0|transmission": 5}
+
+
+def test_a_panel_spans_its_planned_angles_until_its_points_are_in():
+    points = {i: {"key": "30|reflection", "x": x, "f": 1.0 + i, "valid": True}
+              for i, x in enumerate((-70.0, -50.0))}
+    wide = {"30|reflection": np.array([-70.0, -50.0, -30.0, 10.0, 50.0])}
+    (panel,) = panels_of(points, wide)
+    assert panel["x"] == [-90.0, 90.0] and panel["points"] == 2
+    (panel,) = panels_of(points, {"30|reflection": np.array([-70.0, -50.0])})
+    assert panel["x"] == list(x_range(np.array([-70.0, -50.0])))  # as gonio plot zooms
+    assert panel["x"] != [-90.0, 90.0]
 
 
 def test_reduction_replaces_what_no_longer_stands(source):
