@@ -9,8 +9,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 FORBIDDEN = {
-    "drivers": {"sim", "gonio", "calibration"},
-    "sim": {"drivers", "gonio", "calibration"},
+    "drivers": {"sim", "gonio", "calibration", "gonio_watch"},
+    "sim": {"drivers", "gonio", "calibration", "gonio_watch"},
+    "calibration": {"gonio_watch"},
+    "gonio_watch": {"drivers"},
 }
 
 
@@ -47,6 +49,17 @@ def test_gonio_imports_sim_only_where_documented():
     assert users <= allowed
 
 
+def test_gonio_reaches_the_live_view_only_through_its_verb():
+    # gonio_watch sits above gonio and calibration; `gonio watch` (and `gonio scan --watch`,
+    # which starts it in a process of its own) is the one way in.
+    users = {
+        str(path.relative_to(ROOT))
+        for path in (ROOT / "gonio").rglob("*.py")
+        if "gonio_watch" in imported_packages(path)
+    }
+    assert users <= {"gonio/commands/watch.py"}
+
+
 def test_only_the_record_hands_a_runs_sim_table_to_reduction():
     # The emulator's truth ([sim]) reaches reduction, fits, plots and exports only through
     # gonio.record.emulator_config, which withholds it from any run with a real device;
@@ -55,7 +68,7 @@ def test_only_the_record_hands_a_runs_sim_table_to_reduction():
     reads = re.compile(r"""(config|raw)\s*(\.get\(\s*|\[\s*)["']sim["']""")
     readers = {
         str(path.relative_to(ROOT))
-        for package in ("gonio", "calibration")
+        for package in ("gonio", "calibration", "gonio_watch")
         for path in (ROOT / package).rglob("*.py")
         if reads.search(path.read_text())
     }

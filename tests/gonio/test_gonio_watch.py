@@ -109,7 +109,8 @@ def test_follower_starts_again_when_the_file_is_replaced(source, tmp_path):
 
 def test_status_counts_positions_elapsed_and_eta(source):
     rows = source.rows()
-    meta = {**source.meta, "status": "running", "sessions": [
+    held = {"reason": "beam below 50 %", "index": 9, "t_s": 3.5, "resumed_t_s": None}
+    meta = {**source.meta, "status": "running", "suspensions": [held], "sessions": [
         {**source.meta["sessions"][0], "stop_utc": None}]}
     start = meta["sessions"][0]["start_utc"]
     from datetime import datetime
@@ -122,7 +123,7 @@ def test_status_counts_positions_elapsed_and_eta(source):
     assert out["elapsed_s"] == pytest.approx(12.5, abs=0.01)
     steps = np.diff([r["t_s"] for r in rows[:10]])
     assert out["eta_s"] == pytest.approx((len(rows) - 10) * np.median(steps))
-    assert out["control"]["enabled"]
+    assert out["control"]["enabled"] and out["suspensions"] == [held]
     assert eta_s(meta, [], 20) == (meta["estimate_s"], "the plan's estimate")
     assert eta_s(meta, rows, len(rows)) == (0.0, "all readings stored")
 

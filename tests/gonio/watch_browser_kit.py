@@ -85,10 +85,9 @@ class Scan:
 
 
 @contextmanager
-def scanning(plan: Path, out: Path, *options: str, timeout: float = 60.0) -> Iterator[Scan]:
+def scanning(plan: Path, out: Path, *options: str, timeout: float = 120.0) -> Iterator[Scan]:
     """`gonio scan PLAN --sim --out OUT OPTIONS` in its own process, yielded once its run
-    directory exists (and its token line is in, where the scan prints one); stopped by
-    SIGTERM if still running at the end."""
+    directory exists; stopped by SIGTERM if still running at the end."""
     proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "scan", str(plan), "--sim",
                              "--out", str(out), "--no-plot", "--no-progress", *options],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -104,7 +103,6 @@ def scanning(plan: Path, out: Path, *options: str, timeout: float = 60.0) -> Ite
             elif proc.poll() is not None or time.monotonic() > deadline:
                 raise AssertionError(f"no run directory; stderr: {''.join(scan.stderr)}")
             time.sleep(0.05)
-        time.sleep(0.3)  # the token line follows the run directory
         yield scan
     finally:
         if proc.poll() is None:
