@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import math
 import socket
 import threading
 import time
@@ -202,7 +203,7 @@ class Handler(BaseHTTPRequestHandler):
             self.wfile.write(body)
 
     def _json(self, status: HTTPStatus, data: Any) -> None:
-        self._send(status, json.dumps(data, allow_nan=False).encode(),
+        self._send(status, json.dumps(jsonable(data), allow_nan=False).encode(),
                    "application/json; charset=utf-8")
 
     def _refuse(self, status: HTTPStatus, why: str) -> None:
@@ -221,20 +222,22 @@ class Handler(BaseHTTPRequestHandler):
         url = urlsplit(self.path)
         query = parse_qs(url.query)
         app = self.server.app
-        try:
-            if url.path in self.server.assets:
-                self._send(HTTPStatus.OK, *self.server.assets[url.path])
-            elif url.path == "/status.json":
-                self._json(HTTPStatus.OK, app.status())
-            elif url.path == "/data.json":
-                self._json(HTTPStatus.OK, app.data(_int(query, "since"), _int(query, "version")))
-            elif url.path == "/model.json":
-                keys = [k for k in query.get("keys", [""])[0].split(",") if k]
-                self._json(HTTPStatus.OK, app.model_curves(keys))
-            else:
-                self._refuse(HTTPStatus.NOT_FOUND, "not found")
-        except ValueError as exc:
-            self._refuse(HTTPStatus.BAD_REQUEST, str(exc))
+        if url.path in self.server.assets:
+            self._send(HTTPStatus.OK, *self.server.assets[url.path])
+        elif url.path == "/status.json":
+            self._json(HTTPStatus.OK, app.status())
+        elif url.path == "/data.json":
+            try:
+                since, version = _int(query, "since"), _int(query, "version")
+            except ValueError as exc:
+                self._refuse(HTTPStatus.BAD_REQUEST, str(exc))
+                return
+            self._json(HTTPStatus.OK, app.data(since, version))
+        elif url.path == "/model.json":
+            keys = [k for k in query.get("keys", [""])[0].split(",") if k]
+            self._json(HTTPStatus.OK, app.model_curves(keys))
+        else:
+            self._refuse(HTTPStatus.NOT_FOUND, "not found")
 
     do_HEAD = do_GET
 
@@ -254,6 +257,18 @@ class Handler(BaseHTTPRequestHandler):
             self._refuse(HTTPStatus.NOT_FOUND, "not found")
         else:
             self._json(*self.server.app.command(action))
+
+
+def jsonable(data: Any) -> Any:
+    """Data with every float that is not finite as None (a stored reading may hold an
+    infinity; the browser's JSON has neither it nor NaN)."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: jsonable(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [jsonable(v) for v in data]
+    return data
 
 
 def _int(query: dict[str, list[str]], name: str) -> int:

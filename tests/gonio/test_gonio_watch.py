@@ -25,6 +25,7 @@ from gonio.store import READINGS, RunWriter, encode_line, open_run
 from gonio_watch.follow import RunFollower
 from gonio_watch.model import NO_MODEL, ModelCurves
 from gonio_watch.reduction import LiveReduction, panels_of
+from gonio_watch.server import jsonable
 from gonio_watch.status import Live, combined_status, eta_s, status_of
 from gonio_watch.viewer import serving
 
@@ -283,6 +284,11 @@ def test_server_serves_the_page_and_json_and_nothing_else(source):
         assert status == 403 and "this page" in doc["error"]
         assert get(server, "/control/explode", method="POST", body="{}",
                    headers=json_post)[0] == 404
+
+
+def test_json_documents_hold_no_infinity_nor_nan():
+    doc = {"p": float("inf"), "raw": [{"p": -float("inf")}, (1.5, float("nan"))], "n": 3}
+    assert jsonable(doc) == {"p": None, "raw": [{"p": None}, [1.5, None]], "n": 3}
 
 
 @contextmanager

@@ -40,6 +40,8 @@ def main() -> None:
             return page_counts(driver)[0] >= SHARE * planned and 0 < panels == with_curves
 
         wait_until(ready, timeout=180, every=0.2, what="the picture's moment")
+        height = driver.execute_script("return document.documentElement.scrollHeight")
+        driver.set_window_size(1400, height + 140)  # the whole page (the window's frame)
         driver.save_screenshot(str(out))
     print(out)
 
