@@ -16,7 +16,8 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
-from gonio_testkit import ROOT, fast_config, gonio_cli, one_line_error, write_toml
+from gonio_testkit import ROOT, gonio_cli, one_line_error
+from watch_testkit import plan_file
 
 from calibration.pipeline import reduce_run
 from calibration.plot import x_range
@@ -29,23 +30,12 @@ from gonio_watch.server import jsonable
 from gonio_watch.status import Live, combined_status, eta_s, status_of
 from gonio_watch.viewer import serving
 
-PLAN = {"name": "watch", "sample": {"id": "w", "kind": "hemisphere", "eta": 1.51,
-                                    "lit_from": "air"},
-        "grid": [{"side": "reflection", "theta_i_deg": [0.0, 30.0],
-                  "theta_o_deg": {"start": -70, "stop": 70, "step": 20},
-                  "skip_forbidden": True},
-                 {"side": "transmission", "theta_i_deg": [0.0],
-                  "theta_o_deg": {"start": -40, "stop": 40, "step": 20}}],
-        "dark": {"every": 8}, "beam": {"every": 8}}
-
 
 @pytest.fixture(scope="module")
 def source(tmp_path_factory):
     """A completed all-emulated run (instant motion) whose readings the tests replay."""
     folder = tmp_path_factory.mktemp("source")
-    write_toml(folder / "cfg.toml", fast_config())
-    plan = write_toml(folder / "plan.toml", {**PLAN, "instrument": "cfg.toml"})
-    result = new_scan(plan, sim=True, out=folder / "runs", progress=False)
+    result = new_scan(plan_file(folder), sim=True, out=folder / "runs", progress=False)
     assert result.outcome.status == "completed"
     return open_run(result.path)
 
@@ -384,8 +374,7 @@ def test_cli_prints_the_url_warns_on_a_wide_bind_and_ends_with_stdin(source):
 
 
 def test_scan_watch_serves_the_run_beside_the_scan(tmp_path):
-    write_toml(tmp_path / "cfg.toml", fast_config(time_scale=15.0))  # readings for ~6 s
-    plan = write_toml(tmp_path / "plan.toml", {**PLAN, "instrument": "cfg.toml"})
+    plan = plan_file(tmp_path, 15.0)  # readings for ~6 s
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([sys.executable, "-m", "gonio.cli", "scan", str(plan), "--sim",
                              "--out", str(tmp_path / "runs"), "--no-plot", "--no-progress",

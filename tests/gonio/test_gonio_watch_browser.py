@@ -7,11 +7,11 @@ import json
 import time
 
 import pytest
-from gonio_testkit import fast_config, write_toml
-from watch_browser_kit import (
+from watch_testkit import (
     chromium,
     missing,
     page_counts,
+    plan_file,
     scanning,
     wait_until,
     watching,
@@ -24,20 +24,6 @@ pytestmark = [pytest.mark.browser,
 
 POLL_S = 1.0  # the page's polling interval (watch.js POLL_MS)
 LAG_S = 2.5 * POLL_S  # how far the page may be behind the store: a poll and its fetches
-PLAN = {"name": "watch", "sample": {"id": "w", "kind": "hemisphere", "eta": 1.51,
-                                    "lit_from": "air"},
-        "grid": [{"side": "reflection", "theta_i_deg": [0.0, 30.0],
-                  "theta_o_deg": {"start": -70, "stop": 70, "step": 20},
-                  "skip_forbidden": True},
-                 {"side": "transmission", "theta_i_deg": [0.0],
-                  "theta_o_deg": {"start": -40, "stop": 40, "step": 20}}],
-        "dark": {"every": 8}, "beam": {"every": 8}}
-
-
-def plan_file(folder, time_scale):
-    """The plan with its instrument: 37 readings, about 0.4 s each at time scale 4."""
-    write_toml(folder / "cfg.toml", fast_config(time_scale=time_scale))
-    return write_toml(folder / "plan.toml", {**PLAN, "instrument": "cfg.toml"})
 
 
 def reduced_points(driver) -> int:

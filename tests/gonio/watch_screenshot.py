@@ -14,7 +14,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gonio_testkit import EXAMPLES, ROOT  # noqa: E402
-from watch_browser_kit import chromium, page_counts, scanning, wait_until, watching  # noqa: E402
+from watch_testkit import chromium, page_counts, scanning, wait_until, watching  # noqa: E402
 
 from gonio.store import open_run  # noqa: E402
 

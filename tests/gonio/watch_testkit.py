@@ -1,5 +1,5 @@
-"""Helpers for the live view's browser tests and its screenshot script: a `gonio scan --sim` in
-its own process (with the control token it prints), `gonio watch` beside it, and headless
+"""Helpers for the live view's tests and its screenshot script: their plan, a `gonio scan --sim`
+in its own process (with the control token it prints), `gonio watch` beside it, and headless
 Chromium (Debian's chromium and chromium-driver, driven by selenium with the driver given
 explicitly, so selenium downloads nothing; a fresh profile, no background networking)."""
 
@@ -18,7 +18,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gonio_testkit import ROOT
+from gonio_testkit import ROOT, fast_config, write_toml
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
@@ -26,6 +26,22 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-dev-shm-usage")
 TOKEN_LINE = re.compile(r"gonio: control token ([0-9a-f]{32}) ")
+PLAN = {"name": "watch", "sample": {"id": "w", "kind": "hemisphere", "eta": 1.51,
+                                    "lit_from": "air"},
+        "grid": [{"side": "reflection", "theta_i_deg": [0.0, 30.0],
+                  "theta_o_deg": {"start": -70, "stop": 70, "step": 20},
+                  "skip_forbidden": True},
+                 {"side": "transmission", "theta_i_deg": [0.0],
+                  "theta_o_deg": {"start": -40, "stop": 40, "step": 20}}],
+        "dark": {"every": 8}, "beam": {"every": 8}}
+"""The live view tests' plan: 28 readings (20 sample points in three panels, 4 dark, 4 beam)."""
+
+
+def plan_file(folder: Path, time_scale: float | str = "inf") -> Path:
+    """PLAN in folder, with its instrument (sim-serial made fast, at time_scale: about 0.5 s
+    per reading at 4)."""
+    write_toml(folder / "cfg.toml", fast_config(time_scale=time_scale))
+    return write_toml(folder / "plan.toml", {**PLAN, "instrument": "cfg.toml"})
 
 
 def missing() -> str | None:
