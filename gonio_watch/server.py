@@ -51,6 +51,7 @@ SECURITY_HEADERS = {
 }
 ACTIONS = ("pause", "resume", "abort")
 LIVE_EVERY_S = 0.5  # the scan is asked for its state at most this often
+MAX_BODY = 4096  # bytes of a control request's body
 NO_TOKEN = ("pause, resume and abort need the session's control token: start the viewer "
             "with `gonio watch RUN --token TOKEN` (the scan prints it on stderr)")
 
@@ -246,7 +247,11 @@ class Handler(BaseHTTPRequestHandler):
         if not self._host_ok():
             return
         length = int(self.headers.get("Content-Length") or 0)
-        self.rfile.read(min(length, 4096))
+        if length > MAX_BODY:
+            self.close_connection = True  # the rest of the body is not read
+            self._refuse(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, "a control request is small")
+            return
+        self.rfile.read(length)
         origin = self.headers.get("Origin")
         action = urlsplit(self.path).path.removeprefix("/control/")
         if origin is not None and origin != f"http://{self.headers.get('Host')}":

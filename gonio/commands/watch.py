@@ -29,8 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="port to serve the page on (default: a free one)")
     p.add_argument("--bind", metavar="HOST", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only; another "
-                        "shows the run, and with --token lets pause and abort it, to whoever "
-                        "can reach that address)")
+                        "address shows the run to whoever can reach it, and with --token lets "
+                        "them pause and abort the scan)")
     p.add_argument("--open", action="store_true", help="open the page in the web browser")
     p.add_argument("--token", metavar="TOKEN",
                    help="the scan session's control token (gonio scan prints it on stderr), "

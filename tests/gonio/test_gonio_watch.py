@@ -274,6 +274,8 @@ def test_server_serves_the_page_and_json_and_nothing_else(source):
         assert status == 403 and "this page" in doc["error"]
         assert get(server, "/control/explode", method="POST", body="{}",
                    headers=json_post)[0] == 404
+        assert get(server, "/control/pause", method="POST", body="{}" + " " * 5000,
+                   headers=json_post)[0] == 413
 
 
 def test_json_documents_hold_no_infinity_nor_nan():
