@@ -14,18 +14,24 @@ emulator latency and instant motion, beside its floor measured in the same run:
 - fsync: appending and fsyncing as many lines, as long as the scan's, beside the run (the
   store overlaps each reading's fsync with the next point, so this part is a serial bound).
 
+Then the time per point with `gonio watch` following the store (its own process, polling the
+run's files and checking each new line; no browser attached), against the same scan without
+it just before and just after.
+
 Run: python bench/scan_throughput.py [--points 2000]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import subprocess
 import sys
 import tempfile
 import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -51,11 +57,11 @@ PM100_LINES = (b":READ?;:SENS:POW:RANG?;:SYST:ERR?\n",)
 
 
 def config_text() -> str:
-    """sim-serial.toml with instant motion and a one-ray aperture rule ([sim.aperture] is
-    the file's last table, so the added key lands in it)."""
+    """sim-serial.toml with instant motion and a one-ray aperture rule (a [sim.aperture]
+    table of its own at the end: the file has none)."""
     text = (ROOT / "examples" / "instruments" / "sim-serial.toml").read_text()
     text = text.replace("time_scale = 50.0", 'time_scale = "inf"')
-    return text + "order = [0, 0]\n"
+    return text + "\n[sim.aperture]\norder = [0, 0]\n"
 
 
 def plan_text(per_curve: int) -> str:
@@ -136,6 +142,42 @@ def fsync_s(folder: Path, n: int, line_bytes: int) -> float:
         return time.perf_counter() - t0
 
 
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) a process has used so far (/proc/PID/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def per_point_s(folder: Path, watch: bool) -> tuple[float, float | None]:
+    """Seconds per point of the scan's measuring loop (plan.toml in folder) and, with watch,
+    the CPU seconds per point `gonio watch` spent following it (from before the first
+    reading, the scan waiting for its URL; checked to have followed every reading)."""
+    viewers: list = []
+
+    def started(path: Path, token: str | None) -> None:
+        viewer = subprocess.Popen([sys.executable, "-m", "gonio_cli", "watch", str(path)],
+                                  stdout=subprocess.PIPE, text=True,
+                                  env={**os.environ, "PYTHONPATH": str(ROOT)})
+        url = viewer.stdout.readline().strip()
+        viewers.extend((viewer, url, cpu_s(viewer.pid)))
+
+    result = new_scan(folder / "plan.toml", sim=True, out=folder / "runs", progress=False,
+                      started=started if watch else None)
+    r = open_run(result.path).readings()
+    assert result.outcome.status == "completed", result.outcome
+    viewer_cpu = None
+    if viewers:
+        viewer, url, cpu0 = viewers
+        time.sleep(0.5)  # one poll after the last line
+        viewer_cpu = (cpu_s(viewer.pid) - cpu0) / len(r)
+        with urllib.request.urlopen(url + "status.json") as reply:
+            followed = json.load(reply)["readings"]
+        viewer.terminate()
+        viewer.wait()
+        assert followed == len(r), f"gonio watch followed {followed} of {len(r)} readings"
+    return float(r["t_s"][-1] - r["t_s"][0]) / (len(r) - 1), viewer_cpu
+
+
 def load() -> str:
     """The 1, 5 and 15 minute load averages (figures on a shared machine move with them)."""
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
@@ -170,6 +212,7 @@ def main() -> None:
         sync_s = fsync_s(tmp, n, line_bytes)
         np.save(tmp / "positions.npy", np.stack([r[f"{role}_deg"] for role in ROLES], axis=1))
         bench_s, bench_cpu_s = physics_replay_s(tmp / "positions.npy")
+        watched = [per_point_s(tmp, watch) for watch in (False, True, False)]
     assert result.outcome.status == "completed" and len(r) == n, result.outcome
     loop_s = float(r["t_s"][-1] - r["t_s"][0]) * n / (n - 1)
     esp_s = bare_round_trip_s(EspEmulator(VirtualClock(math.inf), {1: {}}), ESP_LINES, b"\r\n")
@@ -198,6 +241,11 @@ def main() -> None:
               f"{(loop_s - floor) / n * 1e3:.2f} ms/point")
     print("  (the store fsyncs each reading while the engine moves on to the next one, so the "
           "full stack can beat the serial sum)")
+    (before, _), (with_watch, viewer_cpu), (after, _) = watched
+    print(f"  per point, the same scan again: {before * 1e3:.3f} ms without gonio watch, "
+          f"{with_watch * 1e3:.3f} ms with it following the store (no browser; its own CPU "
+          f"{viewer_cpu * 1e3:.3f} ms/point), {after * 1e3:.3f} ms without "
+          f"({with_watch / ((before + after) / 2) - 1:+.1%})")
 
 
 if __name__ == "__main__":

@@ -5,10 +5,16 @@ and `gonio export --format zemax|mitsuba` share."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from calibration import calfile
 from calibration.fit import FitOptions, FitResult, fit
 from calibration.reduced import ReducedData
+
+if TYPE_CHECKING:
+    from gonio.store import Run
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:
@@ -27,12 +33,21 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
     flag (calibration.reduce.optics_of); subtract_signature: subtract the bench's own scatter
     that the run's signature readings measured, signature_share: the share of the net signal
     above which a point is flagged (calibration.signature; None: its default)."""
-    from calibration.reduce import optics_of, reduce_readings
-    from gonio.record import emulator_config
     from gonio.store import open_run
 
     run = open_run(run_dir)
-    readings = run.readings()
+    return reduce_stored(run, run.readings(), calibration_file, shot_noise_w,
+                         subtract_signature, signature_share)
+
+
+def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path | None = None,
+                  shot_noise_w: float | None = None, subtract_signature: bool = False,
+                  signature_share: float | None = None) -> ReducedData:
+    """`reduce_run` of some of a run's stored readings (READING_DTYPE): those stored so far,
+    for the live view of a run in progress."""
+    from calibration.reduce import optics_of, reduce_readings
+    from gonio.record import emulator_config
+
     cal = calibration_for(run.meta, calibration_file)
     if cal is not None:
         readings = calfile.apply(readings, cal)

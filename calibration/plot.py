@@ -90,6 +90,23 @@ def x_range(theta_deg: np.ndarray) -> tuple[float, float]:
     return max(-90.0, theta_deg.min() - margin), min(90.0, theta_deg.max() + margin)
 
 
+def in_plane(data: ReducedData) -> np.ndarray:
+    """The points in the plane of incidence (phi_o = 0 or 180 deg): what the figures show."""
+    return np.abs(data.wo[:, 1]) < 1e-6
+
+
+def panel_limits(theta_o_deg: np.ndarray, bsdf: np.ndarray, good: np.ndarray
+                 ) -> tuple[tuple[float, float], tuple[float, float] | None]:
+    """(x range, y range) of one figure panel from its points (`good`: valid, positive): the
+    outgoing angles zoomed onto the lobe (x_range), the values with some room; y None when
+    no point is good."""
+    lobe = good & (bsdf > 1e-5 * bsdf[good].max()) if good.any() else good
+    positive = bsdf[good]
+    y = ((max(positive.min() / 5, positive.max() * 1e-7), positive.max() * 5)
+         if positive.size else None)
+    return x_range(theta_o_deg[lobe]), y
+
+
 def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Path:
     """Write the figure: a column per incidence angle, a row per measured side; PNG."""
     import matplotlib
@@ -97,10 +114,10 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    in_plane = np.abs(data.wo[:, 1]) < 1e-6
-    if not in_plane.any():
+    shown = in_plane(data)
+    if not shown.any():
         raise CalibrationError("no in-plane points to plot (phi_o = 0)")
-    data = data.subset(in_plane)
+    data = data.subset(shown)
     theta_i = np.round(data.theta_i_deg, 1)
     incidences = sorted(set(theta_i.tolist()))
     sides = [s for s in (False, True) if (data.transmission == s).any()]
@@ -123,8 +140,8 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
             for (label, (x, y)), style in zip(curves.items(), ("-", "--"), strict=False):
                 ax.plot(x, np.where(y > 0, y, np.nan), style, color="C3", lw=1.2, label=label)
             ax.set_yscale("log")
-            lobe = good & (data.bsdf > 1e-5 * data.bsdf[good].max()) if good.any() else good
-            ax.set_xlim(*x_range(theta_o[lobe]))
+            x_lim, y_lim = panel_limits(theta_o, data.bsdf, good)
+            ax.set_xlim(*x_lim)
             ax.grid(True, which="both", lw=0.3, alpha=0.5)
             side = "transmission" if transmission else "reflection"
             ax.set_title(f"theta_i = {ti:g} deg, {side}", fontsize=9)
@@ -132,9 +149,8 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
                 ax.set_xlabel("outgoing angle (deg, forward > 0)")
             if col == 0:
                 ax.set_ylabel("BSDF (1/sr)")
-            positive = data.bsdf[good]
-            if positive.size:
-                ax.set_ylim(max(positive.min() / 5, positive.max() * 1e-7), positive.max() * 5)
+            if y_lim is not None:
+                ax.set_ylim(*y_lim)
     axes[0, 0].legend(fontsize=7, loc="lower left")
     fig.suptitle(title or "measured BSDF", fontsize=10)
     fig.tight_layout()

@@ -272,6 +272,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
         "dark_level_w": {f"{r:.6g}": v for r, v in dark.level.items()},
         "sim": optics.sim, "emulator_truth": optics.truth,
         "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
+        "index": rows["index"].tolist(),  # the reading each point comes from
     }
     if signature.meta is not None:
         meta["signature"] = signature.meta

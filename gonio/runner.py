@@ -33,6 +33,7 @@ from gonio.store import DamagedRunError, RunWriter, damage_message, digest_probl
 from gonio.suspenders import Watch
 
 DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
+Started = Callable[[Path, str | None], None]  # the run directory, the control token
 
 
 @dataclass
@@ -96,14 +97,15 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
          control: PauseControl | None, t0_epoch: float, stored: Sequence[dict] = (),
          check: DetectorCheck | None = None, session: dict[str, Any] | None = None,
-         channel: bool = False) -> ScanResult:
+         channel: bool = False, started: Started | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
     of the schedule (`stored`: the readings stored already; the run started at t0_epoch).
     session: more for meta.json's record of this session; channel: serve the control channel
-    (gonio.control) in the run directory. The run's signal handling (`control`) starts before
-    the run directory is made: a signal in the first milliseconds of a run ends it as one at
-    any other moment does."""
+    (gonio.control) in the run directory; started: told the run directory once it exists, and
+    the control channel's token (None: no channel), before the engine starts (`gonio scan
+    --watch`). The run's signal handling (`control`) starts before the run directory is made:
+    a signal in the first milliseconds of a run ends it as one at any other moment does."""
     control = control or PauseControl()
     done = sched.readings[[row["index"] for row in stored]]
     with _devices(cfg, sim, plan, t0_epoch, done) as dev, \
@@ -130,7 +132,9 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                                          **({"identity_changes": swapped} if swapped else {}),
                                          **(session or {})})
                 with serving(writer.path, control, status) if channel \
-                        else contextlib.nullcontext():
+                        else contextlib.nullcontext() as server:
+                    if started is not None:
+                        started(writer.path, server.token if server else None)
                     return ScanResult(writer.path, engine.run())
             finally:
                 writer.close()
@@ -141,7 +145,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
              sample_id: str | None = None, check: DetectorCheck | None = None,
-             warn: Callable[[str], None] | None = None, channel: bool = False) -> ScanResult:
+             warn: Callable[[str], None] | None = None, channel: bool = False,
+             started: Started | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
@@ -152,7 +157,9 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     exists and before any motion (the scan command checks the calibration's ranges there);
     warn: told, once the devices are open and checked and before any motion, what the run
     will lack that reduction needs (undescribed);
-    channel: serve the control channel in the run directory (gonio.control; token on stderr).
+    channel: serve the control channel in the run directory (gonio.control; token on stderr);
+    started: told the run directory once it exists and the control channel's token (None:
+    none), before any reading.
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -176,7 +183,7 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
                 meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn),
-                channel=channel)
+                channel=channel, started=started)
 
 
 def scaled(cfg: InstrumentConfig, sim: list[str] | bool, time_scale: float | None
@@ -229,14 +236,15 @@ def with_sample_id(plan: Plan, sample_id: str) -> Plan:
 def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                 sim: list[str] | bool | None = None, progress: bool | None = None,
                 control: PauseControl | None = None,
-                plan_path: str | Path | None = None, channel: bool = False) -> ScanResult:
+                plan_path: str | Path | None = None, channel: bool = False,
+                started: Started | None = None) -> ScanResult:
     """Continue a run after its last stored reading (first measuring any a repair dropped),
     with the plan and config it started with, both checked against their digests.
 
     instrument: a config to use instead of the stored one, differing from it in device
     endpoints only (recorded in the session). sim: None = as the run was started.
     plan_path: a plan file that must say what the stored plan says (`same_plan`);
-    channel: as for new_scan.
+    channel, started: as for new_scan.
     """
     run = open_run(run_dir)
     lines = run.lines()
@@ -264,7 +272,8 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
             writer.set_status("completed", "")
         return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
-                run.meta["t0_epoch"], stored=lines.rows, session=session, channel=channel)
+                run.meta["t0_epoch"], stored=lines.rows, session=session, channel=channel,
+                started=started)
 
 
 _MISSING = object()

@@ -188,37 +188,62 @@ def _check_line(line: bytes, checked: bool) -> tuple[dict[str, Any] | None, str,
     return row, "", crc is not None
 
 
+class LineChecker:
+    """Checks the complete lines of readings.jsonl in order as they come, keeping what it has
+    seen: `scan_lines` feeds it a whole file, a viewer following a run another process writes
+    feeds it each new stretch (the rules of `scan_lines`)."""
+
+    def __init__(self, checked: bool, refill: Collection[int] = ()):
+        self.checked, self.refill = checked, refill
+        self.rows: dict[int, dict[str, Any]] = {}  # valid readings by index
+        self.damaged: list[Damage] = []
+        self.count = 0  # complete lines seen
+        self.unchecked = 0
+        self._where: dict[int, int] = {}
+        self._top, self._since_valid = -1, 0
+
+    def feed(self, complete: bytes) -> list[dict[str, Any]]:
+        """Check the next complete lines (bytes that end with a newline, or none); returns the
+        valid readings among them, in file order."""
+        new = []
+        for line in complete.split(b"\n")[:-1]:
+            self.count += 1
+            row, problem, has_crc = _check_line(line, self.checked)
+            if row is not None:
+                index = row["index"]
+                gap = [i for i in range(self._top + 1, index) if i not in self.refill]
+                if index in self.rows:
+                    problem = f"duplicate of index {index} (line {self._where[index]})"
+                elif index < self._top and index not in self.refill:
+                    problem = f"index {index} out of order (after index {self._top})"
+                elif len(gap) > self._since_valid:
+                    self.damaged.append(Damage(self.count, f"index {index} follows index "
+                                                           f"{self._top}: "
+                                                           f"{describe_indices(gap)} missing"))
+            if problem:
+                self.damaged.append(Damage(self.count, problem))
+                self._since_valid += 1
+                continue
+            self.rows[index], self._where[index], self._since_valid = row, self.count, 0
+            self._top = max(self._top, index)
+            self.unchecked += not has_crc
+            new.append(row)
+        return new
+
+    def lines(self, keep_bytes: int, torn_bytes: int) -> Lines:
+        """What the lines fed so far hold (`keep_bytes` of them, `torn_bytes` after)."""
+        return Lines([self.rows[i] for i in sorted(self.rows)], self.damaged, keep_bytes,
+                     torn_bytes, self.unchecked, self.count)
+
+
 def scan_lines(data: bytes, checked: bool, refill: Collection[int] = ()) -> Lines:
     """Check every complete line of readings.jsonl (JSON object, checksum if `checked` or
     present, index neither repeated nor out of order, no indices missing unless damaged lines
     account for them). `refill`: indices a repair dropped, which may come later, out of order."""
     keep = data.rfind(b"\n") + 1
-    rows: dict[int, dict[str, Any]] = {}
-    where: dict[int, int] = {}
-    damaged: list[Damage] = []
-    top, unchecked, since_valid = -1, 0, 0
-    lines = data[:keep].split(b"\n")[:-1]
-    for n, line in enumerate(lines, 1):
-        row, problem, has_crc = _check_line(line, checked)
-        if row is not None:
-            index = row["index"]
-            gap = [i for i in range(top + 1, index) if i not in refill]
-            if index in rows:
-                problem = f"duplicate of index {index} (line {where[index]})"
-            elif index < top and index not in refill:
-                problem = f"index {index} out of order (after index {top})"
-            elif len(gap) > since_valid:
-                damaged.append(Damage(n, f"index {index} follows index {top}: "
-                                         f"{describe_indices(gap)} missing"))
-        if problem:
-            damaged.append(Damage(n, problem))
-            since_valid += 1
-            continue
-        rows[index], where[index], since_valid = row, n, 0
-        top = max(top, index)
-        unchecked += not has_crc
-    return Lines([rows[i] for i in sorted(rows)], damaged, keep, len(data) - keep, unchecked,
-                 len(lines))
+    checker = LineChecker(checked, refill)
+    checker.feed(data[:keep])
+    return checker.lines(keep, len(data) - keep)
 
 
 def describe_indices(indices: list[int]) -> str:
@@ -312,9 +337,15 @@ class Run:
 
     def lines(self) -> Lines:
         """Every line of readings.jsonl checked (see `scan_lines`)."""
-        return scan_lines((self.path / READINGS).read_bytes(),
-                          checked=self.meta.get("line_checksum") == CRC,
-                          refill=set(self.meta.get("repair", {}).get("dropped", ())))
+        return scan_lines((self.path / READINGS).read_bytes(), **self._line_rules())
+
+    def line_checker(self) -> LineChecker:
+        """A LineChecker with this run's rules, to check its lines as they come."""
+        return LineChecker(**self._line_rules())
+
+    def _line_rules(self) -> dict[str, Any]:
+        return {"checked": self.meta.get("line_checksum") == CRC,
+                "refill": set(self.meta.get("repair", {}).get("dropped", ()))}
 
     def rows(self) -> list[dict[str, Any]]:
         """The readings as dicts, by index (a torn last line is ignored); DamagedRunError
@@ -326,12 +357,7 @@ class Run:
 
     def readings(self) -> np.ndarray:
         """The readings as a numpy structured array with READING_DTYPE fields."""
-        rows = self.rows()
-        out = np.zeros(len(rows), READING_DTYPE)
-        for name in READING_DTYPE.names:
-            if rows:
-                out[name] = [_value(r.get(name), READING_DTYPE[name]) for r in rows]
-        return out
+        return readings_array(self.rows())
 
     def __len__(self) -> int:
         return len(self.rows())
@@ -341,6 +367,15 @@ class Run:
         """created | running | paused | suspended | completed | aborted | failed ("running" after
         a kill)."""
         return self.meta.get("status", "unknown")
+
+
+def readings_array(rows: list[dict[str, Any]]) -> np.ndarray:
+    """Stored readings (dicts, as `Run.rows` gives them) as a READING_DTYPE array."""
+    out = np.zeros(len(rows), READING_DTYPE)
+    for name in READING_DTYPE.names:
+        if rows:
+            out[name] = [_value(r.get(name), READING_DTYPE[name]) for r in rows]
+    return out
 
 
 def _value(v: Any, dtype: np.dtype) -> Any:

@@ -37,6 +37,7 @@ COMMANDS = [
     "fit",
     "export",
     "check",
+    "watch",
     "calibrate",
     "lut",
     "sweep",

@@ -14,13 +14,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-PACKAGES = ("drivers", "sim", "gonio", "calibration", "gonio_cli")
+PACKAGES = ("drivers", "sim", "gonio", "calibration", "gonio_watch", "gonio_cli")
 
 FORBIDDEN = {
-    "drivers": {"sim", "gonio", "calibration", "gonio_cli"},
-    "sim": {"drivers", "gonio", "calibration", "gonio_cli"},
-    "gonio": {"calibration", "gonio_cli"},
-    "calibration": {"gonio_cli"},
+    "drivers": {"sim", "gonio", "calibration", "gonio_cli", "gonio_watch"},
+    "sim": {"drivers", "gonio", "calibration", "gonio_cli", "gonio_watch"},
+    "gonio": {"calibration", "gonio_cli", "gonio_watch"},
+    "calibration": {"gonio_cli", "gonio_watch"},
+    "gonio_watch": {"drivers", "gonio_cli"},
 }
 
 # Cycles known and being removed elsewhere; each is the exact set of modules (or, for the
@@ -201,6 +202,17 @@ def test_gonio_imports_sim_only_where_documented():
     assert users <= allowed
 
 
+def test_the_cli_reaches_the_live_view_only_through_its_verb():
+    # gonio_watch sits above gonio and calibration, below the CLI; `gonio watch` (and `gonio
+    # scan --watch`, which starts it in a process of its own) is the one way in.
+    users = {
+        str(path.relative_to(ROOT))
+        for path in (ROOT / "gonio_cli").rglob("*.py")
+        if "gonio_watch" in imported_packages(path)
+    }
+    assert users <= {"gonio_cli/commands/watch.py"}
+
+
 def test_only_the_record_hands_a_runs_sim_table_to_reduction():
     # The emulator's truth ([sim]) reaches reduction, fits, plots and exports only through
     # gonio.record.emulator_config, which withholds it from any run with a real device;
@@ -209,7 +221,7 @@ def test_only_the_record_hands_a_runs_sim_table_to_reduction():
     reads = re.compile(r"""(config|raw)\s*(\.get\(\s*|\[\s*)["']sim["']""")
     readers = {
         str(path.relative_to(ROOT))
-        for package in ("gonio", "gonio_cli", "calibration")
+        for package in ("gonio", "gonio_cli", "calibration", "gonio_watch")
         for path in (ROOT / package).rglob("*.py")
         if reads.search(path.read_text())
     }

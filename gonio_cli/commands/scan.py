@@ -9,10 +9,12 @@ SIGHUP).
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gonio.errors import GonioError
+from gonio.errors import GonioError, os_error_text
 
 if TYPE_CHECKING:
     from gonio.runner import DetectorCheck
@@ -46,6 +48,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the measured sample's id, instead of the plan's [sample] id")
     p.add_argument("--no-plot", action="store_true", help="do not write plot.png")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--watch", action="store_true",
+                   help="follow the run in a browser page beside the scan (gonio watch, "
+                        "given the session's control token); its URL goes to stderr")
     p.set_defaults(func=run)
 
 
@@ -63,6 +68,18 @@ def _plot(run_dir) -> None:
         print(f"gonio scan: note: plot.png shows raw power ({exc})", file=sys.stderr)
 
 
+def _watch(run_dir: Path, token: str | None) -> subprocess.Popen | None:
+    """Start the live view beside the scan (None, with a warning, if it cannot start: the
+    scan goes on without it)."""
+    from gonio_cli.commands.watch import start_beside
+
+    try:
+        return start_beside(run_dir, token)
+    except OSError as exc:
+        print(f"gonio scan: warning: no live view: {os_error_text(exc)}", file=sys.stderr)
+        return None
+
+
 def _covers(path: str) -> DetectorCheck:
     """The check, once the detector is open and before any motion, that the calibration file
     covers every range the schedule can read on (calibration.coverage)."""
@@ -78,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
     from gonio.runner import new_scan, resume_scan
 
     progress = False if args.no_progress else None
+    viewers: list = []
+    started = (lambda path, token: viewers.append(_watch(path, token))) if args.watch else None
     if args.plan is None and isinstance(args.sim, list) and len(args.sim) == 1 \
             and args.sim[0].endswith(".toml"):
         args.plan, args.sim = args.sim[0], True  # `gonio scan --sim PLAN`: the plan, not NAMES
@@ -86,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
             raise GonioError("--resume RUN continues a run as it was started: "
                              "give no --calibration, --time-scale or --sample-id with it")
         result = resume_scan(args.resume, args.instrument, args.sim, progress=progress,
-                             plan_path=args.plan, channel=True)
+                             plan_path=args.plan, channel=True, started=started)
     else:
         if not args.plan:
             raise GonioError("a PLAN file is needed (or --resume RUN)")
@@ -99,7 +118,11 @@ def run(args: argparse.Namespace) -> int:
                           progress=progress, calibration=calibration,
                           time_scale=args.time_scale, sample_id=args.sample_id, check=check,
                           warn=lambda text: print(f"gonio scan: warning: {text}",
-                                                  file=sys.stderr), channel=True)
+                                                  file=sys.stderr), channel=True,
+                       started=started)
+    for viewer in viewers:
+        if viewer is not None:
+            viewer.stdin.close()  # the viewer ends once an open page has shown the run's end
     outcome = result.outcome
     plotted = False
     if not args.no_plot and outcome.done:
