@@ -87,11 +87,13 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
          control: PauseControl | None, t0_epoch: float, done: Sequence[int] = (),
          check: DetectorCheck | None = None,
-         session: dict[str, Any] | None = None) -> ScanResult:
+         session: dict[str, Any] | None = None,
+         created: Callable[[Path], None] | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
     of the schedule (the readings of indices `done` are stored; the run started at t0_epoch).
-    session: more for meta.json's record of this session. The run's signal handling
+    session: more for meta.json's record of this session; created: told the run directory
+    once it exists, before any reading is measured. The run's signal handling
     (`control`) starts before the run directory is made: a signal in the first milliseconds
     of a run ends it as one at any other moment does."""
     control = control or PauseControl()
@@ -102,6 +104,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
         with control:
             writer = make_writer()
             try:
+                if created is not None:
+                    created(writer.path)
                 swapped = identity_changes(writer.meta["sessions"], inst.devices)
                 inst.last_positions = dev.positions
                 bar = Progress(len(sched), writer.stored, plan.name,
@@ -126,7 +130,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              progress: bool | None = None, control: PauseControl | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
              sample_id: str | None = None, check: DetectorCheck | None = None,
-             warn: Callable[[str], None] | None = None) -> ScanResult:
+             warn: Callable[[str], None] | None = None,
+             created: Callable[[Path], None] | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
@@ -136,7 +141,9 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     check: called with the schedule's readings and the open detector before the run directory
     exists and before any motion (the scan command checks the calibration's ranges there);
     warn: told, once the devices are open and checked and before any motion, what the run
-    will lack that reduction needs (undescribed).
+    will lack that reduction needs (undescribed);
+    created: told the run directory as soon as it exists, before any reading is measured
+    (the queue records it there).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
@@ -149,11 +156,7 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
         from gonio.simulate import with_time_scale
 
         cfg = with_time_scale(cfg, time_scale)
-    sched = build_schedule(plan, cfg)
-    if isinstance(sim, list):
-        from gonio.simulate import resolve_devices
-
-        resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
+    sched = schedule_for(plan, cfg, sim)
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
     meta = {"plan_name": plan.name, "instrument_name": cfg.name, "planned": len(sched),
             "estimate_s": sched.estimate_s, "naive_estimate_s": sched.naive_estimate_s,
@@ -164,7 +167,19 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
             "sample": plan.sample.to_json() if plan.sample else None}
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
-                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn))
+                meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn),
+                created=created)
+
+
+def schedule_for(plan: Plan, cfg: InstrumentConfig, sim: list[str] | bool) -> Schedule:
+    """The plan's schedule on the instrument, once plan, config and --sim's device names
+    are checked (PlanError / ConfigError): what a scan checks before any run directory."""
+    sched = build_schedule(plan, cfg)
+    if isinstance(sim, list):
+        from gonio.simulate import resolve_devices
+
+        resolve_devices(cfg, sim)
+    return sched
 
 
 def _then_warn(check: DetectorCheck | None, texts: list[str],
