@@ -193,14 +193,15 @@ def add(out: Path, plans: Sequence[str | Path], instrument: str | Path | None,
 
 def _copied(source: Path, folder: Path, out: Path, instrument: str | Path | None,
             sim: list[str] | bool) -> Entry:
-    """The plan copied into folder and its entry, the copy validated: the plan's own
-    `instrument` resolves against the original's folder, and the copy keeps the original's
-    file name (a plan's name defaults to it)."""
-    cfg_path = instrument_path(load_plan(source), instrument).resolve()
+    """The plan, once validated (errors name the original), copied into folder, and its entry.
+    The copy keeps the file name (a plan's name defaults to it); its own `instrument`, relative
+    to the original's folder, is resolved here and recorded in the entry."""
+    plan = load_plan(source)
+    cfg_path = instrument_path(plan, instrument).resolve()
+    sched = schedule_for(plan, load_config(cfg_path), sim)
     folder.mkdir(parents=True)
     copy = folder / source.name
     write_text_atomic(copy, source.read_text(encoding="utf-8"))
-    sched = schedule_for(load_plan(copy), load_config(cfg_path), sim)
     return Entry(plan=str(copy.relative_to(out)), source=str(source.resolve()),
                  instrument=str(cfg_path),
                  sim=sim if isinstance(sim, bool) else tuple(sim), planned=len(sched),
