@@ -88,7 +88,9 @@ def load(out: Path) -> list[Entry]:
 
 
 def _entry(f: Fields) -> Entry:
-    sim = f.table.get("sim") if f.has("sim") else None
+    if not f.has("sim"):
+        raise f.error(f"{f.where}: missing required key 'sim'")
+    sim = f.table["sim"]
     valid_sim = isinstance(sim, bool) or (
         isinstance(sim, list) and bool(sim) and all(isinstance(s, str) and s for s in sim))
     if not valid_sim:
@@ -146,13 +148,20 @@ def _editing(out: Path) -> Iterator[list[Entry]]:
         write_text_atomic(queue_path(out), render(entries))
 
 
+def existing(out: Path) -> list[Entry]:
+    """The folder's entries; QueueError if it has none (no queue.toml, or an empty one)."""
+    entries = load(out)
+    if not entries:
+        raise QueueError(f"{out}: no queue here (no entry in {queue_path(out)}): add plans "
+                         f"with `gonio queue add PLAN --out {out}`")
+    return entries
+
+
 @contextmanager
 def run_lock(out: Path) -> Iterator[None]:
     """Hold the folder's run lock while its queue runs; QueueError (naming the holder's pid)
     if another process holds it, or if the folder has no queue."""
-    if not queue_path(out).exists():
-        raise QueueError(f"{out}: no queue here (no {QUEUE_FILE}): add plans with "
-                         f"`gonio queue add PLAN --out {out}`")
+    existing(out)
     with _lock_file(out, "run.lock") as fh:
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -169,9 +178,9 @@ def run_lock(out: Path) -> Iterator[None]:
 
 def add(out: Path, plans: Sequence[str | Path], instrument: str | Path | None,
         sim: list[str] | bool) -> list[tuple[int, Entry]]:
-    """Copy the plans into the queue and append an entry for each, once every copy is
-    validated against its instrument config as `gonio plan` does (and --sim's names): one
-    bad plan raises its PlanError / ConfigError and adds nothing. Returns (position, entry)s."""
+    """Validate each plan against its instrument config as `gonio plan` does (and --sim's
+    names), copy it into the queue and append its entry: one bad plan raises its PlanError /
+    ConfigError and adds nothing. Returns the (position, entry) of each added."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     made: list[Path] = []

@@ -82,14 +82,10 @@ def add(args: argparse.Namespace) -> int:
 
 def list_entries(args: argparse.Namespace) -> int:
     """Print the queue, one line per entry."""
-    from gonio.errors import QueueError
-    from gonio.queue import QUEUE_FILE, load
+    from gonio.queue import existing
 
     out = Path(args.out)
-    entries = load(out)
-    if not entries:
-        raise QueueError(f"{out}: no queue here (no entry in {out / QUEUE_FILE})")
-    for position, entry in enumerate(entries, 1):
+    for position, entry in enumerate(existing(out), 1):
         print(line(out, position, entry))
     return 0
 

@@ -201,6 +201,7 @@ def test_the_queue_file_reads_back_what_was_written(tmp_path):
     ({"run": "../elsewhere"}, "entry 2.run: must be the name of a run directory"),
     ({"stat": "pending"}, "entry 2: unknown key 'stat'"),
     ({"plan": None}, "entry 2: missing required key 'plan'"),
+    ({"sim": None}, "entry 2: missing required key 'sim'"),
 ])
 def test_a_bad_entry_is_named_with_its_field(tmp_path, change, message):
     good = ENTRY.__dict__
