@@ -21,6 +21,11 @@ class RunError(GonioError):
     """A run directory is missing, damaged or cannot be resumed."""
 
 
+class QueueError(GonioError):
+    """A queue file is invalid (the message names the entry and the field), or the queue is
+    being run by another process."""
+
+
 class Terminated(BaseException):
     """SIGTERM or SIGHUP arrived: a run aborts at once, a command ends with 128 + signum (a
     BaseException, so that no retry or `except Exception` swallows it)."""

@@ -97,15 +97,18 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          sched: Schedule, sim: list[str] | bool, progress: bool | None,
          control: PauseControl | None, t0_epoch: float, stored: Sequence[dict] = (),
          check: DetectorCheck | None = None, session: dict[str, Any] | None = None,
-         channel: bool = False, started: Started | None = None) -> ScanResult:
+         channel: bool = False, started: Started | None = None,
+         created: Callable[[Path], None] | None = None) -> ScanResult:
     """Open the devices, check the detector (`check`), then open the run (so a device that
     cannot be opened or a failed check leaves no new run behind), and measure what is left
     of the schedule (`stored`: the readings stored already; the run started at t0_epoch).
     session: more for meta.json's record of this session; channel: serve the control channel
     (gonio.control) in the run directory; started: told the run directory once it exists, and
     the control channel's token (None: no channel), before the engine starts (`gonio scan
-    --watch`). The run's signal handling (`control`) starts before the run directory is made:
-    a signal in the first milliseconds of a run ends it as one at any other moment does."""
+    --watch`); created: told the run directory as soon as it exists, before any reading is
+    measured (the queue records it there). The run's signal handling (`control`) starts
+    before the run directory is made: a signal in the first milliseconds of a run ends it as
+    one at any other moment does."""
     control = control or PauseControl()
     done = sched.readings[[row["index"] for row in stored]]
     with _devices(cfg, sim, plan, t0_epoch, done) as dev, \
@@ -115,6 +118,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
         with control:
             writer = make_writer()
             try:
+                if created is not None:
+                    created(writer.path)
                 swapped = identity_changes(writer.meta["sessions"], inst.devices)
                 todo = writer.todo(len(sched))
                 status = RunStatus()
@@ -146,7 +151,8 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
              calibration: dict | None = None, time_scale: float | None = None,
              sample_id: str | None = None, check: DetectorCheck | None = None,
              warn: Callable[[str], None] | None = None, channel: bool = False,
-             started: Started | None = None) -> ScanResult:
+             started: Started | None = None,
+             created: Callable[[Path], None] | None = None) -> ScanResult:
     """Validate plan and config, create a run directory and measure the plan into it.
 
     sim: False (real devices), True (emulate every device) or a list of device / role names;
@@ -160,17 +166,15 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     channel: serve the control channel in the run directory (gonio.control; token on stderr);
     started: told the run directory once it exists and the control channel's token (None:
     none), before any reading.
+    created: told the run directory as soon as it exists, before any reading is measured
+    (the queue records it there).
     """
     plan = load_plan(plan_path)
     if sample_id is not None:
         plan = with_sample_id(plan, sample_id)
     cfg_path = instrument_path(plan, instrument)
     cfg = scaled(load_config(cfg_path), sim, time_scale)
-    sched = build_schedule(plan, cfg)
-    if isinstance(sim, list):
-        from gonio.simulate import resolve_devices
-
-        resolve_devices(cfg, sim)  # a bad name fails before the run directory exists
+    sched = schedule_for(plan, cfg, sim)
     seeds = {"sim": cfg.sim.get("seed", 0)} if sim is not False else {}
     meta = {"plan_name": plan.name, "calibrates": plan.calibrates,
             "instrument_name": cfg.name, "planned": len(sched),
@@ -183,7 +187,7 @@ def new_scan(plan_path: str | Path, instrument: str | Path | None = None,
     return _run(lambda: RunWriter.create(Path(out), plan.name, plan.path, cfg.path, plan.raw,
                                          cfg.raw, meta), plan, cfg, sched, sim, progress, control,
                 meta["t0_epoch"], check=_then_warn(check, undescribed(plan, cfg), warn),
-                channel=channel, started=started)
+                channel=channel, started=started, created=created)
 
 
 def scaled(cfg: InstrumentConfig, sim: list[str] | bool, time_scale: float | None
@@ -197,6 +201,17 @@ def scaled(cfg: InstrumentConfig, sim: list[str] | bool, time_scale: float | Non
     from gonio.simulate import with_time_scale
 
     return with_time_scale(cfg, time_scale)
+
+
+def schedule_for(plan: Plan, cfg: InstrumentConfig, sim: list[str] | bool) -> Schedule:
+    """The plan's schedule on the instrument, once plan, config and --sim's device names
+    are checked (PlanError / ConfigError): what a scan checks before any run directory."""
+    sched = build_schedule(plan, cfg)
+    if isinstance(sim, list):
+        from gonio.simulate import resolve_devices
+
+        resolve_devices(cfg, sim)
+    return sched
 
 
 def _then_warn(check: DetectorCheck | None, texts: list[str],

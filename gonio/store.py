@@ -89,13 +89,17 @@ def fsync_dir(path: Path) -> None:
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON via a temporary file, fsync and rename: never a half-written file (nor a
-    temporary one left behind when the disk refuses)."""
+    """Write JSON atomically (see `write_text_atomic`)."""
+    write_text_atomic(path, json.dumps(data, indent=2, default=_json_default) + "\n")
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write a text file via a temporary file, fsync and rename: never a half-written file
+    (nor a temporary one left behind when the disk refuses)."""
     tmp = path.with_suffix(path.suffix + ".tmp")
     try:
-        with open(tmp, "w") as fh:
-            json.dump(data, fh, indent=2, default=_json_default)
-            fh.write("\n")
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

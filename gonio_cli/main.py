@@ -31,6 +31,7 @@ from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
 COMMANDS = [
     "scan",
     "plan",
+    "queue",
     "emulate",
     "reduce",
     "plot",

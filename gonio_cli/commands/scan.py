@@ -11,17 +11,34 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gonio.errors import GonioError, os_error_text
 
 if TYPE_CHECKING:
-    from gonio.runner import DetectorCheck
+    from gonio.runner import DetectorCheck, ScanResult
 
 
 def _sim_names(value: str) -> list[str]:
     return [v for v in value.split(",") if v]
+
+
+def add_sim_option(p: argparse.ArgumentParser) -> None:
+    """--sim [NAMES]: emulate every device, or the named ones (scan, queue add)."""
+    p.add_argument("--sim", nargs="?", const=True, default=None, type=_sim_names,
+                   metavar="NAMES",
+                   help="emulate every device, or only the named devices/roles "
+                        "(comma-separated, e.g. --sim detector)")
+
+
+def plan_given_to_sim(sim: list[str] | bool | None) -> tuple[str | None, list[str] | bool | None]:
+    """`--sim PLAN.toml`: argparse hands the plan to --sim's optional NAMES; this takes it
+    back as (the plan, sim = True), else (None, sim as it was)."""
+    if isinstance(sim, list) and len(sim) == 1 and sim[0].endswith(".toml"):
+        return sim[0], True
+    return None, sim
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -32,10 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="plan TOML file (with --resume: optional, must match the run's plan)")
     p.add_argument("--instrument", metavar="CFG",
                    help="instrument config (default: the plan's `instrument`)")
-    p.add_argument("--sim", nargs="?", const=True, default=None, type=_sim_names,
-                   metavar="NAMES",
-                   help="emulate every device, or only the named devices/roles "
-                        "(comma-separated, e.g. --sim detector)")
+    add_sim_option(p)
     p.add_argument("--time-scale", type=float, metavar="X",
                    help="with --sim: virtual seconds per real second (inf = instant moves), "
                         "instead of the config's [sim] time_scale")
@@ -54,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _plot(run_dir) -> None:
+def _plot(run_dir, verb: str) -> None:
     """plot.png: the calibrated BSDF plot (calibration.plot); for a run that cannot be reduced
     (no beam readings, say) the quick look at raw power instead."""
     from calibration.plot import plot_run
@@ -65,7 +79,7 @@ def _plot(run_dir) -> None:
         from gonio.quicklook import write_quicklook
 
         write_quicklook(run_dir)
-        print(f"gonio scan: note: plot.png shows raw power ({exc})", file=sys.stderr)
+        print(f"{verb}: note: plot.png shows raw power ({exc})", file=sys.stderr)
 
 
 def _watch(run_dir: Path, token: str | None) -> subprocess.Popen | None:
@@ -97,9 +111,8 @@ def run(args: argparse.Namespace) -> int:
     progress = False if args.no_progress else None
     viewers: list = []
     started = (lambda path, token: viewers.append(_watch(path, token))) if args.watch else None
-    if args.plan is None and isinstance(args.sim, list) and len(args.sim) == 1 \
-            and args.sim[0].endswith(".toml"):
-        args.plan, args.sim = args.sim[0], True  # `gonio scan --sim PLAN`: the plan, not NAMES
+    if args.plan is None:
+        args.plan, args.sim = plan_given_to_sim(args.sim)
     if args.resume:
         if args.calibration or args.time_scale is not None or args.sample_id:
             raise GonioError("--resume RUN continues a run as it was started: "
@@ -117,28 +130,37 @@ def run(args: argparse.Namespace) -> int:
         result = new_scan(args.plan, args.instrument, args.sim or False, args.out,
                           progress=progress, calibration=calibration,
                           time_scale=args.time_scale, sample_id=args.sample_id, check=check,
-                          warn=lambda text: print(f"gonio scan: warning: {text}",
-                                                  file=sys.stderr), channel=True,
-                       started=started)
+                          warn=warner("gonio scan"), channel=True, started=started)
     for viewer in viewers:
         if viewer is not None:
             viewer.stdin.close()  # the viewer ends once an open page has shown the run's end
+    return report(result, not args.no_plot, "gonio scan")
+
+
+def warner(verb: str) -> Callable[[str], None]:
+    """What prints a scan's warnings on stderr, as `VERB: warning: ...`."""
+    return lambda text: print(f"{verb}: warning: {text}", file=sys.stderr)
+
+
+def report(result: ScanResult, plot: bool, verb: str) -> int:
+    """After a scan (or a queued one): plot.png if `plot` and readings were stored, how the
+    run ended on stderr, its directory on stdout; the exit status (see the module doc)."""
     outcome = result.outcome
     plotted = False
-    if not args.no_plot and outcome.done:
+    if plot and outcome.done:
         try:
-            _plot(result.path)
+            _plot(result.path, verb)
             plotted = True
         except Exception as exc:  # the data are stored; a plot problem must not hide the run
-            print(f"gonio scan: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
+            print(f"{verb}: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
         except KeyboardInterrupt:
-            print("gonio scan: warning: no plot: interrupted", file=sys.stderr)
+            print(f"{verb}: warning: no plot: interrupted", file=sys.stderr)
     if outcome.status != "completed":
-        print(f"gonio scan: run {outcome.status} after {outcome.done} readings: "
+        print(f"{verb}: run {outcome.status} after {outcome.done} readings: "
               f"{outcome.reason}", file=sys.stderr)
     else:
-        plot = f"; plot {result.path / 'plot.png'}" if plotted else ""
-        print(f"gonio scan: completed, {outcome.done} readings stored{plot}", file=sys.stderr)
+        plotted_to = f"; plot {result.path / 'plot.png'}" if plotted else ""
+        print(f"{verb}: completed, {outcome.done} readings stored{plotted_to}", file=sys.stderr)
     print(result.path, flush=True)
     if outcome.signum:
         return 128 + outcome.signum

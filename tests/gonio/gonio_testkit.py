@@ -11,6 +11,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -113,6 +114,24 @@ def gonio_cli(*args, timeout: float = 120.0, input: str | None = None, cwd=None
     return subprocess.run([sys.executable, "-m", "gonio_cli", *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, input=input,
                           cwd=cwd or ROOT, env=env)
+
+
+def start_gonio(*args, stdin=subprocess.DEVNULL) -> subprocess.Popen:
+    """Start `python -m gonio_cli ARGS` in the background (text output on pipes)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, "-m", "gonio_cli", *map(str, args)], stdin=stdin,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+
+def wait_for_lines(runs, n: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    """Until a run under `runs` holds n readings lines (or the process ended)."""
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None:
+        found = list(runs.glob("*/readings.jsonl"))
+        if found and found[0].read_bytes().count(b"\n") >= n:
+            return
+        assert time.monotonic() < deadline, "the scan made no progress"
+        time.sleep(0.005)
 
 
 def run_dir_of(proc: subprocess.CompletedProcess) -> Path:

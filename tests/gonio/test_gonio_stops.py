@@ -20,6 +20,8 @@ from gonio_testkit import (
     gonio_cli,
     pointed,
     run_dir_of,
+    start_gonio,
+    wait_for_lines,
     write_plan,
     write_toml,
 )
@@ -33,20 +35,7 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def scan(*args: object, stdin=subprocess.DEVNULL) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "gonio_cli", "scan", *map(str, args),
-                             "--no-plot", "--no-progress"], stdin=stdin,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-
-
-def wait_for_lines(runs, n: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
-    """Until a run under `runs` holds n readings lines (or the scan ended)."""
-    deadline = time.monotonic() + timeout
-    while proc.poll() is None:
-        found = list(runs.glob("*/readings.jsonl"))
-        if found and found[0].read_bytes().count(b"\n") >= n:
-            return
-        assert time.monotonic() < deadline, "the scan made no progress"
-        time.sleep(0.005)
+    return start_gonio("scan", *args, "--no-plot", "--no-progress", stdin=stdin)
 
 
 def esp_query(port: serial.Serial, command: str) -> str:

@@ -1,0 +1,226 @@
+"""`gonio queue` in real processes: queued plans run one after another into complete runs; a
+SIGKILL of `gonio queue run` mid-run is resumed by the next one (every reading once) while a
+second runner is refused; SIGTERM aborts the entry and stops the queue; a failed run stops it
+unless --keep-going; a bad plan is refused whole at add. Then queue.toml's own checks, in
+process."""
+
+import signal
+
+import pytest
+import tomllib
+from gonio_testkit import (
+    fast_config,
+    gonio_cli,
+    one_line_error,
+    start_gonio,
+    wait_for_lines,
+    write_toml,
+)
+
+from gonio.errors import QueueError
+from gonio.queue import Entry, load, next_position, queue_path, render
+from gonio.store import open_run
+
+SHORT = {"name": "short", "grid": [{"side": "transmission", "theta_i_deg": [0.0],
+                                    "theta_o_deg": [-20.0, 0.0, 20.0]}]}
+LONG = {"name": "long", "grid": [{"side": "reflection", "theta_i_deg": [10.0],
+                                  "theta_o_deg": {"start": -60.0, "stop": 60.0, "step": 20.0},
+                                  "skip_forbidden": True}]}
+
+
+@pytest.fixture
+def bench(tmp_path):
+    """A fast emulated config and the two plans naming it; the queue's folder."""
+    write_toml(tmp_path / "instrument.toml", fast_config(pm100={"timeout_s": 10.0}))
+    for plan in (SHORT, LONG):
+        write_toml(tmp_path / f"{plan['name']}.toml", {**plan, "instrument": "instrument.toml"})
+    return tmp_path, tmp_path / "runs"
+
+
+def queue(*args):
+    return gonio_cli("queue", *args)
+
+
+def entries(out) -> list[dict]:
+    return tomllib.loads(queue_path(out).read_text())["entry"]
+
+
+def assert_complete(run_dir, planned: int, sessions: int = 1) -> None:
+    """A completed run: every index of its schedule once, in order."""
+    run = open_run(run_dir)
+    assert run.meta["status"] == "completed"
+    assert run.meta["planned"] == planned
+    assert list(run.readings()["index"]) == list(range(planned))
+    assert len(run.meta["sessions"]) == sessions
+
+
+def test_queued_plans_run_one_after_another_from_their_copies(bench):
+    root, out = bench
+    added = queue("add", root / "short.toml", root / "long.toml", "--sim", "--out", out)
+    assert added.returncode == 0, added.stderr
+    short_n, long_n = (int(ln.rsplit("/", 1)[1]) for ln in added.stdout.splitlines())
+    assert [ln.split("  ")[:6] for ln in added.stdout.splitlines()] == [
+        ["1", str(root / "short.toml"), str(root / "instrument.toml"), "sim", "pending", "-"],
+        ["2", str(root / "long.toml"), str(root / "instrument.toml"), "sim", "pending", "-"]]
+    write_toml(root / "short.toml", {**LONG, "name": "short"})  # queued: the copy runs
+    proc = queue("run", "--out", out, "--no-plot", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    recorded = entries(out)
+    assert [e["state"] for e in recorded] == ["completed", "completed"]
+    assert [str(out / e["run"]) for e in recorded] == proc.stdout.split()
+    for entry, planned, name in zip(recorded, (short_n, long_n), ("short", "long"), strict=True):
+        assert_complete(out / entry["run"], planned)
+        assert open_run(out / entry["run"]).meta["plan_name"] == name
+    listed = queue("list", "--out", out)
+    assert listed.returncode == 0, listed.stderr
+    assert [ln.split("  ")[4:] for ln in listed.stdout.splitlines()] == [
+        ["completed", str(out / recorded[0]["run"]), f"{short_n}/{short_n}"],
+        ["completed", str(out / recorded[1]["run"]), f"{long_n}/{long_n}"]]
+
+
+def test_a_killed_queue_resumes_its_running_entry_and_refuses_a_second_runner(bench):
+    root, out = bench
+    added = queue("add", root / "long.toml", root / "short.toml", "--sim", "--out", out)
+    assert added.returncode == 0, added.stderr
+    long_n, short_n = (e["planned"] for e in entries(out))
+    runner = start_gonio("queue", "run", "--out", out, "--no-plot", "--no-progress")
+    try:
+        wait_for_lines(out, 3, runner)
+        runner.send_signal(signal.SIGSTOP)  # holds its lock, stores nothing more
+        second = queue("run", "--out", out)
+        assert second.returncode == 2
+        assert f"being run by another `gonio queue run` (pid {runner.pid})" \
+            in one_line_error(second.stderr)
+        runner.send_signal(signal.SIGKILL)
+    finally:
+        runner.communicate(timeout=30)
+    assert runner.returncode == -signal.SIGKILL, "the queue finished before it could be killed"
+    first, rest = entries(out)
+    assert (first["state"], rest["state"], rest["run"]) == ("running", "pending", "")
+    stored = len(open_run(out / first["run"]).rows())
+    assert 3 <= stored < long_n
+    proc = queue("run", "--out", out, "--no-plot", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "resuming" in proc.stderr
+    done = entries(out)
+    assert [e["state"] for e in done] == ["completed", "completed"]
+    assert done[0]["run"] == first["run"]
+    assert_complete(out / first["run"], long_n, sessions=2)  # nothing lost or doubled
+    assert_complete(out / done[1]["run"], short_n)
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["queue", "queue.toml", first["run"], done[1]["run"]])
+
+
+def test_sigterm_aborts_the_entry_and_stops_the_queue(bench):
+    root, out = bench
+    assert queue("add", root / "long.toml", root / "short.toml", "--sim",
+                 "--out", out).returncode == 0
+    runner = start_gonio("queue", "run", "--out", out, "--no-plot", "--no-progress")
+    wait_for_lines(out, 2, runner)
+    runner.send_signal(signal.SIGTERM)
+    stdout, stderr = runner.communicate(timeout=30)
+    assert runner.returncode == 128 + signal.SIGTERM, stderr
+    first, rest = entries(out)
+    assert (first["state"], first["reason"]) == ("aborted", "SIGTERM")
+    assert stdout.split() == [str(out / first["run"])]
+    assert open_run(out / first["run"]).meta["status"] == "aborted"
+    assert (rest["state"], rest["run"]) == ("pending", "")
+
+
+def test_a_failed_run_stops_the_queue_unless_keep_going(bench):
+    """Real devices on ports that do not exist: each entry fails as it opens them."""
+    root, out = bench
+    real = fast_config()
+    for dev in real["devices"].values():
+        dev["port"] = str(root / "no-such-port")
+    write_toml(root / "real.toml", real)
+    assert queue("add", root / "short.toml", root / "long.toml", "--instrument",
+                 root / "real.toml", "--out", out).returncode == 0
+    stopped = queue("run", "--out", out, "--no-plot", "--no-progress")
+    assert stopped.returncode == 2
+    assert "no-such-port" in one_line_error(stopped.stderr.split("\n", 1)[1])
+    assert [(e["state"], "no-such-port" in e["reason"], e["run"]) for e in entries(out)] == [
+        ("failed", True, ""), ("pending", False, "")]
+    going = queue("run", "--out", out, "--keep-going", "--no-plot", "--no-progress")
+    assert going.returncode == 1, going.stderr
+    assert going.stderr.count("failed: esp: serial port") == 2
+    assert going.stderr.splitlines()[-1] == "gonio queue: 2 of 2 entries failed: 1, 2"
+    assert [(e["state"], "no-such-port" in e["reason"]) for e in entries(out)] == [
+        ("failed", True), ("failed", True)]
+    assert not list(out.glob("*/readings.jsonl"))
+
+
+def test_a_bad_plan_is_refused_and_nothing_is_added(bench):
+    root, out = bench
+    assert queue("add", root / "short.toml", "--sim", "--out", out).returncode == 0
+    before = queue_path(out).read_bytes()
+    bad = write_toml(root / "bad.toml", {  # valid alone; on this bench inside the beam
+        "instrument": "instrument.toml",
+        "grid": [{"side": "reflection", "theta_i_deg": [0.0], "theta_o_deg": [-20.0, 2.0]}]})
+    proc = queue("add", root / "long.toml", bad, "--sim", "--out", out)
+    assert proc.returncode == 2
+    error = one_line_error(proc.stderr)
+    assert str(bad) in error and "theta_o=2" in error and "beam clearance" in error
+    assert queue_path(out).read_bytes() == before
+    assert sorted(p.name for p in (out / "queue").iterdir() if p.is_dir()) == ["01"]
+
+
+def test_a_damaged_queue_file_is_one_error_naming_the_entry_and_field(bench):
+    root, out = bench
+    assert queue("add", root / "short.toml", root / "long.toml", "--sim",
+                 "--out", out).returncode == 0
+    head, tail = queue_path(out).read_text().rsplit('state = "pending"', 1)
+    queue_path(out).write_text(head + 'state = "done"' + tail)  # entry 2's
+    proc = queue("run", "--out", out)
+    assert proc.returncode == 2
+    assert one_line_error(proc.stderr) == (
+        f"gonio queue: error: {queue_path(out)}: entry 2.state: must be one of pending, "
+        f"running, completed, failed, aborted; got 'done'")
+    assert [e["state"] for e in entries(out)] == ["pending", "done"]  # nothing ran
+
+
+ENTRY = Entry(plan="queue/01/a.toml", source="/p/a.toml", instrument="/p/i.toml", sim=True,
+              planned=3, added_utc="2026-01-01T00:00:00.000+00:00")
+
+
+def test_the_queue_file_reads_back_what_was_written(tmp_path):
+    odd = 'quote " backslash \\ newline \n tab \t del \x7f bell \x07 unicode \u00e9\U0001f600'
+    written = [ENTRY, Entry(**{**ENTRY.__dict__, "sim": ("pm100", "arm"), "state": "failed",
+                               "run": "20260101T000000Z-a", "reason": odd})]
+    queue_path(tmp_path).write_text(render(written), encoding="utf-8")
+    assert load(tmp_path) == written
+    assert load(tmp_path / "elsewhere") == []
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"state": "runnig"}, "entry 2.state: must be one of pending, running"),
+    ({"planned": "3"}, "entry 2.planned: must be an integer"),
+    ({"sim": 1}, "entry 2.sim: must be true, false or a list of device names"),
+    ({"sim": []}, "entry 2.sim: must be true, false or a list of device names"),
+    ({"state": "completed"}, "entry 2.run: missing: a completed entry names its run"),
+    ({"run": "../elsewhere"}, "entry 2.run: must be the name of a run directory"),
+    ({"stat": "pending"}, "entry 2: unknown key 'stat'"),
+    ({"plan": None}, "entry 2: missing required key 'plan'"),
+    ({"sim": None}, "entry 2: missing required key 'sim'"),
+])
+def test_a_bad_entry_is_named_with_its_field(tmp_path, change, message):
+    good = ENTRY.__dict__
+    bad = {k: v for k, v in {**good, **change}.items() if v is not None}
+    write_toml(queue_path(tmp_path), {"entry": [{**good, "sim": True}, bad]})
+    with pytest.raises(QueueError) as info:
+        load(tmp_path)
+    assert str(info.value).startswith(f"{queue_path(tmp_path)}: {message}")
+
+
+def test_not_toml_is_one_error(tmp_path):
+    queue_path(tmp_path).write_text("[[entry]\n")
+    with pytest.raises(QueueError, match="not a valid queue file"):
+        load(tmp_path)
+
+
+def test_the_next_entry_is_the_first_not_completed_nor_passed_over():
+    states = ["completed", "failed", "running", "pending"]
+    queued = [Entry(**{**ENTRY.__dict__, "state": s, "run": "r"}) for s in states]
+    assert next_position(queued) == 2
+    assert next_position(queued, {2}) == 3
+    assert next_position(queued, {2, 3, 4}) is None
