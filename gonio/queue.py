@@ -84,7 +84,8 @@ def load(out: Path) -> list[Entry]:
     tables = data.get("entry", [])
     if not isinstance(tables, list):
         raise top.fail("entry", "must be an array of tables ([[entry]])")
-    return [_entry(Fields(t, f"{path}: entry {n}", QueueError)) for n, t in enumerate(tables, 1)]
+    return [_entry(Fields(t, str(path), QueueError, f"entry[{n}]"))
+            for n, t in enumerate(tables, 1)]
 
 
 def _entry(f: Fields) -> Entry:

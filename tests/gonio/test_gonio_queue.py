@@ -174,7 +174,7 @@ def test_a_damaged_queue_file_is_one_error_naming_the_entry_and_field(bench):
     proc = queue("run", "--out", out)
     assert proc.returncode == 2
     assert one_line_error(proc.stderr) == (
-        f"gonio queue: error: {queue_path(out)}: entry 2.state: must be one of pending, "
+        f"gonio queue: error: {queue_path(out)}: [entry[2]] state: must be one of pending, "
         f"running, completed, failed, aborted; got 'done'")
     assert [e["state"] for e in entries(out)] == ["pending", "done"]  # nothing ran
 
@@ -193,15 +193,15 @@ def test_the_queue_file_reads_back_what_was_written(tmp_path):
 
 
 @pytest.mark.parametrize(("change", "message"), [
-    ({"state": "runnig"}, "entry 2.state: must be one of pending, running"),
-    ({"planned": "3"}, "entry 2.planned: must be an integer"),
-    ({"sim": 1}, "entry 2.sim: must be true, false or a list of device names"),
-    ({"sim": []}, "entry 2.sim: must be true, false or a list of device names"),
-    ({"state": "completed"}, "entry 2.run: missing: a completed entry names its run"),
-    ({"run": "../elsewhere"}, "entry 2.run: must be the name of a run directory"),
-    ({"stat": "pending"}, "entry 2: unknown key 'stat'"),
-    ({"plan": None}, "entry 2: missing required key 'plan'"),
-    ({"sim": None}, "entry 2: missing required key 'sim'"),
+    ({"state": "runnig"}, "[entry[2]] state: must be one of pending, running"),
+    ({"planned": "3"}, "[entry[2]] planned: must be an integer"),
+    ({"sim": 1}, "[entry[2]] sim: must be true, false or a list of device names"),
+    ({"sim": []}, "[entry[2]] sim: must be true, false or a list of device names"),
+    ({"state": "completed"}, "[entry[2]] run: missing: a completed entry names its run"),
+    ({"run": "../elsewhere"}, "[entry[2]] run: must be the name of a run directory"),
+    ({"stat": "pending"}, "[entry[2]]: unknown key 'stat'"),
+    ({"plan": None}, "[entry[2]]: missing required key 'plan'"),
+    ({"sim": None}, "[entry[2]]: missing required key 'sim'"),
 ])
 def test_a_bad_entry_is_named_with_its_field(tmp_path, change, message):
     good = ENTRY.__dict__
