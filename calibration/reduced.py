@@ -11,7 +11,7 @@ import numpy as np
 class ReducedData:
     """Calibrated BSDF samples with 1-sigma uncertainties, one entry per measured point.
 
-    Directions are unit vectors in the sample (BSDF) frame of DESIGN.md; `wi` toward the
+    Directions are unit vectors in the sample (BSDF) frame of docs/architecture.md; `wi` toward the
     source, `wo` toward the detector. `valid` is False for saturated, dark-limited or
     otherwise flagged points, which fits and plots leave out. `flags` says why a point is
     suspect (comma-separated, e.g. "signature": the bench's own scatter exceeds the stated

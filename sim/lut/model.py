@@ -2,7 +2,7 @@
 sampling with the model's own sample(); smooth-surface limits in closed form.
 
 The view direction v = (sqrt(1 - mu^2), 0, mu) is the model's wi. By the model's reciprocity
-(f_t(l, v) / eta_v^2 = f_t(v, l) / eta_l^2, DESIGN.md) the renderer's integral over light
+(f_t(l, v) / eta_v^2 = f_t(v, l) / eta_l^2, docs/architecture.md) the renderer's integral over light
 directions l equals the model's directional albedo from v times (n_view / n_beyond)^2.
 """
 
