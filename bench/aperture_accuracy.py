@@ -9,9 +9,9 @@ edge of the model (the horizon, GGX's vertical-facet edge, the end of the transm
 The reference is the rule split along every edge at orders 6 x 44; its own error is its largest
 difference from the 4 x 32 rule. The baseline is the one-point formula P = Phi_i f cos Omega_d.
 Prints one table per lobe: max relative error (all readings, and those with an edge in the
-aperture), median, BSDF evaluations per reading (all, and those with an edge; with multiple scattering on
-a node counts twice: single scattering and the tables), milliseconds per reading, and the load
-average.
+aperture), median, BSDF evaluations per reading (all, and those with an edge; with multiple
+scattering on a node counts twice: single scattering and the tables), milliseconds per reading,
+and the load average.
 Usage: python bench/aperture_accuracy.py [--quick]
 """
 
