@@ -4,8 +4,13 @@ One `ModbusLink` per endpoint (serial port or host:port), shared by every unit o
 `open_link` hands out the same link to drivers of several units on one RTU bus or one
 TCP server, and closes it when the last user is done. Reads may be retried after a
 timeout or a garbled reply; writes never are (a write may already have acted). A late reply
-never answers a later request: on TCP the connection is closed after a timeout (and replies
-carry transaction ids); on RTU the line is brought back in step first (drivers.modbus_rtu_sync).
+never answers a later request: drivers.reply_sync decides which request each frame answers
+(drivers.modbus_frames cuts and sorts the frames); on TCP the connection is also closed after a
+failed exchange (replies carry transaction ids, and a new connection carries nothing late); on
+RTU the line is brought back in step by a diagnostics echo first (drivers.modbus_rtu_sync).
+pymodbus gives the client's port or socket, its connection handling and every codec; the
+request and reply loop is this module's, so a timeout is a timeout (no frame by the deadline)
+and never read out of an exception's text.
 """
 
 from __future__ import annotations
@@ -16,19 +21,26 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pymodbus.client import ModbusTcpClient
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
-from pymodbus.pdu import ExceptionResponse
+from pymodbus.exceptions import ConnectionException
+from pymodbus.pdu import ExceptionResponse, ModbusPDU, ReadDeviceInformationRequest
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    WriteMultipleRegistersRequest,
+)
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
-from drivers.modbus_rtu_sync import RtuSync
+from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
 from drivers.register_map import RegisterMap, decode_text
+from drivers.reply_sync import Event, Garbled, ReplySync, State, UnitKind
 
-READ_DEVICE_IDENTIFICATION = 43  # with MEI type 14
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
 # the basic objects VendorName, ProductCode, MajorMinorRevision (Modbus Application Protocol
 # V1.1b3, 6.21) by object id -> the identity keys they give
 BASIC_OBJECTS = {0: "vendor", 1: "model", 2: "firmware"}
+MAX_TID = 65000  # transaction ids run 1..MAX_TID, as pymodbus's own client counts them
 MODBUS_EXCEPTIONS = {
     1: "illegal function",
     2: "illegal data address",
@@ -58,7 +70,8 @@ class ModbusTimeouts:
 
 
 class ModbusLink:
-    """A pymodbus sync client for one endpoint, serialised by a lock, with error mapping."""
+    """A pymodbus client's port or socket for one endpoint, serialised by a lock: requests
+    out, frames in through the reply machine, failures mapped to DriverErrors."""
 
     def __init__(self, transport: str, port_or_host: str, *, tcp_port: int = 502,
                  baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
@@ -74,32 +87,39 @@ class ModbusLink:
             self.endpoint = f"{port_or_host}:{tcp_port}"
             self._client = ModbusTcpClient(port_or_host, port=tcp_port, timeout=reply_s,
                                            retries=0)
+            self._cut, self._sort = cut_tcp, sort_tcp
         else:
             self.endpoint = port_or_host
             self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s, retries=0)
+            self._cut, self._sort = cut_rtu, sort_rtu
         self._lock = threading.Lock()
         self.users = 0
-        self.in_step = True  # RTU: False after a reply timeout, until an echo is answered
-        self._sync = RtuSync()
+        self.replies = ReplySync()  # which request each frame answers
+        self._tid = 0
+        self._echoes = EchoTokens()
+
+    @property
+    def in_step(self) -> bool:
+        """False (RTU) from a missed reply until an echo is answered."""
+        return self.replies.state is State.IN_STEP
 
     def read(self, device: str, table: str, address: int, count: int, unit: int) -> list[int]:
         """Read count registers of table ("holding" | "input"); retried on timeout / garble."""
-        fn, code = ((self._client.read_holding_registers, 3) if table == "holding"
-                    else (self._client.read_input_registers, 4))
+        kind = ReadHoldingRegistersRequest if table == "holding" else ReadInputRegistersRequest
         what = f"{table} registers {address}..{address + count - 1} of unit {unit}"
         attempt = 0
         while True:
             try:
-                return self._read_once(device, what, (fn, code), address, count, unit)
+                return self._read_once(device, what, kind(address=address, count=count,
+                                                         dev_id=unit), count)
             except (DeviceTimeout, ProtocolError):
                 if attempt == self.read_retries:
                     raise
                 attempt += 1
                 time.sleep(self.timeouts.retry_pause_s)
 
-    def _read_once(self, device: str, what: str, fn, address: int, count: int,
-                   unit: int) -> list[int]:
-        reply = self._call(device, what, fn, unit, address, count=count)
+    def _read_once(self, device: str, what: str, request: ModbusPDU, count: int) -> list[int]:
+        reply = self._call(device, what, request)
         if len(reply.registers) != count:
             raise ProtocolError(f"{device}: {what}: {len(reply.registers)} registers in the "
                                 f"reply, expected {count}")
@@ -108,57 +128,103 @@ class ModbusLink:
     def write(self, device: str, address: int, values: list[int], unit: int) -> None:
         """Write holding registers (function 16), once: never re-sent on a failure."""
         what = f"reply to a write of holding registers {address}.. of unit {unit}"
-        self._call(device, what, (self._client.write_registers, 16), unit, address,
-                   values=values)
+        self._call(device, what, WriteMultipleRegistersRequest(address=address, registers=values,
+                                                               dev_id=unit))
 
     def identification(self, device: str, unit: int) -> dict[int, bytes]:
         """Read Device Identification (function 43, MEI 14) of the basic objects, sent once
         (a unit that lacks it may stay silent): {object id: value}."""
         reply = self._call(device, f"reply to a device identification (43/14) of unit {unit}",
-                           (self._client.read_device_information, READ_DEVICE_IDENTIFICATION),
-                           unit, read_code=BASIC_DEVICE_ID, object_id=0)
+                           ReadDeviceInformationRequest(BASIC_DEVICE_ID, 0, dev_id=unit))
         return {oid: value for oid, value in reply.information.items()
                 if isinstance(value, bytes)}
 
-    def _call(self, device: str, what: str, fn, unit: int, *args, **kwargs):
-        """fn = (client method, its function code), called for `unit`; a reply to another
-        function (a late frame on an RTU line) is a ProtocolError."""
-        call, code = fn
+    def _call(self, device: str, what: str, request: ModbusPDU) -> ModbusPDU:
+        """Send request (RTU: after an echo if out of step) and return the frame the machine
+        takes for its answer; a Modbus exception reply is a DeviceError."""
         with self._lock:
             try:
-                if self.transport == "rtu" and not self.in_step:
-                    self._sync.resync(self._port(), unit, device, what, self.timeouts.reply_s)
-                    self.in_step = True
-                reply = call(*args, device_id=unit, **kwargs)
+                if not self._client.connected and not self._client.connect():
+                    raise ConnectionException(f"cannot open {self.endpoint}")
+                if self.replies.state is State.OUT_OF_STEP:
+                    self._resync(request.dev_id, device, what)
+                reply = self._exchange(request, device, what)
             except (ConnectionException, OSError) as exc:  # refused, reset, hung up
-                self._client.close()
+                self._lose_connection()
                 raise DriverError(f"{device}: connection to {self.endpoint} failed or lost "
                                   f"({exc})") from None
-            except ModbusException as exc:
+            except (DeviceTimeout, ProtocolError):
                 if self.transport == "tcp":  # a late or partial reply must not answer the next
-                    self._client.close()
-                if isinstance(exc, ModbusIOException) and not (
-                    "transaction id" in str(exc) or "device id" in str(exc)
-                ):
-                    self.in_step = False  # the reply may still come
-                    raise DeviceTimeout(device, what, self.timeouts.reply_s) from None
-                raise ProtocolError(f"{device}: {what}: garbled or mismatched reply "
-                                    f"({exc})") from None
-        if reply.function_code & 0x7F != code:
-            self.in_step = False
-            raise ProtocolError(f"{device}: {what}: a reply to function "
-                                f"{reply.function_code & 0x7F}, not {code} (a late frame)")
-        if isinstance(reply, ExceptionResponse) or reply.isError():
-            exc_code = getattr(reply, "exception_code", 0)
+                    self._lose_connection()
+                raise
+        if isinstance(reply, ExceptionResponse):
+            exc_code = reply.exception_code
             raise DeviceError(device, f"Modbus exception {exc_code:02d}",
                               f"{MODBUS_EXCEPTIONS.get(exc_code, 'unknown exception')} ({what})")
         return reply
 
-    def _port(self):
-        """The RTU line's open pyserial port (connecting first if need be)."""
-        if not self._client.connected and not self._client.connect():
-            raise ConnectionException(f"cannot open {self.endpoint}")
-        return self._client.socket
+    def _lose_connection(self) -> None:
+        self._client.close()
+        self.replies.reset()  # nothing sent on the old connection can arrive on a new one
+
+    def _exchange(self, request: ModbusPDU, device: str, what: str) -> ModbusPDU:
+        if self.transport == "tcp":
+            self._tid = self._tid % MAX_TID + 1
+            request.transaction_id = self._tid
+        expected = Expected(request.dev_id, request.function_code, request.transaction_id)
+        frame = self._client.framer.buildFrame(request)
+        self.replies.send_request()
+        self._client.send(frame)
+        event = self._await(device, what, expected)
+        if type(event) is Garbled:
+            raise ProtocolError(f"{device}: {what}: garbled or mismatched reply "
+                                f"{event.unit.raw.hex(' ')}")
+        return event.unit.pdu
+
+    def _await(self, device: str, what: str, expected: Expected) -> Event:
+        """Feed the frames that arrive to the machine until it awaits nothing more; the event
+        that ended the wait (DeviceTimeout, the machine told, when no frame ends it in time)."""
+        deadline = time.monotonic() + self.timeouts.reply_s
+        data = b""
+        while True:
+            chunk = self._client.recv(None)
+            if chunk:
+                data += chunk
+                frames, used = self._cut(data)
+                data = data[used:]
+                for frame in frames:
+                    kind, sync_id = self._sort(frame, expected)
+                    event = self.replies.receive(kind, frame, sync_id)
+                    if not self.replies.awaiting:
+                        return event
+            if not chunk or time.monotonic() >= deadline:
+                self.replies.timeout()
+                raise DeviceTimeout(device, what, self.timeouts.reply_s)
+
+    def _resync(self, unit: int, device: str, what: str) -> None:
+        """RTU: send a fresh echo to `unit` and drop every byte up to its answer (DeviceTimeout
+        naming `what`, still out of step, if it does not come within reply_s), then the rest of
+        that answer's frame up to the line's silence."""
+        token, echo = self._echoes.next_echo(unit)
+        self.replies.send_sync(token)
+        self._client.send(echo)
+        deadline = time.monotonic() + self.timeouts.reply_s
+        received = b""
+        while (end := echo_answer_end(received, echo, unit)) is None:
+            chunk = self._client.recv(None)
+            if not chunk:
+                self.replies.timeout()
+                if self.replies.state is State.IN_STEP:
+                    return
+                raise DeviceTimeout(device, f"{what} (replies out of step after a timeout: no "
+                                    "answer to the Modbus echo, function 08)",
+                                    self.timeouts.reply_s)
+            received += chunk
+        self.replies.receive(UnitKind.SYNC, received[:end], token)
+        port = self._client.socket
+        port.timeout = silent_interval_s(port.baudrate)  # the rest of a matched answer:
+        while port.read(max(1, port.in_waiting)) and time.monotonic() < deadline:
+            pass  # up to the silence ending its frame (a babbling line: the deadline)
 
     def close(self) -> None:
         """Close the client connection."""
