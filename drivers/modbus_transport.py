@@ -307,22 +307,39 @@ class MappedUnit:
         return self.read_values(name)[name]
 
     def write_value(self, name: str, value: float) -> None:
-        """Write one named holding register (checked against the map first), never re-sent.
+        """Write one named holding register (checked against the map first), never re-sent."""
+        self.write_values({name: value})
 
-        If the reply to a setting's write is lost, the register is read back: holding the
-        written words means the write was taken. (Commands are resolved by the caller.)
+    def write_values(self, values: dict[str, float]) -> None:
+        """Write named holding registers, in order, each once; every value is checked against
+        the map before anything is written (bad input stops before any write).
+
+        The map declares each setting (address, type, scale, range: its format); the
+        read-back rule is the written words: if the reply to a setting's write is lost or
+        garbled, the register is read back, and holding exactly the words written means the
+        write was taken (the command register reads back nothing of the kind: its writes
+        are resolved by the caller).
         """
-        reg = self.map.register(name)
-        if reg.table != "holding" or not reg.writable:
-            raise ValueError(f"{self.name}: register {name!r} is not writable in {self.map.source}")
-        words = self.map.encode(name, value)
-        try:
-            self.link.write(self.name, reg.address, words, self.unit)
-        except DeviceTimeout:
-            if name == "command" or self.link.read(
-                self.name, "holding", reg.address, reg.count, self.unit
-            ) != words:
-                raise
+        writes = []
+        for name, value in values.items():
+            reg = self.map.register(name)
+            if reg.table != "holding" or not reg.writable:
+                raise ValueError(f"{self.name}: register {name!r} is not writable in "
+                                 f"{self.map.source}")
+            writes.append((name, reg, self.map.encode(name, value)))
+        for name, reg, words in writes:
+            try:
+                self.link.write(self.name, reg.address, words, self.unit)
+            except (DeviceTimeout, ProtocolError):
+                if name == "command" or self.link.read(
+                    self.name, "holding", reg.address, reg.count, self.unit
+                ) != words:
+                    raise
+
+    def read_tuple(self, names: tuple[str, ...]) -> tuple[float, ...]:
+        """Engineering values of the named registers, in the order named."""
+        values = self.read_values(*names)
+        return tuple(values[name] for name in names)
 
     def identity(self) -> dict[str, str]:
         """The unit's identity as it reports it: Read Device Identification (43/14: vendor,
