@@ -10,7 +10,7 @@ sorted by what it is, so the link never reads a timeout out of a message.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from pymodbus.framer import FramerRTU, FramerSocket
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
@@ -22,8 +22,7 @@ RTU_MIN_BYTES = 4  # unit id, function code, CRC
 _decoder = DecodePDU(False)  # replies (the client side)
 
 
-@dataclass(frozen=True)
-class Frame:
+class Frame(NamedTuple):
     """One reply frame: the unit and transaction id it carries, its PDU (None: a frame of the
     right length and checksum whose content pymodbus cannot decode) and its bytes."""
 
@@ -33,8 +32,7 @@ class Frame:
     raw: bytes
 
 
-@dataclass(frozen=True)
-class Expected:
+class Expected(NamedTuple):
     """What answers the request just sent: its unit, function code and transaction id (0 on
     RTU, whose frames carry none)."""
 
@@ -45,39 +43,56 @@ class Expected:
 
 def cut_rtu(data: bytes) -> tuple[list[Frame], int]:
     """The complete RTU frames in data and how many bytes they (and the noise between them)
-    used; the rest waits for more bytes. A byte that cannot start a frame (unknown function) or
-    a frame whose CRC fails is noise: the search goes on from the next byte, as a master
-    hunting for a frame start does."""
+    used; the rest waits for more bytes. A byte that cannot start a frame (unknown function),
+    a frame whose CRC fails, and a frame start still short of its length while a complete
+    frame follows it are noise: the search goes on, as a master hunting for a frame does."""
     frames: list[Frame] = []
     start = 0
     while len(data) - start >= RTU_MIN_BYTES:
-        rest = data[start:]
-        cls = _decoder.lookupPduClass(rest)
-        size = cls.calculateRtuFrameSize(rest) if cls is not None else 0
-        if cls is None or size < RTU_MIN_BYTES:
+        size = _frame_size(data, start)
+        if size > 0:
+            body = data[start:start + size - 2]
+            frames.append(Frame(body[0], 0, _decoder.decode(body[1:]), data[start:start + size]))
+            start += size
+        elif size == _NOISE:
             start += 1
-            continue
-        if len(rest) < size:
-            break  # the rest of this frame has not come yet
-        body, crc = rest[:size - 2], rest[size - 2:size]
-        if not FramerRTU.check_CRC(body, int.from_bytes(crc, "big")):
-            start += 1
-            continue
-        frames.append(Frame(body[0], 0, _decoder.decode(body[1:]), rest[:size]))
-        start += size
+        else:  # short: wait for the rest, unless a whole frame follows
+            later = next((i for i in range(start + 1, len(data) - RTU_MIN_BYTES + 1)
+                          if _frame_size(data, i) > 0), None)
+            if later is None:
+                break
+            start = later
     return frames, start
+
+
+_NOISE, _SHORT = 0, -1
+
+
+def _frame_size(data: bytes, start: int) -> int:
+    """The size of the CRC-checked frame at data[start:], _NOISE if none starts there, or
+    _SHORT if one may, but its bytes have not all come."""
+    rest = data[start:]
+    cls = _decoder.lookupPduClass(rest)
+    size = cls.calculateRtuFrameSize(rest) if cls is not None else 0
+    if size < RTU_MIN_BYTES:
+        return _NOISE
+    if len(rest) < size:
+        return _SHORT
+    crc = int.from_bytes(rest[size - 2:size], "big")
+    return size if FramerRTU.check_CRC(rest[:size - 2], crc) else _NOISE
 
 
 def cut_tcp(data: bytes) -> tuple[list[Frame], int]:
     """The complete MBAP frames at the front of data and how many bytes they used."""
     frames: list[Frame] = []
     used = 0
-    while True:
+    while used < len(data):
         size, unit, tid, pdu = _tcp_framer.decode(data[used:])
         if not size:
-            return frames, used
+            break
         frames.append(Frame(unit, tid, _decoder.decode(pdu), data[used:used + size]))
         used += size
+    return frames, used
 
 
 _tcp_framer = FramerSocket(_decoder)

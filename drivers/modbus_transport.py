@@ -15,6 +15,7 @@ and never read out of an exception's text.
 
 from __future__ import annotations
 
+import select
 import threading
 import time
 from dataclasses import dataclass
@@ -34,7 +35,7 @@ from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
 from drivers.register_map import RegisterMap, decode_text
-from drivers.reply_sync import Event, Garbled, ReplySync, State, UnitKind
+from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
 # the basic objects VendorName, ProductCode, MajorMinorRevision (Modbus Application Protocol
@@ -87,11 +88,11 @@ class ModbusLink:
             self.endpoint = f"{port_or_host}:{tcp_port}"
             self._client = ModbusTcpClient(port_or_host, port=tcp_port, timeout=reply_s,
                                            retries=0)
-            self._cut, self._sort = cut_tcp, sort_tcp
+            self._cut, self._sort, self._recv = cut_tcp, sort_tcp, self._recv_tcp
         else:
             self.endpoint = port_or_host
             self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s, retries=0)
-            self._cut, self._sort = cut_rtu, sort_rtu
+            self._cut, self._sort, self._recv = cut_rtu, sort_rtu, self._recv_rtu
         self._lock = threading.Lock()
         self.users = 0
         self.replies = ReplySync()  # which request each frame answers
@@ -144,8 +145,8 @@ class ModbusLink:
         takes for its answer; a Modbus exception reply is a DeviceError."""
         with self._lock:
             try:
-                if not self._client.connected and not self._client.connect():
-                    raise ConnectionException(f"cannot open {self.endpoint}")
+                if not self._client.connected:
+                    self._connect()
                 if self.replies.state is State.OUT_OF_STEP:
                     self._resync(request.dev_id, device, what)
                 reply = self._exchange(request, device, what)
@@ -162,6 +163,12 @@ class ModbusLink:
             raise DeviceError(device, f"Modbus exception {exc_code:02d}",
                               f"{MODBUS_EXCEPTIONS.get(exc_code, 'unknown exception')} ({what})")
         return reply
+
+    def _connect(self) -> None:
+        if not self._client.connect():
+            raise ConnectionException(f"cannot open {self.endpoint}")
+        if self.transport == "tcp":  # waits are on select: no poll inside every send and recv
+            self._client.socket.setblocking(False)
 
     def _lose_connection(self) -> None:
         self._client.close()
@@ -186,20 +193,32 @@ class ModbusLink:
         that ended the wait (DeviceTimeout, the machine told, when no frame ends it in time)."""
         deadline = time.monotonic() + self.timeouts.reply_s
         data = b""
-        while True:
-            chunk = self._client.recv(None)
-            if chunk:
-                data += chunk
-                frames, used = self._cut(data)
-                data = data[used:]
-                for frame in frames:
-                    kind, sync_id = self._sort(frame, expected)
-                    event = self.replies.receive(kind, frame, sync_id)
-                    if not self.replies.awaiting:
-                        return event
-            if not chunk or time.monotonic() >= deadline:
-                self.replies.timeout()
-                raise DeviceTimeout(device, what, self.timeouts.reply_s)
+        while chunk := self._recv(deadline):
+            data += chunk
+            frames, used = self._cut(data)
+            data = data[used:]
+            for frame in frames:
+                kind, sync_id = self._sort(frame, expected)
+                event = self.replies.receive(kind, frame, sync_id)
+                if type(event) is Reply or type(event) is Garbled:  # in step: the wait is over
+                    return event
+        self.replies.timeout()
+        raise DeviceTimeout(device, what, self.timeouts.reply_s)
+
+    def _recv_tcp(self, deadline: float) -> bytes:
+        """The bytes that arrive on the socket by the deadline (b"": none)."""
+        sock = self._client.socket
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([sock], [], [], left)[0]:
+            return b""
+        if chunk := sock.recv(4096):
+            return chunk
+        raise ConnectionException(f"{self.endpoint} closed the connection")
+
+    def _recv_rtu(self, deadline: float) -> bytes:
+        """The bytes waiting on the port, or the first to arrive by the deadline and those
+        with them (b"": none); the client's deadline, set by its send, is the same one."""
+        return self._client.recv(None)
 
     def _resync(self, unit: int, device: str, what: str) -> None:
         """RTU: send a fresh echo to `unit` and drop every byte up to its answer (DeviceTimeout
@@ -211,7 +230,7 @@ class ModbusLink:
         deadline = time.monotonic() + self.timeouts.reply_s
         received = b""
         while (end := echo_answer_end(received, echo, unit)) is None:
-            chunk = self._client.recv(None)
+            chunk = self._recv_rtu(deadline)
             if not chunk:
                 self.replies.timeout()
                 if self.replies.state is State.IN_STEP:

@@ -30,6 +30,9 @@ class State(Enum):
     OUT_OF_STEP = "out of step"
     RESYNCING = "resyncing"
 
+    __hash__ = object.__hash__  # a singleton's identity (Enum hashes its name in Python)
+
+
 
 class UnitKind(Enum):
     """What the protocol can tell about a unit from its content alone."""
@@ -52,6 +55,8 @@ class Input(Enum):
     SYNC_REPLY = "sync reply"
     GARBLED = "garbled"
     TIMEOUT = "timeout"
+
+    __hash__ = object.__hash__  # looked up on every send and reply, as State is
 
 
 class SyncMisuse(RuntimeError):
@@ -102,6 +107,7 @@ class Garbled(Event):
 
 
 _IN, _OUT, _RESYNC = State.IN_STEP, State.OUT_OF_STEP, State.RESYNCING
+_SEND_REQUEST = Input.SEND_REQUEST
 
 # (state, input) -> (next state when no request but the awaited one is unanswered, next state
 # when one is). A pair missing from the table is a SyncMisuse.
@@ -122,6 +128,13 @@ TRANSITIONS: dict[tuple[State, Input], tuple[State, State]] = {
     (_RESYNC, Input.GARBLED): (_RESYNC, _RESYNC),
     (_RESYNC, Input.TIMEOUT): (_IN, _OUT),
 }
+
+# the table by state, then input (what _move looks up on every send and reply); and the
+# members the hot paths compare with, bound once (an Enum member's class attribute is slow)
+_NEXT = {state: {what: nxt for (row, what), nxt in TRANSITIONS.items() if row is state}
+         for state in State}
+_SYNC, _FOREIGN, _GARBLED = UnitKind.SYNC, UnitKind.FOREIGN, UnitKind.GARBLED
+
 
 class _Item:
     """One thing sent whose reply is not yet accounted for, and the shape its reply has."""
@@ -165,7 +178,7 @@ class ReplySync:
         the sync query itself (sent for its answer), so its reply is SYNC-shaped."""
         if self._awaited is not None:
             raise SyncMisuse("a request sent while a reply is still awaited")
-        self._move(Input.SEND_REQUEST)
+        self._move(_SEND_REQUEST)
         self._awaited = item = _Item(False, sync_shaped)
         self._unanswered.append(item)
         self._requests += 1
@@ -196,9 +209,9 @@ class ReplySync:
         """The event a unit is, the state moved by it. sync_id: for a SYNC unit, the id of the
         sync query it answers, if the unit shows it (else the earliest one that can be)."""
         found = self._attribute(kind, sync_id)
-        if kind is UnitKind.GARBLED:
+        if kind is _GARBLED:
             event: Event = Garbled(unit)
-            if self.state is State.IN_STEP:
+            if self.state is _IN:
                 self._awaited = None  # the exchange is over either way
         elif found is None:
             event = LateReply(unit)
@@ -215,32 +228,35 @@ class ReplySync:
     def _attribute(self, kind: UnitKind, sync_id: object) -> _Item | None:
         """The earliest unanswered item the unit can answer, removed with every item before it
         (their replies have come or never will: replies come in order); None if there is none."""
-        queue = self._unanswered
-        if not queue:
-            return None
-        if kind is UnitKind.ANSWER:
-            index = next((i for i, item in enumerate(queue) if not item.sync_shaped), None)
-        elif kind is UnitKind.SYNC:
-            index = next((i for i, item in enumerate(queue) if item.sync_shaped and (
-                sync_id is None or item.sync_id == sync_id)), None)
-        elif kind is UnitKind.GARBLED:  # only the awaited request, when nothing is before it
-            index = 0 if queue[0] is self._awaited and not queue[0].is_sync else None
-        else:
-            index = None
+        index = self._match(kind, sync_id)
         if index is None:
             return None
+        queue = self._unanswered
         for _ in range(index + 1):
             item = queue.popleft()
             self._requests -= not item.is_sync
         return item
 
+    def _match(self, kind: UnitKind, sync_id: object) -> int | None:
+        """Where the earliest unanswered item the unit can answer is."""
+        queue = self._unanswered
+        if kind is _GARBLED:  # only the awaited request, when nothing is before it
+            return 0 if queue and queue[0] is self._awaited and not queue[0].is_sync else None
+        if kind is _FOREIGN:
+            return None
+        sync = kind is _SYNC
+        for index, item in enumerate(queue):
+            if item.sync_shaped is sync and (sync_id is None or item.sync_id == sync_id):
+                return index
+        return None
+
     def _move(self, what: Input) -> None:
         try:
-            clear, waiting = TRANSITIONS[self.state, what]
+            clear, waiting = _NEXT[self.state][what]
         except KeyError:
             raise SyncMisuse(f"{what.value} while {self.state.value}") from None
         awaited = self._awaited
         others = self._requests - (awaited is not None and not awaited.is_sync)
         self.state = waiting if others else clear
-        if awaited is not None and awaited.is_sync and self.state is not State.RESYNCING:
+        if awaited is not None and awaited.is_sync and self.state is not _RESYNC:
             self._awaited = None  # the resync is over

@@ -225,7 +225,7 @@ class SerialLineTransport:
             event = self._next_unit(what, deadline)
             if type(event) is Reply:
                 return event.unit
-            if type(event) is Garbled and not self.replies.awaiting:
+            if type(event) is Garbled:  # in step, a garbled line ends the wait
                 raise event.unit
 
     def _next_unit(self, what: str, deadline: float):
