@@ -94,17 +94,9 @@ class EspController(StatusLineDevice):
     integer = staticmethod(_integer)
     flag = staticmethod(_flag)
 
-    def __init__(
-        self,
-        port: str,
-        baudrate: int = 19200,
-        timeout_s: float = 1.0,
-        name: str = "esp",
-        retries: int = 2,
-        poll_s: float = 0.01,
-        rtscts: bool = True,
-        decimals: int = DECIMALS,
-    ):
+    def __init__(self, port: str, baudrate: int = 19200, timeout_s: float = 1.0,
+                 name: str = "esp", retries: int = 2, poll_s: float = 0.01, rtscts: bool = True,
+                 decimals: int = DECIMALS):
         self.poll_s = poll_s
         self.number = decimal_parser(decimals)
         self.version: str | None = None
@@ -203,9 +195,12 @@ class EspAxis:
         self.write_setting(_TARGET, float(position_deg))
 
     def move_by(self, delta_deg: float) -> None:
-        """PR: start a move relative to the current target."""
+        """PR: start a move relative to the current target. A lost status is settled by the
+        target read back within one unit of its last place of the goal (the goal itself comes
+        from a target read to half a unit)."""
         goal = self.target() + float(delta_deg)
-        self._command(f"PR{_fmt(delta_deg)}", self.controller.confirms(_TARGET, goal, self._p))
+        unit = 2 * self.controller.number.half_unit(goal)
+        self._command(f"PR{_fmt(delta_deg)}", lambda: abs(self.target() - goal) <= unit)
 
     def position(self) -> float:
         """TP?: actual position, degrees."""

@@ -189,8 +189,9 @@ class ModbusLink:
         return event.unit.pdu
 
     def _await(self, device: str, what: str, expected: Expected) -> Event:
-        """Feed the frames that arrive to the machine until it awaits nothing more; the event
-        that ended the wait (DeviceTimeout, the machine told, when no frame ends it in time)."""
+        """Feed the frames that arrive to the machine until one is the reply or a garbled one
+        (late replies and late echo answers are passed over): that event; DeviceTimeout, the
+        machine told, when none comes in time."""
         deadline = time.monotonic() + self.timeouts.reply_s
         data = b""
         while chunk := self._recv(deadline):

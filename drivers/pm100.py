@@ -137,16 +137,9 @@ class Pm100(StatusLineDevice):
                       _same_range, "the fixed range's full scale, W, or None while autoranging",
                       value=_fixed_or_auto)
 
-    def __init__(
-        self,
-        port: str,
-        baudrate: int = 115200,
-        timeout_s: float = 1.0,
-        name: str = "pm100",
-        retries: int = 2,
-        zero_timeout_s: float = 10.0,
-        nr3_decimals: int = NR3_DECIMALS,
-    ):
+    def __init__(self, port: str, baudrate: int = 115200, timeout_s: float = 1.0,
+                 name: str = "pm100", retries: int = 2, zero_timeout_s: float = 10.0,
+                 nr3_decimals: int = NR3_DECIMALS):
         self.zero_timeout_s = zero_timeout_s
         self._full_scales: tuple[float, ...] | None = None
         self.number = nr3_parser(nr3_decimals)
