@@ -158,6 +158,11 @@ class ModbusLink:
                 if self.transport == "tcp":  # a late or partial reply must not answer the next
                     self._lose_connection()
                 raise
+            finally:
+                if self.replies.awaiting:  # a wait cut short (a signal): the reply may come
+                    self.replies.timeout()
+                    if self.transport == "tcp":
+                        self._lose_connection()
         if isinstance(reply, ExceptionResponse):
             exc_code = reply.exception_code
             raise DeviceError(device, f"Modbus exception {exc_code:02d}",

@@ -161,8 +161,11 @@ class SerialLineTransport:
         if that fails), discard stale input, then write one line (terminator added) that
         gets no reply (a silent command)."""
         with self.lock:
-            self._in_step(what or repr(line))
-            self._write(line, request=False)
+            try:
+                self._in_step(what or repr(line))
+                self._write(line, request=False)
+            finally:
+                self._abandon_wait()
 
     def _in_step(self, what: str) -> None:
         """Out of step: send the sync query and drop every line before its reply, or, with no
@@ -191,12 +194,17 @@ class SerialLineTransport:
             self._serial.write(data)
             self._serial.flush()
         except PORT_FAILURES as exc:
-            if isinstance(exc, serial.SerialTimeoutException):  # part may have gone out
-                if not self.replies.awaiting:  # a silent line: it may now get an answer
-                    self.replies.send_request()
-                self.replies.timeout()
+            if isinstance(exc, serial.SerialTimeoutException) and not self.replies.awaiting:
+                self.replies.send_request()  # part of a silent line went out: it may be
+                self.replies.timeout()  # answered after all (an error, an echo)
             raise self._port_error(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}",
                                    exc) from exc
+
+    def _abandon_wait(self) -> None:
+        """After an exchange: a wait cut short (the port lost, a signal) leaves its reply to
+        come, like a timeout."""
+        if self.replies.awaiting:
+            self.replies.timeout()
 
     def _resync(self, what: str) -> None:
         """Send the sync query and read until the machine is in step (every line before the
@@ -273,9 +281,12 @@ class SerialLineTransport:
         """Send a line and read its reply once (no retry: for state-changing commands)."""
         what = what or repr(line)
         with self.lock:
-            self._in_step(what)
-            self._write(line, request=True)
-            return self._reply(what)
+            try:
+                self._in_step(what)
+                self._write(line, request=True)
+                return self._reply(what)
+            finally:
+                self._abandon_wait()
 
     def query(
         self,
