@@ -2,6 +2,7 @@
 answers the next read (RTU: the echo first; TCP: a new connection)."""
 
 import signal
+import time
 
 import pytest
 
@@ -29,3 +30,4 @@ def test_a_read_a_signal_cut_short_does_not_answer_the_next(rig, transport):
     r.stage_emu.faults = FaultInjector(FaultSpec())
     assert r.stage.limits() == (-95.0, 95.0)  # not the late (20, 80)
     assert r.stage.link.in_step
+    time.sleep(0.3)  # the late reply goes out (on TCP, to the closed connection) before the stop
