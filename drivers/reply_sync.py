@@ -33,7 +33,6 @@ class State(Enum):
     __hash__ = object.__hash__  # a singleton's identity (Enum hashes its name in Python)
 
 
-
 class UnitKind(Enum):
     """What the protocol can tell about a unit from its content alone."""
 

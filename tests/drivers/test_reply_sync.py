@@ -239,7 +239,7 @@ class Line:
             self.machine.timeout()
             return None
         item, garbled = self.queue.popleft()
-        return self.machine.receive(*self.sort(item, garbled), )
+        return self.machine.receive(*self.sort(item, garbled))
 
     def sort(self, item, garbled):
         if garbled:
