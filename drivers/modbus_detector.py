@@ -10,7 +10,8 @@ import math
 from pathlib import Path
 
 from drivers.base import DeviceError, Reading
-from drivers.modbus_transport import MappedUnit, ModbusTimeouts
+from drivers.modbus_transport import ModbusTimeouts
+from drivers.modbus_unit import MappedUnit
 from drivers.register_map import RegisterMap
 
 DETECTOR_REGISTERS = ("reading", "status", "range_in_use", "fault_code", "gain_range",

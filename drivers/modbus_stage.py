@@ -12,7 +12,8 @@ import time
 from pathlib import Path
 
 from drivers.base import DeviceError, DeviceTimeout, ProtocolError
-from drivers.modbus_transport import MappedUnit, ModbusTimeouts
+from drivers.modbus_transport import ModbusTimeouts
+from drivers.modbus_unit import MappedUnit
 from drivers.register_map import RegisterMap
 
 STAGE_REGISTERS = ("target_position", "velocity", "acceleration", "command", "fault_code",
