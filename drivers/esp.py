@@ -1,19 +1,21 @@
 """Driver for the Newport ESP300/ESP301 motion controller (RS-232 ASCII command set).
 
-Byte-level details from the ESP301 user's manual (EDH0235En1030, section 3): a command is
-`[axis]XX[parameter]` ended by CR (we send CR), replies end in CR LF, commands are silent and
-errors go to a FIFO read with TB? ("code, timestamp, MESSAGE"; axis errors are axis*100 +
-code). Every exchange appends ";TB?" so the error status comes back with it (queries on one
-line answer on one line, comma-separated). Queries are retried after a timeout or garble; a
-state-changing command is sent once, and if its status reply is lost the driver re-reads the
-device state (error buffer, target) instead of re-sending it. An emergency stop (the E-stop
-input: the controller stops the axes and, as configured by ZE, switches their motors off) is
-error 4, EMERGENCY STOP ACTIVATED, in that buffer: the driver raises Interlocked for it, and
-`EspAxis.release_interlock` gets the axis ready again once the input is released. Numeric
-replies must have the controller's fixed shape (optional minus, digits, point, DECIMALS
-decimals, as in `-12.50000`); any other shape is a garbled reply (retried). After a timeout a
-bare VE? (its reply is the only one without an error status) brings late replies and requests
-back in step before the next exchange (drivers.serial_transport).
+Byte-level details from the ESP301 user's manual (EDH0235En1030, section 3): a command
+is `[axis]XX[parameter]` ended by CR (we send CR), replies end in CR LF, commands are
+silent and errors go to a FIFO read with TB? ("code, timestamp, MESSAGE"; axis errors are
+axis*100 + code). Every exchange appends ";TB?" so the error status comes back with it
+(queries on one line answer on one line, comma-separated: drivers.status_line). Queries
+are retried after a timeout or garble; a state-changing command is sent once, and if its
+status reply is lost the driver re-reads the device state (error buffer, then the setting,
+by the check declared with it: drivers.settings) instead of re-sending it. An emergency stop
+(the E-stop input: the controller stops the axes and, as configured by ZE, switches their
+motors off) is error 4, EMERGENCY STOP ACTIVATED, in that buffer: the driver raises
+Interlocked for it, and `EspAxis.release_interlock` gets the axis ready again once the input
+is released. Numeric replies must have the controller's fixed shape (optional minus, digits,
+point, DECIMALS decimals, as in `-12.50000`); any other shape is a garbled reply (retried),
+and a setting read back matches to that precision. After a timeout a bare VE? (its reply is
+the only one without an error status) brings late replies and requests back in step before
+the next exchange (drivers.serial_transport).
 """
 
 from __future__ import annotations
@@ -22,22 +24,26 @@ import math
 import re
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, Interlocked, ProtocolError
-from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
+from drivers.reply_numbers import StrictNumber
+from drivers.serial_transport import SerialLineTransport, SyncQuery
+from drivers.settings import Setting, exactly, to_reply_precision
+from drivers.status_line import StatusDialect, StatusLineDevice
 
 T = TypeVar("T")
 _TB = re.compile(r"\s*(\d+)\s*,\s*(\d+)\s*,\s*(.*\S)\s*")
 _INTEGER = re.compile(r"\d+")
 DECIMALS = 5  # the ESP301's (and the emulator's) position and rate replies: 12.50000
 EMERGENCY_STOP = 4  # general error EMERGENCY STOP ACTIVATED: the E-stop input stopped the axes
+ERROR_BUFFER_DEPTH = 10
 
 
-def decimal_parser(decimals: int = DECIMALS) -> Callable[[str], float]:
+def decimal_parser(decimals: int = DECIMALS) -> StrictNumber:
     """A strict reader of the ESP's fixed-point replies (`-?digits.<decimals digits>`)."""
-    return strict_number_parser(rf"-?\d+\.\d{{{int(decimals)}}}",
-                                f"{0:.{int(decimals)}f} form")
+    return StrictNumber(rf"-?\d+\.\d{{{int(decimals)}}}", f"{0:.{int(decimals)}f} form",
+                        decimals)
 
 
 def _integer(text: str) -> int:
@@ -59,7 +65,29 @@ def _fmt(value: float) -> str:
     return format(float(value), ".10g")
 
 
-class EspController:
+def _tb_status(text: str) -> tuple[int, str] | None:
+    """TB? as (code, message). Code 0 and NO ERROR DETECTED must come together: a lost ','
+    that merged an answer "1" into the status "0" (`10, ...NO ERROR...`) is garbled (None),
+    not error 10."""
+    match = _TB.fullmatch(text)
+    if match is None or (match.group(1) == "0") != (match.group(3) == "NO ERROR DETECTED"):
+        return None
+    return int(match.group(1)), match.group(3)
+
+
+def _split_tb(text: str, count: int) -> tuple[list[str], str]:
+    """Answers joined by commas, then TB?'s three fields. Only the first answer may contain
+    commas (a version string), so a lost or extra comma between answers breaks the count."""
+    parts = text.rsplit(",", count + 2)
+    return [answer.strip() for answer in parts[:-3]], ",".join(parts[-3:])
+
+
+TB_DIALECT = StatusDialect(suffix=";TB?", status_query="TB?", split=_split_tb,
+                           status=_tb_status, queue_depth=ERROR_BUFFER_DEPTH,
+                           interlocks=(EMERGENCY_STOP,))
+
+
+class EspController(StatusLineDevice):
     """One ESP300/ESP301 on a serial port; `axis(n, name)` gives engine-facing Axis objects.
 
     timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is how
@@ -67,128 +95,47 @@ class EspController:
     hardware handshake; decimals: how many decimals its numeric replies carry.
     """
 
-    def __init__(
-        self,
-        port: str,
-        baudrate: int = 19200,
-        timeout_s: float = 1.0,
-        name: str = "esp",
-        retries: int = 2,
-        poll_s: float = 0.01,
-        rtscts: bool = True,
-        decimals: int = DECIMALS,
-    ):
-        self.name = name
+    dialect = TB_DIALECT
+    integer = staticmethod(_integer)
+    flag = staticmethod(_flag)
+
+    def __init__(self, port: str, baudrate: int = 19200, timeout_s: float = 1.0,
+                 name: str = "esp", retries: int = 2, poll_s: float = 0.01, rtscts: bool = True,
+                 decimals: int = DECIMALS):
         self.poll_s = poll_s
         self.number = decimal_parser(decimals)
         self.version: str | None = None
-        self.transport = SerialLineTransport(
+        super().__init__(name, SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\r", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries, rtscts=rtscts,
             sync=SyncQuery("VE?", self._is_version),
-        )
+        ))
         try:
             self.errors()  # start from an empty error buffer
             self.version = self.query("VE?")
         except DriverError:
-            self.transport.close()
+            self.close()
             raise
-
-    # -- lifecycle --------------------------------------------------------------
-    def close(self) -> None:
-        """Close the serial port."""
-        self.transport.close()
-
-    def __enter__(self) -> EspController:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def _is_version(self, text: str) -> bool:
         """The reply to a bare VE? (the sync query): the version string (once known, exactly
         it), never followed by an error status as the replies to every other exchange are."""
         if self.version is not None:
             return text == self.version
-        return "VERSION" in text.upper() and _TB.fullmatch(",".join(text.split(",")[-3:])) is None
-
-    # -- error buffer -----------------------------------------------------------
-    def _parse_tb(self, text: str) -> tuple[int, str]:
-        """TB? as (code, message). Code 0 and NO ERROR DETECTED must come together: a
-        lost ',' that merged an answer "1" into the status "0" (`10, ...NO ERROR...`) is
-        garbled, not error 10."""
-        match = _TB.fullmatch(text)
-        if match is None or (match.group(1) == "0") != (match.group(3) == "NO ERROR DETECTED"):
-            raise ProtocolError(f"{self.name}: garbled TB? reply {text!r}")
-        return int(match.group(1)), match.group(3)
-
-    def next_error(self) -> tuple[int, str]:
-        """Pop the oldest buffered error: (code, message); (0, ...) when empty."""
-        return self.transport.query("TB?", self._parse_tb, "TB? (error buffer)")
-
-    def errors(self) -> list[tuple[int, str]]:
-        """Drain the error buffer (at most its 10 entries)."""
-        found = []
-        for _ in range(10):
-            code, text = self.next_error()
-            if code == 0:
-                break
-            found.append((code, text))
-        return found
-
-    def _raise_if_error(self, code: int, text: str) -> None:
-        if code == EMERGENCY_STOP:
-            raise Interlocked(self.name, code, text)
-        if code != 0:
-            raise DeviceError(self.name, code, text)
+        return "VERSION" in text.upper() and _tb_status(",".join(text.split(",")[-3:])) is None
 
     def query(self, line: str, parse: Callable[[str], T] = str) -> T:
         """Ask a query with ";TB?" appended, so its error status comes in the same reply.
 
         Retried on timeout or garble; a device error raises DeviceError (not retried).
         """
-        return self.query_values(line, parse)[0]
+        return self.query_answers(line, (parse,), 1)[0]
 
-    def query_values(self, line: str, *parsers: Callable[[str], object]) -> list:
+    def query_values(self, line: str, *parsers: Callable[[str], Any]) -> list:
         """Ask several queries on one line (`1MD?;1TP?`, one parser per answer) with ";TB?"
         appended: one round trip for all of them, answered in order on one line, joined by
-        commas. Only the first answer may contain commas (a version string), so a lost or
-        extra comma between answers breaks the count: a garbled reply (retried), not a
-        misread one."""
-        n = len(parsers)
-
-        def checked(text: str) -> list:
-            parts = text.rsplit(",", n + 2)
-            code, message = self._parse_tb(",".join(parts[-3:]))
-            self._raise_if_error(code, message)
-            if len(parts) != n + 3:
-                raise ProtocolError(f"{self.name}: {len(parts) - 3} answers to {line!r}, "
-                                    f"expected {n}: {text!r}")
-            try:
-                return [parse(answer.strip()) for parse, answer in zip(parsers, parts[:n],
-                                                                       strict=True)]
-            except ProtocolError as exc:
-                raise ProtocolError(f"{self.name}: reply to {line!r}: {exc}") from None
-
-        return self.transport.query(f"{line};TB?", checked, line)
-
-    def command(self, line: str, verify: Callable[[], bool] | None = None) -> None:
-        """Send a state-changing command once, with its error status in the same exchange.
-
-        If the status reply is lost or garbled, the error buffer is re-read and `verify()`
-        (if given) checks the device state; the command itself is never re-sent.
-        """
-        try:
-            reply = self.transport.exchange(f"{line};TB?", f"{line!r} status")
-            code, text = self._parse_tb(reply)
-        except (DeviceTimeout, ProtocolError) as exc:
-            self._raise_if_error(*self.next_error())
-            if verify is None or not verify():
-                raise DriverError(
-                    f"{self.name}: {line!r} not confirmed ({exc}); not re-sent"
-                ) from exc
-            return
-        self._raise_if_error(code, text)
+        commas."""
+        return self.query_answers(line, parsers, len(parsers))
 
     def identity(self) -> dict[str, str]:
         """The controller's VE? reply (model and firmware version), asked when it opened."""
@@ -208,12 +155,37 @@ class EspController:
         return axis
 
 
+DEGREES = 7  # SN7: the stage's units are degrees
+# settings: query, command, reply reader, value format, read-back check, what it is
+_TARGET = Setting("PA?", "PA{}", "number", _fmt, to_reply_precision, "PA: move target, deg")
+_LOW_LIMIT = Setting("SL?", "SL{}", "number", _fmt, to_reply_precision, "SL: left limit, deg")
+_HIGH_LIMIT = Setting("SR?", "SR{}", "number", _fmt, to_reply_precision, "SR: right limit, deg")
+_UNITS = Setting("SN?", "SN{}", "integer", str, exactly, "SN: displacement units, 7 = degrees")
+
+
+def _motor(on: bool) -> str:
+    return "MO" if on else "MF"
+
+
 class EspAxis:
     """One ESP axis as the engine's Axis (degrees; the stage's units are set to degrees)."""
+
+    speed_deg_s = Setting("VA?", "VA{}", "number", _fmt, to_reply_precision, "VA: speed, deg/s")
+    accel_deg_s2 = Setting("AC?", "AC{}", "number", _fmt, to_reply_precision, "AC: accel deg/s2")
+    decel_deg_s2 = Setting("AG?", "AG{}", "number", _fmt, to_reply_precision, "AG: decel deg/s2")
+    enabled = Setting("MO?", "{}", "flag", _motor, exactly, "MO?: motor on (MO: on, MF: off)")
 
     def __init__(self, controller: EspController, number: int, name: str):
         self.controller, self.number, self.name = controller, number, name
         self._p = str(number)
+
+    def read_setting(self, setting: Setting) -> Any:
+        """A setting of this axis (its number before the query)."""
+        return self.controller.read_setting(setting, self._p)
+
+    def write_setting(self, setting: Setting, value: Any) -> None:
+        """Set a setting of this axis once, read back by its check if the status is lost."""
+        self.controller.write_setting(setting, value, self._p)
 
     def _query(self, cmd: str, parse: Callable[[str], T] | None = None) -> T:
         """An axis query; numeric (the controller's fixed-point shape) unless parse is given."""
@@ -232,13 +204,15 @@ class EspAxis:
 
     def move_to(self, position_deg: float) -> None:
         """PA: start an absolute move (returns at once)."""
-        target = float(position_deg)
-        self._command(f"PA{_fmt(target)}", lambda: abs(self.target() - target) < 1e-4)
+        self.write_setting(_TARGET, float(position_deg))
 
     def move_by(self, delta_deg: float) -> None:
-        """PR: start a move relative to the current target."""
+        """PR: start a move relative to the current target. A lost status is settled by the
+        target read back within one unit of its last place of the goal (the goal itself comes
+        from a target read to half a unit)."""
         goal = self.target() + float(delta_deg)
-        self._command(f"PR{_fmt(delta_deg)}", lambda: abs(self.target() - goal) < 1e-4)
+        unit = 2 * self.controller.number.half_unit(goal)
+        self._command(f"PR{_fmt(delta_deg)}", lambda: abs(self.target() - goal) <= unit)
 
     def position(self) -> float:
         """TP?: actual position, degrees."""
@@ -246,7 +220,7 @@ class EspAxis:
 
     def target(self) -> float:
         """PA?: the position the current (or last) move goes to."""
-        return self._query("PA?")
+        return self.read_setting(_TARGET)
 
     def is_moving(self) -> bool:
         """MD?: 0 while a move or home is under way."""
@@ -301,52 +275,17 @@ class EspAxis:
     # -- settings ---------------------------------------------------------------
     def enable(self) -> None:
         """MO: motor on, units degrees (SN7)."""
-        self._command("MO", lambda: self.enabled)
-        self._command("SN7", lambda: self._query("SN?", _integer) == 7)
+        self.enabled = True
+        self.write_setting(_UNITS, DEGREES)
 
     def disable(self) -> None:
         """MF: motor off."""
-        self._command("MF", lambda: not self.enabled)
-
-    @property
-    def enabled(self) -> bool:
-        """MO?: motor on."""
-        return self._query("MO?", _flag)
-
-    def _setting(self, cmd: str, value: float) -> None:
-        self._command(f"{cmd}{_fmt(value)}", lambda: abs(self._query(f"{cmd}?") - value) < 1e-6)
-
-    @property
-    def speed_deg_s(self) -> float:
-        """VA?: velocity of the next move."""
-        return self._query("VA?")
-
-    @speed_deg_s.setter
-    def speed_deg_s(self, value: float) -> None:
-        self._setting("VA", value)
-
-    @property
-    def accel_deg_s2(self) -> float:
-        """AC?: acceleration."""
-        return self._query("AC?")
-
-    @accel_deg_s2.setter
-    def accel_deg_s2(self, value: float) -> None:
-        self._setting("AC", value)
-
-    @property
-    def decel_deg_s2(self) -> float:
-        """AG?: deceleration."""
-        return self._query("AG?")
-
-    @decel_deg_s2.setter
-    def decel_deg_s2(self, value: float) -> None:
-        self._setting("AG", value)
+        self.enabled = False
 
     @property
     def limits_deg(self) -> tuple[float, float]:
         """(SL?, SR?): software travel limits."""
-        return self._query("SL?"), self._query("SR?")
+        return self.read_setting(_LOW_LIMIT), self.read_setting(_HIGH_LIMIT)
 
     @limits_deg.setter
     def limits_deg(self, value: tuple[float, float]) -> None:
@@ -355,5 +294,7 @@ class EspAxis:
             raise ValueError(f"{self.name}: limits must be (lo, hi) with lo < hi, got {value!r}")
         cur_lo, _ = self.limits_deg
         # order the two commands so the pair stays valid (SL < SR) in between
-        for cmd, v in ((("SR", hi), ("SL", lo)) if lo >= cur_lo else (("SL", lo), ("SR", hi))):
-            self._setting(cmd, v)
+        order = ((_HIGH_LIMIT, hi), (_LOW_LIMIT, lo)) if lo >= cur_lo else \
+            ((_LOW_LIMIT, lo), (_HIGH_LIMIT, hi))
+        for setting, limit in order:
+            self.write_setting(setting, limit)

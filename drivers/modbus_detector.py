@@ -11,7 +11,8 @@ import math
 from pathlib import Path
 
 from drivers.base import DeviceError, Reading
-from drivers.modbus_transport import MappedUnit, ModbusTimeouts
+from drivers.modbus_transport import ModbusTimeouts
+from drivers.modbus_unit import MappedUnit
 from drivers.register_map import RegisterMap
 
 DETECTOR_REGISTERS = ("reading", "status", "range_in_use", "fault_code", "gain_range",
@@ -63,14 +64,11 @@ class ModbusDetector(MappedUnit):
             raise ValueError(f"{self.name}: averaging must be an integer, got {averaging!r}")
         if range_w is not None and not (math.isfinite(range_w) and range_w > 0):
             raise ValueError(f"{self.name}: range must be a power > 0 W or None, got {range_w!r}")
-        words = {"wavelength": wavelength_nm, "averaging": int(averaging),
-                 "autorange": 1 if range_w is None else 0}
+        values = {"wavelength": wavelength_nm, "averaging": int(averaging),
+                  "autorange": 1 if range_w is None else 0}
         if range_w is not None:
-            words["gain_range"] = self.range_index(range_w)
-        for name, value in words.items():  # check all first: bad input before any write
-            self.map.encode(name, value)
-        for name, value in words.items():
-            self.write_value(name, value)
+            values["gain_range"] = self.range_index(range_w)
+        self.write_values(values)
 
     def settings(self) -> dict[str, float]:
         """The amplifier's settings: wavelength (nm), averaging, autorange, gain_range."""

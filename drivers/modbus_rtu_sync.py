@@ -1,30 +1,28 @@
-"""Bring a Modbus RTU line back in step after a reply timeout, so a late reply is never read as
-the answer to a later request.
+"""The sync query of a Modbus RTU line: a diagnostics echo, and how its answer is recognised.
 
 RTU frames carry no transaction id: a reply that missed its timeout arrives later and, if it
 has the shape the next request expects (the same unit, function and register count: the
 detector's next reading), would be taken for that request's answer. After a timeout the
-link therefore sends a diagnostics echo (function 08, sub-function 0000 "return query data")
-with a fresh token and discards every byte up to its answer: the echoed frame (with at most
-one byte lost or altered), or the unit's exception reply to function 08 (a unit that does
-not implement diagnostics). A unit answers in order, so whatever was late has arrived by
-then. The answer to an echo that
-itself came too late is a function-08 frame, which the link rejects as a reply to anything
-else (drivers.modbus_transport checks every reply's function code).
+link (drivers.modbus_transport, with drivers.reply_sync deciding) therefore sends a
+diagnostics echo (function 08, sub-function 0000 "return query data") with a fresh token and
+discards every byte up to its answer: the echoed frame (with at most one byte lost or
+altered: a garbled answer still shows that everything sent before it has come), or the
+unit's exception reply to function 08 (a unit that does not implement diagnostics). A unit
+answers in order, so whatever was late has arrived by then. The answer to an echo that itself
+came too late is a function-08 frame, which the machine takes for a late sync reply.
 """
 
 from __future__ import annotations
 
 import itertools
 import os
-import time
 
-from pymodbus.framer.rtu import FramerRTU
+from pymodbus.framer import FramerRTU
 
-from drivers.base import DeviceTimeout
+from drivers.modbus_frames import DIAGNOSTICS
 
-DIAGNOSTICS = 0x08
 RETURN_QUERY_DATA = b"\x00\x00"
+EXCEPTION_REPLY_BYTES = 5  # unit, function | 0x80, exception code, CRC
 
 
 def silent_interval_s(baudrate: int) -> float:
@@ -39,51 +37,37 @@ def rtu_frame(unit: int, pdu: bytes) -> bytes:
     return body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
 
 
-def _answered(data: bytes, echo: bytes, unit: int) -> bool:
-    """True if data holds the answer to `echo`: the echo itself, or with one byte lost or
-    altered (a garbled answer still shows that everything sent before it has come), or the
-    unit's exception reply to function 08."""
-    head = bytes([unit, DIAGNOSTICS | 0x80])
-    start = data.find(head)
-    while start >= 0:  # an exception reply, CRC checked (those two bytes occur in data too)
-        if data[start:start + 5] == rtu_frame(unit, data[start + 1:start + 3]):
-            return True
-        start = data.find(head, start + 1)
-    if any(echo[:i] + echo[i + 1:] in data for i in range(len(echo))):
-        return True  # the echo, or the echo with one byte lost
-    n = len(echo)
-    return any(sum(a != b for a, b in zip(data[i:i + n], echo, strict=True)) <= 1
-               for i in range(len(data) - n + 1))
-
-
-class RtuSync:
-    """The echo exchange of one RTU line (one per link; the caller holds the link's lock)."""
+class EchoTokens:
+    """Fresh echo tokens for one line, starting at a random value (so a late echo answer from
+    an earlier session is not taken for this one's)."""
 
     def __init__(self) -> None:
         self._tokens = itertools.count(int.from_bytes(os.urandom(2), "big"))
 
-    def resync(self, port, unit: int, device: str, what: str, reply_s: float) -> None:
-        """Send an echo to `unit` on `port` (a pyserial port) and read up to its answer;
-        DeviceTimeout naming `what` if it does not come within reply_s."""
+    def next_echo(self, unit: int) -> tuple[bytes, bytes]:
+        """(token, the echo frame to send to unit)."""
         token = (next(self._tokens) % 0x10000).to_bytes(2, "big")
-        echo = rtu_frame(unit, bytes([DIAGNOSTICS]) + RETURN_QUERY_DATA + token)
-        # drop stale bytes and send; read / write raise OSError on a lost port (pyserial's
-        # reset_input_buffer and flush would raise termios.error, which nothing maps)
-        port.read(port.in_waiting)
-        port.write(echo)
-        deadline = time.monotonic() + reply_s
-        received = bytearray()
-        saved = port.timeout
-        try:
-            while not _answered(bytes(received), echo, unit):
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceTimeout(device, f"{what} (replies out of step after a timeout:"
-                                        " no answer to the Modbus echo, function 08)", reply_s)
-                port.timeout = left
-                received += port.read(max(1, port.in_waiting))
-            port.timeout = silent_interval_s(port.baudrate)  # the rest of a matched answer:
-            while port.read(max(1, port.in_waiting)) and time.monotonic() < deadline:
-                pass  # up to the silence ending its frame (a babbling line: the deadline)
-        finally:
-            port.timeout = saved
+        return token, rtu_frame(unit, bytes([DIAGNOSTICS]) + RETURN_QUERY_DATA + token)
+
+
+def echo_answer_end(data: bytes, echo: bytes, unit: int) -> int | None:
+    """Where in data the answer to `echo` ends: the echo itself, or with one byte lost or
+    altered, or the unit's exception reply to function 08; None while data holds none."""
+    exact = data.find(echo)
+    if exact >= 0:
+        return exact + len(echo)
+    head = bytes([unit, DIAGNOSTICS | 0x80])
+    start = data.find(head)
+    while start >= 0:  # an exception reply, CRC checked (those two bytes occur in data too)
+        if data[start:start + EXCEPTION_REPLY_BYTES] == rtu_frame(unit, data[start + 1:start + 3]):
+            return start + EXCEPTION_REPLY_BYTES
+        start = data.find(head, start + 1)
+    n = len(echo)
+    for i in range(n):  # the echo with byte i lost
+        found = data.find(echo[:i] + echo[i + 1:])
+        if found >= 0:
+            return found + n - 1
+    for i in range(len(data) - n + 1):  # the echo with one byte altered
+        if sum(a != b for a, b in zip(data[i:i + n], echo, strict=True)) <= 1:
+            return i + n
+    return None

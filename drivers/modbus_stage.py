@@ -12,14 +12,17 @@ import math
 import time
 from pathlib import Path
 
-from drivers.base import DeviceError, DeviceTimeout
-from drivers.modbus_transport import MappedUnit, ModbusTimeouts
+from drivers.base import DeviceError, DeviceTimeout, ProtocolError
+from drivers.modbus_transport import ModbusTimeouts
+from drivers.modbus_unit import MappedUnit
 from drivers.register_map import RegisterMap
 
 STAGE_REGISTERS = ("target_position", "velocity", "acceleration", "command", "fault_code",
                    "actual_position", "status", "limit_negative", "limit_positive")
 STAGE_COMMANDS = ("start", "stop", "home", "abort", "clear_fault")
 STAGE_BITS = ("moving", "homed", "limit", "fault")
+MOTION = ("velocity", "acceleration")  # the settings of the next move, deg/s and deg/s^2
+LIMITS = ("limit_negative", "limit_positive")  # software travel limits, deg
 
 
 class ModbusStage(MappedUnit):
@@ -64,8 +67,7 @@ class ModbusStage(MappedUnit):
 
     def limits(self) -> tuple[float, float]:
         """The drive's software travel limits, degrees."""
-        v = self.read_values("limit_negative", "limit_positive")
-        return v["limit_negative"], v["limit_positive"]
+        return self.read_tuple(LIMITS)
 
     # -- settings ---------------------------------------------------------------
     def configure(self, speed_deg_s: float, accel_deg_s2: float,
@@ -76,18 +78,15 @@ class ModbusStage(MappedUnit):
 
     def set_motion(self, speed_deg_s: float, accel_deg_s2: float) -> None:
         """Set the cruise speed and acceleration used by the next move (map range checked)."""
-        self.write_value("velocity", speed_deg_s)
-        self.write_value("acceleration", accel_deg_s2)
+        self.write_values(dict(zip(MOTION, (speed_deg_s, accel_deg_s2), strict=True)))
 
     def motion(self) -> tuple[float, float]:
         """(speed_deg_s, accel_deg_s2) the drive holds."""
-        v = self.read_values("velocity", "acceleration")
-        return v["velocity"], v["acceleration"]
+        return self.read_tuple(MOTION)
 
     def set_limits(self, low_deg: float, high_deg: float) -> None:
         """Set the software travel limits (the drive checks low < high on the next move)."""
-        self.write_value("limit_negative", low_deg)
-        self.write_value("limit_positive", high_deg)
+        self.write_values(dict(zip(LIMITS, (low_deg, high_deg), strict=True)))
 
     # -- motion -----------------------------------------------------------------
     def move_to(self, position_deg: float) -> None:
@@ -131,10 +130,11 @@ class ModbusStage(MappedUnit):
             time.sleep(self.poll_s)
 
     def _motion_command(self, command: str, target_deg: float | None) -> None:
-        """Write a motion command once; a lost reply is resolved by reading the state."""
+        """Write a motion command once; a lost or garbled reply is resolved by reading the
+        state."""
         try:
             self.command(command)
-        except DeviceTimeout:
+        except (DeviceTimeout, ProtocolError):
             if not self._was_taken(target_deg):
                 raise
         v = self.read_values("status", "fault_code")

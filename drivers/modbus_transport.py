@@ -4,33 +4,42 @@ One `ModbusLink` per endpoint (serial port or host:port), shared by every unit o
 `open_link` hands out the same link to drivers of several units on one RTU bus or one
 TCP server, and closes it when the last user is done. Reads may be retried after a
 timeout or a garbled reply; writes never are (a write may already have acted). A late reply
-never answers a later request: on TCP the connection is closed after a timeout (and replies
-carry transaction ids); on RTU the line is brought back in step first (drivers.modbus_rtu_sync).
+never answers a later request: drivers.reply_sync decides which request each frame answers
+(drivers.modbus_frames cuts and sorts the frames); on TCP the connection is also closed after a
+failed exchange (replies carry transaction ids, and a new connection carries nothing late); on
+RTU the line is brought back in step by a diagnostics echo first (drivers.modbus_rtu_sync).
+pymodbus gives the client's port or socket, its connection handling and every codec; the
+request and reply loop is this module's, so a timeout is a timeout (no frame by the deadline)
+and never read out of an exception's text.
 """
 
 from __future__ import annotations
 
+import select
 import threading
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from pymodbus.client import ModbusTcpClient
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
-from pymodbus.pdu import ExceptionResponse
+from pymodbus.exceptions import ConnectionException
+from pymodbus.pdu import ExceptionResponse, ModbusPDU, ReadDeviceInformationRequest
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    WriteMultipleRegistersRequest,
+)
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, Interlocked, ProtocolError
+from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
-from drivers.modbus_rtu_sync import RtuSync
-from drivers.register_map import RegisterMap, decode_text
+from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
+from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 
-INTERLOCK_BIT = "interlock"  # optional [status_bits] entry: the unit's interlock input is open
-INTERLOCK_TEXT = "interlock input open (the unit stopped and refuses to run)"
-READ_DEVICE_IDENTIFICATION = 43  # with MEI type 14
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
 # the basic objects VendorName, ProductCode, MajorMinorRevision (Modbus Application Protocol
 # V1.1b3, 6.21) by object id -> the identity keys they give
 BASIC_OBJECTS = {0: "vendor", 1: "model", 2: "firmware"}
+MAX_TID = 65000  # transaction ids run 1..MAX_TID, as pymodbus's own client counts them
 MODBUS_EXCEPTIONS = {
     1: "illegal function",
     2: "illegal data address",
@@ -60,7 +69,8 @@ class ModbusTimeouts:
 
 
 class ModbusLink:
-    """A pymodbus sync client for one endpoint, serialised by a lock, with error mapping."""
+    """A pymodbus client's port or socket for one endpoint, serialised by a lock: requests
+    out, frames in through the reply machine, failures mapped to DriverErrors."""
 
     def __init__(self, transport: str, port_or_host: str, *, tcp_port: int = 502,
                  baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
@@ -76,32 +86,39 @@ class ModbusLink:
             self.endpoint = f"{port_or_host}:{tcp_port}"
             self._client = ModbusTcpClient(port_or_host, port=tcp_port, timeout=reply_s,
                                            retries=0)
+            self._cut, self._sort, self._recv = cut_tcp, sort_tcp, self._recv_tcp
         else:
             self.endpoint = port_or_host
             self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s, retries=0)
+            self._cut, self._sort, self._recv = cut_rtu, sort_rtu, self._recv_rtu
         self._lock = threading.Lock()
         self.users = 0
-        self.in_step = True  # RTU: False after a reply timeout, until an echo is answered
-        self._sync = RtuSync()
+        self.replies = ReplySync()  # which request each frame answers
+        self._tid = 0
+        self._echoes = EchoTokens()
+
+    @property
+    def in_step(self) -> bool:
+        """False (RTU) from a missed reply until an echo is answered."""
+        return self.replies.state is State.IN_STEP
 
     def read(self, device: str, table: str, address: int, count: int, unit: int) -> list[int]:
         """Read count registers of table ("holding" | "input"); retried on timeout / garble."""
-        fn, code = ((self._client.read_holding_registers, 3) if table == "holding"
-                    else (self._client.read_input_registers, 4))
+        kind = ReadHoldingRegistersRequest if table == "holding" else ReadInputRegistersRequest
         what = f"{table} registers {address}..{address + count - 1} of unit {unit}"
         attempt = 0
         while True:
             try:
-                return self._read_once(device, what, (fn, code), address, count, unit)
+                return self._read_once(device, what, kind(address=address, count=count,
+                                                         dev_id=unit), count)
             except (DeviceTimeout, ProtocolError):
                 if attempt == self.read_retries:
                     raise
                 attempt += 1
                 time.sleep(self.timeouts.retry_pause_s)
 
-    def _read_once(self, device: str, what: str, fn, address: int, count: int,
-                   unit: int) -> list[int]:
-        reply = self._call(device, what, fn, unit, address, count=count)
+    def _read_once(self, device: str, what: str, request: ModbusPDU, count: int) -> list[int]:
+        reply = self._call(device, what, request)
         if len(reply.registers) != count:
             raise ProtocolError(f"{device}: {what}: {len(reply.registers)} registers in the "
                                 f"reply, expected {count}")
@@ -110,57 +127,127 @@ class ModbusLink:
     def write(self, device: str, address: int, values: list[int], unit: int) -> None:
         """Write holding registers (function 16), once: never re-sent on a failure."""
         what = f"reply to a write of holding registers {address}.. of unit {unit}"
-        self._call(device, what, (self._client.write_registers, 16), unit, address,
-                   values=values)
+        self._call(device, what, WriteMultipleRegistersRequest(address=address, registers=values,
+                                                               dev_id=unit))
 
     def identification(self, device: str, unit: int) -> dict[int, bytes]:
         """Read Device Identification (function 43, MEI 14) of the basic objects, sent once
         (a unit that lacks it may stay silent): {object id: value}."""
         reply = self._call(device, f"reply to a device identification (43/14) of unit {unit}",
-                           (self._client.read_device_information, READ_DEVICE_IDENTIFICATION),
-                           unit, read_code=BASIC_DEVICE_ID, object_id=0)
+                           ReadDeviceInformationRequest(BASIC_DEVICE_ID, 0, dev_id=unit))
         return {oid: value for oid, value in reply.information.items()
                 if isinstance(value, bytes)}
 
-    def _call(self, device: str, what: str, fn, unit: int, *args, **kwargs):
-        """fn = (client method, its function code), called for `unit`; a reply to another
-        function (a late frame on an RTU line) is a ProtocolError."""
-        call, code = fn
+    def _call(self, device: str, what: str, request: ModbusPDU) -> ModbusPDU:
+        """Send request (RTU: after an echo if out of step) and return the frame the machine
+        takes for its answer; a Modbus exception reply is a DeviceError."""
         with self._lock:
             try:
-                if self.transport == "rtu" and not self.in_step:
-                    self._sync.resync(self._port(), unit, device, what, self.timeouts.reply_s)
-                    self.in_step = True
-                reply = call(*args, device_id=unit, **kwargs)
+                if not self._client.connected:
+                    self._connect()
+                if self.replies.state is State.OUT_OF_STEP:
+                    self._resync(request.dev_id, device, what)
+                reply = self._exchange(request, device, what)
             except (ConnectionException, OSError) as exc:  # refused, reset, hung up
-                self._client.close()
+                self._lose_connection()
                 raise DriverError(f"{device}: connection to {self.endpoint} failed or lost "
                                   f"({exc})") from None
-            except ModbusException as exc:
+            except (DeviceTimeout, ProtocolError):
                 if self.transport == "tcp":  # a late or partial reply must not answer the next
-                    self._client.close()
-                if isinstance(exc, ModbusIOException) and not (
-                    "transaction id" in str(exc) or "device id" in str(exc)
-                ):
-                    self.in_step = False  # the reply may still come
-                    raise DeviceTimeout(device, what, self.timeouts.reply_s) from None
-                raise ProtocolError(f"{device}: {what}: garbled or mismatched reply "
-                                    f"({exc})") from None
-        if reply.function_code & 0x7F != code:
-            self.in_step = False
-            raise ProtocolError(f"{device}: {what}: a reply to function "
-                                f"{reply.function_code & 0x7F}, not {code} (a late frame)")
-        if isinstance(reply, ExceptionResponse) or reply.isError():
-            exc_code = getattr(reply, "exception_code", 0)
+                    self._lose_connection()
+                raise
+            finally:
+                if self.replies.awaiting:  # a wait cut short (a signal): the reply may come
+                    self.replies.timeout()
+                    if self.transport == "tcp":
+                        self._lose_connection()
+        if isinstance(reply, ExceptionResponse):
+            exc_code = reply.exception_code
             raise DeviceError(device, f"Modbus exception {exc_code:02d}",
                               f"{MODBUS_EXCEPTIONS.get(exc_code, 'unknown exception')} ({what})")
         return reply
 
-    def _port(self):
-        """The RTU line's open pyserial port (connecting first if need be)."""
-        if not self._client.connected and not self._client.connect():
+    def _connect(self) -> None:
+        if not self._client.connect():
             raise ConnectionException(f"cannot open {self.endpoint}")
-        return self._client.socket
+        if self.transport == "tcp":  # waits are on select: no poll inside every send and recv
+            self._client.socket.setblocking(False)
+
+    def _lose_connection(self) -> None:
+        self._client.close()
+        self.replies.reset()  # nothing sent on the old connection can arrive on a new one
+
+    def _exchange(self, request: ModbusPDU, device: str, what: str) -> ModbusPDU:
+        if self.transport == "tcp":
+            self._tid = self._tid % MAX_TID + 1
+            request.transaction_id = self._tid
+        expected = Expected(request.dev_id, request.function_code, request.transaction_id)
+        frame = self._client.framer.buildFrame(request)
+        self.replies.send_request()
+        self._client.send(frame)
+        event = self._await(device, what, expected)
+        if type(event) is Garbled:
+            raise ProtocolError(f"{device}: {what}: garbled or mismatched reply "
+                                f"{event.unit.raw.hex(' ')}")
+        return event.unit.pdu
+
+    def _await(self, device: str, what: str, expected: Expected) -> Event:
+        """Feed the frames that arrive to the machine until one is the reply or a garbled one
+        (late replies and late echo answers are passed over): that event; DeviceTimeout, the
+        machine told, when none comes in time."""
+        deadline = time.monotonic() + self.timeouts.reply_s
+        data = b""
+        while chunk := self._recv(deadline):
+            data += chunk
+            frames, used = self._cut(data)
+            data = data[used:]
+            for frame in frames:
+                kind, sync_id = self._sort(frame, expected)
+                event = self.replies.receive(kind, frame, sync_id)
+                if type(event) is Reply or type(event) is Garbled:  # in step: the wait is over
+                    return event
+        self.replies.timeout()
+        raise DeviceTimeout(device, what, self.timeouts.reply_s)
+
+    def _recv_tcp(self, deadline: float) -> bytes:
+        """The bytes that arrive on the socket by the deadline (b"": none)."""
+        sock = self._client.socket
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([sock], [], [], left)[0]:
+            return b""
+        if chunk := sock.recv(4096):
+            return chunk
+        raise ConnectionException(f"{self.endpoint} closed the connection")
+
+    def _recv_rtu(self, deadline: float) -> bytes:
+        """The bytes waiting on the port, or the first to arrive by the deadline and those
+        with them (b"": none); the client's deadline, set by its send, is the same one."""
+        return self._client.recv(None)
+
+    def _resync(self, unit: int, device: str, what: str) -> None:
+        """RTU: send a fresh echo to `unit` and drop every byte up to its answer (DeviceTimeout
+        naming `what`, still out of step, if it does not come within reply_s), then the rest of
+        that answer's frame up to the line's silence."""
+        token, echo = self._echoes.next_echo(unit)
+        self.replies.send_sync(token)
+        self._client.send(echo)
+        deadline = time.monotonic() + self.timeouts.reply_s
+        received = b""
+        while (end := echo_answer_end(received, echo, unit)) is None:
+            chunk = self._recv_rtu(deadline)
+            if not chunk:
+                self.replies.timeout()
+                if self.replies.state is State.IN_STEP:
+                    return
+                raise DeviceTimeout(device, f"{what} (replies out of step after a timeout: no "
+                                    "answer to the Modbus echo, function 08)",
+                                    self.timeouts.reply_s)
+            received += chunk
+        self.replies.receive(UnitKind.SYNC, received[:end], token)
+        port = self._client.socket
+        port.timeout = silent_interval_s(port.baudrate)  # the rest of a matched answer:
+        while port.read(max(1, port.in_waiting)) and time.monotonic() < deadline:
+            pass  # up to the silence ending its frame (a babbling line: the deadline)
 
     def close(self) -> None:
         """Close the client connection."""
@@ -196,116 +283,3 @@ def release_link(link: ModbusLink) -> None:
             key = (link.transport, link.endpoint)
             if _links.get(key) is link:
                 del _links[key]
-
-
-class MappedUnit:
-    """One Modbus unit reached through a shared link and addressed by register names.
-
-    Base of the stage and detector drivers: owns the link reference, reads and writes
-    named registers through the map, closes on `close()` or leaving a `with` block.
-    """
-
-    def __init__(self, transport: str, port_or_host: str, unit: int,
-                 register_map: str | Path | RegisterMap, *, name: str, tcp_port: int = 502,
-                 baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
-                 read_retries: int = 2):
-        if isinstance(unit, bool) or not isinstance(unit, int) or not 0 <= unit <= 247:
-            raise ValueError(f"{name}: Modbus unit id must be an integer in 0..247, got {unit!r}")
-        self.name, self.unit = name, unit
-        self.map = (register_map if isinstance(register_map, RegisterMap)
-                    else RegisterMap.load(register_map))
-        self.link = open_link(transport, port_or_host, tcp_port=tcp_port, baudrate=baudrate,
-                              timeouts=timeouts, read_retries=read_retries)
-        self._closed = False
-        self._read_plans: dict[tuple[str, ...], list] = {}
-
-    def read_values(self, *names: str) -> dict[str, float]:
-        """Engineering values of the named registers, one read per table they lie in."""
-        plan = self._read_plans.get(names)
-        if plan is None:
-            plan = self._read_plans[names] = self._read_plan(names)
-        out = {}
-        for table, first, count, group in plan:
-            words = self.link.read(self.name, table, first, count, self.unit)
-            out.update({n: self.map.take(n, first, words) for n in group})
-        return out
-
-    def _read_plan(self, names: tuple[str, ...]) -> list[tuple[str, int, int, tuple[str, ...]]]:
-        """(table, first address, count, names) of each read covering names (made once per
-        tuple of names: a driver asks for the same few sets again and again)."""
-        by_table: dict[str, list[str]] = {}
-        for n in names:
-            by_table.setdefault(self.map.register(n).table, []).append(n)
-        return [(*self.map.block(tuple(group)), tuple(group)) for group in by_table.values()]
-
-    def read_value(self, name: str) -> float:
-        """Engineering value of one named register."""
-        return self.read_values(name)[name]
-
-    def write_value(self, name: str, value: float) -> None:
-        """Write one named holding register (checked against the map first), never re-sent.
-
-        If the reply to a setting's write is lost, the register is read back: holding the
-        written words means the write was taken. (Commands are resolved by the caller.)
-        """
-        reg = self.map.register(name)
-        if reg.table != "holding" or not reg.writable:
-            raise ValueError(f"{self.name}: register {name!r} is not writable in {self.map.source}")
-        words = self.map.encode(name, value)
-        try:
-            self.link.write(self.name, reg.address, words, self.unit)
-        except DeviceTimeout:
-            if name == "command" or self.link.read(
-                self.name, "holding", reg.address, reg.count, self.unit
-            ) != words:
-                raise
-
-    def identity(self) -> dict[str, str]:
-        """The unit's identity as it reports it: Read Device Identification (43/14: vendor,
-        model, firmware) where it offers it, then the map's [identity] string registers for
-        the names that did not give; blank strings left out, {} when it reports neither."""
-        try:
-            objects = self.link.identification(self.name, self.unit)
-        except (DeviceError, DeviceTimeout, ProtocolError):  # not offered
-            objects = {}
-        found = {key: decode_text(objects[oid]) for oid, key in BASIC_OBJECTS.items()
-                 if oid in objects}
-        for name, reg in self.map.identity.items():
-            if not found.get(name):
-                found[name] = decode_text(self.link.read(self.name, reg.table, reg.address,
-                                                         reg.count, self.unit))
-        return {key: value for key, value in found.items() if value}
-
-    def command(self, command: str) -> None:
-        """Write a named value of the map's [commands] to the command register."""
-        self.write_value("command", self.map.commands[command])
-
-    def bits(self, status: float) -> dict[str, bool]:
-        """Status register value -> {bit name: set} by the map's [status_bits]."""
-        word = int(status)
-        return {bit: bool(word >> n & 1) for bit, n in self.map.status_bits.items()}
-
-    def check_interlock(self, bits: dict[str, bool]) -> None:
-        """Interlocked if the status `bits` show the map's optional `interlock` bit set."""
-        if bits.get(INTERLOCK_BIT):
-            raise Interlocked(self.name, INTERLOCK_BIT, INTERLOCK_TEXT)
-
-    def release_interlock(self) -> str | None:
-        """What holds the unit's interlock (its status bit set), or None (also for a map
-        without an interlock bit)."""
-        if INTERLOCK_BIT not in self.map.status_bits:
-            return None
-        held = self.bits(self.read_value("status"))[INTERLOCK_BIT]
-        return f"{self.name}: {INTERLOCK_TEXT}" if held else None
-
-    def close(self) -> None:
-        """Release the link (the last unit on it closes the connection); idempotent."""
-        if not self._closed:
-            self._closed = True
-            release_link(self.link)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -4,15 +4,17 @@ From the PM100D operation manual, "SCPI commands" chapter: messages end in LF, r
 in LF, several message units go in one message separated by ';' (a leading ':' restarts
 at the root), their answers come back joined by ';'. Errors go to the SCPI error queue
 (SYST:ERR? -> `code,"message"`, 0 = none). Every exchange appends ";:SYST:ERR?" so a
-device error is reported with the reply it spoiled; queries (READ?, settings) are retried
-after a timeout or garble, setting commands are sent once and then checked by reading the
-setting back. Numeric answers are checked against the exact shape the manual gives them
-(NR3 `1.234567E-06`: sign, one digit, point, a fixed number of decimals, `E`, signed
-two-digit exponent; NR1 integers; 0/1 flags): a reply with a byte lost or altered is a
-ProtocolError (retried like any garbled query reply), never a plausible wrong number.
-After a timeout a bare *OPC? (its `1` is the only reply without an error status)
-brings late replies and requests back in step before the next exchange, so a late READ?
-answer is never taken for a later reading (drivers.serial_transport).
+device error is reported with the reply it spoiled (drivers.status_line); queries (READ?,
+settings) are retried after a timeout or garble, setting commands are sent once and, if
+their status is lost, checked by reading the setting back by the rule declared with it
+(drivers.settings: a fixed range must read back as that range). Numeric answers are
+checked against the exact shape the manual gives them (NR3 `1.234567E-06`: sign, one
+digit, point, a fixed number of decimals, `E`, signed two-digit exponent; NR1 integers;
+0/1 flags): a reply with a byte lost or altered is a ProtocolError (retried like any
+garbled query reply), never a plausible wrong number. After a timeout a bare *OPC? (its
+`1` is the only reply without an error status) brings late replies and requests back in
+step before the next exchange, so a late READ? answer is never taken for a later reading
+(drivers.serial_transport).
 """
 
 from __future__ import annotations
@@ -21,28 +23,26 @@ import re
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import Any
 
-from drivers.base import (
-    DeviceError,
-    DeviceTimeout,
-    DriverError,
-    InvalidReading,
-    ProtocolError,
-    Reading,
-)
-from drivers.serial_transport import SerialLineTransport, SyncQuery, strict_number_parser
+from drivers.base import DeviceTimeout, DriverError, InvalidReading, ProtocolError, Reading
+from drivers.reply_numbers import StrictNumber
+from drivers.serial_transport import SerialLineTransport, SyncQuery
+from drivers.settings import Setting, exactly, to_reply_precision
+from drivers.status_line import StatusDialect, StatusLineDevice
 
 _ERR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*')
 _NR1 = re.compile(r"[+-]?\d+")
 NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
 SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
 MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
+ERROR_QUEUE_DEPTH = 32
 
 
-def nr3_parser(decimals: int = NR3_DECIMALS) -> Callable[[str], float]:
+def nr3_parser(decimals: int = NR3_DECIMALS) -> StrictNumber:
     """A strict NR3 reader: `[+-]d.<decimals digits>E[+-]dd` exactly, else ProtocolError."""
-    return strict_number_parser(rf"[+-]?\d\.\d{{{int(decimals)}}}E[+-]\d\d",
-                                f"NR3 like {1.0:.{int(decimals)}E}")
+    return StrictNumber(rf"[+-]?\d\.\d{{{int(decimals)}}}E[+-]\d\d",
+                        f"NR3 like {1.0:.{int(decimals)}E}", decimals, mantissa=True)
 
 
 def _nr1(text: str) -> int:
@@ -62,6 +62,53 @@ def _is_opc(text: str) -> bool:
     return text.strip() in ("1", "+1")
 
 
+def _err_status(text: str) -> tuple[int, str] | None:
+    """A SYST:ERR? answer `code,"message"` as (code, message). Code 0 and the text "No error"
+    must come together: a lost ';' that merged an answer "1" into the status "0"
+    (`10,"No error"`) is garbled (None), not error 10."""
+    match = _ERR.fullmatch(text)
+    if match is None or (match.group(1) in ("0", "+0")) != (match.group(2).lower() == "no error"):
+        return None
+    return int(match.group(1)), match.group(2)
+
+
+def _split_err(text: str, count: int) -> tuple[list[str], str]:
+    """Answers joined by ';', the SYST:ERR? answer last."""
+    *answers, status = text.split(";")
+    return answers, status
+
+
+ERR_DIALECT = StatusDialect(suffix=";:SYST:ERR?", status_query=":SYST:ERR?", split=_split_err,
+                            status=_err_status, queue_depth=ERROR_QUEUE_DEPTH)
+
+
+def _fixed_or_auto(auto: bool, upper: float) -> float | None:
+    """The range setting from SENS:POW:RANG:AUTO? and SENS:POW:RANG?: None while autoranging."""
+    return None if auto else upper
+
+
+def _range_argument(range_w: float | None) -> str:
+    return ":AUTO ON" if range_w is None else f" {float(range_w):.6E}"
+
+
+def _same_range(sent: float | None, got: float | None, number: StrictNumber) -> bool:
+    """Autorange reads back as autorange; a fixed range as that very range (to the NR3's
+    precision), not just some fixed range."""
+    return got is None if sent is None else to_reply_precision(sent, got, number)
+
+
+def _holds(sent: float, got: float | None, number: StrictNumber) -> bool:
+    """A fixed range that holds the value sent (the meter picks the smallest that does)."""
+    return got is not None and got >= sent - number.half_unit(sent)
+
+
+_RANGE_QUERY = ":SENS:POW:RANG:AUTO?;:SENS:POW:RANG?"
+# setting a value selects the smallest range holding it: how full_scales_w steps up the ranges
+_RANGE_HOLDING = Setting(_RANGE_QUERY, ":SENS:POW:RANG {}", ("flag", "number"), "{:.6E}".format,
+                         _holds, "the smallest fixed range holding a power, W",
+                         value=_fixed_or_auto)
+
+
 @dataclass(frozen=True)
 class SensorIdentity:
     """SYST:SENS:IDN?: the connected sensor head."""
@@ -74,68 +121,42 @@ class SensorIdentity:
     flags: int
 
 
-class Pm100:
+class Pm100(StatusLineDevice):
     """A PM100-series meter as the engine's Detector (power in W)."""
 
-    def __init__(
-        self,
-        port: str,
-        baudrate: int = 115200,
-        timeout_s: float = 1.0,
-        name: str = "pm100",
-        retries: int = 2,
-        zero_timeout_s: float = 10.0,
-        nr3_decimals: int = NR3_DECIMALS,
-    ):
-        self.name = name
+    dialect = ERR_DIALECT
+    integer = staticmethod(_nr1)
+    flag = staticmethod(_flag)
+
+    wavelength_nm = Setting(":SENS:CORR:WAV?", ":SENS:CORR:WAV {}", "number", "{:.10g}".format,
+                            to_reply_precision, "SENS:CORR:WAV: correction wavelength, nm")
+    averaging = Setting(":SENS:AVER:COUN?", ":SENS:AVER:COUN {}", "integer",
+                        lambda count: str(int(count)), exactly,
+                        "SENS:AVER:COUN: samples averaged per reading")
+    range_w = Setting(_RANGE_QUERY, ":SENS:POW:RANG{}", ("flag", "number"), _range_argument,
+                      _same_range, "the fixed range's full scale, W, or None while autoranging",
+                      value=_fixed_or_auto)
+
+    def __init__(self, port: str, baudrate: int = 115200, timeout_s: float = 1.0,
+                 name: str = "pm100", retries: int = 2, zero_timeout_s: float = 10.0,
+                 nr3_decimals: int = NR3_DECIMALS):
         self.zero_timeout_s = zero_timeout_s
         self._full_scales: tuple[float, ...] | None = None
-        self._nr3 = nr3_parser(nr3_decimals)
-        self.transport = SerialLineTransport(
+        self.number = nr3_parser(nr3_decimals)
+        super().__init__(name, SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
             timeout_s=timeout_s, retries=retries, sync=SyncQuery("*OPC?", _is_opc),
-        )
+        ))
         try:
             self.errors()  # start from an empty error queue
             self.idn = self.query("*IDN?")[0]
             self.query(":CONF:POW")
         except DriverError:
-            self.transport.close()
+            self.close()
             raise
 
-    # -- lifecycle --------------------------------------------------------------
-    def close(self) -> None:
-        """Close the serial port."""
-        self.transport.close()
-
-    def __enter__(self) -> Pm100:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     # -- exchanges --------------------------------------------------------------
-    def _split(self, message: str, text: str) -> list[str]:
-        """Answers before the trailing SYST:ERR? one; DeviceError if it reports one."""
-        *answers, err = text.split(";")
-        code, what = self._status(message, err, text)
-        if code != 0:
-            raise DeviceError(self.name, code, what)
-        return answers
-
-    def _status(self, message: str, err: str, text: str) -> tuple[int, str]:
-        """A SYST:ERR? answer `code,"message"` as (code, message); ProtocolError if garbled.
-
-        Code 0 and the text "No error" must come together: a lost ';' that merged an
-        answer "1" into the status "0" (`10,"No error"`) is garbled, not error 10.
-        """
-        match = _ERR.fullmatch(err)
-        if match is None or (match.group(1) in ("0", "+0")) != (
-                match.group(2).lower() == "no error"):
-            raise ProtocolError(f"{self.name}: garbled reply to {message!r}: {text!r}")
-        return int(match.group(1)), match.group(2)
-
-    def query(self, message: str, *parsers: Callable[[str], object]) -> list:
+    def query(self, message: str, *parsers: Callable[[str], Any]) -> list:
         """Send `message;:SYST:ERR?` and return the answers before the error status.
 
         parsers: one per answer (e.g. the NR3 reader), applied inside the retry loop so a
@@ -143,46 +164,7 @@ class Pm100:
         after a timeout or garbled reply (use only for side-effect-free messages or ones
         that may safely run twice, such as READ?).
         """
-        n_queries = message.count("?")
-
-        def parse(text: str) -> list:
-            answers = self._split(message, text)
-            if len(answers) != n_queries:
-                raise ProtocolError(
-                    f"{self.name}: {len(answers)} answers to {message!r}, expected {n_queries}"
-                )
-            if not parsers:
-                return answers
-            try:
-                return [read(answer) for read, answer in zip(parsers, answers, strict=True)]
-            except ProtocolError as exc:
-                raise ProtocolError(f"{self.name}: reply to {message!r}: {exc}") from None
-
-        return self.transport.query(f"{message};:SYST:ERR?", parse, message)
-
-    def command(self, message: str, check: Callable[[], bool]) -> None:
-        """Send a setting command once; if its status is lost, `check()` re-reads the setting."""
-        try:
-            self._split(message, self.transport.exchange(f"{message};:SYST:ERR?", message))
-        except (DeviceTimeout, ProtocolError) as exc:
-            self.errors(raise_first=True)
-            if not check():
-                raise DriverError(
-                    f"{self.name}: {message!r} not confirmed ({exc}); not re-sent"
-                ) from exc
-
-    def errors(self, raise_first: bool = False) -> list[tuple[int, str]]:
-        """Drain the SCPI error queue; raise_first raises DeviceError for the first one."""
-        found = []
-        for _ in range(32):
-            code, what = self.transport.query(
-                ":SYST:ERR?", lambda t: self._status(":SYST:ERR?", t, t), "SYST:ERR?")
-            if code == 0:
-                break
-            found.append((code, what))
-        if raise_first and found:
-            raise DeviceError(self.name, *found[0])
-        return found
+        return self.query_answers(message, parsers, message.count("?"))
 
     # -- Detector interface -------------------------------------------------------
     def configure(self, wavelength_nm: float, averaging: int, range_w: float | None) -> None:
@@ -193,56 +175,23 @@ class Pm100:
         self.averaging = averaging
         self.range_w = range_w
 
-    @property
-    def wavelength_nm(self) -> float:
-        """SENS:CORR:WAV?: correction wavelength, nm."""
-        return self.query(":SENS:CORR:WAV?", self._nr3)[0]
-
-    @wavelength_nm.setter
-    def wavelength_nm(self, value: float) -> None:
-        value = float(value)
-        self.command(f":SENS:CORR:WAV {value:.10g}",
-                     lambda: abs(self.wavelength_nm - value) <= 1e-6 * value)
-
     def wavelength_limits_nm(self) -> tuple[float, float]:
         """SENS:CORR:WAV? MIN / MAX: the sensor's wavelength range, nm."""
-        lo, hi = self.query(":SENS:CORR:WAV? MIN;:SENS:CORR:WAV? MAX", self._nr3, self._nr3)
+        lo, hi = self.query(":SENS:CORR:WAV? MIN;:SENS:CORR:WAV? MAX", self.number, self.number)
         return lo, hi
-
-    @property
-    def averaging(self) -> int:
-        """SENS:AVER:COUN?: samples averaged per reading."""
-        return self.query(":SENS:AVER:COUN?", _nr1)[0]
-
-    @averaging.setter
-    def averaging(self, value: int) -> None:
-        self.command(f":SENS:AVER:COUN {int(value)}", lambda: self.averaging == int(value))
-
-    @property
-    def range_w(self) -> float | None:
-        """The fixed range's full scale in W, or None while autoranging."""
-        auto, upper = self.query(":SENS:POW:RANG:AUTO?;:SENS:POW:RANG?", _flag, self._nr3)
-        return None if auto else upper
-
-    @range_w.setter
-    def range_w(self, value: float | None) -> None:
-        if value is None:
-            self.command(":SENS:POW:RANG:AUTO ON", lambda: self.range_w is None)
-        else:
-            self.command(f":SENS:POW:RANG {float(value):.6E}", lambda: self.range_w is not None)
 
     def full_scales_w(self) -> tuple[float, ...]:
         """The sensor's ranges (full scale, W, increasing), found once and kept: SCPI lists
         none, so the range is stepped up from SENS:POW:RANG? MIN (a set value selects the
         smallest range holding it) to MAX; the range setting is restored afterwards."""
         if self._full_scales is None:
-            low, high = self.query(":SENS:POW:RANG? MIN;:SENS:POW:RANG? MAX", self._nr3,
-                                   self._nr3)
+            low, high = self.query(":SENS:POW:RANG? MIN;:SENS:POW:RANG? MAX", self.number,
+                                   self.number)
             before = self.range_w
             self.range_w = low
             found = [low]
             while found[-1] < high * (1 - 1e-6):
-                self.range_w = found[-1] * (1 + 1e-4)
+                self.write_setting(_RANGE_HOLDING, found[-1] * (1 + 1e-4))
                 upper = self.range_w
                 if upper is None or upper <= found[-1] or len(found) >= MAX_RANGES:
                     raise ProtocolError(f"{self.name}: range stepping from {found[-1]:g} W "
@@ -258,12 +207,12 @@ class Pm100:
         saturated: the reading is above the range's full scale (over range).
         InvalidReading if the meter answers SCPI's not-a-number (9.91E+37).
         """
-        power, upper = self.query(":READ?;:SENS:POW:RANG?", self._nr3, self._nr3)
+        power, upper = self.query(":READ?;:SENS:POW:RANG?", self.number, self.number)
         return Reading(power_w=self._valid(power, upper), range_w=upper, saturated=power > upper)
 
     def measure(self) -> float:
         """MEAS:POW?: configure for power and take one reading, W (InvalidReading as read)."""
-        power, upper = self.query(":MEAS:POW?;:SENS:POW:RANG?", self._nr3, self._nr3)
+        power, upper = self.query(":MEAS:POW?;:SENS:POW:RANG?", self.number, self.number)
         return self._valid(power, upper)
 
     def _valid(self, power: float, range_w: float) -> float:
@@ -283,7 +232,7 @@ class Pm100:
 
     def zero_offset_w(self) -> float:
         """SENS:CORR:COLL:ZERO:MAGN?: the dark offset the last zero measured, W."""
-        return self.query(":SENS:CORR:COLL:ZERO:MAGN?", self._nr3)[0]
+        return self.query(":SENS:CORR:COLL:ZERO:MAGN?", self.number)[0]
 
     def sensor(self) -> SensorIdentity:
         """SYST:SENS:IDN?: name, serial number, calibration message, type, subtype, flags."""

@@ -8,10 +8,12 @@ adaptor raises) becomes a SerialPortError, so callers see only DriverError subcl
 
 A reply that missed its timeout may still arrive, after the next query has been sent, and
 would be read as that query's answer (a power reading taken at the previous stage position).
-So after a timeout the transport is out of step: before its next exchange it sends the
-driver's sync query, whose answer no other exchange produces, and discards every line up to
-that answer (the device answers in order, so whatever was late has come out by then). A
-garbled reply that arrives in step is the answer to the line just sent, garbled.
+Which request a line answers is decided by drivers.reply_sync (this module only reads and
+writes): after a timeout the line is out of step, and before its next exchange the transport
+sends the driver's sync query, whose answer no other exchange produces, and drops the lines
+before that answer (the device answers in order, so whatever was late has come out by then).
+A garbled line that arrives in step, with nothing older unanswered, is the answer to the line
+just sent, garbled.
 """
 
 from __future__ import annotations
@@ -21,14 +23,14 @@ import select
 import termios
 import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
 
 import serial
 
 from drivers.base import DeviceTimeout, DriverError, ProtocolError
+from drivers.reply_sync import Garbled, Reply, ReplySync, State, SyncReply, UnitKind
 
 T = TypeVar("T")
 
@@ -108,9 +110,8 @@ class SerialLineTransport:
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
         self.sync = sync
-        self.in_step = True  # False after a timeout, until a sync succeeds
+        self.replies = ReplySync()  # which request each line answers
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
-        self._syncs_unanswered = 0  # sync queries whose reply has not been read yet
         self._rx = bytearray()  # bytes read past the last reply line
         self.lock = threading.RLock()
         try:
@@ -120,12 +121,17 @@ class SerialLineTransport:
             )
         except (*PORT_FAILURES, ValueError) as exc:
             raise SerialPortError(name, port, "opening", exc) from exc
+        self._fd = self._serial.fileno()
         try:
-            with self._port("discarding stale input"):
-                self._serial.reset_input_buffer()
+            self._flush_input()
         except DriverError:
             self.close()
             raise
+
+    @property
+    def in_step(self) -> bool:
+        """False from a missed reply until a sync query brings the replies back in step."""
+        return self.replies.state is State.IN_STEP
 
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
@@ -143,66 +149,106 @@ class SerialLineTransport:
         self.close()
 
     # -- bytes ------------------------------------------------------------------
-    @contextmanager
-    def _port(self, action: str) -> Iterator[None]:
-        """Turn a port failure during `action` into SerialPortError (a blocked write into
-        DeviceTimeout); DriverErrors raised inside pass through unchanged."""
-        try:
-            yield
-        except serial.SerialTimeoutException:
-            self.in_step = False  # part of a line may have gone out
-            raise DeviceTimeout(self.name, f"the port to take {action}", self.timeout_s) from None
-        except PORT_FAILURES as exc:
-            raise SerialPortError(self.name, self.port, action, exc) from exc
+    def _port_error(self, action: str, exc: BaseException) -> DriverError:
+        """A port failure during `action` as the DriverError callers see (a blocked write:
+        DeviceTimeout, and whatever was being written may have partly gone out)."""
+        if isinstance(exc, serial.SerialTimeoutException):
+            return DeviceTimeout(self.name, f"the port to take {action}", self.timeout_s)
+        return SerialPortError(self.name, self.port, action, exc)
 
     def send(self, line: str, what: str | None = None) -> None:
         """Bring replies back in step if a reply was missed (DeviceTimeout naming `what`
-        if that fails), discard stale input, then write one line (terminator added)."""
+        if that fails), discard stale input, then write one line (terminator added) that
+        gets no reply (a silent command)."""
         with self.lock:
-            if not self.in_step and self.sync is not None:
-                self._resync(what or repr(line))
-            self._write(line)
+            try:
+                self._in_step(what or repr(line))
+                self._write(line, request=False)
+            finally:
+                self._abandon_wait()
 
-    def _write(self, line: str) -> None:
-        data = line.encode("ascii") + self.write_eol
-        with self._port("discarding stale input"):
+    def _in_step(self, what: str) -> None:
+        """Out of step: send the sync query and drop every line before its reply, or, with no
+        sync query, only trust the flush before the next write."""
+        if self.replies.state is State.OUT_OF_STEP:
+            if self.sync is None:
+                self.replies.reset()
+            else:
+                self._resync(what)
+
+    def _flush_input(self) -> None:
+        try:
             self._serial.reset_input_buffer()
+        except PORT_FAILURES as exc:
+            raise self._port_error("discarding stale input", exc) from exc
         self._rx.clear()
-        with self._port(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}"):
+
+    def _write(self, line: str, request: bool) -> None:
+        """Write a line; request: its reply is awaited (the machine is told first)."""
+        data = line.encode("ascii") + self.write_eol
+        self._flush_input()
+        if request:
+            self.replies.send_request(sync_shaped=self.sync is not None and
+                                      line == self.sync.line)
+        try:
             self._serial.write(data)
             self._serial.flush()
+        except PORT_FAILURES as exc:
+            if isinstance(exc, serial.SerialTimeoutException) and not self.replies.awaiting:
+                self.replies.send_request()  # part of a silent line went out: it may be
+                self.replies.timeout()  # answered after all (an error, an echo)
+            raise self._port_error(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}",
+                                   exc) from exc
+
+    def _abandon_wait(self) -> None:
+        """After an exchange: a wait cut short (the port lost, a signal) leaves its reply to
+        come, like a timeout."""
+        if self.replies.awaiting:
+            self.replies.timeout()
 
     def _resync(self, what: str) -> None:
-        """Send the sync query and drop every line before a sync reply (late replies, garbled
-        or not); DeviceTimeout, still out of step, if none comes in time. Nothing but sync
-        queries is sent while out of step, so any sync reply means every earlier request
-        has been answered; the surplus replies of sync queries that timed out are skipped
-        when they turn up later (see _reply)."""
+        """Send the sync query and read until the machine is in step (every line before the
+        sync reply is late, garbled or not), asking again after the reply to an older sync
+        query; DeviceTimeout, still out of step, if a reply does not come in time."""
         assert self.sync is not None
-        self._write(self.sync.line)
-        self._syncs_unanswered += 1
-        deadline = time.monotonic() + self.timeout_s
-        while True:
-            try:
-                line = self._read_line(f"{what} (replies out of step after a timeout: "
-                                       f"no answer to the sync query {self.sync.line!r})",
-                                       deadline)
-            except ProtocolError:
-                continue
-            if self.sync.is_reply(line):
-                self._syncs_unanswered -= 1
-                self.in_step = True
-                self.resyncs += 1
-                return
+        why = (f"{what} (replies out of step after a timeout: no answer to the sync query "
+               f"{self.sync.line!r})")
+        try:
+            while self.replies.awaiting or self.replies.state is State.OUT_OF_STEP:
+                self.replies.send_sync()
+                self._write(self.sync.line, request=False)
+                deadline = time.monotonic() + self.timeout_s
+                while type(self._next_unit(why, deadline)) is not SyncReply:
+                    pass
+        except DeviceTimeout:
+            if self.replies.state is not State.IN_STEP:
+                raise
+            return  # the late replies came, only the sync reply did not
+        self.resyncs += 1
 
     def _reply(self, what: str) -> str:
-        """The reply to the line just sent: the next line, past any late sync replies."""
+        """The reply to the line just sent: the next line the machine takes for it."""
         deadline = time.monotonic() + self.timeout_s
         while True:
+            event = self._next_unit(what, deadline)
+            if type(event) is Reply:
+                return event.unit
+            if type(event) is Garbled:  # in step, a garbled line ends the wait
+                raise event.unit
+
+    def _next_unit(self, what: str, deadline: float):
+        """Read one line and feed it to the machine (DeviceTimeout, the machine told, if none
+        comes by the deadline); the event it is."""
+        try:
             line = self._read_line(what, deadline)
-            if not (self._syncs_unanswered and self.sync and self.sync.is_reply(line)):
-                return line
-            self._syncs_unanswered -= 1
+        except ProtocolError as garbled:
+            return self.replies.receive(UnitKind.GARBLED, garbled)
+        except DeviceTimeout:
+            self.replies.timeout()
+            raise
+        sync = self.sync
+        kind = UnitKind.SYNC if sync is not None and sync.is_reply(line) else UnitKind.ANSWER
+        return self.replies.receive(kind, line)
 
     def _read_line(self, what: str, deadline: float) -> str:
         """Read one reply line (terminator stripped) by the monotonic `deadline`.
@@ -212,32 +258,35 @@ class SerialLineTransport:
         pyserial's timeout per read (each set re-applies the port's termios settings: two
         system calls per chunk); bytes after the terminator are kept for the next line (and
         discarded by the next send: a line protocol sends one reply per request). Raises
-        DeviceTimeout(what) when no complete line arrives in time (the transport is then
-        out of step: the reply may still come), ProtocolError when it holds bytes that are
-        not printable ASCII.
+        DeviceTimeout(what) when no complete line arrives in time (the reply may still
+        come), ProtocolError when it holds bytes that are not printable ASCII.
         """
-        data = self._rx
-        with self.lock, self._port(f"reading the reply to {what}"):
-            while self.read_eol not in data:
+        data, eol = self._rx, self.read_eol
+        try:
+            while eol not in data:
                 left = deadline - time.monotonic()
-                if left <= 0 or not select.select([self._serial.fileno()], [], [], left)[0]:
-                    self.in_step = False
+                if left <= 0 or not select.select([self._fd], [], [], left)[0]:
                     raise DeviceTimeout(self.name, what, self.timeout_s)
                 data += self._serial.read(max(1, self._serial.in_waiting))
-        end = data.index(self.read_eol)
+        except PORT_FAILURES as exc:
+            raise self._port_error(f"reading the reply to {what}", exc) from exc
+        end = data.index(eol)
         body = bytes(data[:end])
-        del data[: end + len(self.read_eol)]
+        del data[: end + len(eol)]
         if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
-            raise ProtocolError(f"{self.name}: garbled reply to {what}: "
-                                f"{body + self.read_eol!r}")
+            raise ProtocolError(f"{self.name}: garbled reply to {what}: {body + eol!r}")
         return body.decode("ascii")
 
     def exchange(self, line: str, what: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""
         what = what or repr(line)
         with self.lock:
-            self.send(line, what)
-            return self._reply(what)
+            try:
+                self._in_step(what)
+                self._write(line, request=True)
+                return self._reply(what)
+            finally:
+                self._abandon_wait()
 
     def query(
         self,

@@ -43,7 +43,7 @@ class InterlockWindow:
         """From `interlock = {start_s, duration_s}` (FaultConfigError naming what is wrong)."""
         if not (isinstance(table, Mapping) and set(table) == {"start_s", "duration_s"}
                 and all(_is_number(v) and 0.0 <= v < math.inf for v in table.values())):
-            raise FaultConfigError(f"faults: interlock must be {{start_s, duration_s}}, numbers "
+            raise FaultConfigError(f"[faults] interlock: must be {{start_s, duration_s}}, numbers "
                                    f">= 0, got {table!r}")
         return cls(float(table["start_s"]), float(table["duration_s"]))
 

@@ -32,5 +32,5 @@ def test_an_interlock_opens_once_for_its_window_even_between_polls():
     now[0] = 2.0  # opened and closed again since the last poll: the device still saw it
     assert contact.poll() == (True, False)
     assert contact.poll() == (False, False)
-    with pytest.raises(FaultConfigError, match="sim.faults.esp: interlock must be"):
+    with pytest.raises(FaultConfigError, match=r"\[sim\.faults\.esp\] interlock: must be"):
         FaultSpec.from_dict({"interlock": {"start_s": 1.0}}, "esp")
