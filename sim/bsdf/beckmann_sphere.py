@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import erfc, erfcx, ndtri
 
-from sim.bsdf.primitives import SQRT_PI
+from sim.bsdf.constants import SQRT_PI
 
 
 def _log_cdf(x: np.ndarray, mu: np.ndarray) -> np.ndarray:

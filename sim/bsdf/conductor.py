@@ -8,9 +8,9 @@ import cmath
 
 import numpy as np
 
+from sim.bsdf.constants import COS_HORIZON
 from sim.bsdf.fresnel import fresnel_conductor
 from sim.bsdf.microfacet import MicrofacetModel, half_vector, reflect
-from sim.bsdf.primitives import COS_HORIZON
 from sim.bsdf.vectors import dot, unit
 
 

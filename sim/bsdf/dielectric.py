@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
+from sim.bsdf.constants import COS_HORIZON
 from sim.bsdf.fresnel import dielectric_transmittance, reflectance_transmittance_toward
 from sim.bsdf.microfacet import MicrofacetModel, half_vector, reflect
-from sim.bsdf.primitives import COS_HORIZON
 from sim.bsdf.vectors import dot, unit
 
 LOBES = ("reflection", "transmission")

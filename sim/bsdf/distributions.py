@@ -7,17 +7,17 @@ over leading dimensions; alpha_x and alpha_y may be arrays that broadcast the sa
 A direction w below the surface (w.z < 0) is treated through its mirror image (w.z -> |w.z|),
 i.e. the surface seen from w's own side, except by the whole-sphere methods the random walk
 uses (signed_lambda, projected_area, D_visible, sample_visible_sphere). The scalar formulas of
-the compiled kernels are in primitives.py; these are their vectorised versions."""
+the compiled kernels are in primitives.py; these are their vectorised versions. scipy is
+imported where it is used, so that the registry (DISTRIBUTIONS) imports without it: the CLI
+builds its options from it."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.special import beta, betainc, erfc, erfinv
 
-from sim.bsdf.beckmann_sphere import beckmann_visible_unit
-from sim.bsdf.primitives import BECKMANN_CF_FROM, BECKMANN_CF_TERMS, SQRT_PI, Ndf
+from sim.bsdf.constants import BECKMANN_CF_FROM, BECKMANN_CF_TERMS, SQRT_PI, Ndf
 from sim.bsdf.vectors import dot
 
 
@@ -27,6 +27,8 @@ def beckmann_a_lambda(a: np.ndarray) -> np.ndarray:
     Lambda(a) = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2 cancels for large a; there
     1 - a sqrt(pi) erfcx(a) = t / (a + t) with t the tail of the erfc continued fraction.
     """
+    from scipy.special import erfc
+
     a = np.asarray(a, dtype=np.float64)
     small = a < BECKMANN_CF_FROM
     a_s = np.where(small, a, 0.0)
@@ -48,6 +50,8 @@ def beta_half(k: np.ndarray) -> np.ndarray:
     Stirling-type series Gamma(k + 1/2) / Gamma(k) = sqrt(k) exp(-1/(8k) + 1/(192k^3) -
     1/(640k^5) + 17/(14336k^7)) is used instead (k >= 50, error < 1e-16 there).
     """
+    from scipy.special import beta
+
     k = np.asarray(k, dtype=np.float64)
     large = k >= 50.0
     x = 1.0 / np.where(large, k, 50.0)
@@ -314,6 +318,8 @@ class Beckmann(Distribution):
         C(b) ~ cos_t (1 + b) + sin_t exp(-erfinv(b)^2) / sqrt(pi), for b up to erf(cot_t);
         it is inverted by safeguarded Newton iteration in b (after Jakob's Mitsuba sampler).
         """
+        from scipy.special import erfc, erfinv
+
         with np.errstate(divide="ignore", invalid="ignore"):
             cot_t = np.where(sin_t > 0, cos_t / np.where(sin_t > 0, sin_t, 1.0), np.inf)
         # both sides multiplied by cos_t so that grazing incidence (tan = inf) stays finite
@@ -340,6 +346,8 @@ class Beckmann(Distribution):
     def sample_visible_sphere(self, w, u1, u2):
         """By stretching to alpha = 1 (beckmann_sphere: a log-CDF inversion that holds below
         the horizon too, where sample_visible's erf-variable one does not)."""
+        from sim.bsdf.beckmann_sphere import beckmann_visible_unit
+
         ax, ay = self.alpha_x, self.alpha_y
         v = np.stack([ax * w[..., 0], ay * w[..., 1], w[..., 2]], axis=-1)
         v /= np.linalg.norm(v, axis=-1, keepdims=True)
@@ -388,6 +396,8 @@ class Phong(Distribution):
         From Lambda(a) = (1/a) int_a^inf (q - a) P2(q) dq with the Phong slope marginal
         P2(q) = (1 + q^2)^(-(p+3)/2) / B((p+2)/2, 1/2).
         """
+        from scipy.special import betainc
+
         p = self.exponent
         c2 = np.minimum(w[..., 2] ** 2, 1.0)
         r2 = 1.0 - c2  # from c2 so that r2 -> 1 keeps its 1e-18 (matters when p ~ 1e8)
@@ -419,7 +429,8 @@ class Phong(Distribution):
 #: Every distribution by name: the one list the models, the bench, the fits and the CLI use.
 DISTRIBUTIONS = {cls.name: cls for cls in (Beckmann, GGX, Phong)}
 DISTRIBUTION_NAMES = tuple(DISTRIBUTIONS)
-#: Those the random walk (multiple scattering) can walk on.
+#: Those with compiled kernels, and those the random walk (multiple scattering) can walk on.
+COMPILED = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.kernel is not None)
 WALKABLE = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.multiple_scattering)
 
 

@@ -23,13 +23,9 @@ import numpy as np
 # batches run no slower. Set before numba's threading layer starts; a user's setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+from sim.bsdf.constants import COS_HORIZON, STIRLING_FROM, Masking, Ndf, Sampling
 from sim.bsdf.primitives import (
     COMPILED,
-    COS_HORIZON,
-    STIRLING_FROM,
-    Masking,
-    Ndf,
-    Sampling,
     conductor_fresnel,
     cos_lambda,
     dielectric_transmittance,

@@ -13,9 +13,8 @@ These are the vectorised versions of primitives.py's scalar g2_over_cosines and 
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import gamma, gammaln
 
-from sim.bsdf.primitives import HALF_LOG_2PI, STIRLING_FROM, STIRLING_TERMS, Masking, enum_names
+from sim.bsdf.constants import HALF_LOG_2PI, STIRLING_FROM, STIRLING_TERMS, Masking, enum_names
 
 #: Every masking form by name: the one list the models, the bench, the fits and the CLI use.
 MASKINGS = enum_names(Masking)
@@ -94,6 +93,8 @@ def log_beta(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     only b >= 10: log Gamma(a) + corr + a - a log(a+b) + (b - 1/2) log1p(-a/(a+b));
     both < 10: log(Gamma(a) Gamma(b) / Gamma(a+b)), all moderate numbers.
     """
+    from scipy.special import gamma, gammaln  # here: the registry MASKINGS imports without it
+
     a, b = np.minimum(p, q), np.maximum(p, q)
     s = a + b
     frac = a / s

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.bsdf.distributions import make_distribution
+from sim.bsdf.constants import WALTER_BASE, WALTER_SLOPE, Sampling, enum_names
+from sim.bsdf.distributions import COMPILED, make_distribution
 from sim.bsdf.masking import check_masking, g2_over_cosines, masking_kind
-from sim.bsdf.primitives import WALTER_BASE, WALTER_SLOPE, Sampling, enum_names
 from sim.bsdf.vectors import direction_arrays, directions, dot
 
 SAMPLINGS = enum_names(Sampling)
@@ -93,7 +93,6 @@ class MicrofacetModel:
             raise ValueError(f"backend must be one of {BACKENDS} or None, got {backend!r}")
         if backend == "numpy":
             return "numpy"
-        from sim.bsdf.distributions import DISTRIBUTIONS
         from sim.bsdf.kernels import AVAILABLE
 
         d = self.distribution
@@ -101,10 +100,8 @@ class MicrofacetModel:
         if AVAILABLE and d.kernel is not None and scalar_alpha:
             return "numba"
         if backend == "numba":
-            compiled = " or ".join(name for name, cls in DISTRIBUTIONS.items() if cls.kernel
-                                   is not None)
             raise ValueError(f"backend='numba' needs numba (pip install 'gonio[fast]'), "
-                             f"distribution {compiled} and one alpha value, got "
+                             f"distribution {' or '.join(COMPILED)} and one alpha value, got "
                              f"{d.name!r} with alpha shape {np.shape(d.alpha_x)}")
         return "numpy"
 

@@ -3,8 +3,8 @@ Lambda, masking G2 (with log Beta), Fresnel and the normal samplers that the com
 kernels (kernels.py) and the random walk's next-event kernel (multiple_scattering/nee_kernel.py)
 share.
 
-The distributions, masking forms and normal samplers are named by the IntEnums below (numba
-sees their members as ints: a compiled caller passes `Ndf.GGX.value`). With numba (the
+The distributions, masking forms and normal samplers are named by the IntEnums of constants.py
+(numba sees their members as ints: a compiled caller passes `Ndf.GGX.value`). With numba (the
 gonio[fast] extra) each function is compiled on first call and cached on disk; without it they
 are the same formulas as plain Python (where Python raises on a division by zero or an overflow,
 numba's numpy error model gives inf or nan). The vectorised numpy versions (distributions.py,
@@ -14,9 +14,22 @@ them to these."""
 from __future__ import annotations
 
 import math
-from enum import IntEnum
 
 import numpy as np
+
+from sim.bsdf.constants import (
+    BECKMANN_CF_FROM,
+    BECKMANN_CF_TERMS,
+    HALF_LOG_2PI,
+    SQRT_PI,
+    STIRLING_FROM,
+    STIRLING_TERMS,
+    WALTER_BASE,
+    WALTER_SLOPE,
+    Masking,
+    Ndf,
+    Sampling,
+)
 
 try:
     from numba import njit
@@ -31,52 +44,7 @@ else:
     #: How every scalar formula is compiled: cached, with numpy's floating-point error model.
     scalar = njit(cache=True, error_model="numpy")
 
-
-class Ndf(IntEnum):
-    """Normal distributions that have scalar formulas (Distribution.kernel names its own)."""
-
-    GGX = 0
-    BECKMANN = 1
-
-
-class Masking(IntEnum):
-    """Smith masking-shadowing forms (masking.py): G1(i) G1(o), or height-correlated."""
-
-    SEPARABLE = 0
-    CORRELATED = 1
-
-
-class Sampling(IntEnum):
-    """Normal-sampling schemes (microfacet.py): visible normals, or Walter's widened D m.z."""
-
-    VISIBLE = 0
-    WALTER = 1
-
-
-def enum_names(kinds: type[IntEnum]) -> tuple[str, ...]:
-    """The public names of an enum's members, in order: Masking -> ('separable', 'correlated')."""
-    return tuple(kind.name.lower() for kind in kinds)
-
-
-SQRT_PI = math.sqrt(math.pi)
-#: Directions with |cos theta| at or below this count as grazing: eval returns 0 there (the
-#: cosine-weighted value is 0; f itself may diverge for correlated masking at double grazing).
-COS_HORIZON = 1e-100
-#: Beckmann a*Lambda(a) switches from the closed form to a continued fraction at this a.
-BECKMANN_CF_FROM = 2.0
-#: Terms of the erfc continued fraction; enough for full float64 accuracy for a >= 2.
-BECKMANN_CF_TERMS = 60
-#: Above this argument log Gamma is taken as Stirling's form plus STIRLING_TERMS corrections.
-STIRLING_FROM = 10.0
-#: Coefficients B_2k / (2k (2k - 1)) of the Stirling correction sum_k c_k / x^(2k - 1); at
-#: x = 10 the first omitted term is 2e-18, below an ulp of every log Gamma it corrects.
-STIRLING_TERMS = (1 / 12, -1 / 360, 1 / 1260, -1 / 1680, 1 / 1188, -691 / 360360, 1 / 156,
-                  -3617 / 122400)
 STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
-HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
-#: Walter's (2007, eq. 47) roughness scale for sampling: WALTER_BASE - WALTER_SLOPE sqrt|cos i|.
-WALTER_BASE = 1.2
-WALTER_SLOPE = 0.2
 
 
 # --- geometry -----------------------------------------------------------------------------

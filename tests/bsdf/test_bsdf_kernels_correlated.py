@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sim.bsdf import RoughDielectric, kernels
-from sim.bsdf.primitives import Masking, Ndf, Sampling
+from sim.bsdf.constants import Masking, Ndf, Sampling
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE,
                                 reason="numba (gonio[fast]) is not installed")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.distributions import make_distribution
+from sim.bsdf.distributions import WALKABLE, make_distribution
 from sim.bsdf.multiple_scattering import (
     HigherOrderLobe,
     RandomWalkBSDF,
@@ -29,7 +29,7 @@ def direction(theta_deg, phi_deg=0.0):
 
 
 @pytest.mark.skipif(not nee_kernel.AVAILABLE, reason="numba is not installed")
-@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+@pytest.mark.parametrize("name", WALKABLE)
 @pytest.mark.parametrize("micro", [MicroDielectric(1.51), MicroDielectric(1.0 / 1.51),
                                    MicroConductor(None), MicroConductor(0.2 + 3.4j)],
                          ids=["glass", "inverse-glass", "mirror", "gold-like"])

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from sim.bsdf.distributions import make_distribution
+from sim.bsdf.distributions import WALKABLE, make_distribution
 from sim.bsdf.multiple_scattering.walk import walkable
 
 CASES = [("ggx", 0.3), ("ggx", (1.0, 0.4)), ("beckmann", 0.3), ("beckmann", (0.5, 1.2))]
@@ -44,7 +44,7 @@ def test_lambda_of_the_opposite_direction(name, alpha):
     assert np.all(s.signed_lambda(w) >= 0.0)
 
 
-@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+@pytest.mark.parametrize("name", WALKABLE)
 def test_lambda_is_finite_and_monotone_at_extremes(name):
     s = make_distribution(name, 0.5)
     theta = np.concatenate([[0.0, 1e-12, 1e-6], np.linspace(0.1, 1.5, 30),
@@ -98,7 +98,7 @@ def test_phong_and_array_alpha_are_refused():
 
 
 @settings(max_examples=150, deadline=None)
-@given(name=st.sampled_from(["ggx", "beckmann"]),
+@given(name=st.sampled_from(WALKABLE),
        ax=st.floats(1e-4, 5.0), ay=st.floats(1e-4, 5.0),
        theta=st.floats(0.0, np.pi), phi=st.floats(0.0, 2 * np.pi),
        u1=st.floats(0.0, 1.0, exclude_max=True), u2=st.floats(0.0, 1.0, exclude_max=True))
