@@ -9,7 +9,7 @@ import argparse
 import json
 
 from gonio.errors import GonioError
-from sim.bsdf.distributions import COMPILED
+from sim.bsdf.distributions import WITH_KERNELS
 from sim.bsdf.masking import MASKINGS
 
 DEFAULT_SIZE = {"transmission": "64x64x32", "reflection": "64x64"}
@@ -31,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--tile-entries", type=int, default=128,
                    help="entries per tile, the unit of parallel work and of seeding")
-    p.add_argument("--distribution", choices=COMPILED, default="ggx")
+    p.add_argument("--distribution", choices=WITH_KERNELS, default="ggx")
     p.add_argument("--masking", choices=MASKINGS, default="correlated")
     p.add_argument("--multiple-scattering", action="store_true",
                    help="include multiple scattering (Heitz 2016 random walk; transmission)")

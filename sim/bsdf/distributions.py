@@ -430,7 +430,7 @@ class Phong(Distribution):
 DISTRIBUTIONS = {cls.name: cls for cls in (Beckmann, GGX, Phong)}
 DISTRIBUTION_NAMES = tuple(DISTRIBUTIONS)
 #: Those with compiled kernels, and those the random walk (multiple scattering) can walk on.
-COMPILED = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.kernel is not None)
+WITH_KERNELS = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.kernel is not None)
 WALKABLE = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.multiple_scattering)
 
 

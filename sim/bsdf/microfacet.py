@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.bsdf.constants import WALTER_BASE, WALTER_SLOPE, Sampling, enum_names
-from sim.bsdf.distributions import COMPILED, make_distribution
+from sim.bsdf.distributions import WITH_KERNELS, make_distribution
 from sim.bsdf.masking import check_masking, g2_over_cosines, masking_kind
 from sim.bsdf.vectors import direction_arrays, directions, dot
 
@@ -101,7 +101,7 @@ class MicrofacetModel:
             return "numba"
         if backend == "numba":
             raise ValueError(f"backend='numba' needs numba (pip install 'gonio[fast]'), "
-                             f"distribution {' or '.join(COMPILED)} and one alpha value, got "
+                             f"distribution {' or '.join(WITH_KERNELS)} and one alpha value, got "
                              f"{d.name!r} with alpha shape {np.shape(d.alpha_x)}")
         return "numpy"
 
