@@ -16,11 +16,10 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
 from calibration.reduced import ReducedData
 from calibration.smearing import Smearing, smearing_order
 from gonio.errors import GonioError
-from sim.bsdf.distributions import DISTRIBUTION_NAMES
-from sim.bsdf.masking import MASKINGS
 
 ALPHA_BOUNDS = (1e-4, 4.0)
 ETA_BOUNDS = (1.001, 4.0)

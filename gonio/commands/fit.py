@@ -7,9 +7,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
 from gonio.commands.reduce import add_reduce_options
-from sim.bsdf.distributions import DISTRIBUTION_NAMES
-from sim.bsdf.masking import MASKINGS
 
 
 def _list(text: str) -> tuple[str, ...]:
