@@ -252,7 +252,7 @@ class GGX(Distribution):
         u1 = np.asarray(u1, dtype=np.float64)
         u2 = np.asarray(u2, dtype=np.float64)
         vh = np.stack([self.alpha_x * w[..., 0], self.alpha_y * w[..., 1], w[..., 2]], axis=-1)
-        vh = vh / np.sqrt(dot(vh, vh))[..., None]
+        vh = vh / np.linalg.norm(vh, axis=-1, keepdims=True)
         lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
         has = lensq > 0
         inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
@@ -269,7 +269,7 @@ class GGX(Distribution):
         nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
         ne = np.stack([self.alpha_x * nh[..., 0], self.alpha_y * nh[..., 1],
                        np.maximum(nh[..., 2], 0.0)], axis=-1)
-        return ne / np.sqrt(dot(ne, ne))[..., None]
+        return ne / np.linalg.norm(ne, axis=-1, keepdims=True)
 
 
 class Beckmann(Distribution):
