@@ -243,16 +243,22 @@ class GGX(Distribution):
         return (alpha**2 + t**2) / (4.0 * t + 2.0 * alpha)
 
     def sample_visible(self, w, u1, u2):
-        return self.sample_visible_sphere(_upper(w), u1, u2)
+        return self._visible(_upper(w), u1, u2, _length)
 
     def sample_visible_sphere(self, w, u1, u2):
         """Heitz 2018 in the stretched frame; for w below the horizon the visible part of the
         unit hemisphere projects onto the same disk region, t2 in [-v_z sqrt(1 - t1^2),
         sqrt(1 - t1^2)], sampled by the same linear warp of a uniform disk point."""
+        return self._visible(w, u1, u2, _linalg_length)
+
+    def _visible(self, w, u1, u2, length):
+        """Visible normals seen from w, vectors normalised by length(v) (..., 1): the two
+        samplers round their normalisations differently (einsum and linalg.norm differ in the
+        last ulp), each kept so that its numbers, and the walks' random streams, stay put."""
         u1 = np.asarray(u1, dtype=np.float64)
         u2 = np.asarray(u2, dtype=np.float64)
         vh = np.stack([self.alpha_x * w[..., 0], self.alpha_y * w[..., 1], w[..., 2]], axis=-1)
-        vh = vh / np.linalg.norm(vh, axis=-1, keepdims=True)
+        vh = vh / length(vh)
         lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
         has = lensq > 0
         inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
@@ -269,7 +275,17 @@ class GGX(Distribution):
         nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
         ne = np.stack([self.alpha_x * nh[..., 0], self.alpha_y * nh[..., 1],
                        np.maximum(nh[..., 2], 0.0)], axis=-1)
-        return ne / np.linalg.norm(ne, axis=-1, keepdims=True)
+        return ne / length(ne)
+
+
+def _length(v: np.ndarray) -> np.ndarray:
+    """|v| along the last axis, kept as a length-1 axis (einsum: the faster)."""
+    return np.sqrt(dot(v, v))[..., None]
+
+
+def _linalg_length(v: np.ndarray) -> np.ndarray:
+    """|v| along the last axis by np.linalg.norm, kept as a length-1 axis."""
+    return np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 class Beckmann(Distribution):
