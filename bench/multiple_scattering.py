@@ -126,7 +126,7 @@ def throughput_table(rng: np.random.Generator) -> list[str]:
         walk = RandomWalkBSDF(glass, walks=1)
         _, t_walk = timed(walk.eval, wi, wo, rng)
         _, t_single = timed(glass.eval, wi, wo)
-        orders = walk._walker.run(np.ascontiguousarray(wi), rng).orders
+        orders = walk.walker.run(np.ascontiguousarray(wi), rng).orders
         lines.append(f"{alpha:5.1f} {n / t_walk:12.3e} {orders.mean():10.2f} "
                      f"{n / t_single:15.3e} {t_walk / t_single:18.1f}")
     return lines

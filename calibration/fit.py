@@ -16,12 +16,10 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
 from calibration.reduced import ReducedData
 from calibration.smearing import Smearing, smearing_order
 from gonio.errors import GonioError
-
-DISTRIBUTIONS = ("beckmann", "ggx", "phong")
-MASKINGS = ("separable", "correlated")
 
 ALPHA_BOUNDS = (1e-4, 4.0)
 ETA_BOUNDS = (1.001, 4.0)
@@ -51,7 +49,7 @@ class FitOptions:
     """What to fit: the candidate distributions and masking forms (the best is reported),
     which parameters are free, and which points form the fitted subset."""
 
-    distributions: tuple[str, ...] = DISTRIBUTIONS
+    distributions: tuple[str, ...] = DISTRIBUTION_NAMES
     maskings: tuple[str, ...] = ("separable",)
     anisotropic: bool = False
     fit_eta: bool = False
@@ -84,7 +82,7 @@ class FitOptions:
         if self.multiple_scattering and self.anisotropic:
             raise FitError("fit: multiple_scattering is tabulated against one alpha; it cannot "
                            "be combined with anisotropic")
-        for name, given, known in (("distribution", self.distributions, DISTRIBUTIONS),
+        for name, given, known in (("distribution", self.distributions, DISTRIBUTION_NAMES),
                                    ("masking", self.maskings, MASKINGS)):
             if not given:
                 raise FitError(f"fit: at least one {name} is needed")

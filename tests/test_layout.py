@@ -24,21 +24,6 @@ FORBIDDEN = {
     "gonio_watch": {"drivers", "gonio_cli"},
 }
 
-# Cycles known and being removed elsewhere; each is the exact set of modules (or, for the
-# package check, sibling subpackages and modules) that form it, so any other cycle, or this one
-# grown, still fails.
-# sim.bsdf: microfacet reaches kernels and multiple_scattering lazily, kernels takes
-# COS_HORIZON from microfacet, and multiple_scattering's next-event kernel imports kernels
-# (the sim/bsdf restructuring removes it).
-KNOWN_MODULE_CYCLES = [{
-    "sim.bsdf.kernels", "sim.bsdf.microfacet", "sim.bsdf.multiple_scattering",
-    "sim.bsdf.multiple_scattering.energy", "sim.bsdf.multiple_scattering.lobe",
-    "sim.bsdf.multiple_scattering.model", "sim.bsdf.multiple_scattering.nee_kernel",
-    "sim.bsdf.multiple_scattering.walk",
-}]
-KNOWN_PACKAGE_CYCLES = [{"sim.bsdf.kernels", "sim.bsdf.microfacet",
-                         "sim.bsdf.multiple_scattering"}]
-
 
 def imported_packages(path: Path) -> set[str]:
     """Top-level package names a source file imports."""
@@ -228,15 +213,13 @@ def test_only_the_record_hands_a_runs_sim_table_to_reduction():
     assert readers <= allowed
 
 
-@pytest.mark.parametrize(("graph", "known"), [(module_graph, KNOWN_MODULE_CYCLES),
-                                              (sibling_graph, KNOWN_PACKAGE_CYCLES)],
-                         ids=["modules", "packages"])
-def test_no_import_cycle(graph, known):
+@pytest.mark.parametrize("graph", [module_graph, sibling_graph], ids=["modules", "packages"])
+def test_no_import_cycle(graph):
     """No module imports itself through others, lazy imports included; at every level of the
     package tree no subpackage or module imports itself through its siblings."""
     edges = graph()
     found = [f"{describe_cycle(edges, c)} (one cycle of {', '.join(sorted(c))})"
-             for c in cycles(edges) if c not in known]
+             for c in cycles(edges)]
     assert not found, "import cycles:\n" + "\n".join(found)
 
 

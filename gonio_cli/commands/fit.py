@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
 from gonio_cli.commands.reduce import add_reduce_options
 
 
@@ -26,10 +27,11 @@ def _angles(text: str) -> tuple[float, ...] | None:
 
 def add_fit_options(p: argparse.ArgumentParser) -> None:
     """The model and subset options `fit` shares with `plot --fit`."""
-    p.add_argument("--distribution", type=_list, default=("beckmann", "ggx", "phong"),
-                   metavar="D[,D...]", help="candidates: beckmann, ggx, phong (default: all)")
+    p.add_argument("--distribution", type=_list, default=DISTRIBUTION_NAMES,
+                   metavar="D[,D...]",
+                   help=f"candidates: {', '.join(DISTRIBUTION_NAMES)} (default: all)")
     p.add_argument("--masking", type=_list, default=("separable",), metavar="M[,M...]",
-                   help="candidates: separable, correlated (default: separable)")
+                   help=f"candidates: {', '.join(MASKINGS)} (default: separable)")
     p.add_argument("--anisotropic", action="store_true", help="fit alpha_x and alpha_y")
     p.add_argument("--fit-eta", action="store_true", help="fit eta too (else fixed)")
     p.add_argument("--fit-scale", action="store_true", help="fit an overall scale factor")

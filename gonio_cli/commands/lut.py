@@ -9,6 +9,8 @@ import argparse
 import json
 
 from gonio.errors import GonioError
+from sim.bsdf.distributions import WITH_KERNELS
+from sim.bsdf.masking import MASKINGS
 
 DEFAULT_SIZE = {"transmission": "64x64x32", "reflection": "64x64"}
 
@@ -29,8 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--tile-entries", type=int, default=128,
                    help="entries per tile, the unit of parallel work and of seeding")
-    p.add_argument("--distribution", choices=("ggx", "beckmann"), default="ggx")
-    p.add_argument("--masking", choices=("correlated", "separable"), default="correlated")
+    p.add_argument("--distribution", choices=WITH_KERNELS, default="ggx")
+    p.add_argument("--masking", choices=MASKINGS, default="correlated")
     p.add_argument("--multiple-scattering", action="store_true",
                    help="include multiple scattering (Heitz 2016 random walk; transmission)")
     where = p.add_mutually_exclusive_group()

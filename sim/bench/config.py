@@ -16,17 +16,12 @@ import math
 import warnings
 from collections.abc import Callable, Mapping
 
-from sim.bench.sample import (
-    DISTRIBUTIONS,
-    KINDS,
-    LIT_FROM,
-    MASKINGS,
-    Sample,
-    SampleSpec,
-)
+from sim.bench.sample import KINDS, LIT_FROM, Sample, SampleSpec
 from sim.bench.scene import Alignment, Bench, BenchPowerSource
 from sim.bench.source import Dip, Source
 from sim.bench.stray import InstrumentScatter
+from sim.bsdf.distributions import DISTRIBUTION_NAMES, WALKABLE
+from sim.bsdf.masking import MASKINGS
 from sim.devices.photodiode import PhotodiodeModel, SimConfigError
 
 Check = Callable[[str, object], object]
@@ -121,7 +116,7 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
     },
     "sample": {
         "kind": ("hemisphere", _choice(KINDS)),
-        "distribution": ("ggx", _choice(DISTRIBUTIONS)),
+        "distribution": ("ggx", _choice(DISTRIBUTION_NAMES)),
         "alpha": (0.394, _alpha),
         "eta": (1.51, _number(*ETA_RANGE)),
         "k": (0.0, _number(0.0, 20.0)),
@@ -235,9 +230,11 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
 
 def _check_switches(spec: SampleSpec) -> None:
     """What multiple_scattering = true and diffraction = true need from the rest of the table."""
-    if spec.multiple_scattering is True and spec.distribution == "phong":
-        raise SimConfigError('[sim.sample] multiple_scattering: true needs distribution '
-                             '"beckmann" or "ggx" (the random walk has no phong microsurface)')
+    if spec.multiple_scattering is True and spec.distribution not in WALKABLE:
+        walkable = " or ".join(f'"{name}"' for name in WALKABLE)
+        raise SimConfigError(f"[sim.sample] multiple_scattering: true needs distribution "
+                             f"{walkable} (the random walk has no {spec.distribution} "
+                             f"microsurface)")
     surface = {"rms_height_nm": spec.rms_height_nm,
                "correlation_length_um": spec.correlation_length_um}
     missing = [key for key, value in surface.items() if value is None]

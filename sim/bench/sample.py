@@ -20,11 +20,10 @@ from typing import NamedTuple
 import numpy as np
 
 from sim.bench import optics
+from sim.bsdf.distributions import DISTRIBUTIONS
 
 KINDS = ("hemisphere", "slab", "conductor")
 LIT_FROM = ("air", "hemisphere")
-DISTRIBUTIONS = ("beckmann", "ggx", "phong")
-MASKINGS = ("separable", "correlated")
 #: Walks per pair of the per-pair random walk used for anisotropic samples, per table walk
 #: (a pair's walk costs about what scoring 16 table directions does).
 ANISOTROPIC_WALK_SHARE = 16
@@ -148,14 +147,6 @@ def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndar
     reflected_factor = t**2 if spec.lit_from == "hemisphere" else 1.0
     factor = np.where(reflected, reflected_factor, transmitted)
     return w_eval, np.where(wo[..., 2] == 0, 0.0, factor)
-
-
-def _slope_scale(distribution: str, alpha: float, t: np.ndarray) -> np.ndarray:
-    """Local length scale, in slope space, over which D changes by order one at slope t."""
-    if distribution == "ggx":  # D ~ (alpha^2 + t^2)^-2: alpha / 2 at the peak, t / 4 in the tail
-        return (alpha**2 + t**2) / (4.0 * t + 2.0 * alpha)
-    # Beckmann (and Phong, its close cousin): exp(-t^2 / alpha^2)
-    return 0.5 * alpha**2 / (alpha / np.sqrt(2.0) + t)
 
 
 def _tir_distance(w: np.ndarray, h: np.ndarray, eta_w: float, eta_other: float) -> float:
@@ -307,7 +298,7 @@ class Sample:
         s = self.spec
         if s.multiple_scattering != "auto":
             return bool(s.multiple_scattering)
-        if s.distribution == "phong" or theta_i >= 0.5 * np.pi:
+        if not DISTRIBUTIONS[s.distribution].multiple_scattering or theta_i >= 0.5 * np.pi:
             return False
         eta = complex(s.eta, s.k) if s.kind == "conductor" else (
             1.0 / s.eta if self.flipped else s.eta)
@@ -403,7 +394,7 @@ class Sample:
             stretch = s.eta * np.sqrt(abs(w_eval[2]) / max(abs(wo[2]), 1e-300))
         h = optics.half_vector(wi, w_eval, eta_i, eta_o)
         t = np.hypot(h[0], h[1]) / max(h[2], 1e-9)  # finite on vertical facets (h_z = 0)
-        w_h = _slope_scale(s.distribution, min(s.alpha), t) * h[2] ** 2
+        w_h = DISTRIBUTIONS[s.distribution].slope_scale(min(s.alpha), t) * h[2] ** 2
         stretch_o = optics.min_stretch(wi, w_eval, eta_i, eta_o) * stretch
         stretch_i = optics.min_stretch(w_eval, wi, eta_o, eta_i)
         edges = self.edge_circles(wi)

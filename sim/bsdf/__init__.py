@@ -1,14 +1,26 @@
-"""The microfacet BSDF model: rough dielectric (Walter et al. 2007) and rough conductor."""
+"""The microfacet BSDF model: rough dielectric (Walter et al. 2007) and rough conductor.
 
-from sim.bsdf.conductor import RoughConductor
-from sim.bsdf.dielectric import RoughDielectric
-from sim.bsdf.distributions import make_distribution
-from sim.bsdf.fresnel import fresnel_conductor, fresnel_dielectric
+The models are imported on first use (PEP 562), so that the registries of distributions and
+maskings (sim.bsdf.distributions, sim.bsdf.masking) import without scipy: the CLI builds its
+options from them at start-up."""
 
-__all__ = [
-    "RoughConductor",
-    "RoughDielectric",
-    "fresnel_conductor",
-    "fresnel_dielectric",
-    "make_distribution",
-]
+from __future__ import annotations
+
+import importlib
+
+_HOMES = {
+    "RoughConductor": "sim.bsdf.conductor",
+    "RoughDielectric": "sim.bsdf.dielectric",
+    "fresnel_conductor": "sim.bsdf.fresnel",
+    "fresnel_dielectric": "sim.bsdf.fresnel",
+    "make_distribution": "sim.bsdf.distributions",
+}
+
+__all__ = sorted(_HOMES)
+
+
+def __getattr__(name: str):
+    """The public name `name`, imported from its module on first use."""
+    if name not in _HOMES:
+        raise AttributeError(f"module 'sim.bsdf' has no attribute {name!r}")
+    return getattr(importlib.import_module(_HOMES[name]), name)

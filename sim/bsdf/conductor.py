@@ -8,8 +8,9 @@ import cmath
 
 import numpy as np
 
+from sim.bsdf.constants import COS_HORIZON
 from sim.bsdf.fresnel import fresnel_conductor
-from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
+from sim.bsdf.microfacet import MicrofacetModel, half_vector, reflect
 from sim.bsdf.vectors import dot, unit
 
 
@@ -41,17 +42,20 @@ class RoughConductor(MicrofacetModel):
         self.eta_complex = eta_complex
         super().__init__(distribution, alpha, masking, sampling, multiple_scattering, backend)
 
-    def __repr__(self) -> str:
-        return (f"RoughConductor({self.distribution!r}, eta_complex={self.eta_complex}, "
-                f"masking={self.masking!r}, sampling={self.sampling!r})")
+    def _material_repr(self) -> str:
+        return f"eta_complex={self.eta_complex}"
+
+    def _kernel_arguments(self):
+        """The shared kernel arguments with the index inserted: (ndf, ax, ay, has_f, n_c,
+        masking, sampling), as kernels.conductor and conductor_sample take them."""
+        ndf, ax, ay, masking, sampling = self._kernel_parameters()
+        n_c = 0j if self.eta_complex is None else self.eta_complex
+        return ndf, ax, ay, self.eta_complex is not None, n_c, masking, sampling
 
     def _kernel(self, wi, wo, want_pdf):
         from sim.bsdf.kernels import conductor
 
-        dist, ax, ay, masking, sampling = self._kernel_codes()
-        n = 0j if self.eta_complex is None else self.eta_complex
-        return conductor(wi, wo, dist, ax, ay, self.eta_complex is not None, n, masking, sampling,
-                         want_pdf)
+        return conductor(wi, wo, *self._kernel_arguments(), want_pdf)
 
     def _fresnel(self, cos_im):
         if self.eta_complex is None:
@@ -59,36 +63,30 @@ class RoughConductor(MicrofacetModel):
         return fresnel_conductor(cos_im, self.eta_complex)
 
     @staticmethod
-    def _live(wi, wo):
-        return (wi[..., 2] > COS_HORIZON) & (wo[..., 2] > COS_HORIZON)
+    def _over_live_pairs(wi, wo, value):
+        """value(wi, wo, half vector) at the pairs with both directions above the horizon,
+        0 at the others."""
+        live = (wi[..., 2] > COS_HORIZON) & (wo[..., 2] > COS_HORIZON)
+        out = np.zeros(wi.shape[:-1])
+        if live.any():
+            wi, wo = wi[live], wo[live]
+            out[live] = value(wi, wo, half_vector(wi, wo))
+        return out
 
     def _eval(self, wi, wo):
-        live = self._live(wi, wo)
-        f = np.zeros(wi.shape[:-1])
-        if live.any():
-            wi, wo = wi[live], wo[live]
-            m = half_vector(wi, wo)
-            f[live] = (0.25 * self._fresnel(dot(wi, m)) * self.distribution.D(m)
-                       * self._g2_over_cosines(wi, wo))
-        return f
+        return self._over_live_pairs(wi, wo, lambda wi, wo, m: (
+            0.25 * self._fresnel(dot(wi, m)) * self.distribution.D(m)
+            * self._g2_over_cosines(wi, wo)))
 
     def _pdf(self, wi, wo):
-        live = self._live(wi, wo)
-        p = np.zeros(wi.shape[:-1])
-        if live.any():
-            wi, wo = wi[live], wo[live]
-            m = half_vector(wi, wo)
-            p[live] = self._normal_pdf(wi, m) / (4.0 * dot(wo, m))
-        return p
+        return self._over_live_pairs(
+            wi, wo, lambda wi, wo, m: self._normal_pdf(wi, m) / (4.0 * dot(wo, m)))
 
     def _sample(self, wi, u):
         if self._compiled_sampling():
             from sim.bsdf.kernels import conductor_sample
 
-            dist, ax, ay, masking, sampling = self._kernel_codes()
-            n = 0j if self.eta_complex is None else self.eta_complex
-            return conductor_sample(wi, u, dist, ax, ay, self.eta_complex is not None, n,
-                                    masking, sampling)
+            return conductor_sample(wi, u, *self._kernel_arguments())
         wi = unit(wi)
         up = wi[:, 2] > COS_HORIZON
         wi = np.where(up[:, None], wi, [0.0, 0.0, 1.0])  # below the surface: fails below

@@ -11,8 +11,9 @@ import math
 
 import numpy as np
 
+from sim.bsdf.constants import COS_HORIZON
 from sim.bsdf.fresnel import dielectric_transmittance, reflectance_transmittance_toward
-from sim.bsdf.microfacet import COS_HORIZON, MicrofacetModel, half_vector, reflect
+from sim.bsdf.microfacet import MicrofacetModel, half_vector, reflect
 from sim.bsdf.vectors import dot, unit
 
 LOBES = ("reflection", "transmission")
@@ -50,19 +51,22 @@ class RoughDielectric(MicrofacetModel):
         self.transmission = "transmission" in lobes
         super().__init__(distribution, alpha, masking, sampling, multiple_scattering, backend)
 
-    def __repr__(self) -> str:
-        return (f"RoughDielectric({self.distribution!r}, eta={self.eta}, masking={self.masking!r}, "
-                f"sampling={self.sampling!r}, lobes={self.lobes})")
+    def _material_repr(self) -> str:
+        return f"eta={self.eta}"
+
+    def _lobes_repr(self) -> str:
+        return f", lobes={self.lobes}"
+
+    def _kernel_arguments(self):
+        """(ndf, ax, ay, eta, masking, lobes on, sampling), as kernels.dielectric and
+        dielectric_sample take them."""
+        ndf, ax, ay, masking, sampling = self._kernel_parameters()
+        return ndf, ax, ay, self.eta, masking, self.reflection, self.transmission, sampling
 
     def _kernel(self, wi, wo, want_pdf):
-        from sim.bsdf.kernels import dielectric, ggx_dielectric_eval
+        from sim.bsdf.kernels import dielectric
 
-        dist, ax, ay, masking, sampling = self._kernel_codes()
-        if self.distribution.name == "ggx" and not want_pdf:
-            return ggx_dielectric_eval(wi, wo, ax, ay, self.eta, masking == 1, self.reflection,
-                                       self.transmission)
-        return dielectric(wi, wo, dist, ax, ay, self.eta, masking, self.reflection,
-                          self.transmission, sampling, want_pdf)
+        return dielectric(wi, wo, *self._kernel_arguments(), want_pdf)
 
     # --- frame: wi on the upper side ---------------------------------------------------------
 
@@ -144,9 +148,7 @@ class RoughDielectric(MicrofacetModel):
         if self._compiled_sampling():
             from sim.bsdf.kernels import dielectric_sample
 
-            dist, ax, ay, masking, sampling = self._kernel_codes()
-            return dielectric_sample(wi, u, dist, ax, ay, self.eta, masking, self.reflection,
-                                     self.transmission, sampling)
+            return dielectric_sample(wi, u, *self._kernel_arguments())
         wi, _, e, em1, flip = self._mirror(unit(wi), None)
         m = self._sample_normal(wi, u[:, 0], u[:, 1])
         c = dot(wi, m)

@@ -1,24 +1,24 @@
-"""Microfacet normal distributions (Beckmann, GGX, Phong): D, exact Smith Lambda and G1, sampling.
+"""Microfacet normal distributions (Beckmann, GGX, Phong) and their registry: D, exact Smith
+Lambda and G1, sampling, and what each supports (compiled kernels, visible normals, the
+random walk of multiple scattering, its lobe-width scale).
 
 Methods take local-frame unit vectors (..., 3), +z the macro-surface normal, and broadcast
 over leading dimensions; alpha_x and alpha_y may be arrays that broadcast the same way.
 A direction w below the surface (w.z < 0) is treated through its mirror image (w.z -> |w.z|),
-i.e. the surface seen from w's own side."""
+i.e. the surface seen from w's own side, except by the whole-sphere methods the random walk
+uses (signed_lambda, projected_area, D_visible, sample_visible_sphere). The scalar formulas of
+the compiled kernels are in primitives.py; these are their vectorised versions. scipy is
+imported where it is used, so that the registry (DISTRIBUTIONS) imports without it: the CLI
+builds its options from it."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.special import beta, betainc, erfc, erfinv
 
+from sim.bsdf.constants import BECKMANN_CF_FROM, BECKMANN_CF_TERMS, SQRT_PI, Ndf
 from sim.bsdf.vectors import dot
-
-SQRT_PI = math.sqrt(math.pi)
-#: Beckmann a*Lambda(a) switches from the closed form to a continued fraction at this a.
-BECKMANN_CF_FROM = 2.0
-#: Terms of the erfc continued fraction; enough for full float64 accuracy for a >= 2.
-BECKMANN_CF_TERMS = 60
 
 
 def beckmann_a_lambda(a: np.ndarray) -> np.ndarray:
@@ -27,6 +27,8 @@ def beckmann_a_lambda(a: np.ndarray) -> np.ndarray:
     Lambda(a) = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2 cancels for large a; there
     1 - a sqrt(pi) erfcx(a) = t / (a + t) with t the tail of the erfc continued fraction.
     """
+    from scipy.special import erfc
+
     a = np.asarray(a, dtype=np.float64)
     small = a < BECKMANN_CF_FROM
     a_s = np.where(small, a, 0.0)
@@ -48,6 +50,8 @@ def beta_half(k: np.ndarray) -> np.ndarray:
     Stirling-type series Gamma(k + 1/2) / Gamma(k) = sqrt(k) exp(-1/(8k) + 1/(192k^3) -
     1/(640k^5) + 17/(14336k^7)) is used instead (k >= 50, error < 1e-16 there).
     """
+    from scipy.special import beta
+
     k = np.asarray(k, dtype=np.float64)
     large = k >= 50.0
     x = 1.0 / np.where(large, k, 50.0)
@@ -63,10 +67,25 @@ def _positive(alpha, what: str) -> np.ndarray:
     return a
 
 
+def gaussian_slope_scale(alpha: float, t: np.ndarray) -> np.ndarray:
+    """Slope length over which D ~ exp(-t^2 / alpha^2) changes by order one at slope t."""
+    return 0.5 * alpha**2 / (alpha / np.sqrt(2.0) + t)
+
+
 class Distribution:
-    """Common part of the anisotropic slope-space distributions; subclasses give D and Lambda."""
+    """Common part of the anisotropic slope-space distributions; subclasses give D and Lambda
+    and state what they support in the class attributes below."""
 
     name = ""
+    #: Identity of its scalar formulas in primitives.py (the compiled kernels); None: numpy only.
+    kernel: Ndf | None = None
+    #: Normal-sampling schemes (microfacet.SAMPLINGS) whose sample() is compiled too.
+    compiled_samplings: tuple[str, ...] = ()
+    #: Whether it has a visible-normal sampler (sampling='visible', the default when it has).
+    visible_sampler = True
+    #: Whether the random walk of multiple scattering can walk on it (a Smith slope
+    #: distribution with Lambda and visible normals from any direction on the sphere).
+    multiple_scattering = False
 
     def __init__(self, alpha_x, alpha_y=None):
         self.alpha_x = _positive(alpha_x, "alpha")
@@ -130,10 +149,48 @@ class Distribution:
 
     def sample_visible(self, w: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
         """Normals distributed as the visible normals D_w(m) seen from w (Heitz 2014/2018)."""
-        raise NotImplementedError
+        raise ValueError(f"{self.name} has no visible-normal sampler; use sampling='walter'")
 
     def _unit_slope_radius(self, u: np.ndarray) -> np.ndarray:
         raise NotImplementedError
+
+    @property
+    def default_sampling(self) -> str:
+        """The normal-sampling scheme used when none is named: visible normals if it has them."""
+        return "visible" if self.visible_sampler else "walter"
+
+    @staticmethod
+    def slope_scale(alpha: float, t: np.ndarray) -> np.ndarray:
+        """Local length scale, in slope space, over which D changes by order one at slope t
+        (how fine a quadrature of the lobe must be)."""
+        raise NotImplementedError
+
+    # --- the whole sphere (the random walk) -------------------------------------------------
+
+    def signed_lambda(self, w: np.ndarray) -> np.ndarray:
+        """Smith Lambda(w) with its sign: >= 0 upward, Lambda(-w) = -1 - Lambda(w) <= -1
+        downward; +inf exactly horizontal."""
+        z = w[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            up = self.cos_lambda(w) / np.abs(z)
+        up = np.where(np.abs(z) > 0.0, up, np.inf)
+        return np.where(z >= 0.0, up, -1.0 - up)
+
+    def projected_area(self, w: np.ndarray) -> np.ndarray:
+        """Integral of <w, m>+ D(m) dm = w_z (1 + Lambda(w)), for w anywhere on the sphere."""
+        return np.maximum(w[..., 2], 0.0) + self.cos_lambda(w)
+
+    def D_visible(self, w: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """Normals visible from w (any direction): <w,m>+ D(m) / projected_area(w)."""
+        cos = np.maximum(np.sum(w * m, axis=-1), 0.0)
+        area = self.projected_area(w)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = cos * self.D(m) / area
+        return np.where(area > 0.0, out, 0.0)
+
+    def sample_visible_sphere(self, w: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        """A normal m ~ D_visible(w, .) for w anywhere on the sphere (the walk's sampler)."""
+        raise ValueError(f"{self.name} has no visible-normal sampler")
 
 
 def _upper(w: np.ndarray) -> np.ndarray:
@@ -163,6 +220,9 @@ class GGX(Distribution):
     """Trowbridge-Reitz (GGX) distribution, anisotropic, with its closed-form Smith Lambda."""
 
     name = "ggx"
+    kernel = Ndf.GGX
+    compiled_samplings = ("visible", "walter")
+    multiple_scattering = True
 
     def D(self, m):
         mz = m[..., 2]
@@ -177,12 +237,28 @@ class GGX(Distribution):
     def _unit_slope_radius(self, u):
         return np.sqrt(u / (1.0 - u))
 
+    @staticmethod
+    def slope_scale(alpha, t):
+        """D ~ (alpha^2 + t^2)^-2: alpha / 2 at the peak, t / 4 in the tail."""
+        return (alpha**2 + t**2) / (4.0 * t + 2.0 * alpha)
+
     def sample_visible(self, w, u1, u2):
+        return self._visible(_upper(w), u1, u2, _length)
+
+    def sample_visible_sphere(self, w, u1, u2):
+        """Heitz 2018 in the stretched frame; for w below the horizon the visible part of the
+        unit hemisphere projects onto the same disk region, t2 in [-v_z sqrt(1 - t1^2),
+        sqrt(1 - t1^2)], sampled by the same linear warp of a uniform disk point."""
+        return self._visible(w, u1, u2, _linalg_length)
+
+    def _visible(self, w, u1, u2, length):
+        """Visible normals seen from w, vectors normalised by length(v) (..., 1): the two
+        samplers round their normalisations differently (einsum and linalg.norm differ in the
+        last ulp), each kept so that its numbers, and the walks' random streams, stay put."""
         u1 = np.asarray(u1, dtype=np.float64)
         u2 = np.asarray(u2, dtype=np.float64)
-        w = _upper(w)
         vh = np.stack([self.alpha_x * w[..., 0], self.alpha_y * w[..., 1], w[..., 2]], axis=-1)
-        vh = vh / np.sqrt(dot(vh, vh))[..., None]
+        vh = vh / length(vh)
         lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
         has = lensq > 0
         inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
@@ -199,13 +275,28 @@ class GGX(Distribution):
         nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
         ne = np.stack([self.alpha_x * nh[..., 0], self.alpha_y * nh[..., 1],
                        np.maximum(nh[..., 2], 0.0)], axis=-1)
-        return ne / np.sqrt(dot(ne, ne))[..., None]
+        return ne / length(ne)
+
+
+def _length(v: np.ndarray) -> np.ndarray:
+    """|v| along the last axis, kept as a length-1 axis (einsum: the faster)."""
+    return np.sqrt(dot(v, v))[..., None]
+
+
+def _linalg_length(v: np.ndarray) -> np.ndarray:
+    """|v| along the last axis by np.linalg.norm, kept as a length-1 axis."""
+    return np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 class Beckmann(Distribution):
     """Beckmann distribution, anisotropic, with the exact erfc-based Smith Lambda."""
 
     name = "beckmann"
+    kernel = Ndf.BECKMANN
+    #: Its visible-normal sampler needs erfinv, which numba lacks: Walter's only.
+    compiled_samplings = ("walter",)
+    multiple_scattering = True
+    slope_scale = staticmethod(gaussian_slope_scale)
 
     #: Newton-bisection iterations of the visible-slope inversion (converges to ~1e-15).
     VISIBLE_ITERATIONS = 40
@@ -243,6 +334,8 @@ class Beckmann(Distribution):
         C(b) ~ cos_t (1 + b) + sin_t exp(-erfinv(b)^2) / sqrt(pi), for b up to erf(cot_t);
         it is inverted by safeguarded Newton iteration in b (after Jakob's Mitsuba sampler).
         """
+        from scipy.special import erfc, erfinv
+
         with np.errstate(divide="ignore", invalid="ignore"):
             cot_t = np.where(sin_t > 0, cos_t / np.where(sin_t > 0, sin_t, 1.0), np.inf)
         # both sides multiplied by cos_t so that grazing incidence (tan = inf) stays finite
@@ -266,6 +359,18 @@ class Beckmann(Distribution):
         y = erfinv(2.0 * u2 - 1.0)
         return np.where(np.isfinite(x), x, 0.0), np.where(np.isfinite(y), y, 0.0)
 
+    def sample_visible_sphere(self, w, u1, u2):
+        """By stretching to alpha = 1 (beckmann_sphere: a log-CDF inversion that holds below
+        the horizon too, where sample_visible's erf-variable one does not)."""
+        from sim.bsdf.beckmann_sphere import beckmann_visible_unit
+
+        ax, ay = self.alpha_x, self.alpha_y
+        v = np.stack([ax * w[..., 0], ay * w[..., 1], w[..., 2]], axis=-1)
+        v /= np.linalg.norm(v, axis=-1, keepdims=True)
+        n = beckmann_visible_unit(v, u1, u2)
+        m = np.stack([ax * n[..., 0], ay * n[..., 1], np.maximum(n[..., 2], 0.0)], axis=-1)
+        return m / np.linalg.norm(m, axis=-1, keepdims=True)
+
 
 class Phong(Distribution):
     """Phong distribution, exponent p = 2 / alpha^2 - 2 (Walter's mapping from Beckmann alpha).
@@ -275,10 +380,13 @@ class Phong(Distribution):
     Walter used as an approximation and which breaks the projected-area identity by up to
     26 % at alpha 0.9. For p <= -1 (alpha >= sqrt 2) the mean slope is infinite and so is
     Lambda: every direction but the normal is fully masked. Isotropic only; no visible-normal
-    sampler (use sampling='walter').
+    sampler (use sampling='walter'), so no random walk either.
     """
 
     name = "phong"
+    visible_sampler = False
+    #: Beckmann's (Phong is its close cousin).
+    slope_scale = staticmethod(gaussian_slope_scale)
 
     def __init__(self, alpha_x, alpha_y=None):
         super().__init__(alpha_x, alpha_y)
@@ -304,6 +412,8 @@ class Phong(Distribution):
         From Lambda(a) = (1/a) int_a^inf (q - a) P2(q) dq with the Phong slope marginal
         P2(q) = (1 + q^2)^(-(p+3)/2) / B((p+2)/2, 1/2).
         """
+        from scipy.special import betainc
+
         p = self.exponent
         c2 = np.minimum(w[..., 2] ** 2, 1.0)
         r2 = 1.0 - c2  # from c2 so that r2 -> 1 keeps its 1e-18 (matters when p ~ 1e8)
@@ -331,11 +441,13 @@ class Phong(Distribution):
         sin_t = np.sqrt(-np.expm1(2.0 * log_cos))
         return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
 
-    def sample_visible(self, w, u1, u2):
-        raise ValueError("phong has no visible-normal sampler; use sampling='walter'")
 
-
+#: Every distribution by name: the one list the models, the bench, the fits and the CLI use.
 DISTRIBUTIONS = {cls.name: cls for cls in (Beckmann, GGX, Phong)}
+DISTRIBUTION_NAMES = tuple(DISTRIBUTIONS)
+#: Those with compiled kernels, and those the random walk (multiple scattering) can walk on.
+WITH_KERNELS = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.kernel is not None)
+WALKABLE = tuple(name for name, cls in DISTRIBUTIONS.items() if cls.multiple_scattering)
 
 
 def make_distribution(name: str, alpha) -> Distribution:

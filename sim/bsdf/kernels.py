@@ -1,17 +1,19 @@
 """Compiled (numba) eval, pdf and sample of RoughDielectric and RoughConductor (GGX, Beckmann).
 
-The numpy code in the model classes is the reference; these kernels repeat its formulas per pair
-and a test holds them to it. They are used automatically when numba imports (the gonio[fast]
-extra); compiled code is cached on disk. GGX dielectric eval and visible-normal pdf run in
-branch-free blocks that LLVM turns into 512-bit SIMD lanes, with the formulas rearranged to 3
-sqrt and 1 division per pair (docs/bsdf.md, Performance); a pair the block cannot vouch for is
-handed to the scalar kernel. The others are scalar per-pair loops, all parallel over pairs
-(prange). sample() is compiled for GGX and for Beckmann with Walter's sampler."""
+The numpy code in the model classes is the reference; these kernels evaluate it pair by pair
+from the scalar formulas of primitives.py, and a test holds them to it. They are used
+automatically when numba imports (the gonio[fast] extra); compiled code is cached on disk. GGX
+dielectric eval and visible-normal pdf run in branch-free blocks that LLVM turns into 512-bit
+SIMD lanes, with the formulas rearranged to 3 sqrt and 1 division per pair (docs/bsdf.md,
+Performance); a pair the block cannot vouch for is handed to the scalar kernel. The others are
+scalar per-pair loops, all parallel over pairs (prange). sample() is compiled for GGX and for
+Beckmann with Walter's sampler (Distribution.compiled_samplings)."""
 
 from __future__ import annotations
 
 import math
 import os
+from enum import IntEnum
 
 import numpy as np
 
@@ -21,36 +23,37 @@ import numpy as np
 # batches run no slower. Set before numba's threading layer starts; a user's setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-try:
-    from numba import njit, prange
-except ImportError:  # pragma: no cover - exercised only without the [fast] extra
-    AVAILABLE = False
-else:
-    AVAILABLE = True
+from sim.bsdf.constants import COS_HORIZON, STIRLING_FROM, Masking, Ndf, Sampling
+from sim.bsdf.primitives import (
+    COMPILED,
+    conductor_fresnel,
+    cos_lambda,
+    dielectric_transmittance,
+    fresnel_toward,
+    g2_over_cosines,
+    log_beta,
+    normal_density,
+    normal_pdf,
+    sample_normal,
+    transmittance_e,
+    unit,
+    walter_scale,
+)
 
-from sim.bsdf.distributions import BECKMANN_CF_FROM, BECKMANN_CF_TERMS
-from sim.bsdf.masking import HALF_LOG_2PI, STIRLING_FROM, STIRLING_TERMS
-from sim.bsdf.microfacet import COS_HORIZON
-
-#: Distribution and masking codes understood by the kernels.
-CODES = {"ggx": 0, "beckmann": 1, "separable": 0, "correlated": 1, "visible": 0, "walter": 1}
-SQRT_PI = math.sqrt(math.pi)
-STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
+#: True when numba imports: the kernels below exist only then.
+AVAILABLE = COMPILED
 
 
-def supports(distribution_name: str) -> bool:
-    """True when a compiled kernel exists for this distribution and numba is installed."""
-    return AVAILABLE and distribution_name in ("ggx", "beckmann")
+class DielectricBlock(IntEnum):
+    """What a GGX dielectric SIMD block computes per pair."""
 
-
-def supports_sampling(distribution_name: str, sampling: str) -> bool:
-    """True when sample() has a compiled kernel: GGX with either sampler, Beckmann with
-    Walter's (its visible-normal sampler needs erfinv, which numba lacks)."""
-    return AVAILABLE and (distribution_name == "ggx" or (distribution_name == "beckmann"
-                                                         and sampling == "walter"))
+    SEPARABLE_EVAL = 0
+    CORRELATED_EVAL = 1
+    VISIBLE_PDF = 2
 
 
 if AVAILABLE:
+    from numba import njit, prange
     from numba.core import types
     from numba.extending import intrinsic
 
@@ -65,128 +68,10 @@ if AVAILABLE:
 
         return types.none(), codegen
 
-
     @njit(cache=True, error_model="numpy")
-    def _a_lambda(a):
-        if a < BECKMANN_CF_FROM:
-            return 0.5 * (math.exp(-a * a) / SQRT_PI - a * math.erfc(a))
-        if math.isinf(a):
-            return 0.0
-        t = 0.0
-        for k in range(BECKMANN_CF_TERMS, 0, -1):
-            t = 0.5 * k / (a + t)
-        return math.exp(-a * a) * t / (2.0 * SQRT_PI * (a + t))
-
-    @njit(cache=True, error_model="numpy")
-    def _cos_lambda(dist, ax, ay, x, y, z):
-        q = (ax * x) ** 2 + (ay * y) ** 2
-        c = abs(z)
-        if dist == 0:
-            return q / (2.0 * (math.sqrt(c * c + q) + c))
-        r = math.sqrt(q)
-        if r == 0.0:
-            return 0.0
-        return r * _a_lambda(c / r)
-
-    @njit(cache=True, error_model="numpy")
-    def _d(dist, ax, ay, mx, my, mz):
-        if mz <= 0.0:
-            return 0.0
-        if dist == 0:
-            den = mz * mz + ((mx / ax) ** 2 + (my / ay) ** 2)
-            return 1.0 / (math.pi * ax * ay * den * den)
-        expo = -((mx / ax) ** 2 + (my / ay) ** 2) / (mz * mz) - 4.0 * math.log(mz)
-        return math.exp(expo) / (math.pi * ax * ay)
-
-    @njit(cache=True, error_model="numpy")
-    def _stirling_correction(x):
-        r = 1.0 / x
-        r2 = r * r
-        s = 0.0
-        for c in STIRLING_REVERSED:
-            s = s * r2 + c
-        return s * r
-
-    @njit(cache=True, error_model="numpy")
-    def _log_beta(p, q):
-        """masking.log_beta for one pair (same three regions and formulas)."""
-        a, b = min(p, q), max(p, q)
-        s = a + b
-        frac = a / s
-        if b < STIRLING_FROM:
-            return math.log(math.gamma(a) * (math.gamma(b) / math.gamma(s)))
-        corr_b = _stirling_correction(b) - _stirling_correction(s)
-        if a < STIRLING_FROM:
-            return math.lgamma(a) + corr_b + a - a * math.log(s) + (b - 0.5) * math.log1p(-frac)
-        return (HALF_LOG_2PI - 0.5 * math.log(b) + _stirling_correction(a) + corr_b
-                + (a - 0.5) * math.log(frac) + b * math.log1p(-frac))
-
-    @njit(cache=True, error_model="numpy")
-    def _beta_oc(ci, co, li, lo):
-        """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co)."""
-        if not (ci > 0.0 and co > 0.0 and math.isfinite(li) and math.isfinite(lo)):
-            return 0.0
-        return math.exp(_log_beta(1.0 + li / ci, 1.0 + lo / co) - math.log(ci) - math.log(co))
-
-    @njit(cache=True, error_model="numpy")
-    def _g2oc(masking, ci, co, li, lo, transmitted):
-        if masking == 0:
-            return 1.0 / ((ci + li) * (co + lo))
-        if transmitted:
-            return _beta_oc(ci, co, li, lo)
-        return 1.0 / (ci * co + co * li + ci * lo)
-
-    @njit(cache=True, error_model="numpy")
-    def _fresnel_toward(c, e, em1):
-        e_ct2 = em1 * (e + 1.0) + c * c
-        if e_ct2 <= 0.0:
-            return 1.0
-        e_ct = math.sqrt(e_ct2)
-        den_s = c + e_ct
-        den_p = e * e * c + e_ct
-        if den_s <= 0.0 or den_p <= 0.0:
-            return 1.0
-        e2m1 = em1 * (e + 1.0)
-        rs = -e2m1 / (den_s * den_s)
-        rp = e2m1 * (c * c * (e * e + 1.0) - 1.0) / (den_p * den_p)
-        return 0.5 * (rs * rs + rp * rp)
-
-    @njit(cache=True, error_model="numpy")
-    def _transmittance(c, ct, e):
-        return _transmittance_e(c, e * ct, e)
-
-    @njit(cache=True, error_model="numpy")
-    def _transmittance_e(c, e_ct, e):
-        den_s = c + e_ct
-        den_p = e * e * c + e_ct
-        if den_s <= 0.0 or den_p <= 0.0:
-            return 0.0
-        return 2.0 * ((c / den_s) * (e_ct / den_s) + e * e * (c / den_p) * (e_ct / den_p))
-
-    @njit(cache=True, error_model="numpy")
-    def _unit(x, y, z):
-        n = math.sqrt(x * x + y * y + z * z)
-        if n > 0.0:
-            inv = 1.0 / n  # one division instead of three, as vectors.unit does
-            return x * inv, y * inv, z * inv
-        return x, y, z
-
-    @njit(cache=True, error_model="numpy")
-    def _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx, my, mz):
-        """Density of the sampled normal m for wi (iz >= 0): visible or Walter-widened D m.z."""
-        if sampling == 0:
-            wm = ix * mx + iy * my + iz * mz
-            den = iz + _cos_lambda(dist, ax, ay, ix, iy, iz)
-            if wm <= 0.0 or den <= 0.0:
-                return 0.0
-            return wm * _d(dist, ax, ay, mx, my, mz) / den
-        k = 1.2 - 0.2 * math.sqrt(abs(iz))
-        return _d(dist, ax * k, ay * k, mx, my, mz) * max(mz, 0.0)
-
-    @njit(cache=True, error_model="numpy")
-    def _dielectric_one(wi, wo, k, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
-        ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
-        ox, oy, oz = _unit(wo[k, 0], wo[k, 1], wo[k, 2])
+    def _dielectric_one(wi, wo, k, ndf, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
+        ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
+        ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
         e = eta
         em1 = eta - 1.0
         if iz < 0.0:
@@ -200,18 +85,18 @@ if AVAILABLE:
         if oz > 0.0:
             if not refl:
                 return 0.0
-            hx, hy, hz = _unit(ix + ox, iy + oy, iz + oz)
+            hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
             c = ix * hx + iy * hy + iz * hz
-            fr = _fresnel_toward(c, e, em1)
+            fr = fresnel_toward(c, e, em1)
             if want_pdf:
                 choice = fr if both else 1.0
                 om = ox * hx + oy * hy + oz * hz
-                return choice * _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
+                return choice * normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
                     4.0 * om)
-            li = _cos_lambda(dist, ax, ay, ix, iy, iz)
-            lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
-            return 0.25 * fr * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo,
-                                                                     False)
+            li = cos_lambda(ndf, ax, ay, ix, iy, iz)
+            lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+            return (0.25 * fr * normal_density(ndf, ax, ay, hx, hy, hz)
+                    * g2_over_cosines(masking, iz, oz, li, lo, False))
         if not trans:
             return 0.0
         vx = (ix + ox) + em1 * ox
@@ -229,64 +114,47 @@ if AVAILABLE:
         if not (mz > 0.0 and im > 0.0 and om > 0.0):
             return 0.0
         if want_pdf:
-            choice = _transmittance(im, om, e) if both else 1.0
-            return (choice * _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx, my, mz)
+            choice = dielectric_transmittance(im, om, e) if both else 1.0
+            return (choice * normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, mx, my, mz)
                     * e * e * om / n2)
-        ft = _transmittance(im, om, e)
-        li = _cos_lambda(dist, ax, ay, ix, iy, iz)
-        lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
-        return (im * om * e * e * ft * _d(dist, ax, ay, mx, my, mz)
-                * _g2oc(masking, iz, abs(oz), li, lo, True) / n2)
+        ft = dielectric_transmittance(im, om, e)
+        li = cos_lambda(ndf, ax, ay, ix, iy, iz)
+        lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+        return (im * om * e * e * ft * normal_density(ndf, ax, ay, mx, my, mz)
+                * g2_over_cosines(masking, iz, abs(oz), li, lo, True) / n2)
 
     @njit(cache=True, parallel=True, error_model="numpy")
-    def _dielectric(wi, wo, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
+    def _dielectric(wi, wo, ndf, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
         """Pair-by-pair eval (want_pdf False) or pdf of RoughDielectric, pairs of shape (N, 3)."""
         out = np.empty(wi.shape[0])
         for k in prange(wi.shape[0]):
-            out[k] = _dielectric_one(wi, wo, k, dist, ax, ay, eta, masking, refl, trans,
+            out[k] = _dielectric_one(wi, wo, k, ndf, ax, ay, eta, masking, refl, trans,
                                      sampling, want_pdf)
         return out
 
     @njit(cache=True, error_model="numpy")
-    def _conductor_fresnel(c, has_f, n_c):
-        """fresnel.fresnel_conductor for one cosine; 1 when the model has no index (F = 1)."""
-        if not has_f:
-            return 1.0
-        n2 = n_c * n_c
-        n2m1 = (n_c - 1.0) * (n_c + 1.0)
-        if n2m1 == 0:
-            return 0.0 if c != 0 else 1.0
-        root = np.sqrt(n2m1 + c * c)
-        den_s = c + root
-        den_p = n2 * c + root
-        if den_s == 0 or den_p == 0:
-            return 1.0
-        rs = -n2m1 / den_s / den_s
-        rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
-        return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
-
-    @njit(cache=True, error_model="numpy")
-    def _conductor_one(wi, wo, k, dist, ax, ay, has_f, n_c, masking, sampling, want_pdf):
-        ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
-        ox, oy, oz = _unit(wo[k, 0], wo[k, 1], wo[k, 2])
+    def _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
+        ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
+        ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
         if iz <= COS_HORIZON or oz <= COS_HORIZON:
             return 0.0
-        hx, hy, hz = _unit(ix + ox, iy + oy, iz + oz)
+        hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
         c = ix * hx + iy * hy + iz * hz
         if want_pdf:
-            return _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
+            return normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
                 4.0 * (ox * hx + oy * hy + oz * hz))
-        f = _conductor_fresnel(c, has_f, n_c)
-        li = _cos_lambda(dist, ax, ay, ix, iy, iz)
-        lo = _cos_lambda(dist, ax, ay, ox, oy, oz)
-        return 0.25 * f * _d(dist, ax, ay, hx, hy, hz) * _g2oc(masking, iz, oz, li, lo, False)
+        f = conductor_fresnel(c, has_f, n_c)
+        li = cos_lambda(ndf, ax, ay, ix, iy, iz)
+        lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+        return (0.25 * f * normal_density(ndf, ax, ay, hx, hy, hz)
+                * g2_over_cosines(masking, iz, oz, li, lo, False))
 
     @njit(cache=True, parallel=True, error_model="numpy")
-    def conductor(wi, wo, dist, ax, ay, has_f, n_c, masking, sampling, want_pdf):
-        """eval (want_pdf False) or pdf of RoughConductor for pairs of shape (N, 3)."""
+    def _conductor(wi, wo, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
+        """Pair-by-pair eval (want_pdf False) or pdf of RoughConductor, pairs (N, 3)."""
         out = np.empty(wi.shape[0])
         for k in prange(wi.shape[0]):
-            out[k] = _conductor_one(wi, wo, k, dist, ax, ay, has_f, n_c, masking, sampling,
+            out[k] = _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling,
                                     want_pdf)
         return out
 
@@ -315,8 +183,8 @@ if AVAILABLE:
     @njit(cache=True, error_model="numpy")
     def _one_plus_lambda(ax, ay, w, k):
         """1 + Lambda of GGX for direction k of w (N, 3), as the scalar kernel computes it."""
-        x, y, z = _unit(w[k, 0], w[k, 1], w[k, 2])
-        return 1.0 + _cos_lambda(0, ax, ay, x, y, z) / abs(z)
+        x, y, z = unit(w[k, 0], w[k, 1], w[k, 2])
+        return 1.0 + cos_lambda(Ndf.GGX.value, ax, ay, x, y, z) / abs(z)
 
     @njit(cache=True, error_model="numpy")
     def _times_beta(x, ax, ay, wi, wo, k):
@@ -327,7 +195,7 @@ if AVAILABLE:
         if max(p, q) < STIRLING_FROM:  # _log_beta's first region without the log and exp
             v = x * (math.gamma(min(p, q)) * (math.gamma(max(p, q)) / math.gamma(p + q)))
         else:
-            v = x * math.exp(_log_beta(p, q))
+            v = x * math.exp(log_beta(p, q))
         return v if TINY < v < math.inf else math.nan
 
     @njit(cache=True, error_model="numpy", inline="always")
@@ -344,17 +212,20 @@ if AVAILABLE:
     def _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on, res):
         """SIMD loop of _ggx_dielectric over flat (3 m) wi and wo into res (m): 3 sqrt and 1
         division per pair; pairs it cannot vouch for (off unit length, near-grazing, tiny or
-        huge intermediates) are left NaN. Correlated transmission (mode 1) leaves -f / B(P, Q)
-        in res, negative as the mark for the caller to multiply the Beta function in
+        huge intermediates) are left NaN. Correlated transmission (CORRELATED_EVAL) leaves
+        -f / B(P, Q) in res, negative as the mark for the caller to multiply the Beta function in
         (_times_beta); the block spends no division and no store on it.
         Calls nothing but inlined helpers: numba compiles a callee with its caller's fastmath
         flags, so that kernels stay free of any flags given here."""
         _prefer_512_bit_vectors()
         inv_ax, inv_ay, pi_axay, e_in, em1_in, e2m1_out, e2m1_in = _block_constants(ax, ay, eta)
         both = refl_on and trans_on
-        k_refl = 1.0 if mode == 0 else 0.5  # 0.25 and the G2 or pdf numerator (see docs)
-        k_trans = 4.0 if mode == 0 else (1.0 if mode == 1 else 2.0)
-        fresnel = mode != 2 or both  # pdf: Fresnel is the lobe choice, 1 for one lobe
+        separable = mode == DielectricBlock.SEPARABLE_EVAL
+        correlated = mode == DielectricBlock.CORRELATED_EVAL
+        k_refl = 1.0 if separable else 0.5  # 0.25 and the G2 or pdf numerator (see docs)
+        k_trans = 4.0 if separable else (1.0 if correlated else 2.0)
+        # pdf: Fresnel is the lobe choice, 1 for one lobe
+        fresnel = mode != DielectricBlock.VISIBLE_PDF or both
         far = 0
         for j in range(res.shape[0]):
             ix, iy, iz = fi[3 * j], fi[3 * j + 1], fi[3 * j + 2]
@@ -395,9 +266,9 @@ if AVAILABLE:
             q = vz * vz + ((vx * inv_ax) ** 2 + (vy * inv_ay) ** 2)
             s_i = math.sqrt(iz * iz + ((ax * ix) ** 2 + (ay * iy) ** 2))
             s_o = math.sqrt(aoz * aoz + ((ax * ox) ** 2 + (ay * oy) ** 2))
-            if mode == 0:
+            if separable:
                 g_den = (iz + s_i) * (aoz + s_o)
-            elif mode == 1:
+            elif correlated:
                 # transmission: G2 / (iz aoz) = B(P, Q) / (iz aoz), B from the caller
                 g_den = aoz * s_i + iz * s_o if refl else iz * aoz
             else:
@@ -419,18 +290,19 @@ if AVAILABLE:
             safe = ((abs(di) <= UNIT_TOL) & (abs(do) <= UNIT_TOL) & (iz >= SAFE_MIN)
                     & (aoz >= SAFE_MIN) & (n2 >= SAFE_MIN * SAFE_MIN))
             sure = (num > TINY) & (den > TINY) & (val < math.inf)
-            val = -val if (mode == 1) & (not refl) else val
+            val = -val if correlated & (not refl) else val
             res[j] = math.nan if not safe or (ok and not sure) else (val if ok else 0.0)
         return far
 
     @njit(cache=True, parallel=True, error_model="numpy")
     def _ggx_dielectric(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
-        """GGX dielectric eval (mode 0 separable, 1 correlated) or visible pdf (mode 2): SIMD
-        blocks, the Beta factor of correlated transmission, then the pairs left NaN by the
-        scalar kernel."""
+        """GGX dielectric eval or visible pdf (mode, a DielectricBlock): SIMD blocks, the Beta
+        factor of correlated transmission, then the pairs left NaN by the scalar kernel."""
         n = wi.shape[0]
         out = np.empty(n)
-        masking, want_pdf = (1 if mode == 1 else 0), mode == 2
+        correlated = mode == DielectricBlock.CORRELATED_EVAL
+        masking = Masking.CORRELATED.value if correlated else Masking.SEPARABLE.value
+        want_pdf = mode == DielectricBlock.VISIBLE_PDF
         for b in prange((n + BLOCK - 1) // BLOCK):
             start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
             # ravel: views of C-contiguous pairs, block copies of broadcast ones
@@ -443,117 +315,96 @@ if AVAILABLE:
                 if out[k] < 0.0:  # correlated transmission: times B(1 + Lambda_i, 1 + Lambda_o)
                     out[k] = _times_beta(-out[k], ax, ay, wi, wo, k)
                 if math.isnan(out[k]):
-                    out[k] = _dielectric_one(wi, wo, k, 0, ax, ay, eta, masking, refl_on,
-                                             trans_on, 0, want_pdf)
+                    out[k] = _dielectric_one(wi, wo, k, Ndf.GGX.value, ax, ay, eta, masking,
+                                             refl_on, trans_on, Sampling.VISIBLE.value,
+                                             want_pdf)
         return out
 
-    def ggx_dielectric_eval(wi, wo, ax, ay, eta, correlated, refl_on, trans_on):
-        """eval of the GGX RoughDielectric for pairs (N, 3) in branch-free SIMD blocks.
+    def dielectric(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, eta: float,
+                   masking: Masking, refl: bool, trans: bool, sampling: Sampling,
+                   want_pdf: bool) -> np.ndarray:
+        """eval (want_pdf False) or pdf of RoughDielectric for pairs wi, wo of shape (N, 3).
 
-        Both lobes share one half vector, D and G2 and differ in Fresnel factor and Jacobian,
-        so each pair computes one set and selects; algebraically the numpy path's formulas.
+        GGX eval and visible-normal pdf run in the branch-free SIMD blocks (both lobes share one
+        half vector, D and G2 and differ in Fresnel factor and Jacobian, so each pair computes
+        one set and selects; algebraically the numpy path's formulas), the rest pair by pair.
         """
-        return _ggx_dielectric(wi, wo, ax, ay, eta, 1 if correlated else 0, refl_on, trans_on)
+        if ndf == Ndf.GGX and not want_pdf:
+            mode = (DielectricBlock.CORRELATED_EVAL if masking == Masking.CORRELATED
+                    else DielectricBlock.SEPARABLE_EVAL)
+            return _ggx_dielectric(wi, wo, ax, ay, eta, int(mode), refl, trans)
+        if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
+            return _ggx_dielectric(wi, wo, ax, ay, eta, int(DielectricBlock.VISIBLE_PDF), refl,
+                                   trans)
+        return _dielectric(wi, wo, int(ndf), ax, ay, eta, int(masking), refl, trans,
+                           int(sampling), want_pdf)
 
-    def dielectric(wi, wo, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
-        """eval (want_pdf False) or pdf of RoughDielectric for pairs wi, wo of shape (N, 3);
-        the GGX visible-normal pdf runs in the SIMD blocks, the rest pair by pair."""
-        if dist == 0 and want_pdf and sampling == 0:
-            return _ggx_dielectric(wi, wo, ax, ay, eta, 2, refl, trans)
-        return _dielectric(wi, wo, dist, ax, ay, eta, masking, refl, trans, sampling, want_pdf)
-
-    @njit(cache=True, error_model="numpy")
-    def _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u1, u2):
-        """Normal for wi (iz >= 0): GGX visible normals (Heitz 2018), or Walter's widened
-        D m.z for GGX or Beckmann (distributions.sample_normal on the scaled alpha)."""
-        phi = 2.0 * math.pi * u2
-        if sampling == 1:
-            k = 1.2 - 0.2 * math.sqrt(abs(iz))
-            r = math.sqrt(u1 / (1.0 - u1)) if dist == 0 else math.sqrt(-math.log1p(-u1))
-            sx = ax * k * r * math.cos(phi)
-            sy = ay * k * r * math.sin(phi)
-            inv = 1.0 / math.sqrt(1.0 + sx * sx + sy * sy)
-            return -sx * inv, -sy * inv, inv
-        vx, vy, vz = ax * ix, ay * iy, iz
-        n = math.sqrt(vx * vx + vy * vy + vz * vz)
-        vx, vy, vz = vx / n, vy / n, vz / n
-        lensq = vx * vx + vy * vy
-        if lensq > 0.0:
-            inv = 1.0 / math.sqrt(lensq)
-            t1x, t1y = -vy * inv, vx * inv
-        else:
-            t1x, t1y = 1.0, 0.0
-        t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # vh x t1, t1z = 0
-        r = math.sqrt(u1)
-        p1 = r * math.cos(phi)
-        p2 = r * math.sin(phi)
-        s = 0.5 * (1.0 + vz)
-        p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
-        p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
-        nx = p1 * t1x + p2 * t2x + p3 * vx
-        ny = p1 * t1y + p2 * t2y + p3 * vy
-        nz = p2 * t2z + p3 * vz
-        ex, ey, ez = ax * nx, ay * ny, max(nz, 0.0)
-        n = math.sqrt(ex * ex + ey * ey + ez * ez)
-        return ex / n, ey / n, ez / n
+    def conductor(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, has_f: bool,
+                  n_c: complex, masking: Masking, sampling: Sampling,
+                  want_pdf: bool) -> np.ndarray:
+        """eval (want_pdf False) or pdf of RoughConductor for pairs of shape (N, 3); has_f
+        False: F = 1 (n_c unused)."""
+        return _conductor(wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking), int(sampling),
+                          want_pdf)
 
     @njit(cache=True, error_model="numpy")
-    def _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz, mx, my, mz,
+    def _sampling_weight(ndf, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz, mx, my, mz,
                          c, transmitted):
         """f |cos o| / pdf without Fresnel and lobe choice (MicrofacetModel._sampling_weight)."""
         aoz = abs(oz)
-        g2oc = _g2oc(masking, iz, aoz, li, _cos_lambda(dist, ax, ay, ox, oy, oz), transmitted)
-        if sampling == 0:
+        lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+        g2oc = g2_over_cosines(masking, iz, aoz, li, lo, transmitted)
+        if sampling == Sampling.VISIBLE:
             return aoz * (iz + li) * g2oc
-        ks = 1.2 - 0.2 * math.sqrt(iz)
-        d_s = _d(dist, ax * ks, ay * ks, mx, my, mz)
+        ks = walter_scale(iz)
+        d_s = normal_density(ndf, ax * ks, ay * ks, mx, my, mz)
         if not (d_s > 0.0 and mz > 0.0):
             return 0.0
-        return _d(dist, ax, ay, mx, my, mz) / d_s * c * aoz * g2oc / mz
+        return normal_density(ndf, ax, ay, mx, my, mz) / d_s * c * aoz * g2oc / mz
 
     @njit(cache=True, parallel=True, error_model="numpy")
-    def conductor_sample(wi, u, dist, ax, ay, has_f, n_c, masking, sampling):
-        """sample() of RoughConductor: (wo, weight, pdf), failed samples all zero."""
+    def _conductor_sample(wi, u, ndf, ax, ay, has_f, n_c, masking, sampling):
+        """sample() of RoughConductor pair by pair: (wo, weight, pdf), failed samples 0."""
         n = wi.shape[0]
         wo = np.zeros((n, 3))
         weight = np.zeros(n)
         pdf = np.zeros(n)
         for k in prange(n):
-            ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
+            ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
             if not iz > COS_HORIZON:
                 continue
-            mx, my, mz = _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
+            mx, my, mz = sample_normal(ndf, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
             c = ix * mx + iy * my + iz * mz
             ox, oy, oz = 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz
             if not (c > 0.0 and oz > COS_HORIZON):
                 continue
-            p = _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx, my, mz) / (4.0 * c)
+            p = normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, mx, my, mz) / (4.0 * c)
             if not p > 0.0:
                 continue
-            li = _cos_lambda(dist, ax, ay, ix, iy, iz)
-            w = _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
+            li = cos_lambda(ndf, ax, ay, ix, iy, iz)
+            w = _sampling_weight(ndf, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
                                  mx, my, mz, c, False)
             wo[k, 0], wo[k, 1], wo[k, 2] = ox, oy, oz
-            weight[k] = _conductor_fresnel(c, has_f, n_c) * w
+            weight[k] = conductor_fresnel(c, has_f, n_c) * w
             pdf[k] = p
         return wo, weight, pdf
 
     @njit(cache=True, error_model="numpy")
-    def _dielectric_sample_one(wi, u, k, dist, ax, ay, eta, masking, refl_on, trans_on,
+    def _dielectric_sample_one(wi, u, k, ndf, ax, ay, eta, masking, refl_on, trans_on,
                                sampling):
         """One sample of RoughDielectric for pair k: (ox, oy, oz, weight, pdf), all 0 if it
         failed (the numpy path's formulas, pair by pair)."""
         both = refl_on and trans_on
-        ix, iy, iz = _unit(wi[k, 0], wi[k, 1], wi[k, 2])
+        ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
         sgn = -1.0 if iz < 0.0 else 1.0
         iz = iz * sgn
         e = 1.0 / eta if sgn < 0.0 else eta
         em1 = (1.0 - eta) / eta if sgn < 0.0 else eta - 1.0
-        mx, my, mz = _sample_normal(dist, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
+        mx, my, mz = sample_normal(ndf, ax, ay, sampling, ix, iy, iz, u[k, 0], u[k, 1])
         c = ix * mx + iy * my + iz * mz
-        fr = _fresnel_toward(abs(c), e, em1)
+        fr = fresnel_toward(abs(c), e, em1)
         e_ct = math.sqrt(max(em1 * (e + 1.0) + c * c, 0.0))
-        ft = _transmittance_e(abs(c), e_ct, e) if e_ct > 0.0 else 0.0
+        ft = transmittance_e(abs(c), e_ct, e) if e_ct > 0.0 else 0.0
         reflected = u[k, 2] < fr if both else refl_on
         if reflected:
             ox, oy, oz = 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz
@@ -569,17 +420,17 @@ if AVAILABLE:
             jac = 1.0 / (4.0 * abs(c))
         else:
             jac = e * e_ct / (gap * gap) if gap != 0.0 else math.inf
-        p = (lobe if both else 1.0) * _normal_pdf(dist, ax, ay, sampling, ix, iy, iz, mx,
+        p = (lobe if both else 1.0) * normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, mx,
                                                     my, mz) * jac
-        li = _cos_lambda(dist, ax, ay, ix, iy, iz)
-        w = _sampling_weight(dist, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
+        li = cos_lambda(ndf, ax, ay, ix, iy, iz)
+        w = _sampling_weight(ndf, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz,
                              mx, my, mz, c, not reflected)
         if not p > 0.0:
             return 0.0, 0.0, 0.0, 0.0, 0.0
         return ox, oy, oz * sgn, (1.0 if both else lobe) * w, p
 
     @njit(cache=True, parallel=True, error_model="numpy")
-    def _dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
+    def _dielectric_sample(wi, u, ndf, ax, ay, eta, masking, refl_on, trans_on, sampling):
         """sample() of RoughDielectric pair by pair: (wo, weight, pdf), failed samples 0."""
         n = wi.shape[0]
         wo = np.empty((n, 3))
@@ -587,7 +438,7 @@ if AVAILABLE:
         pdf = np.empty(n)
         for k in prange(n):
             wo[k, 0], wo[k, 1], wo[k, 2], weight[k], pdf[k] = _dielectric_sample_one(
-                wi, u, k, dist, ax, ay, eta, masking, refl_on, trans_on, sampling)
+                wi, u, k, ndf, ax, ay, eta, masking, refl_on, trans_on, sampling)
         return wo, weight, pdf
 
     #: Taylor coefficients of sin t / t and cos t in t^2 to t^16 and t^18 (|t| <= pi/4: the
@@ -728,7 +579,7 @@ if AVAILABLE:
         wo2 = wo.reshape((n, 3))
         weight = np.empty(n)
         pdf = np.empty(n)
-        masking = 1 if correlated else 0
+        masking = Masking.CORRELATED.value if correlated else Masking.SEPARABLE.value
         for b in prange((n + BLOCK - 1) // BLOCK):
             start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
             fi, fu = wi[start:stop].ravel(), u[start:stop].ravel()
@@ -743,14 +594,24 @@ if AVAILABLE:
                     pdf[k] = math.nan if math.isnan(weight[k]) else pdf[k]
                 if math.isnan(pdf[k]):
                     wo[3 * k], wo[3 * k + 1], wo[3 * k + 2], weight[k], pdf[k] = (
-                        _dielectric_sample_one(wi, u, k, 0, ax, ay, eta, masking, refl_on,
-                                               trans_on, 0))
+                        _dielectric_sample_one(wi, u, k, Ndf.GGX.value, ax, ay, eta, masking,
+                                               refl_on, trans_on, Sampling.VISIBLE.value))
         return wo2, weight, pdf
 
-    def dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on, sampling):
+    def dielectric_sample(wi: np.ndarray, u: np.ndarray, ndf: Ndf, ax: float, ay: float,
+                          eta: float, masking: Masking, refl_on: bool, trans_on: bool,
+                          sampling: Sampling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero; GGX with
         visible normals in SIMD blocks, the rest pair by pair."""
-        if dist == 0 and sampling == 0:
-            return _ggx_visible_sample(wi, u, ax, ay, eta, masking == 1, refl_on, trans_on)
-        return _dielectric_sample(wi, u, dist, ax, ay, eta, masking, refl_on, trans_on,
-                                  sampling)
+        if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
+            return _ggx_visible_sample(wi, u, ax, ay, eta, masking == Masking.CORRELATED,
+                                       refl_on, trans_on)
+        return _dielectric_sample(wi, u, int(ndf), ax, ay, eta, int(masking), refl_on,
+                                  trans_on, int(sampling))
+
+    def conductor_sample(wi: np.ndarray, u: np.ndarray, ndf: Ndf, ax: float, ay: float,
+                         has_f: bool, n_c: complex, masking: Masking,
+                         sampling: Sampling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """sample() of RoughConductor: (wo, weight, pdf), failed samples all zero."""
+        return _conductor_sample(wi, u, int(ndf), ax, ay, has_f, n_c, int(masking),
+                                 int(sampling))

@@ -7,23 +7,17 @@ Height-correlated (Heitz 2014, JCGT 3(2), sec. 6): a point at height h with heig
 is unmasked along an upward direction with probability u^Lambda and along a downward one with
 (1 - u)^Lambda. Reflection has both directions above: G2 = int u^(Li + Lo) du = 1/(1 + Li + Lo).
 Transmission has one above and one below the same point: G2 = int u^Li (1 - u)^Lo du
-= B(1 + Li, 1 + Lo), the Beta function, computed in log form stable for Lambda up to 1e100."""
+= B(1 + Li, 1 + Lo), the Beta function, computed in log form stable for Lambda up to 1e100.
+These are the vectorised versions of primitives.py's scalar g2_over_cosines and log_beta."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from scipy.special import gamma, gammaln
 
-MASKINGS = ("separable", "correlated")
-#: Above this argument log Gamma is taken as Stirling's form plus STIRLING_TERMS corrections.
-STIRLING_FROM = 10.0
-#: Coefficients B_2k / (2k (2k - 1)) of the Stirling correction sum_k c_k / x^(2k - 1); at
-#: x = 10 the first omitted term is 2e-18, below an ulp of every log Gamma it corrects.
-STIRLING_TERMS = (1 / 12, -1 / 360, 1 / 1260, -1 / 1680, 1 / 1188, -691 / 360360, 1 / 156,
-                  -3617 / 122400)
-HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+from sim.bsdf.constants import HALF_LOG_2PI, STIRLING_FROM, STIRLING_TERMS, Masking, enum_names
+
+#: Every masking form by name: the one list the models, the bench, the fits and the CLI use.
+MASKINGS = enum_names(Masking)
 
 
 def check_masking(masking: str) -> str:
@@ -31,6 +25,11 @@ def check_masking(masking: str) -> str:
     if masking not in MASKINGS:
         raise ValueError(f"masking must be one of {MASKINGS}, got {masking!r}")
     return masking
+
+
+def masking_kind(masking: str) -> Masking:
+    """The kernels' identity of a masking form named in MASKINGS."""
+    return Masking[check_masking(masking).upper()]
 
 
 def g2_over_cosines(
@@ -94,6 +93,8 @@ def log_beta(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     only b >= 10: log Gamma(a) + corr + a - a log(a+b) + (b - 1/2) log1p(-a/(a+b));
     both < 10: log(Gamma(a) Gamma(b) / Gamma(a+b)), all moderate numbers.
     """
+    from scipy.special import gamma, gammaln  # here: the registry MASKINGS imports without it
+
     a, b = np.minimum(p, q), np.maximum(p, q)
     s = a + b
     frac = a / s

@@ -8,20 +8,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.bsdf.distributions import make_distribution
-from sim.bsdf.masking import check_masking, g2_over_cosines
+from sim.bsdf.constants import WALTER_BASE, WALTER_SLOPE, Sampling, enum_names
+from sim.bsdf.distributions import WITH_KERNELS, make_distribution
+from sim.bsdf.masking import check_masking, g2_over_cosines, masking_kind
 from sim.bsdf.vectors import direction_arrays, directions, dot
 
-SAMPLINGS = ("visible", "walter")
+SAMPLINGS = enum_names(Sampling)
 BACKENDS = ("numba", "numpy")
-#: Directions with |cos theta| at or below this count as grazing: eval returns 0 there (the
-#: cosine-weighted value is 0; f itself may diverge for correlated masking at double grazing).
-COS_HORIZON = 1e-100
 
 
 def walter_widening(cos_i: np.ndarray) -> np.ndarray:
-    """Walter's (2007, eq. 47) roughness scale for sampling: 1.2 - 0.2 sqrt|cos i|."""
-    return 1.2 - 0.2 * np.sqrt(np.abs(cos_i))
+    """Walter's (2007, eq. 47) roughness scale for sampling: 1.2 - 0.2 sqrt|cos i|
+    (primitives.walter_scale, vectorised)."""
+    return WALTER_BASE - WALTER_SLOPE * np.sqrt(np.abs(cos_i))
 
 
 class MicrofacetModel:
@@ -30,12 +29,13 @@ class MicrofacetModel:
     def __init__(self, distribution, alpha, masking, sampling, multiple_scattering, backend):
         self.distribution = make_distribution(distribution, alpha)
         self.masking = check_masking(masking)
+        d = self.distribution
         if sampling is None:
-            sampling = "walter" if self.distribution.name == "phong" else "visible"
+            sampling = d.default_sampling
         if sampling not in SAMPLINGS:
             raise ValueError(f"sampling must be one of {SAMPLINGS}, got {sampling!r}")
-        if sampling == "visible" and self.distribution.name == "phong":
-            raise ValueError("sampling='visible' is not available for phong; use 'walter'")
+        if sampling == "visible" and not d.visible_sampler:
+            raise ValueError(f"sampling='visible' is not available for {d.name}; use 'walter'")
         self.sampling = sampling
         self.backend = self._choose_backend(backend)
         self.multiple_scattering = bool(multiple_scattering)
@@ -93,15 +93,15 @@ class MicrofacetModel:
             raise ValueError(f"backend must be one of {BACKENDS} or None, got {backend!r}")
         if backend == "numpy":
             return "numpy"
-        from sim.bsdf import kernels
+        from sim.bsdf.kernels import AVAILABLE
 
         d = self.distribution
         scalar_alpha = np.ndim(d.alpha_x) == 0 and np.ndim(d.alpha_y) == 0
-        if kernels.supports(d.name) and scalar_alpha:
+        if AVAILABLE and d.kernel is not None and scalar_alpha:
             return "numba"
         if backend == "numba":
             raise ValueError(f"backend='numba' needs numba (pip install 'gonio[fast]'), "
-                             f"distribution ggx or beckmann and one alpha value, got "
+                             f"distribution {' or '.join(WITH_KERNELS)} and one alpha value, got "
                              f"{d.name!r} with alpha shape {np.shape(d.alpha_x)}")
         return "numpy"
 
@@ -119,19 +119,23 @@ class MicrofacetModel:
             return fn(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(shape)
 
     def _compiled_sampling(self):
-        """True when sample() runs in a compiled kernel (see kernels.supports_sampling)."""
-        from sim.bsdf.kernels import supports_sampling
+        """True when sample() runs in a compiled kernel (Distribution.compiled_samplings)."""
+        return (self.backend == "numba"
+                and self.sampling in self.distribution.compiled_samplings)
 
-        return self.backend == "numba" and supports_sampling(self.distribution.name,
-                                                             self.sampling)
-
-    def _kernel_codes(self):
-        """Scalar parameters shared by the compiled kernels."""
-        from sim.bsdf.kernels import CODES
-
+    def _kernel_parameters(self):
+        """(ndf, alpha_x, alpha_y, masking, sampling): the parameters every compiled kernel
+        takes, as their typed identities and floats."""
         d = self.distribution
-        return (CODES[d.name], float(d.alpha_x), float(d.alpha_y), CODES[self.masking],
-                CODES[self.sampling])
+        return (d.kernel, float(d.alpha_x), float(d.alpha_y), masking_kind(self.masking),
+                Sampling[self.sampling.upper()])
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}({self.distribution!r}, {self._material_repr()}, "
+                f"masking={self.masking!r}, sampling={self.sampling!r}{self._lobes_repr()})")
+
+    def _lobes_repr(self) -> str:
+        return ""
 
     def _g2_over_cosines(self, wi, wo):
         """G2(wi, wo) / (|cos i| |cos o|), finite at grazing (facet sides checked by callers);

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from sim.bsdf import RoughConductor, RoughDielectric
+from sim.bsdf.distributions import WITH_KERNELS
 from sim.bsdf.kernels import AVAILABLE
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="numba (gonio[fast]) is not installed")
@@ -51,7 +52,7 @@ def test_dielectric_kernel_matches_numpy(kw):
 
 
 @pytest.mark.parametrize("eta", [None, 0.2 + 3.1j, 1.5 + 0j])
-@pytest.mark.parametrize("dist", ["ggx", "beckmann"])
+@pytest.mark.parametrize("dist", WITH_KERNELS)
 def test_conductor_kernel_matches_numpy(eta, dist):
     wi, wo = _pairs(seed=1)
     fast = RoughConductor(dist, (0.2, 0.4), eta, masking="correlated")

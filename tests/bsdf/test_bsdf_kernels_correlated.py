@@ -8,11 +8,14 @@ import numpy as np
 import pytest
 
 from sim.bsdf import RoughDielectric, kernels
+from sim.bsdf.constants import Masking, Ndf, Sampling
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE,
                                 reason="numba (gonio[fast]) is not installed")
 
 ALPHA, ETA = (0.3, 1.3), 1.51
+#: The per-pair kernels' int arguments (kernels.dielectric converts the enums the same way).
+GGX, CORRELATED, VISIBLE = int(Ndf.GGX), int(Masking.CORRELATED), int(Sampling.VISIBLE)
 
 
 def _directions(rng, n, lowest):
@@ -51,7 +54,8 @@ def test_correlated_eval_block_matches_scalar_kernel_and_numpy(alpha, eta):
     wi, wo = _transmitted_pairs(20_000, 1)
     model = RoughDielectric("ggx", alpha, eta, masking="correlated")
     fast = model.eval(wi, wo)
-    scalar = kernels._dielectric(wi, wo, 0, *alpha, eta, 1, True, True, 0, False)
+    scalar = kernels._dielectric(wi, wo, GGX, *alpha, eta, CORRELATED, True, True, VISIBLE,
+                                 False)
     _close(fast, scalar)
     ref_path = RoughDielectric("ggx", alpha, eta, masking="correlated", backend="numpy")
     _close(fast, ref_path.eval(wi, wo))
@@ -105,8 +109,8 @@ def test_correlated_sample_block_matches_scalar_kernel(kw):
     wi, u = _directions(rng, 40_000, 1e-20), rng.random((40_000, 3))
     model = RoughDielectric("ggx", masking="correlated", **kw)
     wo_f, w_f, p_f = model.sample(wi, u)
-    wo_s, w_s, p_s = kernels._dielectric_sample(wi, u, 0, *kw["alpha"], kw["eta"], 1,
-                                                model.reflection, model.transmission, 0)
+    wo_s, w_s, p_s = kernels._dielectric_sample(wi, u, GGX, *kw["alpha"], kw["eta"], CORRELATED,
+                                                model.reflection, model.transmission, VISIBLE)
     assert (wo_f[:, 2] * wi[:, 2] < 0).sum() > 5000
     assert np.abs(wo_f - wo_s).max() < 1e-12
     _close(w_f, w_s)

@@ -55,7 +55,7 @@ def test_beta_over_cosines_at_grazing_and_infinite_lambda():
 
 @pytest.mark.skipif(not AVAILABLE, reason="numba (gonio[fast]) is not installed")
 def test_compiled_beta_matches_numpy():
-    from sim.bsdf.kernels import _beta_oc
+    from sim.bsdf.primitives import beta_over_cosines as _beta_oc
 
     rng = np.random.default_rng(0)
     ci, co = 10.0 ** rng.uniform(-100, 0, (2, 2000))

@@ -12,9 +12,8 @@ from sim.bsdf import (
     fresnel_dielectric,
     make_distribution,
 )
-
-DISTS = ["ggx", "beckmann", "phong"]
-MASKINGS = ["separable", "correlated"]
+from sim.bsdf.distributions import DISTRIBUTION_NAMES as DISTS
+from sim.bsdf.masking import MASKINGS
 
 
 def _mc_albedo(model, wi, n=100_000, seed=2):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from sim.bsdf.distributions import WALKABLE, make_distribution
 from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF, albedo_estimate
 from sim.bsdf.multiple_scattering.guiding import adjoint_density, sample_adjoint
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 
 
 def direction(theta_deg, phi_deg=0.0):
@@ -14,11 +14,11 @@ def direction(theta_deg, phi_deg=0.0):
 
 
 @pytest.mark.parametrize("theta", [30.0, 75.0, 120.0, 160.0])
-@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+@pytest.mark.parametrize("name", WALKABLE)
 def test_backwards_proposal_has_the_density_it_reports(theta, name):
     """E[g(w)] over proposal samples = integral of g p over the sphere (uniform quadrature),
     for g = 1 (total mass of the successful draws), w_z and w_x."""
-    slopes = SlopeDistribution.named(name, (0.5, 0.35))
+    slopes = make_distribution(name, (0.5, 0.35))
     wo = direction(theta, 30.0)
     eta = np.full(1, 1.5 if theta < 90 else 1 / 1.5)
     rng = np.random.default_rng(1)

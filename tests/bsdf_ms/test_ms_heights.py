@@ -80,7 +80,7 @@ def test_first_hit_heights_follow_c1_to_the_power_one_plus_lambda(height):
     model = RandomWalkBSDF(Microsurface("ggx", 0.7, "conductor"), height=height)
     theta = np.radians(70.0)
     wi = np.array([np.sin(theta), 0.0, np.cos(theta)])
-    lam = float(model.slopes.lambda_(wi[None])[0])
+    lam = float(model.slopes.signed_lambda(wi[None])[0])
     h = model.first_heights(wi, np.random.default_rng(5), 20000)
     dist = make_heights(height)
     result = stats.kstest(h, lambda x: dist.cdf(x) ** (1.0 + lam))

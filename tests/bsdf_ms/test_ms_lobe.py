@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from sim.bsdf import RoughConductor, RoughDielectric
+from sim.bsdf.distributions import WALKABLE, make_distribution
 from sim.bsdf.multiple_scattering import (
     HigherOrderLobe,
     RandomWalkBSDF,
@@ -16,7 +17,6 @@ from sim.bsdf.multiple_scattering import (
     nee_kernel,
 )
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 from sim.bsdf.multiple_scattering.walk import Walker
 
 Z_MAX = 4.5  # |z-score| allowed for a Monte Carlo comparison (deterministic seeds)
@@ -29,13 +29,13 @@ def direction(theta_deg, phi_deg=0.0):
 
 
 @pytest.mark.skipif(not nee_kernel.AVAILABLE, reason="numba is not installed")
-@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+@pytest.mark.parametrize("name", WALKABLE)
 @pytest.mark.parametrize("micro", [MicroDielectric(1.51), MicroDielectric(1.0 / 1.51),
                                    MicroConductor(None), MicroConductor(0.2 + 3.4j)],
                          ids=["glass", "inverse-glass", "mirror", "gold-like"])
 def test_compiled_next_event_matches_numpy(name, micro):
     rng = np.random.default_rng(1)
-    walker = Walker(SlopeDistribution.named(name, 0.4), micro, guided=False)
+    walker = Walker(make_distribution(name, 0.4), micro, guided=False)
     n, m = 400, 60
     w_in = rng.normal(size=(n, 3))
     w_in /= np.linalg.norm(w_in, axis=1, keepdims=True)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from sim.bsdf import RoughConductor, RoughDielectric
+from sim.bsdf.distributions import WALKABLE
 from sim.bsdf.multiple_scattering import (
     Microsurface,
     RandomWalkBSDF,
@@ -62,7 +63,7 @@ PAIRS = [
 ]
 
 
-@pytest.mark.parametrize("name", ["ggx", "beckmann"])
+@pytest.mark.parametrize("name", WALKABLE)
 @pytest.mark.parametrize("wi,wo", PAIRS)
 def test_order_one_is_the_height_correlated_single_scattering_model(name, wi, wo):
     single = RoughDielectric(name, (0.6, 0.3), 1.5, masking="correlated")

@@ -13,8 +13,7 @@ import numpy as np
 from sim.bsdf.distributions import make_distribution
 from sim.bsdf.fresnel import dielectric_reflectance_transmittance
 from sim.bsdf.masking import check_masking, log_beta
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
-from sim.bsdf.multiple_scattering.walk import flip
+from sim.bsdf.multiple_scattering.walk import flip, walkable
 
 
 def _gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -36,16 +35,16 @@ def single_scattering_energy(
     check_masking(masking)
     if not 0.0 <= theta < 0.5 * np.pi:
         raise ValueError(f"theta must lie in [0, pi/2) radians, got {theta!r}")
-    slopes = SlopeDistribution(make_distribution(distribution, alpha))
+    slopes = walkable(make_distribution(distribution, alpha))
     x, w = _gauss_legendre_unit(nodes)
     u1, u2 = (a.ravel() for a in np.meshgrid(x, x, indexing="ij"))
     weights = np.outer(w, w).ravel()
     wi = np.broadcast_to([np.sin(theta), 0.0, np.cos(theta)], u1.shape + (3,))
-    m = slopes.sample_visible(wi, u1, u2)
+    m = slopes.sample_visible_sphere(wi, u1, u2)
     c = np.clip(np.sum(wi * m, axis=-1), 0.0, 1.0)
-    li = slopes.lambda_(wi[:1])[0]
+    li = slopes.signed_lambda(wi[:1])[0]
     wr = 2.0 * c[:, None] * m - wi
-    lr = slopes.lambda_(wr)
+    lr = slopes.signed_lambda(wr)
     correlated = masking == "correlated"
     refl = np.where(wr[:, 2] > 0.0, (1.0 + li) / (1.0 + li + lr) if correlated else
                     1.0 / (1.0 + lr), 0.0)
@@ -56,7 +55,7 @@ def single_scattering_energy(
     cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2))
     wt = -wi / eta + (c / eta - cos_t)[:, None] * m
     wt_up = flip(wt / np.linalg.norm(wt, axis=-1, keepdims=True))
-    lt = slopes.lambda_(wt_up)
+    lt = slopes.signed_lambda(wt_up)
     seen = (wt_up[:, 2] > 0.0) & np.isfinite(lt)  # Lambda = inf (grazing): masked, G = 0
     lt = np.where(seen, lt, 0.0)
     g = (1.0 + li) * np.exp(log_beta(1.0 + li, 1.0 + lt)) if correlated else 1.0 / (1.0 + lt)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+from sim.bsdf.distributions import Distribution
 from sim.bsdf.vectors import dot
 
 #: Share of next directions drawn backwards from wo (the rest from the phase function).
@@ -42,7 +42,7 @@ def refract(v: np.ndarray, n: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, 
     return _unit(t), ok
 
 
-def adjoint_density(slopes: SlopeDistribution, w_in: np.ndarray, wo: np.ndarray,
+def adjoint_density(slopes: Distribution, w_in: np.ndarray, wo: np.ndarray,
                     eta: np.ndarray) -> np.ndarray:
     """Density over w_in of the backwards-from-wo proposal (local frame of the next event).
 
@@ -73,12 +73,12 @@ def adjoint_density(slopes: SlopeDistribution, w_in: np.ndarray, wo: np.ndarray,
     return out
 
 
-def sample_adjoint(slopes: SlopeDistribution, wo: np.ndarray, eta: np.ndarray,
+def sample_adjoint(slopes: Distribution, wo: np.ndarray, eta: np.ndarray,
                    u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An arriving direction w_in drawn backwards from wo (see adjoint_density); validity."""
     above = wo[..., 2] > 0.0
     view = np.where(above[..., None], wo, -wo)
-    m = slopes.sample_visible(view, u1, u2)
+    m = slopes.sample_visible_sphere(view, u1, u2)
     mirrored = 2.0 * dot(wo, m)[..., None] * m - wo
     back, ok_t = refract(wo, -m, 1.0 / eta)
     w_in = np.where(above[..., None], mirrored, back)

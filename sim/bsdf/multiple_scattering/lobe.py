@@ -53,7 +53,7 @@ def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
     total, products, done = np.zeros(m), np.zeros((m, m)), 0
     while done < walks:
         k = min(batch, walks - done)
-        res = walk._walker.run(np.repeat(wi[None, :], k, axis=0), rng, targets=targets,
+        res = walk.walker.run(np.repeat(wi[None, :], k, axis=0), rng, targets=targets,
                                min_order=2)
         total += res.value.sum(axis=0)
         products += res.value.T @ res.value

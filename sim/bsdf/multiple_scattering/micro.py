@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
+from sim.bsdf.distributions import Distribution
 from sim.bsdf.vectors import dot
 
 
@@ -21,7 +21,7 @@ def _normalize(v: np.ndarray) -> np.ndarray:
         return v / n
 
 
-def _reflect_phase(slopes: SlopeDistribution, w_in, w_out, fresnel) -> np.ndarray:
+def _reflect_phase(slopes: Distribution, w_in, w_out, fresnel) -> np.ndarray:
     """F D_visible(w_in, h) / (4 <w_in, h>) = F D(h) / (4 A(w_in)), h the half vector."""
     h = _normalize(w_in + w_out)
     c = dot(w_in, h)

@@ -2,7 +2,7 @@
 
 Built from a single-scattering model (RoughDielectric / RoughConductor build it themselves when
 constructed with multiple_scattering=True) or from a Microsurface description. Values follow
-DESIGN.md: 1/sr, no cosine, Walter's eq. 21 for transmission; they are unbiased Monte Carlo
+docs/architecture.md: 1/sr, no cosine, Walter's eq. 21 for transmission; they are unbiased Monte Carlo
 estimates, each the mean of `walks` independent random walks per direction pair.
 """
 
@@ -15,8 +15,7 @@ import numpy as np
 from sim.bsdf.distributions import Distribution, make_distribution
 from sim.bsdf.multiple_scattering.heights import make_heights
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric, MicroDiffuse
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
-from sim.bsdf.multiple_scattering.walk import Walker
+from sim.bsdf.multiple_scattering.walk import Walker, walkable
 from sim.bsdf.vectors import directions
 
 KINDS = ("dielectric", "conductor", "diffuse")
@@ -85,6 +84,7 @@ class RandomWalkBSDF:
     distribution, which changes the recorded heights and nothing else (Smith microsurface);
     guided: draw some next directions backwards from wo when evaluating (see guiding.py);
     None means on below alpha GUIDE_BELOW_ALPHA, where it pays for its cost.
+    slopes is its distribution, walker the Walker that runs its batches of walks.
     """
 
     def __init__(self, parent, *, walks: int = 256, max_order: int | None = None,
@@ -94,7 +94,7 @@ class RandomWalkBSDF:
         if max_order is not None and (int(max_order) != max_order or max_order < 1):
             raise ValueError(f"max_order must be None or a positive integer, got {max_order!r}")
         self.parent = parent
-        self.slopes = SlopeDistribution(_distribution(parent))
+        self.slopes = walkable(_distribution(parent))
         self.micro = _micro(parent)
         self.heights = make_heights(height)
         self.walks = int(walks)
@@ -102,7 +102,7 @@ class RandomWalkBSDF:
         if guided is None:
             guided = max(self.slopes.alpha_x, self.slopes.alpha_y) < GUIDE_BELOW_ALPHA
         self.guided = bool(guided)
-        self._walker = Walker(self.slopes, self.micro, self.guided)
+        self.walker = Walker(self.slopes, self.micro, self.guided)
 
     def _pairs(self, wi, wo, order, unit, rng, walks) -> tuple[np.ndarray, ...]:
         """Mean, standard error and truncated energy per pair, walking in batches of BATCH."""
@@ -117,7 +117,7 @@ class RandomWalkBSDF:
         done = 0
         while done < walks:
             k = min(per_round, walks - done)
-            res = self._walker.run(np.repeat(wi, k, axis=0), rng, np.repeat(wo, k, axis=0),
+            res = self.walker.run(np.repeat(wi, k, axis=0), rng, np.repeat(wo, k, axis=0),
                                    order=order, max_order=cap, unit=unit)
             v = res.value.reshape(-1, k)
             total += [v.sum(axis=1), (v * v).sum(axis=1), res.truncated.reshape(-1, k).sum(axis=1)]
@@ -164,7 +164,7 @@ class RandomWalkBSDF:
         u = np.asarray(u, dtype=np.float64)
         shape = wi.shape[:-1]
         u = np.broadcast_to(u, shape + (3,)).reshape(-1, 3)
-        res = self._walker.run(wi.reshape(-1, 3), rng, u_first=u, max_order=self.max_order)
+        res = self.walker.run(wi.reshape(-1, 3), rng, u_first=u, max_order=self.max_order)
         ok = np.isfinite(res.exit_direction[:, 0])
         wo = np.where(ok[:, None], res.exit_direction, np.array([0.0, 0.0, 1.0]))
         ok &= self._lobe_mask(wi.reshape(-1, 3), wo) > 0.0
@@ -175,5 +175,5 @@ class RandomWalkBSDF:
     def first_heights(self, wi, rng: np.random.Generator, walks: int) -> np.ndarray:
         """Heights of the first scattering event of `walks` walks from wi (nan: none)."""
         (wi,) = directions(wi)
-        res = self._walker.run(np.repeat(wi.reshape(1, 3), walks, axis=0), rng, max_order=1)
+        res = self.walker.run(np.repeat(wi.reshape(1, 3), walks, axis=0), rng, max_order=1)
         return self.heights.inv_log_cdf(res.first_log_cdf)

@@ -18,13 +18,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.bsdf.distributions import WALKABLE, Distribution
 from sim.bsdf.multiple_scattering import nee_kernel
 from sim.bsdf.multiple_scattering.guiding import guided_scatter
 from sim.bsdf.multiple_scattering.heights import log1mexp
-from sim.bsdf.multiple_scattering.slopes import SlopeDistribution
 
 #: Weight below which an evaluating walk plays Russian roulette (survivors carry this weight).
 ROULETTE = 0.1
+
+
+def walkable(distribution: Distribution) -> Distribution:
+    """The distribution, if the walk can walk on it (Distribution.multiple_scattering, one
+    alpha or one (alpha_x, alpha_y) pair); else a ValueError saying why."""
+    if not distribution.multiple_scattering:
+        raise ValueError(
+            "multiple scattering needs a Smith slope distribution "
+            f"{' or '.join(repr(name) for name in WALKABLE)}, got {distribution.name!r}")
+    if np.ndim(distribution.alpha_x) or np.ndim(distribution.alpha_y):
+        raise ValueError("multiple scattering needs one scalar alpha (or alpha_x, alpha_y)")
+    return distribution
 
 
 def flip(w: np.ndarray) -> np.ndarray:
@@ -47,14 +59,14 @@ class WalkResult:
 class Walker:
     """Runs batches of walks for one slope distribution and one micro-BSDF."""
 
-    def __init__(self, slopes: SlopeDistribution, micro, guided: bool = True):
+    def __init__(self, slopes: Distribution, micro, guided: bool = True):
         self.slopes = slopes
         self.micro = micro
         self.guided = guided
 
     def _escape_probability(self, d: np.ndarray, log_u: np.ndarray) -> np.ndarray:
         """G1 = u^Lambda(d) of leaving from log C1 = log_u along local direction d."""
-        lam = self.slopes.lambda_(d)
+        lam = self.slopes.signed_lambda(d)
         with np.errstate(invalid="ignore", over="ignore"):
             g = np.exp(lam * log_u)
         return np.where(lam <= 0.0, np.where(lam == 0.0, 1.0, 0.0), np.nan_to_num(g))
@@ -111,7 +123,7 @@ class Walker:
                 u = u_first[idx].T
             else:
                 u = rng.random((3, idx.size))
-            lam = slopes.lambda_(dk)
+            lam = slopes.signed_lambda(dk)
             cur = np.where(out, log_u[idx], log_v[idx])
             if forced:  # hit for sure, weighted by the hit probability 1 - u^Lambda
                 with np.errstate(invalid="ignore", over="ignore"):
@@ -138,7 +150,7 @@ class Walker:
             if k == 1:
                 first[idx] = log_u[idx]
             w_in = -dk
-            m = slopes.sample_visible(w_in, u[1], u[2])
+            m = slopes.sample_visible_sphere(w_in, u[1], u[2])
             counted = k >= min_order and (order is None or order == k)
             if wo is not None and counted:
                 value[idx] += beta[idx] * self._next_event(w_in, m, out, wo[idx], new, other, unit)
@@ -172,7 +184,7 @@ class Walker:
                         compiled: bool = True) -> np.ndarray:
         """_next_event from each of n events towards each of m targets: (n, m); compiled
         (nee_kernel) for dielectric and conductor facets unless asked not to."""
-        if compiled and not unit and nee_kernel.supports(self.micro):
+        if compiled and not unit and nee_kernel.supports(self.slopes, self.micro):
             return nee_kernel.compiled_next_event_all(self.slopes, self.micro, w_in, out,
                                                       targets, log_here, log_there)
         n, k = len(w_in), len(targets)
