@@ -11,6 +11,7 @@ from sim.devices.faults import FaultSpec
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import ConstantPower
 from sim.devices.pm100 import Pm100Emulator
+from sim.devices.pty_server import PtyDevice
 
 AXES = {
     1: {"limits_deg": (-95.0, 95.0), "speed_deg_s": 20.0, "accel_deg_s2": 80.0},
@@ -53,9 +54,23 @@ def esp_pair(make_esp):
 
 
 @pytest.fixture
-def pm_pair():
+def opened():
+    """Where a test's pair fixture puts the emulators it starts and the drivers it opens: after
+    the test, last opened first, drivers are closed and emulators stopped (and must have met
+    no handler error)."""
+    things = []
+    yield things
+    for thing in reversed(things):
+        if isinstance(thing, PtyDevice):
+            thing.stop()
+            assert thing.server.handler_errors == []
+        else:
+            thing.close()
+
+
+@pytest.fixture
+def pm_pair(opened):
     """make(power_w, faults, timeout_s, retries, detector) -> (emulator, driver)."""
-    opened = []
 
     def make(power_w=2e-6, faults=None, timeout_s=0.3, retries=2, detector=None, source=None):
         emu = Pm100Emulator(source or ConstantPower(power_w),
@@ -67,10 +82,4 @@ def pm_pair():
         opened.append(drv)
         return emu, drv
 
-    yield make
-    for thing in reversed(opened):
-        if isinstance(thing, Pm100Emulator):
-            thing.stop()
-            assert thing.server.handler_errors == []
-        else:
-            thing.close()
+    return make

@@ -2,8 +2,8 @@
 
 Built from a single-scattering model (RoughDielectric / RoughConductor build it themselves when
 constructed with multiple_scattering=True) or from a Microsurface description. Values follow
-docs/architecture.md: 1/sr, no cosine, Walter's eq. 21 for transmission; they are unbiased Monte Carlo
-estimates, each the mean of `walks` independent random walks per direction pair.
+docs/architecture.md: 1/sr, no cosine, Walter's eq. 21 for transmission; they are unbiased Monte
+Carlo estimates, each the mean of `walks` independent random walks per direction pair.
 """
 
 from __future__ import annotations
