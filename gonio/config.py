@@ -14,12 +14,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 
 from gonio.device_kinds import KINDS, DeviceConfig
 from gonio.device_kinds.settings import read_settings
 from gonio.errors import ConfigError
-from gonio.fields import REQUIRED, Fields, location
+from gonio.fields import REQUIRED, Fields, location, read_toml
 from gonio.optics import Optics, parse_optics
 
 ROLES = ("sample", "arm", "azimuth", "elevation")
@@ -88,15 +87,7 @@ class InstrumentConfig:
 def load_config(path: str | Path) -> InstrumentConfig:
     """Read and validate an instrument config file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read instrument config ({exc.strerror})") from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    return parse_config(raw, path)
+    return parse_config(read_toml(path, "instrument config", ConfigError), path)
 
 
 def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> InstrumentConfig:

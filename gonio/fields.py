@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import difflib
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 
 from gonio.errors import GonioError
 
@@ -179,3 +181,25 @@ def _range(f: Fields, low: float, high: float) -> tuple[float, ...]:
 def _show(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def read_toml(path: Path, what: str, error: type[GonioError]) -> dict[str, Any]:
+    """The table of the TOML file `path` (a `what`: "plan", "instrument config"), or one
+    error naming the file: unreadable, not text, or not TOML."""
+    try:
+        return tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what} ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise error(f"{path}: not a text file") from None
+
+
+def stored_table(raw: Mapping[str, Any], key: str, where: str, error: type[GonioError],
+                 parse: Callable[[Fields], Any]) -> Any:
+    """`parse` of the [key] table of a stored (raw) file named `where`, or None if it has
+    none (a run's [optics], [sample])."""
+    if key not in raw:
+        return None
+    return parse(Fields(raw[key], where, error, key))

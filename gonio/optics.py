@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from gonio.errors import ConfigError
-from gonio.fields import Fields
+from gonio.fields import Fields, stored_table
 
 #: Polarisation states a source or an analyser may have (or a linear angle in degrees).
 POLARISATIONS = ("unpolarised", "s", "p")
@@ -83,6 +83,4 @@ def parse_optics(f: Fields) -> Optics:
 
 def optics_of_config(config: dict[str, Any], where: str = "config") -> Optics | None:
     """The [optics] of a stored (raw) instrument config, or None if it has none."""
-    if "optics" not in config:
-        return None
-    return parse_optics(Fields(config["optics"], where, ConfigError, "optics"))
+    return stored_table(config, "optics", where, ConfigError, parse_optics)

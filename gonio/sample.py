@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from gonio.errors import PlanError
-from gonio.fields import Fields
+from gonio.fields import Fields, stored_table
 
 #: Sample kinds as the bench knows them (sim.bench.sample.KINDS names the same).
 KINDS = ("hemisphere", "slab", "conductor")
@@ -67,6 +67,4 @@ def parse_sample(f: Fields) -> SampleInfo:
 
 def sample_of_plan(plan: dict[str, Any], where: str = "plan") -> SampleInfo | None:
     """The [sample] of a stored (raw) plan, or None if it has none."""
-    if "sample" not in plan:
-        return None
-    return parse_sample(Fields(plan["sample"], where, PlanError, "sample"))
+    return stored_table(plan, "sample", where, PlanError, parse_sample)

@@ -18,10 +18,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 
 from gonio.errors import PlanError
-from gonio.fields import Fields
+from gonio.fields import Fields, read_toml
 from gonio.sample import SampleInfo, parse_sample
 from gonio.suspenders import SuspendSpec, parse_suspend
 
@@ -82,15 +81,7 @@ class Plan:
 def load_plan(path: str | Path) -> Plan:
     """Read and parse a plan file (instrument-independent checks only)."""
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise PlanError(f"{path}: cannot read plan ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise PlanError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise PlanError(f"{path}: not a text file") from None
-    return parse_plan(raw, path)
+    return parse_plan(read_toml(path, "plan", PlanError), path)
 
 
 def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
