@@ -123,6 +123,10 @@ def test_abort_from_the_channel_stops_the_arm_on_its_way(tmp_path):
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 130, err
         with serial.Serial(endpoints["esp"][1], 19200, timeout=2) as port:
+            def motion_done() -> bool:  # the stop was sent; the arm decelerates to rest
+                port.write(b"2MD?\r")
+                return port.readline().strip() == b"1"
+            until(motion_done, timeout=5.0)
             port.write(b"2TP\r")
             first = float(port.readline())
             time.sleep(0.3)
