@@ -215,3 +215,23 @@ def pointed(cfg: dict, endpoints: dict[str, tuple[str, str]]) -> dict:
         else:
             dev["port"] = endpoint
     return cfg
+
+
+def esp_arm_at_rest(port_path: str, timeout_s: float = 5.0) -> float:
+    """The ESP arm's (axis 2) position once a stop has brought it to rest: waits for MD? to
+    say done (the stop was sent; the arm decelerates), then checks it stays put for 0.3 s."""
+    import serial
+
+    with serial.Serial(port_path, 19200, timeout=2) as port:
+        def ask(command: str) -> str:
+            port.write(command.encode() + b"\r")
+            return port.readline().decode().strip()
+
+        deadline = time.monotonic() + timeout_s
+        while ask("2MD?") != "1":
+            assert time.monotonic() < deadline, "the arm never came to rest"
+            time.sleep(0.01)
+        first = float(ask("2TP"))
+        time.sleep(0.3)
+        assert ask("2MD?;2TP") == f"1,{first:.5f}"  # at rest, unmoved
+        return first

@@ -11,8 +11,15 @@ import subprocess
 import sys
 import time
 
-import serial
-from gonio_testkit import ROOT, emulating, fast_config, pointed, write_plan, write_toml
+from gonio_testkit import (
+    ROOT,
+    emulating,
+    esp_arm_at_rest,
+    fast_config,
+    pointed,
+    write_plan,
+    write_toml,
+)
 
 from gonio.config import load_config
 from gonio.control import SOCKET, connect
@@ -122,16 +129,7 @@ def test_abort_from_the_channel_stops_the_arm_on_its_way(tmp_path):
             channel.close()
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 130, err
-        with serial.Serial(endpoints["esp"][1], 19200, timeout=2) as port:
-            def motion_done() -> bool:  # the stop was sent; the arm decelerates to rest
-                port.write(b"2MD?\r")
-                return port.readline().strip() == b"1"
-            until(motion_done, timeout=5.0)
-            port.write(b"2TP\r")
-            first = float(port.readline())
-            time.sleep(0.3)
-            port.write(b"2MD?;2TP\r")
-            assert port.readline().decode().strip() == f"1,{first:.5f}"  # at rest, unmoved
+        first = esp_arm_at_rest(endpoints["esp"][1])
     targets = build_schedule(load_plan(plan), load_config(tmp_path / "plan-instrument.toml")
                              ).readings["arm_deg"]
     assert min(abs(targets - first)) > 1.0, (first, targets)  # stopped on the way

@@ -12,10 +12,10 @@ import sys
 import time
 
 import pytest
-import serial
 from gonio_testkit import (
     ROOT,
     emulating,
+    esp_arm_at_rest,
     fast_config,
     gonio_cli,
     pointed,
@@ -38,11 +38,6 @@ def scan(*args: object, stdin=subprocess.DEVNULL) -> subprocess.Popen:
     return start_gonio("scan", *args, "--no-plot", "--no-progress", stdin=stdin)
 
 
-def esp_query(port: serial.Serial, command: str) -> str:
-    port.write(command.encode() + b"\r")
-    return port.readline().decode().strip()
-
-
 def test_sigterm_stops_the_arm_of_a_two_process_rehearsal(tmp_path):
     cfg = fast_config(time_scale=5.0)  # moves of tens of degrees take about a second
     with emulating(write_toml(tmp_path / "emulated.toml", cfg)) as endpoints:
@@ -53,10 +48,7 @@ def test_sigterm_stops_the_arm_of_a_two_process_rehearsal(tmp_path):
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 128 + signal.SIGTERM, err
-        with serial.Serial(endpoints["esp"][1], 19200, timeout=2) as port:
-            first = float(esp_query(port, "2TP"))
-            time.sleep(0.3)
-            assert esp_query(port, "2MD?") == "1" and float(esp_query(port, "2TP")) == first
+        first = esp_arm_at_rest(endpoints["esp"][1])
     targets = build_schedule(load_plan(plan), load_config(tmp_path / "plan-instrument.toml")
                              ).readings["arm_deg"]
     assert min(abs(targets - first)) > 1.0, (first, targets)  # stopped on the way
