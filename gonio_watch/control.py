@@ -7,17 +7,16 @@ cannot be connected to means the scan is not running."""
 from __future__ import annotations
 
 import json
-import os
 import socket
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-SOCKET = "control.sock"
+from gonio.control import SOCKET, connect
+
 COMMANDS = ("status", "pause", "resume", "abort")
 TIMEOUT_S = 2.0  # a pause is answered at once (it acts at the next point)
 MAX_REPLY = 65536
-UNIX_PATH_MAX = 107  # sun_path holds 108 bytes with its NUL
 
 
 class ControlUnavailable(Exception):
@@ -38,26 +37,14 @@ class ControlChannel:
         return self.run_dir / SOCKET
 
     def _connect(self) -> socket.socket:
-        """A connection to the socket (one whose path is too long for sun_path through the
-        run directory's /proc/self/fd entry, as the scan binds it)."""
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        sock.settimeout(TIMEOUT_S)
-        dir_fd = None
+        """A connection to the socket, through gonio.control's own client route (which
+        reaches a path too long for sun_path as the scan binds it)."""
         try:
-            address = str(self.path)
-            if len(os.fsencode(address)) > UNIX_PATH_MAX:
-                dir_fd = os.open(self.run_dir, os.O_RDONLY | os.O_DIRECTORY)
-                address = f"/proc/self/fd/{dir_fd}/{SOCKET}"
-            sock.connect(address)
+            return connect(self.run_dir, TIMEOUT_S)
         except OSError as exc:
-            sock.close()
             why = ("no control socket" if isinstance(exc, FileNotFoundError)
                    else exc.strerror or str(exc))
             raise ControlUnavailable(f"the scan is not running ({why} at {self.path})") from None
-        finally:
-            if dir_fd is not None:
-                os.close(dir_fd)
-        return sock
 
     def reachable(self) -> bool:
         """Whether a scan process listens on the socket (connects, sends nothing)."""
