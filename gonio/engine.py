@@ -71,6 +71,14 @@ MEASURED = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "power_w", "
             "t_s", "flags")  # what a stored line says of the measurement itself
 
 
+def motion_timeout_s(instrument: Instrument, role: str, distance_deg: float) -> float:
+    """How long a move of distance_deg on the role's axis may take, real seconds: WAIT_FACTOR
+    times its velocity profile on the instrument's clock, plus WAIT_MARGIN_S."""
+    ax = instrument.config.axes[role]
+    profile = float(profile_seconds(distance_deg, ax.speed_deg_s, ax.accel_deg_s2))
+    return WAIT_FACTOR * real_seconds(instrument, profile) + WAIT_MARGIN_S
+
+
 class StopRun(Exception):
     """The run cannot go on; the message is the reason recorded in meta.json."""
 
@@ -133,10 +141,7 @@ class Engine:
 
     # -- one reading ------------------------------------------------------------
     def _wait_timeout(self, role: str, target: float) -> float:
-        ax = self.inst.config.axes[role]
-        profile = float(profile_seconds(target - self._reported[role], ax.speed_deg_s,
-                                        ax.accel_deg_s2))
-        return WAIT_FACTOR * real_seconds(self.inst, profile) + WAIT_MARGIN_S
+        return motion_timeout_s(self.inst, role, target - self._reported[role])
 
     def _move(self, row: np.void) -> list[str]:
         """Start every axis that must move, then wait for each; returns the roles moved."""
