@@ -1,5 +1,6 @@
-"""`gonio export RUN --format csv|netcdf|zemax|mitsuba --out FILE`: write a run's readings
-(csv, netcdf: one row per reading) or its fitted model (zemax, mitsuba); calibration.exports."""
+"""`gonio export RUN --format csv|netcdf|bluesky|zemax|mitsuba --out FILE`: write a run's
+readings (csv, netcdf: one row per reading; bluesky: event-model documents as JSON lines) or
+its fitted model (zemax, mitsuba); calibration.exports."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from calibration.exports import FORMATS, write
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `export` verb."""
-    p = subparsers.add_parser("export", help="export a run (csv, netcdf, zemax, mitsuba)",
+    p = subparsers.add_parser("export", help="export a run (csv, netcdf, bluesky, zemax, mitsuba)",
                               description=__doc__)
     p.add_argument("run", help="run directory")
     p.add_argument("--format", required=True, choices=FORMATS)

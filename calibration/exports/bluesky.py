@@ -1,0 +1,87 @@
+"""Export a run as Bluesky's event-model documents, one `["name", {document}]` pair per line
+as suitcase-jsonl writes them: a start (the run's record under `gonio`), one `primary`
+descriptor, one event per stored reading in index order and, once the run has ended, a stop.
+
+Every document is built and validated by event-model's composers (its JSON schemas). The
+events' data keys are the readings' fields (gonio.store.READING_DTYPE); a NaN (an invalid
+reading's power, a dark reading's plan angles) is written as null, as JSON has no NaN. uids are
+derived from the run's start, so exporting a run twice gives the same file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import uuid
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from calibration.exports.raw import _unit as field_unit
+from gonio.errors import GonioError
+from gonio.record import run_record
+from gonio.store import READING_DTYPE, READINGS, Run
+
+EXIT_STATUS = {"completed": "success", "aborted": "abort", "failed": "fail"}
+DTYPES = {"i": "integer", "f": "number", "b": "boolean", "O": "string"}  # numpy kind -> JSON
+
+
+def data_keys() -> dict[str, dict[str, Any]]:
+    """The primary descriptor's data keys: one per reading field, with its unit."""
+    keys = {}
+    for name in READING_DTYPE.names:
+        keys[name] = {"dtype": DTYPES[READING_DTYPE[name].kind], "shape": [],
+                      "source": f"gonio:{READINGS}:{name}"}
+        if field_unit(name):
+            keys[name]["units"] = field_unit(name)
+    return keys
+
+
+def _plain(value: Any) -> Any:
+    """A readings value as JSON has it: a numpy scalar's Python value, NaN as None."""
+    value = value.item() if hasattr(value, "item") else value
+    return None if isinstance(value, float) and math.isnan(value) else value
+
+
+def documents(run: Run) -> list[tuple[str, dict[str, Any]]]:
+    """The run's documents in order: start, descriptor, events, and stop once it has ended."""
+    try:
+        import event_model
+    except ImportError:
+        raise GonioError("the bluesky export needs event-model "
+                         "(pip install 'gonio[bluesky]')") from None
+    meta = run.meta
+    t0 = float(meta["t0_epoch"])
+    start_uid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"gonio-run:{run.path.name}:{t0!r}"))
+    bundle = event_model.compose_run(uid=start_uid, time=t0, metadata={
+        "plan_name": meta.get("plan_name"), "num_points": meta.get("planned"),
+        "instrument_name": meta.get("instrument_name"), "gonio": run_record(run)})
+    descriptor = bundle.compose_descriptor(
+        name="primary", data_keys=data_keys(), time=t0,
+        uid=str(uuid.uuid5(uuid.UUID(start_uid), "primary")))
+    docs: list[tuple[str, dict[str, Any]]] = [("start", bundle.start_doc),
+                                              ("descriptor", descriptor.descriptor_doc)]
+    readings = run.readings()
+    for seq, row in enumerate(readings, start=1):
+        when = t0 + float(row["t_s"])
+        data = {name: _plain(row[name]) for name in READING_DTYPE.names}
+        docs.append(("event", descriptor.compose_event(
+            data=data, timestamps=dict.fromkeys(data, when), seq_num=seq, time=when,
+            uid=str(uuid.uuid5(uuid.UUID(start_uid), f"event-{int(row['index'])}")))))
+    status = meta.get("status")
+    if status in EXIT_STATUS:
+        stopped = meta.get("stopped_utc")
+        end = datetime.fromisoformat(stopped).timestamp() if stopped else \
+            t0 + float(readings["t_s"].max(initial=0.0))
+        docs.append(("stop", bundle.compose_stop(
+            exit_status=EXIT_STATUS[status], reason=meta.get("reason") or "", time=end,
+            uid=str(uuid.uuid5(uuid.UUID(start_uid), "stop")))))
+    return docs
+
+
+def write_jsonl(run: Run, out: Path) -> Path:
+    """The run's documents as JSON lines, one `["name", {document}]` pair a line."""
+    with open(out, "w") as fh:
+        for name, doc in documents(run):
+            fh.write(json.dumps([name, doc], allow_nan=False) + "\n")
+    return out
