@@ -1,7 +1,8 @@
 """A gonio plan as a Bluesky plan: the compiled schedule (gonio.plan.build_schedule) run row
 by row under the RunEngine, so its suspenders, pauses and callbacks apply.
 
-Each row sets the detector's range when it changes, moves the axes whose target changes
+Each row starts at a checkpoint (a suspender that fires makes the RunEngine measure the row
+again when it resumes), sets the detector's range when it changes, moves the axes whose target changes
 (together), settles and dwells as gonio's engine does, and takes one event in the primary
 stream: the detector, every axis's readback and the row's schedule fields (`schedule-index`,
 `schedule-kind`: sample, dark, beam or signature; side, point, the plan's angles).
@@ -72,6 +73,7 @@ def plan(gonio_plan: str | Path | Plan, devices: GonioDevices, md: dict[str, Any
         yield from bps.mv(devices.detector.averaging, p.averaging or cfg.detector.averaging)
         range_w, commanded = None, dict.fromkeys(devices.axes)
         for row in readings:
+            yield from bps.checkpoint()  # a suspender replays the row from here
             if row["range_w"] != range_w:
                 range_w = row["range_w"]
                 yield from bps.mv(devices.detector.range_setting, float(range_w))

@@ -5,6 +5,8 @@ the device."""
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -104,3 +106,31 @@ def test_moves_the_limits_or_the_source_forbid_are_refused(bench):
     assert abs(d.instrument.axes["arm"].position() - 90.0) < 1e-3
     with pytest.raises(AttributeError, match="no 'elevation' axis"):
         _ = d.elevation
+
+
+def test_a_pause_mid_plan_replays_the_row_from_its_checkpoint(bench):
+    # A pause (as a suspender) rewinds to the last checkpoint: the row under way is measured
+    # again on resume, and every row is still read exactly once, in order.
+    from bluesky.utils import RunEngineInterrupted
+
+    RE, d, docs, plan_path = bench
+    docs.clear()
+    paused = []
+
+    def pause_after_third_event(name, doc):
+        if name == "event" and doc["seq_num"] == 3 and not paused:
+            paused.append(True)  # from another thread, as a suspender or Ctrl-C would
+            threading.Thread(target=RE.request_pause, kwargs={"defer": False}).start()
+
+    token = RE.subscribe(pause_after_third_event)
+    try:
+        with pytest.raises(RunEngineInterrupted):
+            RE(plan(plan_path, d))
+        before = len(events(list(docs)))
+        RE.resume()
+    finally:
+        RE.unsubscribe(token)
+    got = events(validated(list(docs)))
+    rows = build_schedule(load_plan(plan_path), d.config).readings
+    assert paused and 3 <= before < len(rows)
+    assert [e["data"]["schedule-index"] for e in got] == rows["index"].tolist()
