@@ -2,10 +2,11 @@
 by row under the RunEngine, so its suspenders, pauses and callbacks apply.
 
 Each row starts at a checkpoint (a suspender that fires makes the RunEngine measure the row
-again when it resumes), sets the detector's range when it changes, moves the axes whose target changes
-(together), settles and dwells as gonio's engine does, and takes one event in the primary
-stream: the detector, every axis's readback and the row's schedule fields (`schedule-index`,
-`schedule-kind`: sample, dark, beam or signature; side, point, the plan's angles).
+again when it resumes), sets the detector's range when it changes, moves the axes whose
+target changes (together), settles and dwells as gonio's engine does, and takes one event in
+the primary stream: the detector, every axis's readback and the row's schedule fields
+(`schedule-index`, `schedule-kind`: sample, dark, beam or signature; side, point, the plan's
+angles).
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ def plan(gonio_plan: str | Path | Plan, devices: GonioDevices, md: dict[str, Any
     metadata = {"plan_name": "gonio.bluesky.plan", "gonio_plan": p.name,
                 "gonio_plan_path": str(p.path), "instrument_name": cfg.name,
                 "num_points": len(readings), "num_intervals": max(len(readings) - 1, 0),
-                "sample": p.sample.to_json() if p.sample else None, **(md or {})}
+                **({"sample": p.sample.to_json()} if p.sample else {}),  # a dict or nothing
+                **(md or {})}
     detectors = [devices.detector, *devices.axes.values(), row_device]
 
     def rows() -> Generator[Msg, Any, None]:
