@@ -16,6 +16,7 @@ import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
 from bluesky import RunEngine  # noqa: E402
 from bluesky_testkit import small_plan, validated  # noqa: E402
+from gonio_testkit import fast_config, write_toml  # noqa: E402
 
 from gonio.bluesky import DeviceFailure, devices, plan  # noqa: E402
 from gonio.config import load_config  # noqa: E402
@@ -85,16 +86,31 @@ def test_a_gonio_plan_runs_its_schedule_in_order(bench):
     assert docs_run[-1][0] == "stop" and docs_run[-1][1]["exit_status"] == "success"
 
 
-def test_a_driver_error_reaches_the_run_engine_naming_the_device(bench):
-    RE, d, _, _ = bench
-    with pytest.raises(Exception) as raised:  # noqa: B017  (what Bluesky wraps it in is its own)
-        RE(bps.mv(d.detector.range_setting, 0.37))  # no PM100 range of 0.37 W
+def device_failure(RE, plan_gen) -> DeviceFailure:
+    """The DeviceFailure a plan ends with, from within what Bluesky wraps it in."""
+    with pytest.raises(Exception) as raised:  # noqa: B017  (the wrapper is Bluesky's own)
+        RE(plan_gen)
     failure = raised.value
     while failure is not None and not isinstance(failure, DeviceFailure):
         failure = failure.__cause__ or failure.__context__
     assert failure is not None, repr(raised.value)
+    return failure
+
+
+def test_a_device_error_reaches_the_run_engine_naming_the_device(bench):
+    RE, d, _, _ = bench
+    failure = device_failure(RE, bps.mv(d.detector.range_setting, 0.37))  # no such PM100 range
     assert failure.device == "detector" and str(failure).startswith("detector: setting the range")
     assert "pm100" in str(failure)  # and the driver's own device name
+
+
+def test_a_lost_port_reaches_the_run_engine_naming_the_axis(tmp_path):
+    RE = RunEngine()
+    with devices(write_toml(tmp_path / "instrument.toml", fast_config()), sim=True) as d:
+        d.instrument.axes["arm"].controller.close()  # the ESP's port is gone
+        failure = device_failure(RE, bps.mv(d.arm, 120.0))
+    assert failure.device == "arm" and str(failure).startswith("arm: ")
+    assert "esp" in str(failure).lower(), str(failure)
 
 
 def test_moves_the_limits_or_the_source_forbid_are_refused(bench):
