@@ -66,6 +66,7 @@ from gonio.suspenders import Watch
 TRANSIENT = (DriverError, OSError, termios.error)
 WAIT_FACTOR = 2.0  # motion timeout = WAIT_FACTOR x profile time + WAIT_MARGIN_S
 WAIT_MARGIN_S = 5.0
+HOME_S = 600.0  # device seconds a homing move may take
 RETRY_PAUSE_S = 0.05
 MEASURED = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "power_w", "saturated",
             "t_s", "flags")  # what a stored line says of the measurement itself
@@ -77,6 +78,16 @@ def motion_timeout_s(instrument: Instrument, role: str, distance_deg: float) -> 
     ax = instrument.config.axes[role]
     profile = float(profile_seconds(distance_deg, ax.speed_deg_s, ax.accel_deg_s2))
     return WAIT_FACTOR * real_seconds(instrument, profile) + WAIT_MARGIN_S
+
+
+def home_axes(instrument: Instrument) -> None:
+    """Home the axes whose config asks for it, one after another, each allowed HOME_S of
+    device time."""
+    for role, ax in instrument.config.axes.items():
+        if ax.home:
+            instrument.axes[role].home()
+            instrument.axes[role].wait(WAIT_FACTOR * real_seconds(instrument, HOME_S)
+                                       + WAIT_MARGIN_S)
 
 
 class StopRun(Exception):
@@ -313,15 +324,11 @@ class Engine:
         """Configure the detector on every range the plan uses (ending on the first reading's),
         home the axes that ask for it, learn where every axis is (the first move's timeout
         depends on it)."""
-        cfg = self.inst.config
         try:
             self._check_ranges()
-            for role, ax in cfg.axes.items():
-                if ax.home:
-                    self.inst.axes[role].home()
-                    self.inst.axes[role].wait(WAIT_FACTOR * real_seconds(self.inst, 600.0)
-                                              + WAIT_MARGIN_S)
-                self._reported[role] = self.inst.axes[role].position()
+            home_axes(self.inst)
+            for role, axis in self.inst.axes.items():
+                self._reported[role] = axis.position()
         except TRANSIENT as exc:
             raise StopRun(f"preparing the instrument: {exc}") from exc
 

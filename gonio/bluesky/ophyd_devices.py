@@ -28,12 +28,12 @@ from ophyd_async.core import StandardReadableFormat as Format
 
 from drivers.base import Axis, Detector
 from gonio.config import InstrumentConfig, load_config
-from gonio.engine import TRANSIENT, WAIT_MARGIN_S, motion_timeout_s
-from gonio.instrument import Instrument, build_instrument, real_seconds
+from gonio.engine import TRANSIENT, home_axes, motion_timeout_s
+from gonio.instrument import Instrument, build_instrument
 from gonio.plan import AUTO_RANGE, describe_range, sweeps_source
 
 T = TypeVar("T")
-HOME_S = 600.0  # device seconds a homing move may take (as gonio's engine allows)
+FAILURES = (*TRANSIENT, ValueError)  # a driver's ValueError: a value the device cannot take
 
 
 class DeviceFailure(RuntimeError):
@@ -49,7 +49,7 @@ async def _call(device: str, action: str, fn: Callable[..., T], *args: Any) -> T
     """A blocking driver call in a worker thread; its failures as a DeviceFailure."""
     try:
         return await asyncio.to_thread(fn, *args)
-    except TRANSIENT as exc:
+    except FAILURES as exc:
         raise DeviceFailure(device, action, exc) from exc
 
 
@@ -217,10 +217,7 @@ def _prepare(inst: Instrument) -> None:
     engine does before a run."""
     det = inst.config.detector
     inst.detector.configure(det.wavelength_nm, det.averaging, det.range_w)
-    for role, ax in inst.config.axes.items():
-        if ax.home:
-            inst.axes[role].home()
-            inst.axes[role].wait(2 * real_seconds(inst, HOME_S) + WAIT_MARGIN_S)
+    home_axes(inst)
 
 
 async def _connect(devs: GonioDevices) -> None:
@@ -248,7 +245,7 @@ def devices(config: str | Path | InstrumentConfig, sim: bool = False,
         stack.callback(inst.stop_all)
         try:
             _prepare(inst)
-        except TRANSIENT as exc:
+        except FAILURES as exc:
             raise DeviceFailure(cfg.name, "preparing the instrument", exc) from exc
         devs = GonioDevices(cfg, inst, {role: GonioAxis(role, axis, inst)
                                         for role, axis in inst.axes.items()},
