@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.lut import remap
+from sim.lut.axes import NODES
 from sim.lut.exr import check_exr, read_exr, save_exr
 from sim.lut.spec import FORMAT, TableSpec
 
@@ -48,7 +50,7 @@ class Table:
             "channels": list(self.spec.channels),
             "definitions": DEFINITIONS[self.spec.kind],
             "axes": [{"name": a.name, "size": a.size, "parameterisation": a.parameterisation,
-                      "nodes": "texel centres t = (k + 0.5) / size, clamp to edge",
+                      "nodes": NODES[a.ends],
                       "first": float(a.values()[0]), "last": float(a.values()[-1])}
                      for a in self.spec.axes],
             "index_order": [a.name for a in self.spec.axes[::-1]] + ["channel"],
@@ -73,13 +75,31 @@ class Table:
         return path
 
     def lookup(self, *params: np.ndarray) -> np.ndarray:
-        """Interpolated channels (..., channels) at parameter values (cos_theta, alpha[, eta])."""
-        if len(params) != len(self.spec.axes):
-            raise ValueError(f"a {self.spec.kind} table takes {len(self.spec.axes)} parameters "
-                             f"({', '.join(a.name for a in self.spec.axes)}), got {len(params)}")
+        """Interpolated channels (..., channels) at parameter values (cos_theta, alpha[, eta]);
+        a fixed-index table takes (cos_theta, alpha) and gives each channel at its own eta."""
+        axes = self.spec.axes
+        if len(params) != len(axes):
+            raise ValueError(f"a {self.spec.kind} table takes {len(axes)} parameters "
+                             f"({', '.join(a.name for a in axes)}), got {len(params)}")
         arrays = np.broadcast_arrays(*params)
-        coords = [a.to_coord(p) for a, p in zip(self.spec.axes, arrays, strict=True)]
-        return interpolate(self.data.astype(np.float64), coords[::-1])
+        data = self.data.astype(np.float64)
+        if self.spec.etas is None:
+            return interpolate(data, texture_coords(self.spec, *arrays)[::-1])
+        return np.concatenate([interpolate(data[..., c:c + 1],
+                                           texture_coords(self.spec, *arrays, eta)[::-1])
+                               for c, eta in enumerate(self.spec.etas)], axis=-1)
+
+
+def texture_coords(spec: TableSpec, mu: np.ndarray, alpha: np.ndarray,
+                   eta: np.ndarray | float | None = None) -> list[np.ndarray]:
+    """Texture coordinate on each axis of spec at (N.V, alpha[, eta]) (eta is given apart for
+    a fixed-index table's channel, and is not an axis of it): what a shader computes."""
+    axes = spec.axes
+    params = np.broadcast_arrays(mu, alpha, *(() if eta is None else (eta,)))
+    coords = [a.to_coord(p) for a, p in zip(axes, params, strict=False)]
+    if spec.remapped:
+        coords[0] = remap.nv_coord(params[0], params[1], params[2], axes[0].size)
+    return coords
 
 
 def interpolate(data: np.ndarray, coords: list[np.ndarray]) -> np.ndarray:
