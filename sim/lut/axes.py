@@ -17,6 +17,9 @@ import numpy as np
 
 #: Largest index-of-refraction ratio on the eta axis; the axis spans [1/ETA_MAX, ETA_MAX].
 ETA_MAX = 2.5
+#: On an eta axis with ends, s - 1/2 goes as (ln eta)^ETA_POWER: nodes crowd towards eta = 1,
+#: where grazing views see the transmittance change over |eta^2 - 1| ~ alpha^2.
+ETA_POWER = 0.4
 
 
 @dataclass(frozen=True)
@@ -44,7 +47,10 @@ class Axis:
             return s
         if self.name == "alpha":
             return s * s
-        return np.exp(math.log(ETA_MAX) * (2.0 * s - 1.0))
+        z = 2.0 * s - 1.0
+        if self.ends:
+            z = np.sign(z) * np.abs(z) ** (1.0 / ETA_POWER)
+        return np.exp(math.log(ETA_MAX) * z)
 
     def to_coord(self, value: np.ndarray) -> np.ndarray:
         """Texture coordinate of a parameter value (the inverse of to_value, unclamped)."""
@@ -54,7 +60,8 @@ class Axis:
         elif self.name == "alpha":
             s = np.sqrt(v)
         else:
-            s = 0.5 * (np.log(v) / math.log(ETA_MAX) + 1.0)
+            z = np.log(v) / math.log(ETA_MAX)
+            s = 0.5 * ((np.sign(z) * np.abs(z) ** ETA_POWER if self.ends else z) + 1.0)
         return (0.5 + (self.size - 1) * s) / self.size if self.ends else s
 
 
@@ -66,7 +73,8 @@ PARAMETERISATIONS = {
 #: How t follows from s, without and with `ends`.
 NODES = {False: "t = s; nodes at texel centres t = (k + 0.5) / size, clamp to edge",
          True: "t = (0.5 + (size - 1) s) / size: node k at s = k / (size - 1), the ends of "
-               "the range on the outer texel centres"}
+               "the range on the outer texel centres (eta: s = (sign(z) |z|^"
+               f"{ETA_POWER} + 1) / 2, z = ln(eta) / ln({ETA_MAX}))"}
 
 
 def axes_for(kind: str, shape: tuple[int, ...], *, ends: bool = False,

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from sim.cluster import map_tasks, total_threads
-from sim.lut.remap import node_points
+from sim.lut.remap import albedo_factor, node_points
 from sim.lut.spec import TableSpec
 from sim.lut.table import Table
 
@@ -106,9 +106,12 @@ def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
                               seed=spec.seed, tile_entries=spec.tile_entries, client=client,
                               progress=progress)
     seconds = time.perf_counter() - start
+    points = grid_points(spec)
     if not np.all(np.isfinite(values)):
-        bad = grid_points(spec)[~np.all(np.isfinite(values), axis=1)][0]
+        bad = points[~np.all(np.isfinite(values), axis=1)][0]
         raise ValueError(f"non-finite table value at (N.V, alpha[, eta]) = {tuple(bad)}")
+    if spec.kind == "transmission":
+        values = values * albedo_factor(spec.remapped, points[:, 2:3])
     exact = values.reshape(spec.array_shape)
     return Table(spec=spec, data=exact.astype(spec.dtype), bake_seconds=seconds,
                  model=getattr(estimator, "description", repr(estimator)))

@@ -8,8 +8,9 @@ moving to 0 as the roughness blurs the edge away):
 
 * s in [0, s_c], s_c = node n // 3: N.V in [0, mu_s], s = s_c (1 - y), y = squash(mu_s - mu;
   M = mu_s, w = LOWER_WIDTH alpha) (beyond the critical angle; only roughness makes a layer);
-* s in [s_c, 1]: s = s_c + (1 - s_c) x, x = squash(m = mu^2 - mu_s^2; M = 1 - mu_s^2,
-  w = |d| + (ROUGHNESS_WIDTH alpha)^2),
+* s in [s_c, 1]: s = s_c + (1 - s_c) x, x = squash(m = (mu - mu_s) (mu + mu_s + e);
+  M = m at mu = 1, w = |d| + (ROUGHNESS_WIDTH alpha)^2), e = GRAZING alpha (the rise from a
+  grazing view of a rough surface is steeper than linear in N.V),
 
 where squash(m; M, w)^2 = m (M + w) / ((m + w) M) grows like sqrt(m / w) inside the layer
 m < w and straightens beyond it. For a smooth surface x min(eta, 1/eta) is the ratio of the
@@ -17,7 +18,9 @@ smaller to the larger of N.V and eta cos(theta_t), of which Fresnel's transmitta
 smooth function on both sides of eta = 1: the critical angle sits on node n // 3, the
 square-root rise above it becomes a straight line, and the layer of width sqrt|d| where
 Fresnel departs from 0 near eta = 1 keeps its texels however thin it gets. The map is
-continuous in (mu, alpha, eta), eta = 1 included. `none` is the identity, t = N.V.
+continuous in (mu, alpha, eta), eta = 1 included. A remapped table also puts the ends of
+the alpha and eta ranges on nodes, crowds its eta nodes towards 1 (sim.lut.axes.ETA_POWER)
+and stores eta^2 T (albedo_factor). `none` is the identity, t = N.V, storing T.
 """
 
 from __future__ import annotations
@@ -29,6 +32,9 @@ REMAPS = ("tir", "none")
 ROUGHNESS_WIDTH = 1.0
 #: The layer width below the split (N.V < mu_s), in units of alpha.
 LOWER_WIDTH = 4.0
+#: Where the rise from grazing view (or from the split) turns from linear to square in m, in
+#: units of alpha.
+GRAZING = 1.0
 #: Floor of every width, so the map stays defined at eta = 1, alpha = 0 (x = 1 for mu > 0).
 TINY = 1e-300
 #: N.V at which the N.V = 0 nodes are baked: the model's limit N.V -> 0+ (at 0 itself the
@@ -39,8 +45,8 @@ DESCRIPTION = ("remapped N.V coordinate s (sim.lut.remap, docs/lut.md): with d =
                "mu_c = sqrt(max(-d, 0)), mu_s = mu_c^3 / (mu_c^2 + alpha^2), "
                "q(m; M, w) = sqrt(m (M + w) / ((m + w) M)) and s_c = (n // 3) / (n - 1): "
                f"s = s_c (1 - q(mu_s - mu; mu_s, {LOWER_WIDTH:g} alpha)) for mu < mu_s, else "
-               f"s = s_c + (1 - s_c) q(mu^2 - mu_s^2; 1 - mu_s^2, |d| + "
-               f"({ROUGHNESS_WIDTH:g} alpha)^2)")
+               f"s = s_c + (1 - s_c) q(m(mu); m(1), |d| + ({ROUGHNESS_WIDTH:g} alpha)^2) with "
+               f"m(mu) = (mu - mu_s) (mu + mu_s + {GRAZING:g} alpha)")
 
 
 def split(n: int) -> float:
@@ -78,7 +84,9 @@ def nv_coord(mu, alpha, eta, n: int) -> np.ndarray:
     mu = np.clip(mu, 0.0, 1.0)
     mu_s, width = _layer(alpha, eta)
     s_c = split(n)
-    x = _squash(np.maximum(mu * mu - mu_s * mu_s, 0.0), 1.0 - mu_s * mu_s, width)
+    eps = GRAZING * alpha
+    x = _squash(np.maximum((mu - mu_s) * (mu + mu_s + eps), 0.0),
+                (1.0 - mu_s) * (1.0 + mu_s + eps), width)
     y = _squash(np.maximum(mu_s - mu, 0.0), mu_s, LOWER_WIDTH * alpha + TINY)
     s = np.where(mu < mu_s, s_c * (1.0 - y), s_c + (1.0 - s_c) * x)
     return (0.5 + (n - 1) * s) / n
@@ -91,11 +99,21 @@ def nv_value(t, alpha, eta, n: int) -> np.ndarray:
     s = np.clip((t * n - 0.5) / (n - 1), 0.0, 1.0)
     mu_s, width = _layer(alpha, eta)
     s_c = split(n)
-    above = _unsquash(np.clip((s - s_c) / (1.0 - s_c), 0.0, 1.0), 1.0 - mu_s * mu_s, width)
+    eps = GRAZING * alpha
+    above = _unsquash(np.clip((s - s_c) / (1.0 - s_c), 0.0, 1.0),
+                      (1.0 - mu_s) * (1.0 + mu_s + eps), width)
     below = mu_s - _unsquash(np.clip(1.0 - s / max(s_c, TINY), 0.0, 1.0), mu_s,
                              LOWER_WIDTH * alpha + TINY)
-    return np.where(s < s_c, np.clip(below, 0.0, 1.0),
-                    np.sqrt(np.clip(above + mu_s * mu_s, 0.0, 1.0)))
+    root = 0.5 * (np.sqrt(eps * eps + 4.0 * (mu_s * (mu_s + eps) + above)) - eps)
+    return np.clip(np.where(s < s_c, below, root), 0.0, 1.0)
+
+
+def albedo_factor(remapped: bool, eta: np.ndarray | float) -> np.ndarray:
+    """What a transmission table stores per unit of T at this eta: eta^2 when remapped (the
+    directional albedo E = eta^2 T, bounded by 1 and free of the 1 / eta^2 that a lerp across
+    eta would bend), else 1."""
+    eta = np.asarray(eta, dtype=np.float64)
+    return eta * eta if remapped else np.ones_like(eta)
 
 
 def node_points(t, alpha, eta, n: int) -> tuple[np.ndarray, np.ndarray]:

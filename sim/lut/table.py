@@ -84,9 +84,13 @@ class Table:
         arrays = np.broadcast_arrays(*params)
         data = self.data.astype(np.float64)
         if self.spec.etas is None:
-            return interpolate(data, texture_coords(self.spec, *arrays)[::-1])
+            stored = interpolate(data, texture_coords(self.spec, *arrays)[::-1])
+            if self.spec.kind != "transmission":
+                return stored
+            return stored / remap.albedo_factor(self.spec.remapped, arrays[2])[..., None]
         return np.concatenate([interpolate(data[..., c:c + 1],
                                            texture_coords(self.spec, *arrays, eta)[::-1])
+                               / remap.albedo_factor(self.spec.remapped, eta)
                                for c, eta in enumerate(self.spec.etas)], axis=-1)
 
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from sim.lut.axes import ETA_MAX
 from sim.lut.bake import Estimator, grid_points, integrate_points
+from sim.lut.remap import albedo_factor
 from sim.lut.spec import TableSpec
 from sim.lut.table import Table
 
@@ -134,6 +135,16 @@ def edge_split(params: np.ndarray, err: np.ndarray,
     return out
 
 
+def stored_values(table: Table) -> np.ndarray:
+    """The table's stored values in the units of the model's channels, one row per grid
+    point (a remapped transmission table stores eta^2 T: divided out here)."""
+    points = grid_points(table.spec)
+    data = table.data.astype(np.float64).reshape(len(points), -1)
+    if table.spec.kind != "transmission":
+        return data
+    return data / albedo_factor(table.spec.remapped, points[:, 2:3])
+
+
 def validate(table: Table, estimator: Estimator | None = None, *, entries: int | None = None,
              points: int = 1000, reference_samples: int = 2**14, seed: int = 1,
              client=None) -> ValidationReport:
@@ -146,8 +157,8 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
     start = time.perf_counter()
     grid = grid_points(table.spec)
     index = chosen_entries(len(grid), entries, seed)
-    stored = table.data.astype(np.float64).reshape(len(grid), -1)[index]
     grid = grid[index]
+    stored = stored_values(table)[index]
     params = random_points(table.spec, points, seed)
     looked_up = model_points(table.spec, params)
     ref, noise = reference(np.concatenate([grid, looked_up]), estimator, reference_samples,

@@ -12,6 +12,7 @@ import pytest
 from gonio_cli.main import main
 from sim.lut import TableSpec, bake, load_table
 from sim.lut.bake import grid_points
+from sim.lut.remap import albedo_factor
 from sim.lut.table import Table, interpolate, texture_coords
 from sim.lut.validate import random_points
 
@@ -59,7 +60,7 @@ def test_transmission_half_atlas_of_eta_slices(tmp_path):
     for x, y in [(0, 0), (7, 0), (2, 4), (5, 5), (3, 14)]:  # N.V x, alpha y % 5, eta y // 5
         mu, a, e = points[y, x]
         assert (a, e) == (alpha[y % 5], eta[y // 5])
-        assert pixels[y, x] == np.float16(100 * mu + 10 * a + e)
+        assert pixels[y, x] == np.float16((100 * mu + 10 * a + e) * e * e)  # stores eta^2 T
     atlas = json.loads(header["gonio.atlas"])
     assert atlas["width"] == 8 and atlas["height"] == 15 and atlas["pixel_type"] == "HALF"
     assert atlas["channels"] == {"R": "transmittance"} and "y // 5" in atlas["layout"]
@@ -141,4 +142,5 @@ def test_atlas_sampling_recipe_of_the_docs_gives_the_trilinear_lookup(tmp_path, 
     k = np.minimum(np.floor(x), n_eta - 2)
     low, high = (interpolate(atlas, [(k + j + t_alpha) / n_eta, t[:, 0]]) for j in (0, 1))
     recipe = low + (x - k)[:, None] * (high - low)
+    recipe = recipe / albedo_factor(spec.remapped, params[2])[:, None]  # stored eta^2 T
     assert np.allclose(recipe, table.lookup(*params), rtol=0, atol=1e-12)
