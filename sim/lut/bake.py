@@ -90,7 +90,8 @@ def grid_points(spec: TableSpec) -> np.ndarray:
         values = [np.repeat(v, len(spec.etas)) for v in values]
         values.append(np.tile(spec.etas, len(grids[0].ravel())))
     if spec.remapped:
-        values[0], values[2] = node_points(coords[0], values[1], values[2], axes[0].size)
+        values[0], values[2] = node_points(coords[0], values[1], values[2], axes[0].size,
+                                           mirror=spec.etas is None)
     return np.stack(values, axis=-1)
 
 

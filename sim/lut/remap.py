@@ -116,11 +116,12 @@ def albedo_factor(remapped: bool, eta: np.ndarray | float) -> np.ndarray:
     return eta * eta if remapped else np.ones_like(eta)
 
 
-def node_points(t, alpha, eta, n: int) -> tuple[np.ndarray, np.ndarray]:
+def node_points(t, alpha, eta, n: int, mirror: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(N.V, eta) at which to bake the nodes at (t, alpha, eta): N.V = nv_value (MU_FLOOR at
-    the least), and beyond the split on an eta > 1 slice, where no view lands, the mirror
-    node at 1 / eta, so the lerp across eta = 1 meets the side it continues."""
+    the least), and with `mirror` (a table with an eta axis), beyond the split on an eta > 1
+    slice, where no view lands, the mirror node at 1 / eta, so the lerp across eta = 1 meets
+    the side it continues."""
     t, alpha, eta = _arrays(t, alpha, eta)
     below = (t * n - 0.5) / (n - 1) < split(n) - 1e-12
-    eta = np.where(below & (eta > 1.0), 1.0 / eta, eta)
+    eta = np.where(mirror & below & (eta > 1.0), 1.0 / eta, eta)
     return np.maximum(nv_value(t, alpha, eta, n), MU_FLOOR), eta
