@@ -171,3 +171,21 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
         len(grid), *max_rms(entry_err), points, *max_rms(lookup_err),
         float(np.sqrt(np.mean(noise * noise))), reference_samples,
         time.perf_counter() - start, **split)
+
+
+def fixed_index_error(fixed: Table, full: Table, etas: list[float], points: int = 2000,
+                      seed: int = 1) -> list[dict]:
+    """How far a fixed-index table is from the 3-D table when the glass's index is another:
+    at each eta, max and RMS of the fixed table's channel on eta's side of 1 (T at
+    fixed.spec.eta, or at its reciprocal) minus the 3-D table's lookup at eta, over points
+    uniform in (N.V, alpha)."""
+    mu, alpha = np.random.default_rng(seed).random((2, points))
+    looked_up = fixed.lookup(mu, alpha)
+    out = []
+    for eta in etas:
+        channel = 0 if (eta > 1) == (fixed.spec.eta > 1) else 1
+        err = looked_up[:, channel] - full.lookup(mu, alpha, np.full(points, eta))[:, 0]
+        worst, rms = max_rms(err)
+        out.append({"eta": eta, "fixed_eta": fixed.spec.etas[channel], "max": worst,
+                    "rms": rms})
+    return out
