@@ -31,6 +31,21 @@ DEFINITIONS = {
 }
 
 
+def definitions(spec: TableSpec) -> dict:
+    """What each stored channel of a table of spec holds (its metadata's `definitions`)."""
+    base = DEFINITIONS[spec.kind]
+    if spec.kind != "transmission":
+        return base
+    stored = base["transmittance"]
+    if spec.remapped:
+        stored = (f"eta^2 times the {stored}, i.e. the directional albedo E(v) (at most 1); "
+                  f"divide by eta^2 for T (Table.lookup does)")
+    if spec.etas is None:
+        return {"transmittance": stored}
+    return {name: f"at eta = {eta:g}: {stored}"
+            for name, eta in zip(spec.channels, spec.etas, strict=True)}
+
+
 @dataclass
 class Table:
     """Baked values `data` (spec.array_shape: reversed axes, channels) in spec.dtype, with
@@ -48,7 +63,7 @@ class Table:
             "format": FORMAT,
             "kind": self.spec.kind,
             "channels": list(self.spec.channels),
-            "definitions": DEFINITIONS[self.spec.kind],
+            "definitions": definitions(self.spec),
             "axes": [{"name": a.name, "size": a.size, "parameterisation": a.parameterisation,
                       "nodes": NODES[a.ends],
                       "first": float(a.values()[0]), "last": float(a.values()[-1])}
