@@ -43,6 +43,7 @@ from sim.lut.validate import (
     near_critical,
     random_points,
     reference,
+    stored_values,
 )
 
 #: Width of the layout column of the bake-time lines.
@@ -173,11 +174,11 @@ def accuracy_table(kind: str, shapes: list[tuple[int, ...]], samples_list: list[
         for samples in samples_list:
             spec = TableSpec(kind=kind, shape=shape, samples=samples, dtype="float64")
             table = bake(spec, estimator)
-            index = chosen_entries(spec, entries, seed=2)
+            index = chosen_entries(len(grid_points(spec)), entries, seed=2)
             ref_entries, _ = reference(grid_points(spec)[index], estimator, reference_samples)
             for dtype in dtypes:
                 stored = Table(spec=spec, data=table.data.astype(dtype).astype(np.float64))
-                flat = stored.data.reshape(-1, len(spec.channels))[index]
+                flat = stored_values(stored)[index]
                 err = stored.lookup(*params.T) - ref_points
                 row = [*max_rms(flat - ref_entries), *max_rms(err)]
                 if transmission:
