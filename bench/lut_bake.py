@@ -18,7 +18,13 @@ Accuracy: max and RMS error of entries and of random lookups for each size and d
 transmission, lookups split into points near the total-internal-reflection edge
 (eta < 1, |N.V - N.V_c| <= TIR_BAND) and the rest.
 
-    python bench/lut_bake.py [--samples 256] [--skip-accuracy] [--quick]
+Issue 18: the 32x32x16 transmission table at 1024 samples with the old N.V axis
+(--remap none) and the remapped one, validated on the same points (uniform in the physical
+N.V, alpha, eta) against one reference, split at the TIR band and at the old table's eta
+nodes around 1; the 2-D table at eta = 1.5 against the 3-D table at other indices; the quoted
+focusing approximation against Walter's eq. 17.
+
+    python bench/lut_bake.py [--samples 256] [--skip-accuracy] [--quick] [--only-issue-18]
 """
 
 from __future__ import annotations
@@ -34,15 +40,19 @@ import numpy as np
 from sim.cluster import dask_client, describe, usable_cores
 from sim.lut import Table, TableSpec, bake
 from sim.lut.bake import grid_points, integrate_tile, integrate_tiles, tile_arguments
+from sim.lut.focusing import approximation_error
 from sim.lut.model import ModelEstimator
 from sim.lut.validate import (
     TIR_BAND,
     chosen_entries,
     edge_split,
+    fixed_index_error,
     max_rms,
     near_critical,
     random_points,
     reference,
+    stored_values,
+    unity_bracket,
 )
 
 #: Width of the layout column of the bake-time lines.
@@ -173,11 +183,11 @@ def accuracy_table(kind: str, shapes: list[tuple[int, ...]], samples_list: list[
         for samples in samples_list:
             spec = TableSpec(kind=kind, shape=shape, samples=samples, dtype="float64")
             table = bake(spec, estimator)
-            index = chosen_entries(spec, entries, seed=2)
+            index = chosen_entries(len(grid_points(spec)), entries, seed=2)
             ref_entries, _ = reference(grid_points(spec)[index], estimator, reference_samples)
             for dtype in dtypes:
                 stored = Table(spec=spec, data=table.data.astype(dtype).astype(np.float64))
-                flat = stored.data.reshape(-1, len(spec.channels))[index]
+                flat = stored_values(stored)[index]
                 err = stored.lookup(*params.T) - ref_points
                 row = [*max_rms(flat - ref_entries), *max_rms(err)]
                 if transmission:
@@ -188,15 +198,76 @@ def accuracy_table(kind: str, shapes: list[tuple[int, ...]], samples_list: list[
                       f"{table.bake_seconds:7.2f} " + " ".join(f"{x:9.2e}" for x in row))
 
 
+REMAP_SHAPE = (32, 32, 16)
+OTHER_ETAS = [1.33, 1.45, 1.6, 1.7, 2.0]
+
+
+def remap_figures(name: str, table: Table, params: np.ndarray, ref: np.ndarray, entries: int,
+                  reference_samples: int, band: tuple[float, float]) -> None:
+    """One line of entry and lookup errors for a table against the shared reference; the
+    eta = 1 part is the band between the old table's eta nodes bracketing 1 (the new table's
+    own bracket is much narrower: its eta nodes crowd towards 1)."""
+    estimator = ModelEstimator("transmission")
+    index = chosen_entries(len(grid_points(table.spec)), entries, seed=2)
+    entry_ref, _ = reference(grid_points(table.spec)[index], estimator, reference_samples)
+    entry_max, entry_rms = max_rms(stored_values(table)[index] - entry_ref)
+    err = table.lookup(*params.T) - ref
+    lookup_max, lookup_rms = max_rms(err)
+    parts = edge_split(params, err, band)
+    print(f"{name:12s} bake {table.bake_seconds:6.1f} s | entries max {entry_max:.4f} rms "
+          f"{entry_rms:.4f} | lookups max {lookup_max:.4f} rms {lookup_rms:.4f} | TIR band "
+          f"({parts['edge_points']}) max {parts['edge_lookup_max']:.4f} rms "
+          f"{parts['edge_lookup_rms']:.4f} | eta in ({parts['unity_eta'][0]:.3f}, "
+          f"{parts['unity_eta'][1]:.3f}) ({parts['unity_points']}) max "
+          f"{parts['unity_lookup_max']:.4f} rms {parts['unity_lookup_rms']:.4f} | rest max "
+          f"{parts['rest_lookup_max']:.4f} rms {parts['rest_lookup_rms']:.4f}")
+
+
+def issue_18(points: int = 2000, entries: int = 1024, reference_samples: int = 2**14) -> None:
+    """Issue 18's albedo-table figures in one run: the 32x32x16 table with the old N.V axis
+    and the remapped one (same budget, same validation points uniform in the physical
+    parameters, one shared reference), the fixed-index table against the 3-D one at other
+    indices, and the quoted focusing approximation against Walter's eq. 17."""
+    print(f"== issue 18, before (--remap none) and after (tir): load average {load()}; "
+          f"{'x'.join(map(str, REMAP_SHAPE))} float16, 1024 samples/entry, {points} lookups "
+          f"uniform in (N.V, alpha, eta), reference 2 x {reference_samples} Sobol points")
+    tables = {r: bake(TableSpec(kind="transmission", shape=REMAP_SHAPE, remap=r))
+              for r in ("none", "tir")}
+    params = random_points(tables["tir"].spec, points, seed=1)
+    ref, noise = reference(params, ModelEstimator("transmission"), reference_samples)
+    print(f"reference noise rms {float(np.sqrt(np.mean(noise**2))):.1e}")
+    for name, table in (("before: none", tables["none"]), ("after: tir", tables["tir"])):
+        remap_figures(name, table, params, ref, entries, reference_samples,
+                      unity_bracket(tables["none"].spec))
+    fixed = bake(TableSpec(kind="transmission", shape=REMAP_SHAPE[:2], eta=1.5))
+    print(f"fixed eta 1.5 (and 1/1.5) 32x32 float16: bake {fixed.bake_seconds:.1f} s; against "
+          f"the 3-D table at other indices:")
+    for row in fixed_index_error(fixed, tables["tir"], OTHER_ETAS + [1 / e for e in OTHER_ETAS]):
+        print(f"  eta {row['eta']:.4f} from the eta {row['fixed_eta']:.4f} channel: max "
+              f"{row['max']:.4f} rms {row['rms']:.4f}")
+    etas = np.exp(np.linspace(np.log(0.4), np.log(2.5), 64))
+    for name, part in (("eta < 1", etas[etas < 0.97]), ("eta > 1", etas[etas > 1.03])):
+        r = approximation_error(part)
+        print(f"focusing, quoted approximation against Walter eq. 17 ({name}, {r['points']} "
+              f"facet angles x indices): max relative error {r['max_relative_error']:.3g}, rms "
+              f"{r['rms_relative_error']:.3g}, exact / quoted in [{r['exact_over_quoted'][0]:.3g}, "
+              f"{r['exact_over_quoted'][1]:.3g}]")
+
+
 def main() -> None:
-    """Run both sections."""
+    """Run the sections."""
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", type=int, default=256, help="Sobol points per entry")
     parser.add_argument("--skip-accuracy", action="store_true")
     parser.add_argument("--quick", action="store_true",
                         help="32x32x16 for the timing, smaller accuracy sweep")
+    parser.add_argument("--only-issue-18", action="store_true",
+                        help="only the remap before/after, fixed-index and focusing figures")
     args = parser.parse_args()
+    if args.only_issue_18:
+        issue_18()
+        return
     shape = (32, 32, 16) if args.quick else (64, 64, 32)
     print(f"== bake time, transmission {'x'.join(map(str, shape))}, {args.samples} samples/entry")
     bake_times(shape, args.samples)
@@ -217,6 +288,7 @@ def main() -> None:
                                                               (64, 64, 32)]
     accuracy_table("transmission", shapes, samples, ["float16", "float32"], entries=500,
                    points=2000, reference_samples=2**13)
+    issue_18()
     print(f"load average at the end: {load()}")
 
 

@@ -33,6 +33,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="entries per tile, the unit of parallel work and of seeding")
     p.add_argument("--distribution", choices=WITH_KERNELS, default="ggx")
     p.add_argument("--masking", choices=MASKINGS, default="correlated")
+    p.add_argument("--remap", choices=("tir", "none"),
+                   help="N.V coordinate of a transmission table: tir (default) follows the "
+                        "critical angle and the Fresnel layer near eta = 1 per (alpha, eta), "
+                        "none is t = N.V (tables before it); see docs/lut.md")
+    p.add_argument("--eta", type=float, metavar="ETA",
+                   help="transmission at this one index: a 2-D N.V x roughness table whose two "
+                        "channels are at ETA and 1/ETA (e.g. 1.5: into and out of glass)")
     p.add_argument("--multiple-scattering", action="store_true",
                    help="include multiple scattering (Heitz 2016 random walk; transmission)")
     where = p.add_mutually_exclusive_group()
@@ -62,17 +69,22 @@ def run(args: argparse.Namespace) -> int:
     from sim.lut.table import check_storable
 
     try:
-        spec = TableSpec(kind=args.kind, shape=parse_size(args.size or DEFAULT_SIZE[args.kind]),
+        size = args.size or DEFAULT_SIZE[args.kind]
+        if args.eta is not None and not args.size:
+            size = "x".join(size.split("x")[:2])
+        spec = TableSpec(kind=args.kind, shape=parse_size(size),
                          dtype=args.dtype, samples=args.samples, seed=args.seed,
                          tile_entries=args.tile_entries, distribution=args.distribution,
-                         masking=args.masking, multiple_scattering=args.multiple_scattering)
+                         masking=args.masking, multiple_scattering=args.multiple_scattering,
+                         remap=args.remap, eta=args.eta)
         if args.validate and min(args.validate_entries, args.validate_points) < 1:
             raise ValueError("--validate-entries and --validate-points must be >= 1")
         check_storable(spec, args.out)
         with dask_client(args.workers, args.scheduler) as client:
             table = bake(spec, client=client, progress=args.progress)
             layout = describe(args.workers, args.scheduler)
-            print(f"baked {spec.kind} {'x'.join(map(str, spec.shape))} {spec.dtype}, "
+            at = f" at eta {spec.eta:g} and {1 / spec.eta:g}" if spec.eta is not None else ""
+            print(f"baked {spec.kind}{at} {'x'.join(map(str, spec.shape))} {spec.dtype}, "
                   f"{spec.samples} samples/entry, in {table.bake_seconds:.2f} s ({layout})")
             if args.validate:
                 report = validate(table, entries=args.validate_entries,

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from sim.cluster import map_tasks, total_threads
+from sim.lut.remap import albedo_factor, node_points
 from sim.lut.spec import TableSpec
 from sim.lut.table import Table
 
@@ -77,10 +78,21 @@ def integrate_points(params: np.ndarray, estimator: Estimator, *, samples: int, 
 
 
 def grid_points(spec: TableSpec) -> np.ndarray:
-    """Parameter values (N.V, alpha[, eta]) of every entry, in the stored array's C order
-    (N.V fastest): (entries, axes)."""
-    grids = np.meshgrid(*(axis.values() for axis in spec.axes[::-1]), indexing="ij")
-    return np.stack([g.ravel() for g in grids[::-1]], axis=-1)
+    """Model parameters (N.V, alpha[, eta]) of every stored value, in the stored array's C
+    order (N.V fastest): (entries, axes); a fixed-index table's two channels are two values
+    per entry, (entries * 2, 3). A remapped table's N.V follows sim.lut.remap.node_points."""
+    axes = spec.axes
+    grids = np.meshgrid(*(axis.coords() for axis in axes[::-1]), indexing="ij")
+    coords = [g.ravel() for g in grids[::-1]]
+    values = [axis.to_value(t) for axis, t in zip(axes, coords, strict=True)]
+    if spec.etas is not None:
+        coords = [np.repeat(t, len(spec.etas)) for t in coords]
+        values = [np.repeat(v, len(spec.etas)) for v in values]
+        values.append(np.tile(spec.etas, len(grids[0].ravel())))
+    if spec.remapped:
+        values[0], values[2] = node_points(coords[0], values[1], values[2], axes[0].size,
+                                           mirror=spec.etas is None)
+    return np.stack(values, axis=-1)
 
 
 def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
@@ -95,9 +107,12 @@ def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
                               seed=spec.seed, tile_entries=spec.tile_entries, client=client,
                               progress=progress)
     seconds = time.perf_counter() - start
+    points = grid_points(spec)
     if not np.all(np.isfinite(values)):
-        bad = grid_points(spec)[~np.all(np.isfinite(values), axis=1)][0]
+        bad = points[~np.all(np.isfinite(values), axis=1)][0]
         raise ValueError(f"non-finite table value at (N.V, alpha[, eta]) = {tuple(bad)}")
+    if spec.kind == "transmission":
+        values = values * albedo_factor(spec.remapped, points[:, 2:3])
     exact = values.reshape(spec.array_shape)
     return Table(spec=spec, data=exact.astype(spec.dtype), bake_seconds=seconds,
                  model=getattr(estimator, "description", repr(estimator)))

@@ -8,13 +8,16 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from sim.lut.axes import Axis, axes_for
+from sim.lut.axes import ETA_MAX, Axis, axes_for
+from sim.lut.remap import DESCRIPTION, REMAPS
 
 FORMAT = "gonio-lut/1"  # the stored table's format, in every table file's metadata
 KINDS = ("reflection", "transmission")
 DTYPES = ("float16", "float32", "float64")
 CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",)}
 DIMENSIONS = {"reflection": 2, "transmission": 3}
+#: A fixed-index transmission table's channels: T at eta and at 1 / eta (both sides of glass).
+FIXED_ETA_CHANNELS = ("transmittance", "transmittance_reciprocal")
 
 
 def parse_size(text: str) -> tuple[int, ...]:
@@ -42,15 +45,29 @@ class TableSpec:
     masking: str = "correlated"
     multiple_scattering: bool = False
     reflection_eta: float = 1.5
+    remap: str | None = None  # N.V coordinate (sim.lut.remap): "tir" for transmission, else "none"
+    eta: float | None = None  # transmission at this one index and its reciprocal: a 2-D table
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"kind {self.kind!r} is not one of {', '.join(KINDS)}")
-        if len(self.shape) != DIMENSIONS[self.kind]:
+        if self.remap is None:
+            object.__setattr__(self, "remap", "tir" if self.kind == "transmission" else "none")
+        if self.remap not in REMAPS:
+            raise ValueError(f"remap {self.remap!r} is not one of {', '.join(REMAPS)}")
+        if self.remap != "none" and self.kind != "transmission":
+            raise ValueError(f"remap {self.remap!r} is for transmission tables (the TIR edge); "
+                             f"a {self.kind} table takes remap 'none'")
+        if self.eta is not None and (self.kind != "transmission"
+                                     or not 1 / ETA_MAX <= self.eta <= ETA_MAX
+                                     or self.eta == 1.0):
+            raise ValueError(f"eta {self.eta} fixes the index of a transmission table: give a "
+                             f"value in [{1 / ETA_MAX:g}, {ETA_MAX:g}] other than 1")
+        if len(self.shape) != self.dimensions:
+            names = " x ".join(a.name for a in axes_for(self.kind, (2,) * self.dimensions))
             raise ValueError(
-                f"a {self.kind} table has {DIMENSIONS[self.kind]} axes "
-                f"({' x '.join(a.name for a in axes_for(self.kind, (2, 2, 2)))}), "
-                f"got size {'x'.join(map(str, self.shape))}")
+                f"a {self.kind} table{' at a fixed eta' if self.eta is not None else ''} has "
+                f"{self.dimensions} axes ({names}), got size {'x'.join(map(str, self.shape))}")
         if any(int(n) != n or n < 2 for n in self.shape):
             raise ValueError(f"size {self.shape}: every axis needs at least 2 nodes")
         if self.dtype not in DTYPES:
@@ -69,9 +86,26 @@ class TableSpec:
                              "multiple scattering is available for --kind transmission")
 
     @property
+    def dimensions(self) -> int:
+        """Number of axes: the kind's, less the eta axis when the index is fixed."""
+        return DIMENSIONS[self.kind] - (self.eta is not None)
+
+    @property
+    def remapped(self) -> bool:
+        """True when the N.V axis holds sim.lut.remap's coordinate (and every range's ends
+        are nodes)."""
+        return self.remap != "none"
+
+    @property
     def axes(self) -> tuple[Axis, ...]:
         """The table's axes, in index order."""
-        return axes_for(self.kind, self.shape)
+        return axes_for(self.kind, self.shape, ends=self.remapped,
+                        cos_theta=DESCRIPTION if self.remapped else None)
+
+    @property
+    def etas(self) -> tuple[float, ...] | None:
+        """A fixed-index table's index for each channel (eta, 1 / eta); else None."""
+        return None if self.eta is None else (self.eta, 1.0 / self.eta)
 
     @property
     def array_shape(self) -> tuple[int, ...]:
@@ -83,7 +117,7 @@ class TableSpec:
     @property
     def channels(self) -> tuple[str, ...]:
         """Names of the values stored per entry (the last table dimension)."""
-        return CHANNELS[self.kind]
+        return CHANNELS[self.kind] if self.eta is None else FIXED_ETA_CHANNELS
 
     def to_dict(self) -> dict:
         """JSON-ready fields."""
@@ -93,5 +127,5 @@ class TableSpec:
 
     @classmethod
     def from_dict(cls, d: dict) -> TableSpec:
-        """Inverse of to_dict."""
-        return cls(**{**d, "shape": tuple(d["shape"])})
+        """Inverse of to_dict (a file from before the remap has no remap field: "none")."""
+        return cls(**{"remap": "none", **d, "shape": tuple(d["shape"])})

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.lut import remap
+from sim.lut.axes import NODES
 from sim.lut.exr import check_exr, read_exr, save_exr
 from sim.lut.spec import FORMAT, TableSpec
 
@@ -27,6 +29,21 @@ DEFINITIONS = {
                          "(radiance BTDF, eta_o^2 factor included, so values may exceed 1)",
     },
 }
+
+
+def definitions(spec: TableSpec) -> dict:
+    """What each stored channel of a table of spec holds (its metadata's `definitions`)."""
+    base = DEFINITIONS[spec.kind]
+    if spec.kind != "transmission":
+        return base
+    stored = base["transmittance"]
+    if spec.remapped:
+        stored = (f"eta^2 times the {stored}, i.e. the directional albedo E(v) (at most 1); "
+                  f"divide by eta^2 for T (Table.lookup does)")
+    if spec.etas is None:
+        return {"transmittance": stored}
+    return {name: f"at eta = {eta:g}: {stored}"
+            for name, eta in zip(spec.channels, spec.etas, strict=True)}
 
 
 @dataclass
@@ -46,9 +63,9 @@ class Table:
             "format": FORMAT,
             "kind": self.spec.kind,
             "channels": list(self.spec.channels),
-            "definitions": DEFINITIONS[self.spec.kind],
+            "definitions": definitions(self.spec),
             "axes": [{"name": a.name, "size": a.size, "parameterisation": a.parameterisation,
-                      "nodes": "texel centres t = (k + 0.5) / size, clamp to edge",
+                      "nodes": NODES[a.ends],
                       "first": float(a.values()[0]), "last": float(a.values()[-1])}
                      for a in self.spec.axes],
             "index_order": [a.name for a in self.spec.axes[::-1]] + ["channel"],
@@ -73,13 +90,35 @@ class Table:
         return path
 
     def lookup(self, *params: np.ndarray) -> np.ndarray:
-        """Interpolated channels (..., channels) at parameter values (cos_theta, alpha[, eta])."""
-        if len(params) != len(self.spec.axes):
-            raise ValueError(f"a {self.spec.kind} table takes {len(self.spec.axes)} parameters "
-                             f"({', '.join(a.name for a in self.spec.axes)}), got {len(params)}")
+        """Interpolated channels (..., channels) at parameter values (cos_theta, alpha[, eta]);
+        a fixed-index table takes (cos_theta, alpha) and gives each channel at its own eta."""
+        axes = self.spec.axes
+        if len(params) != len(axes):
+            raise ValueError(f"a {self.spec.kind} table takes {len(axes)} parameters "
+                             f"({', '.join(a.name for a in axes)}), got {len(params)}")
         arrays = np.broadcast_arrays(*params)
-        coords = [a.to_coord(p) for a, p in zip(self.spec.axes, arrays, strict=True)]
-        return interpolate(self.data.astype(np.float64), coords[::-1])
+        data = self.data.astype(np.float64)
+        if self.spec.etas is None:
+            stored = interpolate(data, texture_coords(self.spec, *arrays)[::-1])
+            if self.spec.kind != "transmission":
+                return stored
+            return stored / remap.albedo_factor(self.spec.remapped, arrays[2])[..., None]
+        return np.concatenate([interpolate(data[..., c:c + 1],
+                                           texture_coords(self.spec, *arrays, eta)[::-1])
+                               / remap.albedo_factor(self.spec.remapped, eta)
+                               for c, eta in enumerate(self.spec.etas)], axis=-1)
+
+
+def texture_coords(spec: TableSpec, mu: np.ndarray, alpha: np.ndarray,
+                   eta: np.ndarray | float | None = None) -> list[np.ndarray]:
+    """Texture coordinate on each axis of spec at (N.V, alpha[, eta]) (eta is given apart for
+    a fixed-index table's channel, and is not an axis of it): what a shader computes."""
+    axes = spec.axes
+    params = np.broadcast_arrays(mu, alpha, *(() if eta is None else (eta,)))
+    coords = [a.to_coord(p) for a, p in zip(axes, params, strict=False)]
+    if spec.remapped:
+        coords[0] = remap.nv_coord(params[0], params[1], params[2], axes[0].size)
+    return coords
 
 
 def interpolate(data: np.ndarray, coords: list[np.ndarray]) -> np.ndarray:

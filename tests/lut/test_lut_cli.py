@@ -40,7 +40,7 @@ def test_lut_writes_the_table_its_axes_and_metadata(tmp_path, capsys):
         meta = json.loads(str(f["metadata"]))
         assert np.allclose(f["axis_eta"] * f["axis_eta"][::-1], 1.0)
     assert "RoughDielectric" in meta["model"] and "correlated" in meta["model"]
-    assert meta["definitions"]["transmittance"].startswith("integral over the transmitted")
+    assert meta["definitions"]["transmittance"].startswith("eta^2 times the integral over")
     assert meta["validation"] is None
 
 
@@ -65,6 +65,9 @@ def test_cluster_by_address_gives_the_same_bits_and_validates(tmp_path, schedule
     (["--workers", "0"], "--workers must be >= 1"),
     (["--kind", "reflection", "--size", "4x4", "--multiple-scattering"], "single scattering"),
     (["--validate", "--validate-points", "0"], "--validate-points must be >= 1"),
+    (["--eta", "1"], "other than 1"),
+    (["--eta", "3"], "give a value in"),
+    (["--kind", "reflection", "--size", "4x3", "--remap", "tir"], "is for transmission"),
 ])
 def test_bad_arguments_are_one_line_errors(tmp_path, capsys, extra, message):
     assert main([*ARGS, *extra, "--out", str(tmp_path / "x.npz")]) == 2
@@ -82,3 +85,27 @@ def test_unreachable_scheduler_is_named():
     with pytest.raises(ValueError, match="cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'"):
         with dask_client(scheduler="tcp://127.0.0.1:9", connect_timeout_s=0.5):
             pass
+
+
+def test_remap_none_keeps_the_old_axes_and_eta_fixes_the_index(tmp_path, capsys):
+    old, fixed = tmp_path / "old.npz", tmp_path / "fixed.exr"
+    assert main([*ARGS, "--remap", "none", "--out", str(old)]) == 0
+    table = load_table(old)
+    assert table.spec.remap == "none"
+    with np.load(old, allow_pickle=False) as f:  # texel-centre nodes, N.V itself
+        assert np.allclose(f["axis_cos_theta"], (np.arange(4) + 0.5) / 4)
+    assert json.loads(str(np.load(old)["metadata"]))["definitions"]["transmittance"].startswith(
+        "integral over the transmitted")
+    assert main(["lut", "--kind", "transmission", "--eta", "1.5", "--size", "6x4", "--samples",
+                 "64", "--dtype", "float16", "--out", str(fixed), "--validate",
+                 "--validate-points", "40", "--reference-samples", "512"]) == 0
+    assert "baked transmission at eta 1.5 and 0.666667 6x4 float16" in capsys.readouterr().out
+    table = load_table(fixed)
+    assert table.spec.shape == (6, 4) and table.spec.channels == ("transmittance",
+                                                                  "transmittance_reciprocal")
+    assert table.data.shape == (4, 6, 2) and table.validation["points_checked"] == 40
+    assert table.validation["edge_points"] is not None  # the 1/1.5 channel has a TIR edge
+    # a smooth surface at normal view: (1 - F) / eta^2 on each side
+    t = table.lookup(1.0, 0.0)
+    assert np.allclose(t, [0.96 / 1.5**2, 0.96 * 1.5**2], rtol=2e-3)
+

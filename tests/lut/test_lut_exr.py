@@ -11,7 +11,10 @@ import pytest
 
 from gonio_cli.main import main
 from sim.lut import TableSpec, bake, load_table
-from sim.lut.table import Table, interpolate
+from sim.lut.bake import grid_points
+from sim.lut.remap import albedo_factor
+from sim.lut.table import Table, interpolate, texture_coords
+from sim.lut.validate import random_points
 
 if os.environ.get("CI"):
     import OpenEXR  # CI installs the test extra, which includes gonio[exr]: never skip there
@@ -52,10 +55,12 @@ def test_transmission_half_atlas_of_eta_slices(tmp_path):
     pixels, pixel_type = channels["R"]
     assert set(channels) == {"R"} and pixel_type == OpenEXR.HALF
     assert pixels.dtype == np.float16 and pixels.shape == (3 * 5, 8)  # height x width
-    mu, alpha, eta = (a.values() for a in spec.axes)
+    points = grid_points(spec).reshape(3 * 5, 8, 3)  # the model's (N.V, alpha, eta) per pixel
+    alpha, eta = (a.values() for a in spec.axes[1:])
     for x, y in [(0, 0), (7, 0), (2, 4), (5, 5), (3, 14)]:  # N.V x, alpha y % 5, eta y // 5
-        expected = 100 * mu[x] + 10 * alpha[y % 5] + eta[y // 5]
-        assert pixels[y, x] == np.float16(expected)
+        mu, a, e = points[y, x]
+        assert (a, e) == (alpha[y % 5], eta[y // 5])
+        assert pixels[y, x] == np.float16((100 * mu + 10 * a + e) * e * e)  # stores eta^2 T
     atlas = json.loads(header["gonio.atlas"])
     assert atlas["width"] == 8 and atlas["height"] == 15 and atlas["pixel_type"] == "HALF"
     assert atlas["channels"] == {"R": "transmittance"} and "y // 5" in atlas["layout"]
@@ -117,21 +122,25 @@ def test_cli_writes_exr_and_refuses_float64_before_baking(tmp_path, capsys):
     assert "baked" not in captured.out and not (tmp_path / "x.exr").exists()
 
 
-def test_atlas_sampling_recipe_of_the_docs_gives_the_trilinear_lookup(tmp_path):
-    """docs/lut.md's shader recipe (two bilinear fetches in the atlas, blended across eta)
-    applied to the pixels read back from the file equals Table.lookup."""
-    spec = TableSpec(kind="transmission", shape=(8, 5, 6), dtype="float32", samples=4)
+@pytest.mark.parametrize("remap", ["tir", "none"])
+def test_atlas_sampling_recipe_of_the_docs_gives_the_trilinear_lookup(tmp_path, remap):
+    """docs/lut.md's shader recipe (texture coordinates from N.V, alpha, eta, then two
+    bilinear fetches in the atlas blended across eta) applied to the pixels read back from
+    the file equals Table.lookup."""
+    spec = TableSpec(kind="transmission", shape=(8, 5, 6), dtype="float32", samples=4,
+                     remap=remap)
     table = bake(spec, Ramp(("transmittance",)))
     table.data = (table.data + np.random.default_rng(4).random(table.data.shape)).astype(
         np.float32)  # a ramp is multilinear already: add texel noise so blending shows
     _, channels = read_raw(table.save(tmp_path / "t.exr"))
     atlas = channels["R"][0].astype(np.float64)[..., None]
     n_mu, n_alpha, n_eta = spec.shape
-    t = np.random.default_rng(5).random((500, 3))
+    params = random_points(spec, 500, seed=5).T
+    t = np.stack(texture_coords(spec, *params), axis=-1)
     t_alpha = np.clip(t[:, 1], 0.5 / n_alpha, 1 - 0.5 / n_alpha)
     x = np.clip(t[:, 2] * n_eta - 0.5, 0, n_eta - 1)
     k = np.minimum(np.floor(x), n_eta - 2)
     low, high = (interpolate(atlas, [(k + j + t_alpha) / n_eta, t[:, 0]]) for j in (0, 1))
     recipe = low + (x - k)[:, None] * (high - low)
-    params = [a.to_value(t[:, j]) for j, a in enumerate(spec.axes)]
+    recipe = recipe / albedo_factor(spec.remapped, params[2])[:, None]  # stored eta^2 T
     assert np.allclose(recipe, table.lookup(*params), rtol=0, atol=1e-12)

@@ -14,8 +14,9 @@ from sim.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worke
 from sim.lut import TableSpec, bake, load_table, parse_size, validate
 from sim.lut.axes import ETA_MAX, axes_for
 from sim.lut.bake import grid_points, integrate_tile
+from sim.lut.remap import albedo_factor
 from sim.lut.table import Table, interpolate
-from sim.lut.validate import TIR_BAND, near_critical
+from sim.lut.validate import TIR_BAND, edge_split, near_critical, random_points, stored_values
 
 
 class StandIn:
@@ -103,8 +104,8 @@ def test_interpolation_is_exact_for_multilinear_data_and_clamps_to_edge():
 
 def test_bake_converges_to_the_exact_integral():
     table = bake(SPEC, StandIn())
-    exact = StandIn.exact(*grid_points(SPEC).T).reshape(SPEC.shape[::-1])
-    err = np.abs(table.data[..., 0] - exact)
+    exact = StandIn.exact(*grid_points(SPEC).T)
+    err = np.abs(stored_values(table)[:, 0] - exact)
     assert err.max() < 2e-3  # Sobol, 256 points, plus the 1e-3/sqrt(12)/16 jitter
     assert table.data.dtype == np.float32 and np.isfinite(table.data).all()
 
@@ -119,7 +120,8 @@ def test_same_bits_whatever_the_layout(client, monkeypatch):
     serial = np.concatenate([
         integrate_tile(points[s:s + SPEC.tile_entries], estimator, SPEC.samples, SPEC.seed, k)
         for k, s in enumerate(range(0, len(points), SPEC.tile_entries))
-    ]).reshape(threads.shape).astype(SPEC.dtype)
+    ]) * albedo_factor(SPEC.remapped, points[:, 2:3])  # a remapped table stores eta^2 T
+    serial = serial.reshape(threads.shape).astype(SPEC.dtype)
     assert threads.tobytes() == cluster.tobytes() == serial.tobytes()
     for per_thread in (1, 1000):  # one task per thread, one tile per task
         # the module by name: the attribute sim.lut.bake is the bake function
@@ -153,8 +155,9 @@ def test_npz_round_trip_keeps_bits_axes_and_metadata(tmp_path):
 
 
 def test_validation_separates_interpolation_error_from_noise(client):
+    # remap none: the stand-in is smooth in N.V itself (the remap follows the model's edges)
     spec = TableSpec(kind="transmission", shape=(4, 4, 4), dtype="float64", samples=128,
-                     tile_entries=32)
+                     tile_entries=32, remap="none")
     estimator = StandIn()
     table = bake(spec, estimator)
     report = validate(table, estimator, points=300, reference_samples=1024, client=client)
@@ -164,9 +167,7 @@ def test_validation_separates_interpolation_error_from_noise(client):
     # a coarse 4^3 grid of a curved function: lookups are worse than entries
     assert report.lookup_max > 3 * report.entry_max
     # and the lookup error matches an exact check of the same table
-    rng = np.random.default_rng(0)
-    t = rng.random((2000, 3))
-    params = [a.to_value(t[:, k]) for k, a in enumerate(spec.axes)]
+    params = random_points(spec, 2000, seed=0).T
     direct = np.abs(table.lookup(*params)[..., 0] - StandIn.exact(*params))
     assert report.lookup_rms == pytest.approx(np.sqrt(np.mean(direct**2)), rel=0.3)
     finer = bake(TableSpec(**{**spec.to_dict(), "shape": (16, 16, 16)}), estimator)
@@ -224,10 +225,16 @@ def test_lookup_errors_are_split_at_the_tir_edge_band():
     report = validate(bake(spec, StandIn()), StandIn(), points=400, reference_samples=256)
     d = report.to_dict()
     assert 0 < d["edge_points"] < 400 and d["tir_band"] == TIR_BAND
-    whole = (d["edge_lookup_rms"] ** 2 * d["edge_points"]
-             + d["rest_lookup_rms"] ** 2 * (400 - d["edge_points"])) / 400
-    assert np.sqrt(whole) == pytest.approx(report.lookup_rms, rel=1e-12)
-    assert report.lookup_max == max(d["edge_lookup_max"], d["rest_lookup_max"])
+    assert d["unity_eta"] == pytest.approx(tuple(spec.axes[2].values()[1:3]))  # 4 nodes
+    assert d["unity_eta"][0] < 1 < d["unity_eta"][1]
+    assert 0 < d["unity_points"] < 400
+    assert report.lookup_max == max(d[f"{p}_lookup_max"] for p in ("edge", "unity", "rest"))
+    # the parts of edge_split: TIR band, between the nodes bracketing eta = 1, neither
+    err = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    split = edge_split(params, err, (0.9, 1.1))
+    assert (split["edge_points"], split["unity_points"]) == (2, 1)
+    assert (split["edge_lookup_max"], split["unity_lookup_max"]) == (2.0, 5.0)
+    assert split["rest_lookup_rms"] == pytest.approx(np.sqrt((9 + 16) / 2))
     reflection = TableSpec(kind="reflection", shape=(4, 4), samples=64)
     r = validate(bake(reflection, StandIn(("scale", "bias"))), StandIn(("scale", "bias")),
                  points=50, reference_samples=256)
