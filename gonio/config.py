@@ -37,6 +37,7 @@ class AxisConfig:
     settle_s: float = 0.0
     tolerance_deg: float = 0.01
     home: bool = False
+    repeatability_deg: float = 0.0  # 1-sigma scatter of where a move ends (the GUM budget's)
 
 
 @dataclass(frozen=True)
@@ -165,6 +166,7 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
             settle_s=a.number("settle_s", 0.0, low=0.0, high=3600.0),
             tolerance_deg=a.number("tolerance_deg", 0.01, low=0.0, high=10.0, low_open=True),
             home=a.boolean("home", False),
+            repeatability_deg=a.number("repeatability_deg", 0.0, low=0.0, high=10.0),
         )
         a.string("units", "deg", choices=("deg",))
         a.done()
