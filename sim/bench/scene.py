@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
 from sim.bench.sample import LobeScales, Sample
@@ -26,17 +28,36 @@ NEGLIGIBLE = 1e-14  # fraction of the incident power below which a tail is not r
 
 @dataclass(frozen=True)
 class Alignment:
-    """Known mechanical errors: the true angle is the stage's reported angle plus the offset."""
+    """Known mechanical errors: the true angle is the stage's reported angle plus the offset,
+    plus, with a repeatability, a scatter drawn anew (N(0, repeatability), from `seed`) each
+    time the stage's reported angle changes: where a move ends, which the encoder cannot see."""
 
     sample_offset_deg: float = 0.0
     arm_offset_deg: float = 0.0
+    sample_repeatability_deg: float = 0.0
+    arm_repeatability_deg: float = 0.0
+    seed: int = 0
+    _moves: dict = field(default_factory=dict, compare=False, repr=False)
 
     def true_positions(self, positions: Mapping[str, float]) -> dict[str, float]:
         """Stage positions corrected to the sample's and arm's true angles."""
         true = {"azimuth": 0.0, "elevation": 0.0, **positions}
-        true["sample"] = positions["sample"] + self.sample_offset_deg
-        true["arm"] = positions["arm"] + self.arm_offset_deg
+        true["sample"] = (positions["sample"] + self.sample_offset_deg
+                          + self._scatter("sample", positions["sample"],
+                                          self.sample_repeatability_deg))
+        true["arm"] = (positions["arm"] + self.arm_offset_deg
+                       + self._scatter("arm", positions["arm"], self.arm_repeatability_deg))
         return true
+
+    def _scatter(self, role: str, reported: float, sigma: float) -> float:
+        """This move's scatter of a stage: kept while its reported angle stays put."""
+        if sigma == 0.0:
+            return 0.0
+        last = self._moves.get(role)
+        if last is None or last[0] != reported:
+            rng = self._moves.setdefault("rng", np.random.default_rng(self.seed))
+            last = self._moves[role] = (reported, float(rng.normal(0.0, sigma)))
+        return last[1]
 
 
 def disk_overlap_fraction(r_beam: float, r_aperture: float, offset: float) -> float:
