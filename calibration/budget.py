@@ -43,9 +43,11 @@ class Budget:
 
     @property
     def components(self) -> dict[str, np.ndarray]:
-        """Every component's standard uncertainty (N,), 1/sr, by name."""
+        """Every component's standard uncertainty (N,), 1/sr, by name (a name may have an own
+        and a shared part: their root sum of squares)."""
         out = dict(self.own)
-        out.update({name: np.linalg.norm(e, axis=1) for name, e in self.shared.items()})
+        for name, e in self.shared.items():
+            out[name] = np.hypot(out.get(name, 0.0), np.linalg.norm(e, axis=1))
         return out
 
     @property
@@ -116,15 +118,38 @@ def stage_slopes(stages: dict[str, np.ndarray], roles: set[str],
     return slopes
 
 
-def add_angle_terms(budget: Budget, slopes: dict[str, np.ndarray], inputs: AngleInputs) -> None:
-    """angle_repeatability (own: each move's scatter) and angle_offset (shared: the
-    calibration's zero offsets, one column per stage) from the slopes (1/sr per degree)."""
-    own = [slopes[r] * s for r, s in inputs.repeatability_deg.items()]
+def move_ids(readings: np.ndarray, rows: np.ndarray, role: str) -> np.ndarray:
+    """For each of `rows` (sample readings), the number of the stage's move it was read after:
+    over all readings in the order taken, a new move wherever the stage's reported angle
+    differs from the reading before (beam and dark positions count: the stage went there)."""
+    order = np.argsort(readings["index"], kind="stable")
+    angle = readings[f"{role}_deg"][order]
+    moves = np.concatenate([[0], np.cumsum(angle[1:] != angle[:-1])])
+    of_index = dict(zip(readings["index"][order].tolist(), moves.tolist(), strict=True))
+    return np.array([of_index[i] for i in rows["index"].tolist()], dtype=np.int64)
+
+
+def add_angle_terms(budget: Budget, slopes: dict[str, np.ndarray], inputs: AngleInputs,
+                    moves: dict[str, np.ndarray]) -> None:
+    """angle_repeatability (each move's scatter: a point's own, shared by the points read
+    without the stage moving between them, one column per such move) and angle_offset
+    (shared: the calibration's zero offsets, one column per stage), from the slopes (1/sr
+    per degree) and the move numbers of `move_ids`."""
+    own, shared = [], []
+    for role, sigma in inputs.repeatability_deg.items():
+        error = slopes[role] * sigma
+        _, first, counts = np.unique(moves[role], return_inverse=True, return_counts=True)
+        alone = counts[first] == 1
+        own.append(np.where(alone, error, 0.0))
+        for group in np.flatnonzero(counts > 1):
+            shared.append(np.where(first == group, error, 0.0))
     if own:
         budget.add_own("angle_repeatability", np.sqrt(np.sum(np.square(own), axis=0)))
-    shared = [slopes[r] * s for r, s in inputs.offset_sigma_deg.items()]
     if shared:
-        budget.add_shared("angle_offset", np.stack(shared, axis=1))
+        budget.add_shared("angle_repeatability", np.stack(shared, axis=1))
+    offsets = [slopes[r] * s for r, s in inputs.offset_sigma_deg.items()]
+    if offsets:
+        budget.add_shared("angle_offset", np.stack(offsets, axis=1))
 
 
 def expanded(data) -> tuple[float, np.ndarray]:

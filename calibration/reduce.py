@@ -30,6 +30,7 @@ from calibration.budget import (
     AngleInputs,
     Budget,
     add_angle_terms,
+    move_ids,
     stage_slopes,
 )
 from calibration.detector import range_key
@@ -297,7 +298,8 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
                                    1.0 / (factor * np.abs(wo[:, 2])), np.nan)
         slopes = stage_slopes(stages, set(angle.repeatability_deg) | set(angle.offset_sigma_deg),
                               reading)
-        add_angle_terms(budget, {r: s * per_reading for r, s in slopes.items()}, angle)
+        moves = {role: move_ids(readings, rows, role) for role in angle.repeatability_deg}
+        add_angle_terms(budget, {r: s * per_reading for r, s in slopes.items()}, angle, moves)
     sigma = budget.sigma
     # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
     # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept

@@ -92,13 +92,17 @@ class Scan:
 
     def draw(self, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """(readings in READING_DTYPE, truth: the BSDF at each sample reading's reported
-        position)."""
+        position). In time order: the dark readings, then blocks of beam_every sample
+        readings, each after a beam reading (the sample stage turns to the beam position and
+        back: a new move, so one scatter per block; the arm moves for every reading)."""
         rng = np.random.default_rng(seed)
         theta_o, transmission = self.planned()
         st = stage_angles(self.theta_i_deg, theta_o, 0.0, transmission)
         n = len(theta_o)
+        block = np.arange(n) // self.beam_every
         offsets = rng.normal(0.0, self.offset_sigma_deg)
-        sample_true = st.sample_deg + offsets[0] + rng.normal(0, self.repeatability_deg[0], n)
+        sample_true = (st.sample_deg + offsets[0]
+                       + rng.normal(0, self.repeatability_deg[0], block[-1] + 1)[block])
         arm_true = st.arm_deg + offsets[1] + rng.normal(0, self.repeatability_deg[1], n)
         half_true = self.half_angle_deg + rng.normal(0.0, self.half_angle_sigma_deg)
         omega_true = solid_angle_sr(math.radians(half_true))
@@ -106,9 +110,8 @@ class Scan:
         nominal, cos_factor = self.reading_model(st.sample_deg, st.arm_deg, self.half_angle_deg)
         truth = nominal / cos_factor
 
-        # time order: a beam reading every beam_every sample readings, darks first
-        t_sample = np.arange(n) * 1.0 + 1.0
-        t_beam = np.arange(0, n + self.beam_every, self.beam_every) * 1.0 + 0.5
+        t_sample = np.arange(n) + block + 2.0  # a beam reading before each block
+        t_beam = np.arange(block[-1] + 2) * (self.beam_every + 1) + 1.0
         source = lambda t: self.beam_w * (1.0 + self.drift * np.sin(2 * np.pi * t / 400.0 + 1.0))  # noqa: E731
         gain_err = {r: (0.0 if r == RANGES_W[-1] else rng.normal(0.0, self.gain_sigma))
                     for r in RANGES_W}
@@ -135,10 +138,11 @@ class Scan:
         out["side"] = [("transmission" if t else "reflection") for t in transmission] + \
             [""] * (len(t_beam) + len(dark_range))
         out["flags"] = ""
-        out["index"] = np.arange(len(out))
         out["power_w"] = np.concatenate([measured, beam, dark_power])
         out["range_w"] = np.concatenate([fs, np.full(len(t_beam), beam_fs), dark_range])
         out["t_s"] = np.concatenate([t_sample, t_beam, np.full(len(dark_range), 0.0)])
+        out["index"] = np.argsort(np.argsort(out["t_s"], kind="stable"), kind="stable")
+        out["sample_deg"], out["arm_deg"] = 90.0, 180.0  # beam and dark: sample retracted
         out["sample_deg"][:n], out["arm_deg"][:n] = st.sample_deg, st.arm_deg
         a = sample_angles(st.sample_deg, st.arm_deg)
         for name in a._fields:
