@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import tomllib
 from budget_kit import Scan, run_of
-from fitting_bench_runs import EXAMPLE
+from fitting_bench_runs import EXAMPLE, instrument, plan, scan
 
 from calibration.budget import AngleInputs, Budget, expanded
 from calibration.fit import FitOptions, fit
@@ -160,3 +160,70 @@ def test_coverage_of_U_at_k2_over_the_lobe_and_its_flanks():
     # the test can fail: without the angle terms the flanks are far from covered
     assert blind[where == "flank"].mean() < 0.8
     assert math.isclose(inside.mean(), 0.95, abs_tol=0.02)
+
+
+REPEATABILITY_DEG = 0.01
+
+
+@pytest.fixture(scope="module")
+def jittery_run(tmp_path_factory):
+    """A scan across Beckmann 0.05's transmitted lobe on the emulated stack (ESP and PM100 on
+    ptys) whose stages end each move N(0, 0.01 deg) off ([sim.alignment]), as the config's
+    [axes] repeatability_deg says."""
+    tmp = tmp_path_factory.mktemp("budget")
+    cfg = instrument(tmp, {"source": {"power_w": 1e-3}, "aperture": {"rtol": 1e-5},
+                           "sample": {"kind": "hemisphere", "distribution": "beckmann",
+                                      "alpha": 0.05, "eta": 1.51,
+                                      "multiple_scattering": False},
+                           "alignment": {"sample_repeatability_deg": REPEATABILITY_DEG,
+                                         "arm_repeatability_deg": REPEATABILITY_DEG}}, seed=3)
+    text = cfg.read_text()
+    for axis in ("[axes.sample]", "[axes.arm]"):
+        text = text.replace(axis, f"{axis}\nrepeatability_deg = {REPEATABILITY_DEG}")
+    cfg.write_text(text)
+    grids = [{"side": "transmission", "theta_i_deg": 0.0,
+              "theta_o_deg": {"start": -4.0, "stop": 4.0, "step": 0.2}}]
+    return scan(plan(tmp, "jitter", grids, dark_every=8, beam_every=8), cfg, tmp / "runs")
+
+
+@pytest.mark.slow
+def test_emulated_stage_scatter_is_covered_by_the_budget(jittery_run):
+    """The reduced values against the bench at the reported positions: with the angle terms
+    the pulls are those of a normal law, without them the flanks are many sigma off."""
+    from calibration.pipeline import reduce_run
+    from gonio.store import open_run
+    from sim.bench import build_bench
+    from sim.bench.sample import exit_view
+
+    run = open_run(jittery_run)
+    bench = build_bench(run.config["sim"], run.config["optics"], run.plan["sample"])
+    rows = run.readings()
+    rows = rows[rows["kind"] == "sample"]
+    truth = np.array([bench.scattered_fraction({"sample": s, "arm": a}) for s, a in
+                      zip(rows["sample_deg"], rows["arm_deg"], strict=True)])
+    data = reduce_run(jittery_run, slope_options=FitOptions(distributions=("beckmann",)))
+    _, factor = exit_view(bench.sample.spec, data.wi, data.wo)
+    expected = truth / (bench.integral.solid_angle_sr * factor * np.abs(data.wo[:, 2]))
+    ok = data.valid & (expected > 1e-3 * expected.max())
+    assert ok.sum() >= 20 and data.meta["budget"]["slope"]["distribution"] == "beckmann"
+    pull = ((data.bsdf - expected) / data.sigma)[ok]
+    assert 0.5 < np.sqrt(np.mean(pull**2)) < 1.6, pull
+    assert np.mean(np.abs(pull) <= 2.0) >= 0.85
+    blind = reduce_run(jittery_run, slope_options=None)
+    blind_pull = ((blind.bsdf - expected) / blind.sigma)[ok]
+    assert np.sqrt(np.mean(blind_pull**2)) > 5.0
+
+
+@pytest.mark.slow
+def test_gonio_reduce_reports_u_k_and_U(jittery_run, capsys):
+    from gonio_cli.main import main
+
+    assert main(["reduce", str(jittery_run), "--coverage-k", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "k = 3, U = k u" in out and "angle_repeatability" in out
+    table = np.genfromtxt(jittery_run / "reduced.csv", delimiter=",", names=True, dtype=None,
+                          encoding=None)
+    np.testing.assert_allclose(table["expanded_per_sr"], 3.0 * table["sigma_per_sr"], rtol=1e-2)
+    assert set(table["coverage_k"]) == {3.0}
+    assert main(["reduce", str(jittery_run), "--coverage-k", "0"]) != 0
+    assert "--coverage-k must be a finite number > 0" in capsys.readouterr().err
