@@ -14,7 +14,7 @@ from calibration.signature import DEFAULT_SHARE
 from gonio.errors import GonioError
 
 CSV_HEADER = ("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,side,bsdf_per_sr,sigma_per_sr,"
-              "valid,flags,coverage_k,expanded_per_sr")
+              "coverage_k,expanded_per_sr,valid,flags")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,8 +61,8 @@ def write_csv(data, path: Path) -> Path:
     side = np.where(data.transmission, "transmission", "reflection")
     k, big_u = expanded(data)
     lines = [CSV_HEADER] + [
-        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{int(v)},{g.replace(',', ';')},"
-        f"{k:g},{x:.3g}"
+        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{k:g},{x:.3g},{int(v)},"
+        f"{g.replace(',', ';')}"
         for a, b, c, d, s, f, e, v, g, x in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
                                                 data.valid, data.flags, big_u, strict=True)]
     path.write_text("\n".join(lines) + "\n")

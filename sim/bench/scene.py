@@ -18,7 +18,7 @@ import numpy as np
 
 from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
-from sim.bench.sample import LobeScales, Sample
+from sim.bench.sample import LobeScales, Sample, exit_view
 from sim.bench.source import Source
 from sim.bench.stray import InstrumentScatter
 
@@ -134,6 +134,18 @@ class Bench:
                     return probe
         return self.integral.integrate(self.sample.integrand, wi, wo,
                                        self.sample.lobe_scales(wi, wo))
+
+    def reduced_bsdf(self, sample_deg: np.ndarray, arm_deg: np.ndarray) -> np.ndarray:
+        """What reduction of noiseless readings at these stage positions (true ones, taken as
+        reported) gives: the scattered fraction over Omega T |cos o| (the exit view's factor
+        T), so a test compares reduced values with the bench's exact expectation."""
+        fraction = np.array([self.scattered_fraction({"sample": s, "arm": a})
+                             for s, a in zip(sample_deg, arm_deg, strict=True)])
+        wi, wo = sample_frame_directions({"sample": np.asarray(sample_deg, float),
+                                          "arm": np.asarray(arm_deg, float)},
+                                         flipped=self.sample.flipped)
+        _, factor = exit_view(self.sample.spec, wi, wo)
+        return fraction / (self.integral.solid_angle_sr * factor * np.abs(wo[..., 2]))
 
     def warm_up(self) -> None:
         """Evaluate one reflected and one transmitted reading, so the model's compiled kernels
