@@ -65,7 +65,8 @@ SHOT_NOT_MODELLED = ("dark scatter per range; shot noise not modelled (give [det
 class ReductionOptics:
     """What reduction takes from a run's description: the sample ([sample]), the aperture's
     half-angle (a calibration's, else [optics]) and where it came from, the wavelength, the
-    shot noise of one reading per watt of net signal and the noise model in words; `sim` and
+    shot noise of one reading per watt of net signal and the noise model in words, the
+    detector's relative non-linearity ([detector] linearity_rel, 0: not stated); `sim` and
     `truth` are the emulator's [sim] table and its sample of an all-emulated run (for plots)."""
 
     sample: SampleInfo
@@ -75,6 +76,7 @@ class ReductionOptics:
     optics: Optics | None = None
     shot_variance_per_w: float = 0.0
     noise_model: str = SHOT_NOT_MODELLED
+    linearity_rel: float = 0.0
     sim: dict | None = None
     truth: dict | None = None
 
@@ -116,7 +118,8 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     averaging = int((plan or {}).get("averaging") or detector.get("averaging", 1))
     variance, noise_model = _shot_noise(detector, sim, shot_noise_w, wavelength, averaging)
     return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
-                           noise_model, sim, _emulator_truth(sim, plan or {}) if sim else None)
+                           noise_model, float(detector.get("linearity_rel") or 0.0), sim,
+                           _emulator_truth(sim, plan or {}) if sim else None)
 
 
 def _shot_noise(detector: dict, sim: dict | None, shot_noise_w: float | None,
@@ -279,7 +282,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
                        * per_w)
     budget.add_shared("dark", per_range(rows["range_w"], level_sigma * per_w))
     budget.add_shared("beam_normalisation", np.abs(bsdf)[:, None] * phi_shared / phi[:, None])
-    notes = calibration_terms(budget, cal, rows["range_w"], optics.aperture_from)
+    notes = calibration_terms(budget, cal, rows["range_w"], optics)
     if angle.any and slope_model is None:
         notes.append("angle: not propagated (no fitted model gave the BSDF's slope)")
     elif angle.any:
@@ -342,31 +345,31 @@ def per_range(range_w: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.where(range_w[:, None] == ranges[None, :], values[:, None], 0.0)
 
 
-def calibration_terms(budget: Budget, cal, range_w: np.ndarray, aperture_from: str
+def calibration_terms(budget: Budget, cal, range_w: np.ndarray, optics: ReductionOptics
                       ) -> list[str]:
-    """The calibration's components: range_gain (shared per range: the gain's relative sigma),
-    linearity (own: the gain fit's largest deviation as a rectangular half-width, GUM type B)
-    and solid_angle (shared by all points: the measured aperture's relative sigma); returns
-    notes on what the budget lacks."""
+    """The components of the calibration and the detector's description: range_gain (shared
+    per range: the gain's relative sigma), solid_angle (shared by all points: the measured
+    aperture's relative sigma) and linearity (own: [detector] linearity_rel, GUM type B);
+    returns notes on what the budget lacks."""
     value = np.abs(budget.bsdf)
-    if cal is None:
-        return ["range_gain, linearity: no calibration applied",
-                f"solid_angle: the {aperture_from} aperture states no uncertainty"]
     notes = []
+    if optics.linearity_rel > 0:
+        budget.add_own("linearity", value * optics.linearity_rel)
+    else:
+        notes.append("linearity: not stated ([detector] linearity_rel)")
+    if cal is None:
+        return notes + ["range_gain: no calibration applied",
+                        f"solid_angle: the {optics.aperture_from} aperture states no "
+                        "uncertainty"]
     if cal.gains is not None:
         rel = np.array([_relative(cal.gains.get(range_key(r))) for r in range_w])
         budget.add_shared("range_gain", per_range(range_w, value * rel))
     else:
         notes.append("range_gain: the calibration has no gains")
-    deviation = (cal.linearity or {}).get("max_deviation")
-    if deviation is not None and math.isfinite(deviation):
-        budget.add_own("linearity", value * abs(deviation) / math.sqrt(3.0))
-    else:
-        notes.append("linearity: the calibration has no linearity check")
-    if aperture_from == "calibration":
+    if optics.aperture_from == "calibration":
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
     else:
-        notes.append(f"solid_angle: the {aperture_from} aperture states no uncertainty")
+        notes.append(f"solid_angle: the {optics.aperture_from} aperture states no uncertainty")
     return notes
 
 

@@ -44,13 +44,16 @@ class AxisConfig:
 class DetectorConfig:
     """The detector, its correction wavelength, averaging and range policy (None = auto);
     `shot_noise_w`: the shot-noise variance of one sample per watt of signal, W (2 q B / R for
-    a photodiode of responsivity R and noise bandwidth B), None when not known."""
+    a photodiode of responsivity R and noise bandwidth B), None when not known;
+    `linearity_rel`: the relative 1-sigma non-linearity of a reading (the uncertainty budget's,
+    a datasheet's or a linearity test's figure), None when not stated."""
 
     device: str
     wavelength_nm: float
     averaging: int = 1
     range_w: float | None = None
     shot_noise_w: float | None = None
+    linearity_rel: float | None = None
 
 
 @dataclass(frozen=True)
@@ -208,6 +211,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
         averaging=f.number("averaging", 1, low=1, high=100_000, integer=True),
         range_w=range_w,
         shot_noise_w=f.number("shot_noise_w", None, low=0.0, high=1.0),
+        linearity_rel=f.number("linearity_rel", None, low=0.0, high=0.5),
     )
     f.done()
     return det

@@ -57,16 +57,17 @@ class Scan:
         return Calibration(
             created_utc="synthetic", gains=gains, gain_reference=range_key(RANGES_W[-1]),
             dark_offsets_w={range_key(r): Measured(0.0, 0.0) for r in RANGES_W},
-            linearity={"chi2_dof": 1.0, "max_deviation": self.linearity},
             sample_offset_deg=Measured(0.0, self.offset_sigma_deg[0]),
             arm_offset_deg=Measured(0.0, self.offset_sigma_deg[1]),
             aperture_half_angle_deg=Measured(self.half_angle_deg, self.half_angle_sigma_deg))
 
     def optics(self) -> ReductionOptics:
-        """What reduction takes: the sample and the calibration's aperture."""
+        """What reduction takes: the sample, the calibration's aperture, the shot noise and the
+        non-linearity as the config would state them (the uniform law's sigma)."""
         sample = SampleInfo(id="synthetic", kind="hemisphere", eta=self.eta)
         return ReductionOptics(sample, self.half_angle_deg, "calibration", 633.0,
-                               shot_variance_per_w=self.shot_per_w)
+                               shot_variance_per_w=self.shot_per_w,
+                               linearity_rel=self.linearity / math.sqrt(3.0))
 
     def model(self):
         """The sample's BSDF."""

@@ -100,11 +100,14 @@ def test_without_a_fitted_model_the_angle_terms_are_left_out_and_said_so():
     assert any(n.startswith("angle: not propagated") for n in data.meta["budget"]["notes"])
 
 
-def test_without_calibration_or_repeatability_the_budget_is_the_noise_dark_and_beam():
-    readings, _ = SCAN.draw(4)
-    data = reduce_readings(run_of(Scan(repeatability_deg=(0.0, 0.0))), readings, None,
-                           SCAN.optics())
+def test_without_calibration_or_stated_errors_the_budget_is_the_noise_dark_and_beam():
+    plain = Scan(repeatability_deg=(0.0, 0.0), linearity=0.0)
+    readings, _ = plain.draw(4)
+    data = reduce_readings(run_of(plain), readings, None, plain.optics())
     assert set(data.components) == {"read_noise", "shot_noise", "dark", "beam_normalisation"}
+    assert data.meta["budget"]["notes"] == [
+        "linearity: not stated ([detector] linearity_rel)", "range_gain: no calibration applied",
+        "solid_angle: the calibration aperture states no uncertainty"]
     assert data.meta["budget"]["angle_inputs"] == {"repeatability_deg": {},
                                                    "offset_sigma_deg": {}}
 
@@ -126,11 +129,15 @@ def test_angle_inputs_from_the_config_and_the_calibration():
     assert not AngleInputs.of_run({}, None).any
 
 
-def test_repeatability_is_an_axis_key_of_the_instrument_config():
+def test_repeatability_and_linearity_are_keys_of_the_instrument_config():
     raw = tomllib.loads(EXAMPLE.read_text())
     assert parse_config(raw).axes["arm"].repeatability_deg == 0.0
+    assert parse_config(raw).detector.linearity_rel is None
     raw["axes"]["arm"]["repeatability_deg"] = 0.004
-    assert parse_config(raw).axes["arm"].repeatability_deg == 0.004
+    raw["detector"]["linearity_rel"] = 0.002
+    config = parse_config(raw)
+    assert config.axes["arm"].repeatability_deg == 0.004
+    assert config.detector.linearity_rel == 0.002
     raw["axes"]["arm"]["repeatability_deg"] = -1.0
     with pytest.raises(ConfigError) as err:
         parse_config(raw)
