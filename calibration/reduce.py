@@ -11,7 +11,10 @@ the config's [detector] shot_noise_w, or the emulated meter of an all-emulated r
 it is not modelled, and meta["noise_model"] says so); the dark level's uncertainty is
 propagated, and the beam curve's, which all points share, both into sigma and as
 ReducedData.shared_rel (the fit's covariance). Signature readings (the bench without the sample)
-flag, and on request subtract, what the bench adds (calibration.signature).
+flag, and on request subtract, what the bench adds (calibration.signature). Every such term is
+a named component of the value's GUM budget (ReducedData.components, calibration.budget), with
+the calibration's (range gains, solid angle), the detector's stated non-linearity and the angle
+errors through a fitted model's slope (docs/fitting.md, "Uncertainty budget").
 """
 
 from __future__ import annotations
@@ -286,23 +289,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     if angle.any and slope_model is None:
         notes.append("angle: not propagated (no fitted model gave the BSDF's slope)")
     elif angle.any:
-        stages = {role: rows[f"{role}_deg"] for role in STAGE_ROLES}
-
-        def reading(at: dict[str, np.ndarray]) -> np.ndarray:
-            """The model's reading (before division by factor |cos o|) at stage positions."""
-            a = sample_angles(at["sample"], at["arm"], at["elevation"], at["azimuth"])
-            i = directions(a.theta_i_deg, a.phi_i_deg, flipped)
-            o = directions(a.theta_o_deg, a.phi_o_deg, flipped)
-            o_eval, f = exit_view(spec, i, o)
-            return slope_model(i, o_eval) * f * np.abs(o[:, 2])
-
-        with np.errstate(divide="ignore", invalid="ignore"):
-            per_reading = np.where(factor * np.abs(wo[:, 2]) > 0,
-                                   1.0 / (factor * np.abs(wo[:, 2])), np.nan)
-        slopes = stage_slopes(stages, set(angle.repeatability_deg) | set(angle.offset_sigma_deg),
-                              reading)
-        moves = {role: move_ids(readings, rows, role) for role in angle.repeatability_deg}
-        add_angle_terms(budget, {r: s * per_reading for r, s in slopes.items()}, angle, moves)
+        angle_terms(budget, readings, rows, angle, slope_model, spec, flipped)
     sigma = budget.sigma
     # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
     # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept
@@ -336,6 +323,33 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
         meta["signature"] = signature.meta
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
                        budget.shared_rel, flags.astype(str), budget.components)
+
+
+def angle_terms(budget: Budget, readings: np.ndarray, rows: np.ndarray, angle: AngleInputs,
+                slope_model: SlopeModel, spec, flipped: bool) -> None:
+    """The stages' errors through the model's slope (calibration.budget.add_angle_terms): the
+    derivative of what reduction would give, the model's reading f T |cos o| at the stages'
+    positions over T |cos o| at the recorded ones (an angle error moves the reading, not the
+    divisor)."""
+    from sim.bench.sample import exit_view
+
+    def reading(at: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(the model's reading before division by T |cos o|, T |cos o|) at stage positions."""
+        a = sample_angles(at["sample"], at["arm"], at["elevation"], at["azimuth"])
+        wi = directions(a.theta_i_deg, a.phi_i_deg, flipped)
+        wo = directions(a.theta_o_deg, a.phi_o_deg, flipped)
+        w_eval, factor = exit_view(spec, wi, wo)
+        divisor = factor * np.abs(wo[:, 2])
+        return slope_model(wi, w_eval) * divisor, divisor
+
+    stages = {role: rows[f"{role}_deg"] for role in STAGE_ROLES}
+    _, divisor = reading(stages)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_divisor = np.where(divisor > 0, 1.0 / divisor, np.nan)
+    slopes = stage_slopes(stages, set(angle.repeatability_deg) | set(angle.offset_sigma_deg),
+                          lambda at: reading(at)[0])
+    moves = {role: move_ids(readings, rows, role) for role in angle.repeatability_deg}
+    add_angle_terms(budget, {r: s * per_divisor for r, s in slopes.items()}, angle, moves)
 
 
 def per_range(range_w: np.ndarray, values: np.ndarray) -> np.ndarray:
