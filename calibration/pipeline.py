@@ -10,11 +10,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from calibration import calfile
-from calibration.fit import FitOptions, FitResult, fit
+from calibration.fit import FitError, FitOptions, FitResult, fit
 from calibration.reduced import ReducedData
 
 if TYPE_CHECKING:
     from gonio.store import Run
+
+#: The fit whose model gives `reduce_run` the BSDF's slope: the default one.
+DEFAULT_SLOPE_FIT = FitOptions()
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:
@@ -26,25 +29,34 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
 
 def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
                shot_noise_w: float | None = None, subtract_signature: bool = False,
-               signature_share: float | None = None) -> ReducedData:
+               signature_share: float | None = None,
+               slope_options: FitOptions | None = DEFAULT_SLOPE_FIT) -> ReducedData:
     """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"],
     the [optics] beam divergence into meta["beam_divergence_deg"] for the fit; an all-emulated
     run's [sim] table is meta["sim"], calibration.reduce). shot_noise_w: the --shot-noise-w
     flag (calibration.reduce.optics_of); subtract_signature: subtract the bench's own scatter
     that the run's signature readings measured, signature_share: the share of the net signal
-    above which a point is flagged (calibration.signature; None: its default)."""
+    above which a point is flagged (calibration.signature; None: its default);
+    slope_options: the fit whose model carries the angle errors into the budget
+    (`reduce_stored`)."""
     from gonio.store import open_run
 
     run = open_run(run_dir)
     return reduce_stored(run, run.readings(), calibration_file, shot_noise_w,
-                         subtract_signature, signature_share)
+                         subtract_signature, signature_share, slope_options)
 
 
 def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path | None = None,
                   shot_noise_w: float | None = None, subtract_signature: bool = False,
-                  signature_share: float | None = None) -> ReducedData:
+                  signature_share: float | None = None, slope_options: FitOptions | None = None
+                  ) -> ReducedData:
     """`reduce_run` of some of a run's stored readings (READING_DTYPE): those stored so far,
-    for the live view of a run in progress."""
+    for the live view of a run in progress. When the run states angle uncertainties (the
+    stages' repeatability, the calibration's offsets) and slope_options are given, the data
+    are fitted with them and reduced again with the fitted model's slope in the budget
+    (meta["budget"]["slope"] names the fit; a failed fit leaves the angle terms out and says
+    why in meta["budget"]["notes"]); None: no fit, no angle terms."""
+    from calibration.budget import AngleInputs
     from calibration.reduce import optics_of, reduce_readings
     from gonio.record import emulator_config
 
@@ -53,20 +65,41 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
         readings = calfile.apply(readings, cal)
     optics = optics_of(run.config, cal, run.plan, emulator_config(run), shot_noise_w)
     share = {} if signature_share is None else {"signature_share": signature_share}
-    data = reduce_readings(run, readings, cal, optics, subtract_signature=subtract_signature,
-                           **share)
-    if optics.optics is not None:
-        data.meta["beam_divergence_deg"] = optics.optics.divergence_deg
-    if cal is not None:
-        data.meta["calibration"] = (str(calibration_file) if calibration_file is not None
-                                    else run.meta.get("calibration"))
+    angle = AngleInputs.of_run(run.config, cal)
+
+    def reduced(slope_model=None) -> ReducedData:
+        """The reduction, with the angle terms from slope_model if given."""
+        data = reduce_readings(run, readings, cal, optics, subtract_signature=subtract_signature,
+                               angle=angle, slope_model=slope_model, **share)
+        if optics.optics is not None:
+            data.meta["beam_divergence_deg"] = optics.optics.divergence_deg
+        if cal is not None:
+            data.meta["calibration"] = (str(calibration_file) if calibration_file is not None
+                                        else run.meta.get("calibration"))
+        return data
+
+    data = reduced()
+    if not angle.any or slope_options is None:
+        return data
+    try:
+        result = fit(data, slope_options)
+    except FitError as exc:
+        notes = data.meta["budget"]["notes"]
+        notes[:] = [n for n in notes if not n.startswith("angle:")]
+        notes.append(f"angle: not propagated (the fit failed: {exc})")
+        return data
+    data = reduced(result.predict)
+    data.meta["budget"]["slope"] = {"distribution": result.distribution,
+                                    "parameters": result.to_dict()["parameters"]}
     return data
 
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,
             calibration_file: str | Path | None = None, shot_noise_w: float | None = None,
             subtract_signature: bool = False) -> tuple[ReducedData, FitResult]:
-    """Reduce and fit a run."""
-    data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature)
+    """Reduce and fit a run (fitted twice when the angle terms need the model's slope:
+    `reduce_stored`)."""
+    options = options or FitOptions()
+    data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature,
+                      slope_options=options)
     return data, fit(data, options)
-

@@ -11,22 +11,37 @@ the config's [detector] shot_noise_w, or the emulated meter of an all-emulated r
 it is not modelled, and meta["noise_model"] says so); the dark level's uncertainty is
 propagated, and the beam curve's, which all points share, both into sigma and as
 ReducedData.shared_rel (the fit's covariance). Signature readings (the bench without the sample)
-flag, and on request subtract, what the bench adds (calibration.signature).
+flag, and on request subtract, what the bench adds (calibration.signature). Every such term is
+a named component of the value's GUM budget (ReducedData.components, calibration.budget), with
+the calibration's (range gains, solid angle), the detector's stated non-linearity and the angle
+errors through a fitted model's slope (docs/fitting.md, "Uncertainty budget").
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from calibration.aperture import solid_angle_sr
 from calibration.beam import beam_power
+from calibration.budget import (
+    COVERAGE_K,
+    STAGE_ROLES,
+    AngleInputs,
+    Budget,
+    add_angle_terms,
+    move_ids,
+    stage_slopes,
+)
+from calibration.detector import range_key
 from calibration.reduced import ReducedData
 from calibration.signature import DEFAULT_SHARE, apply_signature
 from calibration.values import CalibrationError
 from gonio.errors import GonioError
+from gonio.geometry import sample_angles
 from gonio.optics import Optics, optics_of_config
 from gonio.reading_flags import INVALID, flagged
 from gonio.sample import SampleInfo, sample_of_plan
@@ -41,6 +56,9 @@ HORIZON = "horizon"
 EDGE_ON_COS = 1e-6  # |cos theta_i| below this: the beam grazes the sample (it is retracted)
 
 
+#: The fitted model of a reading, f(wi, wo) in 1/sr (FitResult.predict).
+SlopeModel = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
 #: The noise model of a run whose shot noise nothing states.
 SHOT_NOT_MODELLED = ("dark scatter per range; shot noise not modelled (give [detector] "
                      "shot_noise_w or --shot-noise-w)")
@@ -50,7 +68,8 @@ SHOT_NOT_MODELLED = ("dark scatter per range; shot noise not modelled (give [det
 class ReductionOptics:
     """What reduction takes from a run's description: the sample ([sample]), the aperture's
     half-angle (a calibration's, else [optics]) and where it came from, the wavelength, the
-    shot noise of one reading per watt of net signal and the noise model in words; `sim` and
+    shot noise of one reading per watt of net signal and the noise model in words, the
+    detector's relative non-linearity ([detector] linearity_rel, 0: not stated); `sim` and
     `truth` are the emulator's [sim] table and its sample of an all-emulated run (for plots)."""
 
     sample: SampleInfo
@@ -60,6 +79,7 @@ class ReductionOptics:
     optics: Optics | None = None
     shot_variance_per_w: float = 0.0
     noise_model: str = SHOT_NOT_MODELLED
+    linearity_rel: float = 0.0
     sim: dict | None = None
     truth: dict | None = None
 
@@ -101,7 +121,8 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     averaging = int((plan or {}).get("averaging") or detector.get("averaging", 1))
     variance, noise_model = _shot_noise(detector, sim, shot_noise_w, wavelength, averaging)
     return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
-                           noise_model, sim, _emulator_truth(sim, plan or {}) if sim else None)
+                           noise_model, float(detector.get("linearity_rel") or 0.0), sim,
+                           _emulator_truth(sim, plan or {}) if sim else None)
 
 
 def _shot_noise(detector: dict, sim: dict | None, shot_noise_w: float | None,
@@ -208,17 +229,23 @@ class DarkModel:
 
 
 def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics | None = None,
-                    subtract_signature: bool = False, signature_share: float = DEFAULT_SHARE
+                    subtract_signature: bool = False, signature_share: float = DEFAULT_SHARE,
+                    angle: AngleInputs | None = None, slope_model: SlopeModel | None = None
                     ) -> ReducedData:
-    """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`).
+    """ReducedData of a run's readings (raw, or already corrected by a calibration `cal`), with
+    their uncertainty budget (calibration.budget) in `components`, combined into `sigma`.
 
-    run: a gonio.store.Run (its description gives the optics unless `optics` is given).
+    run: a gonio.store.Run (its description gives the optics unless `optics` is given, its
+    config the stages' repeatability unless `angle` is given). slope_model(wi, wo): the fitted
+    model of a reading (FitResult.predict), whose slope carries the angle errors into the
+    values; None: the angle terms are left out and meta["budget"] says so.
     Readings flagged invalid (the detector had none) are left out; signature_share,
     subtract_signature: calibration.signature.apply_signature."""
     from gonio.record import emulator_config
 
     readings = readings[~flagged(readings, INVALID)]
     optics = optics or optics_of(run.config, cal, run.plan, emulator_config(run))
+    angle = angle if angle is not None else AngleInputs.of_run(getattr(run, "config", {}), cal)
     kinds = readings["kind"]
     dark = DarkModel.from_readings(readings[(kinds == "dark") & ~readings["saturated"]])
     beam_rows = readings[(kinds == "beam") & ~readings["saturated"]]
@@ -236,24 +263,39 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
 
     spec = SampleSpec(kind=sample.kind, eta=sample.eta, k=sample.k, lit_from=sample.lit_from)
     w_eval, factor = exit_view(spec, wi, wo)
-    level, level_sigma, noise = dark.at(rows["range_w"])
-    phi, phi_sigma, phi_shared = beam.smooth(rows["t_s"])
+    level, level_sigma, read = dark.at(rows["range_w"])
+    phi, _, phi_shared = beam.smooth(rows["t_s"])
     net = rows["power_w"] - level
     shot = optics.shot_variance_per_w
-    noise = np.sqrt(noise**2 + shot * np.maximum(net, 0.0))
+    shot_w = np.sqrt(shot * np.maximum(net, 0.0))
+    noise = np.hypot(read, shot_w)
     scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
     signature = apply_signature(readings, rows, dark, beam, shot, net, noise, scale,
                                 signature_share, subtract_signature)
-    net, noise = signature.net_w, signature.noise_w
+    net = signature.net_w
     with np.errstate(divide="ignore", invalid="ignore"):
-        bsdf = np.where(scale > 0, net / scale, np.nan)
-        sigma = np.abs(np.where(scale > 0, np.hypot(noise, level_sigma) / scale, np.nan))
-        sigma = np.hypot(sigma, np.abs(bsdf) * phi_sigma / phi)
+        per_w = np.where(scale > 0, 1.0 / scale, np.nan)
+        bsdf = net * per_w
+    budget = Budget(bsdf)
+    budget.add_own("read_noise", read * per_w)
+    if shot > 0:
+        budget.add_own("shot_noise", shot_w * per_w)
+    if subtract_signature:
+        budget.add_own("signature", np.sqrt(np.maximum(signature.noise_w**2 - noise**2, 0.0))
+                       * per_w)
+    budget.add_shared("dark", per_range(rows["range_w"], level_sigma * per_w))
+    budget.add_shared("beam_normalisation", np.abs(bsdf)[:, None] * phi_shared / phi[:, None])
+    notes = calibration_terms(budget, cal, rows["range_w"], optics)
+    if angle.any and slope_model is None:
+        notes.append("angle: not propagated (no fitted model gave the BSDF's slope)")
+    elif angle.any:
+        angle_terms(budget, readings, rows, angle, slope_model, spec, flipped)
+    sigma = budget.sigma
     # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
     # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept
     horizon = ((np.abs(wo[:, 2]) < math.sin(math.radians(optics.aperture_half_angle_deg)))
                | (np.abs(wi[:, 2]) < EDGE_ON_COS))
-    valid = (~rows["saturated"] & (scale > 0) & (net > DARK_LIMIT_SIGMAS * noise)
+    valid = (~rows["saturated"] & (scale > 0) & (net > DARK_LIMIT_SIGMAS * signature.noise_w)
              & np.isfinite(bsdf) & ~signature.invalid & ~horizon)
     transmission = np.where(horizon, rows["side"] == "transmission",
                             (wo[:, 2] > 0) != (wi[:, 2] > 0))
@@ -273,8 +315,87 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
         "sim": optics.sim, "emulator_truth": optics.truth,
         "side": rows["side"].tolist(), "repeat": rows["repeat"].tolist(),
         "index": rows["index"].tolist(),  # the reading each point comes from
+        "coverage_k": COVERAGE_K,
+        "budget": {"own": sorted(budget.own), "shared": sorted(budget.shared),
+                   "angle_inputs": angle.to_json(), "notes": notes},
     }
     if signature.meta is not None:
         meta["signature"] = signature.meta
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
-                       phi_shared / phi[:, None], flags.astype(str))
+                       budget.shared_rel, flags.astype(str), budget.components)
+
+
+def angle_terms(budget: Budget, readings: np.ndarray, rows: np.ndarray, angle: AngleInputs,
+                slope_model: SlopeModel, spec, flipped: bool) -> None:
+    """The stages' errors through the model's slope (calibration.budget.add_angle_terms): the
+    derivative of what reduction would give, the model's reading f T |cos o| at the stages'
+    positions over T |cos o| at the recorded ones (an angle error moves the reading, not the
+    divisor)."""
+    from sim.bench.sample import exit_view
+
+    def reading(at: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(the model's reading before division by T |cos o|, T |cos o|) at stage positions."""
+        a = sample_angles(at["sample"], at["arm"], at["elevation"], at["azimuth"])
+        wi = directions(a.theta_i_deg, a.phi_i_deg, flipped)
+        wo = directions(a.theta_o_deg, a.phi_o_deg, flipped)
+        w_eval, factor = exit_view(spec, wi, wo)
+        divisor = factor * np.abs(wo[:, 2])
+        return slope_model(wi, w_eval) * divisor, divisor
+
+    stages = {role: rows[f"{role}_deg"] for role in STAGE_ROLES}
+    _, divisor = reading(stages)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_divisor = np.where(divisor > 0, 1.0 / divisor, np.nan)
+    slopes = stage_slopes(stages, set(angle.repeatability_deg) | set(angle.offset_sigma_deg),
+                          lambda at: reading(at)[0])
+    moves = {role: move_ids(readings, rows, role) for role in angle.repeatability_deg}
+    add_angle_terms(budget, {r: s * per_divisor for r, s in slopes.items()}, angle, moves)
+
+
+def per_range(range_w: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(N, ranges) columns: each point's value in its range's column, 0 elsewhere (an error
+    common to the readings of one range)."""
+    ranges = np.unique(range_w)
+    return np.where(range_w[:, None] == ranges[None, :], values[:, None], 0.0)
+
+
+def calibration_terms(budget: Budget, cal, range_w: np.ndarray, optics: ReductionOptics
+                      ) -> list[str]:
+    """The components of the calibration and the detector's description: range_gain (shared
+    per range: the gain's relative sigma), solid_angle (shared by all points: the measured
+    aperture's relative sigma) and linearity (own: [detector] linearity_rel, GUM type B);
+    returns notes on what the budget lacks."""
+    value = np.abs(budget.bsdf)
+    notes = []
+    if optics.linearity_rel > 0:
+        budget.add_own("linearity", value * optics.linearity_rel)
+    else:
+        notes.append("linearity: not stated ([detector] linearity_rel)")
+    if cal is None:
+        return notes + ["range_gain: no calibration applied",
+                        f"solid_angle: the {optics.aperture_from} aperture states no "
+                        "uncertainty"]
+    if cal.gains is not None:
+        rel = np.array([_relative(cal.gains.get(range_key(r))) for r in range_w])
+        budget.add_shared("range_gain", per_range(range_w, value * rel))
+    else:
+        notes.append("range_gain: the calibration has no gains")
+    if optics.aperture_from == "calibration":
+        budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
+    else:
+        notes.append(f"solid_angle: the {optics.aperture_from} aperture states no uncertainty")
+    return notes
+
+
+def _relative(m) -> float:
+    """sigma / value of a Measured (0 for None or a zero value)."""
+    return float(m.sigma / abs(m.value)) if m is not None and m.value != 0 else 0.0
+
+
+def _solid_angle_rel(cal) -> float:
+    """Relative sigma of the calibration's solid angle: its own, else from the half-angle's
+    (dOmega / dbeta = 2 pi sin beta, Omega = 2 pi (1 - cos beta))."""
+    if cal.aperture_solid_angle_sr is not None:
+        return _relative(cal.aperture_solid_angle_sr)
+    beta = math.radians(cal.aperture_half_angle_deg.value)
+    return math.sin(beta) * math.radians(cal.aperture_half_angle_deg.sigma) / (1.0 - math.cos(beta))

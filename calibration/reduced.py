@@ -21,6 +21,9 @@ class ReducedData:
     relative error shared_rel @ z, z ~ N(0, I_k) (the beam curve's error, common to every point
     it normalises); `sigma` includes each point's own part of it, |bsdf| |shared_rel[i]|. Fits
     take it as a covariance (`whitened`), not as independent noise. None: no shared error.
+
+    `components` is the uncertainty budget (calibration.budget): each named standard
+    uncertainty, own or shared; `sigma` is their root sum of squares, u (meta["coverage_k"]: k).
     """
 
     wi: np.ndarray  # (N, 3)
@@ -32,6 +35,7 @@ class ReducedData:
     meta: dict = field(default_factory=dict)  # eta, wavelength_nm, run path, calibration used
     shared_rel: np.ndarray | None = None  # (N, k) relative errors shared between points
     flags: np.ndarray | None = None  # (N,) str, comma-separated; None: no flags
+    components: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (N,) standard uncertainty, 1/sr
 
     def __post_init__(self) -> None:
         n = len(self.bsdf)
@@ -68,7 +72,7 @@ class ReducedData:
         return ReducedData(
             self.wi[keep], self.wo[keep], self.bsdf[keep], self.sigma[keep],
             self.valid[keep], self.transmission[keep], dict(self.meta), self.shared_rel[keep],
-            self.flags[keep],
+            self.flags[keep], {name: u[keep] for name, u in self.components.items()},
         )
 
     @property

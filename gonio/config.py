@@ -37,19 +37,23 @@ class AxisConfig:
     settle_s: float = 0.0
     tolerance_deg: float = 0.01
     home: bool = False
+    repeatability_deg: float = 0.0  # 1-sigma scatter of where a move ends (the GUM budget's)
 
 
 @dataclass(frozen=True)
 class DetectorConfig:
     """The detector, its correction wavelength, averaging and range policy (None = auto);
     `shot_noise_w`: the shot-noise variance of one sample per watt of signal, W (2 q B / R for
-    a photodiode of responsivity R and noise bandwidth B), None when not known."""
+    a photodiode of responsivity R and noise bandwidth B), None when not known;
+    `linearity_rel`: the relative 1-sigma non-linearity of a reading (the uncertainty budget's,
+    a datasheet's or a linearity test's figure), None when not stated."""
 
     device: str
     wavelength_nm: float
     averaging: int = 1
     range_w: float | None = None
     shot_noise_w: float | None = None
+    linearity_rel: float | None = None
 
 
 @dataclass(frozen=True)
@@ -165,6 +169,7 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
             settle_s=a.number("settle_s", 0.0, low=0.0, high=3600.0),
             tolerance_deg=a.number("tolerance_deg", 0.01, low=0.0, high=10.0, low_open=True),
             home=a.boolean("home", False),
+            repeatability_deg=a.number("repeatability_deg", 0.0, low=0.0, high=10.0),
         )
         a.string("units", "deg", choices=("deg",))
         a.done()
@@ -206,6 +211,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
         averaging=f.number("averaging", 1, low=1, high=100_000, integer=True),
         range_w=range_w,
         shot_noise_w=f.number("shot_noise_w", None, low=0.0, high=1.0),
+        linearity_rel=f.number("linearity_rel", None, low=0.0, high=0.5),
     )
     f.done()
     return det

@@ -1,5 +1,6 @@
-"""`gonio reduce RUN`: raw readings -> BSDF values with 1-sigma uncertainties (dark, beam,
-aperture, cos o, hemisphere exit); writes RUN/reduced.csv and prints a summary per incidence."""
+"""`gonio reduce RUN`: raw readings -> BSDF values with their uncertainty budget (dark, beam,
+aperture, cos o, hemisphere exit; calibration.budget); writes RUN/reduced.csv (u, k, U = k u)
+and prints a summary per incidence and the budget's components."""
 
 from __future__ import annotations
 
@@ -8,10 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.budget import COVERAGE_K, expanded
 from calibration.signature import DEFAULT_SHARE
+from gonio.errors import GonioError
 
 CSV_HEADER = ("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,side,bsdf_per_sr,sigma_per_sr,"
-              "valid,flags")
+              "coverage_k,expanded_per_sr,valid,flags")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--signature-share", type=float, default=DEFAULT_SHARE, metavar="FRACTION",
                    help="flag points whose signature exceeds this share of the net signal "
                         f"(default {DEFAULT_SHARE:g})")
+    p.add_argument("--coverage-k", type=float, default=COVERAGE_K, metavar="K",
+                   help=f"coverage factor of the expanded uncertainty U = k u (default "
+                        f"{COVERAGE_K:g}: about 95 %% for a normal distribution)")
     p.set_defaults(func=run)
 
 
@@ -49,14 +55,16 @@ def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def write_csv(data, path: Path) -> Path:
     """One row per sample reading, in the sample frame, degrees; valid 1/0; flags separated by
-    ';' (e.g. signature)."""
+    ';' (e.g. signature); sigma is the standard uncertainty u, expanded U = k u."""
     ti, pi = spherical_deg(data.wi)
     to, po = spherical_deg(data.wo)
     side = np.where(data.transmission, "transmission", "reflection")
+    k, big_u = expanded(data)
     lines = [CSV_HEADER] + [
-        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{int(v)},{g.replace(',', ';')}"
-        for a, b, c, d, s, f, e, v, g in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
-                                             data.valid, data.flags, strict=True)]
+        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{k:g},{x:.3g},{int(v)},"
+        f"{g.replace(',', ';')}"
+        for a, b, c, d, s, f, e, v, g, x in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
+                                                data.valid, data.flags, big_u, strict=True)]
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -80,13 +88,38 @@ def summary(data) -> list[str]:
     return lines
 
 
+def budget_summary(data) -> list[str]:
+    """Lines per component: own or shared, its median and largest share u_c / u over the valid
+    points; then k and the median U / f, and the budget's notes."""
+    good = data.valid & (data.sigma > 0)
+    shared = set(data.meta.get("budget", {}).get("shared", ()))
+    lines = [f"{'component':<20} {'kind':<7} {'median u_c/u':>12} {'max u_c/u':>10} "
+             f"{'median u_c/f':>12}"]
+    for name, u in sorted(data.components.items()):
+        share = u[good] / data.sigma[good]
+        rel = u[good] / np.abs(data.bsdf[good])
+        if not good.any():
+            continue
+        lines.append(f"{name:<20} {'shared' if name in shared else 'own':<7} "
+                     f"{np.median(share):12.3g} {share.max():10.3g} {np.median(rel):12.3g}")
+    k, big_u = expanded(data)
+    if good.any():
+        lines.append(f"u combined; k = {k:g}, U = k u: median U/f "
+                     f"{np.median(big_u[good] / np.abs(data.bsdf[good])):.3g}")
+    lines += [f"budget: {note}" for note in data.meta.get("budget", {}).get("notes", ())]
+    return lines
+
+
 def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
     from calibration.pipeline import reduce_run
     from calibration.signature import summary as signature_summary
 
+    if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
+        raise GonioError(f"--coverage-k must be a finite number > 0, got {args.coverage_k!r}")
     data = reduce_run(args.run, args.calibration, args.shot_noise_w, args.subtract_signature,
                       args.signature_share)
+    data.meta["coverage_k"] = args.coverage_k
     out = write_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv")
     m = data.meta
     print(f"run {args.run}: sample {m['sample']['id']}, eta {m['eta']:g}, aperture "
@@ -95,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
           f"(drift rms {m['beam_drift_rms']:.2%})")
     print(f"noise: {m['noise_model']}")
     print("\n".join(summary(data)))
+    print("\n".join(budget_summary(data)))
     if "signature" in m:
         print("\n".join(signature_summary(m["signature"])))
     print(out)

@@ -139,6 +139,8 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
     "alignment": {
         "sample_offset_deg": (0.0, _number(-10.0, 10.0)),
         "arm_offset_deg": (0.0, _number(-10.0, 10.0)),
+        "sample_repeatability_deg": (0.0, _number(0.0, 1.0)),
+        "arm_repeatability_deg": (0.0, _number(0.0, 1.0)),
     },
     "stray": {  # sim.bench.stray: the instrument's own scatter (default: none)
         "halo_fraction": (0.0, _number(0.0, 0.1)),
@@ -222,7 +224,8 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
         source=source, sample=sample,
         aperture_diameter_mm=aperture["diameter_mm"], distance_mm=aperture["distance_mm"],
         rtol=aperture["rtol"], order=aperture["order"],
-        alignment=Alignment(**read_table(sim_config, "alignment")),
+        alignment=Alignment(**read_table(sim_config, "alignment"),
+                            seed=int(sim_config.get("seed", 0) or 0)),
         retracted_beyond_deg=retracted,
         stray=InstrumentScatter(**read_table(sim_config, "stray")),
     )

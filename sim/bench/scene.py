@@ -14,9 +14,11 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
-from sim.bench.sample import LobeScales, Sample
+from sim.bench.sample import LobeScales, Sample, exit_view
 from sim.bench.source import Source
 from sim.bench.stray import InstrumentScatter
 
@@ -26,17 +28,36 @@ NEGLIGIBLE = 1e-14  # fraction of the incident power below which a tail is not r
 
 @dataclass(frozen=True)
 class Alignment:
-    """Known mechanical errors: the true angle is the stage's reported angle plus the offset."""
+    """Known mechanical errors: the true angle is the stage's reported angle plus the offset,
+    plus, with a repeatability, a scatter drawn anew (N(0, repeatability), from `seed`) each
+    time the stage's reported angle changes: where a move ends, which the encoder cannot see."""
 
     sample_offset_deg: float = 0.0
     arm_offset_deg: float = 0.0
+    sample_repeatability_deg: float = 0.0
+    arm_repeatability_deg: float = 0.0
+    seed: int = 0
+    _moves: dict = field(default_factory=dict, compare=False, repr=False)
 
     def true_positions(self, positions: Mapping[str, float]) -> dict[str, float]:
         """Stage positions corrected to the sample's and arm's true angles."""
         true = {"azimuth": 0.0, "elevation": 0.0, **positions}
-        true["sample"] = positions["sample"] + self.sample_offset_deg
-        true["arm"] = positions["arm"] + self.arm_offset_deg
+        true["sample"] = (positions["sample"] + self.sample_offset_deg
+                          + self._scatter("sample", positions["sample"],
+                                          self.sample_repeatability_deg))
+        true["arm"] = (positions["arm"] + self.arm_offset_deg
+                       + self._scatter("arm", positions["arm"], self.arm_repeatability_deg))
         return true
+
+    def _scatter(self, role: str, reported: float, sigma: float) -> float:
+        """This move's scatter of a stage: kept while its reported angle stays put."""
+        if sigma == 0.0:
+            return 0.0
+        last = self._moves.get(role)
+        if last is None or last[0] != reported:
+            rng = self._moves.setdefault("rng", np.random.default_rng(self.seed))
+            last = self._moves[role] = (reported, float(rng.normal(0.0, sigma)))
+        return last[1]
 
 
 def disk_overlap_fraction(r_beam: float, r_aperture: float, offset: float) -> float:
@@ -113,6 +134,18 @@ class Bench:
                     return probe
         return self.integral.integrate(self.sample.integrand, wi, wo,
                                        self.sample.lobe_scales(wi, wo))
+
+    def reduced_bsdf(self, sample_deg: np.ndarray, arm_deg: np.ndarray) -> np.ndarray:
+        """What reduction of noiseless readings at these stage positions (true ones, taken as
+        reported) gives: the scattered fraction over Omega T |cos o| (the exit view's factor
+        T), so a test compares reduced values with the bench's exact expectation."""
+        fraction = np.array([self.scattered_fraction({"sample": s, "arm": a})
+                             for s, a in zip(sample_deg, arm_deg, strict=True)])
+        wi, wo = sample_frame_directions({"sample": np.asarray(sample_deg, float),
+                                          "arm": np.asarray(arm_deg, float)},
+                                         flipped=self.sample.flipped)
+        _, factor = exit_view(self.sample.spec, wi, wo)
+        return fraction / (self.integral.solid_angle_sr * factor * np.abs(wo[..., 2]))
 
     def warm_up(self) -> None:
         """Evaluate one reflected and one transmitted reading, so the model's compiled kernels
