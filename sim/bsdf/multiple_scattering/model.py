@@ -220,15 +220,10 @@ class RandomWalkBSDF:
             self._shares[outside] = table
         return self._shares[outside]
 
-    def sample(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Follow one walk from wi: (wo, weight = f |cos o| / p(wo), approximate_pdf at wo).
-
-        One walk per sample: the weight is the walk's throughput (1 for a dielectric and for
-        F = 1), exact for the walk's own density p; the pdf returned is approximate_pdf, not p
-        (p is known only by further walks: pdf()), so use it for MIS weights, not to divide.
-        u (..., 3) drives the first scattering event (height, visible normal); later events use
-        rng.
-        """
+    def walk_once(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """One walk from each wi: (wo, weight = the walk's throughput, 0 outside the parent's
+        lobes or when the walk does not leave). u (..., 3) drives the first scattering event
+        (height, visible normal); later events use rng."""
         (wi,) = directions(wi)
         u = np.asarray(u, dtype=np.float64)
         shape = wi.shape[:-1]
@@ -237,9 +232,19 @@ class RandomWalkBSDF:
         ok = np.isfinite(res.exit_direction[:, 0])
         wo = np.where(ok[:, None], res.exit_direction, np.array([0.0, 0.0, 1.0]))
         ok &= self._lobe_mask(wi.reshape(-1, 3), wo) > 0.0
-        weight = np.where(ok, res.weight, 0.0)
-        pdf = np.where(ok, self.approximate_pdf(wi.reshape(-1, 3), wo), 0.0)
-        return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
+        return wo.reshape(shape + (3,)), np.where(ok, res.weight, 0.0).reshape(shape)
+
+    def sample(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """walk_once, and approximate_pdf at wo: (wo, weight = f |cos o| / p(wo), pdf).
+
+        One walk per sample: the weight is exact for the walk's own density p; the pdf returned
+        is approximate_pdf, not p (p is known only by further walks: pdf()), so use it for MIS
+        weights, not to divide by.
+        """
+        wo, weight = self.walk_once(wi, u, rng)
+        (wi,) = directions(wi)
+        pdf = np.where(weight > 0.0, self.approximate_pdf(np.broadcast_to(wi, wo.shape), wo), 0.0)
+        return wo, weight, pdf
 
     def first_heights(self, wi, rng: np.random.Generator, walks: int) -> np.ndarray:
         """Heights of the first scattering event of `walks` walks from wi (nan: none)."""
