@@ -2,9 +2,9 @@
 
 GGX is Heitz 2018's warp (primitives.ggx_visible_normal, which holds below the horizon too);
 Beckmann is beckmann_sphere's log-CDF inversion, one direction at a time, with the two special
-functions numba lacks: erfcx (direct form, then the erfc continued fraction of
-primitives.beckmann_a_lambda) and the normal quantile ndtri (Acklam's rational approximation
-refined by one Halley step to full double precision). beckmann_sphere (numpy, scipy) is the
+functions numba lacks: erfcx (direct form, then primitives.erfc_continued_fraction) and the
+normal quantile ndtri (Acklam's rational approximation refined by one Halley step to full double
+precision). beckmann_sphere (numpy, scipy) is the
 reference.
 """
 
@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import math
 
-from sim.bsdf.constants import BECKMANN_CF_FROM, BECKMANN_CF_TERMS, SQRT_PI, Ndf
-from sim.bsdf.primitives import ggx_visible_normal, scalar, unit
+from sim.bsdf.constants import BECKMANN_CF_FROM, SQRT_PI, Ndf
+from sim.bsdf.primitives import erfc_continued_fraction, ggx_visible_normal, scalar, unit
 
 LOG_2 = math.log(2.0)
 LOG_SQRT_PI = math.log(SQRT_PI)
-#: Newton steps of the Beckmann slope inversion at most (it converges in a few).
+#: Steps of the Beckmann slope inversion at most (it converges in a few).
 NEWTON_STEPS = 60
 # Acklam's coefficients: central numerator, central denominator, tail numerator and denominator
 _A = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02,
@@ -36,10 +36,7 @@ def erfcx(x):
     """exp(x^2) erfc(x) for x >= 0."""
     if x < BECKMANN_CF_FROM:
         return math.exp(x * x) * math.erfc(x)
-    t = 0.0
-    for k in range(BECKMANN_CF_TERMS, 0, -1):
-        t = 0.5 * k / (x + t)
-    return 1.0 / (SQRT_PI * (x + t))
+    return 1.0 / (SQRT_PI * (x + erfc_continued_fraction(x)))
 
 
 @scalar
@@ -77,8 +74,9 @@ def _log_cdf(x, mu):
 
 @scalar
 def _visible_slope(mu, u):
-    """Slope x < mu of density proportional to (mu - x) exp(-x^2), by Newton on log F from the
-    left (beckmann_sphere._visible_slope)."""
+    """Slope x < mu of density proportional to (mu - x) exp(-x^2), by Halley's method on
+    log F (beckmann_sphere._visible_slope takes Newton steps), started left of the root; a
+    step that would leave [bracket, mu) is a Newton step, which from the left stays there."""
     target = math.log(u) + _log_cdf(mu, mu)
     bound = math.log(0.5 * (max(mu, 0.0) + 1.0 / SQRT_PI)) - target
     x = min(-math.sqrt(max(bound, 0.0)), mu)
@@ -87,11 +85,16 @@ def _visible_slope(mu, u):
         gap = mu - x
         if gap <= 0.0:
             break
-        step = (target - g) / math.exp(math.log(gap) - x * x - LOG_SQRT_PI - g)
+        d1 = math.exp(math.log(gap) - x * x - LOG_SQRT_PI - g)  # (log F)' = f / F
+        d2 = d1 * (-1.0 / gap - 2.0 * x) - d1 * d1  # (log F)''
+        r = target - g
+        step = 2.0 * r * d1 / (2.0 * d1 * d1 + r * d2)
+        if not (math.isfinite(step) and 0.0 < step < gap):
+            step = r / d1
         if not (math.isfinite(step) and step > 0.0):
             break
         x = min(x + step, mu)
-        if step <= 1e-13 * (1.0 + abs(x)):
+        if step <= 1e-6 * (1.0 + abs(x)):  # Halley: the error left is of order step^3
             break
     return x
 
