@@ -2,8 +2,9 @@
 
 energy_loss is deterministic (graded Gauss-Legendre quadrature, over the facets' slopes, of
 what each facet's single scattering loses: accurate for losses down to 1e-6 and below),
-cheap enough for the bench to decide whether multiple scattering is worth computing. albedo_estimate integrates any model's f |cos o| over
-the sphere by importance sampling, the white-furnace check of the random walk.
+cheap enough for the bench to decide whether multiple scattering is worth computing.
+albedo_estimate integrates any model's f |cos o| over the sphere by importance sampling, the
+white-furnace check of the random walk.
 """
 
 from __future__ import annotations
