@@ -34,19 +34,18 @@ AVAILABLE = COMPILED
 
 
 @scalar
-def signed_lambda(ndf, ax, ay, x, y, z):
-    """Smith Lambda with its sign (Distribution.signed_lambda): +inf exactly horizontal."""
-    c = abs(z)
-    if c == 0.0:
-        return math.inf
-    up = cos_lambda(ndf, ax, ay, x, y, z) / c
-    return up if z >= 0.0 else -1.0 - up
-
-
-@scalar
 def projected_area(ndf, ax, ay, x, y, z):
     """Integral of <w, m>+ D(m) dm for w anywhere on the sphere (Distribution.projected_area)."""
     return max(z, 0.0) + cos_lambda(ndf, ax, ay, x, y, z)
+
+
+@scalar
+def escape_lambda(lam, log_u):
+    """G1 = u^Lambda of leaving, upward, with Smith Lambda lam >= 0, from log C1 = log_u."""
+    if lam == 0.0:
+        return 1.0
+    g = math.exp(lam * log_u)
+    return g if math.isfinite(g) else 0.0
 
 
 @scalar
@@ -54,11 +53,14 @@ def escape(ndf, ax, ay, x, y, z, log_u):
     """G1 = u^Lambda of leaving along (x, y, z) from log C1 = log_u (0 for z <= 0)."""
     if z <= 0.0:
         return 0.0
-    lam = cos_lambda(ndf, ax, ay, x, y, z) / z
-    if lam == 0.0:
-        return 1.0
-    g = math.exp(lam * log_u)
-    return g if math.isfinite(g) else 0.0
+    return escape_lambda(cos_lambda(ndf, ax, ay, x, y, z) / z, log_u)
+
+
+@scalar
+def unsigned_lambda(ndf, ax, ay, x, y, z):
+    """Lambda of (x, y, |z|): the escape exponent of a direction on either side (inf at z = 0)."""
+    c = abs(z)
+    return cos_lambda(ndf, ax, ay, x, y, z) / c if c > 0.0 else math.inf
 
 
 @scalar
@@ -109,32 +111,43 @@ def phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, ox, oy, oz):
 
 @scalar
 def next_event(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, tx, ty, tz,
-               log_here, log_there):
-    """Phase function from w_in = i (projected area `area`) towards the world direction t times
-    t's escape probability from this event (Walker._next_event)."""
+               lam_t, log_here, log_there):
+    """Phase function from w_in = i (projected area `area`) towards the world direction t
+    (unsigned_lambda lam_t) times t's escape probability from this event
+    (Walker._next_event)."""
     el, elm1 = side_eta(eta, outside)
     lz = tz if outside else -tz  # t in the local frame of this side
     if lz > 0.0:
         phase = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area,
                               tx, ty, lz)
-        return phase * escape(ndf, ax, ay, tx, ty, lz, log_here) if phase > 0.0 else 0.0
+        return phase * escape_lambda(lam_t, log_here) if phase > 0.0 else 0.0
     if conductor:
         return 0.0
     phase = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, tx, ty, lz)
-    return phase * escape(ndf, ax, ay, tx, ty, -lz, log_there) if phase > 0.0 else 0.0
+    return phase * escape_lambda(lam_t, log_there) if phase > 0.0 else 0.0
+
+
+@scalar
+def target_lambdas(ndf, ax, ay, targets):
+    """unsigned_lambda of every target (m, 3): computed once, used at every event."""
+    lam = np.empty(targets.shape[0])
+    for t in range(targets.shape[0]):
+        lam[t] = unsigned_lambda(ndf, ax, ay, targets[t, 0], targets[t, 1], targets[t, 2])
+    return lam
 
 
 @scalar
 def next_event_all(ndf, ax, ay, conductor, eta, has_f, n_c, w_in, out, log_here, log_there,
                    targets, result):
     """result[e, t] = phase(w_in[e] -> target t) x its escape probability (walk.py)."""
+    lam = target_lambdas(ndf, ax, ay, targets)
     for e in range(w_in.shape[0]):
         ix, iy, iz = w_in[e, 0], w_in[e, 1], w_in[e, 2]
         area = projected_area(ndf, ax, ay, ix, iy, iz)
         for t in range(targets.shape[0]):
             result[e, t] = next_event(ndf, ax, ay, conductor, eta, has_f, n_c, out[e], ix, iy,
                                       iz, area, targets[t, 0], targets[t, 1], targets[t, 2],
-                                      log_here[e], log_there[e])
+                                      lam[t], log_here[e], log_there[e])
 
 
 def supports(slopes: Distribution, micro) -> bool:

@@ -16,7 +16,6 @@ from sim.bsdf.constants import BECKMANN_CF_FROM, SQRT_PI, Ndf
 from sim.bsdf.primitives import erfc_continued_fraction, ggx_visible_normal, scalar, unit
 
 LOG_2 = math.log(2.0)
-LOG_SQRT_PI = math.log(SQRT_PI)
 #: Steps of the Beckmann slope inversion at most (it converges in a few).
 NEWTON_STEPS = 60
 # Acklam's coefficients: central numerator, central denominator, tail numerator and denominator
@@ -66,10 +65,14 @@ def ndtri(p):
 
 @scalar
 def _log_cdf(x, mu):
-    """log F(x), F(x) = int_{-inf}^x (mu - t) exp(-t^2)/sqrt(pi) dt (beckmann_sphere._log_cdf)."""
+    """(log F(x), F'(x) / F(x)), F(x) = int_{-inf}^x (mu - t) exp(-t^2)/sqrt(pi) dt (x <= mu;
+    beckmann_sphere._log_cdf), both from one erfc, stable in the tails."""
     if x <= 0.0:
-        return -x * x + math.log(mu * erfcx(-x) + 1.0 / SQRT_PI) - LOG_2
-    return math.log(mu * math.erfc(-x) + math.exp(-x * x) / SQRT_PI) - LOG_2
+        q = mu * erfcx(-x) + 1.0 / SQRT_PI  # F = exp(-x^2) q / 2
+        return -x * x + math.log(q) - LOG_2, 2.0 * (mu - x) / (SQRT_PI * q)
+    e = math.exp(-x * x)
+    q = mu * math.erfc(-x) + e / SQRT_PI  # F = q / 2
+    return math.log(q) - LOG_2, 2.0 * (mu - x) * e / (SQRT_PI * q)
 
 
 @scalar
@@ -77,15 +80,14 @@ def _visible_slope(mu, u):
     """Slope x < mu of density proportional to (mu - x) exp(-x^2), by Halley's method on
     log F (beckmann_sphere._visible_slope takes Newton steps), started left of the root; a
     step that would leave [bracket, mu) is a Newton step, which from the left stays there."""
-    target = math.log(u) + _log_cdf(mu, mu)
+    target = math.log(u) + _log_cdf(mu, mu)[0]
     bound = math.log(0.5 * (max(mu, 0.0) + 1.0 / SQRT_PI)) - target
     x = min(-math.sqrt(max(bound, 0.0)), mu)
     for _ in range(NEWTON_STEPS):
-        g = _log_cdf(x, mu)
+        g, d1 = _log_cdf(x, mu)  # log F and (log F)' = f / F
         gap = mu - x
         if gap <= 0.0:
             break
-        d1 = math.exp(math.log(gap) - x * x - LOG_SQRT_PI - g)  # (log F)' = f / F
         d2 = d1 * (-1.0 / gap - 2.0 * x) - d1 * d1  # (log F)''
         r = target - g
         step = 2.0 * r * d1 / (2.0 * d1 * d1 + r * d2)

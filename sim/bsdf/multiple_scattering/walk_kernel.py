@@ -23,8 +23,9 @@ from sim.bsdf.multiple_scattering.nee_kernel import (
     phase_transmit,
     projected_area,
     side_eta,
-    signed_lambda,
     surface_arguments,
+    target_lambdas,
+    unsigned_lambda,
 )
 from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
 from sim.bsdf.primitives import normal_density, scalar, unit
@@ -64,11 +65,11 @@ def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my
 
 
 @scalar
-def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, eta):
-    """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density)."""
+def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
+    """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density);
+    area: projected_area of wo (above) or of -wo (below), |o_z| + cos_lambda(o) either way."""
     if oz > 0.0:
         hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
-        area = projected_area(ndf, ax, ay, ox, oy, oz)
         if hz > 0.0 and ox * hx + oy * hy + oz * hz > 0.0 and area > 0.0:
             return normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
         return 0.0
@@ -80,7 +81,6 @@ def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, eta):
     co = ox * hx + oy * hy + oz * hz
     if not (ci > 0.0 and co < 0.0 and hz > 0.0):
         return 0.0
-    area = projected_area(ndf, ax, ay, -ox, -oy, -oz)
     if not area > 0.0:
         return 0.0
     cos_v = max(-(ox * hx + oy * hy + oz * hz), 0.0)
@@ -111,9 +111,9 @@ def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
 
 @scalar
 def guided(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy, oz,
-           px, py, pz, crossed_p, u0, u1, u2, u3):
+           area_o, px, py, pz, crossed_p, u0, u1, u2, u3):
     """Next direction by one-sample MIS of the phase function and backwards from wo
-    (guiding.guided_scatter): (x, y, z, factor, crossed)."""
+    (guiding.guided_scatter): (x, y, z, factor, crossed). area_o: |o_z| + cos_lambda(o)."""
     target_cross = (not conductor) and u1 < 0.5
     side = outside != target_cross
     sz = oz if side else -oz
@@ -139,7 +139,7 @@ def guided(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, o
     nz = oz if next_side else -oz
     e_next = side_eta(eta, next_side)[0] if not conductor else 1.0
     arz = wz if crossed else -wz  # arriving direction in the next event's frame
-    p_adj = adjoint_density(ndf, ax, ay, -wx, -wy, arz, ox, oy, nz, e_next)
+    p_adj = adjoint_density(ndf, ax, ay, -wx, -wy, arz, ox, oy, nz, area_o, e_next)
     if not conductor:
         p_adj *= 0.5
     mixture = (1.0 - BACKWARDS) * p_phase + BACKWARDS * p_adj
@@ -156,10 +156,14 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
     """One walk from each row of wi; outputs as Walker.run's WalkResult (value (n, m))."""
     np.random.seed(seed)
     forced = mode != SAMPLE
+    lam_t = target_lambdas(ndf, ax, ay, targets)
+    lam_o = target_lambdas(ndf, ax, ay, wo)
     for i in range(wi.shape[0]):
         outside = wi[i, 2] > 0.0
         if conductor and not outside:
             continue
+        if mode == EVALUATE:  # wo's Lambda and projected area, the same from either side
+            area_o = abs(wo[i, 2]) * (1.0 + lam_o[i])
         dx, dy = -wi[i, 0], -wi[i, 1]
         dz = -wi[i, 2] if outside else wi[i, 2]
         cur = 0.0  # log C1 of the height on this side (h = +inf above, -inf below)
@@ -171,7 +175,8 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
                 ua, ub, uc = u_first[i, 0], u_first[i, 1], u_first[i, 2]
             else:
                 ua, ub, uc = np.random.random(), np.random.random(), np.random.random()
-            lam = signed_lambda(ndf, ax, ay, dx, dy, dz)
+            lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
+            lam = lam_up if dz >= 0.0 else -1.0 - lam_up
             if forced:
                 p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
                 if math.isnan(p_hit):
@@ -193,18 +198,19 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
                 first[i] = new if outside else other
             ix, iy, iz = -dx, -dy, -dz
             mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
-            area = projected_area(ndf, ax, ay, ix, iy, iz)
+            area = max(iz, 0.0) + abs(iz) * lam_up if abs(iz) > 0.0 else projected_area(
+                ndf, ax, ay, ix, iy, iz)
             if k >= min_order and (order == 0 or order == k):
                 if mode == EVALUATE:
                     value[i, 0] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,
                                                      outside, ix, iy, iz, area, wo[i, 0],
-                                                     wo[i, 1], wo[i, 2], new, other)
+                                                     wo[i, 1], wo[i, 2], lam_o[i], new, other)
                 elif mode == TARGETS:
                     for t in range(targets.shape[0]):
                         value[i, t] += beta * next_event(ndf, ax, ay, conductor, eta, has_f,
                                                          n_c, outside, ix, iy, iz, area,
                                                          targets[t, 0], targets[t, 1],
-                                                         targets[t, 2], new, other)
+                                                         targets[t, 2], lam_t[t], new, other)
             s0 = np.random.random()
             np.random.random()  # the numpy path's second scattering uniform
             wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
@@ -214,7 +220,7 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
                 g2, g3 = np.random.random(), np.random.random()
                 wx, wy, wz, factor, crossed = guided(
                     ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area,
-                    wo[i, 0], wo[i, 1], wo[i, 2], wx, wy, wz, crossed, g0, g1, g2, g3)
+                    wo[i, 0], wo[i, 1], wo[i, 2], area_o, wx, wy, wz, crossed, g0, g1, g2, g3)
             beta *= factor
             if crossed:
                 outside = not outside
