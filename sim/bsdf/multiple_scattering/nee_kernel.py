@@ -92,15 +92,20 @@ def phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area
 
 
 @scalar
+def refraction_normal(ix, iy, iz, ox, oy, oz, el):
+    """(h, <i,h>, <o,h>) of the facet h (h_z >= 0) that refracts i into o below it, el the
+    relative index across it: h = -(i + el o) / |.| turned upward."""
+    hx, hy, hz = unit(ix + el * ox, iy + el * oy, iz + el * oz)
+    if hz <= 0.0:
+        hx, hy, hz = -hx, -hy, -hz
+    return (hx, hy, hz, ix * hx + iy * hy + iz * hz, ox * hx + oy * hy + oz * hz)
+
+
+@scalar
 def phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, ox, oy, oz):
     """(1-F) D_visible(w_in,h) el^2 |<w_out,h>| / (<w_in,h> + el <w_out,h>)^2, w_out below
     (MicroDielectric.phase_transmit); area is w_in's projected area."""
-    hx, hy, hz = unit(ix + el * ox, iy + el * oy, iz + el * oz)
-    hx, hy, hz = -hx, -hy, -hz
-    if hz < 0.0:
-        hx, hy, hz = -hx, -hy, -hz
-    ci = ix * hx + iy * hy + iz * hz
-    co = ox * hx + oy * hy + oz * hz
+    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, el)
     if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
         return 0.0
     denom = ci + el * co

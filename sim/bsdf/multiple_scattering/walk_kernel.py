@@ -22,6 +22,7 @@ from sim.bsdf.multiple_scattering.nee_kernel import (
     phase_reflect,
     phase_transmit,
     projected_area,
+    refraction_normal,
     side_eta,
     surface_arguments,
     target_lambdas,
@@ -73,19 +74,11 @@ def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
         if hz > 0.0 and ox * hx + oy * hy + oz * hz > 0.0 and area > 0.0:
             return normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
         return 0.0
-    hx, hy, hz = unit(ix + eta * ox, iy + eta * oy, iz + eta * oz)
-    hx, hy, hz = -hx, -hy, -hz
-    if hz < 0.0:
-        hx, hy, hz = -hx, -hy, -hz
-    ci = ix * hx + iy * hy + iz * hz
-    co = ox * hx + oy * hy + oz * hz
-    if not (ci > 0.0 and co < 0.0 and hz > 0.0):
+    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, eta)
+    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
         return 0.0
-    if not area > 0.0:
-        return 0.0
-    cos_v = max(-(ox * hx + oy * hy + oz * hz), 0.0)
-    denom = ci + eta * co
-    value = cos_v * normal_density(ndf, ax, ay, hx, hy, hz) / area * ci / (denom * denom)
+    denom = ci + eta * co  # D_visible(-o, h) = -co D(h) / area
+    value = -co * normal_density(ndf, ax, ay, hx, hy, hz) / area * ci / (denom * denom)
     return value if math.isfinite(value) else 0.0
 
 
