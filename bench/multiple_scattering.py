@@ -2,8 +2,10 @@
 
 For the reference glass (GGX, eta = 1.51) at alpha 0.3 and 1.0: the eval error against walks
 per direction pair (reference: 2^17 walks per pair, computed in this run), the white-furnace
-error against run time (F = 1 conductor, and R + T for the glass), and walks per second beside
-the single-scattering eval (pairs per second) measured in the same run as the baseline; and
+error against run time (F = 1 conductor, and R + T for the glass), and walks per CPU-second
+of the compiled walk (eval, sample, shared paths; GGX and Beckmann, glass and mirror, alpha 0.3
+and 1.0) beside the numpy walk measured in the same run as the baseline and against issue 19's
+C++ figures for this machine; and
 the two-scale diffraction model's evals per second beside the plain microfacet eval; and for
 the bench's tabulated orders >= 2 (HigherOrderLobe), the error against walks per table column
 and the build time, beside the per-pair walk (HigherOrders) it replaced, measured in the same
@@ -26,6 +28,7 @@ from sim.bsdf.multiple_scattering import (
     albedo_estimate,
     higher_orders_at,
 )
+from sim.bsdf.multiple_scattering.walk import Walker
 
 ETA = 1.51
 ALPHAS = (0.3, 1.0)
@@ -110,25 +113,66 @@ def furnace_table(rng: np.random.Generator) -> list[str]:
     return lines
 
 
+#: Issue 19's single-thread figures for Heitz et al.'s C++ random walk on this machine, walks per
+#: CPU-second: GGX glass at alpha 0.3-1.0 (eval, sample), and the range for the other cases.
+CPP_GGX_GLASS = {"eval": 1.3e6, "sample": 1.2e6}
+CPP_OTHER = (0.7e6, 1.4e6)
+SURFACES = [(name, kind, alpha) for name in ("ggx", "beckmann") for kind in ("dielectric",
+                                                                              "conductor")
+            for alpha in ALPHAS]
+TARGETS = 64
+
+
+def _walk_modes(walker, n: int, rng: np.random.Generator) -> dict[str, float]:
+    """Walks per CPU-second, and scattering events per walk, of eval (forced hits and
+    roulette, NEE towards one wo per walk), sample (the analog walk) and the shared-path
+    estimator (orders >= 2 towards TARGETS directions per walk), from 60 deg incidence towards
+    uniform wo on the sphere (the upper hemisphere for a mirror)."""
+    wi = np.tile(direction(60.0), (n, 1))
+    u = rng.random((n, 2))
+    z = 2.0 * u[:, 0] - 1.0
+    if walker.micro.transmits is False:
+        z = np.abs(z)
+    r = np.sqrt(1.0 - z * z)
+    wo = np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), z], -1)
+    shared = max(n // 8, 1)
+    rates, events = {}, {}
+    for mode, args, kwargs in (("eval", (wi, rng, wo), {}), ("sample", (wi, rng), {}),
+                               ("shared", (wi[:shared], rng),
+                                {"targets": wo[:TARGETS], "min_order": 2})):
+        start = time.process_time()
+        res = walker.run(*args, **kwargs)
+        rates[mode] = len(args[0]) / (time.process_time() - start)
+        events[mode] = float(res.orders.mean())
+    return rates, events
+
+
 def throughput_table(rng: np.random.Generator) -> list[str]:
-    """Walks per second of the random walk beside single-scattering evals per second."""
-    lines = ["throughput (same run): random walk vs single-scattering eval (baseline)",
-             f"{'alpha':>5} {'walks/s':>12} {'mean order':>10} {'single evals/s':>15} "
-             f"{'walk cost in evals':>18}"]
-    n = 200_000
-    for alpha in ALPHAS:
-        glass = RoughDielectric("ggx", alpha, ETA, masking="correlated")
-        u = rng.random((n, 2))
-        wi = np.broadcast_to(direction(45.0), (n, 3))
-        z = 2 * u[:, 0] - 1
-        r = np.sqrt(1 - z * z)
-        wo = np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), z], -1)
-        walk = RandomWalkBSDF(glass, walks=1)
-        _, t_walk = timed(walk.eval, wi, wo, rng)
-        _, t_single = timed(glass.eval, wi, wo)
-        orders = walk.walker.run(np.ascontiguousarray(wi), rng).orders
-        lines.append(f"{alpha:5.1f} {n / t_walk:12.3e} {orders.mean():10.2f} "
-                     f"{n / t_single:15.3e} {t_walk / t_single:18.1f}")
+    """Walks per CPU-second of the compiled walk beside the numpy walk (the per-walk baseline,
+    same run), and the ratio to issue 19's C++ figures (GGX glass: eval 1.3e6, sample 1.2e6;
+    other cases 0.7-1.4e6, so two ratios: against 0.7e6 / against 1.4e6). events: scattering
+    events per walk (an eval walk is forced to hit, so it is longer than the analog walk the
+    C++ eval follows, and carries less variance)."""
+    lines = [f"walks per CPU-second, 60 deg incidence: compiled walk vs numpy walk (baseline, same "
+             f"run); shared = orders >= 2 towards {TARGETS} targets per walk",
+             f"{'surface':>20} {'mode':>7} {'events':>6} {'compiled/s':>11} {'numpy/s':>10} "
+             f"{'speed-up':>8} {'vs C++ (issue 19)':>18}"]
+    for name, kind, alpha in SURFACES:
+        model = RandomWalkBSDF(Microsurface(name, alpha, kind, eta=ETA), walks=1)
+        slopes, micro, guided = model.slopes, model.micro, model.guided
+        _walk_modes(Walker(slopes, micro, guided), 64, rng)  # compile (or load the cache)
+        fast, events = _walk_modes(Walker(slopes, micro, guided), 40000, rng)
+        slow, _ = _walk_modes(Walker(slopes, micro, guided, compiled=False), 10000, rng)
+        label = f"{name} {'glass' if kind == 'dielectric' else 'mirror'} {alpha}"
+        for mode in ("eval", "sample", "shared"):
+            if name == "ggx" and kind == "dielectric" and mode in CPP_GGX_GLASS:
+                versus = f"{fast[mode] / CPP_GGX_GLASS[mode]:18.2f}"
+            elif mode == "shared":
+                versus = f"{'(no C++ analogue)':>18}"
+            else:
+                versus = f"{fast[mode] / CPP_OTHER[0]:8.2f} / {fast[mode] / CPP_OTHER[1]:<7.2f}"
+            lines.append(f"{label:>20} {mode:>7} {events[mode]:6.2f} {fast[mode]:11.3e} "
+                         f"{slow[mode]:10.3e} {fast[mode] / slow[mode]:8.1f} {versus}")
     return lines
 
 

@@ -124,5 +124,5 @@ class ModelEstimator:
         leaving through the far side, times their throughput, over eta^2."""
         v = np.broadcast_to(view_direction(mu), u.shape)
         walk = RandomWalkBSDF(self.model(alpha, eta), walks=1)
-        wo, weight, _ = walk.sample(v, u, rng)
+        wo, weight = walk.walk_once(v, u, rng)
         return np.array([np.mean(np.where(wo[:, 2] < 0, weight, 0.0)) / (eta * eta)])

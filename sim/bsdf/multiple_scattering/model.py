@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.bsdf.distributions import Distribution, make_distribution
+from sim.bsdf.multiple_scattering.energy import energy_loss
 from sim.bsdf.multiple_scattering.heights import make_heights
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric, MicroDiffuse
 from sim.bsdf.multiple_scattering.walk import Walker, walkable
@@ -24,6 +25,9 @@ KINDS = ("dielectric", "conductor", "diffuse")
 GUIDE_BELOW_ALPHA = 0.7
 #: Walks advanced together in one vectorised batch (bounded so the arrays stay in cache).
 BATCH = 1 << 15
+#: Incidence angles (deg from the side's normal) of the table of orders >= 2's share behind
+#: approximate_pdf (interpolated linearly between them).
+MASS_NODES_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 89.0)
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,8 @@ class RandomWalkBSDF:
     guided: draw some next directions backwards from wo when evaluating (see guiding.py);
     None means on below alpha GUIDE_BELOW_ALPHA, where it pays for its cost.
     slopes is its distribution, walker the Walker that runs its batches of walks.
+    sample() follows one walk and reports approximate_pdf (not the walk's exact density, which
+    only pdf() estimates, by walks): see docs/architecture.md on stochastic models.
     """
 
     def __init__(self, parent, *, walks: int = 256, max_order: int | None = None,
@@ -103,6 +109,8 @@ class RandomWalkBSDF:
             guided = max(self.slopes.alpha_x, self.slopes.alpha_y) < GUIDE_BELOW_ALPHA
         self.guided = bool(guided)
         self.walker = Walker(self.slopes, self.micro, self.guided)
+        self._single = None  # the order-1 model behind approximate_pdf, built on first use
+        self._shares: dict[bool, np.ndarray] = {}
 
     def _pairs(self, wi, wo, order, unit, rng, walks) -> tuple[np.ndarray, ...]:
         """Mean, standard error and truncated energy per pair, walking in batches of BATCH."""
@@ -149,17 +157,73 @@ class RandomWalkBSDF:
         return self._pairs(wi, wo, order, False, rng, self.walks)[0]
 
     def pdf(self, wi, wo, rng: np.random.Generator) -> np.ndarray:
-        """Density over solid angle of sample()'s wo: the walk's direction density, estimated."""
+        """Density over solid angle of sample()'s wo: the walk's direction density, estimated
+        by `walks` walks per pair (unbiased, noisy; approximate_pdf is the deterministic one)."""
         wi_, wo_ = directions(wi, wo)
         f_unit = self._pairs(wi_, wo_, None, True, rng, self.walks)[0]
         return f_unit * np.abs(wo_[..., 2])
 
-    def sample(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Follow one walk from wi: (wo, weight = f |cos o| / pdf, pdf estimate at wo).
+    def approximate_pdf(self, wi, wo) -> np.ndarray:
+        """The density sample() reports: order 1 of the walk exactly (the height-correlated
+        single-scattering model, F = 1 for a conductor) plus orders >= 2 as a cosine lobe
+        carrying their share of the walks (energy_loss at wi's incidence, in the x-z plane for
+        an anisotropic surface): M |cos o| / pi above a conductor, M |cos o| / (2 pi) on either
+        side of a dielectric; diffuse facets: |cos o| / pi. Deterministic and cheap, positive
+        wherever the walk reaches, for multiple importance sampling; not the exact density."""
+        wi, wo = directions(wi, wo)
+        same = (wi[..., 2] > 0.0) == (wo[..., 2] > 0.0)
+        cos_o = np.abs(wo[..., 2])
+        if isinstance(self.micro, MicroDiffuse):
+            return np.where(same, cos_o / np.pi, 0.0)
+        first = self._order_one().eval(wi, wo) * cos_o
+        mass = self._higher_order_share(wi)
+        if isinstance(self.micro, MicroConductor):
+            return first + np.where(same & (wi[..., 2] > 0.0), mass * cos_o / np.pi, 0.0)
+        return first + mass * cos_o / (2.0 * np.pi)
 
-        u (..., 3) drives the first scattering event (height, visible normal); later events use
-        rng. The weight is the walk's throughput (1 for a dielectric and for F = 1).
-        """
+    def _order_one(self):
+        """The single-scattering model equal to the walk's order 1 in unit mode."""
+        if self._single is None:
+            from sim.bsdf import RoughConductor, RoughDielectric
+
+            alpha = (float(self.slopes.alpha_x), float(self.slopes.alpha_y))
+            if isinstance(self.micro, MicroConductor):
+                self._single = RoughConductor(self.slopes.name, alpha, None,
+                                              masking="correlated")
+            else:
+                self._single = RoughDielectric(self.slopes.name, alpha, self.micro.eta,
+                                               masking="correlated")
+        return self._single
+
+    def _higher_order_share(self, wi: np.ndarray) -> np.ndarray:
+        """Share of the walks from wi that scatter more than once (tabulated energy_loss)."""
+        above = wi[..., 2] > 0.0
+        theta = np.degrees(np.arccos(np.clip(np.abs(wi[..., 2]), 0.0, 1.0)))
+        share = np.zeros(theta.shape)
+        for side in (True, False):
+            pick = above == side
+            if pick.any():
+                share[pick] = np.interp(theta[pick], MASS_NODES_DEG, self._share_table(side))
+        return share
+
+    def _share_table(self, outside: bool) -> np.ndarray:
+        """energy_loss at MASS_NODES_DEG from outside or (a dielectric) from inside."""
+        if outside not in self._shares:
+            conductor = isinstance(self.micro, MicroConductor)
+            if conductor and not outside:
+                table = np.zeros(len(MASS_NODES_DEG))
+            else:
+                eta = None if conductor else (self.micro.eta if outside else 1.0 / self.micro.eta)
+                alpha = (float(self.slopes.alpha_x), float(self.slopes.alpha_y))
+                table = np.array([energy_loss(self.slopes.name, alpha, eta, np.radians(t))
+                                  for t in MASS_NODES_DEG])
+            self._shares[outside] = table
+        return self._shares[outside]
+
+    def walk_once(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """One walk from each wi: (wo, weight = the walk's throughput, 0 outside the parent's
+        lobes or when the walk does not leave). u (..., 3) drives the first scattering event
+        (height, visible normal); later events use rng."""
         (wi,) = directions(wi)
         u = np.asarray(u, dtype=np.float64)
         shape = wi.shape[:-1]
@@ -168,9 +232,19 @@ class RandomWalkBSDF:
         ok = np.isfinite(res.exit_direction[:, 0])
         wo = np.where(ok[:, None], res.exit_direction, np.array([0.0, 0.0, 1.0]))
         ok &= self._lobe_mask(wi.reshape(-1, 3), wo) > 0.0
-        weight = np.where(ok, res.weight, 0.0)
-        pdf = np.where(ok, self.pdf(wi.reshape(-1, 3), wo, rng), 0.0)
-        return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
+        return wo.reshape(shape + (3,)), np.where(ok, res.weight, 0.0).reshape(shape)
+
+    def sample(self, wi, u, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """walk_once, and approximate_pdf at wo: (wo, weight = f |cos o| / p(wo), pdf).
+
+        One walk per sample: the weight is exact for the walk's own density p; the pdf returned
+        is approximate_pdf, not p (p is known only by further walks: pdf()), so use it for MIS
+        weights, not to divide by.
+        """
+        wo, weight = self.walk_once(wi, u, rng)
+        (wi,) = directions(wi)
+        pdf = np.where(weight > 0.0, self.approximate_pdf(np.broadcast_to(wi, wo.shape), wo), 0.0)
+        return wo, weight, pdf
 
     def first_heights(self, wi, rng: np.random.Generator, walks: int) -> np.ndarray:
         """Heights of the first scattering event of `walks` walks from wi (nan: none)."""

@@ -1,11 +1,15 @@
-"""Compiled next-event estimation from many walk events towards many directions (numba).
+"""Compiled phase functions and next-event estimation of the random walk (numba).
 
-Walker._next_event_all (numpy) is the reference; this kernel repeats micro.py's phase
-functions and the walk's escape probability per (event, target) pair, in the same order, from
-the scalar formulas of sim.bsdf.primitives, for dielectric and conductor facets on GGX or
-Beckmann slopes. It is what makes HigherOrderLobe's
-tables cheap: their cost is events x targets of exactly this. Serial on purpose: numba's
-parallel loop ran it 8x slower on the shared 2-core machine under load (oversubscription).
+micro.py's phase functions and Walker's escape probability, one event and one direction at a
+time, from the scalar formulas of sim.bsdf.primitives, for dielectric and conductor facets on
+GGX or Beckmann slopes; Walker._next_event_all (numpy) is their reference. walk_kernel.py walks
+with them, and next_event_all scores many events towards many directions, which is what makes
+HigherOrderLobe's tables cheap. Serial on purpose: numba's parallel loop ran 8x slower on the
+shared 2-core machine under load (oversubscription).
+
+A surface is passed as (ndf, ax, ay, conductor, eta, has_f, n_c): slope kernel and roughness,
+conductor or dielectric facets, eta = n_interior / n_exterior (dielectric), and the complex
+index n_c of a conductor when has_f (else F = 1, as for any facet in unit mode).
 """
 
 from __future__ import annotations
@@ -22,82 +26,157 @@ from sim.bsdf.primitives import (
     cos_lambda,
     fresnel_toward,
     normal_density,
+    scalar,
     unit,
 )
 
 AVAILABLE = COMPILED
 
-if AVAILABLE:
-    from numba import njit
 
-    @njit(cache=True, error_model="numpy")
-    def _escape(ndf, ax, ay, x, y, z, log_u):
-        """G1 = u^Lambda of leaving along the upward (x, y, z) from log C1 = log_u."""
-        if z <= 0.0:
-            return 0.0
-        lam = cos_lambda(ndf, ax, ay, x, y, z) / z
-        if lam == 0.0:
-            return 1.0
-        g = math.exp(lam * log_u)
-        return g if math.isfinite(g) else 0.0
+@scalar
+def projected_area(ndf, ax, ay, x, y, z):
+    """Integral of <w, m>+ D(m) dm for w anywhere on the sphere (Distribution.projected_area)."""
+    return max(z, 0.0) + cos_lambda(ndf, ax, ay, x, y, z)
 
-    @njit(cache=True, error_model="numpy")
-    def next_event_all(ndf, ax, ay, conductor, eta, has_f, n_c, w_in, out, log_here,
-                       log_there, targets, result):
-        """result[e, t] = phase(w_in[e] -> target t) x its escape probability (walk.py)."""
-        for e in range(w_in.shape[0]):
-            ix, iy, iz = w_in[e, 0], w_in[e, 1], w_in[e, 2]
-            outside = out[e]
-            el = eta if outside else 1.0 / eta
-            elm1 = eta - 1.0 if outside else 1.0 / eta - 1.0
-            area = max(iz, 0.0) + cos_lambda(ndf, ax, ay, ix, iy, iz)
-            for t in range(targets.shape[0]):
-                tx, ty = targets[t, 0], targets[t, 1]
-                tz = targets[t, 2] if outside else -targets[t, 2]
-                value = 0.0
-                if tz > 0.0:
-                    hx, hy, hz = unit(ix + tx, iy + ty, iz + tz)
-                    c = ix * hx + iy * hy + iz * hz
-                    if c > 0.0 and hz > 0.0 and area > 0.0:
-                        if conductor:
-                            f = conductor_fresnel(c, has_f, n_c)
-                        else:
-                            f = fresnel_toward(c, el, elm1)
-                        phase = f * normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
-                        value = phase * _escape(ndf, ax, ay, tx, ty, tz, log_here[e])
-                elif not conductor:
-                    hx, hy, hz = unit(ix + el * tx, iy + el * ty, iz + el * tz)
-                    hx, hy, hz = -hx, -hy, -hz
-                    if hz < 0.0:
-                        hx, hy, hz = -hx, -hy, -hz
-                    ci = ix * hx + iy * hy + iz * hz
-                    co = tx * hx + ty * hy + tz * hz
-                    if ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0:
-                        denom = ci + el * co
-                        d_visible = ci * normal_density(ndf, ax, ay, hx, hy, hz) / area
-                        phase = ((1.0 - fresnel_toward(ci, el, elm1)) * d_visible * el * el
-                                 * abs(co) / (denom * denom))
-                        if math.isfinite(phase):
-                            value = phase * _escape(ndf, ax, ay, tx, ty, -tz, log_there[e])
-                result[e, t] = value
+
+@scalar
+def escape_lambda(lam, log_u):
+    """G1 = u^Lambda of leaving, upward, with Smith Lambda lam >= 0, from log C1 = log_u."""
+    if lam == 0.0:
+        return 1.0
+    g = math.exp(lam * log_u)
+    return g if math.isfinite(g) else 0.0
+
+
+@scalar
+def escape(ndf, ax, ay, x, y, z, log_u):
+    """G1 = u^Lambda of leaving along (x, y, z) from log C1 = log_u (0 for z <= 0)."""
+    if z <= 0.0:
+        return 0.0
+    return escape_lambda(cos_lambda(ndf, ax, ay, x, y, z) / z, log_u)
+
+
+@scalar
+def unsigned_lambda(ndf, ax, ay, x, y, z):
+    """Lambda of (x, y, |z|): the escape exponent of a direction on either side (inf at z = 0)."""
+    c = abs(z)
+    return cos_lambda(ndf, ax, ay, x, y, z) / c if c > 0.0 else math.inf
+
+
+@scalar
+def side_eta(eta, outside):
+    """(n_other / n_this, that minus 1 without rounding) on the outside or the inside."""
+    if outside:
+        return eta, eta - 1.0
+    return 1.0 / eta, 1.0 / eta - 1.0
+
+
+@scalar
+def facet_fresnel(conductor, has_f, n_c, c, el, elm1):
+    """Reflectance of a facet at cosine c: conductor (1 without has_f) or dielectric towards el."""
+    if conductor:
+        return conductor_fresnel(c, has_f, n_c)
+    return fresnel_toward(c, el, elm1)
+
+
+@scalar
+def phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area, ox, oy, oz):
+    """F(<w_in,h>) D(h) / (4 A(w_in)) (micro._reflect_phase), w_in = i of projected area
+    `area`, w_out = o."""
+    hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
+    c = ix * hx + iy * hy + iz * hz
+    if not (c > 0.0 and hz > 0.0 and area > 0.0):
+        return 0.0
+    f = facet_fresnel(conductor, has_f, n_c, c, el, elm1)
+    return f * normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
+
+
+@scalar
+def refraction_normal(ix, iy, iz, ox, oy, oz, el):
+    """(h, <i,h>, <o,h>) of the facet h (h_z >= 0) that refracts i into o below it, el the
+    relative index across it: h = -(i + el o) / |.| turned upward."""
+    hx, hy, hz = unit(ix + el * ox, iy + el * oy, iz + el * oz)
+    if hz <= 0.0:
+        hx, hy, hz = -hx, -hy, -hz
+    return (hx, hy, hz, ix * hx + iy * hy + iz * hz, ox * hx + oy * hy + oz * hz)
+
+
+@scalar
+def phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, ox, oy, oz):
+    """(1-F) D_visible(w_in,h) el^2 |<w_out,h>| / (<w_in,h> + el <w_out,h>)^2, w_out below
+    (MicroDielectric.phase_transmit); area is w_in's projected area."""
+    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, el)
+    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
+        return 0.0
+    denom = ci + el * co
+    d_visible = ci * normal_density(ndf, ax, ay, hx, hy, hz) / area
+    value = (1.0 - fresnel_toward(ci, el, elm1)) * d_visible * el * el * abs(co) / (denom * denom)
+    return value if math.isfinite(value) else 0.0
+
+
+@scalar
+def next_event(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, tx, ty, tz,
+               lam_t, log_here, log_there):
+    """Phase function from w_in = i (projected area `area`) towards the world direction t
+    (unsigned_lambda lam_t) times t's escape probability from this event
+    (Walker._next_event)."""
+    el, elm1 = side_eta(eta, outside)
+    lz = tz if outside else -tz  # t in the local frame of this side
+    if lz > 0.0:
+        phase = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area,
+                              tx, ty, lz)
+        return phase * escape_lambda(lam_t, log_here) if phase > 0.0 else 0.0
+    if conductor:
+        return 0.0
+    phase = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, tx, ty, lz)
+    return phase * escape_lambda(lam_t, log_there) if phase > 0.0 else 0.0
+
+
+@scalar
+def target_lambdas(ndf, ax, ay, targets):
+    """unsigned_lambda of every target (m, 3): computed once, used at every event."""
+    lam = np.empty(targets.shape[0])
+    for t in range(targets.shape[0]):
+        lam[t] = unsigned_lambda(ndf, ax, ay, targets[t, 0], targets[t, 1], targets[t, 2])
+    return lam
+
+
+@scalar
+def next_event_all(ndf, ax, ay, conductor, eta, has_f, n_c, w_in, out, log_here, log_there,
+                   targets, result):
+    """result[e, t] = phase(w_in[e] -> target t) x its escape probability (walk.py)."""
+    lam = target_lambdas(ndf, ax, ay, targets)
+    for e in range(w_in.shape[0]):
+        ix, iy, iz = w_in[e, 0], w_in[e, 1], w_in[e, 2]
+        area = projected_area(ndf, ax, ay, ix, iy, iz)
+        for t in range(targets.shape[0]):
+            result[e, t] = next_event(ndf, ax, ay, conductor, eta, has_f, n_c, out[e], ix, iy,
+                                      iz, area, targets[t, 0], targets[t, 1], targets[t, 2],
+                                      lam[t], log_here[e], log_there[e])
 
 
 def supports(slopes: Distribution, micro) -> bool:
-    """True when the kernel covers this walk: dielectric or conductor facets on slopes that
+    """True when the kernels cover this walk: dielectric or conductor facets on slopes that
     have scalar formulas (Distribution.kernel)."""
     return (AVAILABLE and slopes.kernel is not None
             and isinstance(micro, (MicroDielectric, MicroConductor)))
 
 
-def compiled_next_event_all(slopes: Distribution, micro, w_in, out, targets, log_here,
-                            log_there) -> np.ndarray:
-    """Walker._next_event_all by the kernel: (n events, m targets) of phase x escape."""
+def surface_arguments(slopes: Distribution, micro, unit_mode: bool = False) -> tuple:
+    """(ndf, ax, ay, conductor, eta, has_f, n_c) of a supported walk; unit_mode drops the
+    conductor's Fresnel factor (the walk's direction density)."""
     conductor = isinstance(micro, MicroConductor)
-    has_f = conductor and micro.eta_complex is not None
+    has_f = conductor and micro.eta_complex is not None and not unit_mode
+    return (int(slopes.kernel), float(slopes.alpha_x), float(slopes.alpha_y), conductor,
+            1.0 if conductor else micro.eta, has_f,
+            complex(micro.eta_complex) if has_f else 0j)
+
+
+def compiled_next_event_all(slopes: Distribution, micro, w_in, out, targets, log_here,
+                            log_there, unit_mode: bool = False) -> np.ndarray:
+    """Walker._next_event_all by the kernel: (n events, m targets) of phase x escape."""
     result = np.empty((len(w_in), len(targets)))
-    next_event_all(int(slopes.kernel), float(slopes.alpha_x), float(slopes.alpha_y), conductor,
-                   1.0 if conductor else micro.eta, has_f,
-                   complex(micro.eta_complex) if has_f else 0j, np.ascontiguousarray(w_in),
+    next_event_all(*surface_arguments(slopes, micro, unit_mode), np.ascontiguousarray(w_in),
                    np.ascontiguousarray(out), np.ascontiguousarray(log_here, dtype=np.float64),
                    np.ascontiguousarray(log_there, dtype=np.float64),
                    np.ascontiguousarray(targets, dtype=np.float64), result)

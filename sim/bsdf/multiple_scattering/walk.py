@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.bsdf.distributions import WALKABLE, Distribution
-from sim.bsdf.multiple_scattering import nee_kernel
+from sim.bsdf.multiple_scattering import nee_kernel, walk_kernel
 from sim.bsdf.multiple_scattering.guiding import guided_scatter
 from sim.bsdf.multiple_scattering.heights import log1mexp
 
@@ -57,12 +57,14 @@ class WalkResult:
 
 
 class Walker:
-    """Runs batches of walks for one slope distribution and one micro-BSDF."""
+    """Runs batches of walks for one slope distribution and one micro-BSDF; compiled: by
+    walk_kernel where it covers the walk (nee_kernel.supports), else by numpy (the reference)."""
 
-    def __init__(self, slopes: Distribution, micro, guided: bool = True):
+    def __init__(self, slopes: Distribution, micro, guided: bool = True, compiled: bool = True):
         self.slopes = slopes
         self.micro = micro
         self.guided = guided
+        self.compiled = compiled and nee_kernel.supports(slopes, micro)
 
     def _escape_probability(self, d: np.ndarray, log_u: np.ndarray) -> np.ndarray:
         """G1 = u^Lambda(d) of leaving from log C1 = log_u along local direction d."""
@@ -98,6 +100,9 @@ class Walker:
         ends the walks; the next direction is drawn by guided_scatter (phase function or
         backwards from wo, one-sample MIS). Sampling (no wo) runs the analog walk, which exits.
         """
+        if self.compiled:
+            return WalkResult(*walk_kernel.run(self, wi, rng, wo, order, max_order, unit,
+                                               u_first, targets, min_order, ROULETTE))
         n = wi.shape[0]
         slopes, micro = self.slopes, self.micro
         outside = wi[:, 2] > 0.0
@@ -184,9 +189,9 @@ class Walker:
                         compiled: bool = True) -> np.ndarray:
         """_next_event from each of n events towards each of m targets: (n, m); compiled
         (nee_kernel) for dielectric and conductor facets unless asked not to."""
-        if compiled and not unit and nee_kernel.supports(self.slopes, self.micro):
+        if compiled and nee_kernel.supports(self.slopes, self.micro):
             return nee_kernel.compiled_next_event_all(self.slopes, self.micro, w_in, out,
-                                                      targets, log_here, log_there)
+                                                      targets, log_here, log_there, unit)
         n, k = len(w_in), len(targets)
         each = np.repeat(np.arange(n), k)
         flat = self._next_event(w_in[each], m[each], out[each], np.tile(targets, (n, 1)),

@@ -1,0 +1,259 @@
+"""The random walk compiled, one walk at a time (numba): what Walker.run does, at native speed.
+
+Walker.run's numpy path is the reference and the fallback (diffuse facets, no numba); this
+kernel follows the same steps per walk (forced hits and Russian roulette when evaluating,
+next-event estimation towards wo or towards every target, guided next directions
+(guiding.py) towards wo, the analog walk when sampling, order and cap), with the scalar
+formulas of nee_kernel.py and visible_kernel.py, and numba's own random generator seeded from
+the caller's numpy Generator (so a seed gives the same walks, not the numpy path's numbers).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim.bsdf.multiple_scattering.guiding import BACKWARDS
+from sim.bsdf.multiple_scattering.nee_kernel import (
+    escape,
+    facet_fresnel,
+    next_event,
+    phase_reflect,
+    phase_transmit,
+    projected_area,
+    refraction_normal,
+    side_eta,
+    surface_arguments,
+    target_lambdas,
+    unsigned_lambda,
+)
+from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
+from sim.bsdf.primitives import normal_density, scalar, unit
+
+#: What a batch does: follow the analog walk to its exit, score towards one wo per walk, or
+#: score towards every one of a set of targets.
+SAMPLE, EVALUATE, TARGETS = 0, 1, 2
+LOG_2 = math.log(2.0)
+
+
+@scalar
+def log1mexp(x):
+    """log(1 - exp(x)) for x <= 0 (heights.log1mexp)."""
+    if x > -LOG_2:
+        return math.log(-math.expm1(x))
+    return math.log1p(-math.exp(x))
+
+
+@scalar
+def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u):
+    """Next direction from the phase function (micro.scatter): (x, y, z, factor, crossed)."""
+    c = ix * mx + iy * my + iz * mz
+    if conductor:
+        f = facet_fresnel(True, has_f, n_c, c, 1.0, 0.0)
+        return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
+    el, elm1 = side_eta(eta, outside)
+    c = min(max(c, 0.0), 1.0)
+    f = facet_fresnel(False, False, n_c, c, el, elm1)
+    sin2_t = (1.0 - c * c) / (el * el)
+    if u >= f and sin2_t < 1.0:
+        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
+        k = c / el - cos_t
+        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
+        return x, y, z, 1.0, True
+    x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
+    return x, y, z, 1.0, False
+
+
+@scalar
+def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
+    """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density);
+    area: projected_area of wo (above) or of -wo (below), |o_z| + cos_lambda(o) either way."""
+    if oz > 0.0:
+        hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
+        if hz > 0.0 and ox * hx + oy * hy + oz * hz > 0.0 and area > 0.0:
+            return normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
+        return 0.0
+    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, eta)
+    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
+        return 0.0
+    denom = ci + eta * co  # D_visible(-o, h) = -co D(h) / area
+    value = -co * normal_density(ndf, ax, ay, hx, hy, hz) / area * ci / (denom * denom)
+    return value if math.isfinite(value) else 0.0
+
+
+@scalar
+def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
+    """An arriving direction drawn backwards from wo (guiding.sample_adjoint): (x, y, z, ok)."""
+    above = oz > 0.0
+    s = 1.0 if above else -1.0
+    mx, my, mz = visible_normal(ndf, ax, ay, s * ox, s * oy, s * oz, u1, u2)
+    c = ox * mx + oy * my + oz * mz
+    if above:
+        x, y, z = 2.0 * c * mx - ox, 2.0 * c * my - oy, 2.0 * c * mz - oz
+        ok = c > 0.0
+    else:  # refract wo through the facet -m into a medium 1/eta times denser
+        e = 1.0 / eta
+        cn = -c
+        sin2 = (1.0 - cn * cn) / (e * e)
+        ok = sin2 < 1.0 and cn > 0.0
+        k = cn / e - math.sqrt(max(0.0, 1.0 - sin2))
+        x, y, z = unit(-ox / e - k * mx, -oy / e - k * my, -oz / e - k * mz)
+    return x, y, z, ok and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+
+
+@scalar
+def guided(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy, oz,
+           area_o, px, py, pz, crossed_p, u0, u1, u2, u3):
+    """Next direction by one-sample MIS of the phase function and backwards from wo
+    (guiding.guided_scatter): (x, y, z, factor, crossed). area_o: |o_z| + cos_lambda(o)."""
+    target_cross = (not conductor) and u1 < 0.5
+    side = outside != target_cross
+    sz = oz if side else -oz
+    e_side = side_eta(eta, side)[0] if not conductor else 1.0
+    bx, by, bz, ok_a = sample_adjoint(ndf, ax, ay, ox, oy, sz, e_side, u2, u3)
+    use_adj = u0 < BACKWARDS and ok_a
+    if use_adj:  # travel along minus the arriving direction, mirrored if it crosses
+        crossed = target_cross
+        wx, wy, wz = -bx, -by, (bz if target_cross else -bz)
+    else:
+        crossed = crossed_p
+        wx, wy, wz = px, py, pz
+    el, elm1 = side_eta(eta, outside)
+    if crossed:
+        p_phase = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, wx, wy, wz)
+        p_energy = p_phase
+    else:
+        p_phase = phase_reflect(ndf, ax, ay, conductor, False, n_c, el, elm1, ix, iy, iz, area,
+                                wx, wy, wz)
+        p_energy = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz,
+                                 area, wx, wy, wz) if has_f else p_phase
+    next_side = outside != crossed
+    nz = oz if next_side else -oz
+    e_next = side_eta(eta, next_side)[0] if not conductor else 1.0
+    arz = wz if crossed else -wz  # arriving direction in the next event's frame
+    p_adj = adjoint_density(ndf, ax, ay, -wx, -wy, arz, ox, oy, nz, area_o, e_next)
+    if not conductor:
+        p_adj *= 0.5
+    mixture = (1.0 - BACKWARDS) * p_phase + BACKWARDS * p_adj
+    factor = p_energy / mixture if mixture > 0.0 else 0.0
+    if u0 < BACKWARDS and not ok_a:
+        factor = 0.0
+    return wx, wy, wz, factor, crossed
+
+
+@scalar
+def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, targets, u_first,
+               order, max_order, min_order, roulette, seed, value, exit_dir, weight, truncated,
+               orders, first):
+    """One walk from each row of wi; outputs as Walker.run's WalkResult (value (n, m))."""
+    np.random.seed(seed)
+    forced = mode != SAMPLE
+    lam_t = target_lambdas(ndf, ax, ay, targets)
+    lam_o = target_lambdas(ndf, ax, ay, wo)
+    for i in range(wi.shape[0]):
+        outside = wi[i, 2] > 0.0
+        if conductor and not outside:
+            continue
+        if mode == EVALUATE:  # wo's Lambda and projected area, the same from either side
+            area_o = abs(wo[i, 2]) * (1.0 + lam_o[i])
+        dx, dy = -wi[i, 0], -wi[i, 1]
+        dz = -wi[i, 2] if outside else wi[i, 2]
+        cur = 0.0  # log C1 of the height on this side (h = +inf above, -inf below)
+        beta = 1.0
+        k = 0
+        while True:
+            k += 1
+            if k == 1 and u_first.shape[0]:
+                ua, ub, uc = u_first[i, 0], u_first[i, 1], u_first[i, 2]
+            else:
+                ua, ub, uc = np.random.random(), np.random.random(), np.random.random()
+            lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
+            lam = lam_up if dz >= 0.0 else -1.0 - lam_up
+            if forced:
+                p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
+                if math.isnan(p_hit):
+                    p_hit = 1.0
+                beta *= p_hit
+                e = -math.log1p(-ua * p_hit)
+            else:
+                e = -math.log1p(-ua)
+            new = math.inf if lam == 0.0 else cur + e / lam
+            if not new < 0.0:
+                if not forced:
+                    exit_dir[i, 0], exit_dir[i, 1] = dx, dy
+                    exit_dir[i, 2] = dz if outside else -dz
+                    weight[i] = beta
+                break
+            other = log1mexp(new)
+            orders[i] = k
+            if k == 1:
+                first[i] = new if outside else other
+            ix, iy, iz = -dx, -dy, -dz
+            mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
+            area = max(iz, 0.0) + abs(iz) * lam_up if abs(iz) > 0.0 else projected_area(
+                ndf, ax, ay, ix, iy, iz)
+            if k >= min_order and (order == 0 or order == k):
+                if mode == EVALUATE:
+                    value[i, 0] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,
+                                                     outside, ix, iy, iz, area, wo[i, 0],
+                                                     wo[i, 1], wo[i, 2], lam_o[i], new, other)
+                elif mode == TARGETS:
+                    for t in range(targets.shape[0]):
+                        value[i, t] += beta * next_event(ndf, ax, ay, conductor, eta, has_f,
+                                                         n_c, outside, ix, iy, iz, area,
+                                                         targets[t, 0], targets[t, 1],
+                                                         targets[t, 2], lam_t[t], new, other)
+            s0 = np.random.random()
+            np.random.random()  # the numpy path's second scattering uniform
+            wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
+                                                  outside, ix, iy, iz, mx, my, mz, s0)
+            if guide:
+                g0, g1 = np.random.random(), np.random.random()
+                g2, g3 = np.random.random(), np.random.random()
+                wx, wy, wz, factor, crossed = guided(
+                    ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area,
+                    wo[i, 0], wo[i, 1], wo[i, 2], area_o, wx, wy, wz, crossed, g0, g1, g2, g3)
+            beta *= factor
+            if crossed:
+                outside = not outside
+                dx, dy, dz = wx, wy, -wz
+                cur = other
+            else:
+                dx, dy, dz = wx, wy, wz
+                cur = new
+            if forced:  # Russian roulette on low weights keeps the estimate unbiased
+                r = np.random.random()
+                if beta < roulette:
+                    beta = roulette if r * roulette < beta else 0.0
+            if order and k >= order:
+                break
+            if max_order and k >= max_order:
+                truncated[i] = beta * (1.0 - escape(ndf, ax, ay, dx, dy, dz, cur))
+                break
+            if not beta > 0.0:
+                break
+
+
+def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, unit_mode,
+        u_first, targets, min_order, roulette):
+    """Walker.run by the kernel: the arrays of a WalkResult, in its field order."""
+    n = wi.shape[0]
+    mode = SAMPLE if wo is None and targets is None else (EVALUATE if targets is None
+                                                          else TARGETS)
+    value = np.zeros((n, 1 if targets is None else len(targets)))
+    exit_dir = np.full((n, 3), np.nan)
+    weight, truncated = np.zeros(n), np.zeros(n)
+    orders = np.zeros(n, dtype=np.int64)
+    first = np.full(n, np.nan)
+    empty = np.zeros((0, 3))
+    walk_batch(*surface_arguments(walker.slopes, walker.micro, unit_mode), mode,
+               mode == EVALUATE and walker.guided,
+               np.ascontiguousarray(wi, dtype=np.float64),
+               empty if wo is None else np.ascontiguousarray(wo, dtype=np.float64),
+               empty if targets is None else np.ascontiguousarray(targets, dtype=np.float64),
+               empty if u_first is None else np.ascontiguousarray(u_first, dtype=np.float64),
+               order or 0, max_order or 0, int(min_order), float(roulette),
+               int(rng.integers(0, 2**32 - 1)), value, exit_dir, weight, truncated, orders, first)
+    return (value if targets is not None else value[:, 0], exit_dir, weight, truncated, orders,
+            first)

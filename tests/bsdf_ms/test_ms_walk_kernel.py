@@ -1,0 +1,104 @@
+"""The compiled walk against the numpy walk (same estimator, independent random numbers), and its
+scalar special functions and visible-normal samplers against scipy and the numpy samplers."""
+
+import numpy as np
+import pytest
+from scipy.special import erfcx as scipy_erfcx
+from scipy.special import ndtri as scipy_ndtri
+
+from sim.bsdf.distributions import make_distribution
+from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
+from sim.bsdf.multiple_scattering.nee_kernel import AVAILABLE
+from sim.bsdf.multiple_scattering.visible_kernel import erfcx, ndtri, visible_normal
+from sim.bsdf.multiple_scattering.walk import Walker
+
+pytestmark = pytest.mark.skipif(not AVAILABLE, reason="the walk kernel needs numba (gonio[fast])")
+Z_MAX = 4.5
+
+
+def direction(theta_deg, phi_deg=0.0):
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+
+def test_ndtri_and_erfcx_match_scipy_to_full_precision():
+    p = np.concatenate([np.logspace(-300, -1, 400), np.linspace(0.01, 0.99, 199),
+                        1.0 - np.logspace(-16, -2, 50)])
+    ours = np.array([ndtri(x) for x in p])
+    assert np.allclose(ours, scipy_ndtri(p), rtol=2e-14, atol=1e-15)
+    x = np.concatenate([np.linspace(0.0, 5.0, 201), np.logspace(0.5, 8, 100)])
+    assert np.allclose([erfcx(v) for v in x], scipy_erfcx(x), rtol=1e-13)
+
+
+@pytest.mark.parametrize("name,alpha", [("ggx", (0.3, 0.3)), ("beckmann", (0.3, 0.3)),
+                                        ("beckmann", (1.0, 0.4)), ("ggx", (0.05, 0.8))])
+def test_visible_normals_match_the_numpy_sampler_on_the_whole_sphere(name, alpha):
+    slopes = make_distribution(name, alpha)
+    rng = np.random.default_rng(1)
+    w = rng.normal(size=(300, 3))
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    w[:3] = [direction(0), direction(180), direction(90, 30)]
+    u = rng.random((2, 300))
+    ref = slopes.sample_visible_sphere(w, u[0], u[1])
+    ours = np.array([visible_normal(int(slopes.kernel), *map(float, alpha), *w[i], u[0, i], u[1, i])
+                     for i in range(300)])
+    assert np.allclose(ours, ref, atol=1e-9)
+
+
+def _walkers(surface, guided):
+    model = RandomWalkBSDF(surface, walks=1)
+    return (Walker(model.slopes, model.micro, guided),
+            Walker(model.slopes, model.micro, guided, compiled=False))
+
+
+SURFACES = [Microsurface("ggx", 0.3, "dielectric", eta=1.5),
+            Microsurface("beckmann", (0.9, 0.5), "dielectric", eta=1.5),
+            Microsurface("beckmann", 0.4, "conductor", eta_complex=0.2 + 3.0j),
+            Microsurface("ggx", 1.0, "conductor")]
+PAIRS = [(direction(30), direction(50, 160)), (direction(70), direction(20, 10)),
+         (direction(60), direction(130, 200)), (-direction(30), direction(120, 10)),
+         (-direction(20), -direction(40, 180))]
+
+
+def _mean_and_error(values):
+    return values.mean(axis=0), values.std(axis=0, ddof=1) / np.sqrt(len(values))
+
+
+@pytest.mark.parametrize("surface", SURFACES)
+@pytest.mark.parametrize("guided", [True, False])
+def test_compiled_eval_agrees_with_the_numpy_walk(surface, guided):
+    fast, slow = _walkers(surface, guided)
+    n = 6000
+    for wi, wo in PAIRS:
+        if surface.kind == "conductor" and (wi[2] < 0 or wo[2] < 0):
+            continue
+        args = (np.tile(wi, (n, 1)), None, np.tile(wo, (n, 1)))
+        a = fast.run(args[0], np.random.default_rng(2), args[2]).value
+        b = slow.run(args[0], np.random.default_rng(3), args[2]).value
+        (ma, ea), (mb, eb) = _mean_and_error(a), _mean_and_error(b)
+        assert ma > 0 and abs(ma - mb) < Z_MAX * np.hypot(ea, eb)
+
+
+@pytest.mark.parametrize("surface", SURFACES[1:3])
+def test_compiled_sampling_targets_and_cap_agree_with_the_numpy_walk(surface):
+    fast, slow = _walkers(surface, False)
+    wi = np.tile(direction(50, 20), (20000, 1))
+    runs = [w.run(wi, np.random.default_rng(s), max_order=3) for w, s in ((fast, 4), (slow, 5))]
+    for field in ("exit_direction", "weight", "truncated", "orders"):
+        (ma, ea), (mb, eb) = (_mean_and_error(np.nan_to_num(getattr(r, field)).reshape(len(wi), -1))
+                              for r in runs)
+        assert np.all(np.abs(ma - mb) <= Z_MAX * np.hypot(ea, eb) + 1e-12), field
+    targets = np.array([direction(t, p) for t in (10, 60, 120, 170) for p in (0, 135)])
+    a, b = (w.run(wi[:4000], np.random.default_rng(s), targets=targets, min_order=2).value
+            for w, s in ((fast, 6), (slow, 7)))
+    (ma, ea), (mb, eb) = _mean_and_error(a), _mean_and_error(b)
+    assert np.all(np.abs(ma - mb) <= Z_MAX * np.hypot(ea, eb) + 1e-12)
+
+
+def test_compiled_walks_are_reproducible_from_the_generator():
+    fast, _ = _walkers(SURFACES[0], True)
+    wi, wo = np.tile(direction(40), (500, 1)), np.tile(direction(150, 20), (500, 1))
+    a = fast.run(wi, np.random.default_rng(8), wo).value
+    b = fast.run(wi, np.random.default_rng(8), wo).value
+    c = fast.run(wi, np.random.default_rng(9), wo).value
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
