@@ -11,10 +11,13 @@ from dataclasses import asdict, dataclass
 from sim.lut.axes import Axis, axes_for
 
 FORMAT = "gonio-lut/1"  # the stored table's format, in every table file's metadata
-KINDS = ("reflection", "transmission")
+KINDS = ("reflection", "transmission", "transmission-blur", "transmission-direction")
 DTYPES = ("float16", "float32", "float64")
-CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",)}
-DIMENSIONS = {"reflection": 2, "transmission": 3}
+CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",),
+            "transmission-blur": ("blur_alpha", "residual"),
+            "transmission-direction": ("offset",)}
+DIMENSIONS = {"reflection": 2, "transmission": 3, "transmission-blur": 3,
+              "transmission-direction": 3}
 
 
 def parse_size(text: str) -> tuple[int, ...]:
@@ -67,6 +70,10 @@ class TableSpec:
         if self.kind == "reflection" and self.multiple_scattering:
             raise ValueError("the reflection table's F0 split holds for single scattering only; "
                              "multiple scattering is available for --kind transmission")
+        if self.kind in ("transmission-blur", "transmission-direction") and \
+                self.multiple_scattering:
+            raise ValueError(f"the {self.kind} table describes the single-scattering lobe; "
+                             f"multiple scattering is available for --kind transmission")
 
     @property
     def axes(self) -> tuple[Axis, ...]:

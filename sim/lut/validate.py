@@ -108,9 +108,9 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
     """Check `entries` table entries (all when None, else a random subset) and `points`
     random lookups (uniform in texture coordinates over the whole domain)."""
     if estimator is None:
-        from sim.lut.model import ModelEstimator
+        from sim.lut.estimators import estimator_for
 
-        estimator = ModelEstimator.for_spec(table.spec)
+        estimator = estimator_for(table.spec)
     start = time.perf_counter()
     index = chosen_entries(table.spec, entries, seed)
     grid = grid_points(table.spec)[index]
@@ -119,7 +119,7 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
     ref, noise = reference(np.concatenate([grid, params]), estimator, reference_samples, client)
     entry_err = stored - ref[: len(grid)]
     lookup_err = table.lookup(*params.T) - ref[len(grid):]
-    split = edge_split(params, lookup_err) if table.spec.kind == "transmission" else {}
+    split = edge_split(params, lookup_err) if table.spec.kind != "reflection" else {}
     return ValidationReport(
         len(grid), *max_rms(entry_err), points, *max_rms(lookup_err),
         float(np.sqrt(np.mean(noise * noise))), reference_samples,
