@@ -25,24 +25,23 @@ from sim.lut.spec import CHANNELS, TableSpec
 QUANTITIES = {"transmission-blur": "blur", "transmission-direction": "direction"}
 
 
-def lobe_moments(wo: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                              np.ndarray]:
-    """Total weight (k,), weighted mean direction vector E[l] (k, 3) and second moment
-    E[l l^T] (k, 3, 3) of k lobes' samples wo (k, n, 3) with weights (k, n)."""
+def lobe_moments(wo: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Total weight (k,) and weighted mean direction vector E[l] (k, 3) of k lobes' samples
+    wo (k, n, 3) with weights (k, n)."""
     total = weight.sum(axis=1)
     safe = np.where(total > 0, total, 1.0)[:, None]
-    first = np.einsum("kn,kni->ki", weight, wo) / safe
-    second = np.einsum("kn,kni,knj->kij", weight, wo, wo) / safe[..., None]
-    return total, first, second
+    return total, np.einsum("kn,kni->ki", weight, wo) / safe
 
 
-def blur_channels(alpha: float, total: np.ndarray, first: np.ndarray,
-                  second: np.ndarray) -> np.ndarray:
-    """(blur_alpha, residual) per lobe (k, 2); a lobe that transmits nothing gets the
-    albedo-only choice (blur_alpha = alpha, residual 0)."""
+def blur_channels(alpha: float, wo: np.ndarray, weight: np.ndarray, total: np.ndarray,
+                  first: np.ndarray) -> np.ndarray:
+    """(blur_alpha, residual) per lobe (k, 2) from its samples and moments; a lobe that
+    transmits nothing gets the albedo-only choice (blur_alpha = alpha, residual 0)."""
     mean_cos = np.linalg.norm(first, axis=-1)
     axis = first / np.where(mean_cos > 0, mean_cos, 1.0)[:, None]
-    spread = 1.0 - np.einsum("ki,kij,kj->k", axis, second, axis)
+    along = np.einsum("kni,ki->kn", wo, axis)
+    spread = 1.0 - np.einsum("kn,kn->k", weight, along * along) / np.where(total > 0, total,
+                                                                          1.0)
     blur = equivalent_alpha(mean_cos)
     kernel_spread = 1.0 - kernel_moments(blur, (2,))[0]
     residual = np.where(kernel_spread > 0, spread / np.where(kernel_spread > 0, kernel_spread,
@@ -98,7 +97,8 @@ class LobeEstimator(ModelEstimator):
         k, n = len(mu), len(u)
         v = np.repeat(view_direction(mu), n, axis=0)
         wo, weight, _ = self.model(alpha, eta).sample(v, np.tile(u, (k, 1)))
-        total, first, second = lobe_moments(wo.reshape(k, n, 3), weight.reshape(k, n))
+        wo, weight = wo.reshape(k, n, 3), weight.reshape(k, n)
+        total, first = lobe_moments(wo, weight)
         if QUANTITIES[self.kind] == "blur":
-            return blur_channels(alpha, total, first, second)
+            return blur_channels(alpha, wo, weight, total, first)
         return direction_channels(mu, eta, total, first)
