@@ -24,10 +24,16 @@ QUADRATURE_NODES = 96
 INVERSION_NODES = 4097
 
 
+@functools.cache
+def _gauss_legendre() -> tuple[np.ndarray, np.ndarray]:
+    """The QUADRATURE_NODES-point Gauss-Legendre rule on [-1, 1] (computed once: 25 ms)."""
+    return np.polynomial.legendre.leggauss(QUADRATURE_NODES)
+
+
 def _rule(alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Legendre weights in u (du, ..., QUADRATURE_NODES) and c = d.l at the nodes."""
     a2 = np.asarray(alpha, dtype=np.float64)[..., None] ** 2
-    x, w = np.polynomial.legendre.leggauss(QUADRATURE_NODES)
+    x, w = _gauss_legendre()
     u_max = 1.0 / (1.0 + a2)
     u = 0.5 * (x + 1.0) * u_max
     return 0.5 * u_max * w, (1.0 - (1.0 + a2) * u) / (1.0 - (1.0 - a2) * u)
