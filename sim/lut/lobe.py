@@ -6,8 +6,8 @@ same lobe up to a constant), turned into the table's channels.
   m = E[l] / |E[l]|, as a signed polar-angle offset from the ideal refraction (sim.lut.direction).
 * Blur (`transmission-blur`, channels `blur_alpha`, `residual`): the roughness of the
   reflection prefilter kernel (sim.lut.prefilter) whose mean cosine about its axis equals the
-  lobe's, E_k[d.l] = |E[l]| (the lobe's mean cosine about m); `residual` is the relative
-  mismatch of the second moment that the match leaves, E[1 - (l.m)^2] over the kernel's minus 1.
+  lobe's, E_k[d.l] = E[l.m] (= |E[l]|); `residual` is the relative mismatch of the second
+  moment that the match leaves, E[1 - (l.m)^2] over the kernel's, minus 1.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from sim.lut.direction import polar_angle, refraction_angle
 from sim.lut.model import ModelEstimator, view_direction
-from sim.lut.prefilter import equivalent_alpha, kernel_moments
+from sim.lut.prefilter import equivalent_alpha, kernel_spreads
 from sim.lut.spec import CHANNELS, TableSpec
 
 #: What each lobe table stores.
@@ -36,14 +36,17 @@ def lobe_moments(wo: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.nda
 def blur_channels(alpha: float, wo: np.ndarray, weight: np.ndarray, total: np.ndarray,
                   first: np.ndarray) -> np.ndarray:
     """(blur_alpha, residual) per lobe (k, 2) from its samples and moments; a lobe that
-    transmits nothing gets the albedo-only choice (blur_alpha = alpha, residual 0)."""
-    mean_cos = np.linalg.norm(first, axis=-1)
-    axis = first / np.where(mean_cos > 0, mean_cos, 1.0)[:, None]
-    along = np.einsum("kni,ki->kn", wo, axis)
-    spread = 1.0 - np.einsum("kn,kn->k", weight, along * along) / np.where(total > 0, total,
-                                                                          1.0)
-    blur = equivalent_alpha(mean_cos)
-    kernel_spread = 1.0 - kernel_moments(blur, (2,))[0]
+    transmits nothing gets the albedo-only choice (blur_alpha = alpha, residual 0).
+    1 - l.m = |l - m|^2 / 2 and 1 - (l.m)^2 = |l x m|^2 keep the digits of narrow lobes."""
+    length = np.linalg.norm(first, axis=-1)
+    axis = first / np.where(length > 0, length, 1.0)[:, None]
+    safe = np.where(total > 0, total, 1.0)
+    gap = wo - axis[:, None, :]
+    one_minus_cos = 0.5 * np.einsum("kn,kn->k", weight, np.sum(gap * gap, axis=-1)) / safe
+    cross = np.cross(wo, axis[:, None, :])
+    spread = np.einsum("kn,kn->k", weight, np.sum(cross * cross, axis=-1)) / safe
+    blur = equivalent_alpha(one_minus_cos)
+    kernel_spread = kernel_spreads(blur)[1]
     residual = np.where(kernel_spread > 0, spread / np.where(kernel_spread > 0, kernel_spread,
                                                              1.0) - 1.0, 0.0)
     empty = total <= 0
