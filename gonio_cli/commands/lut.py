@@ -1,7 +1,8 @@
 """`gonio lut`: bake a real-time split-sum lookup table from gonio's rough-dielectric model
-(transmission: N.V x roughness x eta; reflection: N.V x roughness, F0 scale and bias) into an
-.npz (or an OpenEXR .exr) with its axes, parameterisation and model, optionally validated.
-See docs/lut.md."""
+(transmission: N.V x roughness x eta; reflection: N.V x roughness, F0 scale and bias; and on
+the transmission axes the prefilter roughness matching the transmitted lobe, or the lobe's
+offset from ideal refraction) into an .npz (or an OpenEXR .exr) with its axes,
+parameterisation and model, optionally validated. See docs/lut.md."""
 
 from __future__ import annotations
 
