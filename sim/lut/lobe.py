@@ -47,8 +47,10 @@ def blur_channels(alpha: float, wo: np.ndarray, weight: np.ndarray, total: np.nd
     spread = np.einsum("kn,kn->k", weight, np.sum(cross * cross, axis=-1)) / safe
     blur = equivalent_alpha(one_minus_cos)
     kernel_spread = kernel_spreads(blur)[1]
-    residual = np.where(kernel_spread > 0, spread / np.where(kernel_spread > 0, kernel_spread,
-                                                             1.0) - 1.0, 0.0)
+    # a lobe of one direction (a single transmitted sample, or an ideal refraction) is
+    # matched by the delta kernel: residual 0
+    point = (np.count_nonzero(weight > 0, axis=1) < 2) | (one_minus_cos <= 0)
+    residual = np.where(point, 0.0, spread / np.where(point, 1.0, kernel_spread) - 1.0)
     empty = total <= 0
     return np.stack([np.where(empty, alpha, blur), np.where(empty, 0.0, residual)], axis=-1)
 
