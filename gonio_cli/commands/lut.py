@@ -1,7 +1,8 @@
 """`gonio lut`: bake a real-time split-sum lookup table from gonio's rough-dielectric model
-(transmission: N.V x roughness x eta; reflection: N.V x roughness, F0 scale and bias) into an
-.npz (or an OpenEXR .exr) with its axes, parameterisation and model, optionally validated.
-See docs/lut.md."""
+(transmission: N.V x roughness x eta; reflection: N.V x roughness, F0 scale and bias; and on
+the transmission axes the prefilter roughness matching the transmitted lobe, or the lobe's
+offset from ideal refraction) into an .npz (or an OpenEXR .exr) with its axes,
+parameterisation and model, optionally validated. See docs/lut.md."""
 
 from __future__ import annotations
 
@@ -12,14 +13,19 @@ from gonio.errors import GonioError
 from sim.bsdf.distributions import WITH_KERNELS
 from sim.bsdf.masking import MASKINGS
 
-DEFAULT_SIZE = {"transmission": "64x64x32", "reflection": "64x64"}
+DEFAULT_SIZE = {"transmission": "64x64x32", "reflection": "64x64",
+                "transmission-blur": "32x32x16", "transmission-direction": "32x32x16"}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `lut` verb."""
     p = subparsers.add_parser("lut", help="bake and validate split-sum lookup tables",
                               description=__doc__)
-    p.add_argument("--kind", choices=("transmission", "reflection"), required=True)
+    p.add_argument("--kind", choices=tuple(DEFAULT_SIZE), required=True,
+                   help="transmission (albedo), reflection (F0 scale and bias), "
+                        "transmission-blur (prefilter roughness matching the transmitted lobe, "
+                        "and its residual), transmission-direction (the lobe's offset from "
+                        "ideal refraction); see docs/lut.md")
     p.add_argument("--size", help="nodes per axis, e.g. 64x64x32 (transmission: N.V x "
                    "roughness x eta) or 64x64 (reflection); default per kind as shown")
     p.add_argument("--dtype", choices=("float16", "float32", "float64"), default="float16")

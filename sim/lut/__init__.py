@@ -2,7 +2,10 @@
 
 `TableSpec` says what to bake, `bake` computes it tile by tile (in-process or on a Dask
 cluster, bitwise identical either way), `Table` stores, loads and interpolates it, and
-`validate` measures its error against converged integrals. See docs/lut.md.
+`validate` measures its error against converged integrals. Besides the albedo tables, the
+transmission-blur and transmission-direction kinds (sim.lut.lobe) say which prefiltered mip
+and direction a renderer fetches for rough glass; sim.lut.splitsum checks the whole split sum
+against brute force. See docs/lut.md.
 """
 
 from sim.lut.axes import Axis, axes_for

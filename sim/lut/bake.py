@@ -99,9 +99,9 @@ def bake(spec: TableSpec, estimator: Estimator | None = None, client=None,
          progress: bool = False) -> Table:
     """Bake the table of spec (the model's estimator unless one is given) with Dask."""
     if estimator is None:
-        from sim.lut.model import ModelEstimator
+        from sim.lut.estimators import estimator_for
 
-        estimator = ModelEstimator.for_spec(spec)
+        estimator = estimator_for(spec)
     start = time.perf_counter()
     values = integrate_points(grid_points(spec), estimator, samples=spec.samples,
                               seed=spec.seed, tile_entries=spec.tile_entries, client=client,

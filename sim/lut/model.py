@@ -79,6 +79,10 @@ class ModelEstimator:
         return RoughDielectric(self.distribution, alpha=alpha, eta=eta, masking=self.masking,
                                lobes=(self.kind,), backend=self.backend)
 
+    def smooth(self, mu: np.ndarray, eta: np.ndarray) -> np.ndarray:
+        """The channels (k, channels) for a smooth interface: smooth_limit."""
+        return smooth_limit(self.kind, mu, eta)
+
     def __call__(self, params: np.ndarray, u: np.ndarray,
                  rng: np.random.Generator) -> np.ndarray:
         """Channels (m, channels) at params (m, 2 or 3) from the shared uniforms u (n, 3):
@@ -86,11 +90,11 @@ class ModelEstimator:
         (alpha, eta), whose sample() runs in sim.bsdf's compiled kernels."""
         params = np.asarray(params, dtype=np.float64)
         mu, alpha = params[:, 0], params[:, 1]
-        eta = params[:, 2] if self.kind == "transmission" else np.full(len(mu),
+        eta = params[:, 2] if self.kind != "reflection" else np.full(len(mu),
                                                                        self.reflection_eta)
         out = np.empty((len(params), len(self.channels)))
         smooth = alpha < ALPHA_DELTA
-        out[smooth] = smooth_limit(self.kind, mu[smooth], eta[smooth])
+        out[smooth] = self.smooth(mu[smooth], eta[smooth])
         if self.multiple_scattering:
             for j in np.flatnonzero(~smooth):
                 out[j] = self._walks(mu[j], alpha[j], eta[j], u, rng)

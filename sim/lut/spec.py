@@ -12,10 +12,13 @@ from sim.lut.axes import ETA_MAX, Axis, axes_for
 from sim.lut.remap import DESCRIPTION, REMAPS
 
 FORMAT = "gonio-lut/1"  # the stored table's format, in every table file's metadata
-KINDS = ("reflection", "transmission")
+KINDS = ("reflection", "transmission", "transmission-blur", "transmission-direction")
 DTYPES = ("float16", "float32", "float64")
-CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",)}
-DIMENSIONS = {"reflection": 2, "transmission": 3}
+CHANNELS = {"reflection": ("scale", "bias"), "transmission": ("transmittance",),
+            "transmission-blur": ("blur_alpha", "residual"),
+            "transmission-direction": ("offset",)}
+DIMENSIONS = {"reflection": 2, "transmission": 3, "transmission-blur": 3,
+              "transmission-direction": 3}
 #: A fixed-index transmission table's channels: T at eta and at 1 / eta (both sides of glass).
 FIXED_ETA_CHANNELS = ("transmittance", "transmittance_reciprocal")
 
@@ -84,6 +87,10 @@ class TableSpec:
         if self.kind == "reflection" and self.multiple_scattering:
             raise ValueError("the reflection table's F0 split holds for single scattering only; "
                              "multiple scattering is available for --kind transmission")
+        if self.kind in ("transmission-blur", "transmission-direction") and \
+                self.multiple_scattering:
+            raise ValueError(f"the {self.kind} table describes the single-scattering lobe; "
+                             f"multiple scattering is available for --kind transmission")
 
     @property
     def dimensions(self) -> int:

@@ -28,6 +28,18 @@ DEFINITIONS = {
         "transmittance": "integral over the transmitted hemisphere of f_t(v, o) * |cos o| d o "
                          "(radiance BTDF, eta_o^2 factor included, so values may exceed 1)",
     },
+    "transmission-blur": {
+        "blur_alpha": "GGX alpha of the split-sum reflection prefilter kernel (N = V = R, "
+                      "N.L weighted) whose mean cosine about its axis equals the transmitted "
+                      "lobe's |E[l]| (l weighted by f_t(l, v) |cos l|); at most 4",
+        "residual": "E[1 - (l.m)^2] of the lobe about its mean direction m over the same for "
+                    "the matched kernel, minus 1 (0: second moments agree too)",
+    },
+    "transmission-direction": {
+        "offset": "polar angle (from -N, radians) of the transmitted lobe's mean direction "
+                  "E[l] / |E[l]| minus that of the ideal refraction (pi/2 under TIR); "
+                  "positive: away from the normal",
+    },
 }
 
 

@@ -151,9 +151,9 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
     """Check `entries` table entries (all when None, else a random subset) and `points`
     random lookups (uniform in the physical parameters over the whole domain)."""
     if estimator is None:
-        from sim.lut.model import ModelEstimator
+        from sim.lut.estimators import estimator_for
 
-        estimator = ModelEstimator.for_spec(table.spec)
+        estimator = estimator_for(table.spec)
     start = time.perf_counter()
     grid = grid_points(table.spec)
     index = chosen_entries(len(grid), entries, seed)
@@ -166,7 +166,7 @@ def validate(table: Table, estimator: Estimator | None = None, *, entries: int |
     entry_err = stored - ref[: len(grid)]
     lookup_err = table.lookup(*params.T).reshape(len(looked_up), -1) - ref[len(grid):]
     split = (edge_split(looked_up, lookup_err, unity_bracket(table.spec))
-             if table.spec.kind == "transmission" else {})
+             if table.spec.kind != "reflection" else {})
     return ValidationReport(
         len(grid), *max_rms(entry_err), points, *max_rms(lookup_err),
         float(np.sqrt(np.mean(noise * noise))), reference_samples,
