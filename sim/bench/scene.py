@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from sim.bench.aperture import ApertureIntegral
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
 from sim.bench.sample import LobeScales, Sample
@@ -98,10 +100,7 @@ class Bench:
         inside the beam cone (which the probe's one incident direction cannot see) the full
         rule is used."""
         wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
-        peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
-        reach = self.integral.aperture_rad + self.integral.divergence_rad
-        far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
-        if self.order is None and far:
+        if self.order is None and self._far_from_peak(wi, wo):
             edges = self.sample.edge_circles(wi)
             edge_in_beam = edges is not None and edges.distance(
                 wo, wi, free_is_wo=False) < self.integral.divergence_rad
@@ -111,8 +110,15 @@ class Bench:
                 probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
                 if probe < NEGLIGIBLE:
                     return probe
-        return self.integral.integrate(self.sample.integrand, wi, wo,
-                                       self.sample.lobe_scales(wi, wo))
+        scales = self.sample.lobe_scales(wi, wo) if self.integral.uses_scales else ONE_POINT
+        return self.integral.integrate(self.sample.integrand, wi, wo, scales)
+
+    def _far_from_peak(self, wi: np.ndarray, wo: np.ndarray) -> bool:
+        """Whether wo lies more than twice the aperture's and beam's reach from the lobe's
+        specular peak (or the lobe has none)."""
+        peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
+        reach = self.integral.aperture_rad + self.integral.divergence_rad
+        return peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
 
     def warm_up(self) -> None:
         """Evaluate one reflected and one transmitted reading, so the model's compiled kernels
