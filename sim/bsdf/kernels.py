@@ -45,8 +45,9 @@ from sim.bsdf.primitives import (
 AVAILABLE = COMPILED
 #: Pairs below which eval and pdf run on the calling thread: waking the parallel kernels'
 #: passive OpenMP threads took 1-2 ms per call on a loaded machine (the bench evaluates a few
-#: pairs per reading), more than 16384 pairs cost on one core.
-SERIAL_BELOW = 1 << 15
+#: pairs per reading, seconds apart in CPU terms), where 8192 pairs cost about 0.1 ms on one
+#: core; larger batches (a fit's aperture rules) still gain from the threads.
+SERIAL_BELOW = 1 << 13
 
 
 class DielectricBlock(IntEnum):
