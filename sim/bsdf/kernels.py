@@ -6,9 +6,9 @@ automatically when numba imports (the gonio[fast] extra); compiled code is cache
 dielectric eval and visible-normal pdf run in branch-free blocks that LLVM turns into 512-bit
 SIMD lanes, with the formulas rearranged to 3 sqrt and 1 division per pair (docs/bsdf.md,
 Performance); a pair the block cannot vouch for is handed to the scalar kernel. The others are
-scalar per-pair loops, all parallel over pairs (prange); eval and pdf of small batches run
-on the calling thread (SERIAL_BELOW). sample() is compiled for GGX and for
-Beckmann with Walter's sampler (Distribution.compiled_samplings)."""
+scalar per-pair loops, all parallel over pairs (prange); batches below SERIAL_BELOW pairs run
+on the calling thread. sample() is compiled for GGX and for Beckmann with Walter's sampler
+(Distribution.compiled_samplings)."""
 
 from __future__ import annotations
 
@@ -43,10 +43,10 @@ from sim.bsdf.primitives import (
 
 #: True when numba imports: the kernels below exist only then.
 AVAILABLE = COMPILED
-#: Pairs below which eval and pdf run on the calling thread: waking the parallel kernels'
-#: passive OpenMP threads took 1-2 ms per call on a loaded machine (the bench evaluates a few
-#: pairs per reading, seconds apart in CPU terms), where 8192 pairs cost about 0.1 ms on one
-#: core; larger batches (a fit's aperture rules) still gain from the threads.
+#: Pairs below which a kernel runs on the calling thread alone: waking the parallel kernels'
+#: passive OpenMP threads took 1-4 ms per call on a loaded machine when calls come apart (the
+#: bench evaluates a few pairs per reading), where 8192 pairs cost about 0.1 ms on one core;
+#: larger batches (a fit's aperture rules) still gain from the threads.
 SERIAL_BELOW = 1 << 13
 
 
@@ -59,6 +59,7 @@ class DielectricBlock(IntEnum):
 
 
 if AVAILABLE:
+    import numba
     from numba import njit, prange
     from numba.core import types
     from numba.extending import intrinsic
@@ -139,15 +140,6 @@ if AVAILABLE:
         return out
 
     @njit(cache=True, error_model="numpy")
-    def _dielectric_serial(wi, wo, ndf, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
-        """_dielectric on the calling thread (batches below SERIAL_BELOW)."""
-        out = np.empty(wi.shape[0])
-        for k in range(wi.shape[0]):
-            out[k] = _dielectric_one(wi, wo, k, ndf, ax, ay, eta, masking, refl, trans,
-                                     sampling, want_pdf)
-        return out
-
-    @njit(cache=True, error_model="numpy")
     def _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
@@ -169,15 +161,6 @@ if AVAILABLE:
         """Pair-by-pair eval (want_pdf False) or pdf of RoughConductor, pairs (N, 3)."""
         out = np.empty(wi.shape[0])
         for k in prange(wi.shape[0]):
-            out[k] = _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling,
-                                    want_pdf)
-        return out
-
-    @njit(cache=True, error_model="numpy")
-    def _conductor_serial(wi, wo, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
-        """_conductor on the calling thread (batches below SERIAL_BELOW)."""
-        out = np.empty(wi.shape[0])
-        for k in range(wi.shape[0]):
             out[k] = _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling,
                                     want_pdf)
         return out
@@ -318,44 +301,43 @@ if AVAILABLE:
             res[j] = math.nan if not safe or (ok and not sure) else (val if ok else 0.0)
         return far
 
-    @njit(cache=True, error_model="numpy")
-    def _ggx_dielectric_pass(wi, wo, ax, ay, eta, mode, refl_on, trans_on, out, b):
-        """Block b of GGX dielectric eval or visible pdf (mode, a DielectricBlock) into out: the
-        SIMD block, the Beta factor of correlated transmission, then the pairs left NaN by the
-        scalar kernel."""
+    @njit(cache=True, parallel=True, error_model="numpy")
+    def _ggx_dielectric(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
+        """GGX dielectric eval or visible pdf (mode, a DielectricBlock): SIMD blocks, the Beta
+        factor of correlated transmission, then the pairs left NaN by the scalar kernel."""
         n = wi.shape[0]
+        out = np.empty(n)
         correlated = mode == DielectricBlock.CORRELATED_EVAL
         masking = Masking.CORRELATED.value if correlated else Masking.SEPARABLE.value
         want_pdf = mode == DielectricBlock.VISIBLE_PDF
-        start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
-        # ravel: views of C-contiguous pairs, block copies of broadcast ones
-        fi, fo = wi[start:stop].ravel(), wo[start:stop].ravel()
-        if _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on,
-                                 out[start:stop]):  # directions off unit length: again
-            _ggx_dielectric_block(_normalised(fi), _normalised(fo), ax, ay, eta, mode,
-                                  refl_on, trans_on, out[start:stop])
-        for k in range(start, stop):
-            if out[k] < 0.0:  # correlated transmission: times B(1 + Lambda_i, 1 + Lambda_o)
-                out[k] = _times_beta(-out[k], ax, ay, wi, wo, k)
-            if math.isnan(out[k]):
-                out[k] = _dielectric_one(wi, wo, k, Ndf.GGX.value, ax, ay, eta, masking,
-                                         refl_on, trans_on, Sampling.VISIBLE.value, want_pdf)
-
-    @njit(cache=True, parallel=True, error_model="numpy")
-    def _ggx_dielectric(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
-        """GGX dielectric eval or visible pdf (mode, a DielectricBlock), blocks in parallel."""
-        out = np.empty(wi.shape[0])
-        for b in prange((wi.shape[0] + BLOCK - 1) // BLOCK):
-            _ggx_dielectric_pass(wi, wo, ax, ay, eta, mode, refl_on, trans_on, out, b)
+        for b in prange((n + BLOCK - 1) // BLOCK):
+            start, stop = b * BLOCK, min(n, (b + 1) * BLOCK)
+            # ravel: views of C-contiguous pairs, block copies of broadcast ones
+            fi, fo = wi[start:stop].ravel(), wo[start:stop].ravel()
+            if _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on,
+                                     out[start:stop]):  # directions off unit length: again
+                _ggx_dielectric_block(_normalised(fi), _normalised(fo), ax, ay, eta, mode,
+                                      refl_on, trans_on, out[start:stop])
+            for k in range(start, stop):
+                if out[k] < 0.0:  # correlated transmission: times B(1 + Lambda_i, 1 + Lambda_o)
+                    out[k] = _times_beta(-out[k], ax, ay, wi, wo, k)
+                if math.isnan(out[k]):
+                    out[k] = _dielectric_one(wi, wo, k, Ndf.GGX.value, ax, ay, eta, masking,
+                                             refl_on, trans_on, Sampling.VISIBLE.value,
+                                             want_pdf)
         return out
 
-    @njit(cache=True, error_model="numpy")
-    def _ggx_dielectric_serial(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
-        """_ggx_dielectric on the calling thread (batches below SERIAL_BELOW)."""
-        out = np.empty(wi.shape[0])
-        for b in range((wi.shape[0] + BLOCK - 1) // BLOCK):
-            _ggx_dielectric_pass(wi, wo, ax, ay, eta, mode, refl_on, trans_on, out, b)
-        return out
+    def _launch(kernel, n: int, *args):
+        """kernel(*args) over n pairs: on the calling thread alone below SERIAL_BELOW pairs
+        (numba's thread count is per calling thread, so other threads keep theirs)."""
+        if n >= SERIAL_BELOW:
+            return kernel(*args)
+        threads = numba.get_num_threads()
+        numba.set_num_threads(1)
+        try:
+            return kernel(*args)
+        finally:
+            numba.set_num_threads(threads)
 
     def dielectric(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, eta: float,
                    masking: Masking, refl: bool, trans: bool, sampling: Sampling,
@@ -366,25 +348,24 @@ if AVAILABLE:
         half vector, D and G2 and differ in Fresnel factor and Jacobian, so each pair computes
         one set and selects; algebraically the numpy path's formulas), the rest pair by pair.
         """
-        serial = len(wi) < SERIAL_BELOW
-        if ndf == Ndf.GGX and (not want_pdf or sampling == Sampling.VISIBLE):
-            mode = (DielectricBlock.VISIBLE_PDF if want_pdf else
-                    DielectricBlock.CORRELATED_EVAL if masking == Masking.CORRELATED
+        if ndf == Ndf.GGX and not want_pdf:
+            mode = (DielectricBlock.CORRELATED_EVAL if masking == Masking.CORRELATED
                     else DielectricBlock.SEPARABLE_EVAL)
-            kernel = _ggx_dielectric_serial if serial else _ggx_dielectric
-            return kernel(wi, wo, ax, ay, eta, int(mode), refl, trans)
-        kernel = _dielectric_serial if serial else _dielectric
-        return kernel(wi, wo, int(ndf), ax, ay, eta, int(masking), refl, trans, int(sampling),
-                      want_pdf)
+            return _launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta, int(mode), refl,
+                           trans)
+        if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
+            return _launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta,
+                           int(DielectricBlock.VISIBLE_PDF), refl, trans)
+        return _launch(_dielectric, len(wi), wi, wo, int(ndf), ax, ay, eta, int(masking), refl,
+                       trans, int(sampling), want_pdf)
 
     def conductor(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, has_f: bool,
                   n_c: complex, masking: Masking, sampling: Sampling,
                   want_pdf: bool) -> np.ndarray:
         """eval (want_pdf False) or pdf of RoughConductor for pairs of shape (N, 3); has_f
         False: F = 1 (n_c unused)."""
-        kernel = _conductor_serial if len(wi) < SERIAL_BELOW else _conductor
-        return kernel(wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking), int(sampling),
-                      want_pdf)
+        return _launch(_conductor, len(wi), wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking),
+                       int(sampling), want_pdf)
 
     @njit(cache=True, error_model="numpy")
     def _sampling_weight(ndf, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz, mx, my, mz,
@@ -643,14 +624,14 @@ if AVAILABLE:
         """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero; GGX with
         visible normals in SIMD blocks, the rest pair by pair."""
         if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
-            return _ggx_visible_sample(wi, u, ax, ay, eta, masking == Masking.CORRELATED,
-                                       refl_on, trans_on)
-        return _dielectric_sample(wi, u, int(ndf), ax, ay, eta, int(masking), refl_on,
-                                  trans_on, int(sampling))
+            return _launch(_ggx_visible_sample, len(wi), wi, u, ax, ay, eta,
+                           masking == Masking.CORRELATED, refl_on, trans_on)
+        return _launch(_dielectric_sample, len(wi), wi, u, int(ndf), ax, ay, eta, int(masking),
+                       refl_on, trans_on, int(sampling))
 
     def conductor_sample(wi: np.ndarray, u: np.ndarray, ndf: Ndf, ax: float, ay: float,
                          has_f: bool, n_c: complex, masking: Masking,
                          sampling: Sampling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """sample() of RoughConductor: (wo, weight, pdf), failed samples all zero."""
-        return _conductor_sample(wi, u, int(ndf), ax, ay, has_f, n_c, int(masking),
-                                 int(sampling))
+        return _launch(_conductor_sample, len(wi), wi, u, int(ndf), ax, ay, has_f, n_c,
+                       int(masking), int(sampling))
