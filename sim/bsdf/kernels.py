@@ -40,6 +40,7 @@ from sim.bsdf.primitives import (
     unit,
     walter_scale,
 )
+from sim.cluster import run_with_one_kernel_thread
 
 #: True when numba imports: the kernels below exist only then.
 AVAILABLE = COMPILED
@@ -59,7 +60,6 @@ class DielectricBlock(IntEnum):
 
 
 if AVAILABLE:
-    import numba
     from numba import njit, prange
     from numba.core import types
     from numba.extending import intrinsic
@@ -330,14 +330,7 @@ if AVAILABLE:
     def _launch(kernel, n: int, *args):
         """kernel(*args) over n pairs: on the calling thread alone below SERIAL_BELOW pairs
         (numba's thread count is per calling thread, so other threads keep theirs)."""
-        if n >= SERIAL_BELOW:
-            return kernel(*args)
-        threads = numba.get_num_threads()
-        numba.set_num_threads(1)
-        try:
-            return kernel(*args)
-        finally:
-            numba.set_num_threads(threads)
+        return kernel(*args) if n >= SERIAL_BELOW else run_with_one_kernel_thread(kernel, *args)
 
     def dielectric(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, eta: float,
                    masking: Masking, refl: bool, trans: bool, sampling: Sampling,
