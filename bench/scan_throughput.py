@@ -10,7 +10,8 @@ emulator latency and instant motion, beside its floor measured in the same run:
 - bench physics: the optical bench evaluated at exactly the stage positions the scan
   recorded, in the scan's order, in a fresh process (cold caches, after the same warm-up the
   emulators do before serving), so the multiple-scattering tables the scan walked on first
-  use are counted as they were paid in the scan;
+  use are counted as they were paid in the scan (printed again with the tables walked: the
+  per-reading cost of a longer scan);
 - fsync: appending and fsyncing as many lines, as long as the scan's, beside the run (the
   store overlaps each reading's fsync with the next point, so this part is a serial bound).
 
@@ -103,31 +104,35 @@ def bare_round_trip_s(emulator, lines: tuple[bytes, ...], eol: bytes, n: int = 2
         emulator.stop()
 
 
-def physics_replay_s(positions_file: Path) -> tuple[float, float]:
+def physics_replay_s(positions_file: Path) -> tuple[float, float, float, float]:
     """Seconds (wall, CPU) the bench takes for the readings at the stage positions in
     positions_file (rows of ROLES), in order, after the emulators' warm-up: run in a fresh
-    process, so no table the scan walked is warm here. CPU time shows how much of the wall
+    process, so no table the scan walked is warm here; then (wall, CPU) of the same readings
+    again, the tables walked. CPU time (all the process's threads) shows how much of the wall
     time a loaded machine added."""
     out = subprocess.run([sys.executable, __file__, "--replay-physics", str(positions_file)],
                          capture_output=True, text=True, check=True)
-    wall, cpu = map(float, out.stdout.split()[-2:])
-    return wall, cpu
+    wall, cpu, warm_wall, warm_cpu = map(float, out.stdout.split()[-4:])
+    return wall, cpu, warm_wall, warm_cpu
 
 
 def _replay_physics(positions_file: Path) -> None:
-    """The child of physics_replay_s: print the wall and CPU seconds of the evaluations."""
+    """The child of physics_replay_s: print the wall and CPU seconds of the evaluations, first
+    as the scan paid them, then again with the tables walked."""
     sim = parse_config(tomllib.loads(config_text())).sim
     here = dict.fromkeys(ROLES, 0.0)
     source = build_power_source(sim, lambda: here)
     source.bench.warm_up()
-    wall = cpu = 0.0
-    for row in np.load(positions_file):
-        here.update(zip(ROLES, map(float, row), strict=True))
-        t0, c0 = time.perf_counter(), time.thread_time()
-        source.power_w()
-        wall += time.perf_counter() - t0
-        cpu += time.thread_time() - c0
-    print(wall, cpu)
+    rows = np.load(positions_file)
+    for _ in range(2):
+        wall = cpu = 0.0
+        for row in rows:
+            here.update(zip(ROLES, map(float, row), strict=True))
+            t0, c0 = time.perf_counter(), time.process_time()
+            source.power_w()
+            wall += time.perf_counter() - t0
+            cpu += time.process_time() - c0
+        print(wall, cpu)
 
 
 def fsync_s(folder: Path, n: int, line_bytes: int) -> float:
@@ -211,7 +216,7 @@ def main() -> None:
         line_bytes = round((result.path / READINGS).stat().st_size / max(len(r), 1))
         sync_s = fsync_s(tmp, n, line_bytes)
         np.save(tmp / "positions.npy", np.stack([r[f"{role}_deg"] for role in ROLES], axis=1))
-        bench_s, bench_cpu_s = physics_replay_s(tmp / "positions.npy")
+        bench_s, bench_cpu_s, warm_s, warm_cpu_s = physics_replay_s(tmp / "positions.npy")
         watched = [per_point_s(tmp, watch) for watch in (False, True, False)]
     assert result.outcome.status == "completed" and len(r) == n, result.outcome
     loop_s = float(r["t_s"][-1] - r["t_s"][0]) * n / (n - 1)
@@ -224,7 +229,9 @@ def main() -> None:
           f"pm100 {requests['pm100']} ({requests['pm100'] / n:.2f}/point)")
     print(f"  bare round trip: esp {esp_s * 1e3:.3f} ms, pm100 {pm_s * 1e3:.3f} ms; "
           f"bench physics at the scan's positions {bench_s / n * 1e3:.3f} ms/reading "
-          f"({bench_cpu_s / n * 1e3:.3f} ms of CPU); "
+          f"({bench_cpu_s / n * 1e3:.3f} ms of CPU; {warm_s / n * 1e3:.3f} ms, "
+          f"{warm_cpu_s / n * 1e3:.3f} ms of CPU, again with its multiple-scattering tables "
+          f"walked); "
           f"fsync of a {line_bytes}-byte line {sync_s / n * 1e3:.3f} ms")
     print(f"{'':2}{'what':<50}{'seconds':>9}{'points/s':>10}")
     floor_all = floor_s + bench_s + sync_s

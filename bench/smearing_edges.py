@@ -10,7 +10,9 @@ as the bench does); baseline in the same run: the same Smearing with the edges h
 rule before: rim probe, then 40 polar rings on the straddling points). The bench reference is
 sim.bench at rtol 1e-8. Times: fastest of 5 calls on the whole Walter in-plane scan (532
 points at 0/30/60/75 deg), as a fit repeats them (the split rule is built on the first call
-for those pairs and kept); the first call is printed too. Run: python bench/smearing_edges.py
+for those pairs and kept); the first call is printed too. Last, the forward model's time over
+that of the compiled kernel calls inside it (the fit's floor), fastest of 5.
+Run: python bench/smearing_edges.py
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from calibration.fit import build_model
 from calibration.smearing import Smearing, smearing_order
 from gonio.geometry import directions
 from sim.bench.config import build_bench
+from sim.bsdf import kernels
 
 ALPHA, ETA, APERTURE_MM, DISTANCE_MM, DIVERGENCE_DEG = 0.394, 1.51, 10.0, 500.0, 0.03
 
@@ -52,6 +55,41 @@ def fastest(job, repeats: int = 5) -> float:
         job()
         times.append(time.perf_counter() - t0)
     return min(times)
+
+
+class KernelClock:
+    """Seconds and pairs spent in the compiled dielectric kernel (sim.bsdf.kernels.dielectric,
+    which the models look up at each call) while installed: the forward model's floor."""
+
+    def __init__(self):
+        self.seconds, self.pairs = 0.0, 0
+
+    def __enter__(self):
+        self.inner = kernels.dielectric
+
+        def timed(wi, wo, *args):
+            t0 = time.perf_counter()
+            out = self.inner(wi, wo, *args)
+            self.seconds += time.perf_counter() - t0
+            self.pairs += len(wi)
+            return out
+
+        kernels.dielectric = timed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        kernels.dielectric = self.inner
+
+
+def forward_over_kernel(job, repeats: int = 5) -> tuple[float, float, int]:
+    """(seconds of job, seconds of its kernel calls, pairs) of the fastest of `repeats` calls."""
+    runs = []
+    for _ in range(repeats):
+        with KernelClock() as clock:
+            t0 = time.perf_counter()
+            job()
+            runs.append((time.perf_counter() - t0, clock.seconds, clock.pairs))
+    return min(runs)
 
 
 def main() -> None:
@@ -84,6 +122,8 @@ def main() -> None:
     t_first = fastest(lambda: optics.average(model, swi, swo), repeats=1)  # builds the rule
     t_split = fastest(lambda: optics.average(model, swi, swo))
     t_hidden = fastest(lambda: optics.average(EdgesHidden(model), swi, swo))
+    t_model, t_kernel, kernel_pairs = forward_over_kernel(lambda: optics.average(model, swi,
+                                                                                 swo))
 
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores, shared)")
     print(f"{optics}")
@@ -97,6 +137,9 @@ def main() -> None:
     print(f"(errors over {len(arms)} readings across the edge at theta_i 30 deg; times over "
           f"{len(swi)} in-plane points, repeated on the same pairs as in a fit; the split's "
           f"first call, which builds its rule, {1e3 * t_first:.1f} ms)")
+    print(f"the fit's forward model (split rule) {1e3 * t_model:.2f} ms per call, its kernel "
+          f"evaluations ({kernel_pairs} pairs) {1e3 * t_kernel:.2f} ms of it: "
+          f"{t_model / t_kernel:.2f}x its kernel evaluations")
 
 
 if __name__ == "__main__":

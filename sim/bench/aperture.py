@@ -120,6 +120,12 @@ class ApertureIntegral:
             raise ValueError(f"rtol must be in (0, 1), got {self.rtol}")
 
     @property
+    def uses_scales(self) -> bool:
+        """Whether integrate() reads the lobe's scales: not with both orders fixed at 0 (one
+        ray each way), where neither an order nor a split is chosen."""
+        return self.order != (0, 0)
+
+    @property
     def solid_angle_sr(self) -> float:
         """The aperture's solid angle."""
         return cap_solid_angle(self.aperture_rad)

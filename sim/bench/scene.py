@@ -119,10 +119,7 @@ class Bench:
         inside the beam cone (which the probe's one incident direction cannot see) the full
         rule is used."""
         wi, wo = sample_frame_directions(positions, flipped=self.sample.flipped)
-        peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
-        reach = self.integral.aperture_rad + self.integral.divergence_rad
-        far = peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
-        if self.order is None and far:
+        if self.order is None and self._far_from_peak(wi, wo):
             edges = self.sample.edge_circles(wi)
             edge_in_beam = edges is not None and edges.distance(
                 wo, wi, free_is_wo=False) < self.integral.divergence_rad
@@ -132,8 +129,15 @@ class Bench:
                 probe = self.probe.integrate(self.sample.integrand, wi, wo, split)
                 if probe < NEGLIGIBLE:
                     return probe
-        return self.integral.integrate(self.sample.integrand, wi, wo,
-                                       self.sample.lobe_scales(wi, wo))
+        scales = self.sample.lobe_scales(wi, wo) if self.integral.uses_scales else ONE_POINT
+        return self.integral.integrate(self.sample.integrand, wi, wo, scales)
+
+    def _far_from_peak(self, wi: np.ndarray, wo: np.ndarray) -> bool:
+        """Whether wo lies more than twice the aperture's and beam's reach from the lobe's
+        specular peak (or the lobe has none)."""
+        peak = self.sample.peak_direction(wi, reflection=(wo[2] > 0) == (wi[2] > 0))
+        reach = self.integral.aperture_rad + self.integral.divergence_rad
+        return peak is None or math.acos(min(1.0, float(peak @ wo))) > 2.0 * reach
 
     def reduced_bsdf(self, sample_deg: np.ndarray, arm_deg: np.ndarray) -> np.ndarray:
         """What reduction of noiseless readings at these stage positions (true ones, taken as

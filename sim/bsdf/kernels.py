@@ -6,8 +6,9 @@ automatically when numba imports (the gonio[fast] extra); compiled code is cache
 dielectric eval and visible-normal pdf run in branch-free blocks that LLVM turns into 512-bit
 SIMD lanes, with the formulas rearranged to 3 sqrt and 1 division per pair (docs/bsdf.md,
 Performance); a pair the block cannot vouch for is handed to the scalar kernel. The others are
-scalar per-pair loops, all parallel over pairs (prange). sample() is compiled for GGX and for
-Beckmann with Walter's sampler (Distribution.compiled_samplings)."""
+scalar per-pair loops, all parallel over pairs (prange); batches below SERIAL_BELOW pairs run
+on the calling thread. sample() is compiled for GGX and for Beckmann with Walter's sampler
+(Distribution.compiled_samplings)."""
 
 from __future__ import annotations
 
@@ -39,9 +40,15 @@ from sim.bsdf.primitives import (
     unit,
     walter_scale,
 )
+from sim.cluster import run_with_one_kernel_thread
 
 #: True when numba imports: the kernels below exist only then.
 AVAILABLE = COMPILED
+#: Pairs below which a kernel runs on the calling thread alone: waking the parallel kernels'
+#: passive OpenMP threads took 1-4 ms per call on a loaded machine when calls come apart (the
+#: bench evaluates a few pairs per reading), where 8192 pairs cost about 0.1 ms on one core;
+#: larger batches (a fit's aperture rules) still gain from the threads.
+SERIAL_BELOW = 1 << 13
 
 
 class DielectricBlock(IntEnum):
@@ -320,6 +327,11 @@ if AVAILABLE:
                                              want_pdf)
         return out
 
+    def _launch(kernel, n: int, *args):
+        """kernel(*args) over n pairs: on the calling thread alone below SERIAL_BELOW pairs
+        (numba's thread count is per calling thread, so other threads keep theirs)."""
+        return kernel(*args) if n >= SERIAL_BELOW else run_with_one_kernel_thread(kernel, *args)
+
     def dielectric(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, eta: float,
                    masking: Masking, refl: bool, trans: bool, sampling: Sampling,
                    want_pdf: bool) -> np.ndarray:
@@ -332,20 +344,21 @@ if AVAILABLE:
         if ndf == Ndf.GGX and not want_pdf:
             mode = (DielectricBlock.CORRELATED_EVAL if masking == Masking.CORRELATED
                     else DielectricBlock.SEPARABLE_EVAL)
-            return _ggx_dielectric(wi, wo, ax, ay, eta, int(mode), refl, trans)
+            return _launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta, int(mode), refl,
+                           trans)
         if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
-            return _ggx_dielectric(wi, wo, ax, ay, eta, int(DielectricBlock.VISIBLE_PDF), refl,
-                                   trans)
-        return _dielectric(wi, wo, int(ndf), ax, ay, eta, int(masking), refl, trans,
-                           int(sampling), want_pdf)
+            return _launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta,
+                           int(DielectricBlock.VISIBLE_PDF), refl, trans)
+        return _launch(_dielectric, len(wi), wi, wo, int(ndf), ax, ay, eta, int(masking), refl,
+                       trans, int(sampling), want_pdf)
 
     def conductor(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, has_f: bool,
                   n_c: complex, masking: Masking, sampling: Sampling,
                   want_pdf: bool) -> np.ndarray:
         """eval (want_pdf False) or pdf of RoughConductor for pairs of shape (N, 3); has_f
         False: F = 1 (n_c unused)."""
-        return _conductor(wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking), int(sampling),
-                          want_pdf)
+        return _launch(_conductor, len(wi), wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking),
+                       int(sampling), want_pdf)
 
     @njit(cache=True, error_model="numpy")
     def _sampling_weight(ndf, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz, mx, my, mz,
@@ -604,14 +617,14 @@ if AVAILABLE:
         """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero; GGX with
         visible normals in SIMD blocks, the rest pair by pair."""
         if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
-            return _ggx_visible_sample(wi, u, ax, ay, eta, masking == Masking.CORRELATED,
-                                       refl_on, trans_on)
-        return _dielectric_sample(wi, u, int(ndf), ax, ay, eta, int(masking), refl_on,
-                                  trans_on, int(sampling))
+            return _launch(_ggx_visible_sample, len(wi), wi, u, ax, ay, eta,
+                           masking == Masking.CORRELATED, refl_on, trans_on)
+        return _launch(_dielectric_sample, len(wi), wi, u, int(ndf), ax, ay, eta, int(masking),
+                       refl_on, trans_on, int(sampling))
 
     def conductor_sample(wi: np.ndarray, u: np.ndarray, ndf: Ndf, ax: float, ay: float,
                          has_f: bool, n_c: complex, masking: Masking,
                          sampling: Sampling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """sample() of RoughConductor: (wo, weight, pdf), failed samples all zero."""
-        return _conductor_sample(wi, u, int(ndf), ax, ay, has_f, n_c, int(masking),
-                                 int(sampling))
+        return _launch(_conductor_sample, len(wi), wi, u, int(ndf), ax, ay, has_f, n_c,
+                       int(masking), int(sampling))
