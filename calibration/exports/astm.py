@@ -41,6 +41,7 @@ class AstmTable:
     values: np.ndarray
     header: dict[str, str] = field(default_factory=dict)  # other KEYWORD value lines
     comments: list[str] = field(default_factory=list)
+    source: str = "MEASURED"  # or MODEL
 
 
 def _comment(text: str) -> str:
@@ -58,7 +59,7 @@ def write_astm(table: AstmTable, path: str | Path) -> Path:
         raise CalibrationError(f"astm: data type must be BRDF or BTDF, got {table.data_type!r}")
     names = [f"{w:g}nm" if math.isfinite(w) else "value" for w in table.wavelengths_nm]
     lines = [_comment(c) for c in table.comments]
-    lines += ["SOURCE MEASURED", f"DATA_TYPE {table.data_type}"]
+    lines += [f"SOURCE {table.source}", f"DATA_TYPE {table.data_type}"]
     lines += [f"{key} {value}" for key, value in table.header.items()]
     lines += [f"NUM_POINTS {len(table.theta_i)}", "VARS " + ",".join([*ANGLES, *names])]
     angles = np.stack([table.theta_i, np.mod(table.phi_i, 2 * math.pi), table.theta_s,
@@ -120,10 +121,12 @@ def read_astm(path: str | Path) -> AstmTable:
         raise CalibrationError(f"{path}: no data line after VARS")
     data = np.array(rows)
     data_type = header.pop("DATA_TYPE", "BRDF")
+    source = header.pop("SOURCE", "MEASURED")
     if data_type not in DATA_TYPES:
         raise CalibrationError(f"{path}: DATA_TYPE must be BRDF or BTDF, got {data_type!r}")
     return AstmTable(data_type, data[:, 0], data[:, 1], data[:, 2], data[:, 3],
-                     [_wavelength(nm) for nm in names[4:]], data[:, 4:], header, comments)
+                     [_wavelength(nm) for nm in names[4:]], data[:, 4:], header, comments,
+                     source)
 
 
 def sides_of(transmission: np.ndarray) -> list[str]:

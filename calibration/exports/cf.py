@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.exports.measured import columns, meta_facts, unit_vectors
+from calibration.exports.measured import columns, coverage_k, meta_facts, unit_vectors
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 from gonio.errors import GonioError
@@ -175,7 +175,7 @@ def write_reduced_netcdf(data: ReducedData, record: Mapping[str, Any], out: Path
             var[:] = cols[column]
             var.long_name = REDUCED_LONG_NAMES[column]
             var.units = "degree" if column.endswith("_deg") else "sr-1"
-        ds["bsdf_expanded_uncertainty"].coverage_factor = float(cols["k"][0]) if len(cols["k"]) else 2.0
+        ds[REDUCED_NAMES["U"]].coverage_factor = coverage_k(data)
         components = [c for c in cols if c.startswith("u_")]
         for name in components:
             var = ds.createVariable(name, "f8", ("point",))
