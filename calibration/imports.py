@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.exports.measured import ANGLE_COLUMNS, unit_vectors
+from calibration.exports.measured import ANGLE_COLUMNS, META_KEYS, unit_vectors
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -44,7 +44,7 @@ def read_measured(path: str | Path, options: ImportOptions | None = None) -> Red
     if not path.is_file():
         raise CalibrationError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix == ".nc":
+    if suffix == ".nc" or _starts_with(path, (b"CDF", b"\x89HDF")):
         from calibration.exports.cf import read_reduced_netcdf
 
         data = read_reduced_netcdf(path)
@@ -62,6 +62,13 @@ def read_measured(path: str | Path, options: ImportOptions | None = None) -> Red
                                "fit needs for a dielectric; give it with --eta")
     data.meta["eta"] = float(eta)
     return data
+
+
+def _starts_with(path: Path, magic: tuple[bytes, ...]) -> bool:
+    """True when the file begins with one of the magic byte strings (NetCDF 3 or 4)."""
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    return head.startswith(magic)
 
 
 def _has_line(path: Path, keyword: str) -> bool:
@@ -127,8 +134,7 @@ def _from_csv(path: Path, options: ImportOptions) -> ReducedData:
         raise CalibrationError(f"{path}: not a readable text file ({exc})") from None
     lines = text.splitlines()
     meta = {k: v for k, v in _header([ln for ln in lines if ln.startswith("#")]).items()
-            if k in ("eta", "k", "kind", "wavelength_nm", "aperture_half_angle_deg",
-                     "aperture_sr", "coverage_k", "noise_model", "calibration", "sample")}
+            if k in META_KEYS}
     rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
     if len(rows) < 2:
         raise CalibrationError(f"{path}: no data rows under a header of column names")
@@ -214,6 +220,7 @@ def _from_zemax(path: Path, options: ImportOptions) -> ReducedData:
                                         table.radial_deg)
         keep = on_side(directions, table.scatter_type)
         keep &= np.abs(directions[..., 2]) > 1e-9
+        keep[1:, table.radial_deg == 0.0] = False  # the specular direction, once
         if table.symmetry == "PlaneSymmetrical":
             inside = (table.azimuth_deg > 0) & (table.azimuth_deg < 180)
             mirrored = directions[inside] * np.array([1.0, -1.0, 1.0])

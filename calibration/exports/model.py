@@ -8,7 +8,7 @@ Mitsuba 3's `roughdielectric` evaluated in radiance mode with si.wi toward the c
 detector's place) and wo toward the light (the source's) gives the same value; with the roles
 swapped (the camera on the source's side of the interface) Mitsuba's value is gonio's times
 1/eta^2, the BTDF's reciprocity across an index change (f(o, i) / n_i^2 = f(i, o) / n_o^2).
-tests/exports/test_mitsuba_convention.py evaluates Mitsuba itself.
+tests/fitting/test_exports_mitsuba.py evaluates Mitsuba itself.
 """
 
 from __future__ import annotations
