@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from fitting_bench_runs import instrument, plan, scan
+from zemax_cells import assert_measured_cells
 
 from calibration import calfile
 from calibration.calibrate import build
@@ -18,7 +19,6 @@ from calibration.pipeline import fit_run, reduce_run
 from calibration.values import Measured
 from gonio.store import open_run
 from gonio_cli.main import main
-from zemax_cells import assert_measured_cells
 
 SOURCE = {"power_w": 1e-3, "beam_diameter_mm": 2.0, "divergence_deg": 0.03}
 APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-5}  # bench accuracy << noise
