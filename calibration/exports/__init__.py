@@ -7,14 +7,10 @@ fitted `model` (Zemax, ASTM on a grid, Mitsuba 3), each carrying the run's recor
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from calibration.exports.request import ExportRequest
 from calibration.values import CalibrationError
-
-if TYPE_CHECKING:
-    from calibration.fit import FitOptions
 
 WHATS = ("raw", "reduced", "model")
 ACCEPTS = {"csv": ("raw", "reduced"), "netcdf": ("raw", "reduced"),
@@ -24,19 +20,6 @@ DEFAULT_WHAT = {"csv": "reduced", "netcdf": "reduced", "zemax": "reduced", "astm
 FORMATS = tuple(ACCEPTS)
 RAW_FORMATS = ("csv", "netcdf")
 MODEL_FORMATS = ("zemax", "mitsuba")
-
-
-@dataclass(frozen=True)
-class ExportRequest:
-    """What to export (None: the format's default) and how to reduce and fit the run."""
-
-    what: str | None = None
-    fit_options: FitOptions | None = None
-    fit_file: str | Path | None = None  # `gonio fit --json` output to export instead of fitting
-    force: bool = False  # export a fit whose chi2/dof says it does not describe the data
-    calibration: str | Path | None = None
-    shot_noise_w: float | None = None
-    subtract_signature: bool = False
 
 
 def write(run_dir: str | Path, fmt: str, out_path: str | Path,

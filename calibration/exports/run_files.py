@@ -7,7 +7,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from calibration.exports import ExportRequest
 from calibration.exports.astm import astm_tables, side_paths, write_astm
 from calibration.exports.cf import write_reduced_netcdf
 from calibration.exports.measured import write_reduced_csv
@@ -19,6 +18,7 @@ from calibration.exports.model import (
     mitsuba_file,
     zemax_files,
 )
+from calibration.exports.request import ExportRequest
 from calibration.reduced import ReducedData
 from gonio.errors import GonioError
 from gonio.record import record_lines, run_record
