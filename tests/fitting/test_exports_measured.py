@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import xarray
 from zemax_cells import assert_measured_cells
 
 from calibration.exports import ExportRequest
@@ -124,7 +125,6 @@ def cf_counts(path: Path) -> dict:
 
 
 def test_reduced_netcdf_is_cf_and_reads_back(glass, tmp_path):
-    xarray = pytest.importorskip("xarray", reason="xarray reads the file back (test extra)")
     data, _ = glass
     data = replace(data, shared_rel=np.full((len(data.bsdf), 1), 1e-3))
     path = write_reduced_netcdf(data, RECORD, tmp_path / "r.nc")
@@ -149,7 +149,6 @@ def test_reduced_netcdf_is_cf_and_reads_back(glass, tmp_path):
 
 
 def test_raw_netcdf_is_cf_with_an_epoch(tmp_path):
-    xarray = pytest.importorskip("xarray", reason="xarray decodes the times (test extra)")
     r = np.zeros(4, READING_DTYPE)
     r["index"] = np.arange(4)
     r["kind"] = ["dark", "beam", "sample", "sample"]
