@@ -26,7 +26,8 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
           request: ExportRequest | None = None) -> tuple[list[Path], list[str]]:
     """Write a run as `fmt` (one of FORMATS) and return (every file written, notes for the
     user). Defaults: csv and netcdf the reduced data where the run can be reduced (else its
-    raw readings, with a note saying why), zemax and astm the reduced data (the model filling
+    raw readings, with a note saying why; not when a reduction option or --what asks for the
+    reduced data), zemax and astm the reduced data (the model filling
     only where there is no data), mitsuba the model. Zemax and ASTM write one file per
     measured side: the BTDF at out_path (the BRDF if only reflection was measured), the other
     beside it as <stem>-BRDF<suffix>."""
@@ -42,5 +43,7 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
     # the fit bring in scipy.
     from calibration.exports.run_files import write_run
 
+    asked_to_reduce = (request.what is not None or request.calibration is not None
+                       or request.shot_noise_w is not None or request.subtract_signature)
     return write_run(run_dir, fmt, what, Path(out_path), request,
-                     fallback=request.what is None and fmt in RAW_FORMATS)
+                     fallback=not asked_to_reduce and fmt in RAW_FORMATS)

@@ -29,6 +29,7 @@ from calibration.fit import FitOptions, fit
 from calibration.imports import ImportOptions, read_measured
 from calibration.synthetic import synthesize
 from calibration.values import CalibrationError
+from gonio.record import record_lines
 from gonio.store import READING_DTYPE
 from gonio_cli.main import main
 
@@ -320,3 +321,35 @@ def test_model_export_takes_a_fit_json_and_refuses_a_bad_one(glass, tmp_path):
                                replace(request, force=True))
     assert notes[0].startswith("exported with --force although the ggx fit's fitted chi2/dof")
     assert notes[0].split("--force")[1] in forced[0].read_text()
+
+
+def test_zemax_measured_asymmetrical_and_out_of_plane_incidence(glass):
+    data, result = glass
+    side = data.subset(data.valid & ~data.transmission)
+    table = measured_table(side, "BRDF", 1.51, result.model().eval, 20.0, False, [])
+    assert table.symmetry == "Asymmetrical" and {0.0, 180.0} <= set(table.azimuth_deg)
+    assert table.azimuth_deg.max() < 360.0
+    assert_measured_cells(table, side)
+    tilted = replace(side, wi=side.wi * np.array([1.0, 0.0, 1.0]) + [0.0, 0.1, 0.0])
+    with pytest.raises(CalibrationError, match=r"zemax: a measured table needs incidence in "
+                                               r"the x-z plane"):
+        measured_table(tilted, "BRDF", 1.51, result.model().eval, 20.0, True, [])
+
+
+def test_fit_and_reduce_import_cli(glass, tmp_path, capsys):
+    data, result = glass
+    path = write_reduced_csv(data, tmp_path / "glass.csv", record_lines(RECORD))
+    assert main(["fit", "--import", str(path), "--json", "--distribution", "ggx"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["run"] == str(path) and out["sample"]["id"] == "GG-7"
+    assert out["parameters"]["alpha"]["value"] == pytest.approx(result.alpha, rel=1e-9)
+    astm = write_astm(astm_tables(data)[1], tmp_path / "glass.astm")
+    assert main(["reduce", "--import", str(astm), "--eta", "1.51", "--sigma-relative", "0.05",
+                 "--out", str(tmp_path / "again.csv")]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[-1] == str(tmp_path / "again.csv")
+    assert "assumed: u = 0.05 * |bsdf|" in printed[1]
+    again = read_measured(tmp_path / "again.csv")
+    assert again.meta["eta"] == 1.51 and "assumed" in again.meta["noise_model"]
+    assert main(["fit", str(tmp_path), "--import", str(path)]) == 2
+    assert "give a run directory or --import FILE (one of them)" in capsys.readouterr().err
