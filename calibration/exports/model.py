@@ -13,6 +13,7 @@ tests/fitting/test_exports_mitsuba.py evaluates Mitsuba itself.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -159,8 +160,6 @@ def result_from_json(fitted: dict, where: str) -> FitResult:
 
 def load_fit(path: str | Path) -> FitResult:
     """The fit a `gonio fit --json` output file holds (its last JSON line)."""
-    import json
-
     path = Path(path)
     try:
         lines = [ln for ln in path.read_text().splitlines() if ln.strip()]
