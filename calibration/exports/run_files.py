@@ -60,18 +60,21 @@ def write_data(data: ReducedData, fmt: str, what: str, out: Path, record: Mappin
     if what == "reduced" and fmt == "netcdf":
         return [write_reduced_netcdf(data, record, out)], []
     if what == "reduced" and fmt == "astm":
-        tables = astm_tables(data, lines)
-        return [write_astm(t, p) for t, p in zip(
-            tables, side_paths(out, [t.data_type for t in tables]), strict=True)], []
+        return _astm_files(astm_tables(data, lines), out), []
     result, warnings = fit_for_export(data, request.fit_options, request.fit_file,
                                       request.force)
     lines = [*lines, *warnings]
     if fmt == "mitsuba":
         return [mitsuba_file(result, out, source, lines)], warnings
     if fmt == "astm":
-        tables = astm_model_tables(data, result, fit_notes(result, source, lines))
-        return [write_astm(t, p) for t, p in zip(
-            tables, side_paths(out, [t.data_type for t in tables]), strict=True)], warnings
+        return _astm_files(astm_model_tables(data, result, fit_notes(result, source, lines)),
+                           out), warnings
     if what == "model":
         return zemax_files(data, result, out, source, lines), warnings
     return measured_zemax_files(data, result, out, source, lines), warnings
+
+
+def _astm_files(tables: list, out: Path) -> list[Path]:
+    """One ASTM file per side's table, named by side_paths."""
+    paths = side_paths(out, [t.data_type for t in tables])
+    return [write_astm(t, p) for t, p in zip(tables, paths, strict=True)]
