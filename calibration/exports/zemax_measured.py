@@ -74,7 +74,6 @@ def measured_table(data: ReducedData, scatter_type: str, eta: float,
         wi = np.array([-math.sin(t), 0.0, math.cos(t)])
         wo = scatter_directions(angle, scatter_type, azimuth, radial)
         inside = on_side(wo, scatter_type)
-        cells = np.where(inside, model_eval(np.broadcast_to(wi, wo.shape), wo), 0.0)
         # coefficient[z, r, j]: the weight of the block's point j in cell (z, r)
         sel = np.flatnonzero(block == a)
         z_of = np.searchsorted(azimuth, azimuth_at[sel])
@@ -97,17 +96,19 @@ def measured_table(data: ReducedData, scatter_type: str, eta: float,
         from_data = measured | interpolated
         data_cells = coefficient @ good.bsdf[sel]
         negative = int(np.sum(measured & (data_cells < 0)))
-        cells = np.where(from_data, np.maximum(data_cells, 0.0), cells)
+        cells = np.where(from_data, np.maximum(data_cells, 0.0), 0.0)
+        modelled = inside & ~from_data  # the model is evaluated where it fills, only
+        cells[modelled] = model_eval(np.broadcast_to(wi, (int(modelled.sum()), 3)),
+                                     wo[modelled])
         values[0, a] = cells
         weights = tis_weights(ZemaxTable(scatter_type, symmetry, np.zeros(1), angle_deg,
                                          azimuth, radial, values, tis), a)
         tis[0, a] = float(np.sum(weights * cells))
         u_tis = _tis_uncertainty(good.subset(sel), np.tensordot(weights, coefficient, 2))
-        modelled = int(np.sum(inside & ~from_data))
         notes.append(
             f"block AngleOfIncidence {angle:g} (theta_i {ti:g} deg): measured at "
             f"{int(measured.sum())} cells, interpolated between them at "
-            f"{int(interpolated.sum())}, {model_name} at the other {modelled}"
+            f"{int(interpolated.sum())}, {model_name} at the other {int(modelled.sum())}"
             + (f"; {negative} negative measured values written as 0" if negative else "")
             + f"; TIS {tis[0, a]:.6g} +- {u_tis:.2g} (standard uncertainty from the measured "
             "values; the modelled cells' share without its uncertainty)")
