@@ -35,7 +35,8 @@ class ReducedData:
     meta: dict = field(default_factory=dict)  # eta, wavelength_nm, run path, calibration used
     shared_rel: np.ndarray | None = None  # (N, k) relative errors shared between points
     flags: np.ndarray | None = None  # (N,) str, comma-separated; None: no flags
-    components: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (N,) standard uncertainty, 1/sr
+    # name -> (N,) standard uncertainty in 1/sr: the GUM budget's components (calibration.budget)
+    components: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         n = len(self.bsdf)

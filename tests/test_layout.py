@@ -254,7 +254,7 @@ def test_the_graphs_see_lazy_and_package_imports():
     # calibration runs gonio/__init__.py first; TYPE_CHECKING imports never run.
     modules = module_graph()
     assert "calibration.plot" in modules["gonio_cli.commands.plot"]
-    assert {"gonio.store", "gonio"} <= modules["calibration.exports.model"]
+    assert {"gonio.store", "gonio"} <= modules["calibration.exports.run_files"]
     assert "calibration.reduce" not in modules["calibration.signature"]
     assert {"calibration", "gonio"} <= sibling_graph()["gonio_cli"]
 

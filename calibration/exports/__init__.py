@@ -1,35 +1,49 @@
-"""Every export of a run, in one place: its readings (`raw`: CSV, NetCDF; `bluesky`: event-model
-documents as JSON lines) and its fitted model (`model`: Zemax tabular BSDF, Mitsuba 3
-material), each carrying the run's record (gonio.record.run_record).
+"""Every export of a run, in one place: what was measured (`raw` readings: CSV, NetCDF, and
+Bluesky event-model documents as JSON lines; `reduced` BSDF with its uncertainties: CSV, NetCDF,
+Zemax with model fill, ASTM E1392) and the fitted `model` (Zemax, ASTM on a grid, Mitsuba 3),
+each carrying the run's record (gonio.record.run_record).
 
-`write(run_dir, fmt, out_path)` is what `gonio export --format FMT` calls."""
+`write(run_dir, fmt, out_path, request)` is what `gonio export --format FMT` calls."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from calibration.exports.request import ExportRequest
 from calibration.values import CalibrationError
 
-RAW_FORMATS = ("csv", "netcdf", "bluesky")
+WHATS = ("raw", "reduced", "model")
+ACCEPTS = {"csv": ("raw", "reduced"), "netcdf": ("raw", "reduced"), "bluesky": ("raw",),
+           "zemax": ("reduced", "model"), "astm": ("reduced", "model"), "mitsuba": ("model",)}
+DEFAULT_WHAT = {"csv": "reduced", "netcdf": "reduced", "bluesky": "raw", "zemax": "reduced",
+                "astm": "reduced", "mitsuba": "model"}
+FORMATS = tuple(ACCEPTS)
+RAW_FORMATS = ("csv", "netcdf")
 MODEL_FORMATS = ("zemax", "mitsuba")
-FORMATS = RAW_FORMATS + MODEL_FORMATS
 
 
-def write(run_dir: str | Path, fmt: str, out_path: str | Path) -> list[Path]:
-    """Write a run as `fmt` (one of FORMATS) and return every file written: a raw export one
-    row per reading; a model export reduces and fits the run first (zemax with both sides
-    measured writes the main file, then the other side's)."""
-    # The writers load on use: the CLI reads FORMATS here when it starts, and a model export
-    # brings in the reduction and the fit (scipy).
-    if fmt in RAW_FORMATS:
-        from calibration.exports.bluesky import write_jsonl
-        from calibration.exports.raw import write_csv, write_netcdf
-        from gonio.store import open_run
+def write(run_dir: str | Path, fmt: str, out_path: str | Path,
+          request: ExportRequest | None = None) -> tuple[list[Path], list[str]]:
+    """Write a run as `fmt` (one of FORMATS) and return (every file written, notes for the
+    user). Defaults: csv and netcdf the reduced data where the run can be reduced (else its
+    raw readings, with a note saying why; not when a reduction option or --what asks for the
+    reduced data), zemax and astm the reduced data (the model filling
+    only where there is no data), mitsuba the model. Zemax and ASTM write one file per
+    measured side: the BTDF at out_path (the BRDF if only reflection was measured), the other
+    beside it as <stem>-BRDF<suffix>."""
+    request = request or ExportRequest()
+    if fmt not in ACCEPTS:
+        raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got "
+                               f"{fmt!r}")
+    what = request.what or DEFAULT_WHAT[fmt]
+    if what not in ACCEPTS[fmt]:
+        raise CalibrationError(f"export: --what {what} is not written as {fmt} (it takes "
+                               f"{' or '.join(ACCEPTS[fmt])})")
+    # The writers load on use: the CLI reads FORMATS here when it starts, and the reduction and
+    # the fit bring in scipy.
+    from calibration.exports.run_files import write_run
 
-        writer = {"csv": write_csv, "netcdf": write_netcdf, "bluesky": write_jsonl}[fmt]
-        return [writer(open_run(run_dir), Path(out_path))]
-    if fmt in MODEL_FORMATS:
-        from calibration.exports.model import write_model
-
-        return write_model(run_dir, fmt, out_path)
-    raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    asked_to_reduce = (request.what is not None or request.calibration is not None
+                       or request.shot_noise_w is not None or request.subtract_signature)
+    return write_run(run_dir, fmt, what, Path(out_path), request,
+                     fallback=not asked_to_reduce and fmt in RAW_FORMATS)

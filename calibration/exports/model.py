@@ -1,27 +1,39 @@
-"""Exports of a run's fitted model: Zemax tabular BSDF and Mitsuba 3 material.
+"""Exports of a fitted model: Zemax tabular BSDF (`Source Model`), ASTM E1392 on a grid and
+Mitsuba 3 material; the fit to export (one of `gonio fit --json`, or fitted here), refused when
+its chi-square says it does not describe the data.
 
-`write_model(run_dir, fmt, out_path)` reduces and fits the run (calibration.pipeline) and
-writes the file(s)."""
+Mitsuba's convention, which the export follows with the fitted alpha and index unchanged:
+gonio's f(wi = toward the source, wo = toward the detector) is Walter's radiance BTDF, and
+Mitsuba 3's `roughdielectric` evaluated in radiance mode with si.wi toward the camera (the
+detector's place) and wo toward the light (the source's) gives the same value; with the roles
+swapped (the camera on the source's side of the interface) Mitsuba's value is gonio's times
+1/eta^2, the BTDF's reciprocity across an index change (f(o, i) / n_i^2 = f(i, o) / n_o^2).
+tests/fitting/test_exports_mitsuba.py evaluates Mitsuba itself.
+"""
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from calibration.exports.astm import side_paths, sides_of
 from calibration.exports.mitsuba import material_parameters, write_mitsuba
 from calibration.exports.zemax import tabulate, write_zemax
-from calibration.fit import FitResult
-from calibration.pipeline import fit_run
+from calibration.fit import FitOptions, FitResult, fit
 from calibration.reduced import ReducedData
+from calibration.smearing import Smearing, smearing_order
 from calibration.values import CalibrationError
-from gonio.record import record_lines, run_record
-from gonio.store import open_run
+
+# A fit whose chi2/dof (fitted or held out) exceeds this does not describe the data within
+# their uncertainties (gonio fit's summary warns at the same figure).
+MAX_CHI2_DOF = 3.0
 
 
-def _notes(result: FitResult, source: str, record: Sequence[str]) -> list[str]:
+def fit_notes(result: FitResult, source: str, record: Sequence[str]) -> list[str]:
     """The fit in one line, then the run's record (gonio.record.record_lines)."""
     params = ", ".join(f"{n} = {v:.6g} +- {e:.2g}"
                        for n, v, e in zip(result.names, result.values, result.errors, strict=True))
@@ -32,59 +44,187 @@ def _notes(result: FitResult, source: str, record: Sequence[str]) -> list[str]:
             *record]
 
 
-def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
-                source: str = "", record: Sequence[str] = ()) -> list[Path]:
-    """Tabulate the fitted model (at a point, no aperture average) at the data's incidence
-    angles: one file per measured side,
-    the BTDF at out_path when transmission was measured, else the BRDF; the other side goes
-    next to it as <stem>-BRDF<suffix>. `record`: the run's record lines, as header comments."""
-    out_path = Path(out_path)
+def point_model(result: FitResult) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """The fitted model at a point (no aperture average), scale included: f(wi, wo), 1/sr."""
+    model = result.model()
+
+    def f(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return result.scale * model.eval(wi, wo)
+
+    return f
+
+
+def _zemax_layout(data: ReducedData, result: FitResult, source: str, record: Sequence[str]
+                  ) -> tuple[np.ndarray, list[str], list[str]]:
+    """(incidence angles, sides, header comments) of a Zemax export of `data`'s fit."""
     theta_i = np.unique(np.round(data.theta_i_deg[data.valid], 3))
     if len(theta_i) == 0:
         raise CalibrationError("zemax: the data have no valid point to take incidences from")
-    sides = [s for s, present in (("BTDF", data.transmission[data.valid].any()),
-                                  ("BRDF", (~data.transmission[data.valid]).any())) if present]
-    alpha = np.atleast_1d(result.alpha)
-    width_deg = math.degrees(float(alpha.min()))
-    notes = _notes(result, source, record) + [
+    notes = fit_notes(result, source, record) + [
         "AngleOfIncidence = specular reflection angle (BRDF) or refracted direct-transmission "
         "angle asin(sin(theta_i)/eta) (BTDF); incidence angles theta_i: "
         + " ".join(f"{t:g}" for t in theta_i)]
-    model = result.model()
+    return theta_i, sides_of(data.transmission[data.valid]), notes
 
-    def point_model(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        return result.scale * model.eval(wi, wo)
 
+def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
+                source: str = "", record: Sequence[str] = ()) -> list[Path]:
+    """Tabulate the fitted model (point_model) at the data's incidence angles, `Source
+    Model`: one file per measured side, the BTDF at out_path when transmission was measured,
+    else the BRDF; the other side goes next to it as <stem>-BRDF<suffix>. `record`: the run's
+    record lines, as header comments."""
+    theta_i, sides, notes = _zemax_layout(data, result, source, record)
+    alpha = np.atleast_1d(result.alpha)
     paths = []
-    for k, side in enumerate(sides):
-        path = out_path if k == 0 else out_path.with_name(f"{out_path.stem}-{side}"
-                                                           f"{out_path.suffix}")
-        table = tabulate(point_model, side, theta_i, result.eta, width_deg,
-                         isotropic=alpha.size == 1 or alpha[0] == alpha[-1], comments=notes)
+    for side, path in zip(sides, side_paths(out_path, sides), strict=True):
+        table = tabulate(point_model(result), side, theta_i, result.eta,
+                         math.degrees(float(alpha.min())), isotropic=bool(alpha[0] == alpha[-1]),
+                         comments=notes)
         paths.append(write_zemax(table, path))
     return paths
+
+
+def measured_zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
+                         source: str = "", record: Sequence[str] = ()) -> list[Path]:
+    """The measured data as Zemax tables (`Source Measured`, calibration.exports.
+    zemax_measured), the fit's point_model filling only where there is no data; files named
+    as zemax_files names them."""
+    from calibration.exports.zemax_measured import measured_table
+
+    _, sides, notes = _zemax_layout(data, result, source, record)
+    alpha = np.atleast_1d(result.alpha)
+    name = (f"the fitted {result.distribution} model (alpha "
+            f"{', '.join(f'{a:.6g}' for a in alpha)})")
+    return [write_zemax(measured_table(data, side, result.eta, point_model(result),
+                                       math.degrees(float(alpha.min())),
+                                       bool(alpha[0] == alpha[-1]), notes, name), path)
+            for side, path in zip(sides, side_paths(out_path, sides), strict=True)]
 
 
 def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
                  record: Sequence[str] = ()) -> Path:
     """The fitted material as a Mitsuba 3 scene fragment (`record`: the run's record lines, as
     comments)."""
-    notes = _notes(result, source, record)
+    notes = fit_notes(result, source, record)
     if result.distribution == "phong":
         notes.append("Mitsuba 3 has no Phong distribution: written as Beckmann of the same alpha "
                      "(Walter's mapping)")
     if result.masking != "separable":
         notes.append(f"the fit preferred {result.masking} masking; Mitsuba uses separable Smith")
+    if result.k is None:
+        notes.append("Mitsuba's radiance-mode transmission with the camera in the detector's "
+                     "place equals gonio's BTDF (Walter's radiance BTDF); with the camera on the "
+                     f"source's side it is 1/eta^2 = {1 / result.eta**2:.6g} of it (reciprocity "
+                     "across the index change)")
     material = material_parameters(result.distribution, result.alpha, result.eta, result.scale,
                                    result.k)
     return write_mitsuba(material, out_path, notes)
 
 
-def write_model(run_dir: str | Path, fmt: str, out_path: str | Path) -> list[Path]:
-    """Reduce and fit a run, then write its model as `fmt` (zemax | mitsuba); returns every
-    file written (zemax with both sides measured: the main file, then the other side's)."""
-    data, result = fit_run(run_dir)
-    record = record_lines(run_record(open_run(run_dir)))
-    if fmt == "zemax":
-        return list(zemax_files(data, result, out_path, source=str(run_dir), record=record))
-    return [mitsuba_file(result, out_path, source=str(run_dir), record=record)]
+def result_from_json(fitted: dict, where: str) -> FitResult:
+    """The FitResult of a `gonio fit --json` object (its covariance: the parameters'
+    variances); a CalibrationError names `where` if the object is not one."""
+    try:
+        params = fitted["parameters"]
+        names = tuple(n for n, p in params.items() if not p.get("fixed")
+                      and n != "phong_exponent")
+        values = np.array([float(params[n]["value"]) for n in names])
+        errors = np.array([float(params[n].get("sigma", 0.0)) for n in names])
+        ms, diffraction = fitted.get("multiple_scattering"), fitted.get("diffraction")
+        aperture = float(fitted.get("aperture_half_angle_deg") or 0.0)
+        divergence = float(fitted.get("beam_divergence_deg") or 0.0)
+        alpha = float(min(v for n, v in zip(names, values, strict=True)
+                          if n.startswith("alpha")))
+        result = FitResult(
+            distribution=fitted["distribution"], masking=fitted["masking"], names=names,
+            values=values, errors=errors, covariance=np.diag(errors ** 2),
+            eta=float(params["eta"]["value"]),
+            k=float(params["k"]["value"]) if "k" in params else None,
+            chi2_dof_fit=float(fitted["chi2_dof_fit"]), n_fit=int(fitted["n_fit"]),
+            chi2_dof_heldout=fitted.get("chi2_dof_heldout"),
+            n_heldout=int(fitted.get("n_heldout", 0)),
+            preferred_by=fitted.get("preferred_by_delta_chi2"),
+            candidates=list(fitted.get("candidates", [])),
+            optics=Smearing(aperture, smearing_order(aperture, alpha), divergence,
+                            smearing_order(divergence, alpha)),
+            walks=None if ms is None else int(ms["walks"]),
+            seed=0 if ms is None else int(ms["seed"]))
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise CalibrationError(f"{where}: not a `gonio fit --json` result ({exc!r})") from None
+    if diffraction is not None:
+        from calibration.fit import Diffraction
+
+        result.diffraction = Diffraction(**diffraction)
+    return result
+
+
+def load_fit(path: str | Path) -> FitResult:
+    """The fit a `gonio fit --json` output file holds (its last JSON line)."""
+    path = Path(path)
+    try:
+        lines = [ln for ln in path.read_text().splitlines() if ln.strip()]
+        fitted = json.loads(lines[-1])
+    except OSError as exc:
+        raise CalibrationError(f"{path}: {exc.strerror}") from None
+    except (ValueError, IndexError):
+        raise CalibrationError(f"{path}: not the JSON of `gonio fit --json`") from None
+    return result_from_json(fitted, str(path))
+
+
+def check_describes(result: FitResult, force: bool) -> list[str]:
+    """Nothing when the fit describes the data (chi2/dof at most MAX_CHI2_DOF, fitted and held
+    out); with `force`, the warning to note in the file; else a CalibrationError saying so."""
+    worst = max(result.chi2_dof_fit, result.chi2_dof_heldout or 0.0)
+    if worst <= MAX_CHI2_DOF:
+        return []
+    which = "fitted" if worst == result.chi2_dof_fit else "held-out"
+    said = (f"the {result.distribution} fit's {which} chi2/dof is {worst:.3g} (above "
+            f"{MAX_CHI2_DOF:g}): the model does not describe the data within their "
+            "uncertainties")
+    if not force:
+        raise CalibrationError(f"export: {said}; choose a better fit (fit options such as "
+                               "--multiple-scattering, or --fit FIT.json) or pass --force")
+    return [f"exported with --force although {said}"]
+
+
+def fit_for_export(data: ReducedData, options: FitOptions | None, fit_file: str | Path | None,
+                   force: bool) -> tuple[FitResult, list[str]]:
+    """The fit to export (from `fit_file`, else fitted with `options`) and its notes."""
+    result = load_fit(fit_file) if fit_file is not None else fit(data, options)
+    return result, check_describes(result, force)
+
+
+def astm_model_tables(data: ReducedData, result: FitResult, notes: Sequence[str]
+                      ) -> list:
+    """The fitted model (at a point) on a regular grid at the data's incidences, one table per
+    measured side: theta_s 0..89 deg by 1, phi_s over the half plane (isotropic) or all
+    azimuths by 5."""
+    from calibration.exports.astm import AstmTable, sides_of
+    from calibration.exports.measured import unit_vectors
+
+    good = data.subset(data.valid)
+    incidences = np.unique(np.round(good.theta_i_deg, 3))
+    alpha = np.atleast_1d(result.alpha)
+    stop = 180.1 if alpha[0] == alpha[-1] else 360.0
+    theta_s, phi_s = (g.ravel() for g in np.meshgrid(np.arange(0.0, 89.5, 1.0),
+                                                      np.arange(0.0, stop, 5.0)))
+    model = result.model()
+    wavelength = good.meta.get("wavelength_nm")
+    tables = []
+    for side in sides_of(good.transmission):
+        rows = []
+        for ti in incidences:
+            wo = unit_vectors(theta_s, phi_s)
+            if side == "BTDF":
+                wo[:, 2] *= -1.0
+            wi = np.broadcast_to(unit_vectors(np.array([ti]), np.array([180.0])), wo.shape)
+            rows.append((np.full(len(wo), ti), result.scale * model.eval(wi, wo)))
+        ti_all = np.concatenate([r[0] for r in rows])
+        n = len(ti_all)
+        tables.append(AstmTable(side, np.radians(ti_all), np.full(n, math.pi),
+                                np.radians(np.tile(theta_s, len(incidences))),
+                                np.radians(np.tile(phi_s, len(incidences))),
+                                [math.nan if wavelength is None else float(wavelength)],
+                                np.concatenate([r[1] for r in rows])[:, None],
+                                comments=list(notes), source="MODEL"))
+    return tables

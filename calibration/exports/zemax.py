@@ -1,7 +1,8 @@
 """Zemax tabular BSDF files (the Radiant/Zemax "BSDF data interchange" text format): writer of a
-fitted model tabulated about the specular direction, and a reader that parses it back.
+fitted model tabulated about the specular direction (`Source Model`; the measured tables of
+calibration.exports.zemax_measured say `Source Measured`), and a reader that parses it back.
 
-File layout (one scatter type per file): `Source Measured`, `Symmetry PlaneSymmetrical |
+File layout (one scatter type per file): `Source Measured | Model`, `Symmetry PlaneSymmetrical |
 Asymmetrical`, `SpectralContent Monochrome`, `ScatterType BRDF | BTDF`, then the counts and
 values of `SampleRotation`, `AngleOfIncidence`, `ScatterAzimuth`, `ScatterRadial`, an empty
 line, `Monochrome`, `DataBegin`, and for each sample rotation and angle a `TIS <value>` line
@@ -28,6 +29,7 @@ from calibration.values import CalibrationError
 
 SCATTER_TYPES = ("BRDF", "BTDF")
 SYMMETRIES = ("PlaneSymmetrical", "Asymmetrical")
+SOURCES = ("Measured", "Model")
 
 
 @dataclass
@@ -43,6 +45,7 @@ class ZemaxTable:
     data: np.ndarray
     tis: np.ndarray  # [rotation, angle]
     comments: list[str] = field(default_factory=list)
+    source: str = "Model"  # Measured: measured blocks, the model only where there is no data
 
 
 def specular_frame(angle_deg: float, scatter_type: str) -> tuple[np.ndarray, ...]:
@@ -135,7 +138,7 @@ def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
     path = Path(path)
     lines = [f"# {c}" for c in table.comments]
     lines += [
-        "Source  Measured",
+        f"Source  {table.source}",
         f"Symmetry  {table.symmetry}",
         "SpectralContent  Monochrome",
         f"ScatterType  {table.scatter_type}",
@@ -185,8 +188,9 @@ def read_zemax(path: str | Path) -> ZemaxTable:
         pos += 1
         return values
 
-    if keyword("Source") != "Measured":
-        raise fail("Source must be Measured")
+    source = keyword("Source")
+    if source not in SOURCES:
+        raise fail(f"Source must be Measured or Model, got {source!r}")
     symmetry = keyword("Symmetry")
     if symmetry not in SYMMETRIES:
         raise fail(f"Symmetry {symmetry!r} not supported ({', '.join(SYMMETRIES)})")
@@ -214,20 +218,38 @@ def read_zemax(path: str | Path) -> ZemaxTable:
                 pos += 1
     if pos >= len(body) or body[pos][1] != "DataEnd":
         raise fail("expected DataEnd")
-    return ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data, tis, comments)
+    return ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data, tis, comments,
+                      source)
 
 
-def table_tis(table: ZemaxTable, rotation: int, angle: int) -> float:
-    """TIS recomputed from the tabulated values alone (trapezoid rule over the grid, mirrored
-    for plane-symmetric data): a reader's consistency check of the TIS line."""
-    f = table.data[rotation, angle]
+def tis_weights(table: ZemaxTable, angle: int) -> np.ndarray:
+    """(n_azimuth, n_radial) weights w with TIS = sum(w * data[rotation, angle]): the
+    trapezoid rule over the grid of f |cos theta_o| sin r dr dphi, mirrored for
+    plane-symmetric data (so a TIS is linear in the tabulated values, and so is its error)."""
     wo = scatter_directions(table.angle_deg[angle], table.scatter_type, table.azimuth_deg,
                             table.radial_deg)
     r = np.radians(table.radial_deg)
-    integrand = f * np.abs(wo[..., 2]) * np.sin(r)[None, :]
-    over_r = np.trapezoid(integrand, r, axis=1)
     phi = np.radians(table.azimuth_deg)
+    w_r = _trapezoid_weights(r)
     if table.symmetry == "PlaneSymmetrical":
-        return float(2.0 * np.trapezoid(over_r, phi))
-    closed = np.append(phi, 2 * math.pi)
-    return float(np.trapezoid(np.append(over_r, over_r[0]), closed))
+        w_phi = 2.0 * _trapezoid_weights(phi)
+    else:  # closed over 2 pi: the last interval wraps to the first azimuth
+        w_phi = _trapezoid_weights(np.append(phi, 2 * math.pi))
+        w_phi[0] += w_phi[-1]
+        w_phi = w_phi[:-1]
+    return w_phi[:, None] * w_r[None, :] * np.abs(wo[..., 2]) * np.sin(r)[None, :]
+
+
+def _trapezoid_weights(x: np.ndarray) -> np.ndarray:
+    """Weights of the trapezoid rule on nodes x."""
+    w = np.zeros(len(x))
+    d = np.diff(x)
+    w[:-1] += d / 2
+    w[1:] += d / 2
+    return w
+
+
+def table_tis(table: ZemaxTable, rotation: int, angle: int) -> float:
+    """TIS recomputed from the tabulated values alone (tis_weights): a reader's consistency
+    check of the TIS line."""
+    return float(np.sum(tis_weights(table, angle) * table.data[rotation, angle]))

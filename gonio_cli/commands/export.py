@@ -1,31 +1,51 @@
-"""`gonio export RUN --format csv|netcdf|bluesky|zemax|mitsuba --out FILE`: write a run's
-readings (csv, netcdf: one row per reading; bluesky: event-model documents as JSON lines) or
-its fitted model (zemax, mitsuba); calibration.exports."""
+"""`gonio export RUN --format csv|netcdf|bluesky|zemax|astm|mitsuba [--what raw|reduced|model] --out
+FILE`: write what a run measured (raw readings; reduced BSDF with its uncertainties) or its
+fitted model; calibration.exports."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from calibration.exports import FORMATS, write
+from calibration.exports import ACCEPTS, DEFAULT_WHAT, FORMATS, WHATS, ExportRequest, write
+from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `export` verb."""
-    p = subparsers.add_parser("export", help="export a run (csv, netcdf, bluesky, zemax, mitsuba)",
-                              description=__doc__)
+    p = subparsers.add_parser("export", description=__doc__,
+                              help="export a run (csv, netcdf, bluesky, zemax, astm, mitsuba)")
     p.add_argument("run", help="run directory")
     p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--what", choices=WHATS,
+                   help="; ".join(f"{fmt}: {' or '.join(whats)} (default {DEFAULT_WHAT[fmt]})"
+                                  for fmt, whats in ACCEPTS.items())
+                   + ". csv and netcdf write the raw readings of a run that cannot be reduced")
     p.add_argument("--out", required=True, metavar="FILE",
-                   help="output file; zemax writes one file per measured side, as Zemax reads "
-                        "a BRDF and a BTDF from separate files: the BTDF here (the BRDF if "
-                        "only reflection was measured) and the BRDF beside it as "
+                   help="output file; zemax and astm write one file per measured side, as Zemax "
+                        "reads a BRDF and a BTDF from separate files: the BTDF here (the BRDF "
+                        "if only reflection was measured) and the BRDF beside it as "
                         "STEM-BRDF.SUFFIX. Every file written is printed, one per line")
+    p.add_argument("--fit", metavar="FIT.json",
+                   help="the fit to export (the output of `gonio fit RUN --json`) instead of "
+                        "fitting here with the fit options below (zemax, astm --what model, "
+                        "mitsuba)")
+    p.add_argument("--force", action="store_true",
+                   help="export a fit whose chi2/dof says it does not describe the data "
+                        "(refused otherwise)")
+    add_fit_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Write the file(s) and print each path."""
-    for path in write(args.run, args.format, Path(args.out)):
+    """Write the file(s), print each path and any note (on stderr)."""
+    sim = emulator_sim(args.run) if args.diffraction else None
+    request = ExportRequest(args.what, options_from(args, sim), args.fit, args.force,
+                            args.calibration, args.shot_noise_w, args.subtract_signature)
+    paths, notes = write(args.run, args.format, Path(args.out), request)
+    for note in notes:
+        print(note, file=sys.stderr)
+    for path in paths:
         print(path)
     return 0

@@ -1,6 +1,7 @@
 """`gonio fit RUN [--json]`: fit the microfacet model to a run's reduced BSDF (by default at
 normal incidence only, as Walter et al. did) and score it on the other incidences; with
---diffraction, the two-scale diffraction model around it."""
+--diffraction, the two-scale diffraction model around it. `gonio fit --import FILE` fits a
+measured file gonio did not make (calibration.imports)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import argparse
 import json
 
 from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
-from gonio_cli.commands.reduce import add_reduce_options
+from gonio_cli.commands.reduce import add_reduce_options, add_run_or_import, imported
 
 
 def _list(text: str) -> tuple[str, ...]:
@@ -102,7 +103,7 @@ def emulator_sim(run_dir: str) -> dict | None:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `fit` verb."""
     p = subparsers.add_parser("fit", help="fit the BSDF model to a run", description=__doc__)
-    p.add_argument("run", help="run directory")
+    add_run_or_import(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     add_fit_options(p)
     p.set_defaults(func=run)
@@ -110,16 +111,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Fit and print the result (a summary, or one JSON object with --json)."""
+    from calibration.fit import fit
     from calibration.pipeline import fit_run
 
-    sim = emulator_sim(args.run) if args.diffraction else None
-    data, result = fit_run(args.run, options_from(args, sim), args.calibration,
-                           args.shot_noise_w, args.subtract_signature)
+    data = imported(args)
+    if data is None:
+        sim = emulator_sim(args.run) if args.diffraction else None
+        data, result = fit_run(args.run, options_from(args, sim), args.calibration,
+                               args.shot_noise_w, args.subtract_signature)
+    else:
+        result = fit(data, options_from(args))
     out = result.to_dict()
-    out["run"] = str(args.run)
-    out["sample"] = data.meta["sample"]
+    out["run"] = str(args.run if data.meta.get("imported_from") is None else
+                     data.meta["imported_from"])
+    out["sample"] = data.meta.get("sample")
     out["calibration"] = data.meta.get("calibration")
-    out["noise_model"] = data.meta["noise_model"]
+    out["noise_model"] = data.meta.get("noise_model")
     if data.meta.get("emulator_truth"):
         out["emulator_truth"] = data.meta["emulator_truth"]
     if args.json:

@@ -1,6 +1,9 @@
 """`gonio reduce RUN`: raw readings -> BSDF values with their uncertainty budget (dark, beam,
 aperture, cos o, hemisphere exit; calibration.budget); writes RUN/reduced.csv (u, k, U = k u)
-and prints a summary per incidence and the budget's components."""
+and prints a summary per incidence and the budget's components.
+`gonio reduce --import FILE --out CSV`: a measured file gonio did not make (ASTM E1392, Zemax
+tabular BSDF, gonio's reduced CSV or NetCDF, a plain CSV; calibration.imports) as gonio's
+reduced CSV (calibration.exports.measured)."""
 
 from __future__ import annotations
 
@@ -21,8 +24,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `reduce` verb."""
     p = subparsers.add_parser("reduce", help="raw readings -> BSDF with uncertainties",
                               description=__doc__)
-    p.add_argument("run", help="run directory")
-    p.add_argument("--out", metavar="CSV", help="output file (default RUN/reduced.csv)")
+    add_run_or_import(p)
+    p.add_argument("--out", metavar="CSV", help="output file (default RUN/reduced.csv; "
+                                                "required with --import)")
+    p.add_argument("--eta", type=float, help="the sample's index, for an imported file that "
+                                             "does not give it")
     add_reduce_options(p)
     p.add_argument("--signature-share", type=float, default=DEFAULT_SHARE, metavar="FRACTION",
                    help="flag points whose signature exceeds this share of the net signal "
@@ -31,6 +37,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"coverage factor of the expanded uncertainty U = k u (default "
                         f"{COVERAGE_K:g}: about 95 %% for a normal distribution)")
     p.set_defaults(func=run)
+
+
+def add_run_or_import(p: argparse.ArgumentParser) -> None:
+    """The run directory, or --import FILE and the assumption a file without uncertainties
+    needs."""
+    p.add_argument("run", nargs="?", help="run directory (or --import FILE)")
+    p.add_argument("--import", dest="import_file", metavar="FILE",
+                   help="a measured file instead of a run: ASTM E1392 (.astm), Zemax tabular "
+                        "BSDF (.bsdf), gonio's reduced CSV or NetCDF (.nc), or a plain CSV with "
+                        "columns theta_i_deg, phi_i_deg, theta_o_deg, phi_o_deg (theta_o above "
+                        "90 for transmission), bsdf, optional sigma, wavelength_nm")
+    p.add_argument("--sigma-relative", type=float, metavar="FRACTION",
+                   help="for an imported file without uncertainties: assume u = FRACTION * "
+                        "|bsdf| (stated in the output)")
+
+
+def imported(args: argparse.Namespace):  # -> calibration.reduced.ReducedData | None
+    """The --import file's ReducedData (None without --import); one error for both a run and
+    --import, or neither."""
+    if (args.run is None) == (args.import_file is None):
+        from gonio.errors import GonioError
+
+        raise GonioError("give a run directory or --import FILE (one of them)")
+    if args.import_file is None:
+        return None
+    from calibration.imports import ImportOptions, read_measured
+
+    return read_measured(args.import_file, ImportOptions(args.eta, args.sigma_relative))
 
 
 def add_reduce_options(p: argparse.ArgumentParser) -> None:
@@ -117,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
 
     if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
         raise GonioError(f"--coverage-k must be a finite number > 0, got {args.coverage_k!r}")
+    data = imported(args)
+    if data is not None:
+        return _write_imported(data, args)
     data = reduce_run(args.run, args.calibration, args.shot_noise_w, args.subtract_signature,
                       args.signature_share)
     data.meta["coverage_k"] = args.coverage_k
@@ -131,5 +168,22 @@ def run(args: argparse.Namespace) -> int:
     print("\n".join(budget_summary(data)))
     if "signature" in m:
         print("\n".join(signature_summary(m["signature"])))
+    print(out)
+    return 0
+
+
+def _write_imported(data, args: argparse.Namespace) -> int:
+    """Write an imported file as gonio's reduced CSV; print its noise model, the summary and
+    the CSV's path last."""
+    from calibration.exports.measured import write_reduced_csv
+    from gonio.errors import GonioError
+
+    if not args.out:
+        raise GonioError("reduce --import: give --out CSV (there is no run directory to write "
+                         "into)")
+    out = write_reduced_csv(data, Path(args.out))
+    print(f"imported {args.import_file}: eta {data.meta['eta']:g}, {len(data.bsdf)} points")
+    print(f"noise: {data.meta['noise_model']}")
+    print("\n".join(summary(data)))
     print(out)
     return 0

@@ -1,11 +1,13 @@
 """`gonio export --help` says that a Zemax export of a two-sided run is two files (Zemax reads
-a BRDF and a BTDF from separate files) and that each path written is printed; the export
-itself is tested end to end in tests/fitting/test_fitting_emulated_bench.py."""
+a BRDF and a BTDF from separate files), that each path written is printed and what each format
+holds; a format asked for what it does not hold is one error line. The export itself is tested
+end to end in tests/fitting/test_fitting_emulated_bench.py and test_exports_measured.py."""
 
 from __future__ import annotations
 
 import pytest
 
+from calibration.exports import ACCEPTS
 from gonio_cli.main import main
 
 
@@ -16,3 +18,14 @@ def test_export_help_names_both_zemax_files(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "one file per measured side" in text and "STEM-BRDF.SUFFIX" in text
     assert "Every file written is printed, one per line" in text
+    assert "zemax: reduced or model (default reduced)" in text and "--fit FIT.json" in text
+    assert "csv and netcdf write the raw readings of a run that cannot be reduced" in text
+
+
+@pytest.mark.parametrize("fmt,what", [("zemax", "raw"), ("csv", "model"), ("mitsuba", "raw")])
+def test_export_refuses_what_a_format_does_not_hold(fmt, what, tmp_path, capsys):
+    assert main(["export", str(tmp_path), "--format", fmt, "--what", what,
+                 "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"gonio export: error: export: --what {what} is not written as {fmt} (it "
+                   f"takes {' or '.join(ACCEPTS[fmt])})")

@@ -8,13 +8,14 @@ import math
 import numpy as np
 import pytest
 from fitting_bench_runs import instrument, plan, scan
+from zemax_cells import assert_measured_cells
 
 from calibration import calfile
 from calibration.calibrate import build
 from calibration.exports.mitsuba import read_mitsuba
 from calibration.exports.zemax import read_zemax
 from calibration.fit import FitOptions
-from calibration.pipeline import fit_run
+from calibration.pipeline import fit_run, reduce_run
 from calibration.values import Measured
 from gonio.store import open_run
 from gonio_cli.main import main
@@ -177,24 +178,43 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
 
 
 def test_export_and_plot_cli(quick_run, tmp_path, capsys):
-    assert main(["fit", str(quick_run), "--json"]) == 0
-    fitted = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    alpha = fitted["parameters"]["alpha"]["value"]
+    """Walter's ground glass (the bench adds multiple scattering): the default single-
+    scattering fit does not describe it, so a model export refuses it; its multiple-scattering
+    fit from `gonio fit --json` exports, and the Zemax file's measured blocks are the reduced
+    data where measured."""
     assert main(["export", str(quick_run), "--format", "mitsuba",
-                 "--out", str(tmp_path / "glass.xml")]) == 0
+                 "--out", str(tmp_path / "bad.xml")]) == 2
+    assert "does not describe the data" in capsys.readouterr().err
+    assert not (tmp_path / "bad.xml").exists()
+    assert main(["fit", str(quick_run), "--json", "--distribution", "ggx",
+                 "--multiple-scattering"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    (tmp_path / "fit.json").write_text(line + "\n")
+    fitted = json.loads(line)
+    alpha = fitted["parameters"]["alpha"]["value"]
+    assert fitted["chi2_dof_fit"] < 3.0 and fitted["multiple_scattering"]
+    assert main(["export", str(quick_run), "--format", "mitsuba", "--fit",
+                 str(tmp_path / "fit.json"), "--out", str(tmp_path / "glass.xml")]) == 0
     material = read_mitsuba(tmp_path / "glass.xml")
     assert material["type"] == "roughdielectric"
     assert material["params"]["distribution"] == fitted["distribution"] == "ggx"
     assert material["params"]["alpha"] == pytest.approx(alpha, rel=1e-8)
     capsys.readouterr()
-    assert main(["export", str(quick_run), "--format", "zemax",
-                 "--out", str(tmp_path / "glass.bsdf")]) == 0
+    assert main(["export", str(quick_run), "--format", "zemax", "--fit",
+                 str(tmp_path / "fit.json"), "--out", str(tmp_path / "glass.bsdf")]) == 0
     assert capsys.readouterr().out.split() == [str(tmp_path / "glass.bsdf"),
                                                str(tmp_path / "glass-BRDF.bsdf")]
     btdf, brdf = read_zemax(tmp_path / "glass.bsdf"), read_zemax(tmp_path / "glass-BRDF.bsdf")
     assert (btdf.scatter_type, brdf.scatter_type) == ("BTDF", "BRDF")
+    assert btdf.source == brdf.source == "Measured"
     assert list(btdf.angle_deg) == [0.0] and 0.0 < btdf.tis[0, 0] < 1.0
     assert any(f"alpha = {alpha:.6g}" in c for c in btdf.comments)
+    assert any(c.startswith("block AngleOfIncidence 0 ") and "measured at" in c
+               for c in btdf.comments)
+    data = reduce_run(quick_run)
+    for table in (btdf, brdf):
+        assert_measured_cells(table, data.subset(data.valid & (
+            data.transmission == (table.scatter_type == "BTDF"))))
     assert main(["plot", str(quick_run), "--fit", "--distribution", "ggx",
                  "--out", str(tmp_path / "fit.png")]) == 0
     assert (tmp_path / "fit.png").read_bytes()[:4] == b"\x89PNG"

@@ -91,14 +91,18 @@ def test_export_csv_and_netcdf_round_trip(tmp_path):
     np.testing.assert_allclose([float(x["power_w"]) for x in rows], r["power_w"], rtol=0)
     assert [x["kind"] for x in rows] == list(r["kind"])
     assert all(math.isnan(v) for v in r["plan_theta_o_deg"][r["kind"] == "beam"])
-    assert gonio_cli("export", run_dir, "--format", "netcdf", "--out", tmp_path / "r.nc"
-                     ).returncode == 0
+    proc = gonio_cli("export", run_dir, "--format", "netcdf", "--out", tmp_path / "r.nc")
+    assert proc.returncode == 0
+    # without dark readings the run cannot be reduced: the default export is its raw readings
+    assert "the run cannot be reduced" in proc.stderr and "wrote its raw readings" in proc.stderr
     import netCDF4
     with netCDF4.Dataset(tmp_path / "r.nc") as ds:
         np.testing.assert_array_equal(ds["power_w"][:], r["power_w"])
         np.testing.assert_array_equal(ds["arm_deg"][:], r["arm_deg"])
-        assert list(ds["kind"][:]) == list(r["kind"])
+        kinds = np.array(ds["kind"].flag_meanings.split())[ds["kind"][:]]  # a flag variable
+        assert list(kinds) == list(r["kind"])
         assert ds["arm_deg"].units == "degree" and ds.status == "completed"
+        assert ds.Conventions == "CF-1.8" and ds["t_s"].units.startswith("seconds since ")
 
 
 def test_time_scale_override_and_raw_quick_look(tmp_path):

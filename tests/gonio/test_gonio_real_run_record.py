@@ -152,7 +152,8 @@ def header(path):
 def test_every_export_carries_the_record(emulated, tmp_path):
     import netCDF4
 
-    from calibration.exports import write as write_model
+    from calibration.exports import ExportRequest
+    from calibration.exports import write as write_export
     from calibration.exports.raw import write_csv, write_netcdf
 
     run = open_run(as_real(emulated, tmp_path / "real", WRONG_SIM, sessions_devices=IDENTITY))
@@ -175,12 +176,17 @@ def test_every_export_carries_the_record(emulated, tmp_path):
         assert ds.source_polarisation == "unpolarised"
         assert json.loads(ds.sample)["id"] == "GG-7"
         assert json.loads(ds.sessions)[0]["devices"] == IDENTITY
-    zemax = write_model(run.path, "zemax", tmp_path / "glass.bsdf")[0].read_text()
-    mitsuba = write_model(run.path, "mitsuba", tmp_path / "glass.xml")[0].read_text()
+    # the reduced exports and the model's (forced: this short run's fit is not the point)
+    forced = ExportRequest(force=True)
+    texts = [write_export(run.path, fmt, tmp_path / f"glass.{fmt}", forced)[0][0].read_text()
+             for fmt in ("csv", "zemax", "astm", "mitsuba")]
     for line in ('# receiver_solid_angle_sr: ', '# sample: {"id": "GG-7"',
                  '# sessions: [{"session": 0'):
-        assert line in zemax
-        assert line[2:] in mitsuba
+        for text in texts[:3]:
+            assert line in text
+        assert line[2:] in texts[3]
+    with netCDF4.Dataset(write_export(run.path, "netcdf", tmp_path / "reduced.nc")[0][0]) as ds:
+        assert "bsdf" in ds.variables and json.loads(ds.sample)["id"] == "GG-7"
     # an emulated run from before device identities names its endpoints per session
     old = run_record(open_run(emulated))["sessions"][0]
     assert old["emulated"] and set(old["devices"]) == set(open_run(emulated).config["devices"])

@@ -1,0 +1,170 @@
+"""ASTM E1392 ASCII BSDF files (`.astm`, what libbsdf and BSDF Processor read): writer and
+reader.
+
+Layout, as libbsdf's AstmReader parses it: header lines of `KEYWORD value` (it skips every
+token until `NUM_POINTS n` and `VARS ...`), then `VARS theta_i,phi_i,theta_s,phi_s,<values>`,
+one value column per wavelength named like `632.8nm` (`value` where the wavelength is not
+known: libbsdf reads it as monochrome), then one comma-separated line per
+sample: the four angles in radians (theta from the normal of the side's hemisphere, phi in
+[0, 2 pi)) and the BSDF in 1/sr. No comment may follow VARS (the reader takes every later line
+as data). One file holds one side, as libbsdf reads a file as a BRDF or a BTDF: the gonio
+writer names it in a `DATA_TYPE BRDF|BTDF` line (a file without one is read as a BRDF).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calibration.exports.measured import spherical_deg, unit_vectors
+from calibration.reduced import ReducedData
+from calibration.values import CalibrationError
+
+ANGLES = ("theta_i", "phi_i", "theta_s", "phi_s")
+DATA_TYPES = ("BRDF", "BTDF")
+
+
+@dataclass
+class AstmTable:
+    """One side's samples: angles (N,) in radians, values (N, n_wavelengths) in 1/sr."""
+
+    data_type: str
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    theta_s: np.ndarray  # from +z (BRDF) or -z (BTDF)
+    phi_s: np.ndarray
+    wavelengths_nm: list[float]
+    values: np.ndarray
+    header: dict[str, str] = field(default_factory=dict)  # other KEYWORD value lines
+    comments: list[str] = field(default_factory=list)
+    source: str = "MEASURED"  # or MODEL
+
+
+def _comment(text: str) -> str:
+    """A header comment no reader mistakes for a keyword (libbsdf reads VARS / NUM_POINTS
+    wherever they stand as words)."""
+    words = ["vars" if w == "VARS" else "num_points" if w == "NUM_POINTS" else w
+             for w in text.split()]
+    return "# " + " ".join(words)
+
+
+def write_astm(table: AstmTable, path: str | Path) -> Path:
+    """Write one side's samples as ASTM E1392 ASCII."""
+    path = Path(path)
+    if table.data_type not in DATA_TYPES:
+        raise CalibrationError(f"astm: data type must be BRDF or BTDF, got {table.data_type!r}")
+    names = [f"{w:g}nm" if math.isfinite(w) else "value" for w in table.wavelengths_nm]
+    lines = [_comment(c) for c in table.comments]
+    lines += [f"SOURCE {table.source}", f"DATA_TYPE {table.data_type}"]
+    lines += [f"{key} {value}" for key, value in table.header.items()]
+    lines += [f"NUM_POINTS {len(table.theta_i)}", "VARS " + ",".join([*ANGLES, *names])]
+    angles = np.stack([table.theta_i, np.mod(table.phi_i, 2 * math.pi), table.theta_s,
+                       np.mod(table.phi_s, 2 * math.pi)], axis=1)
+    for a, v in zip(angles, np.atleast_2d(table.values.T).T, strict=True):
+        lines.append(",".join([*(f"{x:.10g}" for x in a), *(f"{x:.9g}" for x in v)]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _wavelength(name: str) -> float:
+    """The wavelength of a value column named like `632.8nm`; NaN for another name."""
+    try:
+        return float(name[:-2]) if name.endswith("nm") else math.nan
+    except ValueError:
+        return math.nan
+
+
+def read_astm(path: str | Path) -> AstmTable:
+    """Parse an ASTM E1392 file; an error names the line that is wrong."""
+    path = Path(path)
+    lines = path.read_text().splitlines()
+    header: dict[str, str] = {}
+    comments: list[str] = []
+    names: list[str] | None = None
+    start = len(lines)
+    for n, line in enumerate(lines):
+        text = line.strip()
+        if text.startswith("#"):
+            comments.append(text[1:].strip())
+            continue
+        key, _, value = text.partition(" ")
+        if key == "VARS":
+            names = [v.strip() for v in value.split(",")]
+            start = n + 1
+            break
+        if key:
+            header[key] = value.strip()
+    if names is None:
+        raise CalibrationError(f"{path}: no VARS line (ASTM E1392 names its columns in one)")
+    if len(names) < 5:
+        raise CalibrationError(f"{path}:{start}: VARS needs four angles and at least one value "
+                               f"column, has {len(names)}")
+    rows = []
+    for n in range(start, len(lines)):
+        text = lines[n].strip()
+        if not text:
+            continue
+        try:
+            row = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise CalibrationError(f"{path}:{n + 1}: not comma-separated numbers: "
+                                   f"{text[:60]!r}") from None
+        if len(row) != len(names):
+            raise CalibrationError(f"{path}:{n + 1}: {len(names)} columns named in VARS, "
+                                   f"{len(row)} given")
+        rows.append(row)
+    if not rows:
+        raise CalibrationError(f"{path}: no data line after VARS")
+    data = np.array(rows)
+    data_type = header.pop("DATA_TYPE", "BRDF")
+    source = header.pop("SOURCE", "MEASURED")
+    if data_type not in DATA_TYPES:
+        raise CalibrationError(f"{path}: DATA_TYPE must be BRDF or BTDF, got {data_type!r}")
+    return AstmTable(data_type, data[:, 0], data[:, 1], data[:, 2], data[:, 3],
+                     [_wavelength(nm) for nm in names[4:]], data[:, 4:], header, comments,
+                     source)
+
+
+def sides_of(transmission: np.ndarray) -> list[str]:
+    """The data types measured, the BTDF first (the main file of a two-sided export)."""
+    return [s for s, present in (("BTDF", transmission.any()), ("BRDF", (~transmission).any()))
+            if present]
+
+
+def side_paths(out_path: str | Path, sides: Sequence[str]) -> list[Path]:
+    """One path per side: out_path for the first, <stem>-<SIDE><suffix> beside it for the
+    rest (as the Zemax export names its second file)."""
+    out_path = Path(out_path)
+    return [out_path if k == 0 else out_path.with_name(f"{out_path.stem}-{side}"
+                                                       f"{out_path.suffix}")
+            for k, side in enumerate(sides)]
+
+
+def astm_tables(data: ReducedData, comments: Sequence[str] = ()) -> list[AstmTable]:
+    """The valid points of reduced data as one table per measured side (sides_of order)."""
+    good = data.subset(data.valid)
+    wavelength = good.meta.get("wavelength_nm")
+    tables = []
+    for side in sides_of(good.transmission):
+        part = good.subset(good.transmission == (side == "BTDF"))
+        ti, pi = spherical_deg(part.wi)
+        to, po = spherical_deg(part.wo)
+        theta_s = 180.0 - to if side == "BTDF" else to
+        tables.append(AstmTable(side, np.radians(ti), np.radians(pi), np.radians(theta_s),
+                                np.radians(po), [math.nan if wavelength is None
+                                                 else float(wavelength)],
+                                part.bsdf[:, None], comments=list(comments)))
+    return tables
+
+
+def directions(table: AstmTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(wi, wo, transmission) of a table's samples in the sample frame."""
+    wi = unit_vectors(np.degrees(table.theta_i), np.degrees(table.phi_i))
+    wo = unit_vectors(np.degrees(table.theta_s), np.degrees(table.phi_s))
+    transmission = np.full(len(wo), table.data_type == "BTDF")
+    wo[transmission, 2] *= -1.0
+    return wi, wo, transmission

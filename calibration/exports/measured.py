@@ -1,0 +1,81 @@
+"""Reduced data as named columns, the one layout every export of measured values shares (and
+the plain CSV that `--import` reads): sample-frame angles in degrees (theta_o above 90 for
+transmission), the BSDF, its standard uncertainty u (`sigma`), the coverage factor k, U = k u,
+one `u_NAME` column per budget component, validity and flags; plus the reduced CSV itself."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from calibration.reduced import ReducedData
+
+DEFAULT_COVERAGE_K = 2.0
+QUANTITY = "BSDF (not cosine-corrected), 1/sr"
+ANGLE_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg")
+# The reduction's scalar facts an export carries (the per-point lists and the emulator's
+# [sim] table stay out: the record, gonio.record.run_record, says what the run was).
+META_KEYS = ("eta", "k", "kind", "lit_from", "wavelength_nm", "aperture_half_angle_deg",
+             "aperture_sr", "aperture_from", "beam_divergence_deg", "noise_model",
+             "beam_mean_w", "beam_drift_rms", "calibration", "coverage_k", "sample", "optics",
+             "assumption")
+
+
+def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(theta from +z, phi = atan2(y, x) in [0, 360)) of unit vectors, degrees."""
+    theta = np.degrees(np.arctan2(np.hypot(w[:, 0], w[:, 1]), w[:, 2]))
+    return theta, np.mod(np.degrees(np.arctan2(w[:, 1], w[:, 0])), 360.0)
+
+
+def unit_vectors(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
+    """(N, 3) unit vectors of spherical angles (theta from +z, phi from +x), degrees."""
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=1)
+
+
+def coverage_k(data: ReducedData) -> float:
+    """The coverage factor of the data's expanded uncertainty (meta["coverage_k"], else 2)."""
+    return float(data.meta.get("coverage_k", DEFAULT_COVERAGE_K))
+
+
+def columns(data: ReducedData) -> dict[str, np.ndarray]:
+    """The data as named columns (see the module docstring), in the order files write them."""
+    ti, pi = spherical_deg(data.wi)
+    to, po = spherical_deg(data.wo)
+    k = coverage_k(data)
+    n = len(data.bsdf)
+    wavelength = data.meta.get("wavelength_nm")
+    out = {"theta_i_deg": ti, "phi_i_deg": pi, "theta_o_deg": to, "phi_o_deg": po,
+           "bsdf": data.bsdf, "sigma": data.sigma, "k": np.full(n, k), "U": k * data.sigma}
+    out.update({f"u_{name}": np.asarray(u) for name, u in data.components.items()})
+    out["wavelength_nm"] = np.full(n, np.nan if wavelength is None else float(wavelength))
+    out["valid"] = data.valid.astype(int)
+    out["flags"] = np.array([f.replace(",", ";") for f in data.flags])
+    return out
+
+
+def meta_facts(data: ReducedData) -> dict:
+    """The reduction's facts an export states (META_KEYS present in meta), with the quantity."""
+    facts = {"quantity": QUANTITY, "coverage_k": coverage_k(data)}
+    facts.update({key: data.meta[key] for key in META_KEYS if key in data.meta})
+    return facts
+
+
+def write_reduced_csv(data: ReducedData, out: Path, record: Sequence[str] = ()) -> Path:
+    """CSV of columns(data) under `# key: JSON` lines: the run's record, then the reduction's
+    facts (meta_facts), so that `--import` finds the index and the noise model again."""
+    cols = columns(data)
+    with open(out, "w", newline="") as fh:
+        for line in record:
+            fh.write(f"# {line}\n")
+        for key, value in meta_facts(data).items():
+            fh.write(f"# {key}: {json.dumps(value, ensure_ascii=False)}\n")
+        writer = csv.writer(fh)
+        writer.writerow(cols)
+        for row in zip(*cols.values(), strict=True):
+            writer.writerow([v if isinstance(v, str) else repr(float(v)) for v in row])
+    return out
