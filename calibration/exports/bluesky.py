@@ -17,7 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from calibration.exports.raw import _unit as field_unit
+from calibration.exports.cf import reading_unit
 from gonio.errors import GonioError
 from gonio.record import run_record
 from gonio.store import READING_DTYPE, READINGS, Run
@@ -32,8 +32,8 @@ def data_keys() -> dict[str, dict[str, Any]]:
     for name in READING_DTYPE.names:
         keys[name] = {"dtype": DTYPES[READING_DTYPE[name].kind], "shape": [],
                       "source": f"gonio:{READINGS}:{name}"}
-        if field_unit(name):
-            keys[name]["units"] = field_unit(name)
+        if reading_unit(name):
+            keys[name]["units"] = reading_unit(name)
     return keys
 
 

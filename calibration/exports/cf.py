@@ -121,6 +121,14 @@ def _globals(ds: Any, title: str, record: Mapping[str, Any], extra: Mapping[str,
     ds.comment = FRAME
 
 
+READING_UNITS = {"_deg": "degree", "_w": "W", "t_s": "s"}  # by the reading field's name ending
+
+
+def reading_unit(name: str) -> str:
+    """The unit of a reading field (gonio.store.READING_DTYPE), "" for a dimensionless one."""
+    return next((u for suffix, u in READING_UNITS.items() if name.endswith(suffix)), "")
+
+
 def epoch_units(started_utc: str | None) -> str:
     """CF time units of seconds since the run's start (UTC)."""
     if not started_utc:
@@ -154,12 +162,8 @@ def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path)
                     var.standard_name = "time"
                     var.units = epoch_units(record.get("started_utc"))
                     var.calendar = "standard"
-                elif name.endswith("_deg"):
-                    var.units = "degree"
-                elif name.endswith("_w"):
-                    var.units = "W"
                 else:
-                    var.units = "1"
+                    var.units = reading_unit(name) or "1"
         _globals(ds, f"gonio run {record.get('run')}: raw readings", record, {})
     return out
 
