@@ -44,17 +44,19 @@ def grid_directions(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
 
 
 def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
-                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Orders >= 2 of f |cos o| from one wi (3,) towards every target (m, 3): (mean, standard
-    error, covariance (m, m) of the mean) over `walks` unguided walks of a RandomWalkBSDF, each
-    walk scoring every target (so the errors of different targets are correlated)."""
+                    rng: np.random.Generator, min_order: int = 2
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Orders >= min_order of f |cos o| from one wi (3,) towards every target (m, 3): (mean,
+    standard error, covariance (m, m) of the mean) over `walks` unguided walks of a
+    RandomWalkBSDF, each walk scoring every target (so the errors of different targets are
+    correlated)."""
     m = len(targets)
     batch = int(np.clip(BATCH_PRODUCTS // max(m, 1), WALK_BATCH, 16 * WALK_BATCH))
     total, products, done = np.zeros(m), np.zeros((m, m)), 0
     while done < walks:
         k = min(batch, walks - done)
         res = walk.walker.run(np.repeat(wi[None, :], k, axis=0), rng, targets=targets,
-                               min_order=2)
+                               min_order=min_order)
         total += res.value.sum(axis=0)
         products += res.value.T @ res.value
         done += k
