@@ -152,9 +152,6 @@ def _check_diffraction_options(options: FitOptions) -> None:
     samples = options.diffraction_samples
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2 or samples % 2:
         raise FitError(f"fit: diffraction_samples must be an even integer >= 2, got {samples!r}")
-    if options.multiple_scattering:
-        raise FitError("fit: diffraction cannot be combined with multiple_scattering (the "
-                       "orders table is tabulated without it); choose one")
 
 
 def diffraction_settings(data: ReducedData, options: FitOptions) -> Diffraction | None:
@@ -342,17 +339,18 @@ def build_model(distribution: str, alpha: float | tuple[float, float], eta: floa
                 seed: int = 0, diffraction: Diffraction | None = None) -> Any:
     """The sim.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
     complex index eta + i k when k is given (imported here so calibration loads without it);
-    with walks, plus multiple scattering (orders >= 2, `walks` walks per pair, fixed seed);
-    with diffraction, the two-scale model around it."""
+    with diffraction, the two-scale model around it; with walks, plus multiple scattering
+    (orders >= 2, `walks` walks per pair, fixed seed), which diffraction leaves alone (the
+    nano-roughness spreads an already broad lobe)."""
     from sim.bsdf import RoughConductor, RoughDielectric
 
-    if diffraction is not None:
-        return diffraction.wrap(build_model(distribution, alpha, eta, masking, k, walks, seed))
-
-    if walks is not None:
-        return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k),
+    if walks is not None:  # orders >= 2 of the microsurface beside the (diffracted) order 1
+        return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k,
+                                             diffraction=diffraction),
                                  build_model(distribution, alpha, eta, "correlated", k),
                                  walks, seed)
+    if diffraction is not None:
+        return diffraction.wrap(build_model(distribution, alpha, eta, masking, k))
     if k is not None:
         return RoughConductor(distribution=distribution, alpha=alpha,
                               eta_complex=complex(eta, k), masking=masking)
@@ -495,7 +493,7 @@ def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
     data = problem.data
     single = _Problem(data, problem.distribution, problem.masking,
                       replace(problem.options, multiple_scattering=False), problem.eta0,
-                      problem.k, problem.optics)
+                      problem.k, problem.optics, problem.diffraction)
     centre = single.unpack(_least_squares(single, alpha0).x)[0]
     for _ in range(MS_TABLE_RECENTRE):
         problem.data = data

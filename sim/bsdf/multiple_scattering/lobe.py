@@ -76,14 +76,20 @@ def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
-                     incidence_tol_deg: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, walked at
-    the pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f). Pairs
-    whose incidence agrees within incidence_tol_deg share one set of `walks` walks from
+                     incidence_tol_deg: float = 0.05, exact_second: bool = True
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, at the
+    pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f). With
+    exact_second (dielectric and conductor facets), order 2 comes from the deterministic
+    quadrature of second_order and only orders >= 3 are walked (their Monte Carlo error is a
+    few times smaller than that of walked orders >= 2); the error is the walks'. Pairs whose
+    incidence agrees within incidence_tol_deg share one set of `walks` walks from
     (seed, side, group), so their errors are correlated; other pairs' are independent."""
     from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
+    from sim.bsdf.multiple_scattering.second_order import second_order, supports
 
     walk = RandomWalkBSDF(parent, walks=walks, guided=False)
+    exact_second = exact_second and supports(walk.walker)
     wi, wo = (np.asarray(w, np.float64).reshape(-1, 3) for w in np.broadcast_arrays(wi, wo))
     side, theta_i, theta_o, dphi = _incidence_frame(wi, wo)
     group = np.round(theta_i / (2.0 * incidence_tol_deg)).astype(np.int64)
@@ -95,7 +101,10 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
         t, p = np.radians(theta_o[rows]), np.radians(dphi[rows])
         targets = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
         rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, g]))
-        mean, _, block = walk_to_targets(walk, start, targets, walks, rng)
+        mean, _, block = walk_to_targets(walk, start, targets, walks, rng,
+                                         min_order=3 if exact_second else 2)
+        if exact_second:
+            mean = mean + second_order(walk.walker, start, targets)
         cos_o = np.abs(targets[:, 2])
         inverse = np.where(cos_o > 0.0, 1.0 / np.where(cos_o > 0.0, cos_o, 1.0), 0.0)
         value[rows] = mean * inverse
@@ -110,13 +119,17 @@ class HigherOrderLobe:
     walk's, so the two add up to the full Smith microsurface); walks: walks per table column;
     seed: each column is walked from (seed, side, node, azimuth, hemisphere), so the
     tables are a fixed function of the parameters; theta_step_deg, phi_step_deg: the direction
-    grid (divisors of 90 and 180). A column is one azimuth and the polar angles of one
-    hemisphere of wo: an in-plane scan of one lobe needs two per incidence (0 and 180 deg).
+    grid (divisors of 90 and 180); exact_second: order 2 by quadrature (second_order) and only
+    orders >= 3 walked, for dielectric and conductor facets. A column is one azimuth and the
+    polar angles of one hemisphere of wo: an in-plane scan of one lobe needs two per incidence
+    (0 and 180 deg).
     """
 
     def __init__(self, parent, walks: int = WALKS, seed: int = 0,
-                 theta_step_deg: float = THETA_STEP_DEG, phi_step_deg: float = PHI_STEP_DEG):
+                 theta_step_deg: float = THETA_STEP_DEG, phi_step_deg: float = PHI_STEP_DEG,
+                 exact_second: bool = True):
         from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
+        from sim.bsdf.multiple_scattering.second_order import supports
 
         if int(walks) != walks or walks < 2:
             raise ValueError(f"walks must be an integer >= 2, got {walks!r}")
@@ -131,6 +144,7 @@ class HigherOrderLobe:
         self.theta_deg = np.linspace(0.0, 180.0, round(180.0 / theta_step_deg) + 1)
         self.phi_deg = np.linspace(0.0, 180.0, round(180.0 / phi_step_deg) + 1)
         self._columns: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self.exact_second = exact_second and supports(self.walk.walker)
 
     def column(self, side: int, node: int, j: int, lower: bool) -> tuple[np.ndarray, np.ndarray]:
         """(f, its standard error) at the polar angles of one hemisphere of wo (theta_deg up to
@@ -138,6 +152,8 @@ class HigherOrderLobe:
         light arriving from the side's hemisphere (+1 above, -1 below) at
         INCIDENCE_NODES_DEG[node]; 0 on the horizon (f falls linearly in cos o there, as the
         escape probability does, so it interpolates better than f |cos o|)."""
+        from sim.bsdf.multiple_scattering.second_order import second_order
+
         key = (side, node, j, lower)
         if key not in self._columns:
             theta = np.radians(INCIDENCE_NODES_DEG[node])
@@ -147,7 +163,10 @@ class HigherOrderLobe:
             targets = grid_directions(polar, self.phi_deg[j:j + 1])[:, 0]
             rng = np.random.default_rng(
                 np.random.SeedSequence([self.seed, side + 1, node, j, int(lower)]))
-            mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng)
+            mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng,
+                                           min_order=3 if self.exact_second else 2)
+            if self.exact_second:
+                mean = mean + second_order(self.walk.walker, wi, targets)
             cos_o = np.abs(targets[:, 2])
             inverse = np.where(cos_o > 1e-12, 1.0 / np.maximum(cos_o, 1e-12), 0.0)
             self._columns[key] = (mean * inverse, err * inverse)

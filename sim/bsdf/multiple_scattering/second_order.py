@@ -21,10 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
-from sim.bsdf.multiple_scattering.walk import flip
+from sim.bsdf.multiple_scattering.walk import Walker, flip
 
 #: Gauss-Legendre nodes in w1_z per hemisphere, azimuth nodes of w1, nodes per height uniform.
-POLAR_NODES = 64
+POLAR_NODES = 128
 AZIMUTH_NODES = 128
 HEIGHT_NODES = 8
 
@@ -76,69 +76,69 @@ def _height_expectation(a0: float, lam1: np.ndarray, crossed: bool, lam_e: np.nd
     return np.einsum("pk,pmk->pm", q, np.nan_to_num(escape))
 
 
-def second_order(walker, wi: np.ndarray, targets: np.ndarray, polar: int = POLAR_NODES,
-                 azimuth: int = AZIMUTH_NODES, heights: int = HEIGHT_NODES) -> np.ndarray:
+def supports(walker) -> bool:
+    """True when second_order can integrate this walker's microsurface (dielectric or conductor
+    facets, isotropic slopes)."""
+    return (isinstance(walker.micro, (MicroConductor, MicroDielectric))
+            and walker.slopes.alpha_x == walker.slopes.alpha_y)
+
+
+def second_order(walker: Walker, wi: np.ndarray, targets: np.ndarray,
+                 polar: int = POLAR_NODES, azimuth: int = AZIMUTH_NODES,
+                 heights: int = HEIGHT_NODES) -> np.ndarray:
     """Order 2 of f |cos o| from wi (3,) towards every target (m, 3) of a dielectric or
-    conductor Smith microsurface (a Walker's slopes and micro, isotropic), by quadrature."""
+    conductor Smith microsurface (a Walker, isotropic slopes), by quadrature."""
     micro, slopes = walker.micro, walker.slopes
-    if not isinstance(micro, (MicroConductor, MicroDielectric)):
-        raise ValueError("second_order needs dielectric or conductor facets")
+    if not supports(walker):
+        raise ValueError("second_order needs dielectric or conductor facets, isotropic slopes")
     wi, targets = np.asarray(wi, np.float64), np.asarray(targets, np.float64).reshape(-1, 3)
     if wi[2] <= 0.0:  # lit from below: the same walk in the mirrored world, eta inverted
         mirrored = MicroDielectric(1.0 / micro.eta) if micro.transmits else micro
-        return second_order(_Walker(slopes, mirrored), flip(wi), flip(targets), polar,
-                            azimuth, heights)
+        return second_order(Walker(slopes, mirrored, guided=False), flip(wi), flip(targets),
+                            polar, azimuth, heights)
+    # targets in one plane through the normal share an azimuth grid (crowded about the plane)
+    plane = np.round(np.mod(np.arctan2(targets[:, 1], targets[:, 0]), np.pi), 9)
+    out = np.zeros(len(targets))
+    for key in np.unique(plane):
+        rows = np.flatnonzero(plane == key)
+        out[rows] = _second_order_in_plane(walker, wi, targets[rows], float(key), polar,
+                                           azimuth, heights)
+    return out
+
+
+def _second_order_in_plane(walker: Walker, wi: np.ndarray, targets: np.ndarray, plane: float,
+                           polar: int, azimuth: int, heights: int) -> np.ndarray:
+    """second_order for targets in the plane through the normal at azimuth `plane`."""
+    micro, slopes = walker.micro, walker.slopes
     a0 = -float(slopes.signed_lambda(-wi[None, :])[0])
     z, wz = _polar_nodes(polar)
     psi, wpsi = _azimuth_nodes(azimuth)
     sin_z = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    out = np.zeros(len(targets))
-    for crossed in (False, True) if micro.transmits else (False,):
-        # the second event's frame: d1 travels in it; its polar angle fixes Lambda(d1)
-        d1_z = -z if crossed else z
-        frame = flip(targets) if crossed else targets
-        same = frame[:, 2] > 0.0
-        lam_e = np.where(same, slopes.signed_lambda(frame), slopes.signed_lambda(flip(frame)))
-        lam1 = slopes.signed_lambda(np.stack([sin_z, 0.0 * z, d1_z], axis=-1))
-        h = _height_expectation(a0, lam1, crossed, np.broadcast_to(lam_e, (len(z), len(frame))),
-                                np.broadcast_to(same, (len(z), len(frame))), heights)
-        first = {}  # phase1 on the azimuth grid about each distinct target azimuth
-        for j, target in enumerate(targets):
-            key = round(float(np.arctan2(target[1], target[0])), 12)
-            if key not in first:
-                first[key] = _first_event(micro, slopes, wi, z, sin_z, key + psi, crossed)
-            w1, phase1 = first[key]
-            rows = np.flatnonzero(phase1 > 0.0)
-            d1 = flip(w1[rows]) if crossed else w1[rows]
-            w_in2 = -d1
-            wl = np.broadcast_to(frame[j], w_in2.shape)
-            here = np.full(len(rows), not crossed)
-            if same[j]:
-                phase2 = micro.phase_reflect(slopes, w_in2, wl, here, w_in2, False)
-            elif micro.transmits:
-                phase2 = micro.phase_transmit(slopes, w_in2, wl, here, False)
-            else:
-                continue
-            weight = (wz[:, None] * wpsi[None, :] * h[:, j, None]).ravel()[rows]
-            out[j] += np.sum(weight * phase1[rows] * phase2)
-    return out
-
-
-def _first_event(micro, slopes, wi: np.ndarray, z: np.ndarray, sin_z: np.ndarray,
-                 phi: np.ndarray, crossed: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Directions w1 on the (polar z, azimuth phi) grid (flattened) and the first event's
-    reflection (or, crossed, transmission) phase function from wi towards them."""
+    phi = plane + psi
     w1 = np.stack([sin_z[:, None] * np.cos(phi)[None, :], sin_z[:, None] * np.sin(phi)[None, :],
                    np.broadcast_to(z[:, None], (len(z), len(phi)))], axis=-1).reshape(-1, 3)
+    node_weight = (wz[:, None] * wpsi[None, :]).ravel()
+    polar_index = np.repeat(np.arange(len(z)), len(phi))
     w_in = np.broadcast_to(wi, w1.shape)
     top = np.ones(len(w1), dtype=bool)
-    if crossed:
-        return w1, micro.phase_transmit(slopes, w_in, w1, top, False)
-    return w1, micro.phase_reflect(slopes, w_in, w1, top, w_in, False)
-
-
-class _Walker:
-    """Slopes and micro-BSDF, as second_order reads them from a Walker."""
-
-    def __init__(self, slopes, micro):
-        self.slopes, self.micro = slopes, micro
+    out = np.zeros(len(targets))
+    for crossed in (False, True) if micro.transmits else (False,):
+        if crossed:
+            phase1 = micro.phase_transmit(slopes, w_in, w1, top, False)
+        else:
+            phase1 = micro.phase_reflect(slopes, w_in, w1, top, w_in, False)
+        live = np.flatnonzero(phase1 > 0.0)
+        d1 = flip(w1[live]) if crossed else w1[live]  # in the frame of the side it travels in
+        here = np.full(len(live), not crossed)
+        # phase(-d1 -> target) with the escape left out (log CDF 0), for every live node
+        phase2 = walker._next_event_all(-d1, -d1, here, targets, np.zeros(len(live)),
+                                        np.zeros(len(live)), False)
+        frame = flip(targets) if crossed else targets  # the targets in d1's frame
+        same = frame[:, 2] > 0.0
+        lam_e = np.where(same, slopes.signed_lambda(frame), slopes.signed_lambda(flip(frame)))
+        lam1 = slopes.signed_lambda(np.stack([sin_z, 0.0 * z, -z if crossed else z], axis=-1))
+        h = _height_expectation(a0, lam1, crossed, np.broadcast_to(lam_e, (len(z), len(frame))),
+                                np.broadcast_to(same, (len(z), len(frame))), heights)
+        amplitude = node_weight[live] * phase1[live]
+        out += np.einsum("r,rm,rm->m", amplitude, phase2, h[polar_index[live]])
+    return out
