@@ -321,7 +321,8 @@ class _WithHigherOrders:
         from sim.bsdf.multiple_scattering import higher_orders_at
 
         wi, wo = np.broadcast_arrays(wi, wo)
-        extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed)[0]
+        extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed,
+                                 covariance=False)[0]
         return self.single.eval(wi, wo) + extra.reshape(wi.shape[:-1])
 
 
@@ -343,7 +344,8 @@ class _OrdersTable:
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
         walked = [higher_orders_at(build_model(problem.distribution, math.exp(a), problem.eta0,
                                                "correlated", problem.k), data.wi, data.wo,
-                                   o.ms_walks, o.ms_seed) for a in self.log_alpha]
+                                   o.ms_walks, o.ms_seed, covariance=node == MS_TABLE_NODES // 2)
+                  for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
         _, self.error, self.covariance = walked[MS_TABLE_NODES // 2]
 
@@ -365,7 +367,7 @@ def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
 
     wi, wo = np.broadcast_arrays(wi, wo)
     value, err, _ = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
-                                     wi, wo, walks, seed)
+                                     wi, wo, walks, seed, covariance=False)
     return value.reshape(wi.shape[:-1]), err.reshape(wi.shape[:-1])
 
 

@@ -44,25 +44,27 @@ def grid_directions(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
 
 
 def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
-                    rng: np.random.Generator, min_order: int = 2
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    rng: np.random.Generator, min_order: int = 2, covariance: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= min_order of f |cos o| from one wi (3,) towards every target (m, 3): (mean,
-    standard error, covariance (m, m) of the mean) over `walks` unguided walks of a
-    RandomWalkBSDF, each walk scoring every target (so the errors of different targets are
-    correlated)."""
+    standard error, covariance (m, m) of the mean, None unless asked for: it costs m^2 per
+    walk) over `walks` unguided walks of a RandomWalkBSDF, each walk scoring every target (so
+    the errors of different targets are correlated)."""
     m = len(targets)
     batch = int(np.clip(BATCH_PRODUCTS // max(m, 1), WALK_BATCH, 16 * WALK_BATCH))
-    total, products, done = np.zeros(m), np.zeros((m, m)), 0
+    total, products, done = np.zeros(m), np.zeros((m, m) if covariance else m), 0
     while done < walks:
         k = min(batch, walks - done)
         res = walk.walker.run(np.repeat(wi[None, :], k, axis=0), rng, targets=targets,
                                min_order=min_order)
         total += res.value.sum(axis=0)
-        products += res.value.T @ res.value
+        products += res.value.T @ res.value if covariance else np.sum(res.value ** 2, axis=0)
         done += k
     mean = total / walks
-    cov = (products / walks - np.outer(mean, mean)) / max(walks - 1, 1)
-    return mean, np.sqrt(np.maximum(np.diag(cov), 0.0)), cov
+    spread = products / walks - (np.outer(mean, mean) if covariance else mean * mean)
+    var = (np.diag(spread) if covariance else spread) / max(walks - 1, 1)
+    cov = spread / max(walks - 1, 1) if covariance else None
+    return mean, np.sqrt(np.maximum(var, 0.0)), cov
 
 
 def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -76,10 +78,12 @@ def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
-                     incidence_tol_deg: float = 0.05, exact_second: bool = True
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     incidence_tol_deg: float = 0.05, exact_second: bool = True,
+                     covariance: bool = True
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, at the
-    pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f). With
+    pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f, or None
+    when not asked for). With
     exact_second (dielectric and conductor facets), order 2 comes from the deterministic
     quadrature of second_order and only orders >= 3 are walked (their Monte Carlo error is a
     few times smaller than that of walked orders >= 2); the error is the walks'. Pairs whose
@@ -93,7 +97,8 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     wi, wo = (np.asarray(w, np.float64).reshape(-1, 3) for w in np.broadcast_arrays(wi, wo))
     side, theta_i, theta_o, dphi = _incidence_frame(wi, wo)
     group = np.round(theta_i / (2.0 * incidence_tol_deg)).astype(np.int64)
-    value, cov = np.zeros(len(wi)), np.zeros((len(wi), len(wi)))
+    value, var = np.zeros(len(wi)), np.zeros(len(wi))
+    cov = np.zeros((len(wi), len(wi))) if covariance else None
     for s, g in sorted(set(zip(side.tolist(), group.tolist(), strict=True))):
         rows = np.flatnonzero((side == s) & (group == g))
         theta = np.radians(np.mean(theta_i[rows]))
@@ -101,15 +106,17 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
         t, p = np.radians(theta_o[rows]), np.radians(dphi[rows])
         targets = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
         rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, g]))
-        mean, _, block = walk_to_targets(walk, start, targets, walks, rng,
-                                         min_order=3 if exact_second else 2)
+        mean, err, block = walk_to_targets(walk, start, targets, walks, rng,
+                                           min_order=3 if exact_second else 2,
+                                           covariance=covariance)
         if exact_second:
             mean = mean + second_order(walk.walker, start, targets)
         cos_o = np.abs(targets[:, 2])
         inverse = np.where(cos_o > 0.0, 1.0 / np.where(cos_o > 0.0, cos_o, 1.0), 0.0)
-        value[rows] = mean * inverse
-        cov[np.ix_(rows, rows)] = block * np.outer(inverse, inverse)
-    return value, np.sqrt(np.diag(cov)), cov
+        value[rows], var[rows] = mean * inverse, (err * inverse) ** 2
+        if covariance:
+            cov[np.ix_(rows, rows)] = block * np.outer(inverse, inverse)
+    return value, np.sqrt(var), cov
 
 
 class HigherOrderLobe:
@@ -164,7 +171,8 @@ class HigherOrderLobe:
             rng = np.random.default_rng(
                 np.random.SeedSequence([self.seed, side + 1, node, j, int(lower)]))
             mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng,
-                                           min_order=3 if self.exact_second else 2)
+                                           min_order=3 if self.exact_second else 2,
+                                           covariance=False)
             if self.exact_second:
                 mean = mean + second_order(self.walk.walker, wi, targets)
             cos_o = np.abs(targets[:, 2])
