@@ -12,7 +12,8 @@ along d1 (u2 / u1 = exp(E / Lambda(d1)), forced to hit and weighted by the hit p
 the walk does) and wo escapes from it with G1. H depends on w1 only through its polar angle
 (isotropic Lambda), so it is computed once per (polar node, branch, target) by Gauss-Legendre
 rules over the two heights' uniforms; the direction integral is Gauss-Legendre in w1_z (split
-at the horizon, where Lambda changes branch) times the periodic trapezoid rule in azimuth.
+at the horizon, where Lambda changes branch) times Gauss-Legendre in azimuth on the arcs
+between the planes of wi and of the targets (where the phase functions peak).
 Orders >= 2 are then this plus the walk's orders >= 3 (lobe.higher_orders_at).
 """
 
@@ -23,7 +24,7 @@ import numpy as np
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
 from sim.bsdf.multiple_scattering.walk import Walker, flip
 
-#: Gauss-Legendre nodes in w1_z per hemisphere, azimuth nodes of w1, nodes per height uniform.
+#: Gauss-Legendre nodes in w1_z per hemisphere, of w1's azimuth (all arcs), per height uniform.
 POLAR_NODES = 128
 AZIMUTH_NODES = 128
 HEIGHT_NODES = 8
@@ -42,13 +43,17 @@ def _polar_nodes(polar: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([-x[::-1], x]), np.concatenate([w[::-1], w])
 
 
-def _azimuth_nodes(azimuth: int) -> tuple[np.ndarray, np.ndarray]:
-    """Azimuths psi of w1 about a target's azimuth and their weights: the periodic trapezoid
-    rule in t with psi = t - sin(2t) / 2, which crowds the nodes about psi = 0 and pi, where
-    the second event's phase function peaks (sharply for grazing directions), and keeps the
-    rule spectrally convergent (the integrand stays smooth and periodic in t)."""
-    t = 2.0 * np.pi * np.arange(azimuth) / azimuth
-    return t - 0.5 * np.sin(2.0 * t), (1.0 - np.cos(2.0 * t)) * 2.0 * np.pi / azimuth
+def _azimuth_nodes(breaks: np.ndarray, azimuth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuths of w1 and their weights: Gauss-Legendre on each arc between the break azimuths
+    (those of the planes of wi and of the targets through the normal, both ways), where the
+    two events' phase functions peak (sharply for grazing directions): the rule crowds its
+    nodes there and no cell straddles a peak."""
+    edges = np.unique(np.round(np.mod(breaks, 2.0 * np.pi), 12))
+    edges = np.append(edges, edges[0] + 2.0 * np.pi)
+    x, w = _gauss_unit(max(8, azimuth // (len(edges) - 1)))
+    spans = np.diff(edges)
+    phi = (edges[:-1, None] + spans[:, None] * x[None, :]).ravel()
+    return phi, (spans[:, None] * w[None, :]).ravel()
 
 
 def _height_expectation(a0: float, lam1: np.ndarray, crossed: bool, lam_e: np.ndarray,
@@ -112,9 +117,11 @@ def _second_order_in_plane(walker: Walker, wi: np.ndarray, targets: np.ndarray, 
     micro, slopes = walker.micro, walker.slopes
     a0 = -float(slopes.signed_lambda(-wi[None, :])[0])
     z, wz = _polar_nodes(polar)
-    psi, wpsi = _azimuth_nodes(azimuth)
+    breaks = [plane, plane + np.pi]
+    if np.hypot(wi[0], wi[1]) > 1e-12:
+        breaks += [np.arctan2(wi[1], wi[0]), np.arctan2(wi[1], wi[0]) + np.pi]
+    phi, wpsi = _azimuth_nodes(np.array(breaks), azimuth)
     sin_z = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    phi = plane + psi
     w1 = np.stack([sin_z[:, None] * np.cos(phi)[None, :], sin_z[:, None] * np.sin(phi)[None, :],
                    np.broadcast_to(z[:, None], (len(z), len(phi)))], axis=-1).reshape(-1, 3)
     node_weight = (wz[:, None] * wpsi[None, :]).ravel()
