@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -38,10 +39,44 @@ MS_WALKS_MAX = 1 << 22
 # Points of the two-scale model's lobe integral per pair: the bench's (sim.bench.sample), so a
 # fit of an emulated run evaluates the same fixed point set.
 DIFFRACTION_SAMPLES = 256
+# Alphas about the microfacet model's best start at which a diffraction fit scores its own.
+START_REFINE = 5
 
 
 class FitError(GonioError):
     """A fit failed, is ill-conditioned, or was asked of data that cannot support it."""
+
+
+#: Seconds between progress lines of a fit (a diffraction fit evaluates for minutes).
+PROGRESS_EVERY_S = 5.0
+
+
+class _Progress:
+    """Reports a running fit in one line at most every `every_s` seconds: the candidate, its
+    stage, model evaluations so far, the best chi-square per point and the elapsed time."""
+
+    def __init__(self, report: Callable[[str], None] | None, every_s: float = PROGRESS_EVERY_S):
+        self.report, self.every_s = report, every_s
+        self.started = self.last = time.perf_counter()
+        self.evaluations, self.best = 0, math.inf
+
+    def stage(self, problem: _Problem, what: str) -> None:
+        """A new stage of one candidate (always reported)."""
+        self.evaluations, self.best = 0, math.inf
+        self._say(f"{problem.distribution}/{problem.masking}: {what}")
+
+    def evaluated(self, problem: _Problem, residuals: np.ndarray) -> None:
+        """One model evaluation (reported when every_s has passed since the last line)."""
+        self.evaluations += 1
+        self.best = min(self.best, float(np.sum(residuals ** 2)) / max(len(residuals), 1))
+        if time.perf_counter() - self.last >= self.every_s:
+            self._say(f"{problem.distribution}/{problem.masking}: {self.evaluations} model "
+                      f"evaluations, best chi2/point {self.best:.4g}")
+
+    def _say(self, text: str) -> None:
+        self.last = time.perf_counter()
+        if self.report is not None:
+            self.report(f"fit: {text} ({self.last - self.started:.0f} s)")
 
 
 @dataclass(frozen=True)
@@ -152,9 +187,6 @@ def _check_diffraction_options(options: FitOptions) -> None:
     samples = options.diffraction_samples
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2 or samples % 2:
         raise FitError(f"fit: diffraction_samples must be an even integer >= 2, got {samples!r}")
-    if options.multiple_scattering:
-        raise FitError("fit: diffraction cannot be combined with multiple_scattering (the "
-                       "orders table is tabulated without it); choose one")
 
 
 def diffraction_settings(data: ReducedData, options: FitOptions) -> Diffraction | None:
@@ -289,7 +321,8 @@ class _WithHigherOrders:
         from sim.bsdf.multiple_scattering import higher_orders_at
 
         wi, wo = np.broadcast_arrays(wi, wo)
-        extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed)[0]
+        extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed,
+                                 covariance=False)[0]
         return self.single.eval(wi, wo) + extra.reshape(wi.shape[:-1])
 
 
@@ -311,7 +344,8 @@ class _OrdersTable:
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
         walked = [higher_orders_at(build_model(problem.distribution, math.exp(a), problem.eta0,
                                                "correlated", problem.k), data.wi, data.wo,
-                                   o.ms_walks, o.ms_seed) for a in self.log_alpha]
+                                   o.ms_walks, o.ms_seed, covariance=node == MS_TABLE_NODES // 2)
+                  for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
         _, self.error, self.covariance = walked[MS_TABLE_NODES // 2]
 
@@ -333,7 +367,7 @@ def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
 
     wi, wo = np.broadcast_arrays(wi, wo)
     value, err, _ = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
-                                     wi, wo, walks, seed)
+                                     wi, wo, walks, seed, covariance=False)
     return value.reshape(wi.shape[:-1]), err.reshape(wi.shape[:-1])
 
 
@@ -342,17 +376,18 @@ def build_model(distribution: str, alpha: float | tuple[float, float], eta: floa
                 seed: int = 0, diffraction: Diffraction | None = None) -> Any:
     """The sim.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
     complex index eta + i k when k is given (imported here so calibration loads without it);
-    with walks, plus multiple scattering (orders >= 2, `walks` walks per pair, fixed seed);
-    with diffraction, the two-scale model around it."""
+    with diffraction, the two-scale model around it; with walks, plus multiple scattering
+    (orders >= 2, `walks` walks per pair, fixed seed), which diffraction leaves alone (the
+    nano-roughness spreads an already broad lobe)."""
     from sim.bsdf import RoughConductor, RoughDielectric
 
-    if diffraction is not None:
-        return diffraction.wrap(build_model(distribution, alpha, eta, masking, k, walks, seed))
-
-    if walks is not None:
-        return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k),
+    if walks is not None:  # orders >= 2 of the microsurface beside the (diffracted) order 1
+        return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k,
+                                             diffraction=diffraction),
                                  build_model(distribution, alpha, eta, "correlated", k),
                                  walks, seed)
+    if diffraction is not None:
+        return diffraction.wrap(build_model(distribution, alpha, eta, masking, k))
     if k is not None:
         return RoughConductor(distribution=distribution, alpha=alpha,
                               eta_complex=complex(eta, k), masking=masking)
@@ -419,6 +454,7 @@ class _Problem:
             hi.append(math.log(SCALE_BOUNDS[1]))
         self.names, self.lower, self.upper = tuple(names), np.array(lo), np.array(hi)
         self.orders: _OrdersTable | None = None
+        self.progress = _Progress(None)
 
     def unpack(self, x: np.ndarray) -> tuple[Any, float, float]:
         """(alpha, eta, scale) from internal parameters."""
@@ -462,12 +498,26 @@ class _Problem:
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         r = self.data.whitened(self.predict(x, self.data))
-        return np.where(np.isfinite(r), r, 1e6)
+        r = np.where(np.isfinite(r), r, 1e6)
+        self.progress.evaluated(self, r)
+        return r
 
     def start(self, alpha0: float) -> np.ndarray:
         """Best of a coarse log-alpha grid about the peak-width estimate (a guard against a
-        poor estimate trapping the optimiser in a local minimum)."""
-        grid = alpha0 * np.exp(np.linspace(-2.5, 2.5, 21))
+        poor estimate trapping the optimiser in a local minimum). With diffraction the grid
+        is scored by the microfacet model alone (the two-scale model costs a few hundred
+        microfacet evaluations per point) and only START_REFINE points about its best by the
+        full model."""
+        if self.diffraction is not None:
+            plain = _Problem(self.data, self.distribution, self.masking, self.options,
+                             self.eta0, self.k, self.optics)
+            centre = math.exp(plain.start(alpha0)[0])
+            return self._best_of(centre * np.exp(np.linspace(-0.5, 0.5, START_REFINE)))
+        return self._best_of(alpha0 * np.exp(np.linspace(-2.5, 2.5, 21)))
+
+    def _best_of(self, grid: np.ndarray) -> np.ndarray:
+        """The internal parameters of the lowest chi-square among the alphas of `grid`
+        (the other parameters at their starting values)."""
         grid = np.clip(grid, *ALPHA_BOUNDS)
         rest = []
         if self.options.fit_eta:
@@ -482,6 +532,8 @@ class _Problem:
 
 def _least_squares(problem: _Problem, alpha0: float) -> Any:
     """The optimiser's solution from the best start about alpha0."""
+    problem.progress.stage(problem, "start" if problem.orders is None
+                           else "start with the multiple-scattering table")
     return least_squares(problem.residuals, problem.start(alpha0),
                          bounds=(problem.lower, problem.upper), method="trf", x_scale="jac",
                          xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
@@ -495,10 +547,12 @@ def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
     data = problem.data
     single = _Problem(data, problem.distribution, problem.masking,
                       replace(problem.options, multiple_scattering=False), problem.eta0,
-                      problem.k, problem.optics)
+                      problem.k, problem.optics, problem.diffraction)
+    single.progress = problem.progress
     centre = single.unpack(_least_squares(single, alpha0).x)[0]
     for _ in range(MS_TABLE_RECENTRE):
         problem.data = data
+        problem.progress.stage(problem, f"multiple-scattering table about alpha {centre:.4g}")
         problem.orders = _OrdersTable(problem, centre)
         problem.data = replace(data, sigma=np.hypot(data.sigma, problem.orders.error))
         sol = _least_squares(problem, centre)
@@ -563,10 +617,13 @@ def _check_conditioning(jac: np.ndarray, names: tuple[str, ...], distribution: s
                        f"{', '.join(involved)}; fix one of them or add data that constrains it")
 
 
-def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
+def fit(data: ReducedData, options: FitOptions | None = None,
+        progress: Callable[[str], None] | None = None) -> FitResult:
     """Fit every candidate (distribution x masking) on the chosen subset, keep the lowest
-    chi-square, and score the fitted model on the held-out valid points."""
+    chi-square, and score the fitted model on the held-out valid points. progress, if given,
+    receives a line per stage and at most every PROGRESS_EVERY_S seconds while it runs."""
     started = time.perf_counter()
+    reporter = _Progress(progress)
     options = options or FitOptions()
     diffraction = diffraction_settings(data, options)
     eta0 = options.eta if options.eta is not None else data.meta.get("eta")
@@ -602,6 +659,7 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
         for masking in options.maskings:
             problem = _Problem(fit_data, distribution, masking, options, eta0, k, optics,
                                diffraction)
+            problem.progress = reporter
             try:
                 scored.append((problem, _solve(problem, alpha0)))
             except FitError as exc:
@@ -617,6 +675,7 @@ def fit(data: ReducedData, options: FitOptions | None = None) -> FitResult:
                        "and the masked points)")
     runner_up = min((s["chi2"] for p, s in scored if p.distribution != problem.distribution),
                     default=None)
+    reporter.stage(problem, "held-out points")
     heldout = _heldout_chi2(data, ~in_fit, problem, best["x"])
     alpha, eta, _ = problem.unpack(best["x"])
     return FitResult(

@@ -4,6 +4,7 @@ and `gonio export --format zemax|mitsuba` share."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -96,10 +97,12 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,
             calibration_file: str | Path | None = None, shot_noise_w: float | None = None,
-            subtract_signature: bool = False) -> tuple[ReducedData, FitResult]:
+            subtract_signature: bool = False,
+            progress: Callable[[str], None] | None = None) -> tuple[ReducedData, FitResult]:
     """Reduce and fit a run (fitted twice when the angle terms need the model's slope:
-    `reduce_stored`)."""
+    `reduce_stored`; progress: calibration.fit.fit's progress lines)."""
     options = options or FitOptions()
     data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature,
                       slope_options=options)
-    return data, fit(data, options)
+    return data, fit(data, options, progress)
+

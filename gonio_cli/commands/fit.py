@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
 from gonio_cli.commands.reduce import add_reduce_options, add_run_or_import, imported
@@ -118,9 +119,9 @@ def run(args: argparse.Namespace) -> int:
     if data is None:
         sim = emulator_sim(args.run) if args.diffraction else None
         data, result = fit_run(args.run, options_from(args, sim), args.calibration,
-                               args.shot_noise_w, args.subtract_signature)
+                               args.shot_noise_w, args.subtract_signature, progress=_to_stderr)
     else:
-        result = fit(data, options_from(args))
+        result = fit(data, options_from(args), _to_stderr)
     out = result.to_dict()
     out["run"] = str(args.run if data.meta.get("imported_from") is None else
                      data.meta["imported_from"])
@@ -134,6 +135,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(summary(out))
     return 0
+
+
+def _to_stderr(line: str) -> None:
+    """A fit's progress line, on stderr (stdout keeps the result alone)."""
+    print(f"gonio {line}", file=sys.stderr, flush=True)
 
 
 #: Above this alpha, multiple scattering is a visible part of a rough dielectric's lobe.

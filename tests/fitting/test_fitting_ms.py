@@ -15,8 +15,13 @@ from calibration.reduced import ReducedData
 from sim.bench import build_bench
 
 ALPHA = 0.553  # Walter's acid-etched glass
+# the bench's tables with 4x the default walks: with order 2 by quadrature the fit's own
+# error (in its sigma) fell ~4x, and the bench's (which no sigma carries) must stay below it
 SAMPLE = {"kind": "hemisphere", "distribution": "ggx", "alpha": ALPHA, "eta": 1.51,
-          "masking": "correlated"}
+          "masking": "correlated", "ms_walks": 1 << 16}
+
+
+SYSTEMATIC = 2e-4  # of alpha: the bench's table interpolation and aperture (see below)
 
 
 def emulated_run(seed: int = 5) -> ReducedData:
@@ -56,9 +61,12 @@ def test_fit_with_multiple_scattering_recovers_alpha(data):
           f"(chi2/dof {multiple.chi2_dof_fit:.3g})")
     # single scattering cannot describe the data (the detector sees the extra light) ...
     assert single.chi2_dof_fit > 1e3
-    # ... the model with multiple scattering does, and finds alpha within its uncertainty
+    # ... the model with multiple scattering does, and finds alpha within its uncertainty and
+    # a systematic floor SYSTEMATIC: the bench interpolates its tables (2.5 deg, linear) and
+    # averages the broad lobe over its aperture, which the fit's point model leaves out (seen:
+    # +0.02 %, since order 2 by quadrature cut the fit's sigma to 2e-5)
     assert multiple.chi2_dof_fit < 10.0
-    assert abs(value / ALPHA - 1.0) < 0.03 and abs(value - ALPHA) < 3.0 * sigma
+    assert abs(value - ALPHA) < 3.0 * np.hypot(sigma, SYSTEMATIC * ALPHA)
     assert multiple.to_dict()["multiple_scattering"] == {"walks": 1 << 15, "seed": 0}
     assert single.to_dict()["multiple_scattering"] is None
 

@@ -44,23 +44,27 @@ def grid_directions(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
 
 
 def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
-                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Orders >= 2 of f |cos o| from one wi (3,) towards every target (m, 3): (mean, standard
-    error, covariance (m, m) of the mean) over `walks` unguided walks of a RandomWalkBSDF, each
-    walk scoring every target (so the errors of different targets are correlated)."""
+                    rng: np.random.Generator, min_order: int = 2, covariance: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Orders >= min_order of f |cos o| from one wi (3,) towards every target (m, 3): (mean,
+    standard error, covariance (m, m) of the mean, None unless asked for: it costs m^2 per
+    walk) over `walks` unguided walks of a RandomWalkBSDF, each walk scoring every target (so
+    the errors of different targets are correlated)."""
     m = len(targets)
     batch = int(np.clip(BATCH_PRODUCTS // max(m, 1), WALK_BATCH, 16 * WALK_BATCH))
-    total, products, done = np.zeros(m), np.zeros((m, m)), 0
+    total, products, done = np.zeros(m), np.zeros((m, m) if covariance else m), 0
     while done < walks:
         k = min(batch, walks - done)
         res = walk.walker.run(np.repeat(wi[None, :], k, axis=0), rng, targets=targets,
-                               min_order=2)
+                               min_order=min_order)
         total += res.value.sum(axis=0)
-        products += res.value.T @ res.value
+        products += res.value.T @ res.value if covariance else np.sum(res.value ** 2, axis=0)
         done += k
     mean = total / walks
-    cov = (products / walks - np.outer(mean, mean)) / max(walks - 1, 1)
-    return mean, np.sqrt(np.maximum(np.diag(cov), 0.0)), cov
+    spread = products / walks - (np.outer(mean, mean) if covariance else mean * mean)
+    var = (np.diag(spread) if covariance else spread) / max(walks - 1, 1)
+    cov = spread / max(walks - 1, 1) if covariance else None
+    return mean, np.sqrt(np.maximum(var, 0.0)), cov
 
 
 def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -74,18 +78,27 @@ def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
-                     incidence_tol_deg: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, walked at
-    the pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f). Pairs
-    whose incidence agrees within incidence_tol_deg share one set of `walks` walks from
+                     incidence_tol_deg: float = 0.05, exact_second: bool = True,
+                     covariance: bool = True
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, at the
+    pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f, or None
+    when not asked for). With
+    exact_second (dielectric and conductor facets), order 2 comes from the deterministic
+    quadrature of second_order and only orders >= 3 are walked (their Monte Carlo error is a
+    few times smaller than that of walked orders >= 2); the error is the walks'. Pairs whose
+    incidence agrees within incidence_tol_deg share one set of `walks` walks from
     (seed, side, group), so their errors are correlated; other pairs' are independent."""
     from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
+    from sim.bsdf.multiple_scattering.second_order import second_order, supports
 
     walk = RandomWalkBSDF(parent, walks=walks, guided=False)
+    exact_second = exact_second and supports(walk.walker)
     wi, wo = (np.asarray(w, np.float64).reshape(-1, 3) for w in np.broadcast_arrays(wi, wo))
     side, theta_i, theta_o, dphi = _incidence_frame(wi, wo)
     group = np.round(theta_i / (2.0 * incidence_tol_deg)).astype(np.int64)
-    value, cov = np.zeros(len(wi)), np.zeros((len(wi), len(wi)))
+    value, var = np.zeros(len(wi)), np.zeros(len(wi))
+    cov = np.zeros((len(wi), len(wi))) if covariance else None
     for s, g in sorted(set(zip(side.tolist(), group.tolist(), strict=True))):
         rows = np.flatnonzero((side == s) & (group == g))
         theta = np.radians(np.mean(theta_i[rows]))
@@ -93,12 +106,17 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
         t, p = np.radians(theta_o[rows]), np.radians(dphi[rows])
         targets = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
         rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, g]))
-        mean, _, block = walk_to_targets(walk, start, targets, walks, rng)
+        mean, err, block = walk_to_targets(walk, start, targets, walks, rng,
+                                           min_order=3 if exact_second else 2,
+                                           covariance=covariance)
+        if exact_second:
+            mean = mean + second_order(walk.walker, start, targets)
         cos_o = np.abs(targets[:, 2])
         inverse = np.where(cos_o > 0.0, 1.0 / np.where(cos_o > 0.0, cos_o, 1.0), 0.0)
-        value[rows] = mean * inverse
-        cov[np.ix_(rows, rows)] = block * np.outer(inverse, inverse)
-    return value, np.sqrt(np.diag(cov)), cov
+        value[rows], var[rows] = mean * inverse, (err * inverse) ** 2
+        if covariance:
+            cov[np.ix_(rows, rows)] = block * np.outer(inverse, inverse)
+    return value, np.sqrt(var), cov
 
 
 class HigherOrderLobe:
@@ -108,13 +126,17 @@ class HigherOrderLobe:
     walk's, so the two add up to the full Smith microsurface); walks: walks per table column;
     seed: each column is walked from (seed, side, node, azimuth, hemisphere), so the
     tables are a fixed function of the parameters; theta_step_deg, phi_step_deg: the direction
-    grid (divisors of 90 and 180). A column is one azimuth and the polar angles of one
-    hemisphere of wo: an in-plane scan of one lobe needs two per incidence (0 and 180 deg).
+    grid (divisors of 90 and 180); exact_second: order 2 by quadrature (second_order) and only
+    orders >= 3 walked, for dielectric and conductor facets. A column is one azimuth and the
+    polar angles of one hemisphere of wo: an in-plane scan of one lobe needs two per incidence
+    (0 and 180 deg).
     """
 
     def __init__(self, parent, walks: int = WALKS, seed: int = 0,
-                 theta_step_deg: float = THETA_STEP_DEG, phi_step_deg: float = PHI_STEP_DEG):
+                 theta_step_deg: float = THETA_STEP_DEG, phi_step_deg: float = PHI_STEP_DEG,
+                 exact_second: bool = True):
         from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
+        from sim.bsdf.multiple_scattering.second_order import supports
 
         if int(walks) != walks or walks < 2:
             raise ValueError(f"walks must be an integer >= 2, got {walks!r}")
@@ -129,6 +151,7 @@ class HigherOrderLobe:
         self.theta_deg = np.linspace(0.0, 180.0, round(180.0 / theta_step_deg) + 1)
         self.phi_deg = np.linspace(0.0, 180.0, round(180.0 / phi_step_deg) + 1)
         self._columns: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self.exact_second = exact_second and supports(self.walk.walker)
 
     def column(self, side: int, node: int, j: int, lower: bool) -> tuple[np.ndarray, np.ndarray]:
         """(f, its standard error) at the polar angles of one hemisphere of wo (theta_deg up to
@@ -136,6 +159,8 @@ class HigherOrderLobe:
         light arriving from the side's hemisphere (+1 above, -1 below) at
         INCIDENCE_NODES_DEG[node]; 0 on the horizon (f falls linearly in cos o there, as the
         escape probability does, so it interpolates better than f |cos o|)."""
+        from sim.bsdf.multiple_scattering.second_order import second_order
+
         key = (side, node, j, lower)
         if key not in self._columns:
             theta = np.radians(INCIDENCE_NODES_DEG[node])
@@ -145,7 +170,11 @@ class HigherOrderLobe:
             targets = grid_directions(polar, self.phi_deg[j:j + 1])[:, 0]
             rng = np.random.default_rng(
                 np.random.SeedSequence([self.seed, side + 1, node, j, int(lower)]))
-            mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng)
+            mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng,
+                                           min_order=3 if self.exact_second else 2,
+                                           covariance=False)
+            if self.exact_second:
+                mean = mean + second_order(self.walk.walker, wi, targets)
             cos_o = np.abs(targets[:, 2])
             inverse = np.where(cos_o > 1e-12, 1.0 / np.maximum(cos_o, 1e-12), 0.0)
             self._columns[key] = (mean * inverse, err * inverse)
