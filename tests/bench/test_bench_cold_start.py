@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 PLAN = """
@@ -20,6 +22,7 @@ theta_o_deg = 10.0
 """
 
 
+@pytest.mark.slow
 def test_first_reading_with_an_empty_kernel_cache_is_within_the_modbus_timeout(tmp_path):
     plan = tmp_path / "plan.toml"
     plan.write_text(PLAN.format(instrument=ROOT / "examples/instruments/sim-modbus.toml"))

@@ -97,6 +97,7 @@ def bench_expectation(bench, readings, data):
     return truth / (phi * bench.integral.solid_angle_sr * factor * np.abs(data.wo[:, 2]))
 
 
+@pytest.mark.slow
 def test_reduced_values_match_the_bench_expectation_chi_square():
     run, readings, bench = simulate_run(SIM, plan())
     data = reduce_readings(run, readings)

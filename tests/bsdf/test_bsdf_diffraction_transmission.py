@@ -108,6 +108,7 @@ def hemisphere_energy(f_of, wi, sample_model, below, n=1500, seed=5):
     return g.mean(), g.std() / np.sqrt(n)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("theta,from_glass", [(0.0, False), (45.0, False), (75.0, False),
                                               (20.0, True), (35.0, True)])
 def test_transmitted_and_reflected_energy_are_the_microfacet_models(theta, from_glass):

@@ -53,6 +53,7 @@ def _cases():
     return [cases[i] for i in sorted(keep)]
 
 
+@pytest.mark.slow
 def test_dielectric_matches_mpmath_50_digits():
     """Worst relative error over the extreme set, against Walter's formulas at 50 digits."""
     worst = (0.0, None)
@@ -187,6 +188,7 @@ unit_vectors = st.tuples(*[st.floats(-1, 1, allow_subnormal=True)] * 3).filter(
 grazing_z = st.sampled_from([0.0, 1e-300, -1e-300, 1e-9, -1e-9, 1e-15, -1e-15])
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, derandomize=True)
 @given(wi=unit_vectors, wo=unit_vectors, zi=st.none() | grazing_z, zo=st.none() | grazing_z,
        log_alpha=st.floats(np.log(1e-4), np.log(4.0)),

@@ -71,6 +71,7 @@ def test_fit_with_multiple_scattering_recovers_alpha(data):
     assert single.to_dict()["multiple_scattering"] is None
 
 
+@pytest.mark.slow
 def test_uncertainty_covers_the_walks_monte_carlo_error(data):
     """Two fits whose tables are walked from different seeds differ by no more than their
     uncertainties allow (which include the tables' propagated Monte Carlo error)."""

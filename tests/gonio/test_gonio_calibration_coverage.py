@@ -30,6 +30,7 @@ def sim_serial(tmp_path):
                                                      "optics": OPTICS})
 
 
+@pytest.mark.slow
 def test_a_calibration_from_the_calib_plan_covers_the_shipped_plans(tmp_path):
     # one run of the shipped calib-detector plan (one test, not a fixture: xdist would run a
     # module fixture once per worker)

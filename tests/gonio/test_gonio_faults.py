@@ -55,6 +55,7 @@ def assert_contiguous_and_planned(run_dir, cfg, plan=PLAN):
                     "photodiode": {"bad_crc_prob": 0.005, "drop_prob": 0.002,
                                    "stall_prob": 0.002}}),
 ])
+@pytest.mark.slow
 def test_thousand_points_with_faults_complete(tmp_path, fast_store, instrument, faults):
     # short reply timeouts keep the stalls cheap; the detector's reply includes the bench's
     # physics, which a loaded machine can slow to tens of ms

@@ -118,6 +118,7 @@ FUZZ = settings(max_examples=80, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.data(), action=st.sampled_from(["replace", "delete", "stray"]), value=junk)
 def test_fuzzed_plans(data, action, value):

@@ -78,6 +78,7 @@ def reference(tmp_path_factory):
     return root, open_run(run_dir_of(proc)).readings()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("chain_seed", [11, 12])
 def test_sigkill_and_resume_keeps_every_point_once(reference, tmp_path, chain_seed):
     root, ref = reference
