@@ -46,8 +46,8 @@ def test_compiled_next_event_matches_numpy(name, micro):
     here = np.log(rng.random(n))
     there = np.log1p(-np.exp(here))
     args = (w_in, w_in, out, targets, here, there, False)
-    fast = walker._next_event_all(*args, compiled=True)
-    slow = walker._next_event_all(*args, compiled=False)
+    fast = walker.next_event_all(*args, compiled=True)
+    slow = walker.next_event_all(*args, compiled=False)
     assert np.all(np.isfinite(fast)) and np.count_nonzero(slow) > 0.2 * slow.size
     np.testing.assert_allclose(fast, slow, rtol=1e-6, atol=1e-300)
 

@@ -2,7 +2,7 @@
 
 micro.py's phase functions and Walker's escape probability, one event and one direction at a
 time, from the scalar formulas of sim.bsdf.primitives, for dielectric and conductor facets on
-GGX or Beckmann slopes; Walker._next_event_all (numpy) is their reference. walk_kernel.py walks
+GGX or Beckmann slopes; Walker.next_event_all (numpy) is their reference. walk_kernel.py walks
 with them, and next_event_all scores many events towards many directions, which is what makes
 HigherOrderLobe's tables cheap. Serial on purpose: numba's parallel loop ran 8x slower on the
 shared 2-core machine under load (oversubscription).
@@ -174,7 +174,7 @@ def surface_arguments(slopes: Distribution, micro, unit_mode: bool = False) -> t
 
 def compiled_next_event_all(slopes: Distribution, micro, w_in, out, targets, log_here,
                             log_there, unit_mode: bool = False) -> np.ndarray:
-    """Walker._next_event_all by the kernel: (n events, m targets) of phase x escape."""
+    """Walker.next_event_all by the kernel: (n events, m targets) of phase x escape."""
     result = np.empty((len(w_in), len(targets)))
     next_event_all(*surface_arguments(slopes, micro, unit_mode), np.ascontiguousarray(w_in),
                    np.ascontiguousarray(out), np.ascontiguousarray(log_here, dtype=np.float64),

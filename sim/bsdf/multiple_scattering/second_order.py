@@ -138,8 +138,8 @@ def _second_order_in_plane(walker: Walker, wi: np.ndarray, targets: np.ndarray, 
         d1 = flip(w1[live]) if crossed else w1[live]  # in the frame of the side it travels in
         here = np.full(len(live), not crossed)
         # phase(-d1 -> target) with the escape left out (log CDF 0), for every live node
-        phase2 = walker._next_event_all(-d1, -d1, here, targets, np.zeros(len(live)),
-                                        np.zeros(len(live)), False)
+        phase2 = walker.next_event_all(-d1, -d1, here, targets, np.zeros(len(live)),
+                                       np.zeros(len(live)), False)
         frame = flip(targets) if crossed else targets  # the targets in d1's frame
         same = frame[:, 2] > 0.0
         lam_e = np.where(same, slopes.signed_lambda(frame), slopes.signed_lambda(flip(frame)))

@@ -160,8 +160,8 @@ class Walker:
             if wo is not None and counted:
                 value[idx] += beta[idx] * self._next_event(w_in, m, out, wo[idx], new, other, unit)
             elif targets is not None and counted:
-                value[idx] += beta[idx, None] * self._next_event_all(w_in, m, out, targets, new,
-                                                                     other, unit)
+                value[idx] += beta[idx, None] * self.next_event_all(w_in, m, out, targets, new,
+                                                                    other, unit)
             scattered = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)), unit)
             if wo is not None and self.guided and micro.guidable:
                 scattered = guided_scatter(slopes, micro, w_in, m, out, wo[idx],
@@ -185,10 +185,13 @@ class Walker:
             idx = idx[beta[idx] > 0.0]
         return WalkResult(value, exit_dir, weight, truncated, orders, first)
 
-    def _next_event_all(self, w_in, m, out, targets, log_here, log_there, unit,
-                        compiled: bool = True) -> np.ndarray:
-        """_next_event from each of n events towards each of m targets: (n, m); compiled
-        (nee_kernel) for dielectric and conductor facets unless asked not to."""
+    def next_event_all(self, w_in: np.ndarray, m: np.ndarray, out: np.ndarray,
+                       targets: np.ndarray, log_here: np.ndarray, log_there: np.ndarray,
+                       unit: bool, compiled: bool = True) -> np.ndarray:
+        """Phase function x escape probability from each of n events (local w_in, facet m,
+        side out, log CDFs here and across) towards each of m world targets: (n, m); public
+        for second_order; compiled (nee_kernel) for dielectric and conductor facets unless
+        asked not to (then numpy, the reference)."""
         if compiled and nee_kernel.supports(self.slopes, self.micro):
             return nee_kernel.compiled_next_event_all(self.slopes, self.micro, w_in, out,
                                                       targets, log_here, log_there, unit)
