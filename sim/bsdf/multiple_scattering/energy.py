@@ -23,7 +23,7 @@ GRADING = 10
 AZIMUTH_NODES = 16
 
 
-def _gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+def gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Nodes and weights of n-point Gauss-Legendre on [0, 1]."""
     x, w = np.polynomial.legendre.leggauss(n)
     return 0.5 * (x + 1.0), 0.5 * w
@@ -34,7 +34,7 @@ def _graded_unit_rule() -> tuple[np.ndarray, np.ndarray]:
     GRADING times, so a stretch resolves what happens within 2^-GRADING of a breakpoint."""
     edges = 0.5 * 0.5 ** np.arange(GRADING + 1)
     edges = np.concatenate([[0.0], edges[::-1], 1.0 - edges[1:], [1.0]])
-    x, w = _gauss_legendre(PANEL_NODES)
+    x, w = gauss_legendre_unit(PANEL_NODES)
     width = np.diff(edges)
     return (edges[:-1, None] + width[:, None] * x).ravel(), (width[:, None] * w).ravel()
 
@@ -115,7 +115,7 @@ def _loss_quadrature(slopes, eta, theta: float, correlated: bool) -> float:
     reflected (psi_r, closed form) or refracted (bisection) direction meets the horizon; the
     azimuth split where the visibility cut begins (phi = pi/2), y -> -y symmetry used."""
     wi = np.array([np.sin(theta), 0.0, np.cos(theta)])
-    x, w = _gauss_legendre(AZIMUTH_NODES)
+    x, w = gauss_legendre_unit(AZIMUTH_NODES)
     phi = np.concatenate([0.5 * np.pi * x, 0.5 * np.pi * (1.0 + x)])
     w_phi = np.concatenate([w, w]) * 0.5 * np.pi * 2.0  # both arcs, and phi -> -phi
     kappa = slopes.alpha_x * wi[0] * np.cos(phi)  # s . wi_xy per unit rho

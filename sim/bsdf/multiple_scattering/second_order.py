@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.bsdf.multiple_scattering.energy import gauss_legendre_unit
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
 from sim.bsdf.multiple_scattering.walk import Walker, flip
 
@@ -30,16 +31,10 @@ AZIMUTH_NODES = 128
 HEIGHT_NODES = 8
 
 
-def _gauss_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1]."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (x + 1.0), 0.5 * w
-
-
 def _polar_nodes(polar: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Legendre nodes of w1_z in [-1, 0] and in [0, 1] (split at the horizon, where
     Lambda changes branch) and their weights."""
-    x, w = _gauss_unit(polar)
+    x, w = gauss_legendre_unit(polar)
     return np.concatenate([-x[::-1], x]), np.concatenate([w[::-1], w])
 
 
@@ -50,7 +45,7 @@ def _azimuth_nodes(breaks: np.ndarray, azimuth: int) -> tuple[np.ndarray, np.nda
     nodes there and no cell straddles a peak."""
     edges = np.unique(np.round(np.mod(breaks, 2.0 * np.pi), 12))
     edges = np.append(edges, edges[0] + 2.0 * np.pi)
-    x, w = _gauss_unit(max(8, azimuth // (len(edges) - 1)))
+    x, w = gauss_legendre_unit(max(8, azimuth // (len(edges) - 1)))
     spans = np.diff(edges)
     phi = (edges[:-1, None] + spans[:, None] * x[None, :]).ravel()
     return phi, (spans[:, None] * w[None, :]).ravel()
@@ -61,7 +56,7 @@ def _height_expectation(a0: float, lam1: np.ndarray, crossed: bool, lam_e: np.nd
     """H (p, m): the expectation over both events' heights of G1 = c^lam_e of wo leaving the
     second event, c its height CDF on wo's side (own side where same, else the other), for
     first directions of Lambda lam1 (p,) and targets (m,) of escape Lambda lam_e (p, m)."""
-    x, w = _gauss_unit(nodes)
+    x, w = gauss_legendre_unit(nodes)
     s, t = (a.ravel() for a in np.meshgrid(x, x, indexing="ij"))
     weight = np.outer(w, w).ravel()
     log_u1 = np.log(s) / a0
