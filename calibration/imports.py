@@ -90,10 +90,10 @@ def _assumed_sigma(path: Path, bsdf: np.ndarray, options: ImportOptions,
     if not 0.0 < options.sigma_relative < 10.0:
         raise CalibrationError(f"{path}: --sigma-relative must be in (0, 10), got "
                                f"{options.sigma_relative!r}")
-    floor = np.abs(bsdf).max() * 1e-12
-    sigma = options.sigma_relative * np.maximum(np.abs(bsdf), floor)
+    sigma = options.sigma_relative * np.abs(bsdf)
     return sigma, (f"assumed: u = {options.sigma_relative:g} * |bsdf| (the file states no "
-                   "uncertainties; --sigma-relative)")
+                   "uncertainties; --sigma-relative); values of 0 get no u from it and are "
+                   "left out (flag 'zero')")
 
 
 def _reduced(path: Path, wi: np.ndarray, wo: np.ndarray, bsdf: np.ndarray,
@@ -108,6 +108,10 @@ def _reduced(path: Path, wi: np.ndarray, wo: np.ndarray, bsdf: np.ndarray,
     finite = np.isfinite(bsdf) & np.isfinite(sigma) & (sigma > 0)
     valid = meta.pop("valid", np.ones(len(bsdf), bool)) & finite
     flags = meta.pop("flags", None)
+    zero = np.isfinite(bsdf) & (bsdf == 0) & ~(sigma > 0)
+    if zero.any():  # a relative u of 0 would weigh the point infinitely: it is left out
+        flags = np.array([""] * len(bsdf), dtype=object) if flags is None else flags.copy()
+        flags[zero] = ["zero" if not f else f"{f},zero" for f in flags[zero]]
     components = meta.pop("components", {})
     return ReducedData(wi, wo, bsdf, sigma, valid, transmission, meta, flags=flags,
                        components=components)

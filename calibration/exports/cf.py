@@ -129,16 +129,19 @@ def reading_unit(name: str) -> str:
     return next((u for suffix, u in READING_UNITS.items() if name.endswith(suffix)), "")
 
 
-def epoch_units(started_utc: str | None) -> str:
-    """CF time units of seconds since the run's start (UTC)."""
-    if not started_utc:
+def epoch_units(t0_epoch: float | None) -> str:
+    """CF time units of seconds since the run's clock origin (meta.json `t0_epoch`, the instant
+    every reading's `t_s` counts from), in UTC."""
+    if t0_epoch is None:
         return "s"
-    start = datetime.fromisoformat(started_utc.replace("Z", "+00:00")).astimezone(timezone.utc)
-    return f"seconds since {start.strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]}"
+    start = datetime.fromtimestamp(float(t0_epoch), tz=timezone.utc)
+    return f"seconds since {start.strftime('%Y-%m-%d %H:%M:%S.%f')}"
 
 
-def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path) -> Path:
-    """A run's readings (READING_DTYPE) as CF-1.8 NetCDF4, dimension `reading`."""
+def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path,
+                     t0_epoch: float | None = None) -> Path:
+    """A run's readings (READING_DTYPE) as CF-1.8 NetCDF4, dimension `reading`; `t_s` as time
+    since `t0_epoch` (without it, plain seconds)."""
     netCDF4 = _netcdf4()
     with netCDF4.Dataset(out, "w", format="NETCDF4") as ds:
         ds.createDimension("reading", len(readings))
@@ -160,7 +163,7 @@ def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path)
                 var.long_name = long_name
                 if name == "t_s":
                     var.standard_name = "time"
-                    var.units = epoch_units(record.get("started_utc"))
+                    var.units = epoch_units(t0_epoch)
                     var.calendar = "standard"
                 else:
                     var.units = reading_unit(name) or "1"

@@ -171,9 +171,10 @@ def load_fit(path: str | Path) -> FitResult:
     return result_from_json(fitted, str(path))
 
 
-def check_describes(result: FitResult, force: bool) -> list[str]:
+def check_describes(result: FitResult, force: bool, from_file: bool = False) -> list[str]:
     """Nothing when the fit describes the data (chi2/dof at most MAX_CHI2_DOF, fitted and held
-    out); with `force`, the warning to note in the file; else a CalibrationError saying so."""
+    out); with `force`, the warning to note in the file; else a CalibrationError saying so
+    (from_file: the fit came from --fit, so the advice is a better fit, not that option)."""
     worst = max(result.chi2_dof_fit, result.chi2_dof_heldout or 0.0)
     if worst <= MAX_CHI2_DOF:
         return []
@@ -182,16 +183,18 @@ def check_describes(result: FitResult, force: bool) -> list[str]:
             f"{MAX_CHI2_DOF:g}): the model does not describe the data within their "
             "uncertainties")
     if not force:
-        raise CalibrationError(f"export: {said}; choose a better fit (fit options such as "
-                               "--multiple-scattering, or --fit FIT.json) or pass --force")
-    return [f"exported with --force although {said}"]
+        better = ("give --fit a better fit (e.g. from gonio fit --json --multiple-scattering)"
+                  if from_file else "choose a better fit (fit options such as "
+                  "--multiple-scattering, or --fit FIT.json)")
+        raise CalibrationError(f"export: {said}; {better} or pass --force")
+    return [f"exported although {said} (forced)"]
 
 
 def fit_for_export(data: ReducedData, options: FitOptions | None, fit_file: str | Path | None,
                    force: bool) -> tuple[FitResult, list[str]]:
     """The fit to export (from `fit_file`, else fitted with `options`) and its notes."""
     result = load_fit(fit_file) if fit_file is not None else fit(data, options)
-    return result, check_describes(result, force)
+    return result, check_describes(result, force, from_file=fit_file is not None)
 
 
 def astm_model_tables(data: ReducedData, result: FitResult, notes: Sequence[str]

@@ -30,4 +30,4 @@ def write_netcdf(run: Run, out: Path) -> Path:
     """CF-1.8 NetCDF4 file of the readings, dimension `reading` (calibration.exports.cf)."""
     from calibration.exports.cf import write_raw_netcdf
 
-    return write_raw_netcdf(run.readings(), run_record(run), out)
+    return write_raw_netcdf(run.readings(), run_record(run), out, run.meta.get("t0_epoch"))

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+from pathlib import Path
 
 from gonio.errors import GonioError
 from sim.bsdf.distributions import WITH_KERNELS
@@ -86,6 +88,10 @@ def run(args: argparse.Namespace) -> int:
         if args.validate and min(args.validate_entries, args.validate_points) < 1:
             raise ValueError("--validate-entries and --validate-points must be >= 1")
         check_storable(spec, args.out)
+        folder = Path(args.out).resolve().parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK):
+            raise GonioError(f"cannot write {args.out}: {folder} is not a writable folder "
+                             "(checked before baking)")
         with dask_client(args.workers, args.scheduler) as client:
             table = bake(spec, client=client, progress=args.progress)
             layout = describe(args.workers, args.scheduler)

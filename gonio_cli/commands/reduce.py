@@ -113,7 +113,7 @@ def summary(data) -> list[str]:
             sel = (theta_i == ti) & (data.transmission == t)
             if not sel.any():
                 continue
-            good = sel & data.valid
+            good = sel & data.valid & (data.bsdf != 0)
             peak = f"{data.bsdf[good].max():11.4g}" if good.any() else f"{'-':>11}"
             rel = (f"{np.median(data.sigma[good] / np.abs(data.bsdf[good])):14.3g}"
                    if good.any() else f"{'-':>14}")

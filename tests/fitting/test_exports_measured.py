@@ -10,6 +10,7 @@ import csv
 import json
 import math
 from dataclasses import replace
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,13 @@ def test_plain_csv_columns_assumptions_and_errors(glass, tmp_path, capsys):
     assert main(["fit", "--import", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "plain.csv: the CSV has no uncertainties" in err
+    # a value of 0 gets no u from a relative assumption: left out and flagged, not weighed
+    # with a vanishing sigma
+    path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,bsdf\n"
+                    "0,0,10,0,0.5\n0,0,20,0,0.0\n0,0,30,0,0.2\n")
+    zeros = read_measured(path, ImportOptions(eta=1.51, sigma_relative=0.02))
+    assert zeros.valid.tolist() == [True, False, True]
+    assert list(zeros.flags) == ["", "zero", ""]
     path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,bsdf\n0,0,10,1\n")
     with pytest.raises(CalibrationError, match=r"plain.csv: no column phi_o"):
         read_measured(path)
@@ -158,11 +166,14 @@ def test_raw_netcdf_is_cf_with_an_epoch(tmp_path):
     r["t_s"] = [0.0, 0.5, 1.25, 2.0]
     r["power_w"] = [1e-9, 1e-3, 2e-6, 3e-6]
     r["saturated"] = [False, False, True, False]
-    path = write_raw_netcdf(r, RECORD, tmp_path / "raw.nc")
+    # t_s counts from meta.json's t0_epoch, taken before the devices open: seconds before the
+    # record's started_utc (00:20:05.757 here); the times must decode from t0, not from it
+    t0 = datetime(2026, 12, 2, 0, 20, 3, 250000, tzinfo=timezone.utc).timestamp()
+    path = write_raw_netcdf(r, RECORD, tmp_path / "raw.nc", t0_epoch=t0)
     checked = cf_counts(path)
     assert checked["said"] == [] and checked["counts"]["ERROR"] == 0
     with xarray.open_dataset(path) as ds:
-        start = np.datetime64("2026-12-02T00:20:05.757")
+        start = np.datetime64("2026-12-02T00:20:03.250")
         np.testing.assert_array_equal(ds["t_s"].values - start,
                                       (r["t_s"] * 1e9).astype("timedelta64[ns]"))
         meanings = np.array(ds["kind"].attrs["flag_meanings"].split())
@@ -315,12 +326,12 @@ def test_model_export_takes_a_fit_json_and_refuses_a_bad_one(glass, tmp_path):
     fit_json.write_text(json.dumps(bad))
     for fmt, what in (("mitsuba", "model"), ("zemax", "reduced"), ("astm", "model")):
         with pytest.raises(CalibrationError, match=r"chi2/dof is 2e\+05.*does not describe "
-                                                   r"the data.*--force"):
+                                                   r"the data.*; give --fit a better fit.*--force"):
             write_data(data, fmt, what, tmp_path / f"c.{fmt}", RECORD, request)
     forced, notes = write_data(data, "mitsuba", "model", tmp_path / "d.xml", RECORD,
                                replace(request, force=True))
-    assert notes[0].startswith("exported with --force although the ggx fit's fitted chi2/dof")
-    assert notes[0].split("--force")[1] in forced[0].read_text()
+    assert notes[0].startswith("exported although the ggx fit's fitted chi2/dof")
+    assert notes[0].endswith("(forced)") and notes[0] in forced[0].read_text()
 
 
 def test_zemax_measured_asymmetrical_and_out_of_plane_incidence(glass):

@@ -78,7 +78,9 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys, extra, message):
 
 def test_unwritable_output_is_one_line(tmp_path, capsys):
     assert main([*ARGS, "--out", str(tmp_path / "missing" / "x.npz")]) == 2
-    assert "cannot write" in capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert "cannot write" in err and "checked before baking" in err
+    assert "baked" not in out  # refused before the bake, not after it
 
 
 def test_unreachable_scheduler_is_named():
