@@ -130,11 +130,33 @@ def run(args: argparse.Namespace) -> int:
     out["noise_model"] = data.meta.get("noise_model")
     if data.meta.get("emulator_truth"):
         out["emulator_truth"] = data.meta["emulator_truth"]
+    out["warnings"] = fit_warnings(out, imported_from=data.meta.get("imported_from"))
     if args.json:
+        for line in out["warnings"]:
+            print(f"gonio fit: {line}", file=sys.stderr)
         print(json.dumps(out))
         return 0
     print(summary(out))
     return 0
+
+
+def fit_warnings(out: dict, imported_from: str | None = None) -> list[str]:
+    """Warnings of a fit result dict: a chi2/dof (fitted or held out) above the limit model
+    exports refuse at (calibration.exports.model.MAX_CHI2_DOF), and the likely cause."""
+    from calibration.exports.model import MAX_CHI2_DOF
+
+    worst = max(out["chi2_dof_fit"], out["chi2_dof_heldout"] or 0.0)
+    if worst <= MAX_CHI2_DOF:
+        return []
+    look = "" if imported_from else f" (see gonio plot {out['run']} --fit)"
+    lines = [f"warning: chi2/dof {worst:.3g} is well above 1: the model does not describe the "
+             f"points within their uncertainties{look}; model exports refuse this fit"]
+    alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
+    if alpha > ROUGH_ALPHA and not out.get("multiple_scattering"):
+        lines.append(f"hint: at alpha {alpha:.3g} light scatters more than once between "
+                     "microfacets, which single scattering leaves out: try "
+                     "--multiple-scattering")
+    return lines
 
 
 def _to_stderr(line: str) -> None:
@@ -165,15 +187,7 @@ def summary(out: dict) -> str:
                else "not distinguishable from the runner-up")
     lines.append(f"  candidates chi2/dof: {others} -> {verdict}")
     lines += [f"  skipped: {c['failed']}" for c in out["candidates"] if "failed" in c]
-    if out["chi2_dof_fit"] > 3.0:
-        lines.append("  warning: chi2/dof well above 1: the model does not describe the fitted "
-                     "points within their uncertainties (see gonio plot RUN --fit)")
-        alpha = max(p["value"] for name, p in out["parameters"].items()
-                    if name.startswith("alpha"))
-        if alpha > ROUGH_ALPHA and not out.get("multiple_scattering"):
-            lines.append(f"  hint: at alpha {alpha:.3g} light scatters more than once between "
-                         "microfacets, which single scattering leaves out: try "
-                         "--multiple-scattering")
+    lines += [f"  {line}" for line in out.get("warnings", [])]
     if out.get("multiple_scattering"):
         ms = out["multiple_scattering"]
         lines.append(f"  multiple scattering: orders >= 2 by {ms['walks']} random walks per "
