@@ -46,9 +46,17 @@ COMMANDS = [
 ]
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (and exit 2), as every other error
+    of the command line is; `--help` still prints the usage."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The full parser, one sub-command per module in COMMANDS."""
-    parser = argparse.ArgumentParser(
+    """The full parser, one sub-command per module in COMMANDS (each a OneLineParser)."""
+    parser = OneLineParser(
         prog="gonio", description="A virtual gonioreflectometer with real instrument drivers."
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -29,3 +29,19 @@ def test_export_refuses_what_a_format_does_not_hold(fmt, what, tmp_path, capsys)
     err = capsys.readouterr().err.strip()
     assert err == (f"gonio export: error: export: --what {what} is not written as {fmt} (it "
                    f"takes {' or '.join(ACCEPTS[fmt])})")
+
+
+@pytest.mark.parametrize("argv", [
+    ["export", "RUN", "--format", "foo", "--out", "x.csv"],
+    ["export", "RUN", "--format", "csv", "--what", "bogus", "--out", "x.csv"],
+    ["lut", "--kind", "bogus", "--out", "x.npz"],
+    ["export", "RUN"],
+    ["no-such-verb"],
+])
+def test_a_usage_error_is_one_line_naming_help(argv, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error:" in err and "--help)" in err
+    assert "usage:" not in err
