@@ -171,14 +171,21 @@ def load_fit(path: str | Path) -> FitResult:
     return result_from_json(fitted, str(path))
 
 
+def worst_chi2_dof(fitted: float, held_out: float | None) -> tuple[float, str]:
+    """(the larger of a fit's fitted and held-out chi2/dof, "fitted" or "held-out"): what
+    MAX_CHI2_DOF is held against, by exports and by `gonio fit`'s warning alike."""
+    if held_out is not None and held_out > fitted:
+        return held_out, "held-out"
+    return fitted, "fitted"
+
+
 def check_describes(result: FitResult, force: bool, from_file: bool = False) -> list[str]:
     """Nothing when the fit describes the data (chi2/dof at most MAX_CHI2_DOF, fitted and held
     out); with `force`, the warning to note in the file; else a CalibrationError saying so
     (from_file: the fit came from --fit, so the advice is a better fit, not that option)."""
-    worst = max(result.chi2_dof_fit, result.chi2_dof_heldout or 0.0)
+    worst, which = worst_chi2_dof(result.chi2_dof_fit, result.chi2_dof_heldout)
     if worst <= MAX_CHI2_DOF:
         return []
-    which = "fitted" if worst == result.chi2_dof_fit else "held-out"
     said = (f"the {result.distribution} fit's {which} chi2/dof is {worst:.3g} (above "
             f"{MAX_CHI2_DOF:g}): the model does not describe the data within their "
             "uncertainties")

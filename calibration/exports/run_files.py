@@ -30,15 +30,16 @@ def write_run(run_dir: str | Path, fmt: str, what: str, out: Path, request: Expo
     be reduced is written raw, with a note saying why."""
     from calibration.exports.bluesky import write_jsonl
     from calibration.exports.raw import write_csv, write_netcdf
-    from calibration.pipeline import reduce_run
+    from calibration.pipeline import DEFAULT_SLOPE_FIT, reduce_stored
     from gonio.store import open_run
 
     run = open_run(run_dir)
     notes: list[str] = []
     if what != "raw":
-        try:
-            data = reduce_run(run_dir, request.calibration, request.shot_noise_w,
-                              request.subtract_signature)
+        try:  # the run already open (reduce_run would open and read it again)
+            data = reduce_stored(run, run.readings(), request.calibration,
+                                 request.shot_noise_w, request.subtract_signature,
+                                 slope_options=DEFAULT_SLOPE_FIT)
         except GonioError as exc:
             if not fallback:
                 raise

@@ -143,9 +143,9 @@ def run(args: argparse.Namespace) -> int:
 def fit_warnings(out: dict, imported_from: str | None = None) -> list[str]:
     """Warnings of a fit result dict: a chi2/dof (fitted or held out) above the limit model
     exports refuse at (calibration.exports.model.MAX_CHI2_DOF), and the likely cause."""
-    from calibration.exports.model import MAX_CHI2_DOF
+    from calibration.exports.model import MAX_CHI2_DOF, worst_chi2_dof
 
-    worst = max(out["chi2_dof_fit"], out["chi2_dof_heldout"] or 0.0)
+    worst, _ = worst_chi2_dof(out["chi2_dof_fit"], out["chi2_dof_heldout"])
     if worst <= MAX_CHI2_DOF:
         return []
     look = "" if imported_from else f" (see gonio plot {out['run']} --fit)"
