@@ -67,7 +67,9 @@ def test_reads_recover_from_garbled_or_lost_replies(rig, transport, kind):
     # on RTU a retry is an echo and a read, each lost with p = 0.3; on a loaded machine a
     # reply may also miss the 0.05 s timeout: ten retries keep all 25 reads from running out
     r = rig(transport, stage_faults={kind: 0.3, "seed": 11}, reply_s=0.05, read_retries=10)
-    r.stage.move_to(12.5)  # instant clock: done at once (a write: may fail only if unlucky)
+    # put the axis at 12.5 on the emulator's side (instant clock): a write is never retried, so
+    # a move through the faulty link could fail when its one reply is lost or late
+    r.stage_emu.axis.move_to(12.5)
     values = [r.stage.position() for _ in range(25)]
     assert values == [12.5] * 25  # never a wrong value, whatever the fault
     counts = r.stage_emu.faults.counts
