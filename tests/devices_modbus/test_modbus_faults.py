@@ -121,7 +121,7 @@ def test_lost_reply_to_home_is_resolved_by_the_homed_bit(rig):
 @pytest.mark.parametrize("transport", TRANSPORTS)
 def test_lost_reply_to_stop_is_reported_not_resent(rig, transport):
     r = rig(transport, reply_s=0.05, time_scale=1.0)
-    r.stage.move_to(90.0)
+    r.stage_emu.axis.move_to(90.0)  # moving (started on the emulator's side: only stop is tested)
     seen = count_commands(r.stage_emu)
     r.stage_emu.faults = StallWriteReplies(FaultSpec())
     with pytest.raises(DeviceTimeout, match="waiting for reply to a write"):
