@@ -63,7 +63,6 @@ def check_suffix(fmt: str, out_path: Path) -> None:
         return
     others = [f for f, suffixes in SUFFIXES.items() if suffix in suffixes]
     said = f"ends in {suffix}" if suffix else "has no suffix"
-    hint = (f" (a {' or '.join(others)} file's: did you mean --format {others[0]}?)"
-            if others else "")
+    hint = f", which is --format {' or '.join(others)}'s" if others else ""
     raise CalibrationError(f"export: --out {out_path} {said}{hint}; --format {fmt} writes "
                            f"{' or '.join(SUFFIXES[fmt])}")
