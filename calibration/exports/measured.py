@@ -23,7 +23,7 @@ ANGLE_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg")
 META_KEYS = ("eta", "k", "kind", "lit_from", "wavelength_nm", "aperture_half_angle_deg",
              "aperture_sr", "aperture_from", "beam_divergence_deg", "noise_model",
              "beam_mean_w", "beam_drift_rms", "calibration", "coverage_k", "sample", "optics",
-             "assumption")
+             "assumption", "budget")
 #: Decimals of the angles in degrees that text exports write: 1e-9 deg, far below the stages'
 #: steps (about 1e-4 deg), so rounding drops float noise (29.999999999999996) and nothing
 #: measured.
