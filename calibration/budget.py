@@ -158,3 +158,30 @@ def expanded(data) -> tuple[float, np.ndarray]:
     if not (math.isfinite(k) and k > 0):
         raise ValueError(f"coverage factor k must be a finite number > 0, got {k!r}")
     return k, k * data.sigma
+
+
+def summary(data) -> dict:
+    """The budget of a ReducedData per component, over its valid points with u > 0 and f != 0:
+    `kind` (own or shared; None where the data do not say, as for an imported file), the median
+    and largest share u_c / u and the median u_c / |f|; then k, the median U / |f|, the number
+    of points summarised and the budget's notes. What `gonio reduce` prints and `gonio fit
+    --json` gives as "budget" (None for a statistic of no points)."""
+    good = data.valid & (data.sigma > 0) & (data.bsdf != 0) & np.isfinite(data.bsdf)
+    budget = data.meta.get("budget")
+    shared = set((budget or {}).get("shared", ()))
+
+    def median(x: np.ndarray) -> float | None:
+        return float(np.median(x)) if len(x) else None
+
+    components = {}
+    for name, u in sorted(data.components.items()):
+        share = np.asarray(u)[good] / data.sigma[good]
+        components[name] = {
+            "kind": None if budget is None else "shared" if name in shared else "own",
+            "median_share": median(share),
+            "max_share": float(share.max()) if len(share) else None,
+            "median_relative": median(np.asarray(u)[good] / np.abs(data.bsdf[good]))}
+    k, big_u = expanded(data)
+    return {"components": components, "coverage_k": k,
+            "median_expanded_relative": median(big_u[good] / np.abs(data.bsdf[good])),
+            "points": int(good.sum()), "notes": list((budget or {}).get("notes", ()))}

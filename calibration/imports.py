@@ -6,8 +6,11 @@ transmission; bsdf; optional sigma and wavelength_nm).
 
 Uncertainties come from the file where it has them (CSV `sigma`, NetCDF); otherwise from a
 stated assumption (`sigma_relative`: u = that fraction of |bsdf|, put into meta["noise_model"]),
-and a file with neither is one error naming it. The index comes from the file (a gonio CSV's
-`# eta:` line, the NetCDF's attributes) or from `eta`.
+and the index from the file (the `# eta: ...` line of gonio's CSV, ASTM and Zemax exports, else
+their record's sample block; the NetCDF's attributes) or from `eta`. Every input a file lacks
+and no option gives is named in one error (MissingInputs). The run's record that gonio's files
+carry (`# key: JSON` lines before the facts' `quantity`; the NetCDF's record attributes) goes
+into meta["record"], so that a file written from the import carries it on.
 """
 
 from __future__ import annotations
@@ -24,7 +27,18 @@ from calibration.exports.measured import ANGLE_COLUMNS, META_KEYS, unit_vectors
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
-ALIASES = {"bsdf_per_sr": "bsdf", "sigma_per_sr": "sigma"}  # `gonio reduce`'s reduced.csv
+# the column names of reduced.csv as `gonio reduce` wrote it before it used write_reduced_csv
+ALIASES = {"bsdf_per_sr": "bsdf", "sigma_per_sr": "sigma"}
+
+
+class MissingInputs(CalibrationError):
+    """Inputs a file lacks and no option gives, all of them in one error."""
+
+    def __init__(self, path: Path, problems: list[str]) -> None:
+        self.path, self.problems = path, problems
+        listed = (problems[0] if len(problems) == 1 else f"{len(problems)} inputs missing: "
+                  + "; ".join(f"({n}) {p}" for n, p in enumerate(problems, 1)))
+        super().__init__(f"{path}: {listed}")
 
 
 @dataclass(frozen=True)
@@ -38,7 +52,8 @@ class ImportOptions:
 
 def read_measured(path: str | Path, options: ImportOptions | None = None) -> ReducedData:
     """The file's measurements as ReducedData (its format from the suffix, or, for a text
-    file of another suffix, from its first keyword)."""
+    file of another suffix, from its first keyword); a MissingInputs error names every input
+    the file lacks."""
     path = Path(path)
     options = options or ImportOptions()
     if not path.is_file():
@@ -48,6 +63,7 @@ def read_measured(path: str | Path, options: ImportOptions | None = None) -> Red
         from calibration.exports.cf import read_reduced_netcdf
 
         data = read_reduced_netcdf(path)
+        data.meta["eta"] = _inputs(path, options, data.meta, "the NetCDF file", True)
         data.meta.setdefault("assumption", "uncertainties as the file states them")
     elif suffix == ".astm" or (suffix != ".csv" and _has_line(path, "VARS")):
         data = _from_astm(path, options)
@@ -56,12 +72,29 @@ def read_measured(path: str | Path, options: ImportOptions | None = None) -> Red
     else:
         data = _from_csv(path, options)
     data.meta["imported_from"] = str(path)
-    eta = options.eta if options.eta is not None else data.meta.get("eta")
-    if eta is None:
-        raise CalibrationError(f"{path}: the file gives no refractive index (eta), which the "
-                               "fit needs for a dielectric; give it with --eta")
-    data.meta["eta"] = float(eta)
     return data
+
+
+def _inputs(path: Path, options: ImportOptions, meta: dict, what: str,
+            has_sigma: bool) -> float:
+    """The index to use (the option's, else the file's); one MissingInputs error naming each
+    input the file lacks that no option gives (or an option's value out of range)."""
+    problems = []
+    relative = options.sigma_relative
+    if not has_sigma and relative is None:
+        problems.append(f"{what} has no uncertainties, which the fit needs: give "
+                        "--sigma-relative FRACTION to assume u = FRACTION * |bsdf|")
+    elif not has_sigma and not 0.0 < relative < 10.0:
+        problems.append(f"--sigma-relative must be in (0, 10), got {relative!r}")
+    eta = options.eta if options.eta is not None else meta.get("eta")
+    if eta is None:
+        problems.append("the file gives no refractive index (eta), which the fit needs for a "
+                        "dielectric: give --eta")
+    elif not (isinstance(eta, (int, float)) and math.isfinite(eta) and eta > 0):
+        problems.append(f"eta must be a number > 0, got {eta!r}")
+    if problems:
+        raise MissingInputs(path, problems)
+    return float(eta)
 
 
 def _starts_with(path: Path, magic: tuple[bytes, ...]) -> bool:
@@ -80,28 +113,21 @@ def _has_line(path: Path, keyword: str) -> bool:
         raise CalibrationError(f"{path}: {exc.strerror}") from None
 
 
-def _assumed_sigma(path: Path, bsdf: np.ndarray, options: ImportOptions,
-                   what: str) -> tuple[np.ndarray, str]:
-    """(sigma, the assumption stated) for a file without uncertainties; an error without
-    sigma_relative."""
-    if options.sigma_relative is None:
-        raise CalibrationError(f"{path}: {what} has no uncertainties, which the fit needs; give "
-                               "--sigma-relative FRACTION to assume u = FRACTION * |bsdf|")
-    if not 0.0 < options.sigma_relative < 10.0:
-        raise CalibrationError(f"{path}: --sigma-relative must be in (0, 10), got "
-                               f"{options.sigma_relative!r}")
-    sigma = options.sigma_relative * np.abs(bsdf)
-    return sigma, (f"assumed: u = {options.sigma_relative:g} * |bsdf| (the file states no "
-                   "uncertainties; --sigma-relative); values of 0 get no u from it and are "
-                   "left out (flag 'zero')")
+def _assumed_sigma(bsdf: np.ndarray, relative: float) -> tuple[np.ndarray, str]:
+    """(sigma, the assumption stated) for a file without uncertainties (_inputs checked
+    `relative`)."""
+    return relative * np.abs(bsdf), (
+        f"assumed: u = {relative:g} * |bsdf| (the file states no uncertainties; "
+        "--sigma-relative); values of 0 get no u from it and are left out (flag 'zero')")
 
 
 def _reduced(path: Path, wi: np.ndarray, wo: np.ndarray, bsdf: np.ndarray,
              sigma: np.ndarray | None, transmission: np.ndarray, meta: dict,
-             options: ImportOptions, what: str) -> ReducedData:
-    """ReducedData of imported samples; the noise model says where sigma comes from."""
+             options: ImportOptions) -> ReducedData:
+    """ReducedData of imported samples (meta["eta"] set by _inputs); the noise model says
+    where sigma comes from."""
     if sigma is None:
-        sigma, meta["noise_model"] = _assumed_sigma(path, bsdf, options, what)
+        sigma, meta["noise_model"] = _assumed_sigma(bsdf, options.sigma_relative)
         meta["assumption"] = meta["noise_model"]
     else:
         meta.setdefault("noise_model", f"as stated in {path.name}")
@@ -117,17 +143,40 @@ def _reduced(path: Path, wi: np.ndarray, wo: np.ndarray, bsdf: np.ndarray,
                        components=components)
 
 
-def _header(lines: list[str]) -> dict:
-    """The `# key: JSON` lines of a gonio CSV (others are left out)."""
-    out = {}
-    for line in lines:
-        key, sep, value = line[1:].strip().partition(": ")
+def _header(comments: list[str]) -> tuple[dict, dict]:
+    """(record, facts) of the `key: JSON` comment lines of a gonio file (comment text without
+    its `#`; other lines are left out): the record is what comes before the facts' first line,
+    `quantity` (measured.fact_lines); a file without one gives every entry as a fact and those
+    that are not META_KEYS as its record."""
+    entries = []
+    for line in comments:
+        key, sep, value = line.strip().partition(": ")
         if sep:
             try:
-                out[key] = json.loads(value)
+                entries.append((key, json.loads(value)))
             except ValueError:
                 continue
-    return out
+    keys = [key for key, _ in entries]
+    if "quantity" in keys:
+        start = keys.index("quantity")
+        return dict(entries[:start]), dict(entries[start:])
+    return {k: v for k, v in entries if k not in META_KEYS}, dict(entries)
+
+
+def _facts(path: Path, options: ImportOptions, comments: list[str], what: str,
+           has_sigma: bool) -> dict:
+    """The meta of a text file's comments: its facts (META_KEYS, from the record where the
+    facts lack one, e.g. its sample block), the index (the option's, else the `eta` fact, else
+    the sample block's: _inputs) and meta["record"]."""
+    record, facts = _header(comments)
+    meta = {k: v for k, v in {**record, **facts}.items() if k in META_KEYS}
+    sample = record.get("sample")
+    if "eta" not in meta and isinstance(sample, dict) and "eta" in sample:
+        meta["eta"] = sample["eta"]
+    meta["eta"] = _inputs(path, options, meta, what, has_sigma)
+    if record:
+        meta["record"] = record
+    return meta
 
 
 def _from_csv(path: Path, options: ImportOptions) -> ReducedData:
@@ -137,8 +186,6 @@ def _from_csv(path: Path, options: ImportOptions) -> ReducedData:
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationError(f"{path}: not a readable text file ({exc})") from None
     lines = text.splitlines()
-    meta = {k: v for k, v in _header([ln for ln in lines if ln.startswith("#")]).items()
-            if k in META_KEYS}
     rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
     if len(rows) < 2:
         raise CalibrationError(f"{path}: no data rows under a header of column names")
@@ -155,6 +202,8 @@ def _from_csv(path: Path, options: ImportOptions) -> ReducedData:
                                "phi_i_deg, theta_o_deg, phi_o_deg, bsdf, optional sigma, "
                                "wavelength_nm)")
     body = rows[1:]
+    meta = _facts(path, options, [ln[1:] for ln in lines if ln.startswith("#")], "the CSV",
+                  "sigma" in index)
 
     def column(name: str) -> np.ndarray:
         k = index[name]
@@ -178,7 +227,7 @@ def _from_csv(path: Path, options: ImportOptions) -> ReducedData:
         meta["flags"] = np.array([r[index["flags"]].replace(";", ",") for r in body])
     meta["components"] = {n[2:]: column(n) for n in names if n.startswith("u_")}
     wi, wo = unit_vectors(ti, pi), unit_vectors(to, po)
-    return _reduced(path, wi, wo, bsdf, sigma, wo[:, 2] < 0, meta, options, "the CSV")
+    return _reduced(path, wi, wo, bsdf, sigma, wo[:, 2] < 0, meta, options)
 
 
 def _is_number(text: str) -> bool:
@@ -197,12 +246,11 @@ def _from_astm(path: Path, options: ImportOptions) -> ReducedData:
     if table.values.shape[1] != 1:
         raise CalibrationError(f"{path}: {table.values.shape[1]} value columns (one per "
                                "wavelength); the fit takes one wavelength: split the file")
+    meta = _facts(path, options, table.comments, "an ASTM E1392 file", False)
     wi, wo, transmission = directions(table)
-    meta = {}
     if math.isfinite(table.wavelengths_nm[0]):
         meta["wavelength_nm"] = table.wavelengths_nm[0]
-    return _reduced(path, wi, wo, table.values[:, 0], None, transmission, meta, options,
-                    "an ASTM E1392 file")
+    return _reduced(path, wi, wo, table.values[:, 0], None, transmission, meta, options)
 
 
 def _from_zemax(path: Path, options: ImportOptions) -> ReducedData:
@@ -212,10 +260,8 @@ def _from_zemax(path: Path, options: ImportOptions) -> ReducedData:
     from calibration.exports.zemax import on_side, read_zemax, scatter_directions
 
     table = read_zemax(path)
-    eta = options.eta
-    if table.scatter_type == "BTDF" and eta is None:
-        raise CalibrationError(f"{path}: a BTDF's incidence angles follow from its "
-                               "direct-transmission angles only with the index: give --eta")
+    meta = _facts(path, options, table.comments, "a Zemax tabular BSDF file", False)
+    eta = meta["eta"]
     wi, wo, bsdf = [], [], []
     for a, angle in enumerate(table.angle_deg):
         theta_i = (angle if table.scatter_type == "BRDF" else
@@ -239,4 +285,4 @@ def _from_zemax(path: Path, options: ImportOptions) -> ReducedData:
         wi.append(np.broadcast_to([-math.sin(ti), 0.0, math.cos(ti)], (int(keep.sum()), 3)))
     wo_all = np.concatenate(wo)
     return _reduced(path, np.concatenate(wi), wo_all, np.concatenate(bsdf), None,
-                    wo_all[:, 2] < 0, {}, options, "a Zemax tabular BSDF file")
+                    wo_all[:, 2] < 0, meta, options)

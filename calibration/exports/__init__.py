@@ -18,6 +18,10 @@ ACCEPTS = {"csv": ("raw", "reduced"), "netcdf": ("raw", "reduced"), "bluesky": (
 DEFAULT_WHAT = {"csv": "reduced", "netcdf": "reduced", "bluesky": "raw", "zemax": "reduced",
                 "astm": "reduced", "mitsuba": "model"}
 FORMATS = tuple(ACCEPTS)
+# The suffixes a format's file may have: those `--import` (calibration.imports) and the other
+# tools recognise it by; the first is the usual one.
+SUFFIXES = {"csv": (".csv",), "netcdf": (".nc",), "bluesky": (".jsonl",),
+            "zemax": (".bsdf", ".zmx", ".txt"), "astm": (".astm", ".txt"), "mitsuba": (".xml",)}
 RAW_FORMATS = ("csv", "netcdf")
 MODEL_FORMATS = ("zemax", "mitsuba")
 
@@ -30,7 +34,8 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
     reduced data), zemax and astm the reduced data (the model filling
     only where there is no data), mitsuba the model. Zemax and ASTM write one file per
     measured side: the BTDF at out_path (the BRDF if only reflection was measured), the other
-    beside it as <stem>-BRDF<suffix>."""
+    beside it as <stem>-BRDF<suffix>. out_path must end in one of the format's SUFFIXES
+    (checked before any work)."""
     request = request or ExportRequest()
     if fmt not in ACCEPTS:
         raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got "
@@ -39,6 +44,7 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
     if what not in ACCEPTS[fmt]:
         raise CalibrationError(f"export: --what {what} is not written as {fmt} (it takes "
                                f"{' or '.join(ACCEPTS[fmt])})")
+    check_suffix(fmt, Path(out_path))
     # The writers load on use: the CLI reads FORMATS here when it starts, and the reduction and
     # the fit bring in scipy.
     from calibration.exports.run_files import write_run
@@ -47,3 +53,16 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
                        or request.shot_noise_w is not None or request.subtract_signature)
     return write_run(run_dir, fmt, what, Path(out_path), request,
                      fallback=not asked_to_reduce and fmt in RAW_FORMATS)
+
+
+def check_suffix(fmt: str, out_path: Path) -> None:
+    """A CalibrationError unless out_path ends in one of the format's SUFFIXES (naming the
+    format it would suit)."""
+    suffix = out_path.suffix.lower()
+    if suffix in SUFFIXES[fmt]:
+        return
+    others = [f for f, suffixes in SUFFIXES.items() if suffix in suffixes]
+    said = f"ends in {suffix}" if suffix else "has no suffix"
+    hint = f", which is --format {' or '.join(others)}'s" if others else ""
+    raise CalibrationError(f"export: --out {out_path} {said}{hint}; --format {fmt} writes "
+                           f"{' or '.join(SUFFIXES[fmt])}")

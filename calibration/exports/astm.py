@@ -20,12 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.exports.measured import spherical_deg, unit_vectors
+from calibration.exports.measured import angle_text, spherical_deg, unit_vectors
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
 ANGLES = ("theta_i", "phi_i", "theta_s", "phi_s")
 DATA_TYPES = ("BRDF", "BTDF")
+#: Decimals of the angles in radians: 1e-11 rad (6e-10 deg), below the degrees' ANGLE_DECIMALS.
+RADIAN_DECIMALS = 11
 
 
 @dataclass
@@ -53,7 +55,8 @@ def _comment(text: str) -> str:
 
 
 def write_astm(table: AstmTable, path: str | Path) -> Path:
-    """Write one side's samples as ASTM E1392 ASCII."""
+    """Write one side's samples as ASTM E1392 ASCII: angles rounded to RADIAN_DECIMALS, values
+    with every digit (repr)."""
     path = Path(path)
     if table.data_type not in DATA_TYPES:
         raise CalibrationError(f"astm: data type must be BRDF or BTDF, got {table.data_type!r}")
@@ -65,7 +68,8 @@ def write_astm(table: AstmTable, path: str | Path) -> Path:
     angles = np.stack([table.theta_i, np.mod(table.phi_i, 2 * math.pi), table.theta_s,
                        np.mod(table.phi_s, 2 * math.pi)], axis=1)
     for a, v in zip(angles, np.atleast_2d(table.values.T).T, strict=True):
-        lines.append(",".join([*(f"{x:.10g}" for x in a), *(f"{x:.9g}" for x in v)]))
+        lines.append(",".join([*(angle_text(x, RADIAN_DECIMALS) for x in a),
+                               *(repr(float(x)) for x in v)]))
     path.write_text("\n".join(lines) + "\n")
     return path
 

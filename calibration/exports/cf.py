@@ -24,6 +24,7 @@ from gonio.errors import GonioError
 from gonio.store import READING_DTYPE
 
 CONVENTIONS = "CF-1.8"
+CF_GLOBALS = ("Conventions", "title", "history", "source", "comment")  # _globals writes them
 FRAME = "angles in the sample (BSDF) frame of gonio's docs/architecture.md, degrees"
 RAW_LONG_NAMES = {
     "index": "reading index in the run", "kind": "kind of reading",
@@ -225,7 +226,8 @@ def _attribute(value: Any) -> Any:
 
 
 def read_reduced_netcdf(path: str | Path) -> ReducedData:
-    """ReducedData of a file write_reduced_netcdf wrote (meta: its gonio_* attributes)."""
+    """ReducedData of a file write_reduced_netcdf wrote (meta: its gonio_* attributes, and the
+    run's record as meta["record"]: the other attributes but CF_GLOBALS)."""
     netCDF4 = _netcdf4()
     path = Path(path)
     try:
@@ -240,6 +242,10 @@ def read_reduced_netcdf(path: str | Path) -> ReducedData:
         get = {n: np.asarray(ds[n][:], dtype=np.float64) for n in REDUCED_NAMES.values()}
         meta = {key[len("gonio_"):]: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
                 if key.startswith("gonio_")}
+        record = {key: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
+                  if not key.startswith("gonio_") and key not in CF_GLOBALS}
+        if record:
+            meta["record"] = record
         wavelength = float(ds["wavelength"][...]) if "wavelength" in ds.variables else math.nan
         if math.isfinite(wavelength):
             meta["wavelength_nm"] = wavelength

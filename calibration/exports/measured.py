@@ -1,18 +1,19 @@
 """Reduced data as named columns, the one layout every export of measured values shares (and
 the plain CSV that `--import` reads): sample-frame angles in degrees (theta_o above 90 for
 transmission), the BSDF, its standard uncertainty u (`sigma`), the coverage factor k, U = k u,
-one `u_NAME` column per budget component, validity and flags; plus the reduced CSV itself."""
+one `u_NAME` column per budget component, validity and flags; plus the reduced CSV itself. Text
+exports write angles rounded to ANGLE_DECIMALS (angle_text) and the values as they are."""
 
 from __future__ import annotations
 
 import csv
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from calibration.reduced import ReducedData
+from gonio.record import record_lines
 
 DEFAULT_COVERAGE_K = 2.0
 QUANTITY = "BSDF (not cosine-corrected), 1/sr"
@@ -22,7 +23,16 @@ ANGLE_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg")
 META_KEYS = ("eta", "k", "kind", "lit_from", "wavelength_nm", "aperture_half_angle_deg",
              "aperture_sr", "aperture_from", "beam_divergence_deg", "noise_model",
              "beam_mean_w", "beam_drift_rms", "calibration", "coverage_k", "sample", "optics",
-             "assumption")
+             "assumption", "budget")
+#: Decimals of the angles in degrees that text exports write: 1e-9 deg, far below the stages'
+#: steps (about 1e-4 deg), so rounding drops float noise (29.999999999999996) and nothing
+#: measured.
+ANGLE_DECIMALS = 9
+
+
+def angle_text(value: float, decimals: int = ANGLE_DECIMALS) -> str:
+    """An angle as text: rounded to `decimals`, then the shortest repr (-0 written as 0)."""
+    return repr(round(float(value), decimals) + 0.0)
 
 
 def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -65,17 +75,28 @@ def meta_facts(data: ReducedData) -> dict:
     return facts
 
 
+def fact_lines(data: ReducedData, eta: float | None = None) -> list[str]:
+    """meta_facts(data) as `key: JSON` lines, which every text export writes after the run's
+    record (its first, `quantity`, marks where the record ends); `eta`: the index the file's
+    tables were made with, where that is not the data's (a fit's)."""
+    facts = meta_facts(data)
+    if eta is not None:
+        facts["eta"] = float(eta)
+    return record_lines(facts)
+
+
 def write_reduced_csv(data: ReducedData, out: Path, record: Sequence[str] = ()) -> Path:
     """CSV of columns(data) under `# key: JSON` lines: the run's record, then the reduction's
-    facts (meta_facts), so that `--import` finds the index and the noise model again."""
+    facts (fact_lines), so that `--import` finds the record, the index and the noise model
+    again. Angles are written by angle_text, the rest by repr (every digit)."""
     cols = columns(data)
+    angle = [name in ANGLE_COLUMNS for name in cols]
     with open(out, "w", newline="") as fh:
-        for line in record:
+        for line in [*record, *fact_lines(data)]:
             fh.write(f"# {line}\n")
-        for key, value in meta_facts(data).items():
-            fh.write(f"# {key}: {json.dumps(value, ensure_ascii=False)}\n")
         writer = csv.writer(fh)
         writer.writerow(cols)
         for row in zip(*cols.values(), strict=True):
-            writer.writerow([v if isinstance(v, str) else repr(float(v)) for v in row])
+            writer.writerow([v if isinstance(v, str) else angle_text(v) if is_angle
+                             else repr(float(v)) for v, is_angle in zip(row, angle, strict=True)])
     return out

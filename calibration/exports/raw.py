@@ -7,14 +7,17 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+from calibration.exports.measured import angle_text
 from gonio.record import record_lines, run_record
 from gonio.store import READING_DTYPE, Run
 
 
 def write_csv(run: Run, out: Path) -> Path:
     """CSV with a header row of field names; lines `# key: JSON value` before it hold the run's
-    record (gonio.record.run_record)."""
+    record (gonio.record.run_record). Angles (the `_deg` fields) by angle_text, other numbers
+    by repr, NaN as an empty field."""
     r = run.readings()
+    angle = [name.endswith("_deg") for name in READING_DTYPE.names]
     with open(out, "w", newline="") as fh:
         for line in record_lines(run_record(run)):
             fh.write(f"# {line}\n")
@@ -22,7 +25,8 @@ def write_csv(run: Run, out: Path) -> Path:
         writer.writerow(READING_DTYPE.names)
         for row in r.tolist():
             writer.writerow(["" if isinstance(v, float) and v != v else
-                             repr(v) if isinstance(v, float) else v for v in row])
+                             (angle_text(v) if is_angle else repr(v)) if isinstance(v, float)
+                             else v for v, is_angle in zip(row, angle, strict=True)])
     return out
 
 

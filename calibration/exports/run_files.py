@@ -9,7 +9,7 @@ from typing import Any
 
 from calibration.exports.astm import astm_tables, side_paths, write_astm
 from calibration.exports.cf import write_reduced_netcdf
-from calibration.exports.measured import write_reduced_csv
+from calibration.exports.measured import fact_lines, write_reduced_csv
 from calibration.exports.model import (
     astm_model_tables,
     fit_for_export,
@@ -56,17 +56,19 @@ def write_run(run_dir: str | Path, fmt: str, what: str, out: Path, request: Expo
 def write_data(data: ReducedData, fmt: str, what: str, out: Path, record: Mapping[str, Any],
                request: ExportRequest, source: str = "") -> tuple[list[Path], list[str]]:
     """Write reduced data (`what` reduced) or its fit (`what` model) as `fmt`; (paths,
-    notes). `record`: the run's record (gonio.record.run_record), which every file carries."""
+    notes). `record`: the run's record (gonio.record.run_record), which every file carries;
+    the text files then the reduction's facts (measured.fact_lines), with the index their
+    tables were made with (the fit's, where a fit made them), so `--import` reads it again."""
     lines = record_lines(record)
     if what == "reduced" and fmt == "csv":
         return [write_reduced_csv(data, out, lines)], []
     if what == "reduced" and fmt == "netcdf":
         return [write_reduced_netcdf(data, record, out)], []
     if what == "reduced" and fmt == "astm":
-        return _astm_files(astm_tables(data, lines), out), []
+        return _astm_files(astm_tables(data, [*lines, *fact_lines(data)]), out), []
     result, warnings = fit_for_export(data, request.fit_options, request.fit_file,
                                       request.force)
-    lines = [*lines, *warnings]
+    lines = [*lines, *fact_lines(data, result.eta), *warnings]
     if fmt == "mitsuba":
         return [mitsuba_file(result, out, source, lines)], warnings
     if fmt == "astm":

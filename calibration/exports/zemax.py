@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.exports.measured import angle_text
 from calibration.values import CalibrationError
 
 SCATTER_TYPES = ("BRDF", "BTDF")
@@ -129,12 +130,14 @@ def tabulate(model_eval: Callable[[np.ndarray, np.ndarray], np.ndarray], scatter
                       np.zeros(1), angles, azimuth, radial, data, tis, list(comments or []))
 
 
-def _numbers(values: np.ndarray) -> str:
-    return "\t".join(f"{v:.10g}" for v in values)
+def _angles(values: np.ndarray) -> str:
+    """A grid of angles, degrees, tab-separated (measured.angle_text: no float noise)."""
+    return "\t".join(angle_text(v) for v in values)
 
 
 def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
-    """Write the table in the Zemax tabular BSDF format."""
+    """Write the table in the Zemax tabular BSDF format: angles by angle_text, values and TIS
+    with every digit (repr)."""
     path = Path(path)
     lines = [f"# {c}" for c in table.comments]
     lines += [
@@ -142,16 +145,16 @@ def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
         f"Symmetry  {table.symmetry}",
         "SpectralContent  Monochrome",
         f"ScatterType  {table.scatter_type}",
-        f"SampleRotation  {len(table.sample_rotation_deg)}", _numbers(table.sample_rotation_deg),
-        f"AngleOfIncidence  {len(table.angle_deg)}", _numbers(table.angle_deg),
-        f"ScatterAzimuth  {len(table.azimuth_deg)}", _numbers(table.azimuth_deg),
-        f"ScatterRadial  {len(table.radial_deg)}", _numbers(table.radial_deg),
+        f"SampleRotation  {len(table.sample_rotation_deg)}", _angles(table.sample_rotation_deg),
+        f"AngleOfIncidence  {len(table.angle_deg)}", _angles(table.angle_deg),
+        f"ScatterAzimuth  {len(table.azimuth_deg)}", _angles(table.azimuth_deg),
+        f"ScatterRadial  {len(table.radial_deg)}", _angles(table.radial_deg),
         "", "Monochrome", "DataBegin",
     ]
     for r in range(len(table.sample_rotation_deg)):
         for a in range(len(table.angle_deg)):
-            lines.append(f"TIS  {table.tis[r, a]:.6g}")
-            lines += ["\t".join(f"{v:.6e}" for v in row) for row in table.data[r, a]]
+            lines.append(f"TIS  {float(table.tis[r, a])!r}")
+            lines += ["\t".join(repr(float(v)) for v in row) for row in table.data[r, a]]
     lines.append("DataEnd")
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -111,7 +111,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Fit and print the result (a summary, or one JSON object with --json)."""
+    """Fit and print the result (a summary, or one JSON object with --json: the fit, the data's
+    facts, their uncertainty budget (calibration.budget.summary) and the warnings)."""
+    from calibration.budget import summary as budget_summary
     from calibration.fit import fit
     from calibration.pipeline import fit_run
 
@@ -128,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
     out["sample"] = data.meta.get("sample")
     out["calibration"] = data.meta.get("calibration")
     out["noise_model"] = data.meta.get("noise_model")
+    out["budget"] = budget_summary(data)
     if data.meta.get("emulator_truth"):
         out["emulator_truth"] = data.meta["emulator_truth"]
     out["warnings"] = fit_warnings(out, imported_from=data.meta.get("imported_from"))

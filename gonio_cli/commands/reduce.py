@@ -1,6 +1,8 @@
 """`gonio reduce RUN`: raw readings -> BSDF values with their uncertainty budget (dark, beam,
-aperture, cos o, hemisphere exit; calibration.budget); writes RUN/reduced.csv (u, k, U = k u)
-and prints a summary per incidence and the budget's components.
+aperture, cos o, hemisphere exit; calibration.budget); writes RUN/reduced.csv (the file of
+`gonio export --what reduced --format csv`: the run's record and the reduction's facts, u, k,
+U = k u, u_NAME per component; calibration.exports.measured) and prints a summary per incidence
+and the budget's components.
 `gonio reduce --import FILE --out CSV`: a measured file gonio did not make (ASTM E1392, Zemax
 tabular BSDF, gonio's reduced CSV or NetCDF, a plain CSV; calibration.imports) as gonio's
 reduced CSV (calibration.exports.measured)."""
@@ -12,12 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.budget import COVERAGE_K, expanded
+from calibration.budget import COVERAGE_K
 from calibration.signature import DEFAULT_SHARE
 from gonio.errors import GonioError
-
-CSV_HEADER = ("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,side,bsdf_per_sr,sigma_per_sr,"
-              "coverage_k,expanded_per_sr,valid,flags")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -57,8 +56,6 @@ def imported(args: argparse.Namespace):  # -> calibration.reduced.ReducedData | 
     """The --import file's ReducedData (None without --import); one error for both a run and
     --import, or neither."""
     if (args.run is None) == (args.import_file is None):
-        from gonio.errors import GonioError
-
         raise GonioError("give a run directory or --import FILE (one of them)")
     if args.import_file is None:
         return None
@@ -81,28 +78,6 @@ def add_reduce_options(p: argparse.ArgumentParser) -> None:
                         "and leave them out)")
 
 
-def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(theta from +z, phi = atan2(y, x)) of unit vectors, degrees."""
-    return (np.degrees(np.arctan2(np.hypot(w[:, 0], w[:, 1]), w[:, 2])),
-            np.degrees(np.arctan2(w[:, 1], w[:, 0])))
-
-
-def write_csv(data, path: Path) -> Path:
-    """One row per sample reading, in the sample frame, degrees; valid 1/0; flags separated by
-    ';' (e.g. signature); sigma is the standard uncertainty u, expanded U = k u."""
-    ti, pi = spherical_deg(data.wi)
-    to, po = spherical_deg(data.wo)
-    side = np.where(data.transmission, "transmission", "reflection")
-    k, big_u = expanded(data)
-    lines = [CSV_HEADER] + [
-        f"{a:.6f},{b:.6f},{c:.6f},{d:.6f},{s},{f:.9g},{e:.3g},{k:g},{x:.3g},{int(v)},"
-        f"{g.replace(',', ';')}"
-        for a, b, c, d, s, f, e, v, g, x in zip(ti, pi, to, po, side, data.bsdf, data.sigma,
-                                                data.valid, data.flags, big_u, strict=True)]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 def summary(data) -> list[str]:
     """Lines per (incidence, side): points, valid points, peak BSDF, median relative sigma."""
     lines = [f"{'theta_i':>8} {'side':<12} {'points':>6} {'valid':>6} {'peak 1/sr':>11} "
@@ -123,41 +98,41 @@ def summary(data) -> list[str]:
 
 
 def budget_summary(data) -> list[str]:
-    """Lines per component: own or shared, its median and largest share u_c / u over the valid
-    points; then k and the median U / f, and the budget's notes."""
-    good = data.valid & (data.sigma > 0)
-    shared = set(data.meta.get("budget", {}).get("shared", ()))
+    """Lines per component of calibration.budget.summary: own or shared, its median and largest
+    share u_c / u over the valid points, its median u_c / f; then k and the median U / f, and
+    the budget's notes."""
+    from calibration.budget import summary as budget_of
+
+    budget = budget_of(data)
     lines = [f"{'component':<20} {'kind':<7} {'median u_c/u':>12} {'max u_c/u':>10} "
              f"{'median u_c/f':>12}"]
-    for name, u in sorted(data.components.items()):
-        share = u[good] / data.sigma[good]
-        rel = u[good] / np.abs(data.bsdf[good])
-        if not good.any():
-            continue
-        lines.append(f"{name:<20} {'shared' if name in shared else 'own':<7} "
-                     f"{np.median(share):12.3g} {share.max():10.3g} {np.median(rel):12.3g}")
-    k, big_u = expanded(data)
-    if good.any():
-        lines.append(f"u combined; k = {k:g}, U = k u: median U/f "
-                     f"{np.median(big_u[good] / np.abs(data.bsdf[good])):.3g}")
-    lines += [f"budget: {note}" for note in data.meta.get("budget", {}).get("notes", ())]
-    return lines
+    lines += [f"{name:<20} {c['kind'] or '-':<7} {c['median_share']:12.3g} {c['max_share']:10.3g} "
+              f"{c['median_relative']:12.3g}"
+              for name, c in budget["components"].items() if budget["points"]]
+    if budget["points"]:
+        lines.append(f"u combined; k = {budget['coverage_k']:g}, U = k u: median U/f "
+                     f"{budget['median_expanded_relative']:.3g}")
+    return lines + [f"budget: {note}" for note in budget["notes"]]
 
 
 def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
-    from calibration.pipeline import reduce_run
+    from calibration.exports.measured import write_reduced_csv
+    from calibration.pipeline import DEFAULT_SLOPE_FIT, reduce_stored
     from calibration.signature import summary as signature_summary
+    from gonio.record import record_lines, run_record
+    from gonio.store import open_run
 
     if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
         raise GonioError(f"--coverage-k must be a finite number > 0, got {args.coverage_k!r}")
-    data = imported(args)
-    if data is not None:
-        return _write_imported(data, args)
-    data = reduce_run(args.run, args.calibration, args.shot_noise_w, args.subtract_signature,
-                      args.signature_share)
+    if args.import_file is not None or args.run is None:
+        return _write_imported(args)  # imported(): one error for both a run and --import
+    stored = open_run(args.run)
+    data = reduce_stored(stored, stored.readings(), args.calibration, args.shot_noise_w,
+                         args.subtract_signature, args.signature_share, DEFAULT_SLOPE_FIT)
     data.meta["coverage_k"] = args.coverage_k
-    out = write_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv")
+    out = write_reduced_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv",
+                            record_lines(run_record(stored)))
     m = data.meta
     print(f"run {args.run}: sample {m['sample']['id']}, eta {m['eta']:g}, aperture "
           f"{m['aperture_half_angle_deg']:.4g} deg ({m['aperture_sr']:.4g} sr, from "
@@ -172,16 +147,24 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_imported(data, args: argparse.Namespace) -> int:
-    """Write an imported file as gonio's reduced CSV; print its noise model, the summary and
-    the CSV's path last."""
+def _write_imported(args: argparse.Namespace) -> int:
+    """Write an imported file as gonio's reduced CSV, with the record it carries; print its
+    noise model, the summary and the CSV's path last. A missing --out is named in the same
+    error as the inputs the file lacks (calibration.imports.MissingInputs)."""
     from calibration.exports.measured import write_reduced_csv
-    from gonio.errors import GonioError
+    from calibration.imports import MissingInputs
+    from gonio.record import record_lines
 
+    no_out = "give --out CSV (there is no run directory to write into)"
+    try:
+        data = imported(args)
+    except MissingInputs as exc:
+        if args.out:
+            raise
+        raise MissingInputs(exc.path, [*exc.problems, no_out]) from None
     if not args.out:
-        raise GonioError("reduce --import: give --out CSV (there is no run directory to write "
-                         "into)")
-    out = write_reduced_csv(data, Path(args.out))
+        raise GonioError(f"reduce --import: {no_out}")
+    out = write_reduced_csv(data, Path(args.out), record_lines(data.meta.get("record", {})))
     print(f"imported {args.import_file}: eta {data.meta['eta']:g}, {len(data.bsdf)} points")
     print(f"noise: {data.meta['noise_model']}")
     print("\n".join(summary(data)))

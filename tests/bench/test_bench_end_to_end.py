@@ -92,8 +92,9 @@ def test_reduce_and_plot_commands(run_dir):
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     csv = Path(out.stdout.strip().splitlines()[-1])
-    table = np.genfromtxt(csv, delimiter=",", names=True, dtype=None, encoding=None)
-    assert len(table) > 20 and np.all(table["sigma_per_sr"][table["valid"] == 1] > 0)
+    lines = [ln for ln in csv.read_text().splitlines() if not ln.startswith("#")]
+    table = np.genfromtxt(lines, delimiter=",", names=True, dtype=None, encoding=None)
+    assert len(table) > 20 and np.all(table["sigma"][table["valid"] == 1] > 0)
     out = subprocess.run([sys.executable, "-m", "gonio_cli", "plot", str(run_dir), "--out",
                           str(run_dir / "p.png")], capture_output=True, text=True, timeout=120,
                          cwd=ROOT)

@@ -5,9 +5,11 @@ end to end in tests/fitting/test_fitting_emulated_bench.py and test_exports_meas
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
-from calibration.exports import ACCEPTS
+from calibration.exports import ACCEPTS, SUFFIXES
 from gonio_cli.main import main
 
 
@@ -45,3 +47,22 @@ def test_a_usage_error_is_one_line_naming_help(argv, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "error:" in err and "--help)" in err
     assert "usage:" not in err
+
+
+@pytest.mark.parametrize("fmt,out,hint", [("csv", "x.nc", ", which is --format netcdf's"),
+                                          ("zemax", "x.astm", ", which is --format astm's"),
+                                          ("astm", "x.TXT", None), ("mitsuba", "x", "")])
+def test_export_checks_the_suffix_before_any_work(fmt, out, hint, tmp_path, capsys):
+    """One error line, before the run is opened (there is none here) or a file is written; a
+    suffix of the format (any case) passes on to the missing run."""
+    said = f"ends in {Path(out).suffix}" if Path(out).suffix else "has no suffix"
+    assert main(["export", str(tmp_path / "no-run"), "--format", fmt,
+                 "--out", str(tmp_path / out)]) == 2
+    err = capsys.readouterr().err.strip()
+    if hint is None:
+        assert "no-run" in err and "--out" not in err
+        return
+    assert err == (
+        f"gonio export: error: export: --out {tmp_path / out} {said}{hint}; --format {fmt} "
+        f"writes {' or '.join(SUFFIXES[fmt])}")
+    assert list(tmp_path.iterdir()) == []

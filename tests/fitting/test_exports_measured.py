@@ -90,8 +90,9 @@ def test_plain_csv_columns_assumptions_and_errors(glass, tmp_path, capsys):
         pi, po = (math.degrees(math.atan2(w[1], w[0])) for w in (wi, wo))
         rows.append(",".join(repr(float(v)) for v in (ti, pi, to, po, f)))
     path.write_text("\n".join(rows) + "\n")
-    with pytest.raises(CalibrationError, match=r"plain.csv: the CSV has no uncertainties.*"
-                                               r"--sigma-relative"):
+    with pytest.raises(CalibrationError, match=r"plain.csv: 2 inputs missing: \(1\) the CSV has "
+                                               r"no uncertainties.*--sigma-relative.*; \(2\) "
+                                               r"the file gives no refractive index.*--eta"):
         read_measured(path)
     with pytest.raises(CalibrationError, match=r"plain.csv: the file gives no refractive "
                                                r"index \(eta\).*--eta"):
@@ -102,7 +103,7 @@ def test_plain_csv_columns_assumptions_and_errors(glass, tmp_path, capsys):
     assert "assumed: u = 0.02 * |bsdf|" in back.meta["noise_model"]
     assert main(["fit", "--import", str(path)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "plain.csv: the CSV has no uncertainties" in err
+    assert err.count("\n") == 0 and "plain.csv: 2 inputs missing: (1) the CSV has no " in err
     # a value of 0 gets no u from a relative assumption: left out and flagged, not weighed
     # with a vanishing sigma
     path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,bsdf\n"

@@ -152,7 +152,7 @@ def header(path):
 def test_every_export_carries_the_record(emulated, tmp_path):
     import netCDF4
 
-    from calibration.exports import ExportRequest
+    from calibration.exports import SUFFIXES, ExportRequest
     from calibration.exports import write as write_export
     from calibration.exports.raw import write_csv, write_netcdf
 
@@ -178,8 +178,8 @@ def test_every_export_carries_the_record(emulated, tmp_path):
         assert json.loads(ds.sessions)[0]["devices"] == IDENTITY
     # the reduced exports and the model's (forced: this short run's fit is not the point)
     forced = ExportRequest(force=True)
-    texts = [write_export(run.path, fmt, tmp_path / f"glass.{fmt}", forced)[0][0].read_text()
-             for fmt in ("csv", "zemax", "astm", "mitsuba")]
+    texts = [write_export(run.path, fmt, tmp_path / f"glass{SUFFIXES[fmt][0]}",
+                          forced)[0][0].read_text() for fmt in ("csv", "zemax", "astm", "mitsuba")]
     for line in ('# receiver_solid_angle_sr: ', '# sample: {"id": "GG-7"',
                  '# sessions: [{"session": 0'):
         for text in texts[:3]:
