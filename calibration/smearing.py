@@ -173,6 +173,9 @@ class _Runs:
     length: int
 
 
+_NO_RUNS = _Runs(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), 1)
+
+
 @dataclass(frozen=True)
 class _Plan:
     """Every node pair the forward model evaluates for a pair set, flat and contiguous (M, 3),
@@ -190,15 +193,13 @@ class _Plan:
     def of(pieces: list[tuple[np.ndarray, _Runs]]) -> _Plan:
         """The plan of pieces (points (R,), their runs), the pieces' points together 0 ... N - 1
         in any order."""
-        pieces = [(points, runs) for points, runs in pieces if len(points)]
-        lengths = np.concatenate([np.full(len(points), runs.length, np.intp)
-                                  for points, runs in pieces] or [np.zeros(0, np.intp)])
-        def joined(name: str, empty: tuple[int, ...]) -> np.ndarray:
-            return np.concatenate([getattr(runs, name) for _, runs in pieces] or
-                                  [np.zeros(empty)])
-        return _Plan(joined("wi", (0, 3)), joined("wo", (0, 3)), joined("weights", (0,)),
-                     np.cumsum(lengths) - lengths,
-                     np.concatenate([points for points, _ in pieces] or [np.zeros(0, np.intp)]))
+        pieces = ([(points, runs) for points, runs in pieces if len(points)]
+                  or [(np.zeros(0, np.intp), _NO_RUNS)])
+        lengths = np.concatenate([np.full(len(points), runs.length) for points, runs in pieces])
+        wi, wo, weights = (np.concatenate([getattr(runs, name) for _, runs in pieces])
+                           for name in ("wi", "wo", "weights"))
+        return _Plan(wi, wo, weights, np.cumsum(lengths) - lengths,
+                     np.concatenate([points for points, _ in pieces]))
 
     def average(self, model: Any) -> tuple[np.ndarray, np.ndarray]:
         """(each point's weighted sum (N,), the model at the node pairs (M,))."""
@@ -260,7 +261,7 @@ def _split_rule(optics: Smearing, edges: EdgeCircles, n: int, wi: np.ndarray, wo
     straddles[near] = crossed & ~split
     where, m = near[split], int(split.sum())
     if m == 0:
-        return where, _Runs(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), 1), straddles
+        return where, _NO_RUNS, straddles
     centers = np.repeat(wo[where], k, axis=0)
     nodes, weights = split_cap_rule(centers, half_angle, axes[split].reshape(-1, 3),
                                     levels[split].reshape(len(centers), -1), n, n)
