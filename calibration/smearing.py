@@ -7,8 +7,9 @@ the bench splits it (sim.bench.quadrature.split_cap_rule), so the two agree to ~
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from functools import lru_cache
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,10 @@ RIM_POINTS = 24  # directions on the aperture's rim probed for an edge of such a
 #: a reading across an edge follows the bench's to ~1e-5 (the data's sigma is a few 1e-4)
 SPLIT_RTOL = 1e-5
 BEAM_MARGIN = 3.0  # beam half-angles by which the beam's tilt may move an edge circle
+#: Bytes of node-pair plans kept across calls (a fit's few pair sets, ~5 MB for Walter's 588
+#: readings), the least recently used dropped beyond: a one-off dense average (synthetic data at
+#: order 16) is not worth keeping
+KEPT_BYTES = 1 << 27
 
 
 def _rim(w: np.ndarray, half_angle_rad: float, n: int) -> np.ndarray:
@@ -210,13 +215,36 @@ class _Plan:
         out[self.points] = np.add.reduceat(f * self.weights, self.starts)
         return out, f
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes its arrays hold."""
+        return sum(getattr(self, field.name).nbytes for field in fields(self))
+
+
+class _Kept:
+    """A plan builder's plans by their arguments, kept while they hold at most KEPT_BYTES
+    together, the least recently used dropped first."""
+
+    def __init__(self, build: Callable[..., _Plan]):
+        self.build, self.plans = build, OrderedDict()
+        self.__doc__ = build.__doc__
+
+    def __call__(self, *key: Any) -> _Plan:
+        plan = self.plans.pop(key, None)
+        if plan is None:
+            plan = self.build(*key)
+        self.plans[key] = plan  # the most recent last
+        while sum(kept.nbytes for kept in self.plans.values()) > KEPT_BYTES:
+            self.plans.popitem(last=False)
+        return plan
+
 
 def _pairs(wi_bytes: bytes, wo_bytes: bytes) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (N, 3) a plan is kept for, from their float64 bytes."""
     return np.frombuffer(wi_bytes).reshape(-1, 3), np.frombuffer(wo_bytes).reshape(-1, 3)
 
 
-@lru_cache(maxsize=8)
+@_Kept
 def _product_plan(optics: Smearing, wi_bytes: bytes, wo_bytes: bytes) -> _Plan:
     """The product rule's plan at the pairs (given as float64 bytes; kept: a fit asks for the
     same pairs at every candidate)."""
@@ -224,7 +252,7 @@ def _product_plan(optics: Smearing, wi_bytes: bytes, wo_bytes: bytes) -> _Plan:
     return _Plan.of([(np.arange(len(wi)), optics._product(wi, wo, optics.aperture_order))])
 
 
-@lru_cache(maxsize=8)
+@_Kept
 def _edge_plan(optics: Smearing, edges: EdgeCircles, n: int, edge_order: int, wi_bytes: bytes,
                wo_bytes: bytes) -> _Plan:
     """The plan at the pairs (float64 bytes) for a model of known edges: the split rule where
