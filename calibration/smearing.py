@@ -7,8 +7,9 @@ the bench splits it (sim.bench.quadrature.split_cap_rule), so the two agree to ~
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from functools import lru_cache
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,10 @@ RIM_POINTS = 24  # directions on the aperture's rim probed for an edge of such a
 #: a reading across an edge follows the bench's to ~1e-5 (the data's sigma is a few 1e-4)
 SPLIT_RTOL = 1e-5
 BEAM_MARGIN = 3.0  # beam half-angles by which the beam's tilt may move an edge circle
+#: Bytes of node-pair plans kept across calls (a fit's few pair sets, ~5 MB for Walter's 588
+#: readings), the least recently used dropped beyond: a one-off dense average (synthetic data at
+#: order 16) is not worth keeping
+KEPT_BYTES = 1 << 27
 
 
 def _rim(w: np.ndarray, half_angle_rad: float, n: int) -> np.ndarray:
@@ -109,20 +114,18 @@ class Smearing:
         x, weight = cap_rule(w, math.radians(deg), order)
         return x, weight / weight.sum()
 
-    def _product(self, model: Any, wi: np.ndarray, wo: np.ndarray, order: int
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """The product rule of the beam cone and an aperture of this order: (average (N,),
-        whether the model is zero on some nodes and not on all)."""
+    def _product(self, wi: np.ndarray, wo: np.ndarray, order: int) -> _Runs:
+        """The product rule of the beam cone and an aperture of this order at each pair, as
+        runs of node pairs (the point's own order, n k p)."""
         wi_n, wi_w = self._nodes(wi, self.divergence_deg, self.divergence_order)
         wo_n, wo_w = self._nodes(wo, self.aperture_deg, order)
-        f = model.eval(
-            np.broadcast_to(wi_n[:, :, None, :], (len(wi), len(wi_w), len(wo_w), 3)),
-            np.broadcast_to(wo_n[:, None, :, :], (len(wo), len(wi_w), len(wo_w), 3)))
+        shape = (len(wi), len(wi_w), len(wo_w), 3)
         # the detector collects f |cos o| dw; reduction divides by |cos o| at the centre
         cos_ratio = np.abs(wo_n[..., 2]) / np.maximum(np.abs(wo[:, None, 2]), 1e-300)
-        lit = (f > 0).reshape(len(wi), -1)
-        straddles = lit.any(axis=1) & ~lit.all(axis=1)
-        return np.einsum("nij,i,nj->n", f, wi_w, wo_w * cos_ratio), straddles
+        weights = wi_w[None, :, None] * (wo_w * cos_ratio)[:, None, :]
+        return _Runs(np.broadcast_to(wi_n[:, :, None, :], shape).reshape(-1, 3),
+                     np.broadcast_to(wo_n[:, None, :, :], shape).reshape(-1, 3),
+                     weights.ravel(), shape[1] * shape[2])
 
     def _edge_beam_order(self) -> int:
         """The beam rule's order where an edge crosses the aperture: the beam moves the edge
@@ -137,54 +140,143 @@ class Smearing:
         """Model BSDF (N,) averaged over the caps about each wi (N, 3) and wo (N, 3)."""
         if self.aperture_order <= 0 and self.divergence_order <= 0:
             return model.eval(wi, wo)
-        out, straddles = self._product(model, wi, wo, self.aperture_order)
+        pairs = (np.ascontiguousarray(wi, float).tobytes(),
+                 np.ascontiguousarray(wo, float).tobytes())
+        edges = model_edges(model)
+        if self.aperture_deg > 0.0 and self.aperture_order > 0 and edges is not None:
+            alpha = _alpha(model)
+            n = split_order_for(math.radians(self.aperture_deg) / (0.34 * alpha) if alpha
+                                else 0.0, SPLIT_RTOL)
+            return _edge_plan(self, edges, n, EDGE_ORDER, *pairs).average(model)[0]
+        plan = _product_plan(self, *pairs)
+        out, f = plan.average(model)
         if self.aperture_deg <= 0.0 or self.aperture_order <= 0:
             return out
-        half_angle = math.radians(self.aperture_deg)
-        edges = model_edges(model)
-        if edges is not None:
-            alpha = _alpha(model)
-            n = split_order_for(half_angle / (0.34 * alpha) if alpha else 0.0, SPLIT_RTOL)
-            rule = _split_rule(self, edges, n, np.ascontiguousarray(wi, float).tobytes(),
-                               np.ascontiguousarray(wo, float).tobytes())
-            if len(rule.where):
-                f = model.eval(np.broadcast_to(rule.wi_nodes, rule.nodes.shape), rule.nodes)
-                out[rule.where] = np.sum(f * rule.weights, axis=-1) @ rule.beam_weights
-            straddles = rule.straddles
-        else:
-            # the rule's nodes stop short of the rim: an edge there is found on the rim
-            rim = _rim(wo, half_angle, RIM_POINTS)
-            lit = np.concatenate([(model.eval(wi[:, None, :], rim) > 0),
-                                  (out > 0)[:, None]], axis=1)
-            straddles |= lit.any(axis=1) & ~lit.all(axis=1)
+        # edges unknown: an edge is found where the model is zero on some nodes and not on
+        # all, the rule's nodes stopping short of the rim, on the rim too
+        lit = (f > 0).reshape(len(out), -1)
+        rim = _rim(wo, math.radians(self.aperture_deg), RIM_POINTS)
+        lit = np.concatenate([lit, model.eval(wi[:, None, :], rim) > 0, (out > 0)[:, None]],
+                             axis=1)
+        straddles = lit.any(axis=1) & ~lit.all(axis=1)
         if straddles.any():
             # an edge of the lobe inside the aperture that no split follows: a low-order rule
             # is off by up to its whole jump; the bench's top order converges algebraically
-            out[straddles] = self._product(model, wi[straddles], wo[straddles], EDGE_ORDER)[0]
+            top = _Plan.of([(np.arange(np.count_nonzero(straddles)),
+                             self._product(wi[straddles], wo[straddles], EDGE_ORDER))])
+            out[straddles] = top.average(model)[0]
         return out
 
 
 @dataclass(frozen=True)
-class _SplitRule:
-    """The split aperture rule of the points (where) an edge circle crosses: beam nodes
-    (M, K, 1, 3), aperture nodes (M, K, P, 3) and weights (M, K, P) (|cos o| ratio included,
-    normalised per beam node), the beam's weights (K,); straddles (N,): points crossed by an
-    edge no split can follow (an aperture too near the family's axis)."""
+class _Runs:
+    """Node pairs wi, wo (R L, 3) and their weights (R L,): R points' rules of L pairs each."""
 
-    where: np.ndarray
-    wi_nodes: np.ndarray
-    nodes: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
     weights: np.ndarray
-    beam_weights: np.ndarray
-    straddles: np.ndarray
+    length: int
 
 
-@lru_cache(maxsize=8)
-def _split_rule(optics: Smearing, edges: EdgeCircles, n: int, wi_bytes: bytes,
-                wo_bytes: bytes) -> _SplitRule:
-    """The split rule for the pairs (wi, wo) given as float64 bytes (kept: a fit asks for the
-    same pairs at every candidate alpha, and the rule depends only on eta and the order)."""
-    wi, wo = np.frombuffer(wi_bytes).reshape(-1, 3), np.frombuffer(wo_bytes).reshape(-1, 3)
+_NO_RUNS = _Runs(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), 1)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Every node pair the forward model evaluates for a pair set, flat and contiguous (M, 3),
+    and how they sum to each point's average: weights (M,), the first pair of each point's run
+    (starts) and the point each run averages (points); fixed per pair set, so a fit's calls
+    are one kernel call and one weighted sum."""
+
+    wi: np.ndarray
+    wo: np.ndarray
+    weights: np.ndarray
+    starts: np.ndarray
+    points: np.ndarray
+
+    @staticmethod
+    def of(pieces: list[tuple[np.ndarray, _Runs]]) -> _Plan:
+        """The plan of pieces (points (R,), their runs), the pieces' points together 0 ... N - 1
+        in any order."""
+        pieces = ([(points, runs) for points, runs in pieces if len(points)]
+                  or [(np.zeros(0, np.intp), _NO_RUNS)])
+        lengths = np.concatenate([np.full(len(points), runs.length) for points, runs in pieces])
+        wi, wo, weights = (np.concatenate([getattr(runs, name) for _, runs in pieces])
+                           for name in ("wi", "wo", "weights"))
+        return _Plan(wi, wo, weights, np.cumsum(lengths) - lengths,
+                     np.concatenate([points for points, _ in pieces]))
+
+    def average(self, model: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(each point's weighted sum (N,), the model at the node pairs (M,))."""
+        out = np.empty(len(self.points))
+        if not len(self.points):
+            return out, np.zeros(0)
+        f = model.eval(self.wi, self.wo)
+        out[self.points] = np.add.reduceat(f * self.weights, self.starts)
+        return out, f
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes its arrays hold."""
+        return sum(getattr(self, field.name).nbytes for field in fields(self))
+
+
+class _Kept:
+    """A plan builder's plans by their arguments, kept while they hold at most KEPT_BYTES
+    together, the least recently used dropped first."""
+
+    def __init__(self, build: Callable[..., _Plan]):
+        self.build, self.plans = build, OrderedDict()
+        self.__doc__ = build.__doc__
+
+    def __call__(self, *key: Any) -> _Plan:
+        plan = self.plans.pop(key, None)
+        if plan is None:
+            plan = self.build(*key)
+        self.plans[key] = plan  # the most recent last
+        while sum(kept.nbytes for kept in self.plans.values()) > KEPT_BYTES:
+            self.plans.popitem(last=False)
+        return plan
+
+
+def _pairs(wi_bytes: bytes, wo_bytes: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (N, 3) a plan is kept for, from their float64 bytes."""
+    return np.frombuffer(wi_bytes).reshape(-1, 3), np.frombuffer(wo_bytes).reshape(-1, 3)
+
+
+@_Kept
+def _product_plan(optics: Smearing, wi_bytes: bytes, wo_bytes: bytes) -> _Plan:
+    """The product rule's plan at the pairs (given as float64 bytes; kept: a fit asks for the
+    same pairs at every candidate)."""
+    wi, wo = _pairs(wi_bytes, wo_bytes)
+    return _Plan.of([(np.arange(len(wi)), optics._product(wi, wo, optics.aperture_order))])
+
+
+@_Kept
+def _edge_plan(optics: Smearing, edges: EdgeCircles, n: int, edge_order: int, wi_bytes: bytes,
+               wo_bytes: bytes) -> _Plan:
+    """The plan at the pairs (float64 bytes) for a model of known edges: the split rule where
+    an edge circle crosses the aperture, edge_order where one crosses that no split can follow,
+    the product rule elsewhere (kept: a fit asks for the same pairs at every candidate alpha,
+    and the rules depend only on eta and the orders)."""
+    wi, wo = _pairs(wi_bytes, wo_bytes)
+    where, split, straddles = _split_rule(optics, edges, n, wi, wo)
+    rest = np.ones(len(wi), bool)
+    rest[where] = False
+    rest &= ~straddles
+    return _Plan.of([(where, split),
+                     (np.flatnonzero(straddles),
+                      optics._product(wi[straddles], wo[straddles], edge_order)),
+                     (np.flatnonzero(rest),
+                      optics._product(wi[rest], wo[rest], optics.aperture_order))])
+
+
+def _split_rule(optics: Smearing, edges: EdgeCircles, n: int, wi: np.ndarray, wo: np.ndarray
+                ) -> tuple[np.ndarray, _Runs, np.ndarray]:
+    """The split aperture rule of the points (where, M) an edge circle crosses, as runs of
+    beam node x aperture node pairs (|cos o| ratio and the beam's weight included, normalised
+    per beam node), and the points (N,) crossed by an edge no split can follow (an aperture
+    too near the family's axis)."""
     half_angle = math.radians(optics.aperture_deg)
     # the beam's tilt moves a circle by about as much (1 / (e sin) <= 1.4 for glass lit from
     # air): only apertures within BEAM_MARGIN beam half-angles of one can be crossed
@@ -197,16 +289,17 @@ def _split_rule(optics: Smearing, edges: EdgeCircles, n: int, wi_bytes: bytes,
     straddles[near] = crossed & ~split
     where, m = near[split], int(split.sum())
     if m == 0:
-        return _SplitRule(where, np.zeros((0, k, 1, 3)), np.zeros((0, k, 1, 3)),
-                          np.zeros((0, k, 1)), wi_w, straddles)
+        return where, _NO_RUNS, straddles
     centers = np.repeat(wo[where], k, axis=0)
     nodes, weights = split_cap_rule(centers, half_angle, axes[split].reshape(-1, 3),
                                     levels[split].reshape(len(centers), -1), n, n)
     # the detector collects f |cos o| dw; reduction divides by |cos o| at the centre
     cos_ratio = np.abs(nodes[..., 2]) / np.maximum(np.abs(centers[:, None, 2]), 1e-300)
-    weights = weights * cos_ratio / np.sum(weights, axis=1, keepdims=True)
-    return _SplitRule(where, wi_n[split][:, :, None, :], nodes.reshape(m, k, -1, 3),
-                      weights.reshape(m, k, -1), wi_w, straddles)
+    weights = (weights * cos_ratio / np.sum(weights, axis=1, keepdims=True)).reshape(m, k, -1)
+    p = weights.shape[-1]
+    return where, _Runs(
+        np.broadcast_to(wi_n[split][:, :, None, :], (m, k, p, 3)).reshape(-1, 3),
+        nodes.reshape(-1, 3), (weights * wi_w[:, None]).ravel(), k * p), straddles
 
 
 def aperture_average(model: Any, wi: np.ndarray, wo: np.ndarray, half_angle_deg: float,

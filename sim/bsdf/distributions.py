@@ -424,7 +424,8 @@ class Phong(Distribution):
                           np.log1p(-np.minimum(c2, 0.5)))
         # I_{r2}(k, 1/2) = 1 - I_{c2}(1/2, k): take whichever side is small (the accurate one)
         direct = betainc(k, 0.5, r2)
-        inc = np.where(direct < 0.5, direct, 1.0 - betainc(0.5, k, c2))
+        other = ~(direct < 0.5)  # betainc returns at once at x = 0: asked only where taken
+        inc = np.where(other, 1.0 - betainc(0.5, k, np.where(other, c2, 0.0)), direct)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             finite = np.exp(k * log_r2) / ((p + 1.0) * beta_half(k)) - 0.5 * np.sqrt(c2) * inc
         return np.where(r2 == 0, 0.0, np.where(p > -1.0, np.maximum(finite, 0.0), np.inf))
