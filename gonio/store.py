@@ -133,13 +133,10 @@ def canonical_json(data: Any) -> bytes:
 
 def encode_line(row: dict[str, Any], checksum: bool = True) -> bytes:
     """A reading's line: JSON (NaN as null, +-inf as Infinity) with its crc32, and a newline."""
-    clean = {k: None if isinstance(v, float) and v != v else v for k, v in row.items()
-             if k != CRC}
-    text = json.dumps(clean, default=_json_default)
-    if checksum:  # the crc as the last member, appended to the row's text, not encoded again
-        crc = zlib.crc32(canonical_json(clean))
-        text = f'{text[:-1]}{", " if clean else ""}"{CRC}": {crc}}}'
-    return text.encode() + b"\n"
+    clean = {k: None if isinstance(v, float) and v != v else v for k, v in row.items()}
+    if checksum:
+        clean[CRC] = zlib.crc32(canonical_json(clean))
+    return json.dumps(clean, default=_json_default).encode() + b"\n"
 
 
 @dataclass
