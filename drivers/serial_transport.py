@@ -18,6 +18,7 @@ just sent, garbled.
 
 from __future__ import annotations
 
+import os
 import re
 import select
 import termios
@@ -191,7 +192,7 @@ class SerialLineTransport:
             self.replies.send_request(sync_shaped=self.sync is not None and
                                       line == self.sync.line)
         try:
-            self._serial.write(data)
+            self._write_bytes(data)
             self._serial.flush()
         except PORT_FAILURES as exc:
             if isinstance(exc, serial.SerialTimeoutException) and not self.replies.awaiting:
@@ -199,6 +200,30 @@ class SerialLineTransport:
                 self.replies.timeout()  # answered after all (an error, an echo)
             raise self._port_error(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}",
                                    exc) from exc
+
+    def _write_bytes(self, data: bytes) -> None:
+        """One os.write on the port's descriptor (pyserial opens it non-blocking); pyserial's
+        write, which waits for room up to the write timeout, only for what the port did not
+        take at once (it would select for room after every write, room or not)."""
+        try:
+            written = os.write(self._fd, data)
+        except BlockingIOError:
+            written = 0
+        if written < len(data):
+            self._serial.write(data[written:])
+
+    def _read_ready(self) -> bytes:
+        """What has arrived on a port select found readable, in one os.read (pyserial's read
+        would ask for the count and select again); nothing if it was a spurious wake-up."""
+        try:
+            chunk = os.read(self._fd, 4096)
+        except BlockingIOError:
+            return b""
+        if not chunk:  # what pyserial's read raises for a readable port with nothing to read
+            raise serial.SerialException("device reports readiness to read but returned no "
+                                         "data (device disconnected or multiple access on "
+                                         "port?)")
+        return chunk
 
     def _abandon_wait(self) -> None:
         """After an exchange: a wait cut short (the port lost, a signal) leaves its reply to
@@ -267,7 +292,7 @@ class SerialLineTransport:
                 left = deadline - time.monotonic()
                 if left <= 0 or not select.select([self._fd], [], [], left)[0]:
                     raise DeviceTimeout(self.name, what, self.timeout_s)
-                data += self._serial.read(max(1, self._serial.in_waiting))
+                data += self._read_ready()
         except PORT_FAILURES as exc:
             raise self._port_error(f"reading the reply to {what}", exc) from exc
         end = data.index(eol)

@@ -8,6 +8,7 @@ Everything is vectorised over numpy arrays and works in degrees at the edges.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -52,9 +53,41 @@ def directions(sample_deg: ArrayLike, arm_deg: ArrayLike, elevation_deg: ArrayLi
     return _to_sample_frame(source, s, p), _to_sample_frame(detector, s, p)
 
 
+def _one_to_sample_frame(v: tuple[float, float, float], s: float, p: float
+                         ) -> tuple[float, float, float]:
+    """_to_sample_frame for one lab vector and one stage pose (rad), on numbers: the same
+    operations in the same order (the sum over the three components as numpy reduces it), so
+    the result is the vectorised one bit for bit."""
+    sin_s, cos_s = math.sin(s), math.cos(s)
+    x = v[0] * -sin_s + ((0.0 + v[1] * cos_s) + v[2] * 0.0)
+    z = v[0] * cos_s + ((0.0 + v[1] * sin_s) + v[2] * 0.0)
+    cp, sp = math.cos(p), math.sin(p)
+    return x * cp + v[2] * sp, -x * sp + v[2] * cp, z
+
+
+def _one_sample_angles(sample_deg: float, arm_deg: float, elevation_deg: float,
+                       azimuth_deg: float) -> SampleAngles:
+    """sample_angles of one stage pose: a scan records one per reading, and numpy's per-call
+    cost on single numbers is most of its time (atan2 and hypot stay numpy's: math's differ
+    from them in the last bit)."""
+    s, a, e, p = map(math.radians, (sample_deg, arm_deg, elevation_deg, azimuth_deg))
+    detector = (math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e))
+    out = []
+    for w in (_one_to_sample_frame((1.0, 0.0, 0.0), s, p), _one_to_sample_frame(detector, s, p)):
+        phi = math.degrees(float(np.arctan2(w[1], w[0])))
+        out += [math.degrees(float(np.arctan2(float(np.hypot(w[0], w[1])), w[2]))),
+                phi + 360.0 if phi <= -180.0 else phi]
+    return SampleAngles(*out)
+
+
 def sample_angles(sample_deg: ArrayLike, arm_deg: ArrayLike, elevation_deg: ArrayLike = 0.0,
                   azimuth_deg: ArrayLike = 0.0) -> SampleAngles:
-    """Sample-frame spherical angles of the source and detector for given stage positions."""
+    """Sample-frame spherical angles of the source and detector for given stage positions
+    (numbers for numbers, arrays otherwise)."""
+    if all(isinstance(x, float | int) for x in (sample_deg, arm_deg, elevation_deg,
+                                                 azimuth_deg)):
+        return _one_sample_angles(float(sample_deg), float(arm_deg), float(elevation_deg),
+                                  float(azimuth_deg))
     wi, wo = directions(sample_deg, arm_deg, elevation_deg, azimuth_deg)
 
     def spherical(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -42,6 +42,8 @@ def run_with_one_kernel_thread(fn: Callable, *args):
     except ImportError:  # pragma: no cover - without the [fast] extra there are no kernels
         return fn(*args)
     previous = numba.get_num_threads()
+    if previous == 1:
+        return fn(*args)
     numba.set_num_threads(1)
     try:
         return fn(*args)

@@ -15,8 +15,13 @@ READ_OVERHEAD_S = 0.02  # estimated protocol time per reading, plus READ_PER_SAM
 READ_PER_SAMPLE_S = 0.003
 
 
-def profile_seconds(distance: Any, speed: float, accel: float) -> np.ndarray:
-    """Rest-to-rest trapezoidal move time: v/a + d/v if d >= v^2/a, else 2 sqrt(d/a)."""
+def profile_seconds(distance: Any, speed: float, accel: float) -> np.ndarray | float:
+    """Rest-to-rest trapezoidal move time: v/a + d/v if d >= v^2/a, else 2 sqrt(d/a) (a number
+    for a number: the engine asks once per move)."""
+    if isinstance(distance, float | int):
+        d = abs(float(distance))
+        return speed / accel + d / speed if d * accel >= speed * speed else 2.0 * math.sqrt(
+            d / accel)
     d = np.abs(np.asarray(distance, dtype=np.float64))
     return np.where(d * accel >= speed * speed, speed / accel + d / speed,
                     2.0 * np.sqrt(d / accel))

@@ -148,8 +148,12 @@ def detector_largest_range(cfg: InstrumentConfig) -> float | None:
     return max(ranges) if ranges else None
 
 
-def sweeps_source(start_deg: Any, end_deg: Any) -> np.ndarray:
-    """True where an arm move from start to end passes the source (arm = 0 mod 360)."""
+def sweeps_source(start_deg: Any, end_deg: Any) -> np.ndarray | bool:
+    """True where an arm move from start to end passes the source (arm = 0 mod 360); a bool
+    for two numbers (the engine's check of each move)."""
+    if isinstance(start_deg, float | int) and isinstance(end_deg, float | int):
+        lo, hi = sorted((start_deg, end_deg))
+        return math.ceil(lo / 360.0) <= math.floor(hi / 360.0)
     lo, hi = np.minimum(start_deg, end_deg), np.maximum(start_deg, end_deg)
     return np.ceil(np.asarray(lo) / 360.0) <= np.floor(np.asarray(hi) / 360.0)
 

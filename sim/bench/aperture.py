@@ -187,6 +187,8 @@ class ApertureIntegral:
         """The plain product of the two caps' polar rules."""
         if self.divergence_rad == 0.0:
             n_i = 0  # a collimated beam: one incident direction
+        if n_i == n_o == 0:  # one ray each way: the product rule's single term, no node arrays
+            return float(g(wi[None], wo[None])[0]) * self.solid_angle_sr
         wi_nodes, wi_weights = cap_rule(wi, self.divergence_rad, n_i)
         wo_nodes, wo_weights = cap_rule(wo, self.aperture_rad, n_o)
         values = g(wi_nodes[:, None, :], wo_nodes[None, :, :])

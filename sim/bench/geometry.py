@@ -7,6 +7,7 @@ along -X. Sample frame: z = sample normal n, x = t1, y = Z, then turned by the a
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -15,11 +16,37 @@ TOWARD_SOURCE = np.array([1.0, 0.0, 0.0])  # lab direction from the sample to th
 BEAM_DIRECTION = -TOWARD_SOURCE  # the direction the incident beam travels
 
 
+def _sin_cos(deg):
+    """(sin, cos) of angles in degrees: math for one number (a bench reading asks for one, and
+    numpy's per-call cost is 20 times the sine's), numpy for arrays."""
+    if isinstance(deg, float | int):
+        r = math.radians(deg)
+        return math.sin(r), math.cos(r)
+    r = np.radians(deg)
+    return np.sin(r), np.cos(r)
+
+
+def _vector(x, y, z) -> np.ndarray:
+    """Components (numbers or arrays, broadcast) stacked along a last axis of 3."""
+    if isinstance(x, float) and isinstance(y, float) and isinstance(z, float):
+        return np.array((x, y, z))
+    return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+
+
 def detector_direction(arm_deg, elevation_deg=0.0) -> np.ndarray:
     """Lab unit vector from the sample to the detector: (cos e cos a, cos e sin a, sin e)."""
-    a, e = np.radians(arm_deg), np.radians(elevation_deg)
-    return np.stack(np.broadcast_arrays(np.cos(e) * np.cos(a), np.cos(e) * np.sin(a),
-                                        np.sin(e)), axis=-1)
+    (sin_a, cos_a), (sin_e, cos_e) = _sin_cos(arm_deg), _sin_cos(elevation_deg)
+    return _vector(cos_e * cos_a, cos_e * sin_a, sin_e)
+
+
+def _to_sample(x, y, z, sample_trig, azimuth_trig, flipped):
+    """Sample-frame components of lab components (x, y, z), given (sin, cos) of the sample's
+    and the azimuth's angles (lab_to_sample's formula)."""
+    (sin_s, cos_s), (sin_p, cos_p) = sample_trig, azimuth_trig
+    x, y, z = -x * sin_s + y * cos_s, z, x * cos_s + y * sin_s
+    if flipped:
+        x, z = -x, -z
+    return x * cos_p + y * sin_p, -x * sin_p + y * cos_p, z
 
 
 def lab_to_sample(v: np.ndarray, sample_deg, azimuth_deg=0.0, flipped=False) -> np.ndarray:
@@ -29,15 +56,8 @@ def lab_to_sample(v: np.ndarray, sample_deg, azimuth_deg=0.0, flipped=False) -> 
     p. `flipped` mounts the sample the other way round (its exterior normal is -n, e.g. lit
     through the hemisphere): x and z change sign, a 180-degree turn about y.
     """
-    s, p = np.radians(sample_deg), np.radians(azimuth_deg)
-    x = -v[..., 0] * np.sin(s) + v[..., 1] * np.cos(s)
-    y = v[..., 2]
-    z = v[..., 0] * np.cos(s) + v[..., 1] * np.sin(s)
-    if flipped:
-        x, z = -x, -z
-    xp = x * np.cos(p) + y * np.sin(p)
-    yp = -x * np.sin(p) + y * np.cos(p)
-    return np.stack(np.broadcast_arrays(xp, yp, z), axis=-1)
+    return _vector(*_to_sample(v[..., 0], v[..., 1], v[..., 2], _sin_cos(sample_deg),
+                               _sin_cos(azimuth_deg), flipped))
 
 
 def sample_to_lab(w: np.ndarray, sample_deg, azimuth_deg=0.0, flipped=False) -> np.ndarray:
@@ -58,12 +78,13 @@ def sample_frame_directions(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(wi, wo) in the sample frame for stage positions {"sample", "arm", "azimuth",
     "elevation"} in degrees (azimuth and elevation default to 0; values may be arrays)."""
-    s = positions["sample"]
-    p = positions.get("azimuth", 0.0)
-    wi = lab_to_sample(TOWARD_SOURCE, s, p, flipped)
-    wo = lab_to_sample(detector_direction(positions["arm"], positions.get("elevation", 0.0)),
-                       s, p, flipped)
-    wi, wo = np.broadcast_arrays(wi, wo)
+    rotation = _sin_cos(positions["sample"]), _sin_cos(positions.get("azimuth", 0.0))
+    (sin_a, cos_a), (sin_e, cos_e) = (_sin_cos(positions["arm"]),
+                                      _sin_cos(positions.get("elevation", 0.0)))
+    wi = _vector(*_to_sample(1.0, 0.0, 0.0, *rotation, flipped))
+    wo = _vector(*_to_sample(cos_e * cos_a, cos_e * sin_a, sin_e, *rotation, flipped))
+    if wi.shape != wo.shape:
+        wi, wo = np.broadcast_arrays(wi, wo)
     return wi, wo
 
 

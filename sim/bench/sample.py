@@ -13,6 +13,7 @@ their share of the light exceeds `visible_fraction` (the detector's noise floor)
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
@@ -131,7 +132,9 @@ def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndar
     that leaves the polished back face along wo, times that face's transmittance / n^2 (the
     back face widens the cone by n^2). A conductor: 0.
     """
-    wi, wo = np.broadcast_arrays(wi, wo)
+    wi, wo = np.asarray(wi), np.asarray(wo)
+    if wi.shape != wo.shape:
+        wi, wo = np.broadcast_arrays(wi, wo)
     reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
     n = spec.eta
     t = optics.normal_transmittance(n)
@@ -324,7 +327,7 @@ class Sample:
 
     def _eval(self, lobe: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         self.evaluations[lobe] += len(wi)
-        theta_i = float(np.arccos(min(1.0, abs(float(np.mean(wi[:, 2]))))))
+        theta_i = math.acos(min(1.0, abs(float(np.add.reduce(wi[:, 2])) / len(wi))))  # the mean's
         if self.diffraction_on(theta_i, lobe):
             self.evaluations["diffraction"] += len(wi)
             f = self._extra("diffraction", lobe).eval(wi, wo, self.wavelength_m)
@@ -355,15 +358,22 @@ class Sample:
     def integrand(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Detector power per incident power per sr at (wi, wo) (..., 3) -> (...)."""
         wi, wo = np.broadcast_arrays(wi, wo)
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
         w_eval, factor = exit_view(self.spec, wi, wo)
-        out = np.zeros(wi.shape[:-1])
-        reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
+        out = np.zeros(len(wi))
+        reflected = (wo[:, 2] > 0) == (wi[:, 2] > 0)
+        live = factor > 0
         for lobe, on_lobe in (("reflection", reflected), ("transmission", ~reflected)):
-            use = on_lobe & (factor > 0)
-            if use.any():
+            use = on_lobe & live
+            if not use.any():
+                continue
+            if use.all():  # every pair (a single reading's ray): no gathering and scattering
+                out = factor * self._eval(lobe, wi, w_eval) * np.abs(wo[:, 2])
+            else:
                 f = self._eval(lobe, wi[use], w_eval[use])
-                out[use] = factor[use] * f * np.abs(wo[use][:, 2])
-        return out
+                out[use] = factor[use] * f * np.abs(wo[use, 2])
+        return out.reshape(shape)
 
     def peak_direction(self, wi: np.ndarray, reflection: bool) -> np.ndarray | None:
         """Where a lobe's specular peak leaves (as the detector sees it): the mirror direction,

@@ -10,6 +10,7 @@ import shutil
 import signal
 import threading
 import time
+import zlib
 
 import numpy as np
 import pytest
@@ -86,6 +87,17 @@ def test_infinite_power_survives(writer):
     writer.append(row(0, power_w=float("inf"), saturated=True))
     r = open_run(writer.path).readings()
     assert r["power_w"][0] == float("inf") and r["saturated"][0]
+
+
+def test_a_line_is_the_rows_json_with_its_crc_last():
+    """encode_line appends the crc to the row's text: the bytes json.dumps gives for the row
+    with the crc as its last member, the crc over the canonical row (what check verifies)."""
+    for r in (row(3), row(4, power_w=math.inf, flags="retried"), {}):
+        line = gonio.store.encode_line(r)
+        clean = {k: None if isinstance(v, float) and v != v else v for k, v in r.items()}
+        crc = zlib.crc32(gonio.store.canonical_json(clean))
+        assert line == json.dumps({**clean, "crc32": crc}).encode() + b"\n"
+        assert gonio.store.encode_line(r, checksum=False) == json.dumps(clean).encode() + b"\n"
 
 
 def test_out_of_order_append_is_refused(writer):
