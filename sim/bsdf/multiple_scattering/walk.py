@@ -162,6 +162,16 @@ class Walker:
             elif targets is not None and counted:
                 value[idx] += beta[idx, None] * self.next_event_all(w_in, m, out, targets, new,
                                                                     other, unit)
+            if order is not None and k >= order:
+                break
+            if forced:  # Russian roulette on low weights, before scattering (unbiased)
+                b = beta[idx]
+                low = b < ROULETTE
+                lives = ~low | (rng.random(idx.size) * ROULETTE < b)
+                beta[idx] = np.where(low, np.where(lives, ROULETTE, 0.0), b)
+                idx, out, w_in, m = idx[lives], out[lives], w_in[lives], m[lives]
+                if not idx.size:
+                    break
             scattered = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)), unit)
             if wo is not None and self.guided and micro.guidable:
                 scattered = guided_scatter(slopes, micro, w_in, m, out, wo[idx],
@@ -170,13 +180,6 @@ class Walker:
             beta[idx] *= factor
             outside[idx] = out ^ crossed
             d[idx] = np.where(crossed[:, None], flip(w_next), w_next)
-            if forced:  # Russian roulette on low weights keeps the estimate unbiased
-                b = beta[idx]
-                low = b < ROULETTE
-                beta[idx] = np.where(low, np.where(rng.random(idx.size) * ROULETTE < b,
-                                                   ROULETTE, 0.0), b)
-            if order is not None and k >= order:
-                break
             if max_order is not None and k >= max_order:
                 side_log = np.where(outside[idx], log_u[idx], log_v[idx])
                 hit = 1.0 - self._escape_probability(d[idx], side_log)
