@@ -97,7 +97,9 @@ class Walker:
         When evaluating (wo given) every step is forced to hit the surface, the walk's weight
         taking the hit probability 1 - G1; this bounds the NEE weight D / A(w_in) of rare hits
         along nearly vertical upward rays (the analog walk's heavy tail), and Russian roulette
-        ends the walks; the next direction is drawn by guided_scatter (phase function or
+        ends the walks, played after an event's NEE is scored and before it scatters (so the
+        NEE that follows a guided step keeps its exact weight, and an ended event costs no
+        scattering); the next direction is drawn by guided_scatter (phase function or
         backwards from wo, one-sample MIS). Sampling (no wo) runs the analog walk, which exits.
         """
         if self.compiled:

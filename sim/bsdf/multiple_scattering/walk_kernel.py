@@ -184,7 +184,7 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
                     exit_dir[i, 2] = dz if outside else -dz
                     weight[i] = beta
                 break
-            other = log1mexp(new)
+            other = 0.0 if conductor else log1mexp(new)  # the side below, if there is one
             orders[i] = k
             if k == 1:
                 first[i] = new if outside else other
