@@ -147,22 +147,46 @@ def _walk_modes(walker, n: int, rng: np.random.Generator) -> dict[str, float]:
     return rates, events
 
 
+EFFICIENCY_WALKS = 20000
+
+
+def _eval_efficiency(walker, rng: np.random.Generator) -> float:
+    """CPU milliseconds per direction pair for a 1 % relative error of the eval walk at the
+    eval table's 12 pairs (reflection pairs only on a mirror): mean over the pairs of the
+    relative variance per walk times the CPU time per walk, over 1e-4. It is the same for any
+    walk count, so it weighs a walk's cost against its noise (the walks' efficiency)."""
+    wi, wo = direction_pairs()
+    if walker.micro.transmits is False:
+        wi, wo = wi[wo[:, 2] > 0.0], wo[wo[:, 2] > 0.0]
+    start = time.process_time()
+    res = walker.run(np.repeat(wi, EFFICIENCY_WALKS, axis=0), rng,
+                     np.repeat(wo, EFFICIENCY_WALKS, axis=0))
+    per_walk = (time.process_time() - start) / res.value.size
+    v = res.value.reshape(len(wi), EFFICIENCY_WALKS)
+    mean = v.mean(axis=1)
+    lit = mean > 0.0
+    return 1e3 * float(np.mean(v[lit].var(axis=1) / mean[lit] ** 2)) * per_walk / 1e-4
+
+
 def throughput_table(rng: np.random.Generator) -> list[str]:
     """Walks per CPU-second of the compiled walk beside the numpy walk (the per-walk baseline,
     same run), and the ratio to issue 19's C++ figures (GGX glass: eval 1.3e6, sample 1.2e6;
     other cases 0.7-1.4e6, so two ratios: against 0.7e6 / against 1.4e6). events: scattering
     events per walk (an eval walk is forced to hit, so it is longer than the analog walk the
-    C++ eval follows, and carries less variance)."""
+    C++ eval follows, and carries less variance); ms@1%: the eval walk's efficiency
+    (_eval_efficiency: CPU ms per pair for 1 % relative error at the 12 pairs)."""
     lines = [f"walks per CPU-second, 60 deg incidence: compiled walk vs numpy walk (baseline, same "
-             f"run); shared = orders >= 2 towards {TARGETS} targets per walk",
+             f"run); shared = orders >= 2 towards {TARGETS} targets per walk; vs C++: ratio to "
+             f"issue 19's figures for Heitz's C++ walk on this machine (not measured here)",
              f"{'surface':>20} {'mode':>7} {'events':>6} {'compiled/s':>11} {'numpy/s':>10} "
-             f"{'speed-up':>8} {'vs C++ (issue 19)':>18}"]
+             f"{'speed-up':>8} {'vs C++ (issue 19)':>18} {'ms@1%':>7}"]
     for name, kind, alpha in SURFACES:
         model = RandomWalkBSDF(Microsurface(name, alpha, kind, eta=ETA), walks=1)
         slopes, micro, guided = model.slopes, model.micro, model.guided
         _walk_modes(Walker(slopes, micro, guided), 64, rng)  # compile (or load the cache)
         fast, events = _walk_modes(Walker(slopes, micro, guided), 40000, rng)
         slow, _ = _walk_modes(Walker(slopes, micro, guided, compiled=False), 10000, rng)
+        efficiency = f"{_eval_efficiency(Walker(slopes, micro, guided), rng):7.3f}"
         label = f"{name} {'glass' if kind == 'dielectric' else 'mirror'} {alpha}"
         for mode in ("eval", "sample", "shared"):
             if name == "ggx" and kind == "dielectric" and mode in CPP_GGX_GLASS:
@@ -172,7 +196,8 @@ def throughput_table(rng: np.random.Generator) -> list[str]:
             else:
                 versus = f"{fast[mode] / CPP_OTHER[0]:8.2f} / {fast[mode] / CPP_OTHER[1]:<7.2f}"
             lines.append(f"{label:>20} {mode:>7} {events[mode]:6.2f} {fast[mode]:11.3e} "
-                         f"{slow[mode]:10.3e} {fast[mode] / slow[mode]:8.1f} {versus}")
+                         f"{slow[mode]:10.3e} {fast[mode] / slow[mode]:8.1f} {versus}"
+                         f"{' ' + efficiency if mode == 'eval' else ''}")
     return lines
 
 

@@ -56,7 +56,7 @@ def test_quadrature_matches_the_walks_order_two(name):
     model, wi = CASES[name]
     walker = RandomWalkBSDF(model, guided=False).walker
     exact = second_order(walker, wi, TARGETS)
-    mean, err, effective = _walked(walker, wi, 1 << 16, 11, order=2, min_order=2)
+    mean, err, effective = _walked(walker, wi, 1 << 17, 11, order=2, min_order=2)
     dark = exact < DARK * exact.max()
     assert np.all(mean[dark] < DARK * exact.max())  # a conductor sends nothing below
     assert np.all(effective[~dark] >= MIN_EFFECTIVE), effective

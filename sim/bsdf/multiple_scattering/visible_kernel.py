@@ -2,10 +2,10 @@
 
 GGX is Heitz 2018's warp (primitives.ggx_visible_normal, which holds below the horizon too);
 Beckmann is beckmann_sphere's log-CDF inversion, one direction at a time, with the two special
-functions numba lacks: erfcx (direct form, then primitives.erfc_continued_fraction) and the
-normal quantile ndtri (Acklam's rational approximation refined by one Halley step to full double
-precision). beckmann_sphere (numpy, scipy) is the
-reference.
+functions numba lacks: erfcx (libm's erfc times an exactly rounded exp(x^2), the continued
+fraction only beyond x = 25) and the
+normal quantile ndtri (Wichura's AS241, rational functions good to double precision, so no
+erfc is spent on the second slope). beckmann_sphere (numpy, scipy) is the reference.
 """
 
 from __future__ import annotations
@@ -18,49 +18,75 @@ from sim.bsdf.primitives import erfc_continued_fraction, ggx_visible_normal, sca
 LOG_2 = math.log(2.0)
 #: Steps of the Beckmann slope inversion at most (it converges in a few).
 NEWTON_STEPS = 60
-# Acklam's coefficients: central numerator, central denominator, tail numerator and denominator
-_A = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02,
-      1.383577518672690e+02, -3.066479806614716e+01, 2.506628277459239e+00)
-_B = (-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02,
-      6.680131188771972e+01, -1.328068155288572e+01)
-_C = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00,
-      -2.549732539343734e+00, 4.374664141464968e+00, 2.938163982698783e+00)
-_D = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00,
-      3.754408661907416e+00)
-_LOW = 0.02425
+#: erfcx switches to the continued fraction here (erfc(25) = 8e-274 is still a normal number).
+ERFCX_CF_FROM = 25.0
+#: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
+SPLIT = 134217729.0
+# Wichura's AS241 (PPND16): numerator and denominator coefficients, lowest power first, of the
+# central region |p - 1/2| <= 0.425, the near tail r = sqrt(-log p) <= 5 and the far tail
+_A = (3.3871328727963666080e+0, 1.3314166789178437745e+2, 1.9715909503065514427e+3,
+      1.3731693765509461125e+4, 4.5921953931549871457e+4, 6.7265770927008700853e+4,
+      3.3430575583588128105e+4, 2.5090809287301226727e+3)
+_B = (1.0, 4.2313330701600911252e+1, 6.8718700749205790830e+2, 5.3941960214247511077e+3,
+      2.1213794301586595867e+4, 3.9307895800092710610e+4, 2.8729085735721942674e+4,
+      5.2264952788528545610e+3)
+_C = (1.42343711074968357734e+0, 4.63033784615654529590e+0, 5.76949722146069140550e+0,
+      3.64784832476320460504e+0, 1.27045825245236838258e+0, 2.41780725177450611770e-1,
+      2.27238449892691845833e-2, 7.74545014278341407640e-4)
+_D = (1.0, 2.05319162663775882187e+0, 1.67638483018380384940e+0, 6.89767334985100004550e-1,
+      1.48103976427480074590e-1, 1.51986665636164571966e-2, 5.47593808499534494600e-4,
+      1.05075007164441684324e-9)
+_E = (6.65790464350110377720e+0, 5.46378491116411436990e+0, 1.78482653991729133580e+0,
+      2.96560571828504891230e-1, 2.65321895265761230930e-2, 1.24266094738807843860e-3,
+      2.71155556874348757815e-5, 2.01033439929228813265e-7)
+_F = (1.0, 5.99832206555887937690e-1, 1.36929880922735805310e-1, 1.48753612908506148525e-2,
+      7.86869131145613259100e-4, 1.84631831751005468180e-5, 1.42151175831644588870e-7,
+      2.04426310338993978564e-15)
+
+
+@scalar
+def _ratio(num, den, r):
+    """num(r) / den(r), two degree-7 polynomials by Horner's rule."""
+    p, q = num[7], den[7]
+    for k in range(6, -1, -1):
+        p = p * r + num[k]
+        q = q * r + den[k]
+    return p / q
+
+
+@scalar
+def exp_square(x):
+    """exp(x^2) to double precision for large x: x^2's rounding error (Veltkamp split, exact
+    products) is applied as a factor, instead of being amplified x^2 times by exp."""
+    c = SPLIT * x
+    hi = c - (c - x)
+    lo = x - hi
+    s = x * x
+    return math.exp(s) * (1.0 + (((hi * hi - s) + 2.0 * hi * lo) + lo * lo))
 
 
 @scalar
 def erfcx(x):
-    """exp(x^2) erfc(x) for x >= 0."""
+    """exp(x^2) erfc(x) for x >= 0: by libm's erfc below ERFCX_CF_FROM (the continued fraction
+    needs up to 60 chained divisions near x = 2, which made Beckmann's slope inversion from
+    below the horizon 6x slower), then primitives.erfc_continued_fraction (14 terms there)."""
     if x < BECKMANN_CF_FROM:
         return math.exp(x * x) * math.erfc(x)
+    if x < ERFCX_CF_FROM:
+        return exp_square(x) * math.erfc(x)
     return 1.0 / (SQRT_PI * (x + erfc_continued_fraction(x)))
 
 
 @scalar
-def _lower_quantile(p):
-    """Standard normal quantile for 0 < p <= 1/2."""
-    if p < _LOW:
-        q = math.sqrt(-2.0 * math.log(p))
-        x = ((((((_C[0] * q + _C[1]) * q + _C[2]) * q + _C[3]) * q + _C[4]) * q + _C[5])
-             / ((((_D[0] * q + _D[1]) * q + _D[2]) * q + _D[3]) * q + 1.0))
-    else:
-        q = p - 0.5
-        r = q * q
-        x = ((((((_A[0] * r + _A[1]) * r + _A[2]) * r + _A[3]) * r + _A[4]) * r + _A[5]) * q
-             / (((((_B[0] * r + _B[1]) * r + _B[2]) * r + _B[3]) * r + _B[4]) * r + 1.0))
-    e = 0.5 * math.erfc(-x / math.sqrt(2.0)) - p
-    u = e * math.sqrt(2.0 * math.pi) * math.exp(0.5 * x * x)
-    return x - u / (1.0 + 0.5 * x * u)
-
-
-@scalar
 def ndtri(p):
-    """Standard normal quantile Phi^-1(p) for 0 < p < 1, from the nearer tail."""
-    if p > 0.5:
-        return -_lower_quantile(1.0 - p)
-    return _lower_quantile(p)
+    """Standard normal quantile Phi^-1(p) for 0 < p < 1 (AS241: about 1e-16 relative, no
+    special function)."""
+    q = p - 0.5
+    if abs(q) <= 0.425:
+        return q * _ratio(_A, _B, 0.180625 - q * q)
+    r = math.sqrt(-math.log(p if q < 0.0 else 1.0 - p))
+    x = _ratio(_C, _D, r - 1.6) if r <= 5.0 else _ratio(_E, _F, r - 5.0)
+    return -x if q < 0.0 else x
 
 
 @scalar

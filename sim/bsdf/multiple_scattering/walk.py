@@ -97,7 +97,9 @@ class Walker:
         When evaluating (wo given) every step is forced to hit the surface, the walk's weight
         taking the hit probability 1 - G1; this bounds the NEE weight D / A(w_in) of rare hits
         along nearly vertical upward rays (the analog walk's heavy tail), and Russian roulette
-        ends the walks; the next direction is drawn by guided_scatter (phase function or
+        ends the walks, played after an event's NEE is scored and before it scatters (so the
+        NEE that follows a guided step keeps its exact weight, and an ended event costs no
+        scattering); the next direction is drawn by guided_scatter (phase function or
         backwards from wo, one-sample MIS). Sampling (no wo) runs the analog walk, which exits.
         """
         if self.compiled:
@@ -162,6 +164,16 @@ class Walker:
             elif targets is not None and counted:
                 value[idx] += beta[idx, None] * self.next_event_all(w_in, m, out, targets, new,
                                                                     other, unit)
+            if order is not None and k >= order:
+                break
+            if forced:  # Russian roulette on low weights, before scattering (unbiased)
+                b = beta[idx]
+                low = b < ROULETTE
+                lives = ~low | (rng.random(idx.size) * ROULETTE < b)
+                beta[idx] = np.where(low, np.where(lives, ROULETTE, 0.0), b)
+                idx, out, w_in, m = idx[lives], out[lives], w_in[lives], m[lives]
+                if not idx.size:
+                    break
             scattered = micro.scatter(slopes, w_in, m, out, rng.random((2, idx.size)), unit)
             if wo is not None and self.guided and micro.guidable:
                 scattered = guided_scatter(slopes, micro, w_in, m, out, wo[idx],
@@ -170,13 +182,6 @@ class Walker:
             beta[idx] *= factor
             outside[idx] = out ^ crossed
             d[idx] = np.where(crossed[:, None], flip(w_next), w_next)
-            if forced:  # Russian roulette on low weights keeps the estimate unbiased
-                b = beta[idx]
-                low = b < ROULETTE
-                beta[idx] = np.where(low, np.where(rng.random(idx.size) * ROULETTE < b,
-                                                   ROULETTE, 0.0), b)
-            if order is not None and k >= order:
-                break
             if max_order is not None and k >= max_order:
                 side_log = np.where(outside[idx], log_u[idx], log_v[idx])
                 hit = 1.0 - self._escape_probability(d[idx], side_log)

@@ -1,8 +1,9 @@
 """The random walk compiled, one walk at a time (numba): what Walker.run does, at native speed.
 
 Walker.run's numpy path is the reference and the fallback (diffuse facets, no numba); this
-kernel follows the same steps per walk (forced hits and Russian roulette when evaluating,
-next-event estimation towards wo or towards every target, guided next directions
+kernel follows the same steps per walk (forced hits and Russian roulette when evaluating, the
+roulette played before the facet normal is drawn, so an event it ends costs no normal and no
+scattering; next-event estimation towards wo or towards every target, guided next directions
 (guiding.py) towards wo, the analog walk when sampling, order and cap), with the scalar
 formulas of nee_kernel.py and visible_kernel.py, and numba's own random generator seeded from
 the caller's numpy Generator (so a seed gives the same walks, not the numpy path's numbers).
@@ -164,10 +165,8 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
         k = 0
         while True:
             k += 1
-            if k == 1 and u_first.shape[0]:
-                ua, ub, uc = u_first[i, 0], u_first[i, 1], u_first[i, 2]
-            else:
-                ua, ub, uc = np.random.random(), np.random.random(), np.random.random()
+            given = k == 1 and u_first.shape[0] > 0  # the caller's uniforms for event 1
+            ua = u_first[i, 0] if given else np.random.random()
             lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
             lam = lam_up if dz >= 0.0 else -1.0 - lam_up
             if forced:
@@ -185,12 +184,11 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
                     exit_dir[i, 2] = dz if outside else -dz
                     weight[i] = beta
                 break
-            other = log1mexp(new)
+            other = 0.0 if conductor else log1mexp(new)  # the side below, if there is one
             orders[i] = k
             if k == 1:
                 first[i] = new if outside else other
             ix, iy, iz = -dx, -dy, -dz
-            mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
             area = max(iz, 0.0) + abs(iz) * lam_up if abs(iz) > 0.0 else projected_area(
                 ndf, ax, ay, ix, iy, iz)
             if k >= min_order and (order == 0 or order == k):
@@ -204,10 +202,19 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
                                                          n_c, outside, ix, iy, iz, area,
                                                          targets[t, 0], targets[t, 1],
                                                          targets[t, 2], lam_t[t], new, other)
-            s0 = np.random.random()
-            np.random.random()  # the numpy path's second scattering uniform
+            if order and k >= order:
+                break
+            if forced and beta < roulette:  # Russian roulette before scattering: a walk it
+                if np.random.random() * roulette < beta:  # ends costs no normal, no scatter
+                    beta = roulette
+                else:
+                    break
+            ub = u_first[i, 1] if given else np.random.random()
+            uc = u_first[i, 2] if given else np.random.random()
+            mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
             wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
-                                                  outside, ix, iy, iz, mx, my, mz, s0)
+                                                  outside, ix, iy, iz, mx, my, mz,
+                                                  np.random.random())
             if guide:
                 g0, g1 = np.random.random(), np.random.random()
                 g2, g3 = np.random.random(), np.random.random()
@@ -222,12 +229,6 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
             else:
                 dx, dy, dz = wx, wy, wz
                 cur = new
-            if forced:  # Russian roulette on low weights keeps the estimate unbiased
-                r = np.random.random()
-                if beta < roulette:
-                    beta = roulette if r * roulette < beta else 0.0
-            if order and k >= order:
-                break
             if max_order and k >= max_order:
                 truncated[i] = beta * (1.0 - escape(ndf, ax, ay, dx, dy, dz, cur))
                 break
