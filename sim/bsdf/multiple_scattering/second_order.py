@@ -22,6 +22,8 @@ Orders >= 2 are then this plus the walk's orders >= 3 (lobe.higher_orders_at).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from sim.bsdf.multiple_scattering import nee_kernel, second_order_kernel
@@ -29,10 +31,11 @@ from sim.bsdf.multiple_scattering.energy import gauss_legendre_unit
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
 from sim.bsdf.multiple_scattering.walk import Walker, flip
 
-#: Gauss-Legendre nodes per w1_z segment and per azimuth arc (compiled route), per height
-#: uniform (both routes).
-POLAR_NODES = 16
-AZIMUTH_NODES = 16
+#: Gauss-Legendre nodes per radian of w1's polar angle and of its azimuth in each cell (at
+#: least 4, at most MAX_CELL_NODES; compiled route), per height uniform (both routes).
+POLAR_NODES = 12
+AZIMUTH_NODES = 9
+MAX_CELL_NODES = 128
 HEIGHT_NODES = 8
 #: The numpy reference's nodes in w1_z per hemisphere and of w1's azimuth (all arcs).
 REFERENCE_POLAR_NODES = 128
@@ -110,20 +113,29 @@ def second_order(walker: Walker, wi: np.ndarray, targets: np.ndarray,
                  heights: int = HEIGHT_NODES) -> np.ndarray:
     """Order 2 of f |cos o| from wi (3,) towards every target (m, 3) of a dielectric or
     conductor Smith microsurface (a Walker, isotropic slopes), by quadrature: compiled
-    (second_order_kernel, `polar` nodes per w1_z segment, `azimuth` per arc), else the numpy
-    reference."""
+    (second_order_kernel, `polar` nodes per radian of w1's polar angle and `azimuth` per
+    radian of its azimuth in each cell), else the numpy reference."""
     walker, wi, targets = _lit_from_above(walker, wi, targets)
     if not nee_kernel.supports(walker.slopes, walker.micro):
         return second_order_reference(walker, wi, targets)
-    px, pw = gauss_legendre_unit(polar)
-    qx, qw = gauss_legendre_unit(azimuth)
+    xs, ws = _rules(MAX_CELL_NODES)
     hx, hw = gauss_legendre_unit(heights)
     a0 = -float(walker.slopes.signed_lambda(-wi[None, :])[0])
     out = np.empty(len(targets))
     second_order_kernel.second_order_all(
         *nee_kernel.surface_arguments(walker.slopes, walker.micro), wi, a0,
-        np.ascontiguousarray(targets), px, pw, qx, qw, hx, hw, out)
+        np.ascontiguousarray(targets), float(polar), float(azimuth), xs, ws, hx, hw, out)
     return out
+
+
+@functools.cache
+def _rules(largest: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre rules on [0, 1] of every size up to `largest`: nodes xs[n, :n], weights
+    ws[n, :n]."""
+    xs, ws = np.zeros((largest + 1, largest)), np.zeros((largest + 1, largest))
+    for n in range(1, largest + 1):
+        xs[n, :n], ws[n, :n] = gauss_legendre_unit(n)
+    return xs, ws
 
 
 def second_order_reference(walker: Walker, wi: np.ndarray, targets: np.ndarray,

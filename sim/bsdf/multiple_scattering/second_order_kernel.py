@@ -1,16 +1,18 @@
 """Compiled quadrature of the random walk's second order (second_order.py's fast route, numba).
 
-One target at a time, the direction integral over the first event's outgoing w1 is split in
-w1_z at every place where a phase function's support ends (its facet normal reaches the
-horizon: h_z is proportional to z_in + eta z_out, so those edges are lines of constant w1_z:
-the horizon, -wi_z and -wi_z / eta for the first event, and for the second event wo_z or
-eta wo_z, mirrored as the side requires), and in azimuth at the planes of wi and of the target
-(where both events peak); on every cell the product of Gauss-Legendre rules then sees a
-smooth integrand (up to the kinks where Fresnel reaches total internal reflection, which
-make light from below converge slowest). A target in wi's plane makes the integrand
-symmetric about that plane, so half the circle is integrated. The height expectation H is in
-closed form except for light transmitted at both events (there second_order.py's product
-rule over the heights' uniforms), once per polar node and target.
+One target at a time, the direction integral over the first event's outgoing w1 is cut into
+cells on which the integrand is smooth, each integrated by a product of Gauss-Legendre rules in
+w1's polar angle and azimuth with nodes in proportion to its size. The cuts: in the polar angle
+where a phase function's support ends (its facet normal reaches the horizon: h_z is
+proportional to z_in + eta z_out, so those edges are rings: the horizon, -wi_z or -wi_z / eta
+for the first event, wo_z or eta wo_z for the second, mirrored as the side requires), in
+azimuth at the planes of wi and of the target (where both events peak), and on the cones where
+a Fresnel factor has its kink (total internal reflection) or a refraction its limit (kink_cones;
+their rings' ends cut the polar angle too). Integrating in the polar angle rather than in w1_z
+keeps a cell smooth where an edge shrinks onto a pole. A target in wi's plane makes the
+integrand symmetric about that plane, so half the circle is integrated. The height
+expectation H is in closed form except for light transmitted at both events (there
+second_order.py's product rule over the heights' uniforms), once per polar node.
 """
 
 from __future__ import annotations
@@ -107,26 +109,96 @@ def height_expectation(a0, lam, crossed, lam_e, same, hx, hw):
 
 
 @scalar
-def polar_breaks(iz, tz, eta, conductor, crossed):
-    """The w1_z in (-1, 1) where an event's support ends, for incidence z iz > 0 and target z
-    tz, on the reflected (w1 anywhere) or the transmitted (w1 below) branch; sorted, with the
-    ends of the branch's interval."""
+def kink_cones(ix, iy, iz, tx, ty, tz, eta, conductor, crossed):
+    """(axes (4, 3), cosines (4,), count) of the cones in w1 where an event's Fresnel factor
+    or its refracted image ends with a kink: a dielectric reflection with total internal
+    reflection (el < 1) at <w_in, h> = sqrt(1 - el^2), i.e. <w_in, w_out> = 1 - 2 el^2, and
+    a refraction at its limit (the critical or the grazing facet), <w_out, -w_in> = el or
+    1 / el; first event from wi, second towards the target (in d1's frame, then mirrored to
+    w1's)."""
+    axes, cosines, k = np.zeros((4, 3)), np.zeros(4), 0
+    if conductor:
+        return axes, cosines, k
+    el1 = eta  # the first event is outside
     if crossed:
-        edges = np.array([-1.0, 0.0, -iz / eta, tz if tz < 0.0 else tz / eta])
-    else:
-        edges = np.array([-1.0, 0.0, 1.0, -iz, tz if (tz > 0.0 or conductor) else eta * tz])
-    return np.sort(np.minimum(np.maximum(edges, -1.0), 0.0 if crossed else 1.0))
+        axes[k, 0], axes[k, 1], axes[k, 2] = -ix, -iy, -iz
+        cosines[k], k = (el1 if el1 < 1.0 else 1.0 / el1), k + 1
+    elif el1 < 1.0:
+        axes[k, 0], axes[k, 1], axes[k, 2] = ix, iy, iz
+        cosines[k], k = 1.0 - 2.0 * el1 * el1, k + 1
+    el2 = 1.0 / eta if crossed else eta
+    lz = -tz if crossed else tz  # the target in d1's frame
+    mirror = -1.0 if crossed else 1.0  # d1's frame back to w1's
+    if lz > 0.0 and el2 < 1.0:  # <-d1, wo> = 1 - 2 el^2
+        axes[k, 0], axes[k, 1], axes[k, 2] = tx, ty, mirror * lz
+        cosines[k], k = 2.0 * el2 * el2 - 1.0, k + 1
+    elif lz < 0.0:  # <wo, d1> = el or 1 / el
+        axes[k, 0], axes[k, 1], axes[k, 2] = tx, ty, mirror * lz
+        cosines[k], k = (el2 if el2 < 1.0 else 1.0 / el2), k + 1
+    return axes, cosines, k
 
 
 @scalar
-def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx, ty,
-                     tz, px, pw, qx, qw, hx, hw):
-    """Order 2 of f |cos o| from wi = (ix, iy, iz), iz > 0, towards the world target t, with
-    px, pw the polar rule per segment and qx, qw the azimuth rule per arc on [0, 1]."""
+def polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones):
+    """The w1_z where an event's support ends (the horizon, -iz or -iz / eta, then tz or
+    eta tz, mirrored as the side requires) and where a kink cone's rings begin and end, on
+    the reflected (w1 anywhere) or the transmitted (w1 below) branch; sorted, clamped to the
+    branch's interval, with its ends."""
+    hi = 0.0 if crossed else 1.0
+    edges = np.full(5 + 2 * cones, -1.0)
+    edges[1] = 0.0
+    edges[2] = hi
+    if crossed:
+        edges[3], edges[4] = -iz / eta, (tz if tz < 0.0 else tz / eta)
+    else:
+        edges[3], edges[4] = -iz, (tz if (tz > 0.0 or conductor) else eta * tz)
+    for c in range(cones):
+        theta = math.acos(min(1.0, max(-1.0, axes[c, 2])))
+        half = math.acos(min(1.0, max(-1.0, cosines[c])))
+        edges[5 + 2 * c] = math.cos(theta + half)  # past a pole, the ring turns back
+        edges[6 + 2 * c] = math.cos(theta - half)
+    return np.sort(np.minimum(np.maximum(edges, -1.0), hi))
+
+
+@scalar
+def ring_breaks(plane_breaks, z, sin_z, axes, cosines, cones):
+    """The azimuths of one ring of w1 (polar z) at which to split it: the planes' (sorted,
+    first to last, the last closing the range) and where the kink cones cross the ring."""
+    lo, hi = plane_breaks[0], plane_breaks[-1]
+    out = np.empty(plane_breaks.shape[0] + 2 * cones)
+    n = plane_breaks.shape[0]
+    out[:n] = plane_breaks
+    for c in range(cones):
+        r = math.hypot(axes[c, 0], axes[c, 1]) * sin_z
+        rhs = cosines[c] - axes[c, 2] * z
+        if r <= 0.0 or abs(rhs) >= r:
+            continue
+        centre = math.atan2(axes[c, 1], axes[c, 0])
+        turn = math.acos(rhs / r)
+        for phi in (centre - turn, centre + turn):
+            phi = lo + (phi - lo) % (2.0 * math.pi)
+            if lo < phi < hi:
+                out[n] = phi
+                n += 1
+    return np.sort(out[:n])
+
+
+@scalar
+def cell_nodes(span, density, rules):
+    """Gauss-Legendre nodes for a cell of this span at `density` nodes per unit: at least 4,
+    at most the largest rule in `rules`."""
+    return min(rules.shape[0] - 1, max(4, int(math.ceil(density * span))))
+
+
+@scalar
+def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx, ty, tz,
+                     polar, azimuth, xs, ws, hx, hw):
+    """Order 2 of f |cos o| from wi = (ix, iy, iz), iz > 0, towards the world target t:
+    `polar` nodes per radian of w1's polar angle and `azimuth` per radian of its azimuth, per
+    cell, from the Gauss-Legendre rules on [0, 1] xs[n, :n], ws[n, :n]."""
     area_i = projected_area(ndf, ax, ay, ix, iy, iz)
     el, elm1 = side_eta(eta, True)
-    lam_t = unsigned_lambda(ndf, ax, ay, tx, ty, tz)
-    lam_e = lam_t
+    lam_e = unsigned_lambda(ndf, ax, ay, tx, ty, tz)
     flat_i = math.hypot(ix, iy) > 1e-12
     flat_t = math.hypot(tx, ty) > 1e-12
     phi_i = math.atan2(iy, ix) if flat_i else 0.0
@@ -136,36 +208,43 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
     gap = (phi_t - phi_i) % math.pi
     coplanar = min(gap, math.pi - gap) < 1e-9
     if coplanar:
-        arcs = np.array([phi_i, phi_i + math.pi])
+        planes = np.array([phi_i, phi_i + math.pi])
         scale = 2.0
     else:
-        arcs = np.empty(5)
-        arcs[:4] = np.sort(np.array([phi_i, phi_t, phi_i + math.pi, phi_t + math.pi])
-                           % (2.0 * math.pi))
-        arcs[4] = arcs[0] + 2.0 * math.pi
+        planes = np.empty(5)
+        planes[:4] = np.sort(phi_i + np.array([0.0, gap, math.pi, math.pi + gap]))
+        planes[4] = planes[0] + 2.0 * math.pi
         scale = 1.0
     total = 0.0
     for branch in range(1 if conductor else 2):
         crossed = branch == 1
         same = (tz < 0.0) if crossed else (tz > 0.0)
-        edges = polar_breaks(iz, tz, eta, conductor, crossed)
+        axes, cosines, cones = kink_cones(ix, iy, iz, tx, ty, tz, eta, conductor, crossed)
+        edges = polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones)
         for s in range(edges.shape[0] - 1):
-            z0, span = edges[s], edges[s + 1] - edges[s]
-            if span <= 1e-12:
+            if edges[s + 1] - edges[s] <= 1e-12:
                 continue
-            for p in range(px.shape[0]):
-                z = z0 + span * px[p]
-                sin_z = math.sqrt(max(0.0, 1.0 - z * z))
+            # in the polar angle: smooth also where a support edge shrinks onto a pole
+            t0 = math.acos(edges[s + 1])
+            span = math.acos(edges[s]) - t0
+            n_p = cell_nodes(span, polar, xs)
+            for p in range(n_p):
+                theta = t0 + span * xs[n_p, p]
+                z, sin_z = math.cos(theta), math.sin(theta)
                 dz = z if not crossed else -z  # d1's z in its own frame
                 lam = signed_lambda(ndf, ax, ay, sin_z, 0.0, dz)
                 h = height_expectation(a0, lam, crossed, lam_e, same, hx, hw)
                 if h == 0.0:
                     continue
+                arcs = ring_breaks(planes, z, sin_z, axes, cosines, cones)
                 ring = 0.0
                 for a in range(arcs.shape[0] - 1):
                     f0, fspan = arcs[a], arcs[a + 1] - arcs[a]
-                    for q in range(qx.shape[0]):
-                        phi = f0 + fspan * qx[q]
+                    if fspan <= 1e-12:
+                        continue
+                    n_q = cell_nodes(fspan, azimuth, xs)
+                    for q in range(n_q):
+                        phi = f0 + fspan * xs[n_q, q]
                         ox, oy = sin_z * math.cos(phi), sin_z * math.sin(phi)
                         if crossed:
                             first = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area_i,
@@ -178,18 +257,18 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                         # the second event: w_in = -d1 in d1's frame, the escape left out
                         wx, wy, wz = -ox, -oy, -dz
                         area = projected_area(ndf, ax, ay, wx, wy, wz)
-                        ring += fspan * qw[q] * first * next_event(
+                        ring += fspan * ws[n_q, q] * first * next_event(
                             ndf, ax, ay, conductor, eta, has_f, n_c, not crossed, wx, wy, wz,
-                            area, tx, ty, tz, lam_t, 0.0, 0.0)
-                total += span * pw[p] * h * ring
+                            area, tx, ty, tz, lam_e, 0.0, 0.0)
+                total += span * ws[n_p, p] * sin_z * h * ring
     return scale * total
 
 
 @scalar
-def second_order_all(ndf, ax, ay, conductor, eta, has_f, n_c, wi, a0, targets, px, pw, qx, qw,
-                     hx, hw, result):
+def second_order_all(ndf, ax, ay, conductor, eta, has_f, n_c, wi, a0, targets, polar, azimuth,
+                     xs, ws, hx, hw, result):
     """result[t] = second_order_one towards every target (m, 3)."""
     for t in range(targets.shape[0]):
-        result[t] = second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, wi[0],
-                                     wi[1], wi[2], a0, targets[t, 0], targets[t, 1],
-                                     targets[t, 2], px, pw, qx, qw, hx, hw)
+        result[t] = second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, wi[0], wi[1],
+                                     wi[2], a0, targets[t, 0], targets[t, 1], targets[t, 2],
+                                     polar, azimuth, xs, ws, hx, hw)
