@@ -237,6 +237,8 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                 if h == 0.0:
                     continue
                 arcs = ring_breaks(planes, z, sin_z, axes, cosines, cones)
+                # the second event's w_in = -d1 in d1's frame: isotropic, one area per ring
+                area = projected_area(ndf, ax, ay, sin_z, 0.0, -dz)
                 ring = 0.0
                 for a in range(arcs.shape[0] - 1):
                     f0, fspan = arcs[a], arcs[a + 1] - arcs[a]
@@ -254,12 +256,10 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                                                   ix, iy, iz, area_i, ox, oy, z)
                         if first <= 0.0:
                             continue
-                        # the second event: w_in = -d1 in d1's frame, the escape left out
-                        wx, wy, wz = -ox, -oy, -dz
-                        area = projected_area(ndf, ax, ay, wx, wy, wz)
+                        # the second event, its escape left out
                         ring += fspan * ws[n_q, q] * first * next_event(
-                            ndf, ax, ay, conductor, eta, has_f, n_c, not crossed, wx, wy, wz,
-                            area, tx, ty, tz, lam_e, 0.0, 0.0)
+                            ndf, ax, ay, conductor, eta, has_f, n_c, not crossed, -ox, -oy,
+                            -dz, area, tx, ty, tz, lam_e, 0.0, 0.0)
                 total += span * ws[n_p, p] * sin_z * h * ring
     return scale * total
 
