@@ -232,10 +232,6 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                 theta = t0 + span * xs[n_p, p]
                 z, sin_z = math.cos(theta), math.sin(theta)
                 dz = z if not crossed else -z  # d1's z in its own frame
-                lam = signed_lambda(ndf, ax, ay, sin_z, 0.0, dz)
-                h = height_expectation(a0, lam, crossed, lam_e, same, hx, hw)
-                if h == 0.0:
-                    continue
                 arcs = ring_breaks(planes, z, sin_z, axes, cosines, cones)
                 # the second event's w_in = -d1 in d1's frame: isotropic, one area per ring
                 area = projected_area(ndf, ax, ay, sin_z, 0.0, -dz)
@@ -260,7 +256,10 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                         ring += fspan * ws[n_q, q] * first * next_event(
                             ndf, ax, ay, conductor, eta, has_f, n_c, not crossed, -ox, -oy,
                             -dz, area, tx, ty, tz, lam_e, 0.0, 0.0)
-                total += span * ws[n_p, p] * sin_z * h * ring
+                if ring > 0.0:  # light leaving the glass backwards never is: no H for it
+                    lam = signed_lambda(ndf, ax, ay, sin_z, 0.0, dz)
+                    h = height_expectation(a0, lam, crossed, lam_e, same, hx, hw)
+                    total += span * ws[n_p, p] * sin_z * h * ring
     return scale * total
 
 
