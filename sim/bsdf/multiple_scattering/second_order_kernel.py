@@ -22,7 +22,6 @@ import math
 import numpy as np
 
 from sim.bsdf.multiple_scattering.nee_kernel import (
-    next_event,
     phase_reflect,
     phase_transmit,
     projected_area,
@@ -219,6 +218,8 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
     for branch in range(1 if conductor else 2):
         crossed = branch == 1
         same = (tz < 0.0) if crossed else (tz > 0.0)
+        el2, el2m1 = side_eta(eta, not crossed)
+        lz = -tz if crossed else tz  # the target in d1's frame
         axes, cosines, cones = kink_cones(ix, iy, iz, tx, ty, tz, eta, conductor, crossed)
         edges = polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones)
         for s in range(edges.shape[0] - 1):
@@ -252,10 +253,16 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                                                   ix, iy, iz, area_i, ox, oy, z)
                         if first <= 0.0:
                             continue
-                        # the second event, its escape left out
-                        ring += fspan * ws[n_q, q] * first * next_event(
-                            ndf, ax, ay, conductor, eta, has_f, n_c, not crossed, -ox, -oy,
-                            -dz, area, tx, ty, tz, lam_e, 0.0, 0.0)
+                        # the second event (nee_kernel.next_event without the escape)
+                        if lz > 0.0:
+                            second = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el2,
+                                                   el2m1, -ox, -oy, -dz, area, tx, ty, lz)
+                        elif conductor:
+                            second = 0.0
+                        else:
+                            second = phase_transmit(ndf, ax, ay, el2, el2m1, -ox, -oy, -dz, area,
+                                                    tx, ty, lz)
+                        ring += fspan * ws[n_q, q] * first * second
                 if ring > 0.0:  # light leaving the glass backwards never is: no H for it
                     lam = signed_lambda(ndf, ax, ay, sin_z, 0.0, dz)
                     h = height_expectation(a0, lam, crossed, lam_e, same, hx, hw)
