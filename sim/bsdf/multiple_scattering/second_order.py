@@ -10,25 +10,36 @@ d1 = w1 in the frame of the side it travels in. H is the walk's height expectati
 event's height CDF u1 has density a0 u^(a0 - 1) (a0 = -Lambda(-wi)); the second event follows
 along d1 (u2 / u1 = exp(E / Lambda(d1)), forced to hit and weighted by the hit probability, as
 the walk does) and wo escapes from it with G1. H depends on w1 only through its polar angle
-(isotropic Lambda), so it is computed once per (polar node, branch, target) by Gauss-Legendre
-rules over the two heights' uniforms; the direction integral is Gauss-Legendre in w1_z (split
-at the horizon, where Lambda changes branch) times Gauss-Legendre in azimuth on the arcs
-between the planes of wi and of the targets (where the phase functions peak).
+(isotropic Lambda). second_order is the compiled route (second_order_kernel: H in closed form
+where it has one, the w1_z rule split per target at every support edge of both events, so a
+16 x 16 rule per cell converges); second_order_reference is the numpy route it was checked
+against: H by Gauss-Legendre rules over the two heights' uniforms, once per (polar node,
+branch, target), times Gauss-Legendre in w1_z (split only at the horizon, where Lambda
+changes branch) and in azimuth on the arcs between the planes of wi and of the targets (where
+the phase functions peak), converging like 1 / nodes.
 Orders >= 2 are then this plus the walk's orders >= 3 (lobe.higher_orders_at).
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
+from sim.bsdf.multiple_scattering import nee_kernel, second_order_kernel
 from sim.bsdf.multiple_scattering.energy import gauss_legendre_unit
 from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
 from sim.bsdf.multiple_scattering.walk import Walker, flip
 
-#: Gauss-Legendre nodes in w1_z per hemisphere, of w1's azimuth (all arcs), per height uniform.
-POLAR_NODES = 128
-AZIMUTH_NODES = 128
+#: Gauss-Legendre nodes per radian of w1's polar angle and of its azimuth in each cell (at
+#: least 4, at most MAX_CELL_NODES; compiled route), per height uniform (both routes).
+POLAR_NODES = 12
+AZIMUTH_NODES = 9
+MAX_CELL_NODES = 128
 HEIGHT_NODES = 8
+#: The numpy reference's nodes in w1_z per hemisphere and of w1's azimuth (all arcs).
+REFERENCE_POLAR_NODES = 128
+REFERENCE_AZIMUTH_NODES = 128
 
 
 def _polar_nodes(polar: int) -> tuple[np.ndarray, np.ndarray]:
@@ -83,19 +94,58 @@ def supports(walker) -> bool:
             and walker.slopes.alpha_x == walker.slopes.alpha_y)
 
 
-def second_order(walker: Walker, wi: np.ndarray, targets: np.ndarray,
-                 polar: int = POLAR_NODES, azimuth: int = AZIMUTH_NODES,
-                 heights: int = HEIGHT_NODES) -> np.ndarray:
-    """Order 2 of f |cos o| from wi (3,) towards every target (m, 3) of a dielectric or
-    conductor Smith microsurface (a Walker, isotropic slopes), by quadrature."""
+def _lit_from_above(walker: Walker, wi: np.ndarray, targets: np.ndarray
+                    ) -> tuple[Walker, np.ndarray, np.ndarray]:
+    """(walker, wi, targets) with wi above: lit from below, the same walk in the mirrored
+    world, eta inverted."""
     micro, slopes = walker.micro, walker.slopes
     if not supports(walker):
         raise ValueError("second_order needs dielectric or conductor facets, isotropic slopes")
     wi, targets = np.asarray(wi, np.float64), np.asarray(targets, np.float64).reshape(-1, 3)
-    if wi[2] <= 0.0:  # lit from below: the same walk in the mirrored world, eta inverted
-        mirrored = MicroDielectric(1.0 / micro.eta) if micro.transmits else micro
-        return second_order(Walker(slopes, mirrored, guided=False), flip(wi), flip(targets),
-                            polar, azimuth, heights)
+    if wi[2] > 0.0:
+        return walker, wi, targets
+    mirrored = MicroDielectric(1.0 / micro.eta) if micro.transmits else micro
+    return Walker(slopes, mirrored, guided=False), flip(wi), flip(targets)
+
+
+def second_order(walker: Walker, wi: np.ndarray, targets: np.ndarray,
+                 polar: int = POLAR_NODES, azimuth: int = AZIMUTH_NODES,
+                 heights: int = HEIGHT_NODES) -> np.ndarray:
+    """Order 2 of f |cos o| from wi (3,) towards every target (m, 3) of a dielectric or
+    conductor Smith microsurface (a Walker, isotropic slopes), by quadrature: compiled
+    (second_order_kernel, `polar` nodes per radian of w1's polar angle and `azimuth` per
+    radian of its azimuth in each cell), else the numpy reference."""
+    walker, wi, targets = _lit_from_above(walker, wi, targets)
+    if not nee_kernel.supports(walker.slopes, walker.micro):
+        return second_order_reference(walker, wi, targets)
+    xs, ws = _rules(MAX_CELL_NODES)
+    hx, hw = gauss_legendre_unit(heights)
+    a0 = -float(walker.slopes.signed_lambda(-wi[None, :])[0])
+    out = np.empty(len(targets))
+    second_order_kernel.second_order_all(
+        *nee_kernel.surface_arguments(walker.slopes, walker.micro), wi, a0,
+        np.ascontiguousarray(targets), float(polar), float(azimuth), xs, ws, hx, hw, out)
+    return out
+
+
+@functools.cache
+def _rules(largest: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre rules on [0, 1] of every size up to `largest`: nodes xs[n, :n], weights
+    ws[n, :n]."""
+    xs, ws = np.zeros((largest + 1, largest)), np.zeros((largest + 1, largest))
+    for n in range(1, largest + 1):
+        xs[n, :n], ws[n, :n] = gauss_legendre_unit(n)
+    return xs, ws
+
+
+def second_order_reference(walker: Walker, wi: np.ndarray, targets: np.ndarray,
+                           polar: int = REFERENCE_POLAR_NODES,
+                           azimuth: int = REFERENCE_AZIMUTH_NODES,
+                           heights: int = HEIGHT_NODES) -> np.ndarray:
+    """second_order by numpy on one product rule per plane of targets (w1_z split only at the
+    horizon, azimuth arcs between the planes of wi and of the targets): the independent
+    reference of the compiled route, converging like 1 / nodes."""
+    walker, wi, targets = _lit_from_above(walker, wi, targets)
     # targets in one plane through the normal share an azimuth grid (crowded about the plane)
     plane = np.round(np.mod(np.arctan2(targets[:, 1], targets[:, 0]), np.pi), 9)
     out = np.zeros(len(targets))
