@@ -17,7 +17,6 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from sim.bsdf.multiple_scattering.lobe_kernel import lookup
-from sim.bsdf.vectors import directions
 
 #: Incidence angles (deg from the side's normal) walked; others interpolate linearly between.
 INCIDENCE_NODES_DEG = np.append(np.arange(0.0, 90.0, 5.0), 89.5)
@@ -240,18 +239,18 @@ class HigherOrderLobe:
         between incidence nodes; within one polar step of a pole between the columns 0 and 180
         deg only (f = f_pole + theta g cos(dphi) + O(theta^2) there). Only the planes a pair's
         weights need are built."""
-        wi, wo = directions(wi, wo)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        shape = wi.shape[:-1]
-        flat_i = np.ascontiguousarray(wi.reshape(-1, 3), dtype=np.float64)
-        flat_o = np.ascontiguousarray(wo.reshape(-1, 3), dtype=np.float64)
-        out = [np.empty(len(flat_i)) for _ in range(3)]
+        wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+        shape = np.broadcast_shapes(wi.shape, wo.shape)
+        flat_i, flat_o = (np.ascontiguousarray(np.broadcast_to(w, shape)).reshape(-1, 3)
+                          for w in (wi, wo))
+        shape = shape[:-1]
+        out = np.empty((3, len(flat_i)))
         missing = np.empty((4 * len(flat_i), 4), dtype=np.int64)
         while True:
             found = lookup(flat_i, flat_o, INCIDENCE_NODES_DEG, INCIDENCE_SNAP, self._column_cos,
                            PHI_SNAP, self.theta_step, self.upper_deg, self.lower_deg, self._f2,
-                           self._d2, self._f3, self._e3, self._built, self._plane_of, *out,
-                           missing)
+                           self._d2, self._f3, self._e3, self._built, self._plane_of, out[0],
+                           out[1], out[2], missing)
             if not found:
                 break
             for s, node, plane, lower in sorted(set(map(tuple, missing[:found].tolist()))):

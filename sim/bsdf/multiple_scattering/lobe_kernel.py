@@ -34,21 +34,23 @@ def _cell(x, nodes, snap):
 def lookup(wi, wo, incidence, incidence_snap, column_cos, phi_snap, pole_deg, upper, lower,
            f2, d2, f3, e3, built, plane_of, value2, value3, var, missing):
     """Interpolate the tables (side, node, column, polar) f2 (order 2), d2 (its PCHIP slopes in
-    degrees), f3 (orders >= 3) and e3 (their standard error) at the pairs wi, wo (n, 3) into
-    value2, value3 and var (n,): linear in the incidence nodes (deg), in -cos(phi_o - phi_i)
-    over column_cos (within pole_deg of a pole between the first and last column only) and,
-    for orders >= 3, in theta_o over the polar nodes of the upper (deg, up to the horizon) or
-    lower half (after it). A pair needing a table whose plane_of[column] is not built[side,
-    node, plane, half] writes (side, node, plane, half) to a row of missing instead; returns
-    how many rows."""
+    degrees), f3 (orders >= 3) and e3 (their standard error) at the pairs wi, wo (n, 3; any
+    length) into value2, value3 and var (n,): linear in the incidence nodes (deg) and in
+    -cos(phi_o - phi_i) over column_cos (within pole_deg of a pole between the first and last
+    column only); in theta_o over the polar nodes of the upper half (deg, up to the horizon) or
+    the lower one, cubic Hermite for order 2 and linear for the rest. A pair needing a table
+    whose plane_of[column] is not built[side, node, plane, half] writes (side, node, plane,
+    half) to a row of missing instead; returns how many rows."""
     n_missing = 0
     last = len(column_cos) - 1
     split = len(upper)
     ends = np.array([-1.0, 1.0])
     for n in range(len(wi)):
-        side = 0 if wi[n, 2] >= 0.0 else 1
-        theta_i = math.degrees(math.acos(min(abs(wi[n, 2]), 1.0)))
-        theta_o = math.degrees(math.acos(min(max(wo[n, 2], -1.0), 1.0)))
+        cos_i = wi[n, 2] / math.sqrt(wi[n, 0] ** 2 + wi[n, 1] ** 2 + wi[n, 2] ** 2)
+        cos_o = wo[n, 2] / math.sqrt(wo[n, 0] ** 2 + wo[n, 1] ** 2 + wo[n, 2] ** 2)
+        side = 0 if cos_i >= 0.0 else 1
+        theta_i = math.degrees(math.acos(min(abs(cos_i), 1.0)))
+        theta_o = math.degrees(math.acos(min(max(cos_o, -1.0), 1.0)))
         turn = math.atan2(wo[n, 1], wo[n, 0]) - math.atan2(wi[n, 1], wi[n, 0])
         c = -math.cos(turn)
         node0, a_node = _cell(theta_i, incidence, incidence_snap)
