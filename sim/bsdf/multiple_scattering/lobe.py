@@ -2,16 +2,15 @@
 
 What a single-scattering model leaves out is a broad, smooth lobe. HigherOrderLobe walks from
 the incidence angles of a grid (INCIDENCE_NODES_DEG) and, from every walk, estimates that lobe
-towards every polar angle of a column of the direction grid at once (next-event estimation
-from the same paths, so a column's Monte Carlo error is smooth in theta_o), then interpolates:
+towards every polar angle of one hemisphere of a plane of the direction grid at once
+(next-event estimation from the same paths, so a column's Monte Carlo error is smooth in
+theta_o), adds order 2 by quadrature, then interpolates:
 deterministic, with a stated standard error per node, and far cheaper per evaluation than a
 walk per pair. higher_orders_at does the same at given pairs, without a grid. Isotropic
 microsurfaces only (the lobe then depends on theta_i, theta_o and phi_o - phi_i).
 """
 
 from __future__ import annotations
-
-import time
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -164,7 +163,6 @@ class HigherOrderLobe:
         self._f2, self._d2, self._f3, self._e3 = (np.zeros(shape) for _ in range(4))
         self._built = np.zeros((2, len(INCIDENCE_NODES_DEG), last // 2 + 1, 2), dtype=np.bool_)
         self._column_cos = -np.cos(np.radians(self.phi_deg))
-        self.build_seconds: list[float] = []
 
     def build(self, side: int, node: int, plane: int, lower: bool) -> None:
         """Walk and integrate one hemisphere of wo (lower: below the horizon) in one plane
@@ -174,7 +172,6 @@ class HigherOrderLobe:
         scoring every target and one second_order call for all of them."""
         from sim.bsdf.multiple_scattering.second_order import second_order
 
-        start = time.process_time()
         last = len(self.phi_deg) - 1
         columns = [plane] if node == 0 or plane == last - plane else [plane, last - plane]
         theta = np.radians(INCIDENCE_NODES_DEG[node])
@@ -207,7 +204,6 @@ class HigherOrderLobe:
             self._f3[s, node, j, half] = mean[part] * inverse[part]
             self._e3[s, node, j, half] = err[part] * inverse[part]
         self._built[s, node, plane, int(lower)] = True
-        self.build_seconds.append(time.process_time() - start)
 
     def column(self, side: int, node: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(order 2, orders >= 3, their standard error) of f at polar_deg, azimuth phi_deg[j],
