@@ -2,8 +2,9 @@
 
 What a single-scattering model leaves out is a broad, smooth lobe. HigherOrderLobe walks from
 the incidence angles of a grid (INCIDENCE_NODES_DEG) and, from every walk, estimates that lobe
-towards every polar angle of a column of the direction grid at once (next-event estimation
-from the same paths, so a column's Monte Carlo error is smooth in theta_o), then interpolates:
+towards every polar angle of one hemisphere of a plane of the direction grid at once
+(next-event estimation from the same paths, so a column's Monte Carlo error is smooth in
+theta_o), adds order 2 by quadrature, then interpolates:
 deterministic, with a stated standard error per node, and far cheaper per evaluation than a
 walk per pair. higher_orders_at does the same at given pairs, without a grid. Isotropic
 microsurfaces only (the lobe then depends on theta_i, theta_o and phi_o - phi_i).
@@ -12,8 +13,9 @@ microsurfaces only (the lobe then depends on theta_i, theta_o and phi_o - phi_i)
 from __future__ import annotations
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
-from sim.bsdf.vectors import directions
+from sim.bsdf.multiple_scattering.lobe_kernel import lookup
 
 #: Incidence angles (deg from the side's normal) walked; others interpolate linearly between.
 INCIDENCE_NODES_DEG = np.append(np.arange(0.0, 90.0, 5.0), 89.5)
@@ -29,18 +31,15 @@ INCIDENCE_SNAP = 0.02
 #: plane of incidence need no second column (the change is below 1 % of the difference between
 #: neighbouring columns, itself a few % of f: under the tables' Monte Carlo error).
 PHI_SNAP = 0.01
-#: Walks per table column by default (all polar angles of the column share them).
+#: Extra polar nodes (deg from the horizon, either side), none on it (f |cos o| is 0 there):
+#: f changes fastest within a degree of it (from below by ~25 % within the last degree).
+HORIZON_NODES_DEG = (1.25, 0.5, 0.02)
+#: Walks per table plane by default (all its targets share them).
 WALKS = 1 << 14
 #: Walks advanced together: BATCH_PRODUCTS // targets, within [WALK_BATCH, 16 WALK_BATCH] (a
 #: function of the target count only, so one seed walks the same paths for the same count).
 WALK_BATCH = 2048
 BATCH_PRODUCTS = 1 << 20
-
-
-def grid_directions(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
-    """The direction grid (len(theta_deg), len(phi_deg), 3) in the frame with wi in x-z."""
-    t, p = np.meshgrid(np.radians(theta_deg), np.radians(phi_deg), indexing="ij")
-    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
 
 
 def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
@@ -123,13 +122,14 @@ class HigherOrderLobe:
     """Orders >= 2 of a model's microsurface (Heitz 2016) tabulated over wo, built on first use.
 
     parent: the single-scattering model with height-correlated masking (its order 1 is the
-    walk's, so the two add up to the full Smith microsurface); walks: walks per table column;
-    seed: each column is walked from (seed, side, node, azimuth, hemisphere), so the
-    tables are a fixed function of the parameters; theta_step_deg, phi_step_deg: the direction
-    grid (divisors of 90 and 180); exact_second: order 2 by quadrature (second_order) and only
-    orders >= 3 walked, for dielectric and conductor facets. A column is one azimuth and the
-    polar angles of one hemisphere of wo: an in-plane scan of one lobe needs two per incidence
-    (0 and 180 deg).
+    walk's, so the two add up to the full Smith microsurface); walks: walks per build; seed:
+    each build is walked from (seed, side, node, plane, hemisphere), so the tables are a fixed
+    function of the parameters; theta_step_deg, phi_step_deg: the direction grid (divisors of
+    90 and 180); exact_second: order 2 by quadrature (second_order) and only orders >= 3
+    walked, for dielectric and conductor facets. A column is one azimuth phi_deg[j] from the
+    plane of incidence over all polar angles of wo; a plane through the normal holds columns j
+    and last - j, whose targets in one hemisphere of wo one walk set and one second_order call
+    build together: an in-plane scan of one lobe (azimuths 0 and 180) is one build.
     """
 
     def __init__(self, parent, walks: int = WALKS, seed: int = 0,
@@ -148,109 +148,107 @@ class HigherOrderLobe:
             if not (step > 0 and abs(span / step - round(span / step)) < 1e-9):
                 raise ValueError(f"{name}_step_deg must divide {span:g}, got {step!r}")
         self.walks, self.seed = int(walks), int(seed)
-        self.theta_deg = np.linspace(0.0, 180.0, round(180.0 / theta_step_deg) + 1)
-        self.phi_deg = np.linspace(0.0, 180.0, round(180.0 / phi_step_deg) + 1)
-        self._columns: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
         self.exact_second = exact_second and supports(self.walk.walker)
+        self.theta_step = float(theta_step_deg)
+        self.phi_deg = np.linspace(0.0, 180.0, round(180.0 / phi_step_deg) + 1)
+        grid = np.linspace(0.0, 90.0, round(90.0 / theta_step_deg) + 1)[:-1]
+        near = 90.0 - np.asarray(HORIZON_NODES_DEG)
+        #: polar nodes (deg from +z) of the upper half (up to the horizon) and the lower one
+        self.upper_deg = np.unique(np.concatenate([grid, near[near > grid[-1]]]))
+        self.lower_deg = 180.0 - self.upper_deg[::-1]
+        self.polar_deg = np.concatenate([self.upper_deg, self.lower_deg])
+        last = len(self.phi_deg) - 1
+        self._plane_of = np.minimum(np.arange(last + 1), last - np.arange(last + 1))
+        shape = (2, len(INCIDENCE_NODES_DEG), last + 1, len(self.polar_deg))
+        self._f2, self._d2, self._f3, self._e3 = (np.zeros(shape) for _ in range(4))
+        self._built = np.zeros((2, len(INCIDENCE_NODES_DEG), last // 2 + 1, 2), dtype=np.bool_)
+        self._column_cos = -np.cos(np.radians(self.phi_deg))
 
-    def column(self, side: int, node: int, j: int, lower: bool) -> tuple[np.ndarray, np.ndarray]:
-        """(f, its standard error) at the polar angles of one hemisphere of wo (theta_deg up to
-        90, or from 90 with lower) and azimuth phi_deg[j] from the plane of incidence, for
-        light arriving from the side's hemisphere (+1 above, -1 below) at
-        INCIDENCE_NODES_DEG[node]; 0 on the horizon (f falls linearly in cos o there, as the
-        escape probability does, so it interpolates better than f |cos o|)."""
+    def build(self, side: int, node: int, plane: int, lower: bool) -> None:
+        """Walk and integrate one hemisphere of wo (lower: below the horizon) in one plane
+        through the normal, i.e. columns plane and last - plane (column 0 alone at normal
+        incidence, where the lobe does not depend on the azimuth), for light arriving from the
+        side's hemisphere (+1 above, -1 below) at INCIDENCE_NODES_DEG[node]: one walk set
+        scoring every target and one second_order call for all of them."""
         from sim.bsdf.multiple_scattering.second_order import second_order
 
-        key = (side, node, j, lower)
-        if key not in self._columns:
-            theta = np.radians(INCIDENCE_NODES_DEG[node])
-            wi = np.array([np.sin(theta), 0.0, side * np.cos(theta)])
-            mid = len(self.theta_deg) // 2
-            polar = self.theta_deg[mid:] if lower else self.theta_deg[:mid + 1]
-            targets = grid_directions(polar, self.phi_deg[j:j + 1])[:, 0]
-            rng = np.random.default_rng(
-                np.random.SeedSequence([self.seed, side + 1, node, j, int(lower)]))
-            mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng,
-                                           min_order=3 if self.exact_second else 2,
-                                           covariance=False)
-            if self.exact_second:
-                mean = mean + second_order(self.walk.walker, wi, targets)
-            cos_o = np.abs(targets[:, 2])
-            inverse = np.where(cos_o > 1e-12, 1.0 / np.maximum(cos_o, 1e-12), 0.0)
-            self._columns[key] = (mean * inverse, err * inverse)
-        return self._columns[key]
+        last = len(self.phi_deg) - 1
+        columns = [plane] if node == 0 or plane == last - plane else [plane, last - plane]
+        theta = np.radians(INCIDENCE_NODES_DEG[node])
+        wi = np.array([np.sin(theta), 0.0, side * np.cos(theta)])
+        split = len(self.upper_deg)
+        half = slice(split, None) if lower else slice(0, split)
+        # column last - plane at azimuth 180 - phi is, mirrored about the plane of incidence,
+        # the far side of the plane at phi; the poles are moved into that plane by 1e-6 deg so
+        # second_order sees one plane
+        polar = np.radians(np.clip(self.polar_deg[half], 1e-6, 180.0 - 1e-6))
+        far = np.array(columns) != plane
+        azimuth = np.radians(np.repeat(self.phi_deg[plane] + 180.0 * far, len(polar)))
+        t = np.tile(polar, len(columns))
+        targets = np.stack([np.sin(t) * np.cos(azimuth), np.sin(t) * np.sin(azimuth),
+                            np.cos(t)], axis=-1)
+        rng = np.random.default_rng(
+            np.random.SeedSequence([self.seed, side + 1, node, plane, int(lower)]))
+        mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng,
+                                       min_order=3 if self.exact_second else 2,
+                                       covariance=False)
+        second = second_order(self.walk.walker, wi, targets) if self.exact_second else 0.0 * mean
+        inverse = 1.0 / np.abs(targets[:, 2])  # no target on the horizon
+        s = 0 if side > 0 else 1
+        for m, j in enumerate(columns):
+            part = slice(m * len(polar), (m + 1) * len(polar))
+            f2 = second[part] * inverse[part]
+            self._f2[s, node, j, half] = f2
+            self._d2[s, node, j, half] = PchipInterpolator(
+                self.polar_deg[half], f2).derivative()(self.polar_deg[half])
+            self._f3[s, node, j, half] = mean[part] * inverse[part]
+            self._e3[s, node, j, half] = err[part] * inverse[part]
+        self._built[s, node, plane, int(lower)] = True
+
+    def column(self, side: int, node: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(order 2, orders >= 3, their standard error) of f at polar_deg, azimuth phi_deg[j],
+        for light arriving from the side's hemisphere at INCIDENCE_NODES_DEG[node]."""
+        s, plane = (0 if side > 0 else 1), int(self._plane_of[j])
+        for lower in (False, True):
+            if not self._built[s, node, plane, int(lower)]:
+                self.build(side, node, plane, lower)
+        return self._f2[s, node, j], self._f3[s, node, j], self._e3[s, node, j]
 
     @property
-    def columns_walked(self) -> int:
-        """How many columns have been walked so far (each `walks` walks)."""
-        return len(self._columns)
+    def planes_built(self) -> int:
+        """How many hemispheres of a plane have been built so far (each `walks` walks)."""
+        return int(self._built.sum())
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Orders >= 2 of f(wi, wo) in 1/sr, no cosine; wi, wo (..., 3) broadcast."""
         return self.estimate(wi, wo)[0]
 
-    def _azimuth_weights(self, theta_o: np.ndarray, dphi: np.ndarray) -> list:
-        """(column, weight per pair): linear in -cos(phi_o - phi_i) between neighbouring
-        columns; within one polar step of a pole, between the columns 0 and 180 deg only (near
-        a pole f = f_pole + theta g cos(dphi) + O(theta^2), so those two columns give it to
-        first order, where the neighbouring columns would need all of them)."""
-        c = -np.cos(np.radians(dphi))
-        step = self.theta_deg[1] - self.theta_deg[0]
-        near_pole = (theta_o < step) | (theta_o > 180.0 - step)
-        last = len(self.phi_deg) - 1
-        weights = dict(_linear_weights(c, -np.cos(np.radians(self.phi_deg)), PHI_SNAP))
-        ends = dict(_linear_weights(c, np.array([-1.0, 1.0]), PHI_SNAP))
-        out = []
-        for j in sorted({*weights, 0, last}):
-            w = weights.get(j, np.zeros(len(c)))
-            end = ends.get(0 if j == 0 else 1, np.zeros(len(c))) if j in (0, last) else 0.0
-            w = np.where(near_pole, end, w)
-            if np.any(w > 0.0):
-                out.append((j, w))
-        return out
-
     def estimate(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(f, its Monte Carlo standard error) of orders >= 2, interpolated from the tables:
-        linear in theta_o, in cos(phi_o - phi_i) (f is even in the azimuth about the plane of
-        incidence, so smooth in its cosine) and between incidence nodes; only the columns a
-        pair's interpolation weights need are walked."""
-        wi, wo = directions(wi, wo)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        shape = wi.shape[:-1]
-        side, theta_i, theta_o, dphi = _incidence_frame(wi.reshape(-1, 3), wo.reshape(-1, 3))
-        value, var = np.zeros(len(side)), np.zeros(len(side))
-        ti = theta_o / (self.theta_deg[1] - self.theta_deg[0])
-        t0 = np.minimum(np.floor(ti).astype(int), len(self.theta_deg) - 2)
-        a = ti - t0
-        mid = len(self.theta_deg) // 2
-        below = t0 >= mid  # which half-column: rows up to the horizon, or from it
-        t0 = np.where(below, t0 - mid, t0)
-        by_azimuth = self._azimuth_weights(theta_o, dphi)
-        for node, w_node in _linear_weights(theta_i, INCIDENCE_NODES_DEG, INCIDENCE_SNAP):
-            # at normal incidence the lobe does not depend on the azimuth: column 0 serves all
-            for j, w_phi in by_azimuth if node else [(0, np.ones(len(side)))]:
-                w = w_node * w_phi
-                for s, half in ((1, False), (1, True), (-1, False), (-1, True)):
-                    r = (w > 0.0) & (side == s) & (below == half)
-                    if not r.any():
-                        continue
-                    f, err = self.column(s, node, j, half)
-                    value[r] += w[r] * ((1.0 - a[r]) * f[t0[r]] + a[r] * f[t0[r] + 1])
-                    var[r] += (w[r] * ((1.0 - a[r]) * err[t0[r]] + a[r] * err[t0[r] + 1])) ** 2
-        return value.reshape(shape), np.sqrt(var).reshape(shape)
+        """(f, its Monte Carlo standard error) of orders >= 2, interpolated from the tables."""
+        second, higher, err = self.parts(wi, wo)
+        return second + higher, err
 
-
-def _linear_weights(x: np.ndarray, nodes: np.ndarray, snap: float = 1e-9):
-    """(node index, weight per point) of linear interpolation on increasing nodes (clamped),
-    for the nodes with any positive weight; a point within `snap` of a step from a node gives
-    that node weight 1."""
-    pos = np.interp(x, nodes, np.arange(len(nodes), dtype=np.float64))
-    pos = np.where(np.abs(pos - np.round(pos)) < snap, np.round(pos), pos)
-    lower = np.minimum(np.floor(pos).astype(int), len(nodes) - 2)
-    frac = pos - lower
-    weights: dict[int, np.ndarray] = {}
-    for index, weight in ((lower, 1.0 - frac), (lower + 1, frac)):
-        for k in np.unique(index[weight > 0.0]):
-            weights.setdefault(int(k), np.zeros(len(x)))
-            weights[int(k)] += np.where(index == k, weight, 0.0)
-    return sorted(weights.items())
+    def parts(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(order 2, orders >= 3, the standard error of orders >= 3) of f at wi, wo (..., 3):
+        order 2 cubic (PCHIP) in theta_o, orders >= 3 linear, both linear in cos(phi_o - phi_i)
+        (f is even in the azimuth about the plane of incidence, so smooth in its cosine) and
+        between incidence nodes; within one polar step of a pole between the columns 0 and 180
+        deg only (f = f_pole + theta g cos(dphi) + O(theta^2) there). Only the planes a pair's
+        weights need are built."""
+        wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+        shape = np.broadcast_shapes(wi.shape, wo.shape)
+        flat_i, flat_o = (np.ascontiguousarray(np.broadcast_to(w, shape)).reshape(-1, 3)
+                          for w in (wi, wo))
+        shape = shape[:-1]
+        out = np.empty((3, len(flat_i)))
+        missing = np.empty((4 * len(flat_i), 4), dtype=np.int64)
+        while True:
+            found = lookup(flat_i, flat_o, INCIDENCE_NODES_DEG, INCIDENCE_SNAP, self._column_cos,
+                           PHI_SNAP, self.theta_step, self.upper_deg, self.lower_deg, self._f2,
+                           self._d2, self._f3, self._e3, self._built, self._plane_of, out[0],
+                           out[1], out[2], missing)
+            if not found:
+                break
+            for s, node, plane, lower in sorted(set(map(tuple, missing[:found].tolist()))):
+                self.build(1 if s == 0 else -1, node, plane, bool(lower))
+        return out[0].reshape(shape), out[1].reshape(shape), np.sqrt(out[2]).reshape(shape)
