@@ -67,7 +67,7 @@ def test_fit_with_multiple_scattering_recovers_alpha(data):
     # +0.02 %, since order 2 by quadrature cut the fit's sigma to 2e-5)
     assert multiple.chi2_dof_fit < 10.0
     assert abs(value - ALPHA) < 3.0 * np.hypot(sigma, SYSTEMATIC * ALPHA)
-    assert multiple.to_dict()["multiple_scattering"] == {"walks": 1 << 15, "seed": 0}
+    assert multiple.to_dict()["multiple_scattering"] == {"walks": FitOptions().ms_walks, "seed": 0}
     assert single.to_dict()["multiple_scattering"] is None
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets
 from sim.bsdf.multiple_scattering.lobe_kernel import lookup
 
 #: Incidence angles (deg from the side's normal) walked; others interpolate linearly between.
@@ -43,12 +44,16 @@ BATCH_PRODUCTS = 1 << 20
 
 
 def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
-                    rng: np.random.Generator, min_order: int = 2, covariance: bool = True
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                    rng: np.random.Generator, min_order: int = 2, covariance: bool = True,
+                    keyed: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= min_order of f |cos o| from one wi (3,) towards every target (m, 3): (mean,
-    standard error, covariance (m, m) of the mean, None unless asked for: it costs m^2 per
-    walk) over `walks` unguided walks of a RandomWalkBSDF, each walk scoring every target (so
-    the errors of different targets are correlated)."""
+    standard error, covariance (m, m) of the mean, None unless asked for) over `walks`
+    unguided walks of a RandomWalkBSDF, each walk scoring every target (so the errors of
+    different targets are correlated). Compiled walkers use keyed.keyed_walk_to_targets
+    (branch-split walks, the covariance from the first walks' correlation) unless keyed is
+    False; otherwise Walker.run's walks, the covariance from every walk (m^2 per walk)."""
+    if keyed and walk.walker.compiled:
+        return keyed_walk_to_targets(walk.walker, wi, targets, walks, rng, min_order, covariance)
     m = len(targets)
     batch = int(np.clip(BATCH_PRODUCTS // max(m, 1), WALK_BATCH, 16 * WALK_BATCH))
     total, products, done = np.zeros(m), np.zeros((m, m) if covariance else m), 0

@@ -1,0 +1,80 @@
+"""Orders >= min_order towards many targets from keyed, branch-split shared-path walks.
+
+The estimator behind lobe.walk_to_targets for compiled walkers (keyed_kernel): per-walk
+scores summed in batches; the variances use every walk, the covariance of the targets' errors
+is the correlation of the first CORRELATION_WALKS walks (its m^2 per walk products were most
+of the cost) scaled by those standard errors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.bsdf.multiple_scattering import keyed_kernel
+from sim.bsdf.multiple_scattering.nee_kernel import surface_arguments
+from sim.bsdf.multiple_scattering.walk import ROULETTE
+
+#: Least probability of either branch at a dielectric facet (keyed_kernel.split_scatter).
+SHARE = 0.25
+#: Walks whose per-walk products estimate the targets' correlation (the variances use all).
+CORRELATION_WALKS = 1 << 14
+#: Walk-target scores held at once (walks per kernel call = this // targets).
+BATCH_SCORES = 1 << 22
+
+
+class _Sums:
+    """Running sums over walks of the scores (m,), their squares and, for the first
+    CORRELATION_WALKS walks, their products (m, m)."""
+
+    def __init__(self, m: int, correlation: bool):
+        self.n, self.total, self.squares = 0, np.zeros(m), np.zeros(m)
+        self.products = np.zeros((m, m)) if correlation else None
+        self.head_total, self.n_products = np.zeros(m), 0
+
+    def add(self, value: np.ndarray) -> None:
+        self.n += len(value)
+        self.total += value.sum(axis=0)
+        self.squares += np.sum(value * value, axis=0)
+        if self.products is not None and self.n_products < CORRELATION_WALKS:
+            part = value[:CORRELATION_WALKS - self.n_products]
+            self.products += part.T @ part
+            self.head_total += part.sum(axis=0)
+            self.n_products += len(part)
+
+    def mean_error(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean per target and its standard error."""
+        mean = self.total / self.n
+        var = np.maximum(self.squares / self.n - mean * mean, 0.0) / max(self.n - 1, 1)
+        return mean, np.sqrt(var)
+
+    def covariance(self, err: np.ndarray) -> np.ndarray:
+        """Covariance of the mean: the first walks' correlation scaled by the standard errors."""
+        head = self.head_total / self.n_products
+        spread = self.products / self.n_products - np.outer(head, head)
+        sd = np.sqrt(np.maximum(np.diag(spread), 0.0))
+        scale = np.where(sd > 0.0, 1.0 / np.where(sd > 0.0, sd, 1.0), 0.0)
+        correlation = np.clip(spread * np.outer(scale, scale), -1.0, 1.0)
+        np.fill_diagonal(correlation, 1.0)
+        return correlation * np.outer(err, err)
+
+
+def keyed_walk_to_targets(walker, wi: np.ndarray, targets: np.ndarray, walks: int,
+                          rng: np.random.Generator, min_order: int = 2, covariance: bool = True,
+                          share: float = SHARE
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(mean, standard error, covariance of the mean or None) of orders >= min_order of
+    f |cos o| from wi (3,) towards every target (m, 3) over `walks` keyed walks of a compiled
+    Walker (nee_kernel.supports), the key drawn from rng."""
+    key = np.uint64(int(rng.integers(0, 2**63)))
+    targets = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3)
+    wi = np.ascontiguousarray(wi, dtype=np.float64)
+    args = surface_arguments(walker.slopes, walker.micro)
+    sums = _Sums(len(targets), covariance)
+    batch = max(256, BATCH_SCORES // max(len(targets), 1))
+    while sums.n < walks:
+        value = np.zeros((min(batch, walks - sums.n), len(targets)))
+        keyed_kernel.walk_targets(*args, wi, targets, key, sums.n, int(min_order),
+                                  float(ROULETTE), float(share), value)
+        sums.add(value)
+    mean, err = sums.mean_error()
+    return mean, err, sums.covariance(err) if covariance else None

@@ -1,0 +1,131 @@
+"""Shared-path walks towards many targets, keyed random numbers and split branches (numba).
+
+The walk of walk_kernel's TARGETS mode (forced hits, Russian roulette, unguided, next-event
+estimation at every event of order >= min_order towards every target) with two changes:
+
+* a dielectric facet's branch is chosen with probability clip(F, share, 1 - share) instead of
+  F, the weight taking F / that (or (1 - F) / its complement). With F ~ 0.04 at glass, paths
+  that reflect at an early event (those that reach the air side again and score large towards
+  transmitted targets, or stay above and score towards reflected ones) were a few in a
+  thousand and carried most of the variance; now they are common, with small weights;
+* each uniform is a hash of (key, walk index, event, slot) (splitmix64), not a draw from one
+  sequential stream: walk j is the same path whatever the batch size, so any prefix of the
+  walks is a sample of its own (keyed.walk_to_targets takes the covariance from one).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim.bsdf.multiple_scattering.nee_kernel import (
+    facet_fresnel,
+    next_event,
+    projected_area,
+    side_eta,
+    target_lambdas,
+    unsigned_lambda,
+)
+from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
+from sim.bsdf.multiple_scattering.walk_kernel import log1mexp, scatter
+from sim.bsdf.primitives import scalar
+
+GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+MIX_A = np.uint64(0xBF58476D1CE4E5B9)
+MIX_B = np.uint64(0x94D049BB133111EB)
+#: Uniforms reserved per event (height, two for the normal, Fresnel choice, roulette).
+SLOTS = 8
+
+
+@scalar
+def mix64(z):
+    """The splitmix64 finaliser: a bijective, well-mixed hash of a uint64."""
+    z = (z ^ (z >> np.uint64(30))) * MIX_A
+    z = (z ^ (z >> np.uint64(27))) * MIX_B
+    return z ^ (z >> np.uint64(31))
+
+
+@scalar
+def keyed_uniform(walk_key, counter):
+    """A uniform in [0, 1) (53 bits) for draw `counter` of the walk keyed walk_key."""
+    z = mix64(walk_key + np.uint64(counter + 1) * GOLDEN)
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@scalar
+def split_scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u,
+                  share):
+    """scatter, with a dielectric facet's branch chosen with probability clip(F, share,
+    1 - share) instead of F (the weight takes F / that or (1 - F) / its complement):
+    (x, y, z, factor, crossed)."""
+    if conductor:
+        return scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz,
+                       u)
+    c = min(max(ix * mx + iy * my + iz * mz, 0.0), 1.0)
+    el, elm1 = side_eta(eta, outside)
+    f = facet_fresnel(False, False, n_c, c, el, elm1)
+    if (1.0 - c * c) / (el * el) >= 1.0 or not 0.0 < f < 1.0:
+        return scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz,
+                       u)
+    q = min(max(f, share), 1.0 - share)
+    x, y, z, _, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz,
+                                  mx, my, mz, 0.0 if u < q else 1.0)
+    return x, y, z, ((1.0 - f) / (1.0 - q) if crossed else f / q), crossed
+
+
+@scalar
+def walk_targets(ndf, ax, ay, conductor, eta, has_f, n_c, wi, targets, key, first, min_order,
+                 roulette, share, value):
+    """value[j, t] = the NEE sum of orders >= min_order of walk first + j (from wi (3,))
+    towards target t, uniforms keyed by (key, walk index, event, slot); dielectric branches
+    chosen by split_scatter with `share`."""
+    m = targets.shape[0]
+    lam_t = target_lambdas(ndf, ax, ay, targets)
+    start_out = wi[2] > 0.0
+    if conductor and not start_out:
+        return
+    for j in range(value.shape[0]):
+        walk_key = mix64(np.uint64(key) ^ mix64(np.uint64(first + j) * GOLDEN))
+        outside = start_out
+        dx, dy = -wi[0], -wi[1]
+        dz = -wi[2] if outside else wi[2]
+        cur, beta, k = 0.0, 1.0, 0
+        while True:
+            k += 1
+            base = k * SLOTS
+            lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
+            lam = lam_up if dz >= 0.0 else -1.0 - lam_up
+            p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
+            if math.isnan(p_hit):
+                p_hit = 1.0
+            beta *= p_hit
+            new = cur - math.log1p(-keyed_uniform(walk_key, base) * p_hit) / lam \
+                if lam != 0.0 else math.inf
+            if not new < 0.0:
+                break
+            other = log1mexp(new)
+            ix, iy, iz = -dx, -dy, -dz
+            mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, keyed_uniform(walk_key, base + 1),
+                                        keyed_uniform(walk_key, base + 2))
+            area = max(iz, 0.0) + abs(iz) * lam_up if abs(iz) > 0.0 else projected_area(
+                ndf, ax, ay, ix, iy, iz)
+            if k >= min_order:
+                for t in range(m):
+                    value[j, t] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,
+                                                     outside, ix, iy, iz, area, targets[t, 0],
+                                                     targets[t, 1], targets[t, 2], lam_t[t],
+                                                     new, other)
+            wx, wy, wz, factor, crossed = split_scatter(
+                ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz,
+                keyed_uniform(walk_key, base + 3), share)
+            beta *= factor
+            if crossed:
+                outside = not outside
+                dx, dy, dz, cur = wx, wy, -wz, other
+            else:
+                dx, dy, dz, cur = wx, wy, wz, new
+            if beta < roulette:  # Russian roulette on low weights keeps the estimate unbiased
+                beta = roulette if keyed_uniform(walk_key, base + 4) * roulette < beta else 0.0
+            if not beta > 0.0:
+                break
