@@ -368,8 +368,9 @@ class Sample:
             use = on_lobe & live
             if not use.any():
                 continue
-            if use.all():  # every pair (a single reading's ray): no gathering and scattering
-                out = factor * self._eval(lobe, wi, w_eval) * np.abs(wo[:, 2])
+            if use.all():  # every pair (a single reading's ray): no gathering and scattering;
+                # copies, as gathering made (a broadcast view would reach numba's kernels)
+                out = factor * self._eval(lobe, wi.copy(), w_eval.copy()) * np.abs(wo[:, 2])
             else:
                 f = self._eval(lobe, wi[use], w_eval[use])
                 out[use] = factor[use] * f * np.abs(wo[use, 2])
