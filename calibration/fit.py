@@ -98,7 +98,7 @@ class FitOptions:
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
     beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
-    ms_walks: int = 1 << 16  # walks per incidence and table alpha (the same seed for every alpha)
+    ms_walks: int = 1 << 17  # walks per incidence and table alpha (the same seed for every alpha)
     ms_seed: int = 0
     diffraction: bool = False  # the two-scale model (Holzschuch-Pacanowski) around the trial one
     rms_height_nm: float | None = None  # nano-roughness of the K-correlation PSD (held fixed)

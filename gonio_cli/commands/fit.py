@@ -43,9 +43,9 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--multiple-scattering", action="store_true",
                    help="add the random walk's orders >= 2 to the model (a deterministic "
                         "table in alpha, fixed seed; its Monte Carlo error joins sigma)")
-    p.add_argument("--ms-walks", type=int, default=1 << 16, metavar="N",
+    p.add_argument("--ms-walks", type=int, default=1 << 17, metavar="N",
                    help="walks per incidence angle and table alpha for --multiple-scattering "
-                        "(default 65536)")
+                        "(default 131072)")
     p.add_argument("--diffraction", action="store_true",
                    help="fit the two-scale diffraction model (Holzschuch-Pacanowski) around the "
                         "microfacet one, at the run's wavelength; nano-roughness held fixed")

@@ -128,7 +128,7 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "rms_height_nm": (None, _optional(_number(0.0, 1e6, open_low=True))),
         "correlation_length_um": (None, _optional(_number(0.0, 1e6, open_low=True))),
         "psd_exponent": (2.0, _number(1.0, 10.0, open_low=True)),
-        "ms_walks": (1 << 14, _walks),
+        "ms_walks": (1 << 16, _walks),
     },
     "aperture": {
         "diameter_mm": (10.0, _number(0.0, open_low=True)),

@@ -117,7 +117,7 @@ class SampleSpec:
     rms_height_nm: float | None = None  # nano-roughness (K-correlation PSD) for diffraction
     correlation_length_um: float | None = None
     psd_exponent: float = 2.0
-    ms_walks: int = 1 << 14  # random walks per incidence table of the multiple-scattering term
+    ms_walks: int = 1 << 16  # random walks per incidence table of the multiple-scattering term
 
 
 def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
