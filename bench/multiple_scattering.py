@@ -7,7 +7,7 @@ of the compiled walk (eval, sample, shared paths; GGX and Beckmann, glass and mi
 and 1.0) beside the numpy walk measured in the same run as the baseline and against issue 19's
 C++ figures for this machine; and
 the two-scale diffraction model's evals per second beside the plain microfacet eval; for
-the bench's tabulated orders >= 2 (HigherOrderLobe), the error against walks per table column
+the bench's tabulated orders >= 2 (HigherOrderLobe), the error against walks per table build
 and the build time, beside the per-pair walk (HigherOrders) it replaced, measured in the same
 run; and order 2 by quadrature (second_order) per table column, CPU time and error, beside
 the numpy route it replaced (second_order_reference), same run.
@@ -235,17 +235,17 @@ def _score(value: np.ndarray, ref: np.ndarray) -> str:
 
 
 def lobe_table(rng: np.random.Generator) -> list[str]:
-    """The bench's orders >= 2: HigherOrderLobe (tables per incidence and azimuth column,
-    interpolated) against walks per column, off the grid, beside the per-pair HigherOrders
+    """The bench's orders >= 2: HigherOrderLobe (tables per incidence and plane through the
+    normal, interpolated) against walks per build, off the grid, beside the per-pair HigherOrders
     (1024 walks per pair, what the bench used before) at the same pairs.
 
     rms dev: relative RMS deviation from a reference walked at the pairs themselves
     (higher_orders_at, TABLE_REFERENCE_WALKS per incidence); rms/peak: RMS absolute deviation
-    over the largest reference value; build s: walking the columns the 12 pairs need; per pair
-    ms: one more pair once its columns exist (what a bench reading then costs).
+    over the largest reference value; build s: building the tables the 12 pairs need; per pair
+    ms: one more pair once its tables exist (what a bench reading then costs).
     """
     wi, wo = off_grid_pairs()
-    lines = ["orders >= 2 for the bench: tables per incidence x azimuth column (GGX glass, eta "
+    lines = ["orders >= 2 for the bench: tables per incidence x plane (GGX glass, eta "
              "1.51, 12 off-grid pairs)",
              f"{'alpha':>5} {'method':>24} {'build s':>8} {'per pair ms':>11} {'rms dev':>8} "
              f"{'rms/peak':>9}"]
@@ -261,7 +261,7 @@ def lobe_table(rng: np.random.Generator) -> list[str]:
             lobe = HigherOrderLobe(glass, walks=walks, seed=int(rng.integers(1 << 30)))
             value, build = timed(lobe.eval, wi, wo)
             _, again = timed(lobe.eval, wi[:1], wo[:1])
-            lines.append(f"{alpha:5.1f} {f'table, {walks}/column':>24} {build:8.3f} "
+            lines.append(f"{alpha:5.1f} {f'table, {walks}/build':>24} {build:8.3f} "
                          f"{1e3 * again:11.2f} {_score(value, ref)}")
     return lines
 
