@@ -7,6 +7,7 @@ the bench splits it (sim.bench.quadrature.split_cap_rule), so the two agree to ~
 from __future__ import annotations
 
 import math
+import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, fields
@@ -228,15 +229,17 @@ class _Kept:
     def __init__(self, build: Callable[..., _Plan]):
         self.build, self.plans = build, OrderedDict()
         self.__doc__ = build.__doc__
+        self._lock = threading.Lock()  # lru_cache's thread safety, which this replaces
 
     def __call__(self, *key: Any) -> _Plan:
-        plan = self.plans.pop(key, None)
-        if plan is None:
-            plan = self.build(*key)
-        self.plans[key] = plan  # the most recent last
-        while sum(kept.nbytes for kept in self.plans.values()) > KEPT_BYTES:
-            self.plans.popitem(last=False)
-        return plan
+        with self._lock:
+            plan = self.plans.pop(key, None)
+            if plan is None:
+                plan = self.build(*key)
+            self.plans[key] = plan  # the most recent last
+            while sum(kept.nbytes for kept in self.plans.values()) > KEPT_BYTES:
+                self.plans.popitem(last=False)
+            return plan
 
 
 def _pairs(wi_bytes: bytes, wo_bytes: bytes) -> tuple[np.ndarray, np.ndarray]:

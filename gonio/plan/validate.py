@@ -152,6 +152,8 @@ def sweeps_source(start_deg: Any, end_deg: Any) -> np.ndarray | bool:
     """True where an arm move from start to end passes the source (arm = 0 mod 360); a bool
     for two numbers (the engine's check of each move)."""
     if isinstance(start_deg, float | int) and isinstance(end_deg, float | int):
+        if not (math.isfinite(start_deg) and math.isfinite(end_deg)):  # as the array route
+            return bool(sweeps_source(np.array([start_deg]), np.array([end_deg]))[0])
         lo, hi = sorted((start_deg, end_deg))
         return math.ceil(lo / 360.0) <= math.floor(hi / 360.0)
     lo, hi = np.minimum(start_deg, end_deg), np.maximum(start_deg, end_deg)

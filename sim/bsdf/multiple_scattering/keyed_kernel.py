@@ -1,7 +1,9 @@
 """Shared-path walks towards many targets, keyed random numbers and split branches (numba).
 
-The walk of walk_kernel's TARGETS mode (forced hits, Russian roulette, unguided, next-event
-estimation at every event of order >= min_order towards every target) with two changes:
+The walk of walk_kernel's TARGETS mode as it was when this kernel was written (forced hits,
+Russian roulette after the scattering, unguided, next-event estimation at every event of
+order >= min_order towards every target; walk_kernel's eval walk has since moved its roulette
+before the facet normal) with two changes:
 
 * a dielectric facet's branch is chosen with probability clip(F, share, 1 - share) instead of
   F, the weight taking F / that (or (1 - F) / its complement). With F ~ 0.04 at glass, paths
@@ -10,7 +12,7 @@ estimation at every event of order >= min_order towards every target) with two c
   thousand and carried most of the variance; now they are common, with small weights;
 * each uniform is a hash of (key, walk index, event, slot) (splitmix64), not a draw from one
   sequential stream: walk j is the same path whatever the batch size, so any prefix of the
-  walks is a sample of its own (keyed.walk_to_targets takes the covariance from one).
+  walks is a sample of its own (keyed.keyed_walk_to_targets takes the covariance from one).
 """
 
 from __future__ import annotations

@@ -212,7 +212,9 @@ class HigherOrderLobe:
 
     def column(self, side: int, node: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(order 2, orders >= 3, their standard error) of f at polar_deg, azimuth phi_deg[j],
-        for light arriving from the side's hemisphere at INCIDENCE_NODES_DEG[node]."""
+        for light arriving from the side's hemisphere at INCIDENCE_NODES_DEG[node] (at normal
+        incidence every azimuth's is column 0's: the lobe does not depend on it there)."""
+        j = 0 if node == 0 else j
         s, plane = (0 if side > 0 else 1), int(self._plane_of[j])
         for lower in (False, True):
             if not self._built[s, node, plane, int(lower)]:
@@ -234,7 +236,8 @@ class HigherOrderLobe:
         return second + higher, err
 
     def parts(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(order 2, orders >= 3, the standard error of orders >= 3) of f at wi, wo (..., 3):
+        """(order 2, orders >= 3, the standard error of orders >= 3) of f at wi, wo (..., 3);
+        without exact_second order 2 is 0 and walked with the rest, linearly:
         order 2 cubic (PCHIP) in theta_o, orders >= 3 linear, both linear in cos(phi_o - phi_i)
         (f is even in the azimuth about the plane of incidence, so smooth in its cosine) and
         between incidence nodes; within one polar step of a pole between the columns 0 and 180

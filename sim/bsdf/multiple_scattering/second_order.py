@@ -10,13 +10,15 @@ d1 = w1 in the frame of the side it travels in. H is the walk's height expectati
 event's height CDF u1 has density a0 u^(a0 - 1) (a0 = -Lambda(-wi)); the second event follows
 along d1 (u2 / u1 = exp(E / Lambda(d1)), forced to hit and weighted by the hit probability, as
 the walk does) and wo escapes from it with G1. H depends on w1 only through its polar angle
-(isotropic Lambda). second_order is the compiled route (second_order_kernel: H in closed form
-where it has one, the w1_z rule split per target at every support edge of both events, so a
-16 x 16 rule per cell converges); second_order_reference is the numpy route it was checked
-against: H by Gauss-Legendre rules over the two heights' uniforms, once per (polar node,
-branch, target), times Gauss-Legendre in w1_z (split only at the horizon, where Lambda
-changes branch) and in azimuth on the arcs between the planes of wi and of the targets (where
-the phase functions peak), converging like 1 / nodes.
+(isotropic Lambda). second_order is the compiled route (second_order_kernel: H in closed
+form where it has one; cells in w1's polar angle and azimuth cut per target at every support
+edge of both events and at the Fresnel and refraction kink cones, Gauss-Legendre nodes in
+proportion to a cell's size, POLAR_NODES and AZIMUTH_NODES per radian);
+second_order_reference is the numpy route it was checked against: H by Gauss-Legendre rules
+over the two heights' uniforms, once per (polar node, branch, target), times Gauss-Legendre
+in w1_z (split only at the horizon, where Lambda changes branch) and in azimuth on the arcs
+between the planes of wi and of the targets (where the phase functions peak), converging
+like 1 / nodes.
 Orders >= 2 are then this plus the walk's orders >= 3 (lobe.higher_orders_at).
 """
 
@@ -114,10 +116,11 @@ def second_order(walker: Walker, wi: np.ndarray, targets: np.ndarray,
     """Order 2 of f |cos o| from wi (3,) towards every target (m, 3) of a dielectric or
     conductor Smith microsurface (a Walker, isotropic slopes), by quadrature: compiled
     (second_order_kernel, `polar` nodes per radian of w1's polar angle and `azimuth` per
-    radian of its azimuth in each cell), else the numpy reference."""
+    radian of its azimuth in each cell), else the numpy reference at its own node counts
+    (polar and azimuth mean nodes per hemisphere and per circle there: they are not passed)."""
     walker, wi, targets = _lit_from_above(walker, wi, targets)
     if not nee_kernel.supports(walker.slopes, walker.micro):
-        return second_order_reference(walker, wi, targets)
+        return second_order_reference(walker, wi, targets, heights=heights)
     xs, ws = _rules(MAX_CELL_NODES)
     hx, hw = gauss_legendre_unit(heights)
     a0 = -float(walker.slopes.signed_lambda(-wi[None, :])[0])
