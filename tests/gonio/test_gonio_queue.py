@@ -23,8 +23,10 @@ from gonio.store import open_run
 
 SHORT = {"name": "short", "grid": [{"side": "transmission", "theta_i_deg": [0.0],
                                     "theta_o_deg": [-20.0, 0.0, 20.0]}]}
+# long enough that a runner stopped after its third reading has readings left to resume (with
+# 7 readings all were stored before the stop landed once the scan got faster)
 LONG = {"name": "long", "grid": [{"side": "reflection", "theta_i_deg": [10.0],
-                                  "theta_o_deg": {"start": -60.0, "stop": 60.0, "step": 20.0},
+                                  "theta_o_deg": {"start": -60.0, "stop": 60.0, "step": 5.0},
                                   "skip_forbidden": True}]}
 
 
