@@ -28,11 +28,12 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
     return calfile.used_by(meta)
 
 
-def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
+def reduce_run(run: str | Path | Run, calibration_file: str | Path | None = None,
                shot_noise_w: float | None = None, subtract_signature: bool = False,
                signature_share: float | None = None,
                slope_options: FitOptions | None = DEFAULT_SLOPE_FIT) -> ReducedData:
-    """Calibrated ReducedData of a run (the calibration's name goes into meta["calibration"],
+    """Calibrated ReducedData of a run (its directory, or the Run already open, whose readings
+    are then read once; the calibration's name goes into meta["calibration"],
     the [optics] beam divergence into meta["beam_divergence_deg"] for the fit; an all-emulated
     run's [sim] table is meta["sim"], calibration.reduce). shot_noise_w: the --shot-noise-w
     flag (calibration.reduce.optics_of); subtract_signature: subtract the bench's own scatter
@@ -40,9 +41,10 @@ def reduce_run(run_dir: str | Path, calibration_file: str | Path | None = None,
     above which a point is flagged (calibration.signature; None: its default);
     slope_options: the fit whose model carries the angle errors into the budget
     (`reduce_stored`)."""
-    from gonio.store import open_run
+    from gonio.store import Run, open_run
 
-    run = open_run(run_dir)
+    if not isinstance(run, Run):
+        run = open_run(run)
     return reduce_stored(run, run.readings(), calibration_file, shot_noise_w,
                          subtract_signature, signature_share, slope_options)
 

@@ -30,16 +30,15 @@ def write_run(run_dir: str | Path, fmt: str, what: str, out: Path, request: Expo
     be reduced is written raw, with a note saying why."""
     from calibration.exports.bluesky import write_jsonl
     from calibration.exports.raw import write_csv, write_netcdf
-    from calibration.pipeline import DEFAULT_SLOPE_FIT, reduce_stored
+    from calibration.pipeline import reduce_run
     from gonio.store import open_run
 
     run = open_run(run_dir)
     notes: list[str] = []
     if what != "raw":
-        try:  # the run already open (reduce_run would open and read it again)
-            data = reduce_stored(run, run.readings(), request.calibration,
-                                 request.shot_noise_w, request.subtract_signature,
-                                 slope_options=DEFAULT_SLOPE_FIT)
+        try:
+            data = reduce_run(run, request.calibration, request.shot_noise_w,
+                              request.subtract_signature)
         except GonioError as exc:
             if not fallback:
                 raise

@@ -118,7 +118,7 @@ def budget_summary(data) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
     from calibration.exports.measured import write_reduced_csv
-    from calibration.pipeline import DEFAULT_SLOPE_FIT, reduce_stored
+    from calibration.pipeline import reduce_run
     from calibration.signature import summary as signature_summary
     from gonio.record import record_lines, run_record
     from gonio.store import open_run
@@ -128,8 +128,8 @@ def run(args: argparse.Namespace) -> int:
     if args.import_file is not None or args.run is None:
         return _write_imported(args)  # imported(): one error for both a run and --import
     stored = open_run(args.run)
-    data = reduce_stored(stored, stored.readings(), args.calibration, args.shot_noise_w,
-                         args.subtract_signature, args.signature_share, DEFAULT_SLOPE_FIT)
+    data = reduce_run(stored, args.calibration, args.shot_noise_w, args.subtract_signature,
+                      args.signature_share)
     data.meta["coverage_k"] = args.coverage_k
     out = write_reduced_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv",
                             record_lines(run_record(stored)))
