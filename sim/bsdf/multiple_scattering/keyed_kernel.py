@@ -24,13 +24,17 @@ import numpy as np
 from sim.bsdf.multiple_scattering.nee_kernel import (
     facet_fresnel,
     next_event,
-    projected_area,
     side_eta,
     target_lambdas,
     unsigned_lambda,
 )
 from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
-from sim.bsdf.multiple_scattering.walk_kernel import log1mexp, scatter
+from sim.bsdf.multiple_scattering.walk_kernel import (
+    event_area,
+    hit_probability,
+    log1mexp,
+    scatter,
+)
 from sim.bsdf.primitives import scalar
 
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -98,9 +102,7 @@ def walk_targets(ndf, ax, ay, conductor, eta, has_f, n_c, wi, targets, key, firs
             base = k * SLOTS
             lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
             lam = lam_up if dz >= 0.0 else -1.0 - lam_up
-            p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
-            if math.isnan(p_hit):
-                p_hit = 1.0
+            p_hit = hit_probability(lam, cur)
             beta *= p_hit
             new = cur - math.log1p(-keyed_uniform(walk_key, base) * p_hit) / lam \
                 if lam != 0.0 else math.inf
@@ -110,8 +112,7 @@ def walk_targets(ndf, ax, ay, conductor, eta, has_f, n_c, wi, targets, key, firs
             ix, iy, iz = -dx, -dy, -dz
             mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, keyed_uniform(walk_key, base + 1),
                                         keyed_uniform(walk_key, base + 2))
-            area = max(iz, 0.0) + abs(iz) * lam_up if abs(iz) > 0.0 else projected_area(
-                ndf, ax, ay, ix, iy, iz)
+            area = event_area(ndf, ax, ay, ix, iy, iz, lam_up)
             if k >= min_order:
                 for t in range(m):
                     value[j, t] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,

@@ -28,7 +28,7 @@ from sim.bsdf.multiple_scattering.nee_kernel import (
     side_eta,
     unsigned_lambda,
 )
-from sim.bsdf.primitives import cos_lambda, log_beta, scalar
+from sim.bsdf.primitives import log_beta, scalar
 
 
 @scalar
@@ -36,7 +36,7 @@ def signed_lambda(ndf, ax, ay, x, y, z):
     """Distribution.signed_lambda: Lambda >= 0 upward, -1 - Lambda(-w) downward, inf flat."""
     if z == 0.0:
         return math.inf
-    up = cos_lambda(ndf, ax, ay, x, y, z) / abs(z)
+    up = unsigned_lambda(ndf, ax, ay, x, y, z)
     return up if z > 0.0 else -1.0 - up
 
 

@@ -47,6 +47,23 @@ def log1mexp(x):
 
 
 @scalar
+def hit_probability(lam, cur):
+    """The chance that a ray of signed Smith Lambda lam leaving the height of log CDF cur meets
+    the surface again (1 downwards): what a forced hit weighs the walk by."""
+    p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
+    return 1.0 if math.isnan(p_hit) else p_hit
+
+
+@scalar
+def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
+    """projected_area of the event's w_in = (ix, iy, iz) from its Lambda lam_up, which the
+    walk has already computed (the full formula only on the horizon)."""
+    if abs(iz) > 0.0:
+        return max(iz, 0.0) + abs(iz) * lam_up
+    return projected_area(ndf, ax, ay, ix, iy, iz)
+
+
+@scalar
 def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u):
     """Next direction from the phase function (micro.scatter): (x, y, z, factor, crossed)."""
     c = ix * mx + iy * my + iz * mz
@@ -170,9 +187,7 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
             lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
             lam = lam_up if dz >= 0.0 else -1.0 - lam_up
             if forced:
-                p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
-                if math.isnan(p_hit):
-                    p_hit = 1.0
+                p_hit = hit_probability(lam, cur)
                 beta *= p_hit
                 e = -math.log1p(-ua * p_hit)
             else:
@@ -189,8 +204,7 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
             if k == 1:
                 first[i] = new if outside else other
             ix, iy, iz = -dx, -dy, -dz
-            area = max(iz, 0.0) + abs(iz) * lam_up if abs(iz) > 0.0 else projected_area(
-                ndf, ax, ay, ix, iy, iz)
+            area = event_area(ndf, ax, ay, ix, iy, iz, lam_up)
             if k >= min_order and (order == 0 or order == k):
                 if mode == EVALUATE:
                     value[i, 0] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,
