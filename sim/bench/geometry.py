@@ -33,10 +33,15 @@ def _vector(x, y, z) -> np.ndarray:
     return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
 
 
+def _detector_components(arm_deg, elevation_deg):
+    """(x, y, z) of detector_direction: numbers for numbers, arrays otherwise."""
+    (sin_a, cos_a), (sin_e, cos_e) = _sin_cos(arm_deg), _sin_cos(elevation_deg)
+    return cos_e * cos_a, cos_e * sin_a, sin_e
+
+
 def detector_direction(arm_deg, elevation_deg=0.0) -> np.ndarray:
     """Lab unit vector from the sample to the detector: (cos e cos a, cos e sin a, sin e)."""
-    (sin_a, cos_a), (sin_e, cos_e) = _sin_cos(arm_deg), _sin_cos(elevation_deg)
-    return _vector(cos_e * cos_a, cos_e * sin_a, sin_e)
+    return _vector(*_detector_components(arm_deg, elevation_deg))
 
 
 def _to_sample(x, y, z, sample_trig, azimuth_trig, flipped):
@@ -79,10 +84,9 @@ def sample_frame_directions(
     """(wi, wo) in the sample frame for stage positions {"sample", "arm", "azimuth",
     "elevation"} in degrees (azimuth and elevation default to 0; values may be arrays)."""
     rotation = _sin_cos(positions["sample"]), _sin_cos(positions.get("azimuth", 0.0))
-    (sin_a, cos_a), (sin_e, cos_e) = (_sin_cos(positions["arm"]),
-                                      _sin_cos(positions.get("elevation", 0.0)))
-    wi = _vector(*_to_sample(1.0, 0.0, 0.0, *rotation, flipped))
-    wo = _vector(*_to_sample(cos_e * cos_a, cos_e * sin_a, sin_e, *rotation, flipped))
+    detector = _detector_components(positions["arm"], positions.get("elevation", 0.0))
+    wi = _vector(*_to_sample(*TOWARD_SOURCE.tolist(), *rotation, flipped))
+    wo = _vector(*_to_sample(*detector, *rotation, flipped))
     if wi.shape != wo.shape:
         wi, wo = np.broadcast_arrays(wi, wo)
     return wi, wo
