@@ -5,11 +5,14 @@ normal incidence on the emulated bench (the example plans' normal-incidence grid
 --sim`) and reduced; at those fit points the walked orders >= 3 of the fit's model (the truth
 alpha, so many walks per incidence) are compared with a reference from REFERENCE_WALKS walks,
 in units of each point's data sigma: median and worst over points and --seeds seeds, for the
-sequential shared-path walk (before: lobe.walk_to_targets(keyed=False)) and the keyed,
-branch-split walk (after: keyed.keyed_walk_to_targets). "table s": CPU time of the walks of
+sequential shared-path walk (lobe.walk_to_targets(keyed=False)), the keyed, branch-split
+walk (keyed.keyed_walk_to_targets) towards every point, and the fit as it is: the distinct
+polar angles walked once (normal incidence: the lobe has no azimuth; lobe.higher_orders_at)
+and the table's centre alpha, where the fit ends, walked MS_CENTRE_WALKS times the others.
+"walks": those behind the estimate at the truth alpha; "table s": CPU time of the walks of
 one fit table (calibration.fit._OrdersTable: 7 alphas 0.1 apart in log alpha, the covariance
 at the centre one). The reference's own standard error is shown in its row.
-Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 8388608]
+Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 33554432]
 """
 
 from __future__ import annotations
@@ -28,16 +31,19 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from calibration.fit import MS_CENTRE_WALKS  # noqa: E402
 from calibration.pipeline import reduce_run  # noqa: E402
 from sim.bsdf import RoughDielectric  # noqa: E402
 from sim.bsdf.multiple_scattering.lobe import walk_to_targets  # noqa: E402
 from sim.bsdf.multiple_scattering.model import RandomWalkBSDF  # noqa: E402
 
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
-#: Walks per estimate: the fit's before (FitOptions.ms_walks then) and after.
-ESTIMATES = (("before: sequential walk", False, 1 << 15), ("after: keyed, split", True, 1 << 15),
-             ("after: keyed, split", True, 1 << 16), ("after: keyed, split", True, 1 << 17))
-REFERENCE_WALKS = 1 << 23
+#: (label, keyed, FitOptions.ms_walks, walks at the table's centre / ms_walks, distinct polar
+#: angles only): the fit's estimators in the order they were its default.
+ESTIMATES = (("sequential walk", False, 1 << 15, 1, False),
+             ("keyed, split", True, 1 << 17, 1, False),
+             ("distinct, centre x16 (now)", True, 1 << 17, MS_CENTRE_WALKS, True))
+REFERENCE_WALKS = 1 << 25
 #: The fit table's alphas (calibration.fit: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
 TABLE_NODES, TABLE_STEP = 7, 0.1
 
@@ -63,22 +69,29 @@ def glass(alpha: float) -> RandomWalkBSDF:
                                           masking="correlated"), walks=1, guided=False)
 
 
-def orders3(walk, wo: np.ndarray, walks: int, keyed: bool, seed: int,
+def orders3(walk, wo: np.ndarray, walks: int, keyed: bool, seed: int, distinct: bool,
             covariance: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Orders >= 3 of f (1/sr) at normal incidence towards wo and their standard error."""
-    mean, err, _ = walk_to_targets(walk, np.array([0.0, 0.0, 1.0]), wo, walks,
+    """Orders >= 3 of f (1/sr) at normal incidence towards wo and their standard error; with
+    distinct, each polar angle walked once (the lobe has no azimuth at normal incidence)."""
+    polar, index = np.unique(np.round(wo[:, 2], 12), return_inverse=True)
+    targets = np.stack([np.sqrt(1.0 - polar ** 2), 0.0 * polar, polar], axis=-1) \
+        if distinct else wo
+    mean, err, _ = walk_to_targets(walk, np.array([0.0, 0.0, 1.0]), targets, walks,
                                    np.random.default_rng(seed), min_order=3,
                                    covariance=covariance, keyed=keyed)
-    inverse = 1.0 / np.abs(wo[:, 2])
-    return mean * inverse, err * inverse
+    inverse = 1.0 / np.abs(targets[:, 2])
+    mean, err = mean * inverse, err * inverse
+    return (mean[index], err[index]) if distinct else (mean, err)
 
 
-def table_seconds(alpha: float, wo: np.ndarray, walks: int, keyed: bool) -> float:
+def table_seconds(alpha: float, wo: np.ndarray, walks: int, centre: int, keyed: bool,
+                  distinct: bool) -> float:
     """CPU seconds of the walks of one fit table about alpha (covariance at the centre)."""
     start = time.process_time()
     for node in range(TABLE_NODES):
-        orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo, walks, keyed,
-                0, covariance=node == TABLE_NODES // 2)
+        middle = node == TABLE_NODES // 2
+        orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo,
+                walks * (centre if middle else 1), keyed, 0, distinct, covariance=middle)
     return time.process_time() - start
 
 
@@ -90,7 +103,7 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.1f}; reference {args.reference_walks} walks "
           f"(keyed, split); error / data sigma over the normal-incidence fit points x "
           f"{args.seeds} seeds")
-    print(f"{'sample':>13} {'estimator':>24} {'walks':>7} {'table s':>7} {'median':>7} "
+    print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'median':>7} "
           f"{'worst':>7}")
     with tempfile.TemporaryDirectory() as tmp:
         for name, alpha in SAMPLES:
@@ -99,17 +112,17 @@ def main() -> None:
             wo, sigma = data.wo[rows], data.sigma[rows]
             walk = glass(alpha)
             for keyed in (True, False):  # compile outside the timings
-                orders3(walk, wo[:2], 64, keyed, 0, covariance=True)
-            ref, ref_err = orders3(walk, wo, args.reference_walks, True, 999)
-            print(f"{name:>13} {'reference':>24} {args.reference_walks:>7} {'':>7} "
+                orders3(walk, wo[:2], 64, keyed, 0, False, covariance=True)
+            ref, ref_err = orders3(walk, wo, args.reference_walks, True, 999, True)
+            print(f"{name:>13} {'reference':>26} {args.reference_walks:>8} {'':>7} "
                   f"{np.median(ref_err / sigma):7.2f} {np.max(ref_err / sigma):7.2f}")
-            for label, keyed, walks in ESTIMATES:
-                dev = np.concatenate([np.abs(orders3(walk, wo, walks, keyed, seed)[0] - ref)
-                                      / sigma for seed in range(args.seeds)])
-                print(f"{name:>13} {label:>24} {walks:>7} "
-                      f"{table_seconds(alpha, wo, walks, keyed):7.2f} "
+            for label, keyed, walks, centre, distinct in ESTIMATES:
+                dev = np.concatenate([
+                    np.abs(orders3(walk, wo, walks * centre, keyed, seed, distinct)[0] - ref)
+                    / sigma for seed in range(args.seeds)])
+                seconds = table_seconds(alpha, wo, walks, centre, keyed, distinct)
+                print(f"{name:>13} {label:>26} {walks * centre:>8} {seconds:7.2f} "
                       f"{np.median(dev):7.2f} {np.max(dev):7.2f}")
-
 
 if __name__ == "__main__":
     main()

@@ -35,6 +35,8 @@ PREFERENCE_DELTA_CHI2 = 4.0
 MS_TABLE_STEP = 0.1
 MS_TABLE_NODES = 7
 MS_TABLE_RECENTRE = 3
+#: The table's centre alpha walks this many times FitOptions.ms_walks: the fitted model's value.
+MS_CENTRE_WALKS = 16
 MS_WALKS_MAX = 1 << 22
 # Points of the two-scale model's lobe integral per pair: the bench's (sim.bench.sample), so a
 # fit of an emulated run evaluates the same fixed point set.
@@ -98,7 +100,7 @@ class FitOptions:
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
     beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
-    ms_walks: int = 1 << 17  # walks per incidence and table alpha (the same seed for every alpha)
+    ms_walks: int = 1 << 17  # walks per incidence (the table's centre: x MS_CENTRE_WALKS)
     ms_seed: int = 0
     diffraction: bool = False  # the two-scale model (Holzschuch-Pacanowski) around the trial one
     rms_height_nm: float | None = None  # nano-roughness of the K-correlation PSD (held fixed)
@@ -329,10 +331,12 @@ class _WithHigherOrders:
 class _OrdersTable:
     """Orders >= 2 at the fitted points (higher_orders_at: walked at the points themselves, one
     set of walks per incidence) at MS_TABLE_NODES alphas MS_TABLE_STEP apart in log alpha about
-    `centre`, all from the same seed so the Monte Carlo error is common to the nodes, and a
-    cubic spline in log alpha through them (clamped at the ends): a deterministic, smooth term
-    for the optimiser. `error` and `covariance` are its Monte Carlo standard error per point
-    and their covariance (points of one incidence share walks), at the centre node."""
+    `centre`, and a cubic spline in log alpha through them (clamped at the ends): a
+    deterministic, smooth term for the optimiser. The fit ends within a small fraction of a
+    step of the centre, so the model there is the centre node's value (walked with
+    MS_CENTRE_WALKS times the options' walks) and the other nodes give its slope. `error` and
+    `covariance` are the centre node's Monte Carlo standard error per point and their
+    covariance (points of one incidence share walks)."""
 
     def __init__(self, problem: _Problem, centre: float):
         from scipy.interpolate import CubicSpline
@@ -342,12 +346,14 @@ class _OrdersTable:
         o, data = problem.options, problem.data
         half = 0.5 * (MS_TABLE_NODES - 1)
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
+        middle = MS_TABLE_NODES // 2
         walked = [higher_orders_at(build_model(problem.distribution, math.exp(a), problem.eta0,
                                                "correlated", problem.k), data.wi, data.wo,
-                                   o.ms_walks, o.ms_seed, covariance=node == MS_TABLE_NODES // 2)
+                                   o.ms_walks * (MS_CENTRE_WALKS if node == middle else 1),
+                                   o.ms_seed, covariance=node == middle)
                   for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
-        _, self.error, self.covariance = walked[MS_TABLE_NODES // 2]
+        _, self.error, self.covariance = walked[middle]
 
     def __call__(self, alpha: float) -> np.ndarray:
         return self.spline(float(np.clip(math.log(alpha), self.log_alpha[0],

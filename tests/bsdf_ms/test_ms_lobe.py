@@ -205,3 +205,27 @@ def test_every_azimuth_at_normal_incidence_is_column_zero():
     assert first[0].max() > 0.0
     for a, b in zip(first, last, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_pairs_the_lobe_cannot_tell_apart_are_walked_once():
+    """higher_orders_at gives the same value, error and covariance row to pairs an isotropic
+    lobe cannot tell apart (mirror images about the plane of incidence; at normal incidence any
+    azimuth), and its walk from the same seed then scores only the distinct ones, so a point
+    added at a mirror azimuth leaves the other points' values as they were."""
+    normal = np.array([0.0, 0.0, 1.0])
+    oblique = direction(40.0, 25.0)
+    for wi, wo in ((normal, [direction(35.0, p) for p in (0.0, 90.0, 180.0, 300.0)]),
+                   (oblique, [direction(35.0, 25.0 + d) for d in (60.0, -60.0)])):
+        wo = np.array(wo)
+        value, err, cov = higher_orders_at(GLASS, wi, wo, 1 << 12, seed=5)
+        assert value[0] > 0 and np.all(value == value[0]) and np.all(err == err[0])
+        assert np.all(cov == cov[0, 0])  # one estimate: fully correlated
+        alone, alone_err, _ = higher_orders_at(GLASS, wi, wo[:1], 1 << 12, seed=5)
+        assert alone[0] == value[0] and alone_err[0] == err[0]
+    distinct, _, _ = higher_orders_at(GLASS, normal, np.array([direction(35.0),
+                                                                direction(150.0)]), 1 << 12, 5)
+    mirrored, _, _ = higher_orders_at(GLASS, normal, np.array([direction(35.0),
+                                                                direction(150.0, 180.0),
+                                                                direction(35.0, 180.0)]),
+                                      1 << 12, 5)
+    assert np.array_equal(mirrored, distinct[[0, 1, 0]])

@@ -92,7 +92,9 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     quadrature of second_order and only orders >= 3 are walked (their Monte Carlo error is a
     few times smaller than that of walked orders >= 2); the error is the walks'. Pairs whose
     incidence agrees within incidence_tol_deg share one set of `walks` walks from
-    (seed, side, group), so their errors are correlated; other pairs' are independent."""
+    (seed, side, group), so their errors are correlated; other pairs' are independent. Pairs
+    the isotropic lobe cannot tell apart (the same theta_o and |phi_o - phi_i|; the same theta_o
+    in the group at normal incidence, taken as exactly normal) are computed once."""
     from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
     from sim.bsdf.multiple_scattering.second_order import second_order, supports
 
@@ -105,22 +107,35 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     cov = np.zeros((len(wi), len(wi))) if covariance else None
     for s, g in sorted(set(zip(side.tolist(), group.tolist(), strict=True))):
         rows = np.flatnonzero((side == s) & (group == g))
-        theta = np.radians(np.mean(theta_i[rows]))
+        theta = np.radians(np.mean(theta_i[rows])) if g else 0.0
         start = np.array([np.sin(theta), 0.0, s * np.cos(theta)])
-        t, p = np.radians(theta_o[rows]), np.radians(dphi[rows])
-        targets = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+        azimuth = dphi[rows] if g else np.zeros(len(rows))  # none at normal incidence
+        targets, index = _distinct_targets(theta_o[rows], azimuth)
         rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, g]))
         mean, err, block = walk_to_targets(walk, start, targets, walks, rng,
                                            min_order=3 if exact_second else 2,
                                            covariance=covariance)
         if exact_second:
             mean = mean + second_order(walk.walker, start, targets)
-        cos_o = np.abs(targets[:, 2])
+        cos_o = np.abs(targets[index, 2])
         inverse = np.where(cos_o > 0.0, 1.0 / np.where(cos_o > 0.0, cos_o, 1.0), 0.0)
-        value[rows], var[rows] = mean * inverse, (err * inverse) ** 2
+        value[rows], var[rows] = mean[index] * inverse, (err[index] * inverse) ** 2
         if covariance:
-            cov[np.ix_(rows, rows)] = block * np.outer(inverse, inverse)
+            cov[np.ix_(rows, rows)] = block[np.ix_(index, index)] * np.outer(inverse, inverse)
     return value, np.sqrt(var), cov
+
+
+def _distinct_targets(theta_o_deg: np.ndarray, dphi_deg: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(distinct target directions (k, 3) in the incidence frame, index (n,) of each pair's):
+    pairs with the same theta_o and |phi_o - phi_i| (mirror images about the plane of
+    incidence, or any azimuth at normal incidence, where dphi is passed as 0) see the same
+    lobe, so they are walked and integrated once and get the same value."""
+    key = np.round(np.stack([theta_o_deg, dphi_deg], axis=-1), 9)
+    distinct, index = np.unique(key, axis=0, return_inverse=True)
+    t, p = np.radians(distinct[:, 0]), np.radians(distinct[:, 1])
+    targets = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+    return targets, index.reshape(-1)
 
 
 class HigherOrderLobe:

@@ -1,0 +1,93 @@
+"""What the fit's orders >= 3 would cost at issue 19's accuracy: walks per direction, both ways.
+
+Walter's ground glass and acid-etched glass are scanned afresh at normal incidence (as in
+bench/ms_model_error.py). At each fit point this prints the orders >= 3 as a share of f and in
+data sigma, and the per-walk coefficient of variation of two unbiased estimators of them:
+forward, the keyed shared-path walk from wi that scores every target at once (what the fit
+uses), and reverse, the same walk started from the target towards wi alone (reciprocity:
+f(wi, wo) / n_o^2 = f(wo, wi) / n_i^2). From those it works out the walks and CPU seconds per
+fit-table alpha that would put the standard error at 0.45 data sigma at the median point (a
+median |error| of 0.3 sigma) and at 0.67 sigma at every point (the worst of 133 points x 4
+seeds then near 2 sigma): forward, the walks the hardest point needs (all points share them);
+reverse, each point its own walks, the mirrored points (same polar angle, normal incidence)
+walked once.
+Run: python bench/ms_orders3_cost.py [--forward-walks 262144] [--reverse-walks 32768]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ms_model_error import SAMPLES, glass, scan_normal_incidence  # noqa: E402
+
+from calibration.pipeline import reduce_run  # noqa: E402
+from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets  # noqa: E402
+
+NORMAL = np.array([0.0, 0.0, 1.0])
+#: Standard error / data sigma for a median |error| of 0.3 sigma, and for the worst of ~530
+#: errors (133 points x 4 seeds) near 2 sigma.
+MEDIAN_GOAL, WORST_GOAL = 0.3 / 0.674, 2.0 / 3.0
+SHOWN_DEG = (7.5, 30.0, 60.0, 82.5, 97.5, 112.5, 127.5, 142.5, 165.0)
+
+
+def per_walk(walker, wi: np.ndarray, targets: np.ndarray, walks: int, seed: int
+             ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(orders >= 3 of f |cos o| per target, per-walk coefficient of variation, CPU s per
+    walk) of `walks` keyed walks from wi."""
+    start = time.process_time()
+    mean, err, _ = keyed_walk_to_targets(walker, wi, targets, walks,
+                                         np.random.default_rng(seed), 3, False)
+    seconds = (time.process_time() - start) / walks
+    return mean, err / np.where(mean > 0, mean, np.inf) * np.sqrt(walks), seconds
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--forward-walks", type=int, default=1 << 18)
+    ap.add_argument("--reverse-walks", type=int, default=1 << 15)
+    args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f}; forward {args.forward_walks} walks, reverse "
+          f"{args.reverse_walks} walks per point; CV: per-walk coefficient of variation")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, alpha in SAMPLES:
+            data = reduce_run(scan_normal_incidence(name, Path(tmp)))
+            rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
+            wo, sigma, f = data.wo[rows], data.sigma[rows], data.bsdf[rows]
+            walker = glass(alpha).walker
+            per_walk(walker, NORMAL, wo[:2], 64, 0)  # compile outside the timings
+            mean, cv_fwd, s_fwd = per_walk(walker, NORMAL, wo, args.forward_walks, 1)
+            polar = np.round(np.degrees(np.arccos(wo[:, 2])), 6)
+            distinct = np.unique(polar, return_index=True)[1]
+            cv_rev, s_rev = np.zeros(len(wo)), np.zeros(len(wo))
+            for t in distinct:
+                _, cv, s_rev[polar == polar[t]] = per_walk(walker, wo[t], NORMAL[None, :],
+                                                           args.reverse_walks, 2 + int(t))
+                cv_rev[polar == polar[t]] = cv[0]
+            share = mean / np.abs(wo[:, 2]) / sigma  # orders >= 3 in data sigma
+            print(f"\n{name} (GGX {alpha}, {len(wo)} points): forward {s_fwd * 1e6:.2f} us per "
+                  f"walk (all points), reverse {np.median(s_rev) * 1e6:.2f} us (one point)")
+            print(f"{'theta_o':>8} {'o3 / f':>8} {'o3 / sigma':>10} {'CV fwd':>7} {'CV rev':>7}")
+            for deg in SHOWN_DEG:
+                t = int(np.argmin(np.abs(polar - deg)))
+                print(f"{polar[t]:8.1f} {mean[t] / abs(wo[t, 2]) / f[t]:8.4f} {share[t]:10.1f} "
+                      f"{cv_fwd[t]:7.1f} {cv_rev[t]:7.1f}")
+            need_fwd = (share * cv_fwd) ** 2
+            median, worst = np.median(need_fwd) / MEDIAN_GOAL ** 2, need_fwd.max() / WORST_GOAL ** 2
+            reverse = float(np.sum(((share * cv_rev / WORST_GOAL) ** 2 * s_rev)[distinct]))
+            print(f"  per table alpha (the fit walks 7): now {1 << 17} forward walks = "
+                  f"{(1 << 17) * s_fwd:.2f} CPU s; {MEDIAN_GOAL:.2f} sigma at the median point: "
+                  f"{median:.3g} forward walks = {median * s_fwd:.1f} s; {WORST_GOAL:.2f} sigma at "
+                  f"every point: {worst:.3g} forward walks = {worst * s_fwd:.0f} s, or reverse "
+                  f"walks per point {reverse:.0f} s")
+
+if __name__ == "__main__":
+    main()
