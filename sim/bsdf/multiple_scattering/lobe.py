@@ -180,7 +180,7 @@ class HigherOrderLobe:
         last = len(self.phi_deg) - 1
         self._plane_of = np.minimum(np.arange(last + 1), last - np.arange(last + 1))
         shape = (2, len(INCIDENCE_NODES_DEG), last + 1, len(self.polar_deg))
-        self._f2, self._d2, self._f3, self._e3 = (np.zeros(shape) for _ in range(4))
+        self._f2, self._d2, self._f3, self._d3, self._e3 = (np.zeros(shape) for _ in range(5))
         self._built = np.zeros((2, len(INCIDENCE_NODES_DEG), last // 2 + 1, 2), dtype=np.bool_)
         self._column_cos = -np.cos(np.radians(self.phi_deg))
 
@@ -217,11 +217,12 @@ class HigherOrderLobe:
         s = 0 if side > 0 else 1
         for m, j in enumerate(columns):
             part = slice(m * len(polar), (m + 1) * len(polar))
-            f2 = second[part] * inverse[part]
-            self._f2[s, node, j, half] = f2
-            self._d2[s, node, j, half] = PchipInterpolator(
-                self.polar_deg[half], f2).derivative()(self.polar_deg[half])
-            self._f3[s, node, j, half] = mean[part] * inverse[part]
+            for table, slopes, f in ((self._f2, self._d2, second[part] * inverse[part]),
+                                     (self._f3, self._d3, mean[part] * inverse[part])):
+                table[s, node, j, half] = f
+                with np.errstate(over="ignore"):  # secants near 1e-300: their slope is 0
+                    slopes[s, node, j, half] = PchipInterpolator(
+                        self.polar_deg[half], f).derivative()(self.polar_deg[half])
             self._e3[s, node, j, half] = err[part] * inverse[part]
         self._built[s, node, plane, int(lower)] = True
 
@@ -253,7 +254,7 @@ class HigherOrderLobe:
     def parts(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
         """(order 2, orders >= 3, the standard error of orders >= 3) of f at wi, wo (..., 3);
         without exact_second order 2 is 0 and walked with the rest, linearly:
-        order 2 cubic (PCHIP) in theta_o, orders >= 3 linear, both linear in cos(phi_o - phi_i)
+        cubic (PCHIP) in theta_o, the error linearly, all linear in cos(phi_o - phi_i)
         (f is even in the azimuth about the plane of incidence, so smooth in its cosine) and
         between incidence nodes; within one polar step of a pole between the columns 0 and 180
         deg only (f = f_pole + theta g cos(dphi) + O(theta^2) there). Only the planes a pair's
@@ -268,7 +269,8 @@ class HigherOrderLobe:
         while True:
             found = lookup(flat_i, flat_o, INCIDENCE_NODES_DEG, INCIDENCE_SNAP, self._column_cos,
                            PHI_SNAP, self.theta_step, self.upper_deg, self.lower_deg, self._f2,
-                           self._d2, self._f3, self._e3, self._built, self._plane_of, out[0],
+                           self._d2, self._f3, self._d3, self._e3, self._built, self._plane_of,
+                           out[0],
                            out[1], out[2], missing)
             if not found:
                 break

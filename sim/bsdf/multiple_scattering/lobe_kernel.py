@@ -1,8 +1,8 @@
 """HigherOrderLobe's table lookup, one compiled loop over the pairs (numba; plain Python without).
 
 A reading asks for a handful of pairs, so the lookup is one call that finds each pair's
-incidence nodes, azimuth columns and polar cell and sums the tables there: order 2 by cubic
-Hermite (PCHIP slopes, tabulated at the build), orders >= 3 and their standard error linearly.
+incidence nodes, azimuth columns and polar cell and sums the tables there: order 2 and orders
+>= 3 by cubic Hermite (PCHIP slopes, tabulated at the build), the standard error linearly.
 Tables a pair needs that are not built yet are reported instead, for the caller to build.
 """
 
@@ -32,13 +32,13 @@ def _cell(x, nodes, snap):
 
 @scalar
 def lookup(wi, wo, incidence, incidence_snap, column_cos, phi_snap, pole_deg, upper, lower,
-           f2, d2, f3, e3, built, plane_of, value2, value3, var, missing):
-    """Interpolate the tables (side, node, column, polar) f2 (order 2), d2 (its PCHIP slopes in
-    degrees), f3 (orders >= 3) and e3 (their standard error) at the pairs wi, wo (n, 3; any
-    length) into value2, value3 and var (n,): linear in the incidence nodes (deg) and in
+           f2, d2, f3, d3, e3, built, plane_of, value2, value3, var, missing):
+    """Interpolate the tables (side, node, column, polar) f2 (order 2), f3 (orders >= 3), d2 and
+    d3 (their PCHIP slopes in degrees) and e3 (the standard error of f3) at the pairs wi, wo
+    (n, 3; any length) into value2, value3 and var (n,): linear in the incidence nodes (deg) and in
     -cos(phi_o - phi_i) over column_cos (within pole_deg of a pole between the first and last
     column only); in theta_o over the polar nodes of the upper half (deg, up to the horizon) or
-    the lower one, cubic Hermite for order 2 and linear for the rest. A pair needing a table
+    the lower one, cubic Hermite for f2 and f3 and linear for e3. A pair needing a table
     whose plane_of[column] is not built[side, node, plane, half] writes (side, node, plane,
     half) to a row of missing instead; returns how many rows."""
     n_missing = 0
@@ -79,11 +79,13 @@ def lookup(wi, wo, incidence, incidence_snap, column_cos, phi_snap, pole_deg, up
                     missing[n_missing, 2], missing[n_missing, 3] = plane_of[j], half
                     n_missing += 1
                     continue
-                row2, slope, row3, err = f2[side, node, j], d2[side, node, j], \
-                    f3[side, node, j], e3[side, node, j]
-                v2 += w * (h00 * row2[k] + h10 * slope[k] + h01 * row2[k + 1]
-                           + h11 * slope[k + 1])
-                v3 += w * ((1.0 - t) * row3[k] + t * row3[k + 1])
+                row2, slope2, row3, slope3 = f2[side, node, j], d2[side, node, j], \
+                    f3[side, node, j], d3[side, node, j]
+                v2 += w * (h00 * row2[k] + h10 * slope2[k] + h01 * row2[k + 1]
+                           + h11 * slope2[k + 1])
+                v3 += w * (h00 * row3[k] + h10 * slope3[k] + h01 * row3[k + 1]
+                           + h11 * slope3[k + 1])
+                err = e3[side, node, j]
                 v += (w * ((1.0 - t) * err[k] + t * err[k + 1])) ** 2
         value2[n], value3[n], var[n] = v2, v3, v
     return n_missing
