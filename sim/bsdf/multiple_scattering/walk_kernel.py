@@ -31,7 +31,7 @@ from sim.bsdf.multiple_scattering.nee_kernel import (
     unsigned_lambda,
 )
 from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
-from sim.bsdf.primitives import normal_density, scalar, unit
+from sim.bsdf.primitives import inlined, normal_density, scalar, unit
 
 #: What a batch does: follow the analog walk to its exit, score towards one wo per walk, or
 #: score towards every one of a set of targets.
@@ -67,14 +67,29 @@ def log1mexp(x):
 
 
 @scalar
+def one_minus_exp(x):
+    """1 - exp(x) for x <= 0, to an ulp or two: by exp where exp(x) < 1/2 (libm's expm1 costs
+    twice exp), by expm1 nearer 0."""
+    return 1.0 - math.exp(x) if x < -LOG_2 else -math.expm1(x)
+
+
+@scalar
 def hit_probability(lam, cur):
     """The chance that a ray of signed Smith Lambda lam leaving the height of log CDF cur meets
     the surface again (1 downwards): what a forced hit weighs the walk by."""
-    p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
+    p_hit = one_minus_exp(lam * cur) if lam > 0.0 else 1.0
     return 1.0 if math.isnan(p_hit) else p_hit
 
 
 @scalar
+def free_path(u, p):
+    """-log(1 - u p): the optical depth to the next event, from uniform u, given a hit of
+    probability p. By log where 1 - u p is exact (u p >= 1/2, Sterbenz), log1p below."""
+    x = u * p
+    return -math.log(1.0 - x) if x >= 0.5 else -math.log1p(-x)
+
+
+@inlined
 def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
     """projected_area of the event's w_in = (ix, iy, iz) from its Lambda lam_up, which the
     walk has already computed (the full formula only on the horizon)."""
@@ -83,7 +98,7 @@ def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
     return projected_area(ndf, ax, ay, ix, iy, iz)
 
 
-@scalar
+@inlined
 def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u):
     """Next direction from the phase function (micro.scatter): (x, y, z, factor, crossed)."""
     c = ix * mx + iy * my + iz * mz
@@ -103,7 +118,7 @@ def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my
     return x, y, z, 1.0, False
 
 
-@scalar
+@inlined
 def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
     """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density);
     area: projected_area of wo (above) or of -wo (below), |o_z| + cos_lambda(o) either way."""
@@ -120,7 +135,7 @@ def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
     return value if math.isfinite(value) else 0.0
 
 
-@scalar
+@inlined
 def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
     """An arriving direction drawn backwards from wo (guiding.sample_adjoint): (x, y, z, ok)."""
     above = oz > 0.0
@@ -140,7 +155,7 @@ def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
     return x, y, z, ok and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
 
 
-@scalar
+@inlined
 def sample_backwards(ndf, ax, ay, conductor, eta, outside, ox, oy, oz, u1, u2, u3):
     """The guided proposal's backwards-from-wo draw (guiding.guided_scatter): a next direction
     in this side's frame whose arrival at the next event m sends into wo, the next event on
@@ -152,7 +167,7 @@ def sample_backwards(ndf, ax, ay, conductor, eta, outside, ox, oy, oz, u1, u2, u
     return -bx, -by, (bz if crossed else -bz), crossed, ok  # travel along minus the arrival
 
 
-@scalar
+@inlined
 def mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy,
                    oz, area_o, wx, wy, wz, crossed):
     """The walk's weight factor for next direction w however drawn, by one-sample MIS of the
@@ -207,9 +222,9 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
             if forced:
                 p_hit = hit_probability(lam, cur)
                 beta *= p_hit
-                e = -math.log1p(-ua * p_hit)
+                e = free_path(ua, p_hit)
             else:
-                e = -math.log1p(-ua)
+                e = free_path(ua, 1.0)
             new = math.inf if lam == 0.0 else cur + e / lam
             if not new < 0.0:
                 if not forced:
