@@ -5,12 +5,14 @@ import numpy as np
 import pytest
 from scipy.special import erfcx as scipy_erfcx
 from scipy.special import ndtri as scipy_ndtri
+from scipy.stats import kstest
 
 from sim.bsdf.distributions import make_distribution
 from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
 from sim.bsdf.multiple_scattering.nee_kernel import AVAILABLE
 from sim.bsdf.multiple_scattering.visible_kernel import erfcx, ndtri, visible_normal
 from sim.bsdf.multiple_scattering.walk import Walker
+from sim.bsdf.multiple_scattering.walk_kernel import uniform
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="the walk kernel needs numba (gonio[fast])")
 Z_MAX = 4.5
@@ -105,3 +107,12 @@ def test_compiled_walks_are_reproducible_from_the_generator():
     b = fast.run(wi, np.random.default_rng(8), wo).value
     c = fast.run(wi, np.random.default_rng(9), wo).value
     assert np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+def test_the_walks_generator_is_uniform_and_follows_its_state():
+    state = np.random.default_rng(10).integers(0, 2**64, size=4, dtype=np.uint64)
+    again = state.copy()
+    u = np.array([uniform(state) for _ in range(20000)])
+    assert np.all((u >= 0.0) & (u < 1.0)) and kstest(u, "uniform").pvalue > 1e-3
+    assert np.all(u * 2.0**53 == np.floor(u * 2.0**53))  # 53-bit draws
+    assert uniform(again) == u[0] and abs(np.corrcoef(u[:-1], u[1:])[0, 1]) < 0.03

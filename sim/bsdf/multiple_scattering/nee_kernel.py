@@ -25,6 +25,7 @@ from sim.bsdf.primitives import (
     conductor_fresnel,
     cos_lambda,
     fresnel_toward,
+    inlined,
     normal_density,
     scalar,
     unit,
@@ -48,7 +49,7 @@ def escape_lambda(lam, log_u):
     return g if math.isfinite(g) else 0.0
 
 
-@scalar
+@inlined
 def escape(ndf, ax, ay, x, y, z, log_u):
     """G1 = u^Lambda of leaving along (x, y, z) from log C1 = log_u (0 for z <= 0)."""
     if z <= 0.0:
@@ -79,7 +80,7 @@ def facet_fresnel(conductor, has_f, n_c, c, el, elm1):
     return fresnel_toward(c, el, elm1)
 
 
-@scalar
+@inlined
 def phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area, ox, oy, oz):
     """F(<w_in,h>) D(h) / (4 A(w_in)) (micro._reflect_phase), w_in = i of projected area
     `area`, w_out = o."""
@@ -101,7 +102,7 @@ def refraction_normal(ix, iy, iz, ox, oy, oz, el):
     return (hx, hy, hz, ix * hx + iy * hy + iz * hz, ox * hx + oy * hy + oz * hz)
 
 
-@scalar
+@inlined
 def phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, ox, oy, oz):
     """(1-F) D_visible(w_in,h) el^2 |<w_out,h>| / (<w_in,h> + el <w_out,h>)^2, w_out below
     (MicroDielectric.phase_transmit); area is w_in's projected area."""
@@ -114,7 +115,7 @@ def phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, ox, oy, oz):
     return value if math.isfinite(value) else 0.0
 
 
-@scalar
+@inlined
 def next_event(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, tx, ty, tz,
                lam_t, log_here, log_there):
     """Phase function from w_in = i (projected area `area`) towards the world direction t

@@ -13,7 +13,13 @@ from __future__ import annotations
 import math
 
 from sim.bsdf.constants import BECKMANN_CF_FROM, SQRT_PI, Ndf
-from sim.bsdf.primitives import erfc_continued_fraction, ggx_visible_normal, scalar, unit
+from sim.bsdf.primitives import (
+    erfc_continued_fraction,
+    ggx_visible_normal,
+    inlined,
+    scalar,
+    unit,
+)
 
 LOG_2 = math.log(2.0)
 #: Steps of the Beckmann slope inversion at most (it converges in a few).
@@ -143,7 +149,7 @@ def beckmann_visible_unit(vx, vy, vz, u1, u2):
     return unit(-(c * x - s * y), -(s * x + c * y), 1.0)
 
 
-@scalar
+@inlined
 def visible_normal(ndf, ax, ay, x, y, z, u1, u2):
     """m ~ D_visible((x, y, z), .) for a direction anywhere on the sphere
     (Distribution.sample_visible_sphere)."""

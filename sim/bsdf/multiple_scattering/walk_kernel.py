@@ -4,9 +4,10 @@ Walker.run's numpy path is the reference and the fallback (diffuse facets, no nu
 kernel follows the same steps per walk (forced hits and Russian roulette when evaluating, the
 roulette played before the facet normal is drawn, so an event it ends costs no normal and no
 scattering; next-event estimation towards wo or towards every target, guided next directions
-(guiding.py) towards wo, the analog walk when sampling, order and cap), with the scalar
-formulas of nee_kernel.py and visible_kernel.py, and numba's own random generator seeded from
-the caller's numpy Generator (so a seed gives the same walks, not the numpy path's numbers).
+(guiding.py) towards wo, only the proposal drawn computed, the analog walk when sampling,
+order and cap), with the scalar formulas of nee_kernel.py and visible_kernel.py, and its own
+xoshiro256+ generator (uniform) seeded from the caller's numpy Generator (so a seed gives the
+same walks, not the numpy path's numbers; numba's np.random.random cost 12 ns a draw, 1 ns here).
 """
 
 from __future__ import annotations
@@ -30,12 +31,31 @@ from sim.bsdf.multiple_scattering.nee_kernel import (
     unsigned_lambda,
 )
 from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
-from sim.bsdf.primitives import normal_density, scalar, unit
+from sim.bsdf.primitives import inlined, normal_density, scalar, unit
 
 #: What a batch does: follow the analog walk to its exit, score towards one wo per walk, or
 #: score towards every one of a set of targets.
 SAMPLE, EVALUATE, TARGETS = 0, 1, 2
 LOG_2 = math.log(2.0)
+#: xoshiro256+'s shifts and rotation, as uint64 (numba would take a mixed int64 to float).
+SHIFT_A, ROTATE, ROTATE_BACK, DROP = (np.uint64(k) for k in (17, 45, 19, 11))
+
+
+@scalar
+def uniform(state):
+    """The next uniform in [0, 1) of the xoshiro256+ generator `state` (4 uint64, advanced in
+    place; Blackman and Vigna 2018): its top 53 bits, in about 1 ns."""
+    s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
+    result = s0 + s3
+    t = s1 << SHIFT_A
+    s2 ^= s0
+    s3 ^= s1
+    s1 ^= s2
+    s0 ^= s3
+    s2 ^= t
+    state[0], state[1], state[2] = s0, s1, s2
+    state[3] = (s3 << ROTATE) | (s3 >> ROTATE_BACK)
+    return float(result >> DROP) * 2.0**-53
 
 
 @scalar
@@ -47,14 +67,29 @@ def log1mexp(x):
 
 
 @scalar
+def one_minus_exp(x):
+    """1 - exp(x) for x <= 0, to an ulp or two: by exp where exp(x) < 1/2 (libm's expm1 costs
+    twice exp), by expm1 nearer 0."""
+    return 1.0 - math.exp(x) if x < -LOG_2 else -math.expm1(x)
+
+
+@scalar
 def hit_probability(lam, cur):
     """The chance that a ray of signed Smith Lambda lam leaving the height of log CDF cur meets
     the surface again (1 downwards): what a forced hit weighs the walk by."""
-    p_hit = -math.expm1(lam * cur) if lam > 0.0 else 1.0
+    p_hit = one_minus_exp(lam * cur) if lam > 0.0 else 1.0
     return 1.0 if math.isnan(p_hit) else p_hit
 
 
 @scalar
+def free_path(u, p):
+    """-log(1 - u p): the optical depth to the next event, from uniform u, given a hit of
+    probability p. By log where 1 - u p is exact (u p >= 1/2, Sterbenz), log1p below."""
+    x = u * p
+    return -math.log(1.0 - x) if x >= 0.5 else -math.log1p(-x)
+
+
+@inlined
 def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
     """projected_area of the event's w_in = (ix, iy, iz) from its Lambda lam_up, which the
     walk has already computed (the full formula only on the horizon)."""
@@ -63,7 +98,7 @@ def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
     return projected_area(ndf, ax, ay, ix, iy, iz)
 
 
-@scalar
+@inlined
 def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u):
     """Next direction from the phase function (micro.scatter): (x, y, z, factor, crossed)."""
     c = ix * mx + iy * my + iz * mz
@@ -83,7 +118,7 @@ def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my
     return x, y, z, 1.0, False
 
 
-@scalar
+@inlined
 def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
     """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density);
     area: projected_area of wo (above) or of -wo (below), |o_z| + cos_lambda(o) either way."""
@@ -100,7 +135,7 @@ def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
     return value if math.isfinite(value) else 0.0
 
 
-@scalar
+@inlined
 def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
     """An arriving direction drawn backwards from wo (guiding.sample_adjoint): (x, y, z, ok)."""
     above = oz > 0.0
@@ -120,23 +155,24 @@ def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
     return x, y, z, ok and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
 
 
-@scalar
-def guided(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy, oz,
-           area_o, px, py, pz, crossed_p, u0, u1, u2, u3):
-    """Next direction by one-sample MIS of the phase function and backwards from wo
-    (guiding.guided_scatter): (x, y, z, factor, crossed). area_o: |o_z| + cos_lambda(o)."""
-    target_cross = (not conductor) and u1 < 0.5
-    side = outside != target_cross
-    sz = oz if side else -oz
+@inlined
+def sample_backwards(ndf, ax, ay, conductor, eta, outside, ox, oy, oz, u1, u2, u3):
+    """The guided proposal's backwards-from-wo draw (guiding.guided_scatter): a next direction
+    in this side's frame whose arrival at the next event m sends into wo, the next event on
+    the far side when u1 < 1/2 (dielectric): (x, y, z, crossed, ok)."""
+    crossed = (not conductor) and u1 < 0.5
+    side = outside != crossed
     e_side = side_eta(eta, side)[0] if not conductor else 1.0
-    bx, by, bz, ok_a = sample_adjoint(ndf, ax, ay, ox, oy, sz, e_side, u2, u3)
-    use_adj = u0 < BACKWARDS and ok_a
-    if use_adj:  # travel along minus the arriving direction, mirrored if it crosses
-        crossed = target_cross
-        wx, wy, wz = -bx, -by, (bz if target_cross else -bz)
-    else:
-        crossed = crossed_p
-        wx, wy, wz = px, py, pz
+    bx, by, bz, ok = sample_adjoint(ndf, ax, ay, ox, oy, oz if side else -oz, e_side, u2, u3)
+    return -bx, -by, (bz if crossed else -bz), crossed, ok  # travel along minus the arrival
+
+
+@inlined
+def mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy,
+                   oz, area_o, wx, wy, wz, crossed):
+    """The walk's weight factor for next direction w however drawn, by one-sample MIS of the
+    phase function and the backwards proposal (guiding.guided_scatter): phase (with F) over
+    the mixture density. area_o: |o_z| + cos_lambda(o)."""
     el, elm1 = side_eta(eta, outside)
     if crossed:
         p_phase = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, wx, wy, wz)
@@ -154,18 +190,15 @@ def guided(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, o
     if not conductor:
         p_adj *= 0.5
     mixture = (1.0 - BACKWARDS) * p_phase + BACKWARDS * p_adj
-    factor = p_energy / mixture if mixture > 0.0 else 0.0
-    if u0 < BACKWARDS and not ok_a:
-        factor = 0.0
-    return wx, wy, wz, factor, crossed
+    return p_energy / mixture if mixture > 0.0 else 0.0
 
 
 @scalar
 def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, targets, u_first,
-               order, max_order, min_order, roulette, seed, value, exit_dir, weight, truncated,
+               order, max_order, min_order, roulette, state, value, exit_dir, weight, truncated,
                orders, first):
-    """One walk from each row of wi; outputs as Walker.run's WalkResult (value (n, m))."""
-    np.random.seed(seed)
+    """One walk from each row of wi, uniforms from the generator state (uniform); outputs as
+    Walker.run's WalkResult (value (n, m))."""
     forced = mode != SAMPLE
     lam_t = target_lambdas(ndf, ax, ay, targets)
     lam_o = target_lambdas(ndf, ax, ay, wo)
@@ -183,15 +216,15 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
         while True:
             k += 1
             given = k == 1 and u_first.shape[0] > 0  # the caller's uniforms for event 1
-            ua = u_first[i, 0] if given else np.random.random()
+            ua = u_first[i, 0] if given else uniform(state)
             lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
             lam = lam_up if dz >= 0.0 else -1.0 - lam_up
             if forced:
                 p_hit = hit_probability(lam, cur)
                 beta *= p_hit
-                e = -math.log1p(-ua * p_hit)
+                e = free_path(ua, p_hit)
             else:
-                e = -math.log1p(-ua)
+                e = free_path(ua, 1.0)
             new = math.inf if lam == 0.0 else cur + e / lam
             if not new < 0.0:
                 if not forced:
@@ -219,22 +252,26 @@ def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, tar
             if order and k >= order:
                 break
             if forced and beta < roulette:  # Russian roulette before scattering: a walk it
-                if np.random.random() * roulette < beta:  # ends costs no normal, no scatter
+                if uniform(state) * roulette < beta:  # ends costs no normal, no scatter
                     beta = roulette
                 else:
                     break
-            ub = u_first[i, 1] if given else np.random.random()
-            uc = u_first[i, 2] if given else np.random.random()
-            mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
-            wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
-                                                  outside, ix, iy, iz, mx, my, mz,
-                                                  np.random.random())
-            if guide:
-                g0, g1 = np.random.random(), np.random.random()
-                g2, g3 = np.random.random(), np.random.random()
-                wx, wy, wz, factor, crossed = guided(
-                    ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area,
-                    wo[i, 0], wo[i, 1], wo[i, 2], area_o, wx, wy, wz, crossed, g0, g1, g2, g3)
+            if guide and uniform(state) < BACKWARDS:  # only the proposal drawn is computed
+                wx, wy, wz, crossed, ok = sample_backwards(
+                    ndf, ax, ay, conductor, eta, outside, wo[i, 0], wo[i, 1], wo[i, 2],
+                    uniform(state), uniform(state), uniform(state))
+                factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
+            else:
+                ub = u_first[i, 1] if given else uniform(state)
+                uc = u_first[i, 2] if given else uniform(state)
+                mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
+                wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
+                                                      outside, ix, iy, iz, mx, my, mz,
+                                                      uniform(state))
+            if guide and factor > 0.0:
+                factor = mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy,
+                                        iz, area, wo[i, 0], wo[i, 1], wo[i, 2], area_o, wx, wy,
+                                        wz, crossed)
             beta *= factor
             if crossed:
                 outside = not outside
@@ -269,6 +306,7 @@ def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, 
                empty if targets is None else np.ascontiguousarray(targets, dtype=np.float64),
                empty if u_first is None else np.ascontiguousarray(u_first, dtype=np.float64),
                order or 0, max_order or 0, int(min_order), float(roulette),
-               int(rng.integers(0, 2**32 - 1)), value, exit_dir, weight, truncated, orders, first)
+               rng.integers(0, 2**64, size=4, dtype=np.uint64), value, exit_dir, weight,
+               truncated, orders, first)
     return (value if targets is not None else value[:, 0], exit_dir, weight, truncated, orders,
             first)
