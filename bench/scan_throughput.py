@@ -20,7 +20,8 @@ cannot avoid, replayed at the scan's own positions and pace in one loop:
 Method: the scan and its floor each run in a fresh process (cold caches on both sides),
 alternately, `--repeats` times; each side's figure is the least of its repeats, so scheduler
 noise (the machine's wake-up latency moves round trips and fsyncs severalfold between runs)
-lands on both sides alike. Every repeat's ratio is printed beside the ratio of the least.
+lands on both sides alike. Every repeat's ratio (its scan over the floor measured right
+after it) is printed too, with their median.
 
 Then the time per point with `gonio watch` following the store (its own process, polling the
 run's files and checking each new line; no browser attached), against the same scan without
@@ -277,8 +278,9 @@ def report(scans: list[dict], floors: list[dict], loads: tuple[str, str]) -> Non
                           ("round trips + physics + fsync", totals[best])):
         print(f"  full stack / ({what}): {scan['loop_s'] / floor_s:.2f}x; beyond it "
               f"{(scan['loop_s'] - floor_s) / n * 1e3:.2f} ms/point")
-    print("  each repeat, full stack / (round trips + physics + fsync): " + ", ".join(
-        f"{s['loop_s'] / t:.2f}x" for s, t in zip(scans, totals, strict=True)))
+    ratios = [s["loop_s"] / t for s, t in zip(scans, totals, strict=True)]
+    print(f"  each repeat, full stack / (round trips + physics + fsync): "
+          f"{', '.join(f'{x:.2f}x' for x in ratios)} (median {np.median(ratios):.2f}x)")
     print("  (the store fsyncs each reading while the engine moves on to the next one, so the "
           "full stack can beat the serial sum)")
 
