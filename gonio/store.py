@@ -41,9 +41,9 @@ import re
 import secrets
 import shutil
 import sys
-import threading
 import zlib
 from collections.abc import Collection
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -451,7 +451,8 @@ class RunWriter:
         self.next_index = next_index  # after the highest stored index
         self.missing: list[int] = []  # indices below it a repair dropped: measured first
         self._fh = _locked(path / READINGS)
-        self._syncer: _Syncer | None = None  # started by the first append
+        self._syncer: ThreadPoolExecutor | None = None  # started by the first append
+        self._pending: Future | None = None  # the fsync of the last line written
 
     @classmethod
     def create(cls, root: Path, name: str, plan_file: Path | None, config_file: Path | None,
@@ -575,19 +576,23 @@ class RunWriter:
         else:
             self.next_index += 1
         if self._syncer is None:
-            self._syncer = _Syncer(self._fh.fileno())
-        self._syncer.start()
+            self._syncer = ThreadPoolExecutor(1, thread_name_prefix="run-fsync")
+        self._pending = self._syncer.submit(os.fsync, self._fh.fileno())
 
     def wait_stored(self) -> None:
         """Return once every appended reading is fsynced (StoreError, once, if the disk
         refused). Interrupted (Ctrl-C), the fsync stays pending: the next call waits again."""
-        if self._syncer is None:
+        pending = self._pending
+        if pending is None:
             return
         try:
-            self._syncer.wait()
+            pending.result()
         except OSError as exc:
             raise StoreError(f"cannot store {self.path / READINGS}: "
                              f"{exc.strerror or exc}") from None
+        finally:
+            if pending.done():
+                self._pending = None
 
     def close(self) -> None:
         """Wait for the last fsync, then close the readings file."""
@@ -595,53 +600,5 @@ class RunWriter:
             self.wait_stored()
         finally:
             if self._syncer is not None:
-                self._syncer.stop()
-                self._syncer = None
+                self._syncer.shutdown()
             self._fh.close()
-
-
-class _Syncer:
-    """A helper thread that fsyncs a file when started, one fsync at a time. Plain locks hand
-    the work over, so the thread holds the interpreter lock (which the engine and the
-    emulators then wait for) only for a few bytecodes either side of each fsync."""
-
-    def __init__(self, fd: int):
-        self._fd = fd
-        self._go = threading.Lock()  # held while no fsync is asked for
-        self._done = threading.Lock()  # held while one is under way
-        self._go.acquire()
-        self._error: OSError | None = None
-        self._thread = threading.Thread(target=self._serve, name="run-fsync", daemon=True)
-        self._thread.start()
-
-    def _serve(self) -> None:
-        while True:
-            self._go.acquire()
-            if self._fd < 0:
-                return
-            try:
-                os.fsync(self._fd)
-            except OSError as exc:
-                self._error = exc
-            self._done.release()
-
-    def start(self) -> None:
-        """Start an fsync (the previous one has been waited for)."""
-        self._done.acquire()
-        self._go.release()
-
-    def wait(self) -> None:
-        """Return once the fsync started last has returned (its OSError, once, if it
-        failed); interrupted (Ctrl-C), it stays awaited."""
-        self._done.acquire()
-        self._done.release()
-        error, self._error = self._error, None
-        if error is not None:
-            raise error
-
-    def stop(self) -> None:
-        """End the thread, once the fsync under way (if any) has returned."""
-        self._done.acquire()
-        self._fd = -1
-        self._go.release()
-        self._thread.join()
