@@ -69,13 +69,18 @@ def glass(alpha: float) -> RandomWalkBSDF:
                                           masking="correlated"), walks=1, guided=False)
 
 
+def distinct_polar(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(one direction per distinct polar angle of wo (k, 3), each row's index into them): at
+    normal incidence the lobe has no azimuth."""
+    cos_o, index = np.unique(np.round(wo[:, 2], 12), return_inverse=True)
+    return np.stack([np.sqrt(1.0 - cos_o ** 2), 0.0 * cos_o, cos_o], axis=-1), index.reshape(-1)
+
+
 def orders3(walk, wo: np.ndarray, walks: int, keyed: bool, seed: int, distinct: bool,
             covariance: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Orders >= 3 of f (1/sr) at normal incidence towards wo and their standard error; with
     distinct, each polar angle walked once (the lobe has no azimuth at normal incidence)."""
-    polar, index = np.unique(np.round(wo[:, 2], 12), return_inverse=True)
-    targets = np.stack([np.sqrt(1.0 - polar ** 2), 0.0 * polar, polar], axis=-1) \
-        if distinct else wo
+    targets, index = distinct_polar(wo) if distinct else (wo, None)
     mean, err, _ = walk_to_targets(walk, np.array([0.0, 0.0, 1.0]), targets, walks,
                                    np.random.default_rng(seed), min_order=3,
                                    covariance=covariance, keyed=keyed)
@@ -123,6 +128,7 @@ def main() -> None:
                 seconds = table_seconds(alpha, wo, walks, centre, keyed, distinct)
                 print(f"{name:>13} {label:>26} {walks * centre:>8} {seconds:7.2f} "
                       f"{np.median(dev):7.2f} {np.max(dev):7.2f}")
+
 
 if __name__ == "__main__":
     main()

@@ -3,16 +3,14 @@
 Walter's ground glass and acid-etched glass are scanned afresh at normal incidence (as in
 bench/ms_model_error.py). At each fit point this prints the orders >= 3 as a share of f and in
 data sigma, and the per-walk coefficient of variation of two unbiased estimators of them:
-forward, the keyed shared-path walk from wi that scores every target at once (what the fit
-uses), and reverse, the same walk started from the target towards wi alone (reciprocity:
-f(wi, wo) / n_o^2 = f(wo, wi) / n_i^2). From those it works out the walks and CPU seconds per
-fit-table alpha that would put the standard error at 0.45 data sigma at the median point (a
-median |error| of 0.3 sigma) and at 0.67 sigma at every point (the worst of 133 points x 4
-seeds then near 2 sigma): forward, the walks the hardest point needs (all points share them);
-reverse, each point its own walks, the mirrored points (same polar angle, normal incidence)
-walked once.
-Run: python bench/ms_orders3_cost.py [--forward-walks 262144] [--reverse-walks 32768]
-"""
+forward, the keyed shared-path walk from wi that scores every distinct polar angle at once (what
+the fit walks), and reverse, the same walk started from the target towards wi alone
+(reciprocity: f(wi, wo) / n_o^2 = f(wo, wi) / n_i^2). From those it works out the walks and CPU
+seconds per fit-table alpha that would put the standard error at 0.45 data sigma at the median
+point (a median |error| of 0.3 sigma) and at 0.67 sigma at every point (the worst of 133 points
+x 4 seeds then near 2 sigma): forward, the walks the hardest point needs (all points share
+them); reverse, each distinct polar angle its own walks.
+Run: python bench/ms_orders3_cost.py [--forward-walks 262144] [--reverse-walks 32768]"""
 
 from __future__ import annotations
 
@@ -27,8 +25,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ms_model_error import SAMPLES, glass, scan_normal_incidence  # noqa: E402
+from ms_model_error import SAMPLES, distinct_polar, glass, scan_normal_incidence  # noqa: E402
 
+from calibration.fit import MS_CENTRE_WALKS, FitOptions  # noqa: E402
 from calibration.pipeline import reduce_run  # noqa: E402
 from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets  # noqa: E402
 
@@ -36,6 +35,8 @@ NORMAL = np.array([0.0, 0.0, 1.0])
 #: Standard error / data sigma for a median |error| of 0.3 sigma, and for the worst of ~530
 #: errors (133 points x 4 seeds) near 2 sigma.
 MEDIAN_GOAL, WORST_GOAL = 0.3 / 0.674, 2.0 / 3.0
+#: Walks of the fit table's centre alpha (calibration.fit: ms_walks x MS_CENTRE_WALKS).
+CENTRE = FitOptions().ms_walks * MS_CENTRE_WALKS
 SHOWN_DEG = (7.5, 30.0, 60.0, 82.5, 97.5, 112.5, 127.5, 142.5, 165.0)
 
 
@@ -63,18 +64,20 @@ def main() -> None:
             rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
             wo, sigma, f = data.wo[rows], data.sigma[rows], data.bsdf[rows]
             walker = glass(alpha).walker
-            per_walk(walker, NORMAL, wo[:2], 64, 0)  # compile outside the timings
-            mean, cv_fwd, s_fwd = per_walk(walker, NORMAL, wo, args.forward_walks, 1)
-            polar = np.round(np.degrees(np.arccos(wo[:, 2])), 6)
-            distinct = np.unique(polar, return_index=True)[1]
-            cv_rev, s_rev = np.zeros(len(wo)), np.zeros(len(wo))
-            for t in distinct:
-                _, cv, s_rev[polar == polar[t]] = per_walk(walker, wo[t], NORMAL[None, :],
-                                                           args.reverse_walks, 2 + int(t))
-                cv_rev[polar == polar[t]] = cv[0]
+            targets, index = distinct_polar(wo)
+            per_walk(walker, NORMAL, targets[:2], 64, 0)  # compile outside the timings
+            mean, cv_fwd, s_fwd = per_walk(walker, NORMAL, targets, args.forward_walks, 1)
+            cv_rev, s_rev = np.zeros(len(targets)), np.zeros(len(targets))
+            for t in range(len(targets)):
+                _, cv, s_rev[t] = per_walk(walker, targets[t], NORMAL[None, :],
+                                           args.reverse_walks, 2 + t)
+                cv_rev[t] = cv[0]
+            mean, cv_fwd, cv_rev, s_rev = (v[index] for v in (mean, cv_fwd, cv_rev, s_rev))
+            polar = np.degrees(np.arccos(wo[:, 2]))
+            distinct = np.unique(index, return_index=True)[1]
             share = mean / np.abs(wo[:, 2]) / sigma  # orders >= 3 in data sigma
             print(f"\n{name} (GGX {alpha}, {len(wo)} points): forward {s_fwd * 1e6:.2f} us per "
-                  f"walk (all points), reverse {np.median(s_rev) * 1e6:.2f} us (one point)")
+                  f"walk (every polar angle), reverse {np.median(s_rev) * 1e6:.2f} us (one)")
             print(f"{'theta_o':>8} {'o3 / f':>8} {'o3 / sigma':>10} {'CV fwd':>7} {'CV rev':>7}")
             for deg in SHOWN_DEG:
                 t = int(np.argmin(np.abs(polar - deg)))
@@ -83,11 +86,12 @@ def main() -> None:
             need_fwd = (share * cv_fwd) ** 2
             median, worst = np.median(need_fwd) / MEDIAN_GOAL ** 2, need_fwd.max() / WORST_GOAL ** 2
             reverse = float(np.sum(((share * cv_rev / WORST_GOAL) ** 2 * s_rev)[distinct]))
-            print(f"  per table alpha (the fit walks 7): now {1 << 17} forward walks = "
-                  f"{(1 << 17) * s_fwd:.2f} CPU s; {MEDIAN_GOAL:.2f} sigma at the median point: "
+            print(f"  per table alpha: the fit's centre now {CENTRE} forward walks = "
+                  f"{CENTRE * s_fwd:.2f} CPU s; {MEDIAN_GOAL:.2f} sigma at the median point: "
                   f"{median:.3g} forward walks = {median * s_fwd:.1f} s; {WORST_GOAL:.2f} sigma at "
                   f"every point: {worst:.3g} forward walks = {worst * s_fwd:.0f} s, or reverse "
                   f"walks per point {reverse:.0f} s")
+
 
 if __name__ == "__main__":
     main()

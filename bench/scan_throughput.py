@@ -122,6 +122,12 @@ def _timed(seconds: dict[str, float], part: str, fn, *args) -> None:
     seconds[part + "_cpu"] += time.process_time() - c0
 
 
+def _append(fh, line: bytes) -> None:
+    """What the run store does per reading: append the line and fsync it."""
+    fh.write(line)
+    os.fsync(fh.fileno())
+
+
 def _floor(folder: Path) -> None:
     """The child that measures the floor: per point of the scan in folder (positions.npy,
     scan.json), serially, its ESP and PM100 round trips, its physics and an fsync of a line
@@ -149,8 +155,7 @@ def _floor(folder: Path) -> None:
                 _timed(seconds, "esp", esp.exchange, ESP_LINES[1])
                 _timed(seconds, "physics", source.power_w)
                 _timed(seconds, "pm100", pm100.exchange, PM100_LINES[0])
-                fh.write(line)
-                _timed(seconds, "fsync", os.fsync, fh.fileno())
+                _timed(seconds, "fsync", _append, fh, line)
     finally:
         esp.close()
         pm100.close()
@@ -250,7 +255,7 @@ def report(scans: list[dict], floors: list[dict], loads: tuple[str, str]) -> Non
     totals = [sum(floor_parts(s, f).values()) for s, f in zip(scans, floors, strict=True)]
     best = min(range(len(floors)), key=totals.__getitem__)
     scan, floor = min(scans, key=lambda s: s["loop_s"]), floors[best]
-    parts, n, served = floor_parts(scans[best], floor), scan["n"], scan["requests"]
+    parts, n, served = floor_parts(scans[best], floor), scan["n"], scans[best]["requests"]
     print(f"scan of {n} readings (sim-serial, instant motion, zero latency, fsync per point); "
           f"load average {loads[0]} before, {loads[1]} after")
     print(f"  method: the scan and its floor (round trips, physics and fsync per point, "

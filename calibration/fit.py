@@ -30,13 +30,14 @@ MAX_CONDITION = 1e6
 # A distribution is "preferred" only if it beats the next by this chi-square (2 sigma for one
 # extra degree of freedom); otherwise the result says the data cannot tell them apart.
 PREFERENCE_DELTA_CHI2 = 4.0
-# The multiple-scattering table of a fit: NODES alphas STEP apart in log alpha about a centre;
-# a fit ending outside its inner nodes is redone about its result, at most RECENTRE times.
+# The multiple-scattering table of a fit: NODES alphas STEP apart in log alpha about a centre,
+# which walks CENTRE_WALKS times FitOptions.ms_walks (the fitted model's value); a fit ending
+# more than CENTRE_REACH steps from it is redone about its result, at most RECENTRE times.
 MS_TABLE_STEP = 0.1
 MS_TABLE_NODES = 7
 MS_TABLE_RECENTRE = 3
-#: The table's centre alpha walks this many times FitOptions.ms_walks: the fitted model's value.
 MS_CENTRE_WALKS = 16
+MS_CENTRE_REACH = 0.25
 MS_WALKS_MAX = 1 << 22
 # Points of the two-scale model's lobe integral per pair: the bench's (sim.bench.sample), so a
 # fit of an emulated run evaluates the same fixed point set.
@@ -226,7 +227,8 @@ class FitResult:
     preferred_by: float | None  # chi-square margin over the runner-up distribution
     candidates: list[dict[str, Any]] = field(default_factory=list)
     optics: Smearing = field(default_factory=lambda: Smearing(0.0, 0, 0.0, 0))
-    walks: int | None = None  # walks per point of the multiple-scattering term; None: off
+    walks: int | None = None  # walks per incidence of predictions' orders >= 2 (the fitted
+    # points' table centre walked MS_CENTRE_WALKS times as many); None: off
     seed: int = 0
     diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
     fit_time_s: float = 0.0  # wall time of fit()
@@ -303,7 +305,8 @@ class FitResult:
             "aperture_half_angle_deg": self.optics.aperture_deg,
             "beam_divergence_deg": self.optics.divergence_deg,
             "multiple_scattering": (None if self.walks is None
-                                    else {"walks": self.walks, "seed": self.seed}),
+                                    else {"walks": self.walks, "seed": self.seed,
+                                          "fitted_walks": self.walks * MS_CENTRE_WALKS}),
             "diffraction": None if self.diffraction is None else self.diffraction.to_dict(),
             "fit_time_s": self.fit_time_s,
             "candidates": self.candidates,
@@ -360,8 +363,10 @@ class _OrdersTable:
                                           self.log_alpha[-1])))
 
     def covers(self, alpha: float) -> bool:
-        """True when alpha lies between the second and the last but one node."""
-        return self.log_alpha[1] <= math.log(alpha) <= self.log_alpha[-2]
+        """True when alpha lies within MS_CENTRE_REACH steps of the centre node, whose walks
+        set the model's error there (further out the spline leans on the other nodes)."""
+        centre = self.log_alpha[MS_TABLE_NODES // 2]
+        return abs(math.log(alpha) - centre) <= MS_CENTRE_REACH * MS_TABLE_STEP
 
 
 def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
@@ -548,8 +553,8 @@ def _least_squares(problem: _Problem, alpha0: float) -> Any:
 def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
     """The fit with the multiple-scattering table: built about the single-scattering fit's
     alpha (within a few % of the answer), and rebuilt about the result while that falls
-    outside the table's inner nodes. Each point's sigma gains the table's Monte Carlo error in
-    quadrature (the model's own uncertainty)."""
+    further than MS_CENTRE_REACH steps from its centre. Each point's sigma gains the table's
+    Monte Carlo error in quadrature (the model's own uncertainty)."""
     data = problem.data
     single = _Problem(data, problem.distribution, problem.masking,
                       replace(problem.options, multiple_scattering=False), problem.eta0,

@@ -193,8 +193,10 @@ def summary(out: dict) -> str:
     lines += [f"  {line}" for line in out.get("warnings", [])]
     if out.get("multiple_scattering"):
         ms = out["multiple_scattering"]
-        lines.append(f"  multiple scattering: orders >= 2 by {ms['walks']} random walks per "
-                     f"incidence, seed {ms['seed']}")
+        fitted = ms.get("fitted_walks", ms["walks"])
+        lines.append(f"  multiple scattering: orders >= 2 by {fitted} random walks per "
+                     f"incidence at the fitted points ({ms['walks']} for predictions), seed "
+                     f"{ms['seed']}")
     if out.get("diffraction"):
         d = out["diffraction"]
         lines.append(f"  diffraction: two-scale model, rms height {d['rms_height_nm']:g} nm, "

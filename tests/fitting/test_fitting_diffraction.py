@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from fitting_bench_runs import metered_bsdf
 
-from calibration.fit import FitError, FitOptions, build_model, fit
+from calibration.fit import MS_CENTRE_WALKS, FitError, FitOptions, build_model, fit
 from calibration.reduced import ReducedData
 from sim.bench import build_bench
 
@@ -93,7 +93,8 @@ def test_fit_combines_diffraction_with_multiple_scattering():
     assert both.chi2_dof_fit < 2.0
     out = both.to_dict()
     assert out["diffraction"]["rms_height_nm"] == NANO["rms_height_nm"]
-    assert out["multiple_scattering"] == {"walks": 1 << 16, "seed": 0}
+    assert out["multiple_scattering"] == {"walks": 1 << 16, "seed": 0,
+                                          "fitted_walks": (1 << 16) * MS_CENTRE_WALKS}
     assert any("multiple-scattering table" in line for line in lines)
     assert all(line.startswith("fit: ggx/separable: ") for line in lines)
     f, err = both.predict_with_error(data.wi, data.wo)

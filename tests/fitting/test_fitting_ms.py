@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from fitting_bench_runs import metered_bsdf
 
-from calibration.fit import FitError, FitOptions, build_model, fit
+from calibration.fit import MS_CENTRE_WALKS, FitError, FitOptions, build_model, fit
 from calibration.reduced import ReducedData
 from sim.bench import build_bench
 
@@ -67,7 +67,9 @@ def test_fit_with_multiple_scattering_recovers_alpha(data):
     # +0.02 %, since order 2 by quadrature cut the fit's sigma to 2e-5)
     assert multiple.chi2_dof_fit < 10.0
     assert abs(value - ALPHA) < 3.0 * np.hypot(sigma, SYSTEMATIC * ALPHA)
-    assert multiple.to_dict()["multiple_scattering"] == {"walks": FitOptions().ms_walks, "seed": 0}
+    assert multiple.to_dict()["multiple_scattering"] == {
+        "walks": FitOptions().ms_walks, "seed": 0,
+        "fitted_walks": FitOptions().ms_walks * MS_CENTRE_WALKS}
     assert single.to_dict()["multiple_scattering"] is None
 
 

@@ -253,8 +253,8 @@ class HigherOrderLobe:
 
     def parts(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
         """(order 2, orders >= 3, the standard error of orders >= 3) of f at wi, wo (..., 3);
-        without exact_second order 2 is 0 and walked with the rest, linearly:
-        cubic (PCHIP) in theta_o, the error linearly, all linear in cos(phi_o - phi_i)
+        without exact_second order 2 is 0 and walked with the rest. Both parts cubic (PCHIP) in
+        theta_o, the error linearly, all linear in cos(phi_o - phi_i)
         (f is even in the azimuth about the plane of incidence, so smooth in its cosine) and
         between incidence nodes; within one polar step of a pole between the columns 0 and 180
         deg only (f = f_pole + theta g cos(dphi) + O(theta^2) there). Only the planes a pair's
@@ -270,8 +270,7 @@ class HigherOrderLobe:
             found = lookup(flat_i, flat_o, INCIDENCE_NODES_DEG, INCIDENCE_SNAP, self._column_cos,
                            PHI_SNAP, self.theta_step, self.upper_deg, self.lower_deg, self._f2,
                            self._d2, self._f3, self._d3, self._e3, self._built, self._plane_of,
-                           out[0],
-                           out[1], out[2], missing)
+                           out[0], out[1], out[2], missing)
             if not found:
                 break
             for s, node, plane, lower in sorted(set(map(tuple, missing[:found].tolist()))):
