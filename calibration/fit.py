@@ -30,9 +30,11 @@ MAX_CONDITION = 1e6
 # A distribution is "preferred" only if it beats the next by this chi-square (2 sigma for one
 # extra degree of freedom); otherwise the result says the data cannot tell them apart.
 PREFERENCE_DELTA_CHI2 = 4.0
-# The multiple-scattering table of a fit: NODES alphas STEP apart in log alpha about a centre,
-# which walks CENTRE_WALKS times FitOptions.ms_walks (the fitted model's value); a fit ending
-# more than CENTRE_REACH steps from it is redone about its result, at most RECENTRE times.
+# The multiple-scattering table of a fit: NODES alphas STEP apart in log alpha about a centre;
+# a fit ending outside its inner nodes is redone about its result, at most RECENTRE times. The
+# preferred candidate is then refitted with the term at its result walked CENTRE_WALKS times
+# FitOptions.ms_walks (the fitted model's value), again while it ends more than CENTRE_REACH
+# steps from where that was walked.
 MS_TABLE_STEP = 0.1
 MS_TABLE_NODES = 7
 MS_TABLE_RECENTRE = 3
@@ -334,39 +336,52 @@ class _WithHigherOrders:
 class _OrdersTable:
     """Orders >= 2 at the fitted points (higher_orders_at: walked at the points themselves, one
     set of walks per incidence) at MS_TABLE_NODES alphas MS_TABLE_STEP apart in log alpha about
-    `centre`, and a cubic spline in log alpha through them (clamped at the ends): a
-    deterministic, smooth term for the optimiser. The fit ends within a small fraction of a
-    step of the centre, so the model there is the centre node's value (walked with
-    MS_CENTRE_WALKS times the options' walks) and the other nodes give its slope. `error` and
-    `covariance` are the centre node's Monte Carlo standard error per point and their
-    covariance (points of one incidence share walks)."""
+    `centre`, all from one seed, and a cubic spline in log alpha through them (clamped at the
+    ends): a deterministic, smooth term for the optimiser. `refine` adds a constant so that
+    the term at one alpha is its value walked MS_CENTRE_WALKS times over (the spline keeps the
+    slope). `error` and `covariance` are the Monte Carlo standard error per point and their
+    covariance (points of one incidence share walks) at the centre node, or where refined."""
 
     def __init__(self, problem: _Problem, centre: float):
         from scipy.interpolate import CubicSpline
 
-        from sim.bsdf.multiple_scattering import higher_orders_at
-
-        o, data = problem.options, problem.data
         half = 0.5 * (MS_TABLE_NODES - 1)
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
-        middle = MS_TABLE_NODES // 2
-        walked = [higher_orders_at(build_model(problem.distribution, math.exp(a), problem.eta0,
-                                               "correlated", problem.k), data.wi, data.wo,
-                                   o.ms_walks * (MS_CENTRE_WALKS if node == middle else 1),
-                                   o.ms_seed, covariance=node == middle)
+        walks = problem.options.ms_walks
+        walked = [_walked_orders(problem, math.exp(a), walks, node == MS_TABLE_NODES // 2)
                   for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
-        _, self.error, self.covariance = walked[middle]
+        _, self.error, self.covariance = walked[MS_TABLE_NODES // 2]
+        self.offset, self.refined_at = 0.0, None
 
     def __call__(self, alpha: float) -> np.ndarray:
         return self.spline(float(np.clip(math.log(alpha), self.log_alpha[0],
-                                          self.log_alpha[-1])))
+                                          self.log_alpha[-1]))) + self.offset
+
+    def refine(self, problem: _Problem, alpha: float) -> None:
+        """Walk the term at alpha with MS_CENTRE_WALKS x ms_walks walks and shift the spline
+        onto it; its error and covariance become those."""
+        value, self.error, self.covariance = _walked_orders(
+            problem, alpha, problem.options.ms_walks * MS_CENTRE_WALKS, True)
+        self.offset, self.refined_at = 0.0, math.log(alpha)
+        self.offset = value - self(alpha)
 
     def covers(self, alpha: float) -> bool:
-        """True when alpha lies within MS_CENTRE_REACH steps of the centre node, whose walks
-        set the model's error there (further out the spline leans on the other nodes)."""
-        centre = self.log_alpha[MS_TABLE_NODES // 2]
-        return abs(math.log(alpha) - centre) <= MS_CENTRE_REACH * MS_TABLE_STEP
+        """True when alpha lies between the second and the last but one node; once refined,
+        within MS_CENTRE_REACH steps of where."""
+        if self.refined_at is not None:
+            return abs(math.log(alpha) - self.refined_at) <= MS_CENTRE_REACH * MS_TABLE_STEP
+        return self.log_alpha[1] <= math.log(alpha) <= self.log_alpha[-2]
+
+
+def _walked_orders(problem: _Problem, alpha: float, walks: int, covariance: bool
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Orders >= 2 at the fitted points for this alpha (higher_orders_at, the options' seed)."""
+    from sim.bsdf.multiple_scattering import higher_orders_at
+
+    model = build_model(problem.distribution, alpha, problem.eta0, "correlated", problem.k)
+    return higher_orders_at(model, problem.data.wi, problem.data.wo, walks,
+                            problem.options.ms_seed, covariance=covariance)
 
 
 def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
@@ -449,6 +464,7 @@ class _Problem:
                  eta0: float, k: float | None, optics: Smearing,
                  diffraction: Diffraction | None = None):
         self.data, self.distribution, self.masking = data, distribution, masking
+        self.measured = data  # self.data gains the table's error in its sigma; this does not
         self.diffraction = diffraction
         self.options, self.eta0, self.k = options, eta0, k
         self.optics = optics
@@ -553,9 +569,9 @@ def _least_squares(problem: _Problem, alpha0: float) -> Any:
 def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
     """The fit with the multiple-scattering table: built about the single-scattering fit's
     alpha (within a few % of the answer), and rebuilt about the result while that falls
-    further than MS_CENTRE_REACH steps from its centre. Each point's sigma gains the table's
-    Monte Carlo error in quadrature (the model's own uncertainty)."""
-    data = problem.data
+    outside the table's inner nodes. Each point's sigma gains the table's Monte Carlo error in
+    quadrature (the model's own uncertainty)."""
+    data = problem.measured
     single = _Problem(data, problem.distribution, problem.masking,
                       replace(problem.options, multiple_scattering=False), problem.eta0,
                       problem.k, problem.optics, problem.diffraction)
@@ -565,8 +581,7 @@ def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
         problem.data = data
         problem.progress.stage(problem, f"multiple-scattering table about alpha {centre:.4g}")
         problem.orders = _OrdersTable(problem, centre)
-        problem.data = replace(data, sigma=np.hypot(data.sigma, problem.orders.error))
-        sol = _least_squares(problem, centre)
+        sol = _fit_with_table(problem, centre)
         alpha = problem.unpack(sol.x)[0]
         if problem.orders.covers(alpha):
             break
@@ -574,12 +589,43 @@ def _solve_with_orders(problem: _Problem, alpha0: float) -> Any:
     return sol
 
 
+def _fit_with_table(problem: _Problem, alpha0: float) -> Any:
+    """The optimiser's solution with problem.orders, its error added to the points' sigma."""
+    problem.data = replace(problem.measured,
+                           sigma=np.hypot(problem.measured.sigma, problem.orders.error))
+    return _least_squares(problem, alpha0)
+
+
+def _refine(problem: _Problem, sol: Any) -> dict[str, Any]:
+    """The preferred candidate refitted with its multiple-scattering term at the result walked
+    MS_CENTRE_WALKS times over (the table keeps the slope), again while the result moves more
+    than MS_CENTRE_REACH steps from where that was walked: the fitted model's own error is
+    then that of MS_CENTRE_WALKS x ms_walks walks."""
+    walks = problem.options.ms_walks * MS_CENTRE_WALKS
+    for _ in range(MS_TABLE_RECENTRE):
+        alpha = problem.unpack(sol.x)[0]
+        problem.progress.stage(problem, f"multiple-scattering term at alpha {alpha:.5g} by "
+                               f"{walks} walks")
+        problem.data = problem.measured
+        problem.orders.refine(problem, alpha)
+        sol = _fit_with_table(problem, alpha)
+        if problem.orders.covers(problem.unpack(sol.x)[0]):
+            break
+    return _summary(problem, sol)
+
+
 def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
-    """Run one candidate's fit; returns its parameters, covariance and chi-square."""
+    """Run one candidate's fit; returns its parameters, covariance and chi-square (with
+    multiple scattering also the optimiser's solution, for _refine)."""
     if problem.options.multiple_scattering:
         sol = _solve_with_orders(problem, alpha0)
     else:
         sol = _least_squares(problem, alpha0)
+    return _summary(problem, sol)
+
+
+def _summary(problem: _Problem, sol: Any) -> dict[str, Any]:
+    """Parameters, covariance and chi-square of an optimiser's solution."""
     if not np.all(np.isfinite(sol.x)) or sol.status <= 0:
         raise FitError(f"fit {problem.distribution}: the optimiser did not converge "
                        f"({sol.message})")
@@ -599,7 +645,7 @@ def _solve(problem: _Problem, alpha0: float) -> dict[str, Any]:
         cov_internal = cov_internal + _orders_covariance(problem, sol.x, jac)
     cov = cov_internal * np.outer(deriv, deriv)
     return {"x": sol.x, "values": values, "cov": cov, "chi2": chi2, "chi2_dof": chi2_dof,
-            "at_bound": at_bound}
+            "at_bound": at_bound, "solution": sol}
 
 
 def _orders_covariance(problem: _Problem, x: np.ndarray, jac: np.ndarray) -> np.ndarray:
@@ -680,6 +726,9 @@ def fit(data: ReducedData, options: FitOptions | None = None,
     if not scored:
         raise FitError("; ".join(failures))
     problem, best = _preferred(scored, options.distributions)
+    chi2_ranked = best["chi2"]  # the candidates were ranked with their tables as first walked
+    if problem.orders is not None:
+        best = _refine(problem, best["solution"])
     if best["at_bound"]:
         raise FitError(f"fit {problem.distribution}: {', '.join(best['at_bound'])} ended at its "
                        "bound; the data do not support this model (check eta, the subset "
@@ -694,7 +743,7 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         values=best["values"], errors=np.sqrt(np.diag(best["cov"])), covariance=best["cov"],
         eta=eta, k=k, chi2_dof_fit=best["chi2_dof"], n_fit=int(in_fit.sum()),
         chi2_dof_heldout=heldout[0], n_heldout=heldout[1],
-        preferred_by=None if runner_up is None else runner_up - best["chi2"],
+        preferred_by=None if runner_up is None else runner_up - chi2_ranked,
         candidates=[{"distribution": p.distribution, "masking": p.masking,
                      "chi2_dof_fit": s["chi2_dof"],
                      "parameters": dict(zip(p.names, map(float, s["values"]), strict=True))}
