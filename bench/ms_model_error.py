@@ -63,6 +63,15 @@ def scan_normal_incidence(name: str, out: Path) -> Path:
     return Path(lines[-1])
 
 
+def fit_points(tmp: Path):
+    """For each of SAMPLES, scanned afresh at normal incidence under tmp: (name, truth alpha,
+    wo (n, 3), data sigma (n,), f (n,)) at its normal-incidence points."""
+    for name, alpha in SAMPLES:
+        data = reduce_run(scan_normal_incidence(name, tmp))
+        rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
+        yield name, alpha, data.wo[rows], data.sigma[rows], data.bsdf[rows]
+
+
 def glass(alpha: float) -> RandomWalkBSDF:
     """The fit's walk for the height-correlated GGX glass of this alpha."""
     return RandomWalkBSDF(RoughDielectric(distribution="ggx", alpha=alpha, eta=1.51,
@@ -111,10 +120,7 @@ def main() -> None:
     print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'median':>7} "
           f"{'worst':>7}")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, alpha in SAMPLES:
-            data = reduce_run(scan_normal_incidence(name, Path(tmp)))
-            rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
-            wo, sigma = data.wo[rows], data.sigma[rows]
+        for name, alpha, wo, sigma, _ in fit_points(Path(tmp)):
             walk = glass(alpha)
             for keyed in (True, False):  # compile outside the timings
                 orders3(walk, wo[:2], 64, keyed, 0, False, covariance=True)

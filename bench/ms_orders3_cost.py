@@ -25,10 +25,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ms_model_error import SAMPLES, distinct_polar, glass, scan_normal_incidence  # noqa: E402
+from ms_model_error import distinct_polar, fit_points, glass  # noqa: E402
 
 from calibration.fit import MS_CENTRE_WALKS, FitOptions  # noqa: E402
-from calibration.pipeline import reduce_run  # noqa: E402
 from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets  # noqa: E402
 
 NORMAL = np.array([0.0, 0.0, 1.0])
@@ -59,10 +58,7 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.1f}; forward {args.forward_walks} walks, reverse "
           f"{args.reverse_walks} walks per point; CV: per-walk coefficient of variation")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, alpha in SAMPLES:
-            data = reduce_run(scan_normal_incidence(name, Path(tmp)))
-            rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
-            wo, sigma, f = data.wo[rows], data.sigma[rows], data.bsdf[rows]
+        for name, alpha, wo, sigma, f in fit_points(Path(tmp)):
             walker = glass(alpha).walker
             targets, index = distinct_polar(wo)
             per_walk(walker, NORMAL, targets[:2], 64, 0)  # compile outside the timings
