@@ -8,10 +8,10 @@ in units of each point's data sigma: median and worst over points and --seeds se
 sequential shared-path walk (lobe.walk_to_targets(keyed=False)), the keyed, branch-split
 walk (keyed.keyed_walk_to_targets) towards every point, and the fit as it is: the distinct
 polar angles walked once (normal incidence: the lobe has no azimuth; lobe.higher_orders_at)
-and the table's centre alpha, where the fit ends, walked MS_CENTRE_WALKS times the others.
+and the term at the fit's result walked MS_CENTRE_WALKS times the table's walks (the refit).
 "walks": those behind the estimate at the truth alpha; "table s": CPU time of the walks of
-one fit table (calibration.fit._OrdersTable: 7 alphas 0.1 apart in log alpha, the covariance
-at the centre one). The reference's own standard error is shown in its row.
+one fit (calibration.fit._OrdersTable: 7 alphas 0.1 apart in log alpha, the covariance
+at the centre one, and the refit's term). The reference's own standard error is shown in its row.
 Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 33554432]
 """
 
@@ -38,11 +38,11 @@ from sim.bsdf.multiple_scattering.lobe import walk_to_targets  # noqa: E402
 from sim.bsdf.multiple_scattering.model import RandomWalkBSDF  # noqa: E402
 
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
-#: (label, keyed, FitOptions.ms_walks, walks at the table's centre / ms_walks, distinct polar
-#: angles only): the fit's estimators in the order they were its default.
+#: (label, keyed, FitOptions.ms_walks, walks of the refit at the result / ms_walks (1: no
+#: refit), distinct polar angles only): the fit's estimators in the order they were its default.
 ESTIMATES = (("sequential walk", False, 1 << 15, 1, False),
              ("keyed, split", True, 1 << 17, 1, False),
-             ("distinct, centre x16 (now)", True, 1 << 17, MS_CENTRE_WALKS, True))
+             ("distinct, refit x16 (now)", True, 1 << 17, MS_CENTRE_WALKS, True))
 REFERENCE_WALKS = 1 << 25
 #: The fit table's alphas (calibration.fit: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
 TABLE_NODES, TABLE_STEP = 7, 0.1
@@ -98,14 +98,16 @@ def orders3(walk, wo: np.ndarray, walks: int, keyed: bool, seed: int, distinct: 
     return (mean[index], err[index]) if distinct else (mean, err)
 
 
-def table_seconds(alpha: float, wo: np.ndarray, walks: int, centre: int, keyed: bool,
+def table_seconds(alpha: float, wo: np.ndarray, walks: int, refit: int, keyed: bool,
                   distinct: bool) -> float:
-    """CPU seconds of the walks of one fit table about alpha (covariance at the centre)."""
+    """CPU seconds of one fit's walks about alpha: the table (covariance at the centre) and,
+    with refit > 1, the term at alpha with refit x walks (covariance too)."""
     start = time.process_time()
     for node in range(TABLE_NODES):
-        middle = node == TABLE_NODES // 2
-        orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo,
-                walks * (centre if middle else 1), keyed, 0, distinct, covariance=middle)
+        orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo, walks, keyed,
+                0, distinct, covariance=node == TABLE_NODES // 2)
+    if refit > 1:
+        orders3(glass(alpha), wo, walks * refit, keyed, 0, distinct, covariance=True)
     return time.process_time() - start
 
 
