@@ -103,7 +103,7 @@ class FitOptions:
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
     beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
-    ms_walks: int = 1 << 17  # walks per incidence (the table's centre: x MS_CENTRE_WALKS)
+    ms_walks: int = 1 << 17  # walks per incidence and table alpha (the refit: x MS_CENTRE_WALKS)
     ms_seed: int = 0
     diffraction: bool = False  # the two-scale model (Holzschuch-Pacanowski) around the trial one
     rms_height_nm: float | None = None  # nano-roughness of the K-correlation PSD (held fixed)
@@ -230,7 +230,7 @@ class FitResult:
     candidates: list[dict[str, Any]] = field(default_factory=list)
     optics: Smearing = field(default_factory=lambda: Smearing(0.0, 0, 0.0, 0))
     walks: int | None = None  # walks per incidence of predictions' orders >= 2 (the fitted
-    # points' table centre walked MS_CENTRE_WALKS times as many); None: off
+    # points' term at the result walked MS_CENTRE_WALKS times as many); None: off
     seed: int = 0
     diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
     fit_time_s: float = 0.0  # wall time of fit()
