@@ -31,6 +31,7 @@ from sim.bsdf.multiple_scattering.nee_kernel import (
 from sim.bsdf.multiple_scattering.visible_kernel import visible_normal
 from sim.bsdf.multiple_scattering.walk_kernel import (
     event_area,
+    free_path,
     hit_probability,
     log1mexp,
     scatter,
@@ -104,7 +105,7 @@ def walk_targets(ndf, ax, ay, conductor, eta, has_f, n_c, wi, targets, key, firs
             lam = lam_up if dz >= 0.0 else -1.0 - lam_up
             p_hit = hit_probability(lam, cur)
             beta *= p_hit
-            new = cur - math.log1p(-keyed_uniform(walk_key, base) * p_hit) / lam \
+            new = cur + free_path(keyed_uniform(walk_key, base), p_hit) / lam \
                 if lam != 0.0 else math.inf
             if not new < 0.0:
                 break
