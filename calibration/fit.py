@@ -278,8 +278,8 @@ class FitResult:
         f = self.optics.average(single, wi, wo)
         err = np.zeros_like(f)
         if self.walks is not None:
-            orders, err = walked_orders(self.distribution, self.alpha, self.eta, self.k, wi, wo,
-                                        self.walks, self.seed)
+            orders, err, _ = walked_orders(self.distribution, self.alpha, self.eta, self.k, wi,
+                                           wo, self.walks, self.seed)
             f = f + orders
         return self.scale * f, abs(self.scale) * err
 
@@ -376,25 +376,23 @@ class _OrdersTable:
 
 def _walked_orders(problem: _Problem, alpha: float, walks: int, covariance: bool
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Orders >= 2 at the fitted points for this alpha (higher_orders_at, the options' seed)."""
-    from sim.bsdf.multiple_scattering import higher_orders_at
-
-    model = build_model(problem.distribution, alpha, problem.eta0, "correlated", problem.k)
-    return higher_orders_at(model, problem.data.wi, problem.data.wo, walks,
-                            problem.options.ms_seed, covariance=covariance)
+    """walked_orders at the fitted points for this alpha (the options' seed)."""
+    return walked_orders(problem.distribution, alpha, problem.eta0, problem.k, problem.data.wi,
+                         problem.data.wo, walks, problem.options.ms_seed, covariance)
 
 
 def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
-                  wi: np.ndarray, wo: np.ndarray, walks: int,
-                  seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Orders >= 2 of the height-correlated microsurface and their standard error at the pairs
-    (sim.bsdf.multiple_scattering.higher_orders_at), not aperture-averaged (the lobe is broad)."""
+                  wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
+                  covariance: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Orders >= 2 of the height-correlated microsurface at the pairs, their standard error and,
+    if asked, their covariance over the pairs (sim.bsdf.multiple_scattering.higher_orders_at),
+    not aperture-averaged (the lobe is broad)."""
     from sim.bsdf.multiple_scattering import higher_orders_at
 
     wi, wo = np.broadcast_arrays(wi, wo)
-    value, err, _ = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
-                                     wi, wo, walks, seed, covariance=False)
-    return value.reshape(wi.shape[:-1]), err.reshape(wi.shape[:-1])
+    value, err, cov = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
+                                       wi, wo, walks, seed, covariance=covariance)
+    return value.reshape(wi.shape[:-1]), err.reshape(wi.shape[:-1]), cov
 
 
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
@@ -518,8 +516,8 @@ class _Problem:
             f = f + self.orders(alpha)
         elif self.options.multiple_scattering:  # the broad lobe at the points, as the fit has it
             walks, seed = _walk_settings(self.options)
-            orders, err = walked_orders(self.distribution, alpha, eta, self.k, data.wi, data.wo,
-                                        walks, seed)
+            orders, err, _ = walked_orders(self.distribution, alpha, eta, self.k, data.wi,
+                                           data.wo, walks, seed)
             f = f + orders
         return scale * f, scale * err
 

@@ -45,7 +45,9 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "table in alpha, fixed seed; its Monte Carlo error joins sigma)")
     p.add_argument("--ms-walks", type=int, default=1 << 17, metavar="N",
                    help="walks per incidence angle and table alpha for --multiple-scattering "
-                        "(default 131072; the fitted term at the result walks 16x as many)")
+                        "(default 131072, at most 4194304; the fitted term at the result walks "
+                        "16x as many: about 2 s on a Walter run at the default, in proportion "
+                        "to N)")
     p.add_argument("--diffraction", action="store_true",
                    help="fit the two-scale diffraction model (Holzschuch-Pacanowski) around the "
                         "microfacet one, at the run's wavelength; nano-roughness held fixed")

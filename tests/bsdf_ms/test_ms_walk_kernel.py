@@ -7,10 +7,17 @@ from scipy.special import erfcx as scipy_erfcx
 from scipy.special import ndtri as scipy_ndtri
 from scipy.stats import kstest
 
+from sim.bsdf import beckmann_sphere
 from sim.bsdf.distributions import make_distribution
 from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
 from sim.bsdf.multiple_scattering.nee_kernel import AVAILABLE
-from sim.bsdf.multiple_scattering.visible_kernel import erfcx, ndtri, visible_normal
+from sim.bsdf.multiple_scattering.visible_kernel import (
+    START_THETA_MAX,
+    _visible_slope,
+    erfcx,
+    ndtri,
+    visible_normal,
+)
 from sim.bsdf.multiple_scattering.walk import Walker
 from sim.bsdf.multiple_scattering.walk_kernel import uniform
 
@@ -48,6 +55,28 @@ def test_visible_normals_match_the_numpy_sampler_on_the_whole_sphere(name, alpha
     ours = np.array([visible_normal(int(slopes.kernel), *map(float, alpha), *w[i], u[0, i], u[1, i])
                      for i in range(300)])
     assert np.allclose(ours, ref, atol=1e-9)
+
+
+def test_beckmann_slope_inversion_from_its_start_table_converges_everywhere():
+    """Inside the start table (either side of the root), in its tail cells, across its theta edge
+    and beyond it: the numpy inversion's slope to 1e-12 where u fixes it that well, and log F at
+    its target to rounding everywhere (at u = 1 - 2^-53 a slope is only known to ~1e-2)."""
+    rng = np.random.default_rng(4)
+    theta = np.concatenate([rng.uniform(0.0, np.pi, 3000), np.full(200, START_THETA_MAX),
+                            np.full(200, START_THETA_MAX + 1e-9), np.full(200, 1e-7),
+                            np.full(200, np.pi / 2)])
+    u = rng.random(theta.size)
+    u[-800::4] = 1e-300
+    u[-799::4] = 1.0 - 2.0**-53
+    u[-798::4] = rng.uniform(0.0, 1.0 / 64.0, 200)
+    mu = np.cos(theta) / np.sin(theta)
+    ours = np.array([_visible_slope(m, v, t) for m, v, t in zip(mu, u, theta, strict=True)])
+    assert np.all(ours <= mu)
+    target = np.log(u) + beckmann_sphere._log_cdf(mu, mu)
+    assert np.allclose(beckmann_sphere._log_cdf(ours, mu), target, rtol=1e-14, atol=1e-15)
+    fixed = u < 1.0 - 1e-9
+    ref = beckmann_sphere._visible_slope(mu[fixed], u[fixed])
+    assert np.allclose(ours[fixed], ref, rtol=1e-12, atol=1e-12)
 
 
 def _walkers(surface, guided):

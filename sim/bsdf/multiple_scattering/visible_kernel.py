@@ -5,13 +5,18 @@ Beckmann is beckmann_sphere's log-CDF inversion, one direction at a time, with t
 functions numba lacks: erfcx (libm's erfc times an exactly rounded exp(x^2), the continued
 fraction only beyond x = 25) and the
 normal quantile ndtri (Wichura's AS241, rational functions good to double precision, so no
-erfc is spent on the second slope). beckmann_sphere (numpy, scipy) is the reference.
+erfc is spent on the second slope). The inversion starts from a table of converged slopes
+(bilinear in the polar angle and u), which halves its steps. beckmann_sphere (numpy, scipy) is
+the reference and builds that table.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from sim.bsdf import beckmann_sphere
 from sim.bsdf.constants import BECKMANN_CF_FROM, SQRT_PI, Ndf
 from sim.bsdf.primitives import (
     erfc_continued_fraction,
@@ -28,6 +33,23 @@ NEWTON_STEPS = 60
 ERFCX_CF_FROM = 25.0
 #: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
 SPLIT = 134217729.0
+#: The start table: polar angles 0..START_THETA_MAX (beyond it, 162-180 deg, the slopes run off
+#: towards mu = cot theta and the bound-based start is kept) by u = 0..1; in its first u cell and
+#: its last two (the tails) the bound-based start is kept too.
+START_THETAS, START_US, START_THETA_MAX = 33, 65, 0.9 * math.pi
+
+
+def _start_table():
+    """Converged slopes x(theta, u) at the table's nodes (beckmann_sphere's inversion)."""
+    theta = np.linspace(0.0, START_THETA_MAX, START_THETAS)[:, None]
+    u = np.linspace(0.0, 1.0, START_US)[None, :]
+    mu = np.where(theta > 0.0, np.cos(theta) / np.maximum(np.sin(theta), 1e-300), 1e8)
+    mu, u = np.broadcast_arrays(np.clip(mu, -1e4, 1e8), np.clip(u, 1e-300, 1.0 - 2.0**-53))
+    return beckmann_sphere._visible_slope(mu.ravel(), u.ravel()).reshape(mu.shape)
+
+
+START = _start_table()
+THETA_SCALE = (START_THETAS - 1) / START_THETA_MAX
 # Wichura's AS241 (PPND16): numerator and denominator coefficients, lowest power first, of the
 # central region |p - 1/2| <= 0.425, the near tail r = sqrt(-log p) <= 5 and the far tail
 _A = (3.3871328727963666080e+0, 1.3314166789178437745e+2, 1.9715909503065514427e+3,
@@ -108,13 +130,31 @@ def _log_cdf(x, mu):
 
 
 @scalar
-def _visible_slope(mu, u):
-    """Slope x < mu of density proportional to (mu - x) exp(-x^2), by Halley's method on
-    log F (beckmann_sphere._visible_slope takes Newton steps), started left of the root; a
-    step that would leave [bracket, mu) is a Newton step, which from the left stays there."""
-    target = math.log(u) + _log_cdf(mu, mu)[0]
+def _start(mu, u, theta, target):
+    """Where the slope inversion starts: the table's bilinear value inside it (within ~1e-3 of
+    the root, either side), else the bound F(x) <= exp(-x^2)(max(mu, 0) + 1/sqrt(pi))/2, left
+    of the root."""
+    t = theta * THETA_SCALE
+    j = u * (START_US - 1)
+    i, k = int(t), int(j)
+    if i < START_THETAS - 1 and 1 <= k < START_US - 3:
+        ft, fu = t - i, j - k
+        x = ((1.0 - ft) * ((1.0 - fu) * START[i, k] + fu * START[i, k + 1])
+             + ft * ((1.0 - fu) * START[i + 1, k] + fu * START[i + 1, k + 1]))
+        if x < mu:
+            return x
     bound = math.log(0.5 * (max(mu, 0.0) + 1.0 / SQRT_PI)) - target
-    x = min(-math.sqrt(max(bound, 0.0)), mu)
+    return min(-math.sqrt(max(bound, 0.0)), mu)
+
+
+@scalar
+def _visible_slope(mu, u, theta):
+    """Slope x < mu of density proportional to (mu - x) exp(-x^2) (theta = acot mu), by
+    Halley's method on log F (beckmann_sphere._visible_slope takes Newton steps) from _start; a
+    step that would leave (-inf, mu) or go against the residual is a Newton step, which from
+    either side lands left of the root (log F is concave) and from the left stays there."""
+    target = math.log(u) + _log_cdf(mu, mu)[0]
+    x = _start(mu, u, theta, target)
     for _ in range(NEWTON_STEPS):
         g, d1 = _log_cdf(x, mu)  # log F and (log F)' = f / F
         gap = mu - x
@@ -123,12 +163,15 @@ def _visible_slope(mu, u):
         d2 = d1 * (-1.0 / gap - 2.0 * x) - d1 * d1  # (log F)''
         r = target - g
         step = 2.0 * r * d1 / (2.0 * d1 * d1 + r * d2)
-        if not (math.isfinite(step) and 0.0 < step < gap):
+        if not (math.isfinite(step) and step < gap and step * r > 0.0):
             step = r / d1
-        if not (math.isfinite(step) and step > 0.0):
+        if not (math.isfinite(step) and step != 0.0):
             break
         x = min(x + step, mu)
-        if step <= 1e-6 * (1.0 + abs(x)):  # Halley: the error left is of order step^3
+        # small against x and against the root's scale near it (the density's width F/f, its
+        # distance to mu where it vanishes): Halley leaves an error of order the step's cube; the
+        # bound against x alone stopped 0.7 % of a width short where mu << -1
+        if abs(step) <= 1e-6 * min(1.0 + abs(x), 1.0 / max(d1, 1.0 / gap)):
             break
     return x
 
@@ -144,7 +187,7 @@ def beckmann_visible_unit(vx, vy, vz, u1, u2):
     else:
         mu = 1e8 if vz > 0.0 else -1e4
         c, s = 1.0, 0.0
-    x = _visible_slope(mu, min(max(u1, 1e-300), 1.0 - 2.0**-53))
+    x = _visible_slope(mu, min(max(u1, 1e-300), 1.0 - 2.0**-53), math.atan2(sin_t, vz))
     y = ndtri(min(max(u2, 2.0**-60), 1.0 - 2.0**-53)) / math.sqrt(2.0)
     return unit(-(c * x - s * y), -(s * x + c * y), 1.0)
 
