@@ -20,6 +20,7 @@ import numpy as np
 from sim.bsdf.constants import (
     BECKMANN_CF_FROM,
     BECKMANN_CF_TERMS,
+    BECKMANN_KERNEL_CF_FROM,
     HALF_LOG_2PI,
     SQRT_PI,
     STIRLING_FROM,
@@ -50,6 +51,8 @@ else:
     inlined = njit(cache=True, error_model="numpy", inline="always")
 
 STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
+#: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
+SPLIT = 134217729.0
 
 
 # --- geometry -----------------------------------------------------------------------------
@@ -65,6 +68,17 @@ def unit(x, y, z):
 
 
 @scalar
+def exp_square(x, sign):
+    """exp(sign x^2), sign +-1, to double precision for large x: x^2's rounding error (Veltkamp
+    split, exact products) is applied as a factor, instead of being amplified x^2 times by exp."""
+    c = SPLIT * x
+    hi = c - (c - x)
+    lo = x - hi
+    s = x * x
+    return math.exp(sign * s) * (1.0 + sign * (((hi * hi - s) + 2.0 * hi * lo) + lo * lo))
+
+
+@scalar
 def erfc_continued_fraction(a):
     """t with erfc(a) = exp(-a^2) / (sqrt(pi) (a + t)), for a >= BECKMANN_CF_FROM: the
     continued fraction (1/2) / (a + 1 / (a + (3/2) / ...)) with the terms full float64 accuracy
@@ -77,13 +91,17 @@ def erfc_continued_fraction(a):
 
 @scalar
 def beckmann_a_lambda(a):
-    """a * Lambda(a) of the Beckmann Smith function (distributions.beckmann_a_lambda)."""
+    """a * Lambda(a) of the Beckmann Smith function (distributions.beckmann_a_lambda), exp(-a^2)
+    exactly rounded from a = 2 on; the closed form up to BECKMANN_KERNEL_CF_FROM (within ~2a^2
+    ulps), then the continued fraction (15-19 terms)."""
     if a < BECKMANN_CF_FROM:
         return 0.5 * (math.exp(-a * a) / SQRT_PI - a * math.erfc(a))
+    if a < BECKMANN_KERNEL_CF_FROM:
+        return 0.5 * (exp_square(a, -1.0) / SQRT_PI - a * math.erfc(a))
     if math.isinf(a):
         return 0.0
     t = erfc_continued_fraction(a)
-    return math.exp(-a * a) * t / (2.0 * SQRT_PI * (a + t))
+    return exp_square(a, -1.0) * t / (2.0 * SQRT_PI * (a + t))
 
 
 @scalar

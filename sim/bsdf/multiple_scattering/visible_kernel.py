@@ -20,6 +20,7 @@ from sim.bsdf import beckmann_sphere
 from sim.bsdf.constants import BECKMANN_CF_FROM, SQRT_PI, Ndf
 from sim.bsdf.primitives import (
     erfc_continued_fraction,
+    exp_square,
     ggx_visible_normal,
     inlined,
     scalar,
@@ -31,8 +32,6 @@ LOG_2 = math.log(2.0)
 NEWTON_STEPS = 60
 #: erfcx switches to the continued fraction here (erfc(25) = 8e-274 is still a normal number).
 ERFCX_CF_FROM = 25.0
-#: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
-SPLIT = 134217729.0
 #: The start table: polar angles 0..START_THETA_MAX (beyond it, 162-180 deg, the slopes run off
 #: towards mu = cot theta and the bound-based start is kept) by u = 0..1; in its first u cell and
 #: its last two (the tails) the bound-based start is kept too.
@@ -83,17 +82,6 @@ def _ratio(num, den, r):
 
 
 @scalar
-def exp_square(x):
-    """exp(x^2) to double precision for large x: x^2's rounding error (Veltkamp split, exact
-    products) is applied as a factor, instead of being amplified x^2 times by exp."""
-    c = SPLIT * x
-    hi = c - (c - x)
-    lo = x - hi
-    s = x * x
-    return math.exp(s) * (1.0 + (((hi * hi - s) + 2.0 * hi * lo) + lo * lo))
-
-
-@scalar
 def erfcx(x):
     """exp(x^2) erfc(x) for x >= 0: by libm's erfc below ERFCX_CF_FROM (the continued fraction
     needs up to 60 chained divisions near x = 2, which made Beckmann's slope inversion from
@@ -101,7 +89,7 @@ def erfcx(x):
     if x < BECKMANN_CF_FROM:
         return math.exp(x * x) * math.erfc(x)
     if x < ERFCX_CF_FROM:
-        return exp_square(x) * math.erfc(x)
+        return exp_square(x, 1.0) * math.erfc(x)
     return 1.0 / (SQRT_PI * (x + erfc_continued_fraction(x)))
 
 
