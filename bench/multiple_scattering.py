@@ -5,7 +5,7 @@ per direction pair (reference: 2^17 walks per pair, computed in this run), the w
 error against run time (F = 1 conductor, and R + T for the glass), and walks per CPU-second
 of the compiled walk (eval, sample, shared paths; GGX and Beckmann, glass and mirror, alpha 0.3
 and 1.0) beside the numpy walk measured in the same run as the baseline and against issue 19's
-C++ figures for this machine; and
+C++ figures for this machine and the C++ walk as measured here once (CPP_MEASURED); and
 the two-scale diffraction model's evals per second beside the plain microfacet eval; for
 the bench's tabulated orders >= 2 (HigherOrderLobe), the error against walks per table build
 and the build time, beside the per-pair walk (HigherOrders) it replaced, measured in the same
@@ -119,6 +119,18 @@ def furnace_table(rng: np.random.Generator) -> list[str]:
 #: CPU-second: GGX glass at alpha 0.3-1.0 (eval, sample), and the range for the other cases.
 CPP_GGX_GLASS = {"eval": 1.3e6, "sample": 1.2e6}
 CPP_OTHER = (0.7e6, 1.4e6)
+#: Heitz et al.'s published C++ walk (MicrosurfaceScattering.cpp, g++ -O2, float, Gaussian
+#: heights, 60 deg incidence, wo uniform on the sphere or the upper hemisphere for a mirror),
+#: measured on this machine on 2026-12-02: median of 3 runs of 1e6 walks each, alternating
+#: with this walk (docs/performance.md, "Issue 19, fourth pass"); not rebuilt by this script.
+CPP_MEASURED = {("ggx", "dielectric", 0.3): (1.224e6, 1.539e6),
+                ("ggx", "dielectric", 1.0): (8.125e5, 1.062e6),
+                ("ggx", "conductor", 0.3): (1.123e6, 1.559e6),
+                ("ggx", "conductor", 1.0): (7.754e5, 1.047e6),
+                ("beckmann", "dielectric", 0.3): (7.515e5, 9.723e5),
+                ("beckmann", "dielectric", 1.0): (6.499e5, 8.149e5),
+                ("beckmann", "conductor", 0.3): (7.489e5, 9.904e5),
+                ("beckmann", "conductor", 1.0): (5.620e5, 8.084e5)}
 SURFACES = [(name, kind, alpha) for name in ("ggx", "beckmann") for kind in ("dielectric",
                                                                               "conductor")
             for alpha in ALPHAS]
@@ -173,15 +185,17 @@ def _eval_efficiency(walker, rng: np.random.Generator) -> float:
 def throughput_table(rng: np.random.Generator) -> list[str]:
     """Walks per CPU-second of the compiled walk beside the numpy walk (the per-walk baseline,
     same run), and the ratio to issue 19's C++ figures (GGX glass: eval 1.3e6, sample 1.2e6;
-    other cases 0.7-1.4e6, so two ratios: against 0.7e6 / against 1.4e6). events: scattering
+    other cases 0.7-1.4e6, so two ratios: against 0.7e6 / against 1.4e6) and to the C++ walk
+    as measured on this machine for each case (CPP_MEASURED). events: scattering
     events per walk (an eval walk is forced to hit, so it is longer than the analog walk the
     C++ eval follows, and carries less variance); ms@1%: the eval walk's efficiency
     (_eval_efficiency: CPU ms per pair for 1 % relative error at the 12 pairs)."""
     lines = [f"walks per CPU-second, 60 deg incidence: compiled walk vs numpy walk (baseline, same "
              f"run); shared = orders >= 2 towards {TARGETS} targets per walk; vs C++: ratio to "
-             f"issue 19's figures for Heitz's C++ walk on this machine (not measured here)",
+             f"issue 19's figures for Heitz's C++ walk on this machine, and to that walk as "
+             f"measured here on 2026-12-02 (CPP_MEASURED; neither run by this script)",
              f"{'surface':>20} {'mode':>7} {'events':>6} {'compiled/s':>11} {'numpy/s':>10} "
-             f"{'speed-up':>8} {'vs C++ (issue 19)':>18} {'ms@1%':>7}"]
+             f"{'speed-up':>8} {'vs C++ (issue 19)':>18} {'measured':>8} {'ms@1%':>7}"]
     for name, kind, alpha in SURFACES:
         model = RandomWalkBSDF(Microsurface(name, alpha, kind, eta=ETA), walks=1)
         slopes, micro, guided = model.slopes, model.micro, model.guided
@@ -197,8 +211,10 @@ def throughput_table(rng: np.random.Generator) -> list[str]:
                 versus = f"{'(no C++ analogue)':>18}"
             else:
                 versus = f"{fast[mode] / CPP_OTHER[0]:8.2f} / {fast[mode] / CPP_OTHER[1]:<7.2f}"
+            measured = (f"{fast[mode] / CPP_MEASURED[name, kind, alpha][mode == 'sample']:8.2f}"
+                        if mode != "shared" else f"{'':8}")
             lines.append(f"{label:>20} {mode:>7} {events[mode]:6.2f} {fast[mode]:11.3e} "
-                         f"{slow[mode]:10.3e} {fast[mode] / slow[mode]:8.1f} {versus}"
+                         f"{slow[mode]:10.3e} {fast[mode] / slow[mode]:8.1f} {versus} {measured}"
                          f"{' ' + efficiency if mode == 'eval' else ''}")
     return lines
 
