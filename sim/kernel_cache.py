@@ -5,6 +5,9 @@ or takes constants from does: an update that edits primitives.py alone left the 
 on the old formulas (walk_kernel.py's cache was still valid). So every numba cache file under
 sim/ is dropped, once, when any source file under sim/ differs from what the caches were
 written with; numba recompiles on first use (tens of seconds once, then cached again).
+A process started before an edit can still save a kernel compiled from the old sources after
+another process kept the new digest (numba stamps it with its own, unchanged file): editing
+while such a process compiles needs a second `import sim` after it ends.
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ BECKMANN_CF_FROM = 2.0
 BECKMANN_CF_TERMS = 60
 #: The compiled a*Lambda(a) keeps the closed form up to this a: its cancellation costs ~2a^2
 #: ulps (2e-14 at most against mpmath), where the continued fraction needs 60 chained divisions
-#: at a = 2 and 21 from here on (62 ns a call over walk directions, 117 ns with it from a = 2).
+#: at a = 2 and 14-21 from here on (62 ns a call over walk directions, 117 ns with it from a = 2).
 BECKMANN_KERNEL_CF_FROM = 5.0
 #: Above this argument log Gamma is taken as Stirling's form plus STIRLING_TERMS corrections.
 STIRLING_FROM = 10.0

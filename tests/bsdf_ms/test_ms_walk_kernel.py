@@ -64,11 +64,12 @@ def test_beckmann_slope_inversion_from_its_start_table_converges_everywhere():
     rng = np.random.default_rng(4)
     theta = np.concatenate([rng.uniform(0.0, np.pi, 3000), np.full(200, START_THETA_MAX),
                             np.full(200, START_THETA_MAX + 1e-9), np.full(200, 1e-7),
-                            np.full(200, np.pi / 2)])
+                            np.full(200, np.pi / 2), np.full(200, np.pi - 1e-4)])
     u = rng.random(theta.size)
-    u[-800::4] = 1e-300
-    u[-799::4] = 1.0 - 2.0**-53
-    u[-798::4] = rng.uniform(0.0, 1.0 / 64.0, 200)
+    u[-200:] = rng.uniform(0.98, 1.0, 200)  # near mu = -1e4, where log F's rounding cycled
+    u[-1000:-200:4] = 1e-300
+    u[-999:-200:4] = 1.0 - 2.0**-53
+    u[-998:-200:4] = rng.uniform(0.0, 1.0 / 64.0, 200)
     mu = np.cos(theta) / np.sin(theta)
     ours = np.array([_visible_slope(m, v, t) for m, v, t in zip(mu, u, theta, strict=True)])
     assert np.all(ours <= mu)
