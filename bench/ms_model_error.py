@@ -9,9 +9,10 @@ sequential shared-path walk (lobe.walk_to_targets(keyed=False)), the keyed, bran
 walk (keyed.keyed_walk_to_targets) towards every point, and the fit as it is: the distinct
 polar angles walked once (normal incidence: the lobe has no azimuth; lobe.higher_orders_at)
 and the term at the fit's result walked MS_CENTRE_WALKS times the table's walks (the refit).
-"walks": those behind the estimate at the truth alpha; "table s": CPU time of the walks of
-one fit (calibration.fit._OrdersTable: 7 alphas 0.1 apart in log alpha, the covariance
-at the centre one, and the refit's term). The reference's own standard error is shown in its row.
+"walks": those behind the estimate at the truth alpha; "table s": CPU time (and "wall s", on
+keyed.THREADS threads) of the walks of one fit (calibration.fit._OrdersTable: 7 alphas 0.1
+apart in log alpha, the covariance at the centre one, forward; and the refit's term, both ways
+for "both"). The reference's own standard error is shown in its row.
 Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 33554432]
 """
 
@@ -34,7 +35,8 @@ sys.path.insert(0, str(ROOT))
 from calibration.fit import MS_CENTRE_WALKS  # noqa: E402
 from calibration.pipeline import reduce_run  # noqa: E402
 from sim.bsdf import RoughDielectric  # noqa: E402
-from sim.bsdf.multiple_scattering.lobe import walk_to_targets  # noqa: E402
+from sim.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
+from sim.bsdf.multiple_scattering.lobe import walk_both_ways, walk_to_targets  # noqa: E402
 from sim.bsdf.multiple_scattering.model import RandomWalkBSDF  # noqa: E402
 
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
@@ -42,7 +44,8 @@ SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
 #: refit), distinct polar angles only): the fit's estimators in the order they were its default.
 ESTIMATES = (("sequential walk", False, 1 << 15, 1, False),
              ("keyed, split", True, 1 << 17, 1, False),
-             ("distinct, refit x16 (now)", True, 1 << 17, MS_CENTRE_WALKS, True))
+             ("distinct, refit x16", True, 1 << 17, MS_CENTRE_WALKS, True),
+             ("both ways, refit x16 (now)", "both", 1 << 17, MS_CENTRE_WALKS, True))
 REFERENCE_WALKS = 1 << 25
 #: The fit table's alphas (calibration.fit: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
 TABLE_NODES, TABLE_STEP = 7, 0.1
@@ -85,30 +88,32 @@ def distinct_polar(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([np.sqrt(1.0 - cos_o ** 2), 0.0 * cos_o, cos_o], axis=-1), index.reshape(-1)
 
 
-def orders3(walk, wo: np.ndarray, walks: int, keyed: bool, seed: int, distinct: bool,
+def orders3(walk, wo: np.ndarray, walks: int, keyed: bool | str, seed: int, distinct: bool,
             covariance: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Orders >= 3 of f (1/sr) at normal incidence towards wo and their standard error; with
     distinct, each polar angle walked once (the lobe has no azimuth at normal incidence)."""
     targets, index = distinct_polar(wo) if distinct else (wo, None)
-    mean, err, _ = walk_to_targets(walk, np.array([0.0, 0.0, 1.0]), targets, walks,
-                                   np.random.default_rng(seed), min_order=3,
-                                   covariance=covariance, keyed=keyed)
+    rng, normal = np.random.default_rng(seed), np.array([0.0, 0.0, 1.0])
+    mean, err, _ = (walk_both_ways(walk, normal, targets, walks, rng, 3, covariance)
+                    if keyed == "both" else
+                    walk_to_targets(walk, normal, targets, walks, rng, min_order=3,
+                                    covariance=covariance, keyed=keyed))
     inverse = 1.0 / np.abs(targets[:, 2])
     mean, err = mean * inverse, err * inverse
     return (mean[index], err[index]) if distinct else (mean, err)
 
 
-def table_seconds(alpha: float, wo: np.ndarray, walks: int, refit: int, keyed: bool,
-                  distinct: bool) -> float:
-    """CPU seconds of one fit's walks about alpha: the table (covariance at the centre) and,
-    with refit > 1, the term at alpha with refit x walks (covariance too)."""
-    start = time.process_time()
-    for node in range(TABLE_NODES):
-        orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo, walks, keyed,
-                0, distinct, covariance=node == TABLE_NODES // 2)
+def table_seconds(alpha: float, wo: np.ndarray, walks: int, refit: int, keyed: bool | str,
+                  distinct: bool) -> tuple[float, float]:
+    """(CPU, wall) seconds of one fit's walks about alpha: the table (covariance at the centre)
+    and, with refit > 1, the term at alpha with refit x walks (covariance too)."""
+    start, wall = time.process_time(), time.perf_counter()
+    for node in range(TABLE_NODES):  # the table walks forward; only the refit both ways
+        orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo, walks,
+                keyed is not False, 0, distinct, covariance=node == TABLE_NODES // 2)
     if refit > 1:
         orders3(glass(alpha), wo, walks * refit, keyed, 0, distinct, covariance=True)
-    return time.process_time() - start
+    return time.process_time() - start, time.perf_counter() - wall
 
 
 def main() -> None:
@@ -117,24 +122,24 @@ def main() -> None:
     ap.add_argument("--reference-walks", type=int, default=REFERENCE_WALKS)
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f}; reference {args.reference_walks} walks "
-          f"(keyed, split); error / data sigma over the normal-incidence fit points x "
-          f"{args.seeds} seeds")
-    print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'median':>7} "
-          f"{'worst':>7}")
+          f"(both ways); error / data sigma over the normal-incidence fit points x "
+          f"{args.seeds} seeds; {THREADS} threads")
+    print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'wall s':>7} "
+          f"{'median':>7} {'worst':>7}")
     with tempfile.TemporaryDirectory() as tmp:
         for name, alpha, wo, sigma, _ in fit_points(Path(tmp)):
             walk = glass(alpha)
-            for keyed in (True, False):  # compile outside the timings
+            for keyed in (True, False, "both"):  # compile outside the timings
                 orders3(walk, wo[:2], 64, keyed, 0, False, covariance=True)
-            ref, ref_err = orders3(walk, wo, args.reference_walks, True, 999, True)
-            print(f"{name:>13} {'reference':>26} {args.reference_walks:>8} {'':>7} "
+            ref, ref_err = orders3(walk, wo, args.reference_walks, "both", 999, True)
+            print(f"{name:>13} {'reference':>26} {args.reference_walks:>8} {'':>15} "
                   f"{np.median(ref_err / sigma):7.2f} {np.max(ref_err / sigma):7.2f}")
             for label, keyed, walks, centre, distinct in ESTIMATES:
                 dev = np.concatenate([
                     np.abs(orders3(walk, wo, walks * centre, keyed, seed, distinct)[0] - ref)
                     / sigma for seed in range(args.seeds)])
-                seconds = table_seconds(alpha, wo, walks, centre, keyed, distinct)
-                print(f"{name:>13} {label:>26} {walks * centre:>8} {seconds:7.2f} "
+                cpu, wall = table_seconds(alpha, wo, walks, centre, keyed, distinct)
+                print(f"{name:>13} {label:>26} {walks * centre:>8} {cpu:7.2f} {wall:7.2f} "
                       f"{np.median(dev):7.2f} {np.max(dev):7.2f}")
 
 

@@ -348,8 +348,8 @@ class _OrdersTable:
         half = 0.5 * (MS_TABLE_NODES - 1)
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
         walks = problem.options.ms_walks
-        walked = [_walked_orders(problem, math.exp(a), walks, node == MS_TABLE_NODES // 2)
-                  for node, a in enumerate(self.log_alpha)]
+        walked = [_walked_orders(problem, math.exp(a), walks, node == MS_TABLE_NODES // 2,
+                                 both_ways=False) for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
         _, self.error, self.covariance = walked[MS_TABLE_NODES // 2]
         self.offset, self.refined_at = 0.0, None
@@ -359,10 +359,10 @@ class _OrdersTable:
                                           self.log_alpha[-1]))) + self.offset
 
     def refine(self, problem: _Problem, alpha: float) -> None:
-        """Walk the term at alpha with MS_CENTRE_WALKS x ms_walks walks and shift the spline
-        onto it; its error and covariance become those."""
+        """Walk the term at alpha with MS_CENTRE_WALKS x ms_walks walks, transmitted pairs in
+        reverse, and shift the spline onto it; its error and covariance become those."""
         value, self.error, self.covariance = _walked_orders(
-            problem, alpha, problem.options.ms_walks * MS_CENTRE_WALKS, True)
+            problem, alpha, problem.options.ms_walks * MS_CENTRE_WALKS, True, both_ways=True)
         self.offset, self.refined_at = 0.0, math.log(alpha)
         self.offset = value - self(alpha)
 
@@ -374,24 +374,26 @@ class _OrdersTable:
         return self.log_alpha[1] <= math.log(alpha) <= self.log_alpha[-2]
 
 
-def _walked_orders(problem: _Problem, alpha: float, walks: int, covariance: bool
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _walked_orders(problem: _Problem, alpha: float, walks: int, covariance: bool,
+                   both_ways: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """walked_orders at the fitted points for this alpha (the options' seed)."""
     return walked_orders(problem.distribution, alpha, problem.eta0, problem.k, problem.data.wi,
-                         problem.data.wo, walks, problem.options.ms_seed, covariance)
+                         problem.data.wo, walks, problem.options.ms_seed, covariance, both_ways)
 
 
 def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
                   wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
-                  covariance: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                  covariance: bool = False, both_ways: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= 2 of the height-correlated microsurface at the pairs, their standard error and,
-    if asked, their covariance over the pairs (sim.bsdf.multiple_scattering.higher_orders_at),
-    not aperture-averaged (the lobe is broad)."""
+    if asked, their covariance over the pairs (sim.bsdf.multiple_scattering.higher_orders_at,
+    both_ways as there), not aperture-averaged (the lobe is broad)."""
     from sim.bsdf.multiple_scattering import higher_orders_at
 
     wi, wo = np.broadcast_arrays(wi, wo)
     value, err, cov = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
-                                       wi, wo, walks, seed, covariance=covariance)
+                                       wi, wo, walks, seed, covariance=covariance,
+                                       both_ways=both_ways)
     return value.reshape(wi.shape[:-1]), err.reshape(wi.shape[:-1]), cov
 
 

@@ -44,8 +44,9 @@ except ImportError:  # pragma: no cover - exercised only without the [fast] extr
     inlined = scalar
 else:
     COMPILED = True
-    #: How every scalar formula is compiled: cached, with numpy's floating-point error model.
-    scalar = njit(cache=True, error_model="numpy")
+    #: How every scalar formula is compiled: cached, with numpy's floating-point error model,
+    #: releasing the GIL (keyed walks fill one batch from several threads).
+    scalar = njit(cache=True, error_model="numpy", nogil=True)
     #: The same, inlined into each caller by numba (inline="always"): the random walk's
     #: per-event formulas, which LLVM otherwise leaves as calls (a sixth of a walk's time).
     inlined = njit(cache=True, error_model="numpy", inline="always")

@@ -8,9 +8,13 @@ of the cost) scaled by those standard errors.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+from functools import cache
+
 import numpy as np
 
-from sim.bsdf.multiple_scattering import keyed_kernel
+from sim.bsdf.multiple_scattering import keyed_kernel, reciprocal_kernel
 from sim.bsdf.multiple_scattering.nee_kernel import surface_arguments
 from sim.bsdf.multiple_scattering.walk import ROULETTE
 
@@ -18,8 +22,13 @@ from sim.bsdf.multiple_scattering.walk import ROULETTE
 SHARE = 0.25
 #: Walks whose per-walk products estimate the targets' correlation (the variances use all).
 CORRELATION_WALKS = 1 << 14
-#: Walk-target scores held at once (walks per kernel call = this // targets).
-BATCH_SCORES = 1 << 22
+#: Walk-target scores held at once (walks per batch = this // targets): 2 MB, so a batch's
+#: scores stay in cache between the kernel and the sums (32 MB batches took 4x as long).
+BATCH_SCORES = 1 << 18
+#: Threads filling one batch (the kernels release the GIL; a walk's numbers depend only on its
+#: key and index, so the result is the same for any count), and the fewest walks per thread.
+THREADS = len(os.sched_getaffinity(0))
+THREAD_MIN_WALKS = 1 << 8
 
 
 class _Sums:
@@ -34,7 +43,7 @@ class _Sums:
     def add(self, value: np.ndarray) -> None:
         self.n += len(value)
         self.total += value.sum(axis=0)
-        self.squares += np.sum(value * value, axis=0)
+        self.squares += np.einsum("ij,ij->j", value, value)
         if self.products is not None and self.n_products < CORRELATION_WALKS:
             part = value[:CORRELATION_WALKS - self.n_products]
             self.products += part.T @ part
@@ -58,6 +67,37 @@ class _Sums:
         return correlation * np.outer(err, err)
 
 
+@cache
+def _pool() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(THREADS, thread_name_prefix="gonio-walks")
+
+
+def _fill(walk, first: int, value: np.ndarray) -> None:
+    """walk(first, value), its rows split between up to THREADS threads."""
+    parts = min(THREADS, len(value) // THREAD_MIN_WALKS)
+    if parts < 2:
+        walk(first, value)
+        return
+    edges = np.linspace(0, len(value), parts + 1).astype(int)
+    for done in [_pool().submit(walk, first + lo, value[lo:hi])
+                 for lo, hi in zip(edges[:-1], edges[1:], strict=True)]:
+        done.result()
+
+
+def _walk_in_batches(walk, m: int, walks: int, covariance: bool
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(mean, standard error, covariance or None) over `walks` walks of m scores each, walk(first,
+    value) filling value (walks in this batch, m) from walk index first."""
+    sums = _Sums(m, covariance)
+    batch = max(THREADS * THREAD_MIN_WALKS, BATCH_SCORES // max(m, 1))
+    while sums.n < walks:
+        value = np.zeros((min(batch, walks - sums.n), m))
+        _fill(walk, sums.n, value)
+        sums.add(value)
+    mean, err = sums.mean_error()
+    return mean, err, sums.covariance(err) if covariance else None
+
+
 def keyed_walk_to_targets(walker, wi: np.ndarray, targets: np.ndarray, walks: int,
                           rng: np.random.Generator, min_order: int = 2, covariance: bool = True,
                           share: float = SHARE
@@ -69,12 +109,31 @@ def keyed_walk_to_targets(walker, wi: np.ndarray, targets: np.ndarray, walks: in
     targets = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3)
     wi = np.ascontiguousarray(wi, dtype=np.float64)
     args = surface_arguments(walker.slopes, walker.micro)
-    sums = _Sums(len(targets), covariance)
-    batch = max(256, BATCH_SCORES // max(len(targets), 1))
-    while sums.n < walks:
-        value = np.zeros((min(batch, walks - sums.n), len(targets)))
-        keyed_kernel.walk_targets(*args, wi, targets, key, sums.n, int(min_order),
-                                  float(ROULETTE), float(share), value)
-        sums.add(value)
-    mean, err = sums.mean_error()
-    return mean, err, sums.covariance(err) if covariance else None
+    return _walk_in_batches(
+        lambda first, value: keyed_kernel.walk_targets(*args, wi, targets, key, first,
+                                                       int(min_order), float(ROULETTE),
+                                                       float(share), value),
+        len(targets), walks, covariance)
+
+
+def keyed_walk_from_starts(walker, starts: np.ndarray, target: np.ndarray, walks: int,
+                           rng: np.random.Generator, min_order: int = 2,
+                           covariance: bool = True, share: float = SHARE
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(mean, standard error, covariance of the mean or None) of orders >= min_order of
+    f(start, target) |cos target| for every start (n, 3, all on one side of the surface)
+    towards one target (3,), over `walks` keyed walks (rounded up to whole rounds of the
+    starts), each shared by all of them (reciprocal_kernel): the reverse of
+    keyed_walk_to_targets."""
+    starts = np.ascontiguousarray(starts, dtype=np.float64).reshape(-1, 3)
+    if len(np.unique(starts[:, 2] > 0.0)) != 1:
+        raise ValueError("keyed_walk_from_starts: the starts must all be on one side")
+    key = np.uint64(int(rng.integers(0, 2**63)))
+    target = np.ascontiguousarray(target, dtype=np.float64).reshape(3)
+    args = surface_arguments(walker.slopes, walker.micro)
+    n = len(starts)
+    return _walk_in_batches(
+        lambda first, value: reciprocal_kernel.walk_from_starts(
+            *args, starts, target, key, first, int(min_order), float(ROULETTE),
+            float(share), value),
+        n, -(-walks // n) * n, covariance)

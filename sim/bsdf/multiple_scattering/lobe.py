@@ -15,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets
+from sim.bsdf.multiple_scattering.keyed import keyed_walk_from_starts, keyed_walk_to_targets
 from sim.bsdf.multiple_scattering.lobe_kernel import lookup
+from sim.bsdf.multiple_scattering.micro import MicroDielectric
 
 #: Incidence angles (deg from the side's normal) walked; others interpolate linearly between.
 INCIDENCE_NODES_DEG = np.append(np.arange(0.0, 90.0, 5.0), 89.5)
@@ -37,6 +38,9 @@ PHI_SNAP = 0.01
 HORIZON_NODES_DEG = (1.25, 0.5, 0.02)
 #: Walks per table plane by default (all its targets share them).
 WALKS = 1 << 14
+#: walk_both_ways: the pilot that chooses each transmitted target's direction walks this
+#: share of the walks (at least PILOT_MIN_WALKS) each way.
+PILOT_SHARE, PILOT_MIN_WALKS = 16, 1 << 12
 #: Walks advanced together: BATCH_PRODUCTS // targets, within [WALK_BATCH, 16 WALK_BATCH] (a
 #: function of the target count only, so one seed walks the same paths for the same count).
 WALK_BATCH = 2048
@@ -71,6 +75,50 @@ def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
     return mean, np.sqrt(np.maximum(var, 0.0)), cov
 
 
+def walk_both_ways(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
+                   rng: np.random.Generator, min_order: int = 2, covariance: bool = True
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """walk_to_targets, with the targets across a dielectric (transmitted) walked the other
+    way where that is better: `walks` keyed walks from those targets towards wi shared by them
+    (keyed.keyed_walk_from_starts), f(wi, wo) = f(wo, wi) (n_o / n_i)^2 by reciprocity. Which
+    way each target goes is chosen by a pilot of walks // PILOT_SHARE walks each way (the
+    smaller standard error), walks the result does not use, so it stays unbiased. The reverse
+    walk wins in the transmitted wings at normal incidence (15-20x less variance, GGX 0.394
+    glass), where the forward scores are heavy-tailed, and loses at 60 degrees (2-15x more).
+    (Averaging both with the pilot's inverse-variance weights was worse at the worst point:
+    a pilot rarely sees the heavy tail, so it overrates the forward walk.) Conductors and
+    walkers without kernels walk forward only."""
+    targets = np.asarray(targets, np.float64).reshape(-1, 3)
+    side = 1.0 if wi[2] >= 0.0 else -1.0
+    across = np.flatnonzero(targets[:, 2] * side < 0.0)
+    micro = walk.walker.micro
+    if not (len(across) and walk.walker.compiled and isinstance(micro, MicroDielectric)):
+        return walk_to_targets(walk, wi, targets, walks, rng, min_order, covariance)
+    ratio = micro.eta ** 2 if side > 0.0 else micro.eta ** -2  # (n_o / n_i)^2
+    scale = ratio * np.abs(targets[:, 2]) / abs(wi[2])
+
+    def reverse(rows: np.ndarray, n: int, cov: bool):
+        back, err, block = keyed_walk_from_starts(walk.walker, targets[rows], wi, n, rng,
+                                                  min_order, cov)
+        s = scale[rows]
+        return back * s, err * s, block * np.outer(s, s) if cov else None
+
+    pilot = max(walks // PILOT_SHARE, PILOT_MIN_WALKS)
+    fwd_err = walk_to_targets(walk, wi, targets[across], pilot, rng, min_order, False)[1]
+    back = across[reverse(across, pilot, False)[1] < fwd_err]
+    ahead = np.setdiff1d(np.arange(len(targets)), back)
+    mean, err = np.zeros(len(targets)), np.zeros(len(targets))
+    cov = np.zeros((len(targets), len(targets))) if covariance else None
+    for rows, way in ((ahead, None), (back, reverse)):
+        if len(rows):
+            mean[rows], err[rows], block = (
+                walk_to_targets(walk, wi, targets[rows], walks, rng, min_order, covariance)
+                if way is None else way(rows, walks, covariance))
+            if covariance:
+                cov[np.ix_(rows, rows)] = block
+    return mean, err, cov
+
+
 def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
     """(side of wi: +1 / -1, theta_i deg from that side's normal, theta_o deg from +z,
     |phi_o - phi_i| deg) of direction pairs (n, 3): what an isotropic lobe depends on."""
@@ -83,7 +131,7 @@ def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
                      incidence_tol_deg: float = 0.05, exact_second: bool = True,
-                     covariance: bool = True
+                     covariance: bool = True, both_ways: bool = True
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, at the
     pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f, or None
@@ -94,7 +142,8 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     incidence agrees within incidence_tol_deg share one set of `walks` walks from
     (seed, side, group), so their errors are correlated; other pairs' are independent. Pairs
     the isotropic lobe cannot tell apart (the same theta_o and |phi_o - phi_i|; the same theta_o
-    in the group at normal incidence, taken as exactly normal) are computed once."""
+    in the group at normal incidence, taken as exactly normal) are computed once. both_ways
+    walks transmitted pairs in reverse (walk_both_ways), else all forward (walk_to_targets)."""
     from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
     from sim.bsdf.multiple_scattering.second_order import second_order, supports
 
@@ -112,9 +161,9 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
         azimuth = dphi[rows] if g else np.zeros(len(rows))  # none at normal incidence
         targets, index = _distinct_targets(theta_o[rows], azimuth)
         rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, g]))
-        mean, err, block = walk_to_targets(walk, start, targets, walks, rng,
-                                           min_order=3 if exact_second else 2,
-                                           covariance=covariance)
+        mean, err, block = (walk_both_ways if both_ways else walk_to_targets)(
+            walk, start, targets, walks, rng, min_order=3 if exact_second else 2,
+            covariance=covariance)
         if exact_second:
             mean = mean + second_order(walk.walker, start, targets)
         cos_o = np.abs(targets[index, 2])
@@ -209,9 +258,9 @@ class HigherOrderLobe:
                             np.cos(t)], axis=-1)
         rng = np.random.default_rng(
             np.random.SeedSequence([self.seed, side + 1, node, plane, int(lower)]))
-        mean, err, _ = walk_to_targets(self.walk, wi, targets, self.walks, rng,
-                                       min_order=3 if self.exact_second else 2,
-                                       covariance=False)
+        mean, err, _ = walk_both_ways(self.walk, wi, targets, self.walks, rng,
+                                      min_order=3 if self.exact_second else 2,
+                                      covariance=False)
         second = second_order(self.walk.walker, wi, targets) if self.exact_second else 0.0 * mean
         inverse = 1.0 / np.abs(targets[:, 2])  # no target on the horizon
         s = 0 if side > 0 else 1

@@ -81,15 +81,25 @@ def facet_fresnel(conductor, has_f, n_c, c, el, elm1):
 
 
 @inlined
-def phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area, ox, oy, oz):
-    """F(<w_in,h>) D(h) / (4 A(w_in)) (micro._reflect_phase), w_in = i of projected area
-    `area`, w_out = o."""
+def reflect_density(ndf, ax, ay, ix, iy, iz, area, ox, oy, oz):
+    """(D(h) / (4 A(w_in)), <w_in,h>): the reflected phase function from i (projected area
+    `area`) to o without its Fresnel factor, h the mirror facet between them ((0, 0) where none
+    reflects i into o)."""
     hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
     c = ix * hx + iy * hy + iz * hz
     if not (c > 0.0 and hz > 0.0 and area > 0.0):
+        return 0.0, 0.0
+    return normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area), c
+
+
+@inlined
+def phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz, area, ox, oy, oz):
+    """F(<w_in,h>) D(h) / (4 A(w_in)) (micro._reflect_phase), w_in = i of projected area
+    `area`, w_out = o."""
+    density, c = reflect_density(ndf, ax, ay, ix, iy, iz, area, ox, oy, oz)
+    if not density > 0.0:
         return 0.0
-    f = facet_fresnel(conductor, has_f, n_c, c, el, elm1)
-    return f * normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
+    return facet_fresnel(conductor, has_f, n_c, c, el, elm1) * density
 
 
 @scalar
@@ -103,15 +113,24 @@ def refraction_normal(ix, iy, iz, ox, oy, oz, el):
 
 
 @inlined
+def transmit_density(ndf, ax, ay, el, ix, iy, iz, area, ox, oy, oz):
+    """(D_visible(w_in,h) el^2 |<w_out,h>| / (<w_in,h> + el <w_out,h>)^2, <w_in,h>): the
+    transmitted phase function from i (projected area `area`) to o below without its (1 - F)
+    ((0, 0) where no facet refracts i into o)."""
+    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, el)
+    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
+        return 0.0, 0.0
+    denom = ci + el * co
+    d_visible = ci * normal_density(ndf, ax, ay, hx, hy, hz) / area
+    return d_visible * el * el * abs(co) / (denom * denom), ci
+
+
+@inlined
 def phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, ox, oy, oz):
     """(1-F) D_visible(w_in,h) el^2 |<w_out,h>| / (<w_in,h> + el <w_out,h>)^2, w_out below
     (MicroDielectric.phase_transmit); area is w_in's projected area."""
-    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, el)
-    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
-        return 0.0
-    denom = ci + el * co
-    d_visible = ci * normal_density(ndf, ax, ay, hx, hy, hz) / area
-    value = (1.0 - fresnel_toward(ci, el, elm1)) * d_visible * el * el * abs(co) / (denom * denom)
+    density, c = transmit_density(ndf, ax, ay, el, ix, iy, iz, area, ox, oy, oz)
+    value = (1.0 - fresnel_toward(c, el, elm1)) * density if density > 0.0 else 0.0
     return value if math.isfinite(value) else 0.0
 
 
