@@ -50,6 +50,7 @@ def test_walks_do_not_depend_on_the_batch(monkeypatch):
     wi = directions(20.0)
     one = keyed_walk_to_targets(walker, wi, TARGETS, 3000, np.random.default_rng(5))
     monkeypatch.setattr(keyed, "BATCH_SCORES", 256 * len(TARGETS))
+    monkeypatch.setattr(keyed, "MIN_BATCH_WALKS", 256)
     split = keyed_walk_to_targets(walker, wi, TARGETS, 3000, np.random.default_rng(5))
     for a, b in zip(one, split, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=0.0)

@@ -9,6 +9,7 @@ of the cost) scaled by those standard errors.
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 
@@ -17,17 +18,22 @@ import numpy as np
 from sim.bsdf.multiple_scattering import keyed_kernel, reciprocal_kernel
 from sim.bsdf.multiple_scattering.nee_kernel import surface_arguments
 from sim.bsdf.multiple_scattering.walk import ROULETTE
+from sim.cluster import usable_cores
 
 #: Least probability of either branch at a dielectric facet (keyed_kernel.split_scatter).
 SHARE = 0.25
 #: Walks whose per-walk products estimate the targets' correlation (the variances use all).
 CORRELATION_WALKS = 1 << 14
-#: Walk-target scores held at once (walks per batch = this // targets): 2 MB, so a batch's
-#: scores stay in cache between the kernel and the sums (32 MB batches took 4x as long).
+#: Walk-target scores held at once (walks per batch = this // targets, at least
+#: MIN_BATCH_WALKS): 2 MB, so a batch's scores stay in cache between the kernel and the sums
+#: (32 MB batches took 4x as long).
 BATCH_SCORES = 1 << 18
-#: Threads filling one batch (the kernels release the GIL; a walk's numbers depend only on its
-#: key and index, so the result is the same for any count), and the fewest walks per thread.
-THREADS = len(os.sched_getaffinity(0))
+MIN_BATCH_WALKS = 1 << 9
+#: Most threads filling one batch (the kernels release the GIL; a walk's numbers depend only
+#: on its key and index and the batches do not depend on the threads, so neither does the
+#: result), and the fewest walks per thread. Fewer where numba's thread count for the calling
+#: thread is lower (1 in a Dask task: sim.cluster's thread policy).
+THREADS = usable_cores()
 THREAD_MIN_WALKS = 1 << 8
 
 
@@ -61,25 +67,48 @@ class _Sums:
         head = self.head_total / self.n_products
         spread = self.products / self.n_products - np.outer(head, head)
         sd = np.sqrt(np.maximum(np.diag(spread), 0.0))
-        scale = np.where(sd > 0.0, 1.0 / np.where(sd > 0.0, sd, 1.0), 0.0)
-        correlation = np.clip(spread * np.outer(scale, scale), -1.0, 1.0)
+        seen = sd > np.finfo(np.float64).tiny  # 1 / sd finite (a subnormal sd is dark)
+        scale = np.where(seen, 1.0 / np.where(seen, sd, 1.0), 0.0)
+        # one side at a time: |spread_ij| <= sd_i sd_j, so neither product overflows where an
+        # all but dark target's sd is ~1e-170 (the outer product of the scales did, to nan)
+        correlation = spread * scale[:, None] * scale[None, :]
+        correlation = np.clip(0.5 * (correlation + correlation.T), -1.0, 1.0)
         np.fill_diagonal(correlation, 1.0)
         return correlation * np.outer(err, err)
 
 
+_POOL_LOCK = threading.Lock()
+
+
 @cache
-def _pool() -> ThreadPoolExecutor:
-    return ThreadPoolExecutor(THREADS, thread_name_prefix="gonio-walks")
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """The process's pool of `threads` walk threads (dropped in a forked child)."""
+    return ThreadPoolExecutor(threads, thread_name_prefix="gonio-walks")
+
+
+os.register_at_fork(after_in_child=_pool.cache_clear)
+
+
+def _threads() -> int:
+    """Threads for this call: THREADS, at most numba's thread count on the calling thread."""
+    try:
+        import numba
+    except ImportError:  # pragma: no cover - without the [fast] extra nothing is compiled
+        return 1
+    return max(1, min(THREADS, numba.get_num_threads()))
 
 
 def _fill(walk, first: int, value: np.ndarray) -> None:
-    """walk(first, value), its rows split between up to THREADS threads."""
-    parts = min(THREADS, len(value) // THREAD_MIN_WALKS)
+    """walk(first, value), its rows split between up to _threads() threads."""
+    threads = _threads()
+    parts = min(threads, len(value) // THREAD_MIN_WALKS)
     if parts < 2:
         walk(first, value)
         return
+    with _POOL_LOCK:
+        pool = _pool(threads)
     edges = np.linspace(0, len(value), parts + 1).astype(int)
-    for done in [_pool().submit(walk, first + lo, value[lo:hi])
+    for done in [pool.submit(walk, first + lo, value[lo:hi])
                  for lo, hi in zip(edges[:-1], edges[1:], strict=True)]:
         done.result()
 
@@ -89,7 +118,7 @@ def _walk_in_batches(walk, m: int, walks: int, covariance: bool
     """(mean, standard error, covariance or None) over `walks` walks of m scores each, walk(first,
     value) filling value (walks in this batch, m) from walk index first."""
     sums = _Sums(m, covariance)
-    batch = max(THREADS * THREAD_MIN_WALKS, BATCH_SCORES // max(m, 1))
+    batch = max(MIN_BATCH_WALKS, BATCH_SCORES // max(m, 1))
     while sums.n < walks:
         value = np.zeros((min(batch, walks - sums.n), m))
         _fill(walk, sums.n, value)
@@ -128,6 +157,9 @@ def keyed_walk_from_starts(walker, starts: np.ndarray, target: np.ndarray, walks
     starts = np.ascontiguousarray(starts, dtype=np.float64).reshape(-1, 3)
     if len(np.unique(starts[:, 2] > 0.0)) != 1:
         raise ValueError("keyed_walk_from_starts: the starts must all be on one side")
+    if min_order < 2:
+        raise ValueError(f"keyed_walk_from_starts: min_order must be >= 2 (its first event is "
+                         f"not scored), not {min_order}")
     key = np.uint64(int(rng.integers(0, 2**63)))
     target = np.ascontiguousarray(target, dtype=np.float64).reshape(3)
     args = surface_arguments(walker.slopes, walker.micro)

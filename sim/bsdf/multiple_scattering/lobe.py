@@ -79,25 +79,23 @@ def walk_both_ways(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
                    rng: np.random.Generator, min_order: int = 2, covariance: bool = True
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """walk_to_targets, with the targets across a dielectric (transmitted) walked the other
-    way where that is better: `walks` keyed walks from those targets towards wi shared by them
-    (keyed.keyed_walk_from_starts), f(wi, wo) = f(wo, wi) (n_o / n_i)^2 by reciprocity. Which
-    way each target goes is chosen by a pilot of walks // PILOT_SHARE walks each way (the
-    smaller standard error), walks the result does not use, so it stays unbiased. The reverse
-    walk wins in the transmitted wings at normal incidence (15-20x less variance, GGX 0.394
-    glass), where the forward scores are heavy-tailed, and loses at 60 degrees (2-15x more).
-    (Averaging both with the pilot's inverse-variance weights was worse at the worst point:
-    a pilot rarely sees the heavy tail, so it overrates the forward walk.) Conductors and
-    walkers without kernels walk forward only."""
+    way where that is better: keyed walks from them towards wi shared by them
+    (keyed.keyed_walk_from_starts), f(wi, wo) = f(wo, wi) (n_o / n_i)^2 by reciprocity. A
+    pilot of walks // PILOT_SHARE walks each way (at least PILOT_MIN_WALKS), not used in the
+    result (so the choice adds no bias), picks each target's way by the smaller standard
+    error. Conductors, wi on the horizon and walkers without kernels walk forward only."""
     targets = np.asarray(targets, np.float64).reshape(-1, 3)
     side = 1.0 if wi[2] >= 0.0 else -1.0
     across = np.flatnonzero(targets[:, 2] * side < 0.0)
     micro = walk.walker.micro
-    if not (len(across) and walk.walker.compiled and isinstance(micro, MicroDielectric)):
+    if not (len(across) and wi[2] != 0.0 and walk.walker.compiled
+            and isinstance(micro, MicroDielectric)):
         return walk_to_targets(walk, wi, targets, walks, rng, min_order, covariance)
     ratio = micro.eta ** 2 if side > 0.0 else micro.eta ** -2  # (n_o / n_i)^2
     scale = ratio * np.abs(targets[:, 2]) / abs(wi[2])
 
-    def reverse(rows: np.ndarray, n: int, cov: bool):
+    def reverse(rows: np.ndarray, n: int, cov: bool
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         back, err, block = keyed_walk_from_starts(walk.walker, targets[rows], wi, n, rng,
                                                   min_order, cov)
         s = scale[rows]

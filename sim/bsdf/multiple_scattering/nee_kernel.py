@@ -5,7 +5,8 @@ time, from the scalar formulas of sim.bsdf.primitives, for dielectric and conduc
 GGX or Beckmann slopes; Walker.next_event_all (numpy) is their reference. walk_kernel.py walks
 with them, and next_event_all scores many events towards many directions, which is what makes
 HigherOrderLobe's tables cheap. Serial on purpose: numba's parallel loop ran 8x slower on the
-shared 2-core machine under load (oversubscription).
+shared 2-core machine under load (oversubscription); keyed.py runs whole batches of walks on
+a few threads instead, within numba's thread count for the calling thread.
 
 A surface is passed as (ndf, ax, ay, conductor, eta, has_f, n_c): slope kernel and roughness,
 conductor or dielectric facets, eta = n_interior / n_exterior (dielectric), and the complex
