@@ -89,7 +89,8 @@ def _pool(threads: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(threads, thread_name_prefix="gonio-walks")
 
 
-os.register_at_fork(after_in_child=_pool.cache_clear)
+if hasattr(os, "register_at_fork"):  # POSIX; elsewhere nothing forks a child with the pool
+    os.register_at_fork(after_in_child=_pool.cache_clear)
 
 
 def _threads() -> int:

@@ -94,6 +94,10 @@ def walk_both_ways(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
     ratio = micro.eta ** 2 if side > 0.0 else micro.eta ** -2  # (n_o / n_i)^2
     scale = ratio * np.abs(targets[:, 2]) / abs(wi[2])
 
+    def forward(rows: np.ndarray, n: int, cov: bool
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        return walk_to_targets(walk, wi, targets[rows], n, rng, min_order, cov)
+
     def reverse(rows: np.ndarray, n: int, cov: bool
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         back, err, block = keyed_walk_from_starts(walk.walker, targets[rows], wi, n, rng,
@@ -102,16 +106,14 @@ def walk_both_ways(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
         return back * s, err * s, block * np.outer(s, s) if cov else None
 
     pilot = max(walks // PILOT_SHARE, PILOT_MIN_WALKS)
-    fwd_err = walk_to_targets(walk, wi, targets[across], pilot, rng, min_order, False)[1]
+    fwd_err = forward(across, pilot, False)[1]
     back = across[reverse(across, pilot, False)[1] < fwd_err]
     ahead = np.setdiff1d(np.arange(len(targets)), back)
     mean, err = np.zeros(len(targets)), np.zeros(len(targets))
     cov = np.zeros((len(targets), len(targets))) if covariance else None
-    for rows, way in ((ahead, None), (back, reverse)):
+    for rows, way in ((ahead, forward), (back, reverse)):
         if len(rows):
-            mean[rows], err[rows], block = (
-                walk_to_targets(walk, wi, targets[rows], walks, rng, min_order, covariance)
-                if way is None else way(rows, walks, covariance))
+            mean[rows], err[rows], block = way(rows, walks, covariance)
             if covariance:
                 cov[np.ix_(rows, rows)] = block
     return mean, err, cov
