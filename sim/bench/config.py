@@ -53,6 +53,7 @@ ALPHA_RANGE = (1e-4, 4.0)  # the roughness range sim.bsdf's extreme-case tests c
 #: Sample index: glasses and a conductor's real part (silver's is ~0.05); far below it,
 #: refraction ratios of order 1/eta overflow the bench's optics.
 ETA_RANGE = (0.01, 10.0)
+MAX_WALKS = 1 << 25  # [sim.sample] ms_walks: walks per multiple-scattering table build
 
 
 def _alpha(where: str, value: object) -> tuple[float, float]:
@@ -76,9 +77,10 @@ def _optional(check: Check) -> Check:
 
 
 def _walks(where: str, value: object) -> int:
-    # walks per incidence table (HigherOrderLobe); more than 2^22 would take minutes per table
-    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 1 << 22:
-        raise SimConfigError(f"{where}: must be an integer in [2, 4194304], got {value!r}")
+    # walks per incidence table (HigherOrderLobe): 2^25 takes minutes per table the first time
+    # on a machine (then read from the disk, plane_store); more would take an hour
+    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= MAX_WALKS:
+        raise SimConfigError(f"{where}: must be an integer in [2, {MAX_WALKS}], got {value!r}")
     return value
 
 

@@ -209,9 +209,11 @@ class HigherOrders:
 def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k: float,
                       walks: int, seed: int):
     """The HigherOrderLobe of a sample's microsurface (height-correlated masking), shared by
-    every bench of the process with the same parameters, so its tables are walked once."""
+    every bench of the process with the same parameters and kept on disk (plane_store), so
+    its tables are walked once per machine."""
     from sim.bsdf import RoughConductor, RoughDielectric
     from sim.bsdf.multiple_scattering import HigherOrderLobe
+    from sim.bsdf.multiple_scattering.plane_store import plane_store
 
     if kind == "conductor":
         parent = RoughConductor(distribution=distribution, alpha=alpha,
@@ -219,7 +221,9 @@ def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k:
     else:
         parent = RoughDielectric(distribution=distribution, alpha=alpha, eta=eta,
                                  masking="correlated")
-    return HigherOrderLobe(parent, walks=walks, seed=seed)
+    store = plane_store({"kind": kind, "distribution": distribution, "alpha": alpha,
+                         "eta": eta, "k": k, "walks": walks, "seed": seed})
+    return HigherOrderLobe(parent, walks=walks, seed=seed, store=store)
 
 
 @lru_cache(maxsize=4096)

@@ -178,7 +178,7 @@ def test_auto_follows_the_detector_noise_floor():
     ({"rms_height_nm": 20.0}, "correlation_length_um"),
     ({"rms_height_nm": -1.0, "correlation_length_um": 1.0}, "rms_height_nm"),
     ({"ms_walks": 0}, "ms_walks"),
-    ({"ms_walks": 1 << 23}, "ms_walks"),
+    ({"ms_walks": (1 << 25) + 1}, "ms_walks"),
     ({"distribution": "phong", "multiple_scattering": True}, "multiple_scattering"),
 ])
 def test_bad_switch_values_name_the_key(table, key):

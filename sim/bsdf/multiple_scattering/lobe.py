@@ -18,6 +18,7 @@ from scipy.interpolate import PchipInterpolator
 from sim.bsdf.multiple_scattering.keyed import keyed_walk_from_starts, keyed_walk_to_targets
 from sim.bsdf.multiple_scattering.lobe_kernel import lookup
 from sim.bsdf.multiple_scattering.micro import MicroDielectric
+from sim.bsdf.multiple_scattering.plane_store import PlaneStore
 
 #: Incidence angles (deg from the side's normal) walked; others interpolate linearly between.
 INCIDENCE_NODES_DEG = np.append(np.arange(0.0, 90.0, 5.0), 89.5)
@@ -203,7 +204,7 @@ class HigherOrderLobe:
 
     def __init__(self, parent, walks: int = WALKS, seed: int = 0,
                  theta_step_deg: float = THETA_STEP_DEG, phi_step_deg: float = PHI_STEP_DEG,
-                 exact_second: bool = True):
+                 exact_second: bool = True, store: PlaneStore | None = None):
         from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
         from sim.bsdf.multiple_scattering.second_order import supports
 
@@ -217,6 +218,7 @@ class HigherOrderLobe:
             if not (step > 0 and abs(span / step - round(span / step)) < 1e-9):
                 raise ValueError(f"{name}_step_deg must divide {span:g}, got {step!r}")
         self.walks, self.seed = int(walks), int(seed)
+        self.store = store
         self.exact_second = exact_second and supports(self.walk.walker)
         self.theta_step = float(theta_step_deg)
         self.phi_deg = np.linspace(0.0, 180.0, round(180.0 / phi_step_deg) + 1)
@@ -238,15 +240,35 @@ class HigherOrderLobe:
         through the normal, i.e. columns plane and last - plane (column 0 alone at normal
         incidence, where the lobe does not depend on the azimuth), for light arriving from the
         side's hemisphere (+1 above, -1 below) at INCIDENCE_NODES_DEG[node]: one walk set
-        scoring every target and one second_order call for all of them."""
-        from sim.bsdf.multiple_scattering.second_order import second_order
-
+        scoring every target and one second_order call for all of them; read from the store
+        instead where it holds the build."""
         last = len(self.phi_deg) - 1
         columns = [plane] if node == 0 or plane == last - plane else [plane, last - plane]
-        theta = np.radians(INCIDENCE_NODES_DEG[node])
-        wi = np.array([np.sin(theta), 0.0, side * np.cos(theta)])
         split = len(self.upper_deg)
         half = slice(split, None) if lower else slice(0, split)
+        s = 0 if side > 0 else 1
+        address = (s, node, plane, int(lower))
+        shape = (5, len(columns), len(self.polar_deg[half]))
+        built = None if self.store is None else self.store.load(address, shape)
+        if built is None:
+            built = self._walk_plane(side, node, plane, lower, columns)
+            if self.store is not None:
+                self.store.save(address, built)
+        for m, j in enumerate(columns):
+            for table, part in zip((self._f2, self._d2, self._f3, self._d3, self._e3), built,
+                                   strict=True):
+                table[s, node, j, half] = part[m]
+        self._built[address] = True
+
+    def _walk_plane(self, side: int, node: int, plane: int, lower: bool, columns: list[int]
+                    ) -> np.ndarray:
+        """build's walks: (order 2, its theta_o slope, orders >= 3, their slope, their standard
+        error) of f over the hemisphere's polar nodes, per column: (5, columns, nodes)."""
+        from sim.bsdf.multiple_scattering.second_order import second_order
+
+        theta = np.radians(INCIDENCE_NODES_DEG[node])
+        wi = np.array([np.sin(theta), 0.0, side * np.cos(theta)])
+        half = slice(len(self.upper_deg), None) if lower else slice(0, len(self.upper_deg))
         # column last - plane at azimuth 180 - phi is, mirrored about the plane of incidence,
         # the far side of the plane at phi; the poles are moved into that plane by 1e-6 deg so
         # second_order sees one plane
@@ -263,17 +285,16 @@ class HigherOrderLobe:
                                       covariance=False)
         second = second_order(self.walk.walker, wi, targets) if self.exact_second else 0.0 * mean
         inverse = 1.0 / np.abs(targets[:, 2])  # no target on the horizon
-        s = 0 if side > 0 else 1
-        for m, j in enumerate(columns):
+        out = np.empty((5, len(columns), len(polar)))
+        for m in range(len(columns)):
             part = slice(m * len(polar), (m + 1) * len(polar))
-            for table, slopes, f in ((self._f2, self._d2, second[part] * inverse[part]),
-                                     (self._f3, self._d3, mean[part] * inverse[part])):
-                table[s, node, j, half] = f
+            for row, f in ((0, second[part] * inverse[part]), (2, mean[part] * inverse[part])):
+                out[row, m] = f
                 with np.errstate(over="ignore"):  # secants near 1e-300: their slope is 0
-                    slopes[s, node, j, half] = PchipInterpolator(
-                        self.polar_deg[half], f).derivative()(self.polar_deg[half])
-            self._e3[s, node, j, half] = err[part] * inverse[part]
-        self._built[s, node, plane, int(lower)] = True
+                    out[row + 1, m] = PchipInterpolator(self.polar_deg[half], f).derivative()(
+                        self.polar_deg[half])
+            out[4, m] = err[part] * inverse[part]
+        return out
 
     def column(self, side: int, node: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(order 2, orders >= 3, their standard error) of f at polar_deg, azimuth phi_deg[j],
