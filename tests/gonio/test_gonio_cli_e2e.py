@@ -70,10 +70,10 @@ def test_readme_demo_under_a_minute(tmp_path):
     assert run_dir.parent == tmp_path
     run = open_run(run_dir)
     assert run.meta["status"] == "completed"
-    assert len(run) == run.meta["planned"] == 66
+    assert len(run) == run.meta["planned"] == 72
     png = (run_dir / "plot.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
-    assert f"completed, 66 readings stored; plot {run_dir / 'plot.png'}" in proc.stderr
+    assert f"completed, 72 readings stored; plot {run_dir / 'plot.png'}" in proc.stderr
 
 
 def test_export_csv_and_netcdf_round_trip(tmp_path):

@@ -40,12 +40,12 @@ def test_demo_plan_schedule():
     samples = r[r["kind"] == "sample"]
     assert len(samples) == len(plan.points) - sched.skipped == 58
     assert sched.skipped == 2  # theta_o = -theta_i looks into the source
-    # a dark and a beam reading first, after every 25 sample points, and at the end
+    # a dark and a beam reading first, after every 10 sample points, and at the end
     kinds = list(r["kind"])
     assert kinds[:2] == ["dark", "beam"] and kinds[-2:] == ["dark", "beam"]
     n_sample = np.cumsum(r["kind"] == "sample")
     extra = r["kind"] != "sample"
-    assert set(n_sample[extra]) == {0, 25, 50, 58}
+    assert set(n_sample[extra]) == {0, 10, 20, 30, 40, 50, 58}
     assert sched.estimate_s < sched.naive_estimate_s
     # every point measured exactly once
     assert sorted(samples["point"]) == sorted(set(samples["point"]))
@@ -171,8 +171,8 @@ def test_gonio_plan_cli_prints_summary_estimates_and_listing(capsys):
     assert main(["plan", str(EXAMPLES / "plans" / "demo.toml"), "--list"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0] == "plan 'demo' on instrument 'sim-serial'"
-    assert "readings: 66 (58 sample, 4 dark, 4 beam)" in out[2]
+    assert "readings: 72 (58 sample, 7 dark, 7 beam)" in out[2]
     estimate = next(line for line in out if "estimated duration" in line)
     assert "(as written: " in estimate
     table = out[out.index(next(x for x in out if x.lstrip().startswith("index"))) + 1:]
-    assert len(table) == 66 and table[0].split()[:2] == ["0", "dark"]
+    assert len(table) == 72 and table[0].split()[:2] == ["0", "dark"]
