@@ -132,7 +132,7 @@ def _incidence_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: int,
                      incidence_tol_deg: float = 0.05, exact_second: bool = True,
-                     covariance: bool = True, both_ways: bool = True
+                     covariance: bool = True, both_ways: bool = True, stream: int = 0
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= 2 of f (1/sr, no cosine) at the pairs (n, 3) of an isotropic surface, at the
     pairs themselves (no interpolation): (f, standard error, covariance (n, n) of f, or None
@@ -144,7 +144,9 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     (seed, side, group), so their errors are correlated; other pairs' are independent. Pairs
     the isotropic lobe cannot tell apart (the same theta_o and |phi_o - phi_i|; the same theta_o
     in the group at normal incidence, taken as exactly normal) are computed once. both_ways
-    walks transmitted pairs in reverse (walk_both_ways), else all forward (walk_to_targets)."""
+    walks transmitted pairs in reverse (walk_both_ways), else all forward (walk_to_targets).
+    stream > 0 draws walks independent of stream 0's (the walks of the same seed before
+    streams were offered) for the same seed: a second estimate to average with the first."""
     from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
     from sim.bsdf.multiple_scattering.second_order import second_order, supports
 
@@ -161,7 +163,8 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
         start = np.array([np.sin(theta), 0.0, s * np.cos(theta)])
         azimuth = dphi[rows] if g else np.zeros(len(rows))  # none at normal incidence
         targets, index = _distinct_targets(theta_o[rows], azimuth)
-        rng = np.random.default_rng(np.random.SeedSequence([seed, s + 1, g]))
+        rng = np.random.default_rng(np.random.SeedSequence(
+            [seed, s + 1, g] + ([stream] if stream else [])))
         mean, err, block = (walk_both_ways if both_ways else walk_to_targets)(
             walk, start, targets, walks, rng, min_order=3 if exact_second else 2,
             covariance=covariance)
