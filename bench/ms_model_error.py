@@ -8,7 +8,9 @@ in units of each point's data sigma: median and worst over points and --seeds se
 sequential shared-path walk (lobe.walk_to_targets(keyed=False)), the keyed, branch-split
 walk (keyed.keyed_walk_to_targets) towards every point, and the fit as it is: the distinct
 polar angles walked once (normal incidence: the lobe has no azimuth; lobe.higher_orders_at)
-and the term at the fit's result walked MS_CENTRE_WALKS times the table's walks (the refit).
+and the term at the fit's result walked MS_CENTRE_WALKS times the table's walks (the refit),
+both ways, then, as the fit has it now (calibration.fit.refit_orders), its points whose error
+exceeds MS_REWALK_SIGMA of their data sigma walked again.
 "walks": those behind the estimate at the truth alpha; "table s": CPU time (and "wall s", on
 keyed.THREADS threads) of the walks of one fit (calibration.fit._OrdersTable: 7 alphas 0.1
 apart in log alpha, the covariance at the centre one, forward; and the refit's term, both ways
@@ -32,12 +34,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from calibration.fit import MS_CENTRE_WALKS  # noqa: E402
+from calibration.fit import MS_CENTRE_WALKS, refit_orders  # noqa: E402
 from calibration.pipeline import reduce_run  # noqa: E402
 from sim.bsdf import RoughDielectric  # noqa: E402
 from sim.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
 from sim.bsdf.multiple_scattering.lobe import walk_both_ways, walk_to_targets  # noqa: E402
 from sim.bsdf.multiple_scattering.model import RandomWalkBSDF  # noqa: E402
+from sim.bsdf.multiple_scattering.second_order import second_order  # noqa: E402
 
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
 #: (label, keyed, FitOptions.ms_walks, walks of the refit at the result / ms_walks (1: no
@@ -45,7 +48,8 @@ SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
 ESTIMATES = (("sequential walk", False, 1 << 15, 1, False),
              ("keyed, split", True, 1 << 17, 1, False),
              ("distinct, refit x16", True, 1 << 17, MS_CENTRE_WALKS, True),
-             ("both ways, refit x16 (now)", "both", 1 << 17, MS_CENTRE_WALKS, True))
+             ("both ways, refit x16", "both", 1 << 17, MS_CENTRE_WALKS, True),
+             ("refit x16 + rewalk (now)", "refit", 1 << 17, MS_CENTRE_WALKS, True))
 REFERENCE_WALKS = 1 << 25
 #: The fit table's alphas (calibration.fit: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
 TABLE_NODES, TABLE_STEP = 7, 0.1
@@ -103,15 +107,27 @@ def orders3(walk, wo: np.ndarray, walks: int, keyed: bool | str, seed: int, dist
     return (mean[index], err[index]) if distinct else (mean, err)
 
 
+def refitted3(alpha: float, wo: np.ndarray, walks: int, seed: int, sigma: np.ndarray
+              ) -> np.ndarray:
+    """Orders >= 3 of the fit's refitted term at normal incidence (calibration.fit.refit_orders:
+    walked both ways, the points above MS_REWALK_SIGMA of their sigma walked again), 1/sr."""
+    normal = np.broadcast_to([0.0, 0.0, 1.0], wo.shape)
+    value = refit_orders("ggx", alpha, 1.51, None, normal, wo, walks, seed, sigma)[0]
+    return value - second_order(glass(alpha).walker, normal[0], wo) / np.abs(wo[:, 2])
+
+
 def table_seconds(alpha: float, wo: np.ndarray, walks: int, refit: int, keyed: bool | str,
-                  distinct: bool) -> tuple[float, float]:
+                  distinct: bool, sigma: np.ndarray) -> tuple[float, float]:
     """(CPU, wall) seconds of one fit's walks about alpha: the table (covariance at the centre)
-    and, with refit > 1, the term at alpha with refit x walks (covariance too)."""
+    and, with refit > 1, the term at alpha with refit x walks (covariance too; keyed "refit":
+    the fit's refit_orders)."""
     start, wall = time.process_time(), time.perf_counter()
     for node in range(TABLE_NODES):  # the table walks forward; only the refit both ways
         orders3(glass(alpha * np.exp((node - TABLE_NODES // 2) * TABLE_STEP)), wo, walks,
                 keyed is not False, 0, distinct, covariance=node == TABLE_NODES // 2)
-    if refit > 1:
+    if keyed == "refit":
+        refitted3(alpha, wo, walks * refit, 0, sigma)
+    elif refit > 1:
         orders3(glass(alpha), wo, walks * refit, keyed, 0, distinct, covariance=True)
     return time.process_time() - start, time.perf_counter() - wall
 
@@ -136,9 +152,10 @@ def main() -> None:
                   f"{np.median(ref_err / sigma):7.2f} {np.max(ref_err / sigma):7.2f}")
             for label, keyed, walks, centre, distinct in ESTIMATES:
                 dev = np.concatenate([
-                    np.abs(orders3(walk, wo, walks * centre, keyed, seed, distinct)[0] - ref)
-                    / sigma for seed in range(args.seeds)])
-                cpu, wall = table_seconds(alpha, wo, walks, centre, keyed, distinct)
+                    np.abs((refitted3(alpha, wo, walks * centre, seed, sigma) if keyed == "refit"
+                            else orders3(walk, wo, walks * centre, keyed, seed, distinct)[0])
+                           - ref) / sigma for seed in range(args.seeds)])
+                cpu, wall = table_seconds(alpha, wo, walks, centre, keyed, distinct, sigma)
                 print(f"{name:>13} {label:>26} {walks * centre:>8} {cpu:7.2f} {wall:7.2f} "
                       f"{np.median(dev):7.2f} {np.max(dev):7.2f}")
 
