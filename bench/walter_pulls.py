@@ -42,6 +42,9 @@ def pull(alpha: float, seed: int, bench_walks: int, tmp: Path) -> float:
                tmp / "runs")
     _, result = fit_run(run, FitOptions(distributions=("beckmann", "ggx"),
                                         multiple_scattering=True, ms_seed=seed))
+    if result.distribution != "ggx":
+        raise SystemExit(f"bench seed {seed}, alpha {alpha}: the fit preferred "
+                         f"{result.distribution}, so its alpha is not GGX's")
     value, sigma = result.param("alpha")
     return (value - alpha) / sigma
 

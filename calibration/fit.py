@@ -40,9 +40,9 @@ MS_TABLE_NODES = 7
 MS_TABLE_RECENTRE = 3
 MS_CENTRE_WALKS = 16
 MS_CENTRE_REACH = 0.25
-# Points whose refitted term's error exceeds REWALK_SIGMA of their data sigma are walked again
-# with REWALK_WALKS times the refit's walks (the transmitted wings at normal incidence): the
-# worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run for +0.9 s a fit.
+# Points whose refitted term's error exceeds MS_REWALK_SIGMA of their data sigma are walked
+# again with MS_REWALK_WALKS times the refit's walks (the transmitted wings at normal incidence):
+# the worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run, +0.9 s a fit.
 MS_REWALK_SIGMA = 0.6
 MS_REWALK_WALKS = 1
 MS_WALKS_MAX = 1 << 22
@@ -411,10 +411,14 @@ def refit_orders(distribution: str, alpha: float, eta: float, k: float | None,
     """The fitted model's orders >= 2 at the pairs, their error and covariance: walked_orders
     with `walks` walks (transmitted pairs in reverse where better), then the pairs whose error
     exceeds MS_REWALK_SIGMA of their data sigma walked again (stream 1) with MS_REWALK_WALKS
-    times as many, the two estimates there averaged in proportion to their walks."""
+    times as many, the two estimates there averaged in proportion to their walks (fixed
+    weights: the second estimate is independent of the choice, which rests on the first's own
+    error estimate). Pairs the walk cannot tell apart (the same target, so the same first
+    estimate) are walked again together, so they keep one value."""
     value, error, cov = walked_orders(distribution, alpha, eta, k, wi, wo, walks, seed,
                                       covariance=True)
-    again = np.flatnonzero(error > MS_REWALK_SIGMA * sigma)
+    chosen = error > MS_REWALK_SIGMA * sigma
+    again = np.flatnonzero(np.isin(value, value[chosen]) & np.isin(error, error[chosen]))
     if len(again):
         more, more_err, more_cov = walked_orders(distribution, alpha, eta, k, wi[again],
                                                  wo[again], walks * MS_REWALK_WALKS, seed,

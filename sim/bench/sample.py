@@ -213,7 +213,6 @@ def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k:
     its tables are walked once per machine."""
     from sim.bsdf import RoughConductor, RoughDielectric
     from sim.bsdf.multiple_scattering import HigherOrderLobe
-    from sim.bsdf.multiple_scattering.plane_store import plane_store
 
     if kind == "conductor":
         parent = RoughConductor(distribution=distribution, alpha=alpha,
@@ -221,9 +220,9 @@ def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k:
     else:
         parent = RoughDielectric(distribution=distribution, alpha=alpha, eta=eta,
                                  masking="correlated")
-    store = plane_store({"kind": kind, "distribution": distribution, "alpha": alpha,
-                         "eta": eta, "k": k, "walks": walks, "seed": seed})
-    return HigherOrderLobe(parent, walks=walks, seed=seed, store=store)
+    return HigherOrderLobe(parent, walks=walks, seed=seed, cache_as={
+        "kind": kind, "distribution": distribution, "alpha": alpha, "eta": eta, "k": k,
+        "masking": "correlated"})
 
 
 @lru_cache(maxsize=4096)

@@ -2,56 +2,80 @@
 by everything the walk depends on, walked again where a file is torn or of another shape, and
 a disk that refuses the file (a real file-size limit) leaves the build whole in memory."""
 
+import io
 import json
+import os
 import resource
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sim.bench.sample import higher_order_lobe
 from sim.bsdf import RoughDielectric
-from sim.bsdf.multiple_scattering import HigherOrderLobe
-from sim.bsdf.multiple_scattering.plane_store import PlaneStore, cache_root, plane_store
+from sim.bsdf.multiple_scattering import HigherOrderLobe, plane_store
+from sim.bsdf.multiple_scattering.plane_store import PlaneStore, cache_root, code_digest
 
 GLASS = RoughDielectric("ggx", 0.5, 1.51, masking="correlated")
-DESCRIPTION = {"distribution": "ggx", "alpha": 0.5, "eta": 1.51, "walks": 512, "seed": 4}
+PARENT = {"distribution": "ggx", "alpha": 0.5, "eta": 1.51, "masking": "correlated"}
 WI = np.array([np.sin(np.radians(30.0)), 0.0, np.cos(np.radians(30.0))])
 WO = np.array([[0.5, 0.0, -0.866], [-0.3, 0.0, -0.954], [0.2, 0.0, 0.98]])
 
 
-def lobe(store):
-    return HigherOrderLobe(GLASS, walks=512, seed=4, store=store)
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """GONIO_CACHE_DIR pointed at an empty directory; its planes' folder."""
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path))
+    return tmp_path / "ms-planes"
 
 
-def test_a_later_lobe_reads_the_planes_back(tmp_path):
-    store = PlaneStore(DESCRIPTION, tmp_path)
-    first = lobe(store).estimate(WI, WO)
-    files = sorted(store.folder.glob("*.npy"))
-    assert len(files) == 2 and not list(store.folder.glob("*.partial"))  # both hemispheres
-    np.testing.assert_array_equal(lobe(None).estimate(WI, WO), first)  # as walked in memory
-    np.testing.assert_array_equal(lobe(PlaneStore(DESCRIPTION, tmp_path)).estimate(WI, WO),
-                                  first)
+def lobe(cached: bool = True, **kwargs):
+    return HigherOrderLobe(GLASS, **{"walks": 512, "seed": 4, **kwargs},
+                           cache_as=PARENT if cached else None)
+
+
+def test_a_later_lobe_reads_the_planes_back(cache):
+    first = lobe().estimate(WI, WO)
+    files = sorted(cache.glob("*.npy"))
+    assert len(files) == 2 and not list(cache.glob("*.partial"))  # both hemispheres
+    np.testing.assert_array_equal(lobe(cached=False).estimate(WI, WO), first)  # as walked
+    np.testing.assert_array_equal(lobe().estimate(WI, WO), first)
     # it is the file that is read: a changed file changes what a new lobe gives
     plane = np.load(files[0])
     np.save(files[0], 2.0 * plane)
-    assert not np.array_equal(lobe(PlaneStore(DESCRIPTION, tmp_path)).estimate(WI, WO)[0],
-                              first[0])
+    assert not np.array_equal(lobe().estimate(WI, WO)[0], first[0])
 
 
-def test_every_parameter_and_the_code_name_the_file(tmp_path):
-    keys = {PlaneStore({**DESCRIPTION, name: value}, tmp_path).key
-            for name, value in [("walks", 512), ("walks", 1024), ("seed", 5), ("alpha", 0.5001),
-                                ("eta", 1.5)]}
-    assert len(keys) == 5
+def test_everything_the_values_depend_on_names_the_files(cache):
+    """The lobe's walks, seed, grid and order-2 switch and every parent parameter (and the
+    code, through code_digest) give the files' key: a lobe never reads another's tables."""
+    keys = {lobe(**kwargs).store.key for kwargs in (
+        {}, {"walks": 1024}, {"seed": 5}, {"theta_step_deg": 5.0}, {"phi_step_deg": 30.0},
+        {"exact_second": False})}
+    for name, value in (("alpha", 0.5001), ("eta", 1.5), ("distribution", "beckmann"),
+                        ("masking", "separable")):
+        keys.add(HigherOrderLobe(GLASS, walks=512, seed=4,
+                                 cache_as={**PARENT, name: value}).store.key)
+    assert len(keys) == 10
+    assert PlaneStore({"a": 1}, cache).key == PlaneStore({"a": 1}, cache).key
 
 
-@pytest.mark.parametrize("damage", ["truncated", "other shape", "not finite", "not numpy"])
-def test_a_damaged_file_is_walked_again_and_replaced(tmp_path, damage):
-    store = PlaneStore(DESCRIPTION, tmp_path)
-    expected = lobe(store).estimate(WI, WO)
-    path = sorted(store.folder.glob("*.npy"))[0]
+def test_other_code_names_other_files(cache, monkeypatch):
+    """code_digest: sim.bsdf's sources and numpy's, scipy's and numba's versions; a change of
+    any gives other files."""
+    assert code_digest().count("-") == 3 and np.__version__ in code_digest()
+    before = PlaneStore(PARENT, cache).key
+    monkeypatch.setattr(plane_store, "code_digest", lambda: "edited-sources")
+    assert PlaneStore(PARENT, cache).key != before
+
+
+@pytest.mark.parametrize("damage", ["truncated", "other shape", "not finite", "not numpy",
+                                    "a zip archive"])
+def test_a_damaged_file_is_walked_again_and_replaced(cache, damage):
+    expected = lobe().estimate(WI, WO)
+    path = sorted(cache.glob("*.npy"))[0]
     good = path.read_bytes()
     if damage == "truncated":
         path.write_bytes(good[: len(good) // 2])
@@ -59,10 +83,12 @@ def test_a_damaged_file_is_walked_again_and_replaced(tmp_path, damage):
         np.save(path, np.zeros((5, 3)))
     elif damage == "not finite":
         np.save(path, np.full(np.load(path).shape, np.nan))
-    else:
+    elif damage == "not numpy":
         path.write_text("not a plane")
-    np.testing.assert_array_equal(lobe(PlaneStore(DESCRIPTION, tmp_path)).estimate(WI, WO),
-                                  expected)
+    else:
+        with path.open("wb") as handle:
+            np.savez(handle, plane=np.load(io.BytesIO(good)))
+    np.testing.assert_array_equal(lobe().estimate(WI, WO), expected)
     assert path.read_bytes() == good
 
 
@@ -74,9 +100,8 @@ from sim.bsdf import RoughDielectric
 from sim.bsdf.multiple_scattering import HigherOrderLobe
 from sim.bsdf.multiple_scattering.plane_store import PlaneStore
 glass = RoughDielectric("ggx", 0.5, 1.51, masking="correlated")
-store = PlaneStore(json.loads(sys.argv[1]), Path(sys.argv[2]))
-wi, wo = np.array(json.loads(sys.argv[3])), np.array(json.loads(sys.argv[4]))
-values = HigherOrderLobe(glass, 512, 4, store=store).estimate(wi, wo)
+wi, wo = np.array(json.loads(sys.argv[2])), np.array(json.loads(sys.argv[3]))
+values = HigherOrderLobe(glass, 512, 4, cache_as=json.loads(sys.argv[1])).estimate(wi, wo)
 print(json.dumps([v.tolist() for v in values]))
 """
 
@@ -88,12 +113,13 @@ def test_a_disk_that_refuses_the_file_leaves_the_build_in_memory(tmp_path):
     def limit() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (100, 100))
 
-    done = subprocess.run([sys.executable, "-c", SCRIPT, json.dumps(DESCRIPTION), str(tmp_path),
+    done = subprocess.run([sys.executable, "-c", SCRIPT, json.dumps(PARENT),
                            json.dumps(WI.tolist()), json.dumps(WO.tolist())],
-                          capture_output=True, text=True, timeout=300, preexec_fn=limit)
+                          capture_output=True, text=True, timeout=300, preexec_fn=limit,
+                          env={**os.environ, "GONIO_CACHE_DIR": str(tmp_path)})
     assert done.returncode == 0, done.stderr
     np.testing.assert_array_equal(np.array(json.loads(done.stdout)),
-                                  np.array(lobe(None).estimate(WI, WO)))
+                                  np.array(lobe(cached=False).estimate(WI, WO)))
     assert [p.name for p in tmp_path.rglob("*") if p.is_file()] == []
 
 
@@ -101,10 +127,25 @@ def test_the_cache_directory_follows_the_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "here"))
     assert cache_root() == tmp_path / "here"
     monkeypatch.setenv("GONIO_CACHE_DIR", "off")
-    assert cache_root() is None and plane_store(DESCRIPTION) is None
+    assert cache_root() is None and lobe().store is None
     monkeypatch.delenv("GONIO_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert cache_root() == tmp_path / "xdg" / "gonio"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/dir")  # ignored, as the XDG spec says
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert cache_root() == tmp_path / "home" / ".cache" / "gonio"
+
+
+def test_no_home_directory_means_no_cache(monkeypatch):
+    """A process with no HOME and no passwd entry (a container's unknown user): Path.home()
+    raises, and the lobe keeps its tables in memory."""
+    def no_home() -> Path:
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.delenv("GONIO_CACHE_DIR", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setattr(Path, "home", staticmethod(no_home))
+    assert cache_root() is None and lobe().store is None
 
 
 def test_the_bench_keeps_its_tables_in_the_cache_directory(tmp_path, monkeypatch):
@@ -116,4 +157,4 @@ def test_the_bench_keeps_its_tables_in_the_cache_directory(tmp_path, monkeypatch
     finally:
         higher_order_lobe.cache_clear()
     assert len(list((tmp_path / "ms-planes").glob("*.npy"))) == 2
-    np.testing.assert_array_equal(values, lobe(None).estimate(WI, WO))
+    np.testing.assert_array_equal(values, lobe(cached=False).estimate(WI, WO))

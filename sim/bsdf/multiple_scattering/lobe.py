@@ -12,13 +12,15 @@ microsurfaces only (the lobe then depends on theta_i, theta_o and phi_o - phi_i)
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from sim.bsdf.multiple_scattering.keyed import keyed_walk_from_starts, keyed_walk_to_targets
 from sim.bsdf.multiple_scattering.lobe_kernel import lookup
 from sim.bsdf.multiple_scattering.micro import MicroDielectric
-from sim.bsdf.multiple_scattering.plane_store import PlaneStore
+from sim.bsdf.multiple_scattering.plane_store import plane_store
 
 #: Incidence angles (deg from the side's normal) walked; others interpolate linearly between.
 INCIDENCE_NODES_DEG = np.append(np.arange(0.0, 90.0, 5.0), 89.5)
@@ -203,11 +205,14 @@ class HigherOrderLobe:
     plane of incidence over all polar angles of wo; a plane through the normal holds columns j
     and last - j, whose targets in one hemisphere of wo one walk set and one second_order call
     build together: an in-plane scan of one lobe (azimuths 0 and 180) is one build.
+    cache_as: the parent's parameters (whatever sets its values), under which each build is
+    kept on disk with the lobe's own walks, seed and grid (plane_store) and read back by later
+    lobes; None: in memory only.
     """
 
     def __init__(self, parent, walks: int = WALKS, seed: int = 0,
                  theta_step_deg: float = THETA_STEP_DEG, phi_step_deg: float = PHI_STEP_DEG,
-                 exact_second: bool = True, store: PlaneStore | None = None):
+                 exact_second: bool = True, cache_as: Mapping[str, object] | None = None):
         from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
         from sim.bsdf.multiple_scattering.second_order import supports
 
@@ -221,9 +226,12 @@ class HigherOrderLobe:
             if not (step > 0 and abs(span / step - round(span / step)) < 1e-9):
                 raise ValueError(f"{name}_step_deg must divide {span:g}, got {step!r}")
         self.walks, self.seed = int(walks), int(seed)
-        self.store = store
         self.exact_second = exact_second and supports(self.walk.walker)
         self.theta_step = float(theta_step_deg)
+        self.store = None if cache_as is None else plane_store({
+            "parent": dict(cache_as), "model": type(parent).__name__, "walks": self.walks,
+            "seed": self.seed, "theta_step_deg": self.theta_step,
+            "phi_step_deg": float(phi_step_deg), "exact_second": bool(self.exact_second)})
         self.phi_deg = np.linspace(0.0, 180.0, round(180.0 / phi_step_deg) + 1)
         grid = np.linspace(0.0, 90.0, round(90.0 / theta_step_deg) + 1)[:-1]
         near = 90.0 - np.asarray(HORIZON_NODES_DEG)

@@ -28,18 +28,27 @@ OFF = ("", "0", "off", "none")
 
 def cache_root() -> Path | None:
     """The cache directory ($GONIO_CACHE_DIR, $XDG_CACHE_HOME/gonio, ~/.cache/gonio), or None
-    when GONIO_CACHE_DIR turns it off."""
+    when GONIO_CACHE_DIR turns it off or no home directory can be found (no HOME and no passwd
+    entry, as in a container run as an unknown user)."""
     chosen = os.environ.get("GONIO_CACHE_DIR")
-    if chosen is not None:
-        return None if chosen.strip().lower() in OFF else Path(chosen).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "gonio"
+    try:
+        if chosen is not None:
+            return None if chosen.strip().lower() in OFF else Path(chosen).expanduser()
+        if xdg and Path(xdg).is_absolute():  # the XDG spec ignores a relative one
+            return Path(xdg) / "gonio"
+        return Path.home() / ".cache" / "gonio"
+    except (RuntimeError, KeyError):
+        return None
 
 
 @lru_cache(maxsize=1)
 def code_digest() -> str:
     """What the walked values depend on besides their parameters: every source file of
-    sim.bsdf (the walks, order 2's quadrature, the facets) and the numpy and numba versions."""
+    sim.bsdf (the walks, order 2's quadrature, the facets) and the numpy, scipy (the tables'
+    PCHIP slopes) and numba versions."""
+    import scipy
+
     from sim.kernel_cache import sources_digest
 
     try:
@@ -48,12 +57,14 @@ def code_digest() -> str:
     except ImportError:
         numba_version = "none"
     root = Path(__file__).resolve().parents[1]
-    return f"{sources_digest(root)}-{np.__version__}-{numba_version}"
+    return f"{sources_digest(root)}-{np.__version__}-{scipy.__version__}-{numba_version}"
 
 
 class PlaneStore:
-    """Files of one lobe's planes under root, named by a digest of `description` (the lobe's
-    parameters, walks and seed) and code_digest()."""
+    """Files of one lobe's planes under root, named by a digest of `description` (everything
+    the lobe's values depend on: HigherOrderLobe gives its parent's parameters, its walks,
+    seed and grid) and code_digest(). Files of earlier code stay until deleted (a few kB a
+    plane)."""
 
     def __init__(self, description: Mapping[str, object], root: Path):
         text = json.dumps({**description, "code": code_digest()}, sort_keys=True)
@@ -65,10 +76,14 @@ class PlaneStore:
         return self.folder / f"{self.key}-{'-'.join(map(str, address))}.npy"
 
     def load(self, address: tuple[int, ...], shape: tuple[int, ...]) -> np.ndarray | None:
-        """The stored plane if it is whole (float64 of this shape, finite), else None."""
+        """The stored plane if it is whole (a float64 array of this shape, finite), else None:
+        whatever a damaged file makes numpy raise or return is a miss."""
         try:
             stored = np.load(self.path(address), allow_pickle=False)
-        except (OSError, ValueError, EOFError):
+        except Exception:  # noqa: BLE001 - any unreadable file is a miss; the plane is walked
+            return None
+        if not isinstance(stored, np.ndarray):  # a zip archive (np.load gives an NpzFile)
+            stored.close()
             return None
         if stored.dtype != np.float64 or stored.shape != shape or not np.all(np.isfinite(stored)):
             return None
@@ -87,9 +102,10 @@ class PlaneStore:
             os.replace(partial, self.path(address))
             return True
         except OSError:
+            return False
+        finally:  # also on an interrupt: no partial file is left (after the rename there is none)
             if partial is not None:
                 partial.unlink(missing_ok=True)
-            return False
 
 
 def plane_store(description: Mapping[str, object]) -> PlaneStore | None:
