@@ -117,10 +117,17 @@ def gonio_cli(*args, timeout: float = 120.0, input: str | None = None, cwd=None
 
 
 def start_gonio(*args, stdin=subprocess.DEVNULL) -> subprocess.Popen:
-    """Start `python -m gonio_cli ARGS` in the background (text output on pipes)."""
+    """Start `python -m gonio_cli ARGS` in the background (text output on pipes), SIGHUP at
+    its default as from a terminal: a test run under nohup would otherwise hand the child an
+    ignored SIGHUP, which gonio keeps ignored."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.Popen([sys.executable, "-m", "gonio_cli", *map(str, args)], stdin=stdin,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_hangup_by_default)
+
+
+def _hangup_by_default() -> None:
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 
 def wait_for_lines(runs, n: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
