@@ -42,7 +42,7 @@ MS_CENTRE_WALKS = 16
 MS_CENTRE_REACH = 0.25
 # Points whose refitted term's error exceeds MS_REWALK_SIGMA of their data sigma are walked
 # again with MS_REWALK_WALKS times the refit's walks (the transmitted wings at normal incidence):
-# the worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run, +0.9 s a fit.
+# the worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run, +0.8-1.7 s a fit.
 MS_REWALK_SIGMA = 0.6
 MS_REWALK_WALKS = 1
 MS_WALKS_MAX = 1 << 22

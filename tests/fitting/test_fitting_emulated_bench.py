@@ -67,11 +67,11 @@ def narrow_lobe_grids() -> list[dict]:
 #: (value - truth) / sigma of alpha over bench seeds (fit seed = bench seed): mean (the
 #: estimator's bias) and spread. The anti-glare fit sits low (seeds 1-16, cause not traced:
 #: single scattering, -0.002 % at most). The rough glasses, the bench's tables at 2^24 walks
-#: and the fit as now (bench/walter_pulls.py, seeds 1-4): +0.05 +- 0.47 and +0.37 +- 0.58,
-#: no bias beyond its own error (spread / 2), where at 2^21 walks they were +0.20 +- 0.93
-#: and +0.66 +- 0.91 (seeds 1-8 in an earlier run: +0.57 +- 0.79 and +0.49 +- 1.01, the
-#: bias this test allowed for). The tolerance is ~3 spreads about the bias.
-PULL_BIAS = {0.023: -1.52, 0.394: 0.0, 0.553: 0.0}
+#: and the fit as now (bench/walter_pulls.py, seeds 1-4): +0.05 +- 0.47 and +0.37 +- 0.58
+#: (each mean's own error about spread / 2), where at 2^21 walks they were +0.20 +- 0.93 and
+#: +0.66 +- 0.91 (seeds 1-8 in an earlier run: +0.57 +- 0.79 and +0.49 +- 1.01, the offsets
+#: this test allowed before). The tolerance is ~3-4 spreads about the bias.
+PULL_BIAS = {0.023: -1.52, 0.394: 0.05, 0.553: 0.37}
 PULL_TOLERANCE = {0.023: 3.0, 0.394: 2.0, 0.553: 2.0}  # spreads 0.93, 0.47, 0.58
 
 
