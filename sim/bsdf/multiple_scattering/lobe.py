@@ -255,8 +255,7 @@ class HigherOrderLobe:
         instead where it holds the build."""
         last = len(self.phi_deg) - 1
         columns = [plane] if node == 0 or plane == last - plane else [plane, last - plane]
-        split = len(self.upper_deg)
-        half = slice(split, None) if lower else slice(0, split)
+        half = self._hemisphere(lower)
         s = 0 if side > 0 else 1
         address = (s, node, plane, int(lower))
         shape = (5, len(columns), len(self.polar_deg[half]))
@@ -271,6 +270,11 @@ class HigherOrderLobe:
                 table[s, node, j, half] = part[m]
         self._built[address] = True
 
+    def _hemisphere(self, lower: bool) -> slice:
+        """The polar nodes (of polar_deg) above the horizon, or below it."""
+        split = len(self.upper_deg)
+        return slice(split, None) if lower else slice(0, split)
+
     def _walk_plane(self, side: int, node: int, plane: int, lower: bool, columns: list[int]
                     ) -> np.ndarray:
         """build's walks: (order 2, its theta_o slope, orders >= 3, their slope, their standard
@@ -279,7 +283,7 @@ class HigherOrderLobe:
 
         theta = np.radians(INCIDENCE_NODES_DEG[node])
         wi = np.array([np.sin(theta), 0.0, side * np.cos(theta)])
-        half = slice(len(self.upper_deg), None) if lower else slice(0, len(self.upper_deg))
+        half = self._hemisphere(lower)
         # column last - plane at azimuth 180 - phi is, mirrored about the plane of incidence,
         # the far side of the plane at phi; the poles are moved into that plane by 1e-6 deg so
         # second_order sees one plane
