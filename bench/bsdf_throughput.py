@@ -19,8 +19,8 @@ import time
 
 import numpy as np
 
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.kernels import AVAILABLE
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.kernels import AVAILABLE
 
 N = 1_000_000
 ALPHA, ETA = 0.3, 1.51

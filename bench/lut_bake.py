@@ -1,6 +1,6 @@
 """Bake time of the 64x64x32 transmission split-sum table, then the error-against-run-time table.
 
-Bake time, all in one run on the same spec: the numpy reference path of sim.bsdf (no compiled
+Bake time, all in one run on the same spec: the numpy reference path of model.bsdf (no compiled
 kernels: what the bake did before it grouped entries by roughness), then the in-process bake
 (Dask threads, one per core, kernels single-threaded in each task: the baseline), a 1-worker
 and a 2-worker local Dask cluster (workers x threads = cores), each with its speed-up over
@@ -10,7 +10,7 @@ cannot be faster: its speed-up measures what the process boundary costs (seriali
 and results, one scheduler), not added compute. A cluster pays off with more machines.
 
 Thread policy, on a smaller table (median of 3 interleaved runs, wall and CPU seconds): the
-policy of sim.cluster (Dask threads own the cores, kernels one thread per task) against
+policy of model.cluster (Dask threads own the cores, kernels one thread per task) against
 numba owning the cores (a plain loop over tiles in this thread, kernels on every core) and
 against no policy (Dask threads x numba threads, oversubscribed); all must give equal bits.
 
@@ -37,12 +37,12 @@ import time
 
 import numpy as np
 
-from sim.cluster import dask_client, describe, usable_cores
-from sim.lut import Table, TableSpec, bake
-from sim.lut.bake import grid_points, integrate_tile, integrate_tiles, tile_arguments
-from sim.lut.focusing import approximation_error
-from sim.lut.model import ModelEstimator
-from sim.lut.validate import (
+from model.cluster import dask_client, describe, usable_cores
+from model.lut import Table, TableSpec, bake
+from model.lut.bake import grid_points, integrate_tile, integrate_tiles, tile_arguments
+from model.lut.focusing import approximation_error
+from model.lut.model import ModelEstimator
+from model.lut.validate import (
     TIR_BAND,
     chosen_entries,
     edge_split,

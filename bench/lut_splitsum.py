@@ -2,7 +2,7 @@
 albedo-only baseline, and a picture of split sum against brute force.
 
 At random (N.V, alpha, eta), uniform in N.V and alpha and in log eta over the tables' domain,
-the brute-force radiance through gonio's model in sim.lut.splitsum's procedural environment
+the brute-force radiance through gonio's model in model.lut.splitsum's procedural environment
 (sky gradient, 1-degree sun disk importance-sampled, checker wall) is the reference (two
 independent estimates: their half difference is its noise). Split sum = T * P(d, alpha_b)
 with four choices: the albedo-only baseline (alpha_b = alpha, d = ideal refraction), with the
@@ -23,11 +23,11 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from sim.lut import TableSpec, bake
-from sim.lut.axes import ETA_MAX
-from sim.lut.direction import lookup_direction
-from sim.lut.estimators import estimator_for
-from sim.lut.splitsum import Environment, brute_force, prefiltered
+from model.lut import TableSpec, bake
+from model.lut.axes import ETA_MAX
+from model.lut.direction import lookup_direction
+from model.lut.estimators import estimator_for
+from model.lut.splitsum import Environment, brute_force, prefiltered
 
 SIZES = [(8, 8, 4), (16, 16, 8), (32, 32, 16)]
 KINDS = ("transmission", "transmission-blur", "transmission-direction")

@@ -36,11 +36,11 @@ sys.path.insert(0, str(ROOT))
 
 from calibration.fit import MS_CENTRE_WALKS, refit_orders  # noqa: E402
 from calibration.pipeline import reduce_run  # noqa: E402
-from sim.bsdf import RoughDielectric  # noqa: E402
-from sim.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
-from sim.bsdf.multiple_scattering.lobe import walk_both_ways, walk_to_targets  # noqa: E402
-from sim.bsdf.multiple_scattering.model import RandomWalkBSDF  # noqa: E402
-from sim.bsdf.multiple_scattering.second_order import second_order  # noqa: E402
+from model.bsdf import RoughDielectric  # noqa: E402
+from model.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
+from model.bsdf.multiple_scattering.lobe import walk_both_ways, walk_to_targets  # noqa: E402
+from model.bsdf.multiple_scattering.model import RandomWalkBSDF  # noqa: E402
+from model.bsdf.multiple_scattering.second_order import second_order  # noqa: E402
 
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
 #: (label, keyed, FitOptions.ms_walks, walks of the refit at the result / ms_walks (1: no

@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ms_model_error import distinct_polar, fit_points, glass  # noqa: E402
 
 from calibration.fit import MS_CENTRE_WALKS, FitOptions  # noqa: E402
-from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets  # noqa: E402
+from model.bsdf.multiple_scattering.keyed import keyed_walk_to_targets  # noqa: E402
 
 NORMAL = np.array([0.0, 0.0, 1.0])
 #: Standard error / data sigma for a median |error| of 0.3 sigma, and for the worst of ~530

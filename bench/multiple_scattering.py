@@ -19,18 +19,18 @@ import time
 
 import numpy as np
 
-from sim.bench.sample import HigherOrders
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
-from sim.bsdf.multiple_scattering import (
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
+from model.bsdf.multiple_scattering import (
     HigherOrderLobe,
     Microsurface,
     RandomWalkBSDF,
     albedo_estimate,
     higher_orders_at,
 )
-from sim.bsdf.multiple_scattering.second_order import second_order, second_order_reference
-from sim.bsdf.multiple_scattering.walk import Walker
+from model.bsdf.multiple_scattering.second_order import second_order, second_order_reference
+from model.bsdf.multiple_scattering.walk import Walker
+from sim.bench.sample import HigherOrders
 
 ETA = 1.51
 ALPHAS = (0.3, 1.0)

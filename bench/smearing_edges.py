@@ -26,8 +26,8 @@ import numpy as np
 from calibration.fit import build_model
 from calibration.smearing import Smearing, smearing_order
 from gonio.geometry import directions
+from model.bsdf import kernels
 from sim.bench.config import build_bench
-from sim.bsdf import kernels
 
 ALPHA, ETA, APERTURE_MM, DISTANCE_MM, DIVERGENCE_DEG = 0.394, 1.51, 10.0, 500.0, 0.03
 
@@ -60,7 +60,7 @@ def fastest(job, repeats: int = 5) -> float:
 
 class KernelClock:
     """Wall and CPU seconds and pairs spent in the compiled dielectric kernel
-    (sim.bsdf.kernels.dielectric, which the models look up at each call) while installed: the
+    (model.bsdf.kernels.dielectric, which the models look up at each call) while installed: the
     forward model's floor."""
 
     def __init__(self):

@@ -35,8 +35,8 @@ sys.path.insert(0, str(ROOT))
 import calibration.fit as fit_module  # noqa: E402
 from calibration.fit import FitOptions  # noqa: E402
 from calibration.pipeline import fit_run  # noqa: E402
-from sim.bsdf.multiple_scattering import lobe  # noqa: E402
-from sim.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
+from model.bsdf.multiple_scattering import lobe  # noqa: E402
+from model.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
 
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
 EVAL_WALKS, EVAL_SEED = 1 << 23, 7

@@ -1,6 +1,6 @@
 """Fit microfacet model parameters to reduced BSDF data by weighted least squares.
 
-The model is `sim.bsdf.RoughDielectric` (distribution, alpha or (alpha_x, alpha_y), eta,
+The model is `model.bsdf.RoughDielectric` (distribution, alpha or (alpha_x, alpha_y), eta,
 masking form) times an optional scale factor. Fits run on a chosen subset (by default normal
 incidence only, as Walter et al. 2007 did) and the fitted model then predicts the rest, so
 the held-out chi-square tests the model rather than the fit. See docs/fitting.md.
@@ -150,7 +150,7 @@ class Diffraction:
     samples: int = DIFFRACTION_SAMPLES
 
     def wrap(self, model: Any) -> Any:
-        """The two-scale model (sim.bsdf.diffraction.TwoScaleDiffraction) around `model`, with
+        """The two-scale model (model.bsdf.diffraction.TwoScaleDiffraction) around `model`, with
         eval(wi, wo) at this wavelength."""
         return _Diffracted(model, self)
 
@@ -167,7 +167,7 @@ class _Diffracted:
     microfacet models (what Smearing.average calls)."""
 
     def __init__(self, model: Any, settings: Diffraction):
-        from sim.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
+        from model.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
 
         psd = KCorrelationPSD(settings.rms_height_nm * 1e-9,
                               settings.correlation_length_um * 1e-6, settings.psd_exponent)
@@ -263,7 +263,7 @@ class FitResult:
         return self.param("scale")[0] if "scale" in self.names else 1.0
 
     def model(self) -> Any:
-        """The fitted sim.bsdf model (without the scale factor), with the multiple-scattering
+        """The fitted model.bsdf model (without the scale factor), with the multiple-scattering
         term the fit used, if any."""
         return build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
                            self.walks, self.seed, self.diffraction)
@@ -322,7 +322,7 @@ class FitResult:
 
 class _WithHigherOrders:
     """A single-scattering model plus the random walk's orders >= 2 on the same microsurface
-    (sim.bsdf.multiple_scattering.higher_orders_at: walked at the pairs, fixed seed)."""
+    (model.bsdf.multiple_scattering.higher_orders_at: walked at the pairs, fixed seed)."""
 
     def __init__(self, single: Any, correlated: Any, walks: int, seed: int):
         self.single, self.correlated = single, correlated
@@ -330,7 +330,7 @@ class _WithHigherOrders:
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """f(wi, wo) in 1/sr: single scattering plus orders >= 2."""
-        from sim.bsdf.multiple_scattering import higher_orders_at
+        from model.bsdf.multiple_scattering import higher_orders_at
 
         wi, wo = np.broadcast_arrays(wi, wo)
         extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed,
@@ -394,9 +394,9 @@ def walked_orders(distribution: str, alpha: float, eta: float, k: float | None,
                   covariance: bool = False, both_ways: bool = True, stream: int = 0
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Orders >= 2 of the height-correlated microsurface at the pairs, their standard error and,
-    if asked, their covariance over the pairs (sim.bsdf.multiple_scattering.higher_orders_at,
+    if asked, their covariance over the pairs (model.bsdf.multiple_scattering.higher_orders_at,
     both_ways and stream as there), not aperture-averaged (the lobe is broad)."""
-    from sim.bsdf.multiple_scattering import higher_orders_at
+    from model.bsdf.multiple_scattering import higher_orders_at
 
     wi, wo = np.broadcast_arrays(wi, wo)
     value, err, cov = higher_orders_at(build_model(distribution, alpha, eta, "correlated", k),
@@ -437,12 +437,12 @@ def refit_orders(distribution: str, alpha: float, eta: float, k: float | None,
 def build_model(distribution: str, alpha: float | tuple[float, float], eta: float,
                 masking: str, k: float | None = None, walks: int | None = None,
                 seed: int = 0, diffraction: Diffraction | None = None) -> Any:
-    """The sim.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
+    """The model.bsdf model for one parameter set: a RoughDielectric, or a RoughConductor of
     complex index eta + i k when k is given (imported here so calibration loads without it);
     with diffraction, the two-scale model around it; with walks, plus multiple scattering
     (orders >= 2, `walks` walks per pair, fixed seed), which diffraction leaves alone (the
     nano-roughness spreads an already broad lobe)."""
-    from sim.bsdf import RoughConductor, RoughDielectric
+    from model.bsdf import RoughConductor, RoughDielectric
 
     if walks is not None:  # orders >= 2 of the microsurface beside the (diffracted) order 1
         return _WithHigherOrders(build_model(distribution, alpha, eta, masking, k,

@@ -6,15 +6,13 @@ has no truth curve. `--fit` hands over to calibration.fitplot's overlay."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
+from calibration.emulator_truth import EmulatorTruth, truth_of
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
-
-CURVE_POINTS = 721
 
 
 def signed_theta_o_deg(data: ReducedData) -> np.ndarray:
@@ -26,60 +24,21 @@ def signed_theta_o_deg(data: ReducedData) -> np.ndarray:
     return np.where(data.wo[:, 0] * forward < 0, -theta, theta)
 
 
-def in_plane_directions(theta_i_deg: float, theta_o_deg: np.ndarray, transmission: bool
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """(wi, wo) along the plane of incidence for signed outgoing angles (forward positive)."""
-    ti, to = math.radians(theta_i_deg), np.radians(theta_o_deg)
-    wi = np.broadcast_to([-math.sin(ti), 0.0, math.cos(ti)], (len(to), 3))
-    wo = np.stack([np.sin(to), np.zeros_like(to), -np.cos(to) if transmission else np.cos(to)],
-                  axis=1)
-    return wi, wo
-
-
-#: The legend label of the emulated bench's own BSDF (never "model": it is no fit).
-TRUTH = "emulator truth"
-
-
-def emulated_sample(meta: dict):  # -> sim.bench.sample.Sample | None
-    """The sample of the bench an all-emulated run was measured on (meta["sim"], built on the
-    run's [optics] and [sample] as the scan built it), or None for any other run."""
-    if not meta.get("sim"):
-        return None
-    from sim.bench import build_bench
-
-    return build_bench(meta["sim"], meta.get("optics"), meta.get("sample")).sample
-
-
-def truth_curves(meta: dict, sample, theta_i_deg: float, transmission: bool
-                 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{label: (signed theta_o deg, BSDF)} of the emulator's truth (`sample`:
-    emulated_sample(meta), with the multiple scattering and diffraction its "auto" switches
-    turn on): point values, and averaged over the aperture when meta gives its half-angle.
-    Empty for a run that was not all emulated (sample None)."""
-    if sample is None:
+def truth_curves(meta: dict, truth: EmulatorTruth | None, theta_i_deg: float,
+                 transmission: bool) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{label: (signed theta_o deg, BSDF)} of the emulator's truth (`truth`:
+    emulated_truth(meta)): point values, and averaged over the aperture when the reduction's
+    meta gives its half-angle. Empty for a run that was not all emulated (truth None)."""
+    if truth is None:
         return {}
-    from sim.bench.aperture import order_for
-    from sim.bench.quadrature import cap_rule
+    return truth.curves(theta_i_deg, transmission,
+                        float(meta.get("aperture_half_angle_deg") or 0.0))
 
-    spec = sample.spec
-    alpha = spec.alpha if spec.alpha[0] != spec.alpha[1] else spec.alpha[0]
-    theta = np.linspace(-89.5, 89.5, CURVE_POINTS)
-    wi, wo = in_plane_directions(theta_i_deg, theta, transmission)
-    theta_i = math.radians(theta_i_deg)
-    extras = "".join(f" + {name}" for name, on in (
-        ("multiple scattering", sample.multiple_scattering_on(theta_i)),
-        ("diffraction", sample.diffraction_on(theta_i, "transmission" if transmission
-                                              else "reflection"))) if on)
-    label = f"{spec.distribution} alpha {np.round(alpha, 4)}{extras}"
-    curves = {f"{TRUTH} ({label})": (theta, sample.bsdf(wi, wo))}
-    half_angle = math.radians(float(meta.get("aperture_half_angle_deg") or 0.0))
-    if half_angle > 0:
-        # a transmitted lobe is about 0.3 alpha rad wide: resolve it across the aperture
-        order = order_for(half_angle / (0.3 * float(np.min(alpha))), 1e-3)
-        nodes, weights = cap_rule(wo, half_angle, order)
-        f = sample.bsdf(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
-        curves[f"{TRUTH} through the aperture"] = (theta, f @ weights / weights.sum())
-    return curves
+
+def emulated_truth(meta: dict) -> EmulatorTruth | None:
+    """The emulator's truth of the run whose reduction's meta this is (its [sim] table on its
+    [optics] and [sample]), or None for any run with a real device."""
+    return truth_of(meta.get("sim"), meta.get("optics"), meta.get("sample"))
 
 
 def x_range(theta_deg: np.ndarray) -> tuple[float, float]:
@@ -122,7 +81,7 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
     incidences = sorted(set(theta_i.tolist()))
     sides = [s for s in (False, True) if (data.transmission == s).any()]
     theta_o = signed_theta_o_deg(data)
-    truth = emulated_sample(data.meta)
+    truth = emulated_truth(data.meta)
     fig, axes = plt.subplots(len(sides), len(incidences), squeeze=False,
                              figsize=(3.4 * len(incidences) + 0.8, 3.0 * len(sides) + 0.8))
     for col, ti in enumerate(incidences):

@@ -4,7 +4,7 @@ f = (P - dark) / (Phi(t) * Omega * factor * |cos o|): dark subtraction per range
 dark readings, the beam power Phi from the straight-through (beam) readings (a polynomial in
 time through all of them, at least a line, calibration.beam), the aperture solid angle Omega,
 and the faces the light crosses (`factor`: the hemisphere's T_exit on the transmitted side, as
-the bench applies it, sim.bench.sample.exit_view). Noise of a reading: the scatter of the dark
+the bench applies it, model.optics.exit_face.exit_view). Noise of a reading: the scatter of the dark
 readings on its range, scaled with the range's full scale (read noise and ADC steps scale so),
 plus the signal's shot noise where something states it (`optics_of`: the --shot-noise-w flag,
 the config's [detector] shot_noise_w, or the emulated meter of an all-emulated run; otherwise
@@ -37,6 +37,7 @@ from calibration.budget import (
     stage_slopes,
 )
 from calibration.detector import range_key
+from calibration.emulator_truth import EmulatorTruth, truth_of
 from calibration.reduced import ReducedData
 from calibration.signature import DEFAULT_SHARE, apply_signature
 from calibration.values import CalibrationError
@@ -45,6 +46,7 @@ from gonio.geometry import sample_angles
 from gonio.optics import Optics, optics_of_config
 from gonio.reading_flags import INVALID, flagged
 from gonio.sample import SampleInfo, sample_of_plan
+from model.optics.exit_face import SampleFaces, exit_view
 
 # A net signal below this many sigmas is dark-limited (valid = False). The cut selects on the
 # measured value, so it keeps the noise-only points that fluctuate above it, each with a pull
@@ -95,8 +97,9 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     (aperture, wavelength) and [detector] (averaging, shot noise), the plan's [sample] (kind,
     eta, k, lit side), a calibration (its measured aperture wins over the geometry) and the
     --shot-noise-w flag. `sim`: the [sim] table of an all-emulated run
-    (gonio.record.emulator_config), the only way the emulator's truth comes in: its meter's
-    shot noise when nothing else states one, and its sample for plots."""
+    (gonio.record.emulator_config), the only way the emulator's truth comes in (by
+    calibration.emulator_truth): its meter's shot noise when nothing else states one, and its
+    sample for plots."""
     try:
         optics = optics_of_config(config, "run config")
         sample = sample_of_plan(plan or {}, "run plan")
@@ -119,13 +122,14 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     wavelength = (optics.wavelength_nm if optics is not None
                   else float(detector.get("wavelength_nm", math.nan)))
     averaging = int((plan or {}).get("averaging") or detector.get("averaging", 1))
-    variance, noise_model = _shot_noise(detector, sim, shot_noise_w, wavelength, averaging)
+    truth = truth_of(sim, None, (plan or {}).get("sample"))
+    variance, noise_model = _shot_noise(detector, truth, shot_noise_w, wavelength, averaging)
     return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
                            noise_model, float(detector.get("linearity_rel") or 0.0), sim,
-                           _emulator_truth(sim, plan or {}) if sim else None)
+                           truth.sample if truth is not None else None)
 
 
-def _shot_noise(detector: dict, sim: dict | None, shot_noise_w: float | None,
+def _shot_noise(detector: dict, truth: EmulatorTruth | None, shot_noise_w: float | None,
                 wavelength_nm: float, averaging: int) -> tuple[float, str]:
     """(shot-noise variance of one reading per watt of net signal, the noise model in words):
     the per-sample coefficient of the --shot-noise-w flag, else of [detector] shot_noise_w,
@@ -137,45 +141,14 @@ def _shot_noise(detector: dict, sim: dict | None, shot_noise_w: float | None,
         coefficient, source = float(shot_noise_w), "--shot-noise-w"
     elif detector.get("shot_noise_w") is not None:
         coefficient, source = float(detector["shot_noise_w"]), "[detector] shot_noise_w"
-    elif sim is not None:
-        coefficient = emulator_shot_noise_w(sim.get("detector"), wavelength_nm)
+    elif truth is not None:
+        coefficient = truth.shot_noise_w(wavelength_nm)
         source = "the emulated meter's [sim.detector] (2 q B / R)"
     else:
         return 0.0, SHOT_NOT_MODELLED
     return coefficient / averaging, (f"dark scatter per range; shot noise {coefficient:.4g} W "
                                      f"per W of signal per sample from {source}, averaged "
                                      f"over {averaging}")
-
-
-def _emulator_truth(sim: dict, plan: dict) -> dict:
-    """The emulated sample of an all-emulated run ([sim.sample]: distribution, alpha, masking,
-    and the index it emulates)."""
-    from sim.bench.config import read_table
-    from sim.devices.photodiode import SimConfigError
-
-    try:
-        sample = read_table(sim, "sample", plan.get("sample"))
-    except SimConfigError as exc:
-        raise CalibrationError(f"run config: {exc}") from None
-    alpha = sample["alpha"]
-    return {"distribution": sample["distribution"],
-            "alpha": alpha[0] if alpha[0] == alpha[1] else list(alpha),
-            "eta": sample["eta"], "masking": sample["masking"]}
-
-
-def emulator_shot_noise_w(sim_detector: dict | None, wavelength_nm: float) -> float:
-    """Shot-noise variance of one sample of the emulated meter per watt of signal, W^2/W:
-    2 q B / R ([sim.detector] bandwidth B, responsivity R at the wavelength). The dark
-    readings' scatter holds only the read noise and the dark current's shot noise; a signal of
-    1e-9 W or more on the 1e-8 W range has shot noise above that (up to 2.5 times its sigma at
-    full scale)."""
-    from sim.devices.photodiode import ELEMENTARY_CHARGE_C, PhotodiodeModel, SimConfigError
-
-    try:
-        meter = PhotodiodeModel(sim_detector)
-    except SimConfigError as exc:
-        raise CalibrationError(f"run config: {exc}") from None
-    return 2.0 * ELEMENTARY_CHARGE_C * meter.bandwidth_hz / meter.responsivity_a_w(wavelength_nm)
 
 
 def directions(theta_deg: np.ndarray, phi_deg: np.ndarray, flipped: bool) -> np.ndarray:
@@ -259,10 +232,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     flipped = sample.lit_from == "hemisphere"
     wi = directions(rows["theta_i_deg"], rows["phi_i_deg"], flipped)
     wo = directions(rows["theta_o_deg"], rows["phi_o_deg"], flipped)
-    from sim.bench.sample import SampleSpec, exit_view
-
-    spec = SampleSpec(kind=sample.kind, eta=sample.eta, k=sample.k, lit_from=sample.lit_from)
-    w_eval, factor = exit_view(spec, wi, wo)
+    w_eval, factor = exit_view(sample, wi, wo)
     level, level_sigma, read = dark.at(rows["range_w"])
     phi, _, phi_shared = beam.smooth(rows["t_s"])
     net = rows["power_w"] - level
@@ -289,7 +259,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     if angle.any and slope_model is None:
         notes.append("angle: not propagated (no fitted model gave the BSDF's slope)")
     elif angle.any:
-        angle_terms(budget, readings, rows, angle, slope_model, spec, flipped)
+        angle_terms(budget, readings, rows, angle, slope_model, sample, flipped)
     sigma = budget.sigma
     # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
     # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept
@@ -326,13 +296,11 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
 
 
 def angle_terms(budget: Budget, readings: np.ndarray, rows: np.ndarray, angle: AngleInputs,
-                slope_model: SlopeModel, spec, flipped: bool) -> None:
+                slope_model: SlopeModel, spec: SampleFaces, flipped: bool) -> None:
     """The stages' errors through the model's slope (calibration.budget.add_angle_terms): the
     derivative of what reduction would give, the model's reading f T |cos o| at the stages'
     positions over T |cos o| at the recorded ones (an angle error moves the reading, not the
     divisor)."""
-    from sim.bench.sample import exit_view
-
     def reading(at: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """(the model's reading before division by T |cos o|, T |cos o|) at stage positions."""
         a = sample_angles(at["sample"], at["arm"], at["elevation"], at["azimuth"])

@@ -1,8 +1,8 @@
 """What the instrument averages a BSDF over before the detector reports it: the aperture's cap
 of outgoing directions and the divergent beam's cone of incoming ones (the fit's forward model
 of a reading, beside the point model). Where an edge of the model (a jump or kink on a known
-circle: sim.bench.sample.EdgeCircles) crosses the aperture, the aperture is split along it as
-the bench splits it (sim.bench.quadrature.split_cap_rule), so the two agree to ~1e-5 there."""
+circle: model.optics.edges.EdgeCircles) crosses the aperture, the aperture is split along it as
+the bench splits it (model.optics.quadrature.split_cap_rule), so the two agree to ~1e-5 there."""
 
 from __future__ import annotations
 
@@ -15,15 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from sim.bench.aperture import crossing, order_for, split_order_for
-from sim.bench.quadrature import cap_rule, split_cap_rule
-from sim.bench.sample import EdgeCircles
+from model.optics.aperture import crossing, order_for, split_order_for
+from model.optics.edges import EdgeCircles
+from model.optics.quadrature import cap_rule, split_cap_rule
 
 #: Radial order over an aperture that straddles an edge of the lobe not on a known circle (a
 #: model whose edges are not known, a cap too near a circle family's axis): the bench's top order
 EDGE_ORDER = 40
 RIM_POINTS = 24  # directions on the aperture's rim probed for an edge of such a model
-#: Accuracy asked of a split aperture (sim.bench.aperture.split_order_for), so the fit's model of
+#: Accuracy asked of a split aperture (model.optics.aperture.split_order_for), so the fit's model of
 #: a reading across an edge follows the bench's to ~1e-5 (the data's sigma is a few 1e-4)
 SPLIT_RTOL = 1e-5
 BEAM_MARGIN = 3.0  # beam half-angles by which the beam's tilt may move an edge circle
@@ -45,7 +45,7 @@ def _rim(w: np.ndarray, half_angle_rad: float, n: int) -> np.ndarray:
 
 
 def model_edges(model: Any) -> EdgeCircles | None:
-    """The circles where a sim.bsdf model jumps or kinks (EdgeCircles, lit from air), from the
+    """The circles where a model.bsdf model jumps or kinks (EdgeCircles, lit from air), from the
     candidate itself (its eta): a RoughDielectric's or a RoughConductor's; None for another."""
     if hasattr(model, "eta_complex"):
         return EdgeCircles(1.0, 1.0, transmits=False)
@@ -67,7 +67,7 @@ def _cutting_family(edges: EdgeCircles, wi: np.ndarray, wo: np.ndarray, half_ang
     whether an edge circle crosses the cap for some beam direction; whether a family of them
     does and can be split along for all of them (quadrature.splittable's condition); the first
     such family's axes (N, K, 3) and its levels (N, K, L), those crossing no cap pushed out of
-    [-1, 1] and sorted last (the bench's choice of family, sim.bench.aperture, for many points
+    [-1, 1] and sorted last (the bench's choice of family, model.optics.aperture, for many points
     at once)."""
     n, k = wi.shape[:2]
     crossed, chosen = np.zeros(n, bool), np.zeros(n, bool)

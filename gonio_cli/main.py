@@ -26,6 +26,7 @@ import os  # noqa: E402
 
 from drivers.base import DriverError  # noqa: E402
 from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
+from gonio_cli import emulator_truth  # noqa: E402
 
 # Module names under gonio_cli.commands, in the order `gonio --help` lists them.
 COMMANDS = [
@@ -75,6 +76,7 @@ def _quiet_stdout() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     verb = "gonio"
+    emulator_truth.install()
     try:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         args = build_parser().parse_args(argv)

@@ -1,7 +1,8 @@
 """The model curves the live view draws over the reduced BSDF: for a run whose devices were all
 emulated, the emulator's truth as `gonio plot` draws it (calibration.plot.truth_curves, which
 gets the [sim] table only through gonio.record.emulator_config, by way of the reduction's
-meta); no curve for any other run. Each panel's curves are computed once."""
+meta, and the truth from calibration.emulator_truth); no curve for any other run. Each panel's
+curves are computed once."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.plot import emulated_sample, truth_curves
+from calibration.plot import emulated_truth, truth_curves
 
 NO_MODEL = ("no reference model: the run was not measured on an all-emulated bench "
             "(`gonio fit RUN` fits one)")
@@ -29,7 +30,7 @@ class ModelCurves:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._sample: Any = None
+        self._truth: Any = None
         self._known = False
         self._curves: dict[str, list[dict[str, Any]]] = {}
 
@@ -40,13 +41,13 @@ class ModelCurves:
             return {"note": "the run is not reduced yet", "curves": {}}
         with self._lock:
             if not self._known:
-                self._sample, self._known = emulated_sample(meta), True
-            if self._sample is None:
+                self._truth, self._known = emulated_truth(meta), True
+            if self._truth is None:
                 return {"note": NO_MODEL, "curves": {}}
             for key in keys:
                 if key not in self._curves:
                     theta_i, side = key.split("|")
-                    found = truth_curves(meta, self._sample, float(theta_i),
+                    found = truth_curves(meta, self._truth, float(theta_i),
                                          side == "transmission")
                     self._curves[key] = [{"label": label, "x": _rounded(x),
                                           "y": _rounded(y, positive=True)}

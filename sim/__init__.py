@@ -1,5 +1,2 @@
-"""The virtual world: BSDF model, optical bench and device emulators."""
-
-from sim.kernel_cache import drop_stale_kernels
-
-drop_stale_kernels()  # before any kernel loads from numba's cache (sim.kernel_cache says why)
+"""The pretend world: device emulators, source, drift, stray light, the emulated bench that
+composes them with model's physics, and the emulator's truth."""

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import tomllib
 
+from model.cluster import map_tasks
 from sim.bench import build_power_source
-from sim.cluster import map_tasks
 from sim.devices.photodiode import PhotodiodeModel
 
 #: [sim] tables a sweep may vary (owned by sim.bench and sim.devices.photodiode).

@@ -1,9 +1,9 @@
-"""sim.kernel_cache drops numba's cache files when any source under the package changed (numba
+"""model.kernel_cache drops numba's cache files when any source under the package changed (numba
 alone misses a change in a file a kernel calls into), and only then."""
 
 from pathlib import Path
 
-from sim.kernel_cache import ROOT, STAMP, drop_stale_kernels, sources_digest
+from model.kernel_cache import ROOT, STAMP, drop_stale_kernels, sources_digest
 
 
 def _tree(root: Path) -> dict[str, Path]:

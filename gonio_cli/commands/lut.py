@@ -12,8 +12,8 @@ import os
 from pathlib import Path
 
 from gonio.errors import GonioError
-from sim.bsdf.distributions import WITH_KERNELS
-from sim.bsdf.masking import MASKINGS
+from model.bsdf.distributions import WITH_KERNELS
+from model.bsdf.masking import MASKINGS
 
 DEFAULT_SIZE = {"transmission": "64x64x32", "reflection": "64x64",
                 "transmission-blur": "32x32x16", "transmission-direction": "32x32x16"}
@@ -72,9 +72,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Bake (and validate) the table and write it; one line per result on stdout."""
     # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
-    from sim.cluster import dask_client, describe
-    from sim.lut import TableSpec, bake, parse_size, validate
-    from sim.lut.table import check_storable
+    from model.cluster import dask_client, describe
+    from model.lut import TableSpec, bake, parse_size, validate
+    from model.lut.table import check_storable
 
     try:
         size = args.size or DEFAULT_SIZE[args.kind]

@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Check every setting first, then measure; prints a summary line and the output path."""
     # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
-    from sim.cluster import dask_client, describe
+    from model.cluster import dask_client, describe
     from sim.sweep import load_sweep, run_sweep
 
     if Path(args.out).suffix.lower() != ".npz":

@@ -16,12 +16,12 @@ import math
 import warnings
 from collections.abc import Callable, Mapping
 
+from model.bsdf.distributions import DISTRIBUTION_NAMES, WALKABLE
+from model.bsdf.masking import MASKINGS
 from sim.bench.sample import KINDS, LIT_FROM, Sample, SampleSpec
 from sim.bench.scene import Alignment, Bench, BenchPowerSource
 from sim.bench.source import Dip, Source
 from sim.bench.stray import InstrumentScatter
-from sim.bsdf.distributions import DISTRIBUTION_NAMES, WALKABLE
-from sim.bsdf.masking import MASKINGS
 from sim.devices.photodiode import PhotodiodeModel, SimConfigError
 
 Check = Callable[[str, object], object]
@@ -49,7 +49,7 @@ def _choice(options: tuple[str, ...]) -> Check:
     return check
 
 
-ALPHA_RANGE = (1e-4, 4.0)  # the roughness range sim.bsdf's extreme-case tests cover
+ALPHA_RANGE = (1e-4, 4.0)  # the roughness range model.bsdf's extreme-case tests cover
 #: Sample index: glasses and a conductor's real part (silver's is ~0.05); far below it,
 #: refraction ratios of order 1/eta overflow the bench's optics.
 ETA_RANGE = (0.01, 10.0)
@@ -60,7 +60,7 @@ def _alpha(where: str, value: object) -> tuple[float, float]:
     pair = value if isinstance(value, (list, tuple)) else [value, value]
     if len(pair) != 2:
         raise SimConfigError(f"{where}: must be a number or [alpha_x, alpha_y], got {value!r}")
-    in_range = _number(ALPHA_RANGE[0], ALPHA_RANGE[1])  # where sim.bsdf is verified
+    in_range = _number(ALPHA_RANGE[0], ALPHA_RANGE[1])  # where model.bsdf is verified
     return in_range(where, pair[0]), in_range(where, pair[1])
 
 

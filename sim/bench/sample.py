@@ -6,7 +6,7 @@ T_in * T_out * (eta_i / eta_o)^2 * f(wi, wo) * |cos o| (power BSDF times the fac
 crosses), and evaluates each lobe only at the directions that lie on its side.
 `Sample.lobe_scales` estimates how fast that integrand varies, to choose quadrature orders.
 Multiple scattering (orders >= 2 of the Heitz 2016 random walk, tabulated per incidence by
-sim.bsdf.multiple_scattering.HigherOrderLobe) and diffraction (Holzschuch-Pacanowski 2017,
+model.bsdf.multiple_scattering.HigherOrderLobe) and diffraction (Holzschuch-Pacanowski 2017,
 reflection) are added where the spec asks for them, or with "auto" (the default) only where
 their share of the light exceeds `visible_fraction` (the detector's noise floor).
 """
@@ -16,12 +16,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import NamedTuple
 
 import numpy as np
 
-from sim.bench import optics
-from sim.bsdf.distributions import DISTRIBUTIONS
+from model.bsdf.distributions import DISTRIBUTIONS
+from model.optics import smooth as optics
+from model.optics.aperture import LobeScales
+from model.optics.edges import EdgeCircles
+from model.optics.exit_face import exit_view
 
 KINDS = ("hemisphere", "slab", "conductor")
 LIT_FROM = ("air", "hemisphere")
@@ -30,73 +32,6 @@ LIT_FROM = ("air", "hemisphere")
 ANISOTROPIC_WALK_SHARE = 16
 #: Points of the diffraction lobe integral per direction pair (TwoScaleDiffraction samples).
 DIFFRACTION_SAMPLES = 256
-
-
-@dataclass(frozen=True)
-class EdgeCircles:
-    """Where the integrand jumps or kinks, as circles {w: axis . w = level} in the free
-    direction of a pair for given values of the fixed one (the same for wo given wi and for wi
-    given wo). Axis z: the horizon (level 0) and, in transmission, facets standing vertical
-    (h_z = 0, level -w_fixed.z / e, e = index across / index on the fixed side; GGX's D does
-    not vanish there, so f jumps). Axis w_fixed: in transmission a facet seen edge-on (the end
-    of the lobe; from the glass, TIR: level -min(e, 1/e)); in reflection inside the denser
-    medium, the TIR kink of F (level 2 e^2 - 1). In wo only: the kinks of the multiple-
-    scattering tables, linear in theta_o between grid angles (every `table_step_deg`)."""
-
-    n_above: float  # refractive index on the +z side
-    n_below: float
-    transmits: bool  # False: an opaque conductor (the horizon is its only edge)
-    table_step_deg: float | None = None  # the multiple-scattering tables' theta_o step
-
-    def _levels(self, fixed: np.ndarray, free_is_wo: bool) -> tuple[np.ndarray, np.ndarray]:
-        """Levels (N, L) of the z family and (N, 2) of the family about the fixed directions
-        (a level outside [-1, 1]: no such circle)."""
-        n = len(fixed)
-        table = (np.cos(np.radians(np.arange(self.table_step_deg, 180.0, self.table_step_deg)))
-                 if self.table_step_deg and free_is_wo else np.zeros(0))
-        z_levels = np.broadcast_to(np.append(0.0, table), (n, 1 + len(table)))
-        if not self.transmits:
-            return z_levels, np.full((n, 0), 2.0)
-        above = fixed[:, 2] > 0
-        e = np.where(above, self.n_below, self.n_above) / np.where(above, self.n_above,
-                                                                   self.n_below)
-        vertical = -fixed[:, 2] / e
-        edge_on = -np.minimum(e, 1.0 / e)
-        tir = np.where(e < 1.0, 2.0 * e * e - 1.0, 2.0)
-        return (np.concatenate([z_levels, vertical[:, None]], axis=1),
-                np.stack([edge_on, tir], axis=1))
-
-    def circles(self, fixed: np.ndarray, free_is_wo: bool = True
-                ) -> list[tuple[np.ndarray, np.ndarray]]:
-        """[(axis (N, 3), levels (N, L))] per axis for fixed directions (N, 3), on one side."""
-        fixed = np.atleast_2d(fixed)
-        z_levels, fixed_levels = self._levels(fixed, free_is_wo)
-        return [(np.broadcast_to([0.0, 0.0, 1.0], fixed.shape), z_levels),
-                (fixed, fixed_levels)]
-
-    def distance(self, fixed: np.ndarray, free: np.ndarray, free_is_wo: bool = True) -> float:
-        """Angle (rad) from the free direction (3,) to the nearest circle, for one fixed (3,)."""
-        best = np.inf
-        angles = (np.arccos(np.clip(free[2], -1.0, 1.0)),
-                  np.arccos(np.clip(float(fixed @ free), -1.0, 1.0)))
-        for t, levels in zip(angles, self._levels(fixed[None], free_is_wo), strict=True):
-            real = levels[0][np.abs(levels[0]) <= 1.0]
-            if len(real):
-                best = min(best, float(np.min(np.abs(t - np.arccos(real)))))
-        return best
-
-
-class LobeScales(NamedTuple):
-    """Angular scales (rad) near (wi, wo): the smooth lobe's local width in wi and wo, and the
-    distance to the nearest edge (a jump or kink: the horizon, a facet seen edge-on, vertical
-    facets, TIR) in wi and wo; `edges`, when they are all circles (EdgeCircles), lets the
-    aperture integral split its caps along them."""
-
-    width_i: float
-    width_o: float
-    edge_i: float
-    edge_o: float
-    edges: EdgeCircles | None = None
 
 
 @dataclass(frozen=True)
@@ -118,38 +53,6 @@ class SampleSpec:
     correlation_length_um: float | None = None
     psd_exponent: float = 2.0
     ms_walks: int = 1 << 16  # random walks per incidence table of the multiple-scattering term
-
-
-def exit_view(spec: SampleSpec, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(w_eval, factor) with detector power per incident power per sr = factor * f(wi, w_eval)
-    * |cos o|, for sample-frame wi, wo (..., 3); what the bench integrates and reduce divides by.
-
-    Reflection: 1 (T_normal^2 when lit through the hemisphere). Transmission through the
-    hemisphere: T, the curved face's normal-incidence transmittance, either way round (rays
-    from the centre cross it unbent, so the aperture's cone and the power in it are kept; f_t
-    of Walter's eq. 21 integrates to the transmitted flux fraction, so no n^2: see
-    docs/architecture.md, departures). Through a slab: f at the direction inside the glass
-    that leaves the polished back face along wo, times that face's transmittance / n^2 (the
-    back face widens the cone by n^2). A conductor: 0.
-    """
-    wi, wo = np.asarray(wi), np.asarray(wo)
-    if wi.shape != wo.shape:
-        wi, wo = np.broadcast_arrays(wi, wo)
-    reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
-    n = spec.eta
-    t = optics.normal_transmittance(n)
-    w_eval = wo
-    if spec.kind == "conductor":
-        transmitted = np.zeros(wo.shape[:-1])
-    elif spec.kind == "hemisphere":
-        transmitted = np.full(wo.shape[:-1], t)
-    else:
-        w_glass = optics.air_to_glass_direction(wo, n)
-        w_eval = np.where(reflected[..., None], wo, w_glass)
-        transmitted = (1.0 - optics.fresnel_dielectric(w_glass[..., 2], 1.0 / n)) / n**2
-    reflected_factor = t**2 if spec.lit_from == "hemisphere" else 1.0
-    factor = np.where(reflected, reflected_factor, transmitted)
-    return w_eval, np.where(wo[..., 2] == 0, 0.0, factor)
 
 
 def _tir_distance(w: np.ndarray, h: np.ndarray, eta_w: float, eta_other: float) -> float:
@@ -176,8 +79,8 @@ class HigherOrders:
     """
 
     def __init__(self, correlated, walks: int, seed: int, fixed_seed: bool = False):
-        from sim.bsdf.multiple_scattering import RandomWalkBSDF
-        from sim.bsdf.multiple_scattering.model import BATCH
+        from model.bsdf.multiple_scattering import RandomWalkBSDF
+        from model.bsdf.multiple_scattering.model import BATCH
 
         if not 1 <= walks <= BATCH:
             raise ValueError(f"walks must be in [1, {BATCH}] (one batch per pair), got {walks!r}")
@@ -186,7 +89,7 @@ class HigherOrders:
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Orders >= 2 of f(wi, wo) in 1/sr, no cosine; wi, wo (..., 3) broadcast."""
-        from sim.bsdf.multiple_scattering.model import BATCH
+        from model.bsdf.multiple_scattering.model import BATCH
 
         wi, wo = np.broadcast_arrays(np.asarray(wi, np.float64), np.asarray(wo, np.float64))
         shape = wi.shape[:-1]
@@ -211,8 +114,8 @@ def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k:
     """The HigherOrderLobe of a sample's microsurface (height-correlated masking), shared by
     every bench of the process with the same parameters and kept on disk (plane_store), so
     its tables are walked once per machine."""
-    from sim.bsdf import RoughConductor, RoughDielectric
-    from sim.bsdf.multiple_scattering import HigherOrderLobe
+    from model.bsdf import RoughConductor, RoughDielectric
+    from model.bsdf.multiple_scattering import HigherOrderLobe
 
     if kind == "conductor":
         parent = RoughConductor(distribution=distribution, alpha=alpha,
@@ -228,7 +131,7 @@ def higher_order_lobe(kind: str, distribution: str, alpha: float, eta: float, k:
 @lru_cache(maxsize=4096)
 def _lost_energy(distribution: str, alpha: tuple[float, float], eta: float | complex,
                  theta: float) -> float:
-    from sim.bsdf.multiple_scattering import energy_loss
+    from model.bsdf.multiple_scattering import energy_loss
 
     return energy_loss(distribution, alpha if alpha[0] != alpha[1] else alpha[0], eta, theta,
                        masking="correlated")
@@ -256,11 +159,11 @@ class Sample:
                             "diffraction": 0}
 
     def model(self, lobe: str, masking: str | None = None):
-        """The single-scattering sim.bsdf model of one lobe ("reflection" or "transmission")
+        """The single-scattering model.bsdf model of one lobe ("reflection" or "transmission")
         only, with the spec's masking unless another is named."""
         key = (lobe, masking or self.spec.masking)
         if key not in self._models:
-            from sim.bsdf import RoughConductor, RoughDielectric
+            from model.bsdf import RoughConductor, RoughDielectric
 
             s = self.spec
             alpha = s.alpha if s.alpha[0] != s.alpha[1] else s.alpha[0]
@@ -283,13 +186,13 @@ class Sample:
                 self._models[key] = higher_order_lobe(s.kind, s.distribution, s.alpha[0], s.eta,
                                                       s.k, s.ms_walks, self.seed)
             elif name == "random_walk":
-                from sim.bsdf.multiple_scattering.model import BATCH
+                from model.bsdf.multiple_scattering.model import BATCH
 
                 walks = min(BATCH, max(2, s.ms_walks // ANISOTROPIC_WALK_SHARE))
                 self._models[key] = HigherOrders(self.model(lobe, "correlated"), walks,
                                                  self.seed, fixed_seed=True)
             else:
-                from sim.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
+                from model.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
 
                 psd = KCorrelationPSD(s.rms_height_nm * 1e-9, s.correlation_length_um * 1e-6,
                                       s.psd_exponent)
@@ -322,7 +225,7 @@ class Sample:
             return bool(s.diffraction)
         if s.rms_height_nm is None or self.flipped:
             return False
-        from sim.bsdf.diffraction import diffraction_fraction
+        from model.bsdf.diffraction import diffraction_fraction
 
         eta = s.eta if lobe == "transmission" else None
         moved = diffraction_fraction(s.rms_height_nm * 1e-9, self.wavelength_m, theta_i, eta)
@@ -434,5 +337,5 @@ class Sample:
         step = None
         theta_i = float(np.arccos(min(1.0, abs(float(wi[2])))))
         if s.alpha[0] == s.alpha[1] and self.multiple_scattering_on(theta_i):
-            from sim.bsdf.multiple_scattering.lobe import THETA_STEP_DEG as step
+            from model.bsdf.multiple_scattering.lobe import THETA_STEP_DEG as step
         return EdgeCircles(1.0, self.n_interior, s.kind != "conductor", step)

@@ -16,9 +16,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from sim.bench.aperture import ApertureIntegral
+from model.optics.aperture import ApertureIntegral, LobeScales
+from model.optics.exit_face import exit_view
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
-from sim.bench.sample import LobeScales, Sample, exit_view
+from sim.bench.sample import Sample
 from sim.bench.source import Source
 from sim.bench.stray import InstrumentScatter
 

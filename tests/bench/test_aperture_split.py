@@ -11,16 +11,16 @@ from scipy import integrate
 from scipy.optimize import brentq
 from scipy.stats import qmc
 
-from sim.bench import build_bench
-from sim.bench.aperture import SPLIT_MAX_ORDER, split_order_for
-from sim.bench.geometry import sample_frame_directions
-from sim.bench.quadrature import (
+from model.optics.aperture import SPLIT_MAX_ORDER, split_order_for
+from model.optics.quadrature import (
     cap_rule,
     cap_solid_angle,
     orthonormal_basis,
     split_cap_rule,
     splittable,
 )
+from sim.bench import build_bench
+from sim.bench.geometry import sample_frame_directions
 
 Z = np.array([0.0, 0.0, 1.0])
 

@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
+from model.bsdf.diffraction import needs_diffraction
+from model.bsdf.multiple_scattering import energy_loss
+from model.optics.exit_face import exit_view
 from sim.bench import build_bench
-from sim.bench.sample import Sample, SampleSpec, exit_view
-from sim.bsdf.diffraction import needs_diffraction
-from sim.bsdf.multiple_scattering import energy_loss
+from sim.bench.sample import Sample, SampleSpec
 from sim.devices.photodiode import SimConfigError
 
 AUTO = {"multiple_scattering": "auto", "diffraction": "auto"}

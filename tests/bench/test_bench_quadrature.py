@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from sim.bench.aperture import MAX_ORDER, ApertureIntegral, order_for
-from sim.bench.quadrature import cap_rule, cap_solid_angle, node_count
-from sim.bench.sample import LobeScales
+from model.optics.aperture import MAX_ORDER, ApertureIntegral, LobeScales, order_for
+from model.optics.quadrature import cap_rule, cap_solid_angle, node_count
 
 Z = np.array([0.0, 0.0, 1.0])
 

@@ -11,9 +11,10 @@ from calibration.reduce import optics_of, reduce_readings
 from calibration.values import CalibrationError
 from gonio.geometry import sample_angles, stage_angles
 from gonio.store import READING_DTYPE
+from model.bsdf import RoughDielectric
+from model.optics.exit_face import exit_view
 from sim.bench import build_bench
-from sim.bench.sample import exit_view, higher_order_lobe
-from sim.bsdf import RoughDielectric
+from sim.bench.sample import higher_order_lobe
 from sim.devices.photodiode import PhotodiodeModel
 
 WL = 632.8
@@ -107,7 +108,7 @@ def test_reduced_values_match_the_bench_expectation_chi_square():
 
 
 def test_reduced_values_match_the_generating_model():
-    """Against sim.bsdf's point values (single scattering plus the bench's multiple-scattering
+    """Against model.bsdf's point values (single scattering plus the bench's multiple-scattering
     lobe, on by default for ground glass): through a 0.11-degree aperture the lobe's aperture
     average differs from them by far less than the noise."""
     sim = {**SIM, "aperture": {"diameter_mm": 2.0, "distance_mm": 500.0}}
@@ -131,7 +132,7 @@ def test_narrow_lobe_through_the_hemisphere_finite_and_flagged():
     assert np.all(np.isfinite(data.sigma[data.valid]))
     expected = bench_expectation(bench, readings, data)
     chi_square_ok((data.bsdf - expected) / data.sigma, data.valid)
-    # the 0.57-degree aperture halves the 0.45-degree-wide transmitted peak of sim.bsdf
+    # the 0.57-degree aperture halves the 0.45-degree-wide transmitted peak of model.bsdf
     model_peak = RoughDielectric("beckmann", 0.023, 1.51).eval(data.wi, data.wo).max()
     assert 0.3 < data.bsdf[data.valid].max() / model_peak < 0.7
     assert (~data.valid).any()  # far-tail points are dark-limited

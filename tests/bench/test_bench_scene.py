@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+from model.bsdf import RoughDielectric
+from model.optics.quadrature import cap_solid_angle
+from model.optics.smooth import fresnel_dielectric, normal_transmittance
 from sim.bench import build_bench, build_power_source
 from sim.bench.geometry import sample_frame_directions
-from sim.bench.optics import fresnel_dielectric, normal_transmittance
-from sim.bench.quadrature import cap_solid_angle
 from sim.bench.sample import higher_order_lobe
 from sim.bench.scene import disk_overlap_fraction
-from sim.bsdf import RoughDielectric
 from sim.devices.photodiode import PowerSource, SimConfigError
 
 NARROW = {"distribution": "beckmann", "alpha": 0.023}

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from model.optics.quadrature import cap_rule
 from sim.bench import build_bench
 from sim.bench.geometry import BEAM_DIRECTION, angle_from_beam_rad, detector_direction
-from sim.bench.quadrature import cap_rule
 from sim.bench.stray import InstrumentScatter
 from sim.devices.photodiode import SimConfigError
 

@@ -1,6 +1,6 @@
 """Independent high-precision reference of the BSDF (mpmath, 50 digits), written straight from
 Walter et al. 2007 in their own variables (tan theta, erf, Walter's Fresnel eq. 22, Phong Lambda by
-numerical quadrature) rather than from the rearranged forms of sim.bsdf."""
+numerical quadrature) rather than from the rearranged forms of model.bsdf."""
 
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ the scalar models. Per-pair alpha is supported where every pair falls in the sam
 
 import numpy as np
 
-from sim.bsdf import RoughDielectric
+from model.bsdf import RoughDielectric
 
 
 def test_per_pair_alpha_matches_scalar_models_for_eval_and_sample():

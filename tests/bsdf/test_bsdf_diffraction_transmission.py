@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.bsdf import RoughDielectric
-from sim.bsdf.diffraction import (
+from model.bsdf import RoughDielectric
+from model.bsdf.diffraction import (
     KCorrelationPSD,
     TwoScaleDiffraction,
     diffraction_fraction,
@@ -253,7 +253,7 @@ def test_extreme_inputs_give_finite_non_negative_values(theta_i, theta_o, phi, f
 
 
 def fresnel_unpolarised(cos_i, n_i, n_o):
-    """Flat-interface reflectance (s and p averaged), written out independently of sim.bsdf."""
+    """Flat-interface reflectance (s and p averaged), written out independently of model.bsdf."""
     sin_t2 = (n_i / n_o) ** 2 * (1 - cos_i**2)
     cos_t = np.sqrt(1 - sin_t2)
     rs = (n_i * cos_i - n_o * cos_t) / (n_i * cos_i + n_o * cos_t)

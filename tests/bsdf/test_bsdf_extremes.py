@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import betaln
 
-from sim.bsdf import RoughConductor, RoughDielectric
+from model.bsdf import RoughConductor, RoughDielectric
 
 EPS = 1e-9  # rad from grazing
 ALPHAS = [1e-4, 0.023, 0.394, 1.0, 4.0]
@@ -226,7 +226,7 @@ def test_lambda_and_g1_match_mpmath(name):
     equal terms where Lambda is tiny (and uses scipy's betainc at k ~ 2000), so its Lambda is held
     to 1e-11 only where Lambda > 1e-10; G1, the quantity the BSDF uses, is full precision for
     all three."""
-    from sim.bsdf import make_distribution
+    from model.bsdf import make_distribution
 
     worst_lambda = worst_g1 = 0.0
     for alpha in (1e-4, 0.023, 0.394, 1.3) + (() if name == "phong" else (4.0,)):

@@ -4,9 +4,9 @@ import bsdf_reference as ref
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.distributions import WITH_KERNELS
-from sim.bsdf.kernels import AVAILABLE
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.distributions import WITH_KERNELS
+from model.bsdf.kernels import AVAILABLE
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="numba (gonio[fast]) is not installed")
 
@@ -181,7 +181,7 @@ def _sample_agree(cls, kw, wi=None, u=None):
 def test_serial_and_parallel_kernels_agree_bit_for_bit(model, monkeypatch):
     """Small batches run on the calling thread (kernels.SERIAL_BELOW): the same pairs give the
     same bits either way, eval and pdf."""
-    import sim.bsdf.kernels as kernels
+    import model.bsdf.kernels as kernels
 
     wi, wo = _pairs(5000, seed=3)
     runs = []

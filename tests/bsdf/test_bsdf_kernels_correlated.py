@@ -7,8 +7,8 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughDielectric, kernels
-from sim.bsdf.constants import Masking, Ndf, Sampling
+from model.bsdf import RoughDielectric, kernels
+from model.bsdf.constants import Masking, Ndf, Sampling
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE,
                                 reason="numba (gonio[fast]) is not installed")

@@ -6,8 +6,8 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from sim.bsdf.kernels import AVAILABLE
-from sim.bsdf.masking import beta_over_cosines, g2_over_cosines, log_beta
+from model.bsdf.kernels import AVAILABLE
+from model.bsdf.masking import beta_over_cosines, g2_over_cosines, log_beta
 
 ARGS = [1.0, 1.0 + 1e-12, 1.3, 2.0, 9.99, 10.0, 10.01, 31.4, 1e3, 1e5, 1e9, 1e17, 1e100]
 
@@ -55,7 +55,7 @@ def test_beta_over_cosines_at_grazing_and_infinite_lambda():
 
 @pytest.mark.skipif(not AVAILABLE, reason="numba (gonio[fast]) is not installed")
 def test_compiled_beta_matches_numpy():
-    from sim.bsdf.primitives import beta_over_cosines as _beta_oc
+    from model.bsdf.primitives import beta_over_cosines as _beta_oc
 
     rng = np.random.default_rng(0)
     ci, co = 10.0 ** rng.uniform(-100, 0, (2, 2000))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric
+from model.bsdf import RoughConductor, RoughDielectric
 
 
 @pytest.mark.parametrize("kwargs,field", [

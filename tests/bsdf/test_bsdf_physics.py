@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 from bsdf_quadrature import direction, integrate_sphere
 
-from sim.bsdf import (
+from model.bsdf import (
     RoughConductor,
     RoughDielectric,
     fresnel_conductor,
     fresnel_dielectric,
     make_distribution,
 )
-from sim.bsdf.distributions import DISTRIBUTION_NAMES as DISTS
-from sim.bsdf.masking import MASKINGS
+from model.bsdf.distributions import DISTRIBUTION_NAMES as DISTS
+from model.bsdf.masking import MASKINGS
 
 
 def _mc_albedo(model, wi, n=100_000, seed=2):

@@ -5,16 +5,21 @@ formula; the model-level kernels are held to the numpy path in test_bsdf_kernels
 import numpy as np
 import pytest
 
-from sim.bsdf import primitives as p
-from sim.bsdf.constants import BECKMANN_KERNEL_CF_FROM, Masking, Ndf, Sampling
-from sim.bsdf.distributions import DISTRIBUTIONS, WITH_KERNELS, beckmann_a_lambda, make_distribution
-from sim.bsdf.fresnel import (
+from model.bsdf import primitives as p
+from model.bsdf.constants import BECKMANN_KERNEL_CF_FROM, Masking, Ndf, Sampling
+from model.bsdf.distributions import (
+    DISTRIBUTIONS,
+    WITH_KERNELS,
+    beckmann_a_lambda,
+    make_distribution,
+)
+from model.bsdf.fresnel import (
     dielectric_transmittance,
     fresnel_conductor,
     reflectance_transmittance_toward,
 )
-from sim.bsdf.masking import MASKINGS, g2_over_cosines, log_beta, masking_kind
-from sim.bsdf.microfacet import SAMPLINGS, walter_widening
+from model.bsdf.masking import MASKINGS, g2_over_cosines, log_beta, masking_kind
+from model.bsdf.microfacet import SAMPLINGS, walter_widening
 
 ALPHAS = [(0.3, 0.3), (0.05, 0.9), (2.0, 1e-3)]
 #: Relative agreement: the same formulas in the same order; numpy's exp and log may differ

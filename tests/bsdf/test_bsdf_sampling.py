@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from bsdf_quadrature import chi_square_pvalue, direction
 
-from sim.bsdf import RoughConductor, RoughDielectric, make_distribution
+from model.bsdf import RoughConductor, RoughDielectric, make_distribution
 
 N = 100_000
 P_MIN = 1e-3  # per test; about 40 tests, so a false alarm is unlikely at fixed seeds

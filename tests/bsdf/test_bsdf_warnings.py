@@ -7,14 +7,14 @@ import warnings
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric, make_distribution
-from sim.bsdf.fresnel import (
+from model.bsdf import RoughConductor, RoughDielectric, make_distribution
+from model.bsdf.fresnel import (
     dielectric_reflectance_transmittance,
     dielectric_transmittance,
     fresnel_conductor,
     fresnel_dielectric,
 )
-from sim.bsdf.masking import g2_over_cosines
+from model.bsdf.masking import g2_over_cosines
 
 GRAZING = np.array([[1.0, 0.0, 0.0], [0.6, 0.8, 0.0], [0.6, 0.8, -0.0]])
 OTHER = np.array([[0.3, 0.0, 0.954], [0.0, 0.0, 1.0], [0.3, 0.1, -0.95]])

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.diffraction import (
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.diffraction import (
     KCorrelationPSD,
     TwoScaleDiffraction,
     diffraction_fraction,

@@ -6,11 +6,11 @@ import pytest
 from scipy import integrate, optimize
 from scipy.special import betaln, erfc
 
-from sim.bsdf.multiple_scattering import energy_loss
+from model.bsdf.multiple_scattering import energy_loss
 
 
 def lam(name, ax, ay, w):
-    """Smith Lambda of an upward w (scalar formulas, not sim.bsdf's)."""
+    """Smith Lambda of an upward w (scalar formulas, not model.bsdf's)."""
     sin_t = np.hypot(w[0], w[1])
     if sin_t == 0.0:
         return 0.0

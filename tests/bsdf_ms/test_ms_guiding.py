@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from sim.bsdf.distributions import WALKABLE, make_distribution
-from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF, albedo_estimate
-from sim.bsdf.multiple_scattering.guiding import adjoint_density, sample_adjoint
+from model.bsdf.distributions import WALKABLE, make_distribution
+from model.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF, albedo_estimate
+from model.bsdf.multiple_scattering.guiding import adjoint_density, sample_adjoint
 
 
 def direction(theta_deg, phi_deg=0.0):

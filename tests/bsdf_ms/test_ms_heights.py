@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
-from sim.bsdf.multiple_scattering.heights import (
+from model.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
+from model.bsdf.multiple_scattering.heights import (
     GaussianHeights,
     UniformHeights,
     log1mexp,

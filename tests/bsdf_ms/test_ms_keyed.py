@@ -5,11 +5,11 @@ branches), walks that do not depend on the batch, and the covariance it states."
 import numpy as np
 import pytest
 
-from sim.bsdf.distributions import make_distribution
-from sim.bsdf.multiple_scattering import keyed, nee_kernel
-from sim.bsdf.multiple_scattering.keyed import keyed_walk_to_targets
-from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
-from sim.bsdf.multiple_scattering.walk import Walker
+from model.bsdf.distributions import make_distribution
+from model.bsdf.multiple_scattering import keyed, nee_kernel
+from model.bsdf.multiple_scattering.keyed import keyed_walk_to_targets
+from model.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
+from model.bsdf.multiple_scattering.walk import Walker
 
 pytestmark = pytest.mark.skipif(not nee_kernel.AVAILABLE, reason="numba is not installed")
 Z_MAX = 4.5  # |z-score| allowed for a Monte Carlo comparison (deterministic seeds)

@@ -7,18 +7,18 @@ import math
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.distributions import WALKABLE, make_distribution
-from sim.bsdf.multiple_scattering import (
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.distributions import WALKABLE, make_distribution
+from model.bsdf.multiple_scattering import (
     HigherOrderLobe,
     RandomWalkBSDF,
     energy_loss,
     higher_orders_at,
     nee_kernel,
 )
-from sim.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
-from sim.bsdf.multiple_scattering.second_order import second_order
-from sim.bsdf.multiple_scattering.walk import Walker
+from model.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric
+from model.bsdf.multiple_scattering.second_order import second_order
+from model.bsdf.multiple_scattering.walk import Walker
 
 Z_MAX = 4.5  # |z-score| allowed for a Monte Carlo comparison (deterministic seeds)
 GLASS = RoughDielectric("ggx", 0.5, 1.51, masking="correlated")

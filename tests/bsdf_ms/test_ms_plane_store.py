@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from model.bsdf import RoughDielectric
+from model.bsdf.multiple_scattering import HigherOrderLobe, plane_store
+from model.bsdf.multiple_scattering.plane_store import PlaneStore, cache_root, code_digest
 from sim.bench.sample import higher_order_lobe
-from sim.bsdf import RoughDielectric
-from sim.bsdf.multiple_scattering import HigherOrderLobe, plane_store
-from sim.bsdf.multiple_scattering.plane_store import PlaneStore, cache_root, code_digest
 
 GLASS = RoughDielectric("ggx", 0.5, 1.51, masking="correlated")
 PARENT = {"distribution": "ggx", "alpha": 0.5, "eta": 1.51, "masking": "correlated"}
@@ -63,7 +63,7 @@ def test_everything_the_values_depend_on_names_the_files(cache):
 
 
 def test_other_code_names_other_files(cache, monkeypatch):
-    """code_digest: sim.bsdf's sources and numpy's, scipy's and numba's versions; a change of
+    """code_digest: model.bsdf's sources and numpy's, scipy's and numba's versions; a change of
     any gives other files."""
     assert code_digest().count("-") == 3 and np.__version__ in code_digest()
     before = PlaneStore(PARENT, cache).key
@@ -96,9 +96,9 @@ SCRIPT = """
 import json, sys
 import numpy as np
 from pathlib import Path
-from sim.bsdf import RoughDielectric
-from sim.bsdf.multiple_scattering import HigherOrderLobe
-from sim.bsdf.multiple_scattering.plane_store import PlaneStore
+from model.bsdf import RoughDielectric
+from model.bsdf.multiple_scattering import HigherOrderLobe
+from model.bsdf.multiple_scattering.plane_store import PlaneStore
 glass = RoughDielectric("ggx", 0.5, 1.51, masking="correlated")
 wi, wo = np.array(json.loads(sys.argv[2])), np.array(json.loads(sys.argv[3]))
 values = HigherOrderLobe(glass, 512, 4, cache_as=json.loads(sys.argv[1])).estimate(wi, wo)

@@ -5,14 +5,14 @@ transmitted orders >= 3 by reciprocity against the forward walk."""
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughDielectric
-from sim.bsdf.distributions import make_distribution
-from sim.bsdf.multiple_scattering import keyed, nee_kernel
-from sim.bsdf.multiple_scattering.keyed import keyed_walk_from_starts, keyed_walk_to_targets
-from sim.bsdf.multiple_scattering.lobe import walk_both_ways
-from sim.bsdf.multiple_scattering.micro import MicroDielectric
-from sim.bsdf.multiple_scattering.model import RandomWalkBSDF
-from sim.bsdf.multiple_scattering.walk import Walker
+from model.bsdf import RoughDielectric
+from model.bsdf.distributions import make_distribution
+from model.bsdf.multiple_scattering import keyed, nee_kernel
+from model.bsdf.multiple_scattering.keyed import keyed_walk_from_starts, keyed_walk_to_targets
+from model.bsdf.multiple_scattering.lobe import walk_both_ways
+from model.bsdf.multiple_scattering.micro import MicroDielectric
+from model.bsdf.multiple_scattering.model import RandomWalkBSDF
+from model.bsdf.multiple_scattering.walk import Walker
 
 pytestmark = pytest.mark.skipif(not nee_kernel.AVAILABLE, reason="numba is not installed")
 Z_MAX = 4.5  # |z-score| allowed for a Monte Carlo comparison (deterministic seeds)
@@ -106,7 +106,7 @@ def test_the_result_does_not_depend_on_the_threads(monkeypatch, targets):
 
 
 def test_one_kernel_thread_where_numba_has_one(monkeypatch):
-    """sim.cluster's policy (numba's thread count 1 in a Dask task) holds for the walks."""
+    """model.cluster's policy (numba's thread count 1 in a Dask task) holds for the walks."""
     numba = pytest.importorskip("numba")
     monkeypatch.setattr(keyed, "THREADS", 2)
     previous = numba.get_num_threads()

@@ -5,14 +5,14 @@ its node counts; and the orders >= 2 it builds (higher_orders_at) with or withou
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.multiple_scattering import RandomWalkBSDF, higher_orders_at
-from sim.bsdf.multiple_scattering.second_order import second_order, second_order_reference
-from sim.bsdf.multiple_scattering.second_order_kernel import (
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.multiple_scattering import RandomWalkBSDF, higher_orders_at
+from model.bsdf.multiple_scattering.second_order import second_order, second_order_reference
+from model.bsdf.multiple_scattering.second_order_kernel import (
     height_expectation,
     numeric_height_expectation,
 )
-from sim.bsdf.multiple_scattering.walk import Walker
+from model.bsdf.multiple_scattering.walk import Walker
 
 
 def _direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:

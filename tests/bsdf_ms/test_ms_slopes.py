@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from sim.bsdf.distributions import WALKABLE, make_distribution
-from sim.bsdf.multiple_scattering.walk import walkable
+from model.bsdf.distributions import WALKABLE, make_distribution
+from model.bsdf.multiple_scattering.walk import walkable
 
 CASES = [("ggx", 0.3), ("ggx", (1.0, 0.4)), ("beckmann", 0.3), ("beckmann", (0.5, 1.2))]
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from sim.bsdf import RoughConductor, RoughDielectric
-from sim.bsdf.distributions import WALKABLE
-from sim.bsdf.multiple_scattering import (
+from model.bsdf import RoughConductor, RoughDielectric
+from model.bsdf.distributions import WALKABLE
+from model.bsdf.multiple_scattering import (
     Microsurface,
     RandomWalkBSDF,
     albedo_estimate,

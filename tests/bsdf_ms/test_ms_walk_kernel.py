@@ -7,19 +7,19 @@ from scipy.special import erfcx as scipy_erfcx
 from scipy.special import ndtri as scipy_ndtri
 from scipy.stats import kstest
 
-from sim.bsdf import beckmann_sphere
-from sim.bsdf.distributions import make_distribution
-from sim.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
-from sim.bsdf.multiple_scattering.nee_kernel import AVAILABLE
-from sim.bsdf.multiple_scattering.visible_kernel import (
+from model.bsdf import beckmann_sphere
+from model.bsdf.distributions import make_distribution
+from model.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
+from model.bsdf.multiple_scattering.nee_kernel import AVAILABLE
+from model.bsdf.multiple_scattering.visible_kernel import (
     START_THETA_MAX,
     _visible_slope,
     erfcx,
     ndtri,
     visible_normal,
 )
-from sim.bsdf.multiple_scattering.walk import Walker
-from sim.bsdf.multiple_scattering.walk_kernel import uniform
+from model.bsdf.multiple_scattering.walk import Walker
+from model.bsdf.multiple_scattering.walk_kernel import uniform
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="the walk kernel needs numba (gonio[fast])")
 Z_MAX = 4.5

@@ -8,7 +8,7 @@ import time
 import pytest
 
 from gonio_cli.main import main
-from sim.lut import TableSpec, bake
+from model.lut import TableSpec, bake
 
 HUGE = ["lut", "--kind", "transmission", "--size", "256x256x128", "--samples", "65536"]
 

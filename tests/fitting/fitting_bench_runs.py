@@ -105,8 +105,8 @@ def metered_bsdf(bench, positions: list[tuple[float, float]], seed: int, averagi
     [dark] readings subtract it) and divided as reduction divides; sigma is the detector's."""
     import numpy as np
 
+    from model.optics.exit_face import exit_view
     from sim.bench.geometry import sample_frame_directions
-    from sim.bench.sample import exit_view
     from sim.devices.photodiode import PhotodiodeModel
 
     meter = PhotodiodeModel(None, seed=seed)

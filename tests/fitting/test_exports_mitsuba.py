@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from calibration.exports.mitsuba import material_parameters, write_mitsuba
-from sim.bsdf import RoughDielectric
+from model.bsdf import RoughDielectric
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is the `mitsuba` extra (in `test`)")
 ETA, ALPHA = 1.51, 0.3

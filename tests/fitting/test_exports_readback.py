@@ -116,7 +116,7 @@ def test_anisotropic_fit_exports(tmp_path):
 def test_conductor_fit_and_roughconductor_export(tmp_path):
     from calibration.reduced import ReducedData
     from calibration.synthetic import in_plane_directions
-    from sim.bsdf import RoughConductor
+    from model.bsdf import RoughConductor
 
     parts = [in_plane_directions(t, 1.0, 0.2, sides=("reflection",)) for t in (0.0, 40.0)]
     wi, wo = (np.concatenate([p[k] for p in parts]) for k in range(2))

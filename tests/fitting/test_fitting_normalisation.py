@@ -10,10 +10,10 @@ import pytest
 
 from calibration.beam import beam_power
 from calibration.fit import FitOptions, fit
-from calibration.reduce import emulator_shot_noise_w
 from calibration.reduced import ReducedData
 from calibration.synthetic import synthesize
 from sim.devices.photodiode import PhotodiodeModel
+from sim.truth import emulator_shot_noise_w
 
 N_BEAM, SPAN_S, NOISE_REL = 28, 20.0, 5e-4  # as in a Walter example run on the emulated bench
 

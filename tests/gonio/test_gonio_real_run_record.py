@@ -14,14 +14,14 @@ from gonio_testkit import fast_config, gonio_cli, one_line_error, write_toml
 
 from calibration import calfile
 from calibration.pipeline import reduce_run
-from calibration.plot import TRUTH, emulated_sample, plot_reduced, plot_title, truth_curves
-from calibration.reduce import emulator_shot_noise_w
+from calibration.plot import emulated_truth, plot_reduced, plot_title, truth_curves
 from calibration.values import Measured
 from gonio.config import parse_config
 from gonio.errors import ConfigError
 from gonio.record import run_record
 from gonio.runner import new_scan
 from gonio.store import open_run
+from sim.truth import TRUTH, emulator_shot_noise_w
 
 PLAN = {"name": "record", "averaging": 4, "order": "as-written",
         "sample": {"id": "GG-7", "kind": "hemisphere", "eta": 1.51, "operator": "test"},
@@ -133,10 +133,10 @@ def test_a_run_without_its_description_is_one_error_unless_calibrated(emulated, 
 def test_the_emulator_truth_is_drawn_for_emulated_runs_only(emulated, tmp_path):
     own = reduce_run(emulated)
     real = reduce_run(as_real(emulated, tmp_path / "real", WRONG_SIM))
-    labels = list(truth_curves(own.meta, emulated_sample(own.meta), 0.0, True))
+    labels = list(truth_curves(own.meta, emulated_truth(own.meta), 0.0, True))
     assert labels and all(label.startswith(TRUTH) for label in labels)
     assert not any("model" in label for label in labels)
-    assert emulated_sample(real.meta) is None
+    assert emulated_truth(real.meta) is None
     assert truth_curves(real.meta, None, 0.0, True) == {}
     assert plot_title("r", own.meta) == "r: sample GG-7, eta 1.51"
     for name, data in (("emulated", own), ("real", real)):

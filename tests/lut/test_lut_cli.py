@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from gonio_cli.main import main
-from sim.cluster import dask_client
-from sim.lut import TableSpec, bake, load_table
+from model.cluster import dask_client
+from model.lut import TableSpec, bake, load_table
 
 ARGS = ["lut", "--kind", "transmission", "--size", "4x3x4", "--samples", "64",
         "--tile-entries", "7", "--dtype", "float32"]

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from gonio_cli.main import main
-from sim.lut import TableSpec, bake, load_table
-from sim.lut.bake import grid_points
-from sim.lut.remap import albedo_factor
-from sim.lut.table import Table, interpolate, texture_coords
-from sim.lut.validate import random_points
+from model.lut import TableSpec, bake, load_table
+from model.lut.bake import grid_points
+from model.lut.remap import albedo_factor
+from model.lut.table import Table, interpolate, texture_coords
+from model.lut.validate import random_points
 
 if os.environ.get("CI"):
     import OpenEXR  # CI installs the test extra, which includes gonio[exr]: never skip there

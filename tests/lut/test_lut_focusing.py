@@ -1,4 +1,4 @@
-"""The focusing term (sim.lut.focusing): Walter's eq. 17 with the view fixed against a
+"""The focusing term (model.lut.focusing): Walter's eq. 17 with the view fixed against a
 finite-difference Jacobian of the half-vector map, and the quoted expression against a
 numeric derivative of the relation it differentiates."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.lut.focusing import (
+from model.lut.focusing import (
     approximation_error,
     exact_jacobian,
     facet_cosine,

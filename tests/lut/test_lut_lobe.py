@@ -14,15 +14,15 @@ from hypothesis import strategies as st
 from scipy.stats import qmc
 
 from gonio_cli.main import main
-from sim.bench.quadrature import cap_rule, orthonormal_basis
-from sim.bsdf.distributions import make_distribution
-from sim.bsdf.vectors import unit
-from sim.lut import TableSpec, bake, load_table, validate
-from sim.lut.direction import lookup_direction, polar_angle, refraction_angle
-from sim.lut.lobe import LobeEstimator
-from sim.lut.model import ModelEstimator, view_direction
-from sim.lut.prefilter import BLUR_MAX, equivalent_alpha, kernel_spreads, normalisation
-from sim.lut.splitsum import Environment, brute_force, prefiltered
+from model.bsdf.distributions import make_distribution
+from model.bsdf.vectors import unit
+from model.lut import TableSpec, bake, load_table, validate
+from model.lut.direction import lookup_direction, polar_angle, refraction_angle
+from model.lut.lobe import LobeEstimator
+from model.lut.model import ModelEstimator, view_direction
+from model.lut.prefilter import BLUR_MAX, equivalent_alpha, kernel_spreads, normalisation
+from model.lut.splitsum import Environment, brute_force, prefiltered
+from model.optics.quadrature import cap_rule, orthonormal_basis
 
 U = qmc.Sobol(d=3, scramble=True, seed=21).random(2**13)
 U_SUN = qmc.Sobol(d=2, scramble=True, seed=22).random(2**11)

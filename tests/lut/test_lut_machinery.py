@@ -10,13 +10,13 @@ import math
 import numpy as np
 import pytest
 
-from sim.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worker, usable_cores
-from sim.lut import TableSpec, bake, load_table, parse_size, validate
-from sim.lut.axes import ETA_MAX, axes_for
-from sim.lut.bake import grid_points, integrate_tile
-from sim.lut.remap import albedo_factor
-from sim.lut.table import Table, interpolate
-from sim.lut.validate import TIR_BAND, edge_split, near_critical, random_points, stored_values
+from model.cluster import map_tasks, run_with_one_kernel_thread, threads_per_worker, usable_cores
+from model.lut import TableSpec, bake, load_table, parse_size, validate
+from model.lut.axes import ETA_MAX, axes_for
+from model.lut.bake import grid_points, integrate_tile
+from model.lut.remap import albedo_factor
+from model.lut.table import Table, interpolate
+from model.lut.validate import TIR_BAND, edge_split, near_critical, random_points, stored_values
 
 
 class StandIn:
@@ -124,8 +124,8 @@ def test_same_bits_whatever_the_layout(client, monkeypatch):
     serial = serial.reshape(threads.shape).astype(SPEC.dtype)
     assert threads.tobytes() == cluster.tobytes() == serial.tobytes()
     for per_thread in (1, 1000):  # one task per thread, one tile per task
-        # the module by name: the attribute sim.lut.bake is the bake function
-        monkeypatch.setattr(importlib.import_module("sim.lut.bake"), "TASKS_PER_THREAD",
+        # the module by name: the attribute model.lut.bake is the bake function
+        monkeypatch.setattr(importlib.import_module("model.lut.bake"), "TASKS_PER_THREAD",
                             per_thread)
         assert bake(SPEC, estimator).data.tobytes() == threads.tobytes()
     other_seed = bake(TableSpec(**{**SPEC.to_dict(), "shape": SPEC.shape, "seed": 8}), estimator)
@@ -196,7 +196,7 @@ def test_a_non_finite_estimate_is_named():
 
 
 def test_tasks_run_kernels_on_one_thread_and_workers_share_the_cores(client):
-    """The thread policy of sim.cluster: inside a task numba runs one thread (restored
+    """The thread policy of model.cluster: inside a task numba runs one thread (restored
     after), in-process and on a cluster; local workers x threads never exceed the cores."""
     numba = pytest.importorskip("numba")
     before = numba.get_num_threads()

@@ -1,6 +1,6 @@
 """The split-sum integrands of the rough dielectric, checked by independent routes: quadrature
 of the model's eval over light directions, the order-1 energy quadrature of
-sim.bsdf.multiple_scattering, closed-form smooth limits, and extreme inputs."""
+model.bsdf.multiple_scattering, closed-form smooth limits, and extreme inputs."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.stats import qmc
 
-from sim.bsdf import fresnel_dielectric
-from sim.bsdf.multiple_scattering import energy_loss
-from sim.lut.model import ModelEstimator, smooth_limit, view_direction
+from model.bsdf import fresnel_dielectric
+from model.bsdf.multiple_scattering import energy_loss
+from model.lut.model import ModelEstimator, smooth_limit, view_direction
 
 U = qmc.Sobol(d=3, scramble=True, seed=11).random(4096)
 RNG = np.random.default_rng(5)
@@ -63,7 +63,7 @@ def test_reflection_scale_bias_equal_quadrature_of_eval(mu, alpha):
 @pytest.mark.parametrize("alpha", [0.05, 0.4, 1.0])
 def test_scale_plus_bias_is_the_order1_energy_of_a_mirror_microsurface(mu, alpha):
     """scale + bias = integral of f_r / F |cos o|: single_scattering_energy with F = 1
-    (an independent Gauss-Legendre route in sim.bsdf.multiple_scattering)."""
+    (an independent Gauss-Legendre route in model.bsdf.multiple_scattering)."""
     total = REFLECTION(np.array([[mu, alpha]]), U, RNG)[0].sum()
     assert total == pytest.approx(1.0 - energy_loss("ggx", alpha, None, np.arccos(mu)),
                                   abs=2e-3)

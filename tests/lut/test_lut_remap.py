@@ -1,4 +1,4 @@
-"""The remapped N.V coordinate (sim.lut.remap) and the fixed-index table: lookups at the
+"""The remapped N.V coordinate (model.lut.remap) and the fixed-index table: lookups at the
 nodes equal direct evaluations of the model there, lookups are continuous across eta = 1, and
 the map inverts."""
 
@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.lut import TableSpec, bake
-from sim.lut.bake import grid_points
-from sim.lut.model import ModelEstimator
-from sim.lut.remap import MU_FLOOR, nv_coord, nv_value
-from sim.lut.validate import reference, stored_values
+from model.lut import TableSpec, bake
+from model.lut.bake import grid_points
+from model.lut.model import ModelEstimator
+from model.lut.remap import MU_FLOOR, nv_coord, nv_value
+from model.lut.validate import reference, stored_values
 
 REMAPPED = TableSpec(kind="transmission", shape=(12, 6, 6), dtype="float64", samples=512,
                      tile_entries=36)
@@ -79,7 +79,7 @@ def test_lookups_are_continuous_across_eta_one(tables):
                         for e in (-delta, delta))
         return np.max(np.abs(below - above))
 
-    # the eta coordinate goes as |ln eta|^0.4 (sim.lut.axes.ETA_POWER): continuous, steep
+    # the eta coordinate goes as |ln eta|^0.4 (model.lut.axes.ETA_POWER): continuous, steep
     jumps = [jump(d) for d in (1e-6, 1e-9, 1e-12, 1e-15)]
     assert np.all(np.diff(jumps) < 0) and jumps[-1] < 2e-5
     # and the texture coordinate itself

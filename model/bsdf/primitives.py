@@ -1,0 +1,314 @@
+"""Scalar microfacet formulas, one direction or pair at a time: the one source of D, Smith
+Lambda, masking G2 (with log Beta), Fresnel and the normal samplers that the compiled BSDF
+kernels (kernels.py) and the random walk's next-event kernel (multiple_scattering/nee_kernel.py)
+share.
+
+The distributions, masking forms and normal samplers are named by the IntEnums of constants.py
+(numba sees their members as ints: a compiled caller passes `Ndf.GGX.value`). With numba (the
+gonio[fast] extra) each function is compiled on first call and cached on disk; without it they
+are the same formulas as plain Python (where Python raises on a division by zero or an overflow,
+numba's numpy error model gives inf or nan). The vectorised numpy versions (distributions.py,
+masking.py, fresnel.py) are the models' reference path; tests/bsdf/test_bsdf_primitives.py holds
+them to these."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from model.bsdf.constants import (
+    BECKMANN_CF_FROM,
+    BECKMANN_CF_TERMS,
+    BECKMANN_KERNEL_CF_FROM,
+    HALF_LOG_2PI,
+    SQRT_PI,
+    STIRLING_FROM,
+    STIRLING_TERMS,
+    WALTER_BASE,
+    WALTER_SLOPE,
+    Masking,
+    Ndf,
+    Sampling,
+)
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - exercised only without the [fast] extra
+    COMPILED = False
+
+    def scalar(fn):
+        """Without numba: the plain Python function."""
+        return fn
+
+    inlined = scalar
+else:
+    COMPILED = True
+    #: How every scalar formula is compiled: cached, with numpy's floating-point error model,
+    #: releasing the GIL (keyed walks fill one batch from several threads).
+    scalar = njit(cache=True, error_model="numpy", nogil=True)
+    #: The same, inlined into each caller by numba (inline="always"): the random walk's
+    #: per-event formulas, which LLVM otherwise leaves as calls (a sixth of a walk's time).
+    inlined = njit(cache=True, error_model="numpy", inline="always")
+
+STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
+#: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
+SPLIT = 134217729.0
+
+
+# --- geometry -----------------------------------------------------------------------------
+
+@scalar
+def unit(x, y, z):
+    """(x, y, z) scaled to unit length (a zero vector stays zero)."""
+    n = math.sqrt(x * x + y * y + z * z)
+    if n > 0.0:
+        inv = 1.0 / n  # one division instead of three, as vectors.unit does
+        return x * inv, y * inv, z * inv
+    return x, y, z
+
+
+@scalar
+def exp_square(x, sign):
+    """exp(sign x^2), sign +-1, to double precision for large x: x^2's rounding error (Veltkamp
+    split, exact products) is applied as a factor, instead of being amplified x^2 times by exp."""
+    c = SPLIT * x
+    hi = c - (c - x)
+    lo = x - hi
+    s = x * x
+    return math.exp(sign * s) * (1.0 + sign * (((hi * hi - s) + 2.0 * hi * lo) + lo * lo))
+
+
+@scalar
+def erfc_continued_fraction(a):
+    """t with erfc(a) = exp(-a^2) / (sqrt(pi) (a + t)), for a >= BECKMANN_CF_FROM: the
+    continued fraction (1/2) / (a + 1 / (a + (3/2) / ...)) with the terms full float64 accuracy
+    needs at this a (BECKMANN_CF_TERMS at a = 2, falling as 1/a^2 to 14)."""
+    t = 0.0
+    for k in range(min(BECKMANN_CF_TERMS, 14 + int(190.0 / (a * a))), 0, -1):
+        t = 0.5 * k / (a + t)
+    return t
+
+
+@scalar
+def beckmann_a_lambda(a):
+    """a * Lambda(a) of the Beckmann Smith function (distributions.beckmann_a_lambda), exp(-a^2)
+    exactly rounded from a = 2 on; the closed form up to BECKMANN_KERNEL_CF_FROM (within ~2a^2
+    ulps), then the continued fraction (14-21 terms)."""
+    if a < BECKMANN_CF_FROM:
+        return 0.5 * (math.exp(-a * a) / SQRT_PI - a * math.erfc(a))
+    if a < BECKMANN_KERNEL_CF_FROM:
+        return 0.5 * (exp_square(a, -1.0) / SQRT_PI - a * math.erfc(a))
+    if not a < 27.3:  # exp(-a^2) is 0 in double (and a^2 would overflow from 1.3e154)
+        return 0.0
+    t = erfc_continued_fraction(a)
+    return exp_square(a, -1.0) * t / (2.0 * SQRT_PI * (a + t))
+
+
+@scalar
+def cos_lambda(ndf, ax, ay, x, y, z):
+    """|z| Lambda(x, y, z) (Distribution.cos_lambda): finite even at exactly grazing w."""
+    q = (ax * x) ** 2 + (ay * y) ** 2
+    c = abs(z)
+    if ndf == Ndf.GGX:
+        return q / (2.0 * (math.sqrt(c * c + q) + c))
+    r = math.sqrt(q)
+    if r == 0.0:
+        return 0.0
+    return r * beckmann_a_lambda(c / r)
+
+
+@scalar
+def normal_density(ndf, ax, ay, mx, my, mz):
+    """D(m) per unit solid angle (Distribution.D), 0 for m.z <= 0."""
+    if mz <= 0.0:
+        return 0.0
+    if ndf == Ndf.GGX:
+        den = mz * mz + ((mx / ax) ** 2 + (my / ay) ** 2)
+        return 1.0 / (math.pi * ax * ay * den * den)
+    expo = -((mx / ax) ** 2 + (my / ay) ** 2) / (mz * mz) - 4.0 * math.log(mz)
+    return math.exp(expo) / (math.pi * ax * ay)
+
+
+# --- masking ------------------------------------------------------------------------------
+
+@scalar
+def stirling_correction(x):
+    """log Gamma(x) - ((x - 1/2) log x - x + log sqrt(2 pi)), for x >= STIRLING_FROM."""
+    r = 1.0 / x
+    r2 = r * r
+    s = 0.0
+    for c in STIRLING_REVERSED:
+        s = s * r2 + c
+    return s * r
+
+
+@scalar
+def log_beta(p, q):
+    """log B(p, q) for p, q >= 1 (masking.log_beta: the same three regions and formulas)."""
+    a, b = min(p, q), max(p, q)
+    s = a + b
+    frac = a / s
+    if b < STIRLING_FROM:
+        return math.log(math.gamma(a) * (math.gamma(b) / math.gamma(s)))
+    corr_b = stirling_correction(b) - stirling_correction(s)
+    if a < STIRLING_FROM:
+        return math.lgamma(a) + corr_b + a - a * math.log(s) + (b - 0.5) * math.log1p(-frac)
+    return (HALF_LOG_2PI - 0.5 * math.log(b) + stirling_correction(a) + corr_b
+            + (a - 0.5) * math.log(frac) + b * math.log1p(-frac))
+
+
+@scalar
+def beta_over_cosines(ci, co, li, lo):
+    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co)."""
+    if not (ci > 0.0 and co > 0.0 and math.isfinite(li) and math.isfinite(lo)):
+        return 0.0
+    return math.exp(log_beta(1.0 + li / ci, 1.0 + lo / co) - math.log(ci) - math.log(co))
+
+
+@scalar
+def g2_over_cosines(masking, ci, co, li, lo, transmitted):
+    """G2 / (ci co) from the |cosines| and |cos| Lambdas (masking.g2_over_cosines)."""
+    if masking == Masking.SEPARABLE:
+        return 1.0 / ((ci + li) * (co + lo))
+    if transmitted:
+        return beta_over_cosines(ci, co, li, lo)
+    return 1.0 / (ci * co + co * li + ci * lo)
+
+
+# --- Fresnel ------------------------------------------------------------------------------
+
+@scalar
+def fresnel_toward(c, e, em1):
+    """F at |cos_i| = c toward relative index e, em1 = e - 1 exact
+    (fresnel.reflectance_transmittance_toward's F); 1 under total internal reflection."""
+    e_ct2 = em1 * (e + 1.0) + c * c
+    if e_ct2 <= 0.0:
+        return 1.0
+    e_ct = math.sqrt(e_ct2)
+    den_s = c + e_ct
+    den_p = e * e * c + e_ct
+    if den_s <= 0.0 or den_p <= 0.0:
+        return 1.0
+    e2m1 = em1 * (e + 1.0)
+    rs = -e2m1 / (den_s * den_s)
+    rp = e2m1 * (c * c * (e * e + 1.0) - 1.0) / (den_p * den_p)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+@scalar
+def transmittance_e(c, e_ct, e):
+    """1 - F from c = |cos_i| and e cos_t, without a subtraction (fresnel._transmittance)."""
+    den_s = c + e_ct
+    den_p = e * e * c + e_ct
+    if den_s <= 0.0 or den_p <= 0.0:
+        return 0.0
+    return 2.0 * ((c / den_s) * (e_ct / den_s) + e * e * (c / den_p) * (e_ct / den_p))
+
+
+@scalar
+def dielectric_transmittance(c, ct, e):
+    """1 - F from both |cosines| (fresnel.dielectric_transmittance)."""
+    return transmittance_e(c, e * ct, e)
+
+
+@scalar
+def conductor_fresnel(c, has_f, n_c):
+    """fresnel.fresnel_conductor for one cosine and complex index n_c; 1 without an index
+    (has_f False: a perfect mirror)."""
+    if not has_f:
+        return 1.0
+    n2 = n_c * n_c
+    n2m1 = (n_c - 1.0) * (n_c + 1.0)
+    if n2m1 == 0:
+        return 0.0 if c != 0 else 1.0
+    root = np.sqrt(n2m1 + c * c)  # principal branch, as numpy's in fresnel_conductor
+    den_s = c + root
+    den_p = n2 * c + root
+    if den_s == 0 or den_p == 0:
+        return 1.0
+    rs = -n2m1 / den_s / den_s
+    rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
+    return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+
+
+# --- normal sampling ----------------------------------------------------------------------
+
+@scalar
+def walter_scale(cos_i):
+    """Walter's roughness scale for sampling (microfacet.walter_widening)."""
+    return WALTER_BASE - WALTER_SLOPE * math.sqrt(abs(cos_i))
+
+
+@scalar
+def unit_slope_radius(ndf, u):
+    """Slope radius of a unit-roughness normal drawn from D m.z with uniform u
+    (Distribution._unit_slope_radius)."""
+    if ndf == Ndf.GGX:
+        return math.sqrt(u / (1.0 - u))
+    return math.sqrt(-math.log1p(-u))
+
+
+@inlined
+def ggx_visible_normal(ax, ay, ix, iy, iz, u1, u2):
+    """GGX visible normal for wi (iz >= 0) from uniforms u1, u2 (Heitz 2018;
+    GGX.sample_visible)."""
+    phi = 2.0 * math.pi * u2
+    vx, vy, vz = ax * ix, ay * iy, iz
+    n = math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / n, vy / n, vz / n
+    lensq = vx * vx + vy * vy
+    if lensq > 0.0:
+        inv = 1.0 / math.sqrt(lensq)
+        t1x, t1y = -vy * inv, vx * inv
+    else:
+        t1x, t1y = 1.0, 0.0
+    t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # vh x t1, t1z = 0
+    r = math.sqrt(u1)
+    p1 = r * math.cos(phi)
+    p2 = r * math.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
+    p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
+    nx = p1 * t1x + p2 * t2x + p3 * vx
+    ny = p1 * t1y + p2 * t2y + p3 * vy
+    nz = p2 * t2z + p3 * vz
+    ex, ey, ez = ax * nx, ay * ny, max(nz, 0.0)
+    n = math.sqrt(ex * ex + ey * ey + ez * ez)
+    return ex / n, ey / n, ez / n
+
+
+@scalar
+def walter_normal(ndf, ax, ay, iz, u1, u2):
+    """Normal drawn from D m.z at Walter's widened roughness for cos_i = iz
+    (Distribution.sample_normal on the scaled alpha)."""
+    phi = 2.0 * math.pi * u2
+    k = walter_scale(iz)
+    r = unit_slope_radius(ndf, u1)
+    sx = ax * k * r * math.cos(phi)
+    sy = ay * k * r * math.sin(phi)
+    inv = 1.0 / math.sqrt(1.0 + sx * sx + sy * sy)
+    return -sx * inv, -sy * inv, inv
+
+
+@scalar
+def sample_normal(ndf, ax, ay, sampling, ix, iy, iz, u1, u2):
+    """Normal for wi (iz >= 0) by the sampling scheme: visible normals (GGX only: Beckmann's
+    inversion needs erfinv, which numba lacks), or Walter's for either distribution."""
+    if sampling == Sampling.WALTER:
+        return walter_normal(ndf, ax, ay, iz, u1, u2)
+    return ggx_visible_normal(ax, ay, ix, iy, iz, u1, u2)
+
+
+@scalar
+def normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, mx, my, mz):
+    """Density of the normal m sample_normal draws for wi (iz >= 0): the visible-normal
+    density, or Walter's widened D m.z (MicrofacetModel._normal_pdf)."""
+    if sampling == Sampling.VISIBLE:
+        wm = ix * mx + iy * my + iz * mz
+        den = iz + cos_lambda(ndf, ax, ay, ix, iy, iz)
+        if wm <= 0.0 or den <= 0.0:
+            return 0.0
+        return wm * normal_density(ndf, ax, ay, mx, my, mz) / den
+    k = walter_scale(iz)
+    return normal_density(ndf, ax * k, ay * k, mx, my, mz) * max(mz, 0.0)
