@@ -122,7 +122,8 @@ CPP_OTHER = (0.7e6, 1.4e6)
 #: Heitz et al.'s published C++ walk (MicrosurfaceScattering.cpp, g++ -O2, float, Gaussian
 #: heights, 60 deg incidence, wo uniform on the sphere or the upper hemisphere for a mirror),
 #: measured on this machine on 2026-12-02: median of 3 runs of 1e6 walks each, alternating
-#: with this walk (docs/performance.md, "Issue 19, fourth pass"); not rebuilt by this script.
+#: with this walk (docs/performance.md, "Heitz et al.'s C++ walk, paired runs"); not rebuilt by
+#: this script.
 CPP_MEASURED = {("ggx", "dielectric", 0.3): (1.224e6, 1.539e6),
                 ("ggx", "dielectric", 1.0): (8.125e5, 1.062e6),
                 ("ggx", "conductor", 0.3): (1.123e6, 1.559e6),
