@@ -428,10 +428,10 @@ class EspEmulator(PtyDevice):
         while any(t.moving() for t in targets) and not self._stopping.is_set():
             time.sleep(0.002)
         real = self.clock.real_seconds(delay_ms / 1000.0)
-        if self.clock.instant:
-            self.clock.advance(delay_ms / 1000.0)
-        elif math.isfinite(real):
+        if 0.0 < real < math.inf:
             self._stopping.wait(real)
+        else:  # an instant or a frozen clock: only advances move it
+            self.clock.advance(delay_ms / 1000.0)
         return None
 
     def _cmd_te(self, axis: None, query: bool, param: str) -> str:

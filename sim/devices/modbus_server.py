@@ -374,6 +374,8 @@ class ModbusEmulatorServer:
         self.host, self.port, self.baudrate = host, port, baudrate
         self.endpoint: str | None = None
         self.disconnected = False
+        self.late_replies = 0  # replies held back (latency, a hang-up): a test's count
+        self.late_pending = 0  # of those, how many are not out yet
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server = None
         self._thread: threading.Thread | None = None
@@ -480,10 +482,16 @@ class ModbusEmulatorServer:
         if delay_s or hang_up:
             if connection.in_order:
                 connection.reply_sent = self._loop.create_future()
-            self._loop.call_later(delay_s, self._deliver, connection, out, hang_up)
+            self.late_replies += 1
+            self.late_pending += 1
+            self._loop.call_later(delay_s, self._deliver_late, connection, out, hang_up)
         else:
             self._deliver(connection, out, False)
         return b""
+
+    def _deliver_late(self, connection: _Connection, data: bytes | None, hang_up: bool) -> None:
+        self._deliver(connection, data, hang_up)
+        self.late_pending -= 1
 
     def _deliver(self, connection: _Connection, data: bytes | None, hang_up: bool) -> None:
         if connection.reply_sent is not None and not connection.reply_sent.done():

@@ -221,7 +221,7 @@ class _EmulatedDevice:
         """BUSY/IDLE and the warning flag of an axis, or of the device (axis 0): busy if any
         axis is, and the highest-priority flag of any axis."""
         chosen = [self.axes[axis]] if axis else list(self.axes.values())
-        flags = _by_priority([a.warning() for a in chosen if a.warning() != "--"])
+        flags = _by_priority([w for a in chosen if (w := a.warning()) != "--"])
         return ("BUSY" if any(a.busy() for a in chosen) else "IDLE"), (flags + ["--"])[0]
 
     @property
@@ -332,13 +332,17 @@ class ZaberEmulator(PtyDevice):
                 [self.devices[address]] if address in self.devices else []
             out = [alert for dev in targets for alert in dev.alerts()]
             for dev in targets:
+                status_axis = axis if 0 < axis <= len(dev.axes) else 0
+                # a query's status is taken before its data: the clock runs on between the two,
+                # and an IDLE read first guarantees the position read next is the final one
+                early = dev.status(status_axis) if (words or [""])[0] in _QUERIES else None
                 try:
                     if bad_id:
                         raise _Reject("BADMESSAGEID")
                     flag, data = "OK", self._execute(dev, axis, words)
                 except _Reject as rejected:
                     flag, data = "RJ", rejected.reason
-                status, warning = dev.status(axis if 0 < axis <= len(dev.axes) else 0)
+                status, warning = early or dev.status(status_axis)
                 head = f"{axis}" if message_id is None else f"{axis} {message_id:02d}"
                 out.append(dev.message("@", f"{head} {flag} {status} {warning} {data}"))
         return "".join(f"{msg}\r\n" for msg in out).encode("ascii") if out else None
@@ -433,6 +437,9 @@ class ZaberEmulator(PtyDevice):
             a.set(name, value)
         return "0"
 
+
+#: commands that only read: their reply's status comes from the moment before their data
+_QUERIES = {"", "get"}
 
 _COMMANDS = {
     "": ZaberEmulator._status, "move": ZaberEmulator._move, "home": ZaberEmulator._home,

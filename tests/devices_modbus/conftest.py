@@ -54,15 +54,16 @@ def link(request):
 @pytest.fixture
 def rig(tmp_path):
     """make(transport, word_order, time_scale, stage_faults, server_faults, source, reply_s,
-    read_retries, detector) -> Rig; everything is stopped after the test."""
+    read_retries, detector, clock) -> Rig (the stages on `clock` if given, else on a
+    VirtualClock at time_scale); everything is stopped after the test."""
     made = []
 
     def make(transport="tcp", word_order="big", time_scale=math.inf, stage_faults=None,
              server_faults=None, detector_faults=None, source=None, reply_s=0.2,
-             read_retries=2, detector=None):
+             read_retries=2, detector=None, clock=None):
         stage_map = with_word_order(STAGE_MAP, word_order, tmp_path)
         detector_map = with_word_order(DETECTOR_MAP, word_order, tmp_path)
-        clock = VirtualClock(time_scale)
+        clock = clock or VirtualClock(time_scale)
         stage_emu = ModbusStageEmulator(clock, stage_map, (-95.0, 95.0), 20.0, 80.0,
                                         faults=stage_faults and FaultSpec(**stage_faults))
         second_emu = ModbusStageEmulator(clock, stage_map, (-170.0, 170.0), 30.0, 120.0)

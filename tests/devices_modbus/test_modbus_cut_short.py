@@ -2,9 +2,9 @@
 answers the next read (RTU: the echo first; TCP: a new connection)."""
 
 import signal
-import time
 
 import pytest
+from waiting import wait_until
 
 from sim.devices.faults import FaultInjector, FaultSpec
 
@@ -30,4 +30,6 @@ def test_a_read_a_signal_cut_short_does_not_answer_the_next(rig, transport):
     r.stage_emu.faults = FaultInjector(FaultSpec())
     assert r.stage.limits() == (-95.0, 95.0)  # not the late (20, 80)
     assert r.stage.link.in_step
-    time.sleep(0.3)  # the late reply goes out (on TCP, to the closed connection) before the stop
+    # the late reply goes out (on TCP, to the closed connection) before the stop
+    wait_until(lambda: r.server.late_replies == 1 and not r.server.late_pending,
+               what="the late reply")

@@ -12,6 +12,7 @@ import tty
 import pytest
 import serial
 from modbus_testkit import STAGE_MAP, crc16  # noqa: I001 - the test folder's own helpers
+from waiting import wait_until
 
 from drivers.base import DeviceTimeout
 from drivers.modbus_rtu_client import RtuClient
@@ -39,6 +40,8 @@ class ScriptedDevice:
         tty.setraw(self.slave)
         self.path = os.ttyname(self.slave)
         self.pieces, self.pause_s = pieces, pause_s
+        self.sent = 0  # pieces written so far
+        self.closing = threading.Event()
         self.thread = threading.Thread(target=self._serve, daemon=True)
         self.thread.start()
 
@@ -48,12 +51,14 @@ class ScriptedDevice:
             request += os.read(self.master, 64)
         start = 0
         for i, size in enumerate(self.pieces):
-            if i:
-                time.sleep(self.pause_s)
+            if i and self.closing.wait(self.pause_s):
+                return
             os.write(self.master, REPLY[start:start + size])
             start += size
+            self.sent += 1
 
     def close(self) -> None:
+        self.closing.set()
         self.thread.join(5.0)
         os.close(self.master)
         os.close(self.slave)
@@ -64,9 +69,8 @@ def test_the_driver_client_assembles_a_reply_that_comes_in_pieces():
     client = RtuClient(device.path, baudrate=115200, timeout=1.0, retries=0)
     try:
         assert client.connect()
-        t0 = time.monotonic()
         reply = client.read_holding_registers(8, count=2, device_id=1)
-        assert time.monotonic() - t0 >= 0.06  # it waited for the last piece
+        assert device.sent == 3  # it waited for the last piece
         assert reply.registers == [0x1234, 0x5678]
     finally:
         client.close()
@@ -74,15 +78,17 @@ def test_the_driver_client_assembles_a_reply_that_comes_in_pieces():
 
 
 def test_a_reply_that_stays_short_times_out_at_reply_s_in_all():
-    # a byte at 0, 0.25 and 0.5 s, then nothing: the wait after the second byte gets only
-    # what is left of reply_s (0.05 s), so the timeout comes at 0.3 s, not with the third
-    device = ScriptedDevice([1, 1, 1], pause_s=0.25)
+    # a byte every 0.25 s: the wait after each byte gets only what is left of reply_s (0.3 s),
+    # so the timeout comes at 0.3 s, with the reply short; a wait that started afresh with
+    # each byte would take the whole reply, a byte at a time
+    device = ScriptedDevice([1] * len(REPLY), pause_s=0.25)
     link = ModbusLink("rtu", device.path, timeouts=ModbusTimeouts(reply_s=0.3), read_retries=0)
     try:
         t0 = time.monotonic()
         with pytest.raises(DeviceTimeout, match="dev: timeout after 0.3 s"):
             link.read("dev", "holding", 8, 2, 1)
-        assert 0.3 <= time.monotonic() - t0 < 0.45
+        assert time.monotonic() - t0 >= 0.3
+        assert device.sent < len(REPLY)
     finally:
         link.close()
         device.close()
@@ -147,12 +153,11 @@ def test_a_pulled_cable_waits_until_a_slow_host_has_read_the_reply(stage_server)
     server = stage_server(faults=FaultSpec(disconnect_after=1))
     with serial.Serial(server.endpoint, 115200, timeout=0.5) as port:
         port.write(READ_8_9)
-        time.sleep(0.2)  # the host reads late, long after the reply is queued for it
+        # the host reads late: after the reply is queued for it and the cut is due
+        wait_until(lambda: port.in_waiting >= len(STAGE_REPLY) and server.disconnected,
+                   what="the reply queued and the cut due")
         assert port.read(len(STAGE_REPLY)) == STAGE_REPLY
-        deadline = time.monotonic() + 2.0
-        while os.path.exists(server.endpoint) and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert not os.path.exists(server.endpoint)  # the line is gone
+        wait_until(lambda: not os.path.exists(server.endpoint), what="the line gone")
         with pytest.raises(serial.SerialException):
             port.write(READ_8_9)
             port.read(len(STAGE_REPLY))

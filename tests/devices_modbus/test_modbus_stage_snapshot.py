@@ -3,20 +3,9 @@
 clock runs on between the two registers' refreshes)."""
 
 from modbus_testkit import STAGE_MAP  # noqa: I001 - the test folder's own fixtures
+from ticking_clock import TickingClock
 
 from sim.devices.modbus_stage import ModbusStageEmulator
-from sim.devices.motion import VirtualClock
-
-
-class TickingClock(VirtualClock):
-    """A frozen clock that moves on by `step` virtual seconds whenever it is read."""
-
-    def __init__(self, step: float):
-        super().__init__(0.0)
-        self.step = step
-
-    def now(self) -> float:
-        return self.advance(self.step)
 
 
 def test_a_not_moving_status_comes_with_the_final_position():

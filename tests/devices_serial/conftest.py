@@ -21,11 +21,12 @@ AXES = {
 
 @pytest.fixture
 def make_esp():
-    """make_esp(time_scale=inf, faults=None, axes=AXES) -> started EspEmulator."""
+    """make_esp(time_scale=inf, faults=None, axes=AXES, seed=0, clock=None) -> started
+    EspEmulator (on `clock` if given, else a VirtualClock at time_scale)."""
     started = []
 
-    def make(time_scale=math.inf, faults=None, axes=None, seed=0):
-        emu = EspEmulator(VirtualClock(time_scale), axes or AXES,
+    def make(time_scale=math.inf, faults=None, axes=None, seed=0, clock=None):
+        emu = EspEmulator(clock or VirtualClock(time_scale), axes or AXES,
                           faults=FaultSpec(**faults) if faults else None, seed=seed)
         emu.start()
         started.append(emu)
@@ -39,11 +40,12 @@ def make_esp():
 
 @pytest.fixture
 def esp_pair(make_esp):
-    """make(time_scale, faults, timeout_s, retries) -> (emulator, controller)."""
+    """make(time_scale, faults, timeout_s, retries, axes, clock) -> (emulator, controller)."""
     controllers = []
 
-    def make(time_scale=math.inf, faults=None, timeout_s=0.3, retries=2, axes=None):
-        emu = make_esp(time_scale, faults, axes)
+    def make(time_scale=math.inf, faults=None, timeout_s=0.3, retries=2, axes=None,
+             clock=None):
+        emu = make_esp(time_scale, faults, axes, clock=clock)
         ctl = EspController(emu.endpoint, timeout_s=timeout_s, retries=retries, name="esp")
         controllers.append(ctl)
         return emu, ctl

@@ -5,6 +5,7 @@ import time
 
 import pytest
 import serial
+from waiting import wait_until
 
 from sim.devices.faults import FaultConfigError, FaultInjector, FaultSpec
 from sim.devices.pty_server import PtyServer
@@ -103,10 +104,7 @@ def test_pty_server_frame_mode_and_disconnect():
         with serial.Serial(endpoint, 19200, timeout=1.0) as port:
             port.write(b"\x01\x02\x03")
             assert port.read(3) == b"\x03\x02\x01"
-            deadline = time.monotonic() + 2.0
-            while not server.disconnected and time.monotonic() < deadline:
-                time.sleep(0.005)
-            assert server.disconnected
+            wait_until(lambda: server.disconnected, what="the server's disconnect")
             with pytest.raises(serial.SerialException):
                 port.write(b"\x01")
                 port.read(1)

@@ -6,6 +6,7 @@ import time
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from waiting import wait_until
 
 from sim.devices.motion import LimitError, MotionError, TrapezoidAxis, VirtualClock
 
@@ -155,11 +156,11 @@ def test_accelerated_time_scale_runs_in_real_time():
     axis = TrapezoidAxis(clock, speed=100.0, accel=1000.0)
     end = axis.move_to(100.0)  # 1.1 virtual s = 1.1 ms real
     assert clock.real_seconds(end - clock.now()) < 0.01
-    time.sleep(0.02)
+    wait_until(lambda: not axis.is_moving(), what="the move's end")
     assert not axis.is_moving() and axis.position() == 100.0
     # bracket each clock reading between two real-time readings: exact, whatever the load
     r0, v0, r0b = time.monotonic(), clock.now(), time.monotonic()
-    time.sleep(0.05)
+    wait_until(lambda: clock.now() - v0 >= 50.0, what="50 virtual s (50 ms real)")
     r1, v1, r1b = time.monotonic(), clock.now(), time.monotonic()
     assert 1000.0 * (r1 - r0b) * (1 - 1e-9) <= v1 - v0 <= 1000.0 * (r1b - r0) * (1 + 1e-9)
 

@@ -4,6 +4,7 @@ import time
 
 import numpy as np
 import pytest
+from waiting import wait_until
 
 from drivers.base import (
     Detector,
@@ -187,7 +188,7 @@ def test_error_queue_overflow_and_cls(pm_pair):
     emu, pm = pm_pair()
     for _ in range(12):
         pm.transport.send("BOGUS")
-    time.sleep(0.05)
+    wait_until(lambda: list(emu.errors)[-1:] == [-350], what="the emulator's queue overflow")
     errors = pm.errors()
     assert len(errors) == 10 and errors[-1] == (-350, "Queue overflow")
     pm.transport.send("BOGUS")
@@ -219,10 +220,9 @@ def test_source_failure_is_a_device_error_not_a_crash(pm_pair):
 def test_stalled_reply_timeout_is_named_and_bounded(pm_pair):
     emu, pm = pm_pair(timeout_s=0.1, retries=1)
     inject(emu, stall_prob=1.0)
-    t0 = time.monotonic()
     with pytest.raises(DeviceTimeout, match="pm100: timeout after 0.1 s waiting for :READ"):
         pm.read()
-    assert 0.2 - 0.01 <= time.monotonic() - t0 < 0.2 + 2.0  # 1 + 1 retry, bounded
+    assert emu.server.faults.counts["stall"] == 1 + 1  # 1 + 1 retry, bounded
 
 
 def test_lost_setting_status_is_checked_not_resent(pm_pair):

@@ -9,6 +9,7 @@ import time
 import tty
 
 import pytest
+from waiting import wait_until
 
 from drivers.base import DeviceTimeout, DriverError
 from drivers.serial_transport import SerialLineTransport, SerialPortError
@@ -57,21 +58,27 @@ def test_esp_move_position_and_wait_after_the_emulator_stops(esp_pair):
 @pytest.mark.parametrize("device", ["pm100", "esp"])
 def test_emulator_stopping_while_a_reply_is_awaited(pm_pair, esp_pair, device):
     """The port vanishes while the driver blocks in read: it fails at once, not at timeout."""
+    # a reply timeout beyond the suite's hang guard (300 s): a driver that waited for it, and
+    # not for the port, would hang the test
     if device == "pm100":
-        emu, drv = pm_pair(timeout_s=5.0)
+        emu, drv = pm_pair(timeout_s=600.0)
         call, action = drv.read, "reading the reply to :READ"
     else:
-        emu, drv = esp_pair(timeout_s=5.0)
+        emu, drv = esp_pair(timeout_s=600.0)
         call, action = drv.axis(1).position, "reading the reply to 1TP"
     port = emu.endpoint
     emu.server.faults = FaultInjector(FaultSpec(stall_prob=1.0))  # the reply never comes
-    stopper = threading.Timer(0.2, emu.stop)
+
+    def stop_once_asked() -> None:
+        wait_until(lambda: emu.server.faults.counts["stall"] == 1, what="the request")
+        emu.stop()
+
+    stopper = threading.Thread(target=stop_once_asked)
     stopper.start()
-    t0 = time.monotonic()
     with pytest.raises(SerialPortError) as info:
         call()
     stopper.join()
-    assert time.monotonic() - t0 < 2.0
+    assert emu.server.faults.counts["stall"] == 1  # asked once: no timeout, so no retry
     _check(info, device, port, action)
 
 

@@ -11,12 +11,12 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import tomllib
+from waiting import wait_until
 
 from gonio.engine import Engine, Outcome
 from gonio.events import EventBus
@@ -24,6 +24,8 @@ from gonio.recorder import RunRecorder
 from gonio.run_control import TERMINAL, PauseControl
 
 ROOT = Path(__file__).resolve().parents[2]
+#: round trips over which an arm at rest must stay put
+REST_CHECKS = 30
 EXAMPLES = ROOT / "examples"
 
 
@@ -132,13 +134,12 @@ def _hangup_by_default() -> None:
 
 def wait_for_lines(runs, n: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
     """Until a run under `runs` holds n readings lines (or the process ended)."""
-    deadline = time.monotonic() + timeout
-    while proc.poll() is None:
+    def reached() -> bool:
         found = list(runs.glob("*/readings.jsonl"))
-        if found and found[0].read_bytes().count(b"\n") >= n:
-            return
-        assert time.monotonic() < deadline, "the scan made no progress"
-        time.sleep(0.005)
+        return proc.poll() is not None or bool(found) and (
+            found[0].read_bytes().count(b"\n") >= n)
+
+    wait_until(reached, timeout, "the scan's progress")
 
 
 def run_dir_of(proc: subprocess.CompletedProcess) -> Path:
@@ -226,7 +227,8 @@ def pointed(cfg: dict, endpoints: dict[str, tuple[str, str]]) -> dict:
 
 def esp_arm_at_rest(port_path: str, timeout_s: float = 5.0) -> float:
     """The ESP arm's (axis 2) position once a stop has brought it to rest: waits for MD? to
-    say done (the stop was sent; the arm decelerates), then checks it stays put for 0.3 s."""
+    say done (the stop was sent; the arm decelerates), then checks it stays put over
+    REST_CHECKS more round trips."""
     import serial
 
     with serial.Serial(port_path, 19200, timeout=2) as port:
@@ -234,11 +236,8 @@ def esp_arm_at_rest(port_path: str, timeout_s: float = 5.0) -> float:
             port.write(command.encode() + b"\r")
             return port.readline().decode().strip()
 
-        deadline = time.monotonic() + timeout_s
-        while ask("2MD?") != "1":
-            assert time.monotonic() < deadline, "the arm never came to rest"
-            time.sleep(0.01)
+        wait_until(lambda: ask("2MD?") == "1", timeout_s, "the arm at rest")
         first = float(ask("2TP"))
-        time.sleep(0.3)
-        assert ask("2MD?;2TP") == f"1,{first:.5f}"  # at rest, unmoved
+        for _ in range(REST_CHECKS):
+            assert ask("2MD?;2TP") == f"1,{first:.5f}"  # at rest, unmoved
         return first

@@ -7,13 +7,13 @@ import json
 import time
 
 import pytest
+from waiting import wait_until
 from watch_testkit import (
     chromium,
     missing,
     page_counts,
     plan_file,
     scanning,
-    wait_until,
     watching,
 )
 
@@ -51,7 +51,7 @@ def test_page_follows_the_store_while_the_scan_runs(tmp_path):
         assert len(set(seen)) >= 3 and seen == sorted(seen), seen  # it grew as stored
         planned = open_run(scan.run_dir).meta["planned"]
         assert wait_until(lambda: page_counts(driver) == (planned, planned, "completed"),
-                          timeout=10, what="the completed run on the page")
+                          what="the completed run on the page")
         assert wait_until(lambda: reduced_points(driver), what="reduced points") == 20
         curves = driver.execute_script(
             "return document.querySelectorAll('.bsdf-panel path[stroke=\"#c0392b\"]').length")

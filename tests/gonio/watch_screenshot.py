@@ -11,10 +11,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path[:0] = [str(Path(__file__).resolve().parent), str(Path(__file__).resolve().parents[1])]
 
 from gonio_testkit import EXAMPLES, ROOT  # noqa: E402
-from watch_testkit import chromium, page_counts, scanning, wait_until, watching  # noqa: E402
+from waiting import wait_until  # noqa: E402
+from watch_testkit import chromium, page_counts, scanning, watching  # noqa: E402
 
 from gonio.store import open_run  # noqa: E402
 
@@ -39,7 +40,7 @@ def main() -> None:
             panels, with_curves = driver.execute_script(CURVES)
             return page_counts(driver)[0] >= SHARE * planned and 0 < panels == with_curves
 
-        wait_until(ready, timeout=180, every=0.2, what="the picture's moment")
+        wait_until(ready, timeout_s=180, poll_s=0.2, what="the picture's moment")
         height = driver.execute_script("return document.documentElement.scrollHeight")
         driver.set_window_size(1400, height + 140)  # the whole page (the window's frame)
         driver.save_screenshot(str(out))

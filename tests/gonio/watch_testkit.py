@@ -12,13 +12,13 @@ import subprocess
 import sys
 import tempfile
 import threading
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from gonio_testkit import ROOT, fast_config, write_toml
+from waiting import wait_until
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
@@ -111,14 +111,10 @@ def scanning(plan: Path, out: Path, *options: str, timeout: float = 120.0) -> It
     scan = Scan(proc)
     threading.Thread(target=lambda: scan.stderr.extend(proc.stderr), daemon=True).start()
     try:
-        deadline = time.monotonic() + timeout
-        while scan.run_dir is None:
-            made = [p.parent for p in out.glob("*/meta.json")]
-            if made:
-                scan.run_dir = made[0]
-            elif proc.poll() is not None or time.monotonic() > deadline:
-                raise AssertionError(f"no run directory; stderr: {''.join(scan.stderr)}")
-            time.sleep(0.05)
+        made = wait_until(lambda: [p.parent for p in out.glob("*/meta.json")]
+                          or proc.poll() is not None, timeout, "the run directory")
+        assert made is not True, f"no run directory; stderr: {''.join(scan.stderr)}"
+        scan.run_dir = made[0]
         yield scan
     finally:
         if proc.poll() is None:
@@ -153,15 +149,3 @@ def page_counts(driver) -> tuple[int, int, str]:
         " document.querySelectorAll('#raw-plot .pt').length,"
         " document.getElementById('status').textContent]")
     return int(readings), int(points), status
-
-
-def wait_until(predicate, timeout: float = 30.0, every: float = 0.1, what: str = "condition"):
-    """Poll predicate() until it returns something true (returned); AssertionError after
-    timeout seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(every)
-    raise AssertionError(f"{what} not reached in {timeout:g} s")
