@@ -2,7 +2,8 @@
 `reduce` use: ASTM E1392 (`.astm`), Zemax tabular BSDF (`.bsdf`, `.zmx`, `.txt` with its
 keywords), gonio's reduced NetCDF (`.nc`) and CSV, or a plain CSV with named columns
 (theta_i, phi_i, theta_o, phi_o in degrees, with or without `_deg`, theta_o above 90 for
-transmission; bsdf; optional sigma and wavelength_nm).
+transmission; bsdf; optional sigma and wavelength_nm). calibration.formats names the reader
+of each format and tells which format a file is.
 
 Uncertainties come from the file where it has them (CSV `sigma`, NetCDF); otherwise from a
 stated assumption (`sigma_relative`: u = that fraction of |bsdf|, put into meta["noise_model"]),
@@ -24,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.measured import ANGLE_COLUMNS, META_KEYS, unit_vectors
+from calibration.formats import format_to_read
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -51,27 +53,25 @@ class ImportOptions:
 
 
 def read_measured(path: str | Path, options: ImportOptions | None = None) -> ReducedData:
-    """The file's measurements as ReducedData (its format from the suffix, or, for a text
-    file of another suffix, from its first keyword); a MissingInputs error names every input
-    the file lacks."""
+    """The file's measurements as ReducedData, read as the format calibration.formats.
+    format_to_read tells (its magic, its suffix, or for a text file of another suffix its first
+    keyword); a MissingInputs error names every input the file lacks."""
     path = Path(path)
     options = options or ImportOptions()
     if not path.is_file():
         raise CalibrationError(f"{path}: no such file")
-    suffix = path.suffix.lower()
-    if suffix == ".nc" or _starts_with(path, (b"CDF", b"\x89HDF")):
-        from calibration.exports.cf import read_reduced_netcdf
-
-        data = read_reduced_netcdf(path)
-        data.meta["eta"] = _inputs(path, options, data.meta, "the NetCDF file", True)
-        data.meta.setdefault("assumption", "uncertainties as the file states them")
-    elif suffix == ".astm" or (suffix != ".csv" and _has_line(path, "VARS")):
-        data = _from_astm(path, options)
-    elif suffix in (".bsdf", ".zmx") or (suffix != ".csv" and _has_line(path, "DataBegin")):
-        data = _from_zemax(path, options)
-    else:
-        data = _from_csv(path, options)
+    data = format_to_read(path).read(path, options)
     data.meta["imported_from"] = str(path)
+    return data
+
+
+def from_netcdf(path: Path, options: ImportOptions) -> ReducedData:
+    """gonio's reduced NetCDF file (calibration.exports.cf), with the uncertainties it states."""
+    from calibration.exports.cf import read_reduced_netcdf
+
+    data = read_reduced_netcdf(path)
+    data.meta["eta"] = _inputs(path, options, data.meta, "the NetCDF file", True)
+    data.meta.setdefault("assumption", "uncertainties as the file states them")
     return data
 
 
@@ -95,22 +95,6 @@ def _inputs(path: Path, options: ImportOptions, meta: dict, what: str,
     if problems:
         raise MissingInputs(path, problems)
     return float(eta)
-
-
-def _starts_with(path: Path, magic: tuple[bytes, ...]) -> bool:
-    """True when the file begins with one of the magic byte strings (NetCDF 3 or 4)."""
-    with open(path, "rb") as fh:
-        head = fh.read(8)
-    return head.startswith(magic)
-
-
-def _has_line(path: Path, keyword: str) -> bool:
-    """True when a line of a text file starts with `keyword` (sniffing a format)."""
-    try:
-        with open(path, errors="replace") as fh:
-            return any(line.split(maxsplit=1)[:1] == [keyword] for line in fh)
-    except OSError as exc:
-        raise CalibrationError(f"{path}: {exc.strerror}") from None
 
 
 def _assumed_sigma(bsdf: np.ndarray, relative: float) -> tuple[np.ndarray, str]:
@@ -179,7 +163,7 @@ def _facts(path: Path, options: ImportOptions, comments: list[str], what: str,
     return meta
 
 
-def _from_csv(path: Path, options: ImportOptions) -> ReducedData:
+def from_csv(path: Path, options: ImportOptions) -> ReducedData:
     """A plain or gonio CSV (see the module docstring)."""
     try:
         text = path.read_text()
@@ -238,7 +222,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _from_astm(path: Path, options: ImportOptions) -> ReducedData:
+def from_astm(path: Path, options: ImportOptions) -> ReducedData:
     """An ASTM E1392 file: its first value column (one wavelength)."""
     from calibration.exports.astm import directions, read_astm
 
@@ -253,7 +237,7 @@ def _from_astm(path: Path, options: ImportOptions) -> ReducedData:
     return _reduced(path, wi, wo, table.values[:, 0], None, transmission, meta, options)
 
 
-def _from_zemax(path: Path, options: ImportOptions) -> ReducedData:
+def from_zemax(path: Path, options: ImportOptions) -> ReducedData:
     """A Zemax tabular BSDF file: every grid value on its side's hemisphere (the file does
     not say which are measured, so the fit takes all of them), at its incidence angles
     (BTDF: recovered from the direct-transmission angle with `eta`)."""

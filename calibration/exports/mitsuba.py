@@ -1,5 +1,5 @@
 """Mitsuba 3 material from a fit: a `roughdielectric` (or `roughconductor`) BSDF in a scene
-fragment, with the fitted distribution, alpha (or alpha_u / alpha_v) and index; and a reader.
+fragment, with the fitted distribution, alpha (or alpha_u / alpha_v) and index.
 
 Mitsuba 3 knows Beckmann and GGX only: a Phong fit is written as the Beckmann distribution of
 the same alpha (Walter's mapping makes them agree for narrow lobes) and says so in a comment.
@@ -12,8 +12,6 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
-
-from calibration.values import CalibrationError
 
 SCENE_VERSION = "3.0.0"
 
@@ -57,22 +55,3 @@ def write_mitsuba(material: dict[str, Any], path: str | Path, notes: list[str],
     path.write_text(ET.tostring(scene, encoding="unicode") + "\n")
     return path
 
-
-def read_mitsuba(path: str | Path) -> dict[str, Any]:
-    """{"type", "id", "params"} of the first bsdf of a Mitsuba 3 XML file (numbers as floats)."""
-    path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise CalibrationError(f"{path}: not valid XML ({exc})") from exc
-    bsdf = root.find("bsdf") if root.tag == "scene" else root
-    if bsdf is None or bsdf.tag != "bsdf":
-        raise CalibrationError(f"{path}: no <bsdf> element")
-    params: dict[str, Any] = {}
-    for child in bsdf:
-        name, value = child.get("name"), child.get("value")
-        if name is None or value is None:
-            continue
-        params[name] = value if child.tag == "string" else float(value.split(",")[0])
-    return {"type": bsdf.get("type"), "id": bsdf.get("id"), "params": params,
-            "version": root.get("version")}

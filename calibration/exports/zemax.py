@@ -251,8 +251,3 @@ def _trapezoid_weights(x: np.ndarray) -> np.ndarray:
     w[1:] += d / 2
     return w
 
-
-def table_tis(table: ZemaxTable, rotation: int, angle: int) -> float:
-    """TIS recomputed from the tabulated values alone (tis_weights): a reader's consistency
-    check of the TIS line."""
-    return float(np.sum(tis_weights(table, angle) * table.data[rotation, angle]))

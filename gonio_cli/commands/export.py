@@ -1,6 +1,6 @@
-"""`gonio export RUN --format csv|netcdf|bluesky|zemax|astm|mitsuba [--what raw|reduced|model] --out
-FILE`: write what a run measured (raw readings; reduced BSDF with its uncertainties) or its
-fitted model; calibration.exports."""
+"""`gonio export RUN --format FORMAT [--what raw|reduced|model] --out FILE`: write what a run
+measured (raw readings; reduced BSDF with its uncertainties) or its fitted model, in a format of
+calibration.formats; calibration.exports."""
 
 from __future__ import annotations
 
@@ -8,20 +8,26 @@ import argparse
 import sys
 from pathlib import Path
 
-from calibration.exports import ACCEPTS, DEFAULT_WHAT, FORMATS, WHATS, ExportRequest, write
+from calibration.exports import ExportRequest, write
+from calibration.formats import FORMATS, WHATS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
+
+DESCRIPTION = (f"`gonio export RUN --format {'|'.join(FORMATS)} [--what {'|'.join(WHATS)}] "
+               "--out FILE`: write what a run measured (raw readings; reduced BSDF with its "
+               "uncertainties) or its fitted model; calibration.exports.")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `export` verb."""
-    p = subparsers.add_parser("export", description=__doc__,
-                              help="export a run (csv, netcdf, bluesky, zemax, astm, mitsuba)")
+    p = subparsers.add_parser("export", description=DESCRIPTION,
+                              help=f"export a run ({', '.join(FORMATS)})")
     p.add_argument("run", help="run directory")
-    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--format", required=True, choices=tuple(FORMATS))
     p.add_argument("--what", choices=WHATS,
-                   help="; ".join(f"{fmt}: {' or '.join(whats)} (default {DEFAULT_WHAT[fmt]})"
-                                  for fmt, whats in ACCEPTS.items())
-                   + ". csv and netcdf write the raw readings of a run that cannot be reduced")
+                   help="; ".join(f"{fmt.name}: {' or '.join(fmt.whats)} (default "
+                                  f"{fmt.default_what})" for fmt in FORMATS.values())
+                   + f". {' and '.join(f.name for f in FORMATS.values() if f.raw_fallback)} "
+                     "write the raw readings of a run that cannot be reduced")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="output file; zemax and astm write one file per measured side, as Zemax "
                         "reads a BRDF and a BTDF from separate files: the BTDF here (the BRDF "

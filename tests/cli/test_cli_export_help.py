@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from calibration.exports import ACCEPTS, SUFFIXES
+from calibration.formats import FORMATS
 from gonio_cli.main import main
 
 
@@ -30,7 +30,7 @@ def test_export_refuses_what_a_format_does_not_hold(fmt, what, tmp_path, capsys)
                  "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
     assert err == (f"gonio export: error: export: --what {what} is not written as {fmt} (it "
-                   f"takes {' or '.join(ACCEPTS[fmt])})")
+                   f"takes {' or '.join(FORMATS[fmt].whats)})")
 
 
 @pytest.mark.parametrize("argv", [
@@ -64,5 +64,5 @@ def test_export_checks_the_suffix_before_any_work(fmt, out, hint, tmp_path, caps
         return
     assert err == (
         f"gonio export: error: export: --out {tmp_path / out} {said}{hint}; --format {fmt} "
-        f"writes {' or '.join(SUFFIXES[fmt])}")
+        f"writes {' or '.join(FORMATS[fmt].suffixes)}")
     assert list(tmp_path.iterdir()) == []

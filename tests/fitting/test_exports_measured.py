@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray
-from zemax_cells import assert_measured_cells
+from zemax_cells import assert_measured_cells, table_tis
 
 from calibration.exports import ExportRequest
 from calibration.exports.astm import astm_tables, write_astm
@@ -24,7 +24,7 @@ from calibration.exports.cf import read_reduced_netcdf, write_raw_netcdf, write_
 from calibration.exports.measured import write_reduced_csv
 from calibration.exports.model import measured_zemax_files, zemax_files
 from calibration.exports.run_files import write_data
-from calibration.exports.zemax import read_zemax, table_tis
+from calibration.exports.zemax import read_zemax
 from calibration.exports.zemax_measured import measured_table
 from calibration.fit import FitOptions, fit
 from calibration.imports import ImportOptions, read_measured

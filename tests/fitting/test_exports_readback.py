@@ -5,10 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from mitsuba_reader import read_mitsuba
+from zemax_cells import table_tis
 
-from calibration.exports.mitsuba import read_mitsuba
 from calibration.exports.model import mitsuba_file, zemax_files
-from calibration.exports.zemax import read_zemax, table_tis
+from calibration.exports.zemax import read_zemax
 from calibration.fit import FitOptions, fit
 from calibration.synthetic import synthesize
 from calibration.values import CalibrationError

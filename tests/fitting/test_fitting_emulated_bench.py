@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 from fitting_bench_runs import instrument, plan, scan
+from mitsuba_reader import read_mitsuba
 from zemax_cells import assert_measured_cells
 
 from calibration import calfile
 from calibration.calibrate import build
-from calibration.exports.mitsuba import read_mitsuba
 from calibration.exports.zemax import read_zemax
 from calibration.fit import FitOptions
 from calibration.pipeline import fit_run, reduce_run

@@ -1,12 +1,13 @@
 """The check that a measured Zemax table holds the reduced data where measured, by an
 independent route: each point's cell is found as the grid direction (scatter_directions)
-nearest to its own wo, mirrored across the plane of incidence for plane-symmetric tables."""
+nearest to its own wo, mirrored across the plane of incidence for plane-symmetric tables; and a
+table's TIS recomputed from its cells (table_tis)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from calibration.exports.zemax import ZemaxTable, scatter_directions
+from calibration.exports.zemax import ZemaxTable, scatter_directions, tis_weights
 from calibration.reduced import ReducedData
 
 
@@ -31,3 +32,9 @@ def assert_measured_cells(table: ZemaxTable, points: ReducedData) -> None:
             expected = max(float(np.mean(points.bsdf[same])), 0.0)
             value = table.data[0, a].reshape(-1)[cell]
             assert abs(value - expected) <= 1e-6 * expected, (angle, wo, value, expected)
+
+
+def table_tis(table: ZemaxTable, rotation: int, angle: int) -> float:
+    """TIS recomputed from the tabulated values alone (tis_weights): a reader's consistency
+    check of the TIS line."""
+    return float(np.sum(tis_weights(table, angle) * table.data[rotation, angle]))

@@ -152,9 +152,10 @@ def header(path):
 def test_every_export_carries_the_record(emulated, tmp_path):
     import netCDF4
 
-    from calibration.exports import SUFFIXES, ExportRequest
+    from calibration.exports import ExportRequest
     from calibration.exports import write as write_export
     from calibration.exports.raw import write_csv, write_netcdf
+    from calibration.formats import FORMATS
 
     run = open_run(as_real(emulated, tmp_path / "real", WRONG_SIM, sessions_devices=IDENTITY))
     record = run_record(run)
@@ -178,7 +179,7 @@ def test_every_export_carries_the_record(emulated, tmp_path):
         assert json.loads(ds.sessions)[0]["devices"] == IDENTITY
     # the reduced exports and the model's (forced: this short run's fit is not the point)
     forced = ExportRequest(force=True)
-    texts = [write_export(run.path, fmt, tmp_path / f"glass{SUFFIXES[fmt][0]}",
+    texts = [write_export(run.path, fmt, tmp_path / f"glass{FORMATS[fmt].suffixes[0]}",
                           forced)[0][0].read_text() for fmt in ("csv", "zemax", "astm", "mitsuba")]
     for line in ('# receiver_solid_angle_sr: ', '# sample: {"id": "GG-7"',
                  '# sessions: [{"session": 0'):

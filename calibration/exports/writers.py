@@ -1,0 +1,88 @@
+"""The writer of reduced data and of its fit for each format and `--what`, as
+calibration.formats names them: each takes (ReducedData, out path, the run's record,
+ExportRequest, source) and returns (files written, notes). The text files carry the record then
+the reduction's facts (measured.fact_lines), with the index their tables were made with (the
+fit's, where a fit made them), so `--import` reads it again."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from calibration.exports.astm import AstmTable, astm_tables, side_paths, write_astm
+from calibration.exports.cf import write_reduced_netcdf
+from calibration.exports.measured import fact_lines, write_reduced_csv
+from calibration.exports.model import (
+    astm_model_tables,
+    fit_for_export,
+    fit_notes,
+    measured_zemax_files,
+    mitsuba_file,
+    zemax_files,
+)
+from calibration.exports.request import ExportRequest
+from calibration.fit import FitResult
+from calibration.reduced import ReducedData
+from gonio.record import record_lines
+
+Written = tuple[list[Path], list[str]]
+DataWriter = Callable[[ReducedData, Path, Mapping[str, Any], ExportRequest, str], Written]
+
+
+def reduced_csv(data: ReducedData, out: Path, record: Mapping[str, Any],
+                request: ExportRequest, source: str = "") -> Written:
+    """The reduced data as gonio's CSV (measured.write_reduced_csv)."""
+    return [write_reduced_csv(data, out, record_lines(record))], []
+
+
+def reduced_netcdf(data: ReducedData, out: Path, record: Mapping[str, Any],
+                   request: ExportRequest, source: str = "") -> Written:
+    """The reduced data as CF-1.8 NetCDF (cf.write_reduced_netcdf)."""
+    return [write_reduced_netcdf(data, record, out)], []
+
+
+def reduced_astm(data: ReducedData, out: Path, record: Mapping[str, Any],
+                 request: ExportRequest, source: str = "") -> Written:
+    """The reduced data as ASTM E1392, one file per side."""
+    return _astm_files(astm_tables(data, [*record_lines(record), *fact_lines(data)]), out), []
+
+
+def _with_fit(write: Callable[[ReducedData, FitResult, Path, str, list[str]], list[Path]]
+              ) -> DataWriter:
+    """A writer that takes the fit (--fit FIT.json, or fitted; model.fit_for_export, which
+    refuses a fit that does not describe the data) and hands `write` the data, the fit, the
+    out path, the source and the file's lines (the record, the facts, the fit's warnings)."""
+    def write_fitted(data: ReducedData, out: Path, record: Mapping[str, Any],
+                     request: ExportRequest, source: str = "") -> Written:
+        result, warnings = fit_for_export(data, request.fit_options, request.fit_file,
+                                          request.force)
+        lines = [*record_lines(record), *fact_lines(data, result.eta), *warnings]
+        return write(data, result, out, source, lines), warnings
+    return write_fitted
+
+
+def _astm_files(tables: Sequence[AstmTable], out: Path) -> list[Path]:
+    """One ASTM file per side's table, named by side_paths."""
+    paths = side_paths(out, [t.data_type for t in tables])
+    return [write_astm(t, p) for t, p in zip(tables, paths, strict=True)]
+
+
+def _model_astm_files(data: ReducedData, result: FitResult, out: Path, source: str,
+                      lines: list[str]) -> list[Path]:
+    """ASTM E1392 of the fitted model on a grid, one file per side (model.astm_model_tables)."""
+    return _astm_files(astm_model_tables(data, result, fit_notes(result, source, lines)), out)
+
+
+def _mitsuba_files(data: ReducedData, result: FitResult, out: Path, source: str,
+                   lines: list[str]) -> list[Path]:
+    """The Mitsuba 3 material of the fitted model (model.mitsuba_file)."""
+    return [mitsuba_file(result, out, source, lines)]
+
+
+#: Zemax of the data, with the model filling where there is none (model.measured_zemax_files).
+reduced_zemax = _with_fit(measured_zemax_files)
+#: Zemax of the fitted model (model.zemax_files).
+model_zemax = _with_fit(zemax_files)
+model_astm = _with_fit(_model_astm_files)
+model_mitsuba = _with_fit(_mitsuba_files)
