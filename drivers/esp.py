@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import math
 import re
-import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, Interlocked, ProtocolError
+from drivers.base import DeviceError, DriverError, Interlocked, ProtocolError
+from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
 from drivers.serial_transport import SerialLineTransport, SyncQuery
 from drivers.settings import Setting, exactly, to_reply_precision
@@ -230,15 +230,13 @@ class EspAxis:
         """Poll motion done and position together (`nMD?;nTP?`, one round trip) until the
         device reports the motion done; returns the position it reported with that status
         (read after it, so the final one). DeviceTimeout after timeout_s."""
-        deadline = time.monotonic() + timeout_s
-        while True:
+        def done_at() -> float | None:
             done, position = self.controller.query_values(
                 f"{self._p}MD?;{self._p}TP?", _flag, self.controller.number)
-            if done:
-                return position
-            if time.monotonic() > deadline:
-                raise DeviceTimeout(self.name, "motion done (MD?)", timeout_s)
-            time.sleep(self.controller.poll_s)
+            return position if done else None
+
+        return poll_until(done_at, timeout_s, self.controller.poll_s, self.name,
+                          "motion done (MD?)")
 
     def stop(self) -> None:
         """ST: decelerate to a stop; safe at any time (the HOMING ABORTED a stop during a

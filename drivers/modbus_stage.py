@@ -9,12 +9,13 @@ instead of sending it again.
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
-from drivers.base import DeviceError, DeviceTimeout, ProtocolError
+from drivers.base import DeviceError
+from drivers.lost_reply import reraise, sent_once
 from drivers.modbus_transport import ModbusTimeouts
 from drivers.modbus_unit import MappedUnit
+from drivers.polling import poll_until
 from drivers.register_map import RegisterMap
 
 STAGE_REGISTERS = ("target_position", "velocity", "acceleration", "command", "fault_code",
@@ -116,27 +117,20 @@ class ModbusStage(MappedUnit):
     def wait(self, timeout_s: float) -> float:
         """Poll until the drive is at rest; return the final position (DeviceTimeout past
         timeout_s, DeviceError if the drive reports a fault)."""
-        deadline = time.monotonic() + timeout_s
-        while True:
+        def at_rest() -> float | None:
             v = self.read_values("status", "fault_code", "actual_position")
             bits = self.bits(v["status"])
             self.check_interlock(bits)
             if bits["fault"]:
                 self._raise_fault(int(v["fault_code"]))
-            if not bits["moving"]:
-                return v["actual_position"]
-            if time.monotonic() >= deadline:
-                raise DeviceTimeout(self.name, "end of motion", timeout_s)
-            time.sleep(self.poll_s)
+            return None if bits["moving"] else v["actual_position"]
+
+        return poll_until(at_rest, timeout_s, self.poll_s, self.name, "end of motion")
 
     def _motion_command(self, command: str, target_deg: float | None) -> None:
         """Write a motion command once; a lost or garbled reply is resolved by reading the
-        state."""
-        try:
-            self.command(command)
-        except (DeviceTimeout, ProtocolError):
-            if not self._was_taken(target_deg):
-                raise
+        state (unresolved, the lost reply's error stands)."""
+        sent_once(lambda: self.command(command), lambda: self._was_taken(target_deg), reraise)
         v = self.read_values("status", "fault_code")
         bits = self.bits(v["status"])
         self.check_interlock(bits)

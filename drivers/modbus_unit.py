@@ -7,8 +7,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from drivers.base import DeviceError, DeviceTimeout, Interlocked, ProtocolError
+from drivers.lost_reply import reraise, sent_once
 from drivers.modbus_transport import BASIC_OBJECTS, ModbusTimeouts, open_link, release_link
-from drivers.register_map import RegisterMap, decode_text
+from drivers.register_map import Register, RegisterMap, decode_text
 
 INTERLOCK_BIT = "interlock"  # optional [status_bits] entry: the unit's interlock input is open
 INTERLOCK_TEXT = "interlock input open (the unit stopped and refuses to run)"
@@ -80,13 +81,15 @@ class MappedUnit:
                                  f"{self.map.source}")
             writes.append((name, reg, self.map.encode(name, value)))
         for name, reg, words in writes:
-            try:
-                self.link.write(self.name, reg.address, words, self.unit)
-            except (DeviceTimeout, ProtocolError):
-                if name == "command" or self.link.read(
-                    self.name, "holding", reg.address, reg.count, self.unit
-                ) != words:
-                    raise
+            self._write_once(name, reg, words)
+
+    def _write_once(self, name: str, reg: Register, words: list[int]) -> None:
+        """Write one register's words once; a lost reply is settled by reading them back
+        (never for the command register)."""
+        sent_once(lambda: self.link.write(self.name, reg.address, words, self.unit),
+                  lambda: name != "command" and self.link.read(
+                      self.name, "holding", reg.address, reg.count, self.unit) == words,
+                  reraise)
 
     def read_tuple(self, names: tuple[str, ...]) -> tuple[float, ...]:
         """Engineering values of the named registers, in the order named."""

@@ -20,12 +20,12 @@ step before the next exchange, so a late READ? answer is never taken for a later
 from __future__ import annotations
 
 import re
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from drivers.base import DeviceTimeout, DriverError, InvalidReading, ProtocolError, Reading
+from drivers.base import DriverError, InvalidReading, ProtocolError, Reading
+from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
 from drivers.serial_transport import SerialLineTransport, SyncQuery
 from drivers.settings import Setting, exactly, to_reply_precision
@@ -37,6 +37,7 @@ NR3_DECIMALS = 6  # the PM100D manual's and the emulator's NR3: 1.234567E-06
 SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
 MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
 ERROR_QUEUE_DEPTH = 32
+ZERO_POLL_S = 0.05  # how often zero() asks whether the adjustment is still running
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> StrictNumber:
@@ -224,11 +225,8 @@ class Pm100(StatusLineDevice):
     def zero(self) -> None:
         """SENS:CORR:COLL:ZERO: dark-zero adjustment (cover the sensor first); waits for it."""
         self.command(":SENS:CORR:COLL:ZERO", lambda: True)
-        deadline = time.monotonic() + self.zero_timeout_s
-        while self.query(":SENS:CORR:COLL:ZERO:STAT?", _flag)[0]:
-            if time.monotonic() > deadline:
-                raise DeviceTimeout(self.name, "zero adjustment", self.zero_timeout_s)
-            time.sleep(0.05)
+        poll_until(lambda: None if self.query(":SENS:CORR:COLL:ZERO:STAT?", _flag)[0] else True,
+                   self.zero_timeout_s, ZERO_POLL_S, self.name, "zero adjustment")
 
     def zero_offset_w(self) -> float:
         """SENS:CORR:COLL:ZERO:MAGN?: the dark offset the last zero measured, W."""

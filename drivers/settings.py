@@ -4,7 +4,9 @@ the setting is read back and the rule declared with it decides whether the comma
 
 A `Setting` on a driver class is a property: reading it sends the query, assigning it sends
 the command. The class (the host) does the exchanges: `read_setting(setting)` and
-`write_setting(setting, value)` (drivers.status_line for the ESP and the PM100).
+`write_setting(setting, value)` (drivers.status_line for the ESP and the PM100, the
+controller's `get` / `set` for Zaber, whose values are integers: its hosts check with no
+number shape).
 """
 
 from __future__ import annotations
@@ -15,10 +17,11 @@ from typing import Any, Protocol
 
 from drivers.reply_numbers import StrictNumber
 
-Check = Callable[[Any, Any, StrictNumber], bool]  # (sent, read back, the number shape) -> taken
+# (sent, read back, the host's number shape or None for integer values) -> taken
+Check = Callable[[Any, Any, StrictNumber | None], bool]
 
 
-def exactly(sent: Any, got: Any, number: StrictNumber) -> bool:
+def exactly(sent: Any, got: Any, number: StrictNumber | None) -> bool:
     """The read-back is the value sent (integers, flags, codes)."""
     return got == sent
 

@@ -14,7 +14,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, Interlocked, ProtocolError
+from drivers.base import DeviceError, Interlocked, ProtocolError
+from drivers.lost_reply import not_resent, sent_once
 from drivers.reply_numbers import StrictNumber
 from drivers.serial_transport import SerialLineTransport
 from drivers.settings import Setting
@@ -109,15 +110,13 @@ class StatusLineDevice:
         its first entry) and `confirm()` (if given) reads the device state back; unconfirmed,
         DriverError: the message itself is never re-sent.
         """
-        try:
-            self._checked(message, self.transport.exchange(message + self.dialect.suffix,
-                                                           f"{message!r} status"), 0)
-        except (DeviceTimeout, ProtocolError) as exc:
+        def settled() -> bool:
             self.errors(raise_first=True)
-            if confirm is None or not confirm():
-                raise DriverError(
-                    f"{self.name}: {message!r} not confirmed ({exc}); not re-sent"
-                ) from exc
+            return confirm is not None and confirm()
+
+        sent_once(lambda: self._checked(message, self.transport.exchange(
+            message + self.dialect.suffix, f"{message!r} status"), 0), settled,
+            not_resent(self.name, message))
 
     def next_error(self) -> tuple[int, str]:
         """Pop the oldest queued error: (code, message); (0, ...) when none is left."""

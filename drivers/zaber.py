@@ -23,12 +23,14 @@ from __future__ import annotations
 import itertools
 import math
 import re
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.base import DeviceError, DriverError, ProtocolError
+from drivers.lost_reply import LOST, not_resent, sent_once
+from drivers.polling import poll_until
 from drivers.serial_transport import SerialLineTransport, SyncQuery
+from drivers.settings import Setting, exactly
 
 X_RSW60A_STEP_DEG = 0.015  # stage rotation per full motor step
 SPEED_UNIT = 1.6384  # maxspeed data per microstep/s
@@ -69,6 +71,18 @@ FLAGS = {
     "NI": "a movement command interrupted another",
     "NU": "a setting update or reset is pending",
 }
+
+
+def integer_setting(name: str, doc: str) -> Setting:
+    """A setting `name` with integer data: `get name` asks it, `set name N` sets it, and the
+    read-back must be N exactly."""
+    return Setting(f"get {name}", f"set {name} {{}}", "integer", str, exactly, doc)
+
+
+CHECKSUM = integer_setting("comm.checksum", "comm.checksum: 1 = replies carry a checksum")
+ALERTS = integer_setting("comm.alert", "comm.alert: 1 = the device sends alerts")
+LIMIT_MIN = integer_setting("limit.min", "limit.min: the lower travel limit, microsteps")
+LIMIT_MAX = integer_setting("limit.max", "limit.max: the upper travel limit, microsteps")
 
 
 def lrc(text: str) -> str:
@@ -177,9 +191,9 @@ class ZaberController:
     def _open(self, address: int) -> None:
         """Reply checksums on, alerts off (each verified), then the device's identity."""
         who = f"{self.name} device {address}"
-        self.set_verified(address, 0, "comm.checksum", 1, who)
+        self.write_setting(CHECKSUM, 1, address, 0, who)
         self._checksummed.add(address)
-        self.set_verified(address, 0, "comm.alert", 0, who)
+        self.write_setting(ALERTS, 0, address, 0, who)
         self._axis_counts[address] = self.get(address, 0, "system.axiscount", who)
         self._devices[address] = {
             "device_id": self.query(address, 0, "get deviceid", who).data,
@@ -236,14 +250,10 @@ class ZaberController:
         `verify()` (if given) reads the device state back; None when that confirmed it."""
         message_id = next(self._ids)
         what = f"{command!r} (device {address} axis {axis})"
-        try:
-            reply = self._parse(self.transport.exchange(
-                self._line(address, axis, message_id, command), what),
-                address, axis, message_id)
-        except (DeviceTimeout, ProtocolError) as exc:
-            if not _confirmed(verify):
-                raise DriverError(f"{who}: {command!r} not confirmed ({exc}); not re-sent") \
-                    from exc
+        reply = sent_once(lambda: self._parse(self.transport.exchange(
+            self._line(address, axis, message_id, command), what), address, axis, message_id),
+            lambda: _confirmed(verify), not_resent(who, command))
+        if reply is None:
             return None
         self.latest[address, axis] = reply
         if reply.flag == "RJ":
@@ -254,13 +264,22 @@ class ZaberController:
         """An integer setting of one axis (or of the device, axis 0)."""
         return int(self.query(address, axis, f"get {setting}", who, integer=True).data)
 
-    def set_verified(self, address: int, axis: int, setting: str, value: int, who: str) -> None:
-        """Set an integer setting once, then read it back: DriverError unless it holds."""
-        self.command(address, axis, f"set {setting} {value}", who,
-                     lambda: self.get(address, axis, setting, who) == value)
-        got = self.get(address, axis, setting, who)
-        if got != value:
-            raise DriverError(f"{who}: {setting} reads back {got} after set to {value}")
+    def read_setting(self, setting: Setting, address: int, axis: int, who: str) -> int:
+        """A declared setting of one axis (or of the device, axis 0), from its `get`."""
+        return int(self.query(address, axis, setting.query, who, integer=True).data)
+
+    def write_setting(self, setting: Setting, value: int, address: int, axis: int,
+                      who: str) -> None:
+        """Send a setting's `set` once (a lost reply settled by its read-back check), then
+        read it back: DriverError unless it holds."""
+        def holds() -> bool:
+            return setting.check(value, self.read_setting(setting, address, axis, who), None)
+
+        self.command(address, axis, setting.command_for(value), who, holds)
+        got = self.read_setting(setting, address, axis, who)
+        if not setting.check(value, got, None):
+            name = setting.query.removeprefix("get ")
+            raise DriverError(f"{who}: {name} reads back {got} after set to {value}")
 
     # -- devices and axes ---------------------------------------------------------
     def identity(self, address: int | None = None) -> dict[str, str]:
@@ -291,7 +310,7 @@ def _confirmed(verify: Callable[[], bool] | None) -> bool:
     """verify(), False when there is none or its own read-back fails too."""
     try:
         return verify is not None and verify()
-    except (DeviceTimeout, ProtocolError):
+    except LOST:
         return False
 
 
@@ -304,6 +323,9 @@ class ZaberAxis:
     """One axis of a Zaber device as the engine's Axis (degrees). It refuses to move, and
     wait() refuses to report an arrival, while the axis shows a fault or has no reference
     position (WR); home() acknowledges a fault and re-references it."""
+
+    maxspeed = integer_setting("maxspeed", "maxspeed: speed, 1.6384 x microsteps/s")
+    accel = integer_setting("accel", "accel: acceleration, 1.6384e-4 x microsteps/s^2")
 
     def __init__(self, controller: ZaberController, address: int, number: int, name: str):
         self.controller, self.address, self.number, self.name = controller, address, number, name
@@ -327,8 +349,13 @@ class ZaberAxis:
     def _get(self, setting: str) -> int:
         return self.controller.get(self.address, self.number, setting, self.name)
 
-    def _set(self, setting: str, value: int) -> None:
-        self.controller.set_verified(self.address, self.number, setting, value, self.name)
+    def read_setting(self, setting: Setting) -> int:
+        """A declared setting of this axis."""
+        return self.controller.read_setting(setting, self.address, self.number, self.name)
+
+    def write_setting(self, setting: Setting, value: int) -> None:
+        """Set a declared setting of this axis once, and read it back."""
+        self.controller.write_setting(setting, value, self.address, self.number, self.name)
 
     def _data(self, deg: float, per: float = 1.0) -> int:
         """Degrees (or deg/s, deg/s^2 with the unit `per`) as the device's integer data."""
@@ -375,16 +402,16 @@ class ZaberAxis:
         """Poll status and position together (get pos) until IDLE; returns the position that
         reply gave. DeviceError if the axis ended with a fault or without reference;
         DeviceTimeout after timeout_s."""
-        deadline = time.monotonic() + timeout_s
-        while True:
+        def idle_at() -> float | None:
             reply = self._query("get pos", integer=True)
-            if not reply.busy:
-                if blocks_motion(reply.warning):
-                    raise self._blocked("the motion did not end where it was sent")
-                return int(reply.data) * self.microstep_deg
-            if time.monotonic() > deadline:
-                raise DeviceTimeout(self.name, "the motion to end (IDLE)", timeout_s)
-            time.sleep(self.controller.poll_s)
+            if reply.busy:
+                return None
+            if blocks_motion(reply.warning):
+                raise self._blocked("the motion did not end where it was sent")
+            return int(reply.data) * self.microstep_deg
+
+        return poll_until(idle_at, timeout_s, self.controller.poll_s, self.name,
+                          "the motion to end (IDLE)")
 
     def stop(self) -> None:
         """stop: decelerate to rest; safe at any time."""
@@ -421,25 +448,25 @@ class ZaberAxis:
         if not lo < hi:
             raise ValueError(f"{self.name}: limits must be (lo, hi) with lo < hi, "
                              f"got {limits_deg!r}")
-        self._set("maxspeed", speed)
-        self._set("accel", accel)
+        self.maxspeed = speed
+        self.accel = accel
         # order the two limits so that limit.min < limit.max holds in between
-        pair = [("limit.min", lo), ("limit.max", hi)]
-        for setting, value in pair if lo < self._get("limit.max") else reversed(pair):
-            self._set(setting, value)
+        pair = [(LIMIT_MIN, lo), (LIMIT_MAX, hi)]
+        for setting, value in pair if lo < self.read_setting(LIMIT_MAX) else reversed(pair):
+            self.write_setting(setting, value)
 
     @property
     def speed_deg_s(self) -> float:
         """maxspeed, deg/s."""
-        return self._get("maxspeed") / SPEED_UNIT * self.microstep_deg
+        return self.maxspeed / SPEED_UNIT * self.microstep_deg
 
     @property
     def accel_deg_s2(self) -> float:
         """accel, deg/s^2."""
-        return self._get("accel") / ACCEL_UNIT * self.microstep_deg
+        return self.accel / ACCEL_UNIT * self.microstep_deg
 
     @property
     def limits_deg(self) -> tuple[float, float]:
         """(limit.min, limit.max), degrees."""
-        return self._get("limit.min") * self.microstep_deg, \
-            self._get("limit.max") * self.microstep_deg
+        return self.read_setting(LIMIT_MIN) * self.microstep_deg, \
+            self.read_setting(LIMIT_MAX) * self.microstep_deg

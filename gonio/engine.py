@@ -57,6 +57,7 @@ from gonio.plan import (
     sweeps_source,
 )
 from gonio.reading_flags import INVALID, RETRIED
+from gonio.row_step import RowStep, arrival, row_step
 from gonio.run_control import Aborted, PauseControl
 from gonio.store import StoreError
 from gonio.suspenders import Watch
@@ -92,10 +93,6 @@ def home_axes(instrument: Instrument) -> None:
 
 class StopRun(Exception):
     """The run cannot go on; the message is the reason recorded in meta.json."""
-
-
-class PositionMismatch(DriverError):
-    """An axis reports a position other than the target it was sent to (twice running)."""
 
 
 @dataclass
@@ -146,18 +143,15 @@ class Engine:
         self._sent: Stopping | None = None  # the last Stopping published
         self._commanded: dict[str, float | None] = {role: None for role in instrument.axes}
         self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
-        cfg = instrument.config
-        self._settle = {role: cfg.axes[role].settle_s for role in instrument.axes}
         self._range: float | None = None  # the detector range last set (schedule's range_w)
 
     # -- one reading ------------------------------------------------------------
     def _wait_timeout(self, role: str, target: float) -> float:
         return motion_timeout_s(self.inst, role, target - self._reported[role])
 
-    def _move(self, row: np.void) -> list[str]:
-        """Start every axis that must move, then wait for each; returns the roles moved."""
-        targets = {role: float(row[f"{role}_deg"]) for role in self.inst.axes}
-        moved = [r for r, t in targets.items() if self._commanded[r] != t]
+    def _move(self, row: np.void, step: RowStep) -> None:
+        """Start every axis the step moves, then wait for each and check its arrival."""
+        targets, moved = step.targets, step.moved
         if "arm" in moved and sweeps_source(self._reported["arm"], targets["arm"]):
             raise StopRun(f"reading {int(row['index'])}: the arm would sweep through the source "
                           f"({self._reported['arm']:g} -> {targets['arm']:g} deg); not moved")
@@ -172,19 +166,12 @@ class Engine:
                                                  target)
             self._commanded[role] = target
         self.bus.publish(Moved(int(row["index"]), dict(self._reported)))
-        return moved
 
     def _arrived(self, role: str, position: float, target: float) -> float:
-        """The reported position, read again if it is off target (a garbled reply can be a
-        plausible number); PositionMismatch if the second reading is off too."""
-        tol = self.inst.config.axes[role].tolerance_deg
-        if abs(position - target) <= tol:
-            return position
-        again = self.inst.axes[role].position()
-        if abs(again - target) <= tol:
-            return again
-        raise PositionMismatch(f"{role} axis at {again:.6g} deg, not at its target "
-                               f"{target:.6g} deg (tolerance {tol:g})")
+        """The reported position, once the arrival check (gonio.row_step) holds for it."""
+        check = arrival(self.inst, role, target)
+        return position if check.holds(position) else check.confirm(
+            self.inst.axes[role].position())
 
     def _use_range(self, range_w: float) -> None:
         """Set the detector's range (AUTO_RANGE: autorange) unless it is set already."""
@@ -198,12 +185,11 @@ class Engine:
         self._range = range_w
 
     def _measure(self, row: np.void, flags: list[str]) -> dict[str, Any]:
-        self._use_range(float(row["range_w"]))
-        moved = self._move(row)
-        pause = real_seconds(self.inst, max((self._settle[r] for r in moved), default=0.0)
-                             + self.plan.dwell_s)
-        if pause > 0:  # instant time: no sleep(0), which only yields the core away
-            time.sleep(pause)
+        step = row_step(self.inst, row, self._commanded, self.plan.dwell_s)
+        self._use_range(step.range_w)
+        self._move(row, step)
+        if step.pause_s > 0:  # instant time: no sleep(0), which only yields the core away
+            time.sleep(step.pause_s)
         self._doing = f"reading the detector ({self.inst.detector.name})"
         return self._record(row, self.inst.detector.read(), flags)
 

@@ -6,6 +6,9 @@ first Ctrl-C asks for a pause, answered at the terminal prompt; a Ctrl-C while a
 for or in effect aborts at once; SIGTERM and SIGHUP raise Terminated. A pause asked for on the
 channel waits on the channel (resume or abort there, or Ctrl-C: abort), never on the terminal.
 An abort from the channel interrupts the engine's thread as a second Ctrl-C does.
+
+Every change of state goes through `PauseControl._move`, which checks it against
+`TRANSITIONS`, the whole table.
 """
 
 from __future__ import annotations
@@ -24,6 +27,19 @@ TERMINATING = (signal.SIGTERM, signal.SIGHUP)
 HANDLED = (signal.SIGINT, *TERMINATING)
 TERMINAL, CHANNEL = "terminal", "channel"  # where a pause was asked for
 POLL_S = 0.05  # how often a wait looks at the requests
+_ENDS = (State.STOPPING, State.COMPLETED, State.ABORTED, State.FAILED)
+# state -> the states it may move to. A final state may start again (running), or stop at
+# once (a failed start): a queue runs its plans on one control.
+TRANSITIONS: dict[State, frozenset[State]] = {
+    State.STARTING: frozenset({State.RUNNING, State.PAUSING, State.STOPPING}),
+    State.RUNNING: frozenset({State.RUNNING, State.PAUSING, State.PAUSED, State.SUSPENDED,
+                              State.STOPPING}),
+    State.PAUSING: frozenset({State.RUNNING, State.PAUSED, State.SUSPENDED, State.STOPPING}),
+    State.PAUSED: frozenset({State.RUNNING, State.PAUSING, State.STOPPING}),
+    State.SUSPENDED: frozenset({State.RUNNING, State.PAUSING, State.STOPPING}),
+    State.STOPPING: frozenset(_ENDS),
+    **{end: frozenset({State.RUNNING, State.PAUSING, State.STOPPING}) for end in _ENDS[1:]},
+}
 
 
 class Aborted(Exception):
@@ -86,21 +102,32 @@ class PauseControl:
         with self._lock:
             return self._state
 
+    def _move(self, state: State) -> None:
+        """Change to `state` (the lock held), as TRANSITIONS allows. Once stopping, the
+        engine's own steps (running, suspended, paused) before it sees the abort leave the
+        state as it is; any other move the table lacks is a RuntimeError."""
+        if state in TRANSITIONS[self._state]:
+            self._state = state
+        elif self._state is not State.STOPPING:
+            raise RuntimeError(f"run state {self._state.value} cannot change to {state.value}")
+
     def enter(self, state: State) -> None:
         """The engine's thread moves to `state` (a pause asked for while starting or
         suspended takes effect on entering RUNNING)."""
         with self._lock:
             if state is State.RUNNING and self._pending:
-                self._state, self._pause_source, self._pending = State.PAUSING, self._pending, None
+                self._move(State.PAUSING)
+                self._pause_source, self._pending = self._pending, None
             else:
-                self._state = state
+                self._move(state)
 
     # -- requests (any thread) --------------------------------------------------
     def request_pause(self, source: str = CHANNEL) -> State:
         """Ask for a pause before the next reading; returns the state it leaves."""
         with self._lock:
             if self._state is State.RUNNING:
-                self._state, self._pause_source = State.PAUSING, source
+                self._move(State.PAUSING)
+                self._pause_source = source
             elif self._state in (State.STARTING, State.SUSPENDED) and not self._pending:
                 self._pending = source
             return self._state
@@ -109,9 +136,11 @@ class PauseControl:
         """Resume a pause the channel asked for; ValueError (one line) if there is none."""
         with self._lock:
             if self._state is State.PAUSING and self._pause_source == CHANNEL:
-                self._state, self._pause_source = State.RUNNING, None
+                self._move(State.RUNNING)
+                self._pause_source = None
             elif self._state is State.PAUSED and self._pause_source == CHANNEL:
-                self._answer, self._state = "resume", State.RUNNING
+                self._answer = "resume"
+                self._move(State.RUNNING)
             elif self._state is State.PAUSED:
                 raise ValueError("paused at the terminal prompt: answer it there")
             else:
@@ -125,7 +154,7 @@ class PauseControl:
                 return self._state
             self.abort_reason, self._answer = reason, "abort"
             interrupt = self._state is not State.PAUSED or self._pause_source != CHANNEL
-            self._state = State.STOPPING
+            self._move(State.STOPPING)
         if interrupt and self._previous and self._engine_thread == threading.main_thread().ident:
             _thread.interrupt_main(signal.SIGINT)  # as a second Ctrl-C: at once, mid-move too
         return State.STOPPING
@@ -184,7 +213,8 @@ class PauseControl:
         with self._lock:
             if self._state is not State.PAUSING:
                 return
-            self._state, source = State.PAUSED, self._pause_source
+            self._move(State.PAUSED)
+            source = self._pause_source
         on_pause()
         resume = self._answer_on_channel() if source == CHANNEL else self._answer_on_terminal()
         if not resume:

@@ -31,6 +31,7 @@ from gonio.config import InstrumentConfig, load_config
 from gonio.engine import TRANSIENT, home_axes, motion_timeout_s
 from gonio.instrument import Instrument, build_instrument
 from gonio.plan import AUTO_RANGE, describe_range, sweeps_source
+from gonio.row_step import PositionMismatch, arrival
 
 T = TypeVar("T")
 FAILURES = (*TRANSIENT, ValueError)  # a driver's ValueError: a value the device cannot take
@@ -93,8 +94,8 @@ class GonioAxis(StandardReadable):
 
     @AsyncStatus.wrap
     async def set(self, value: float) -> None:
-        """Move to `value` deg and wait for the arrival (gonio's engine's timeout and
-        tolerance); a stop ends it, as a failure unless stopped with success=True."""
+        """Move to `value` deg and wait for the arrival (gonio's engine's timeout and arrival
+        check, gonio.row_step); a stop ends it, as a failure unless stopped with success=True."""
         target = float(value)
         start = await self.position()
         self._refuse(start, target)
@@ -110,11 +111,14 @@ class GonioAxis(StandardReadable):
                 return
             raise DeviceFailure(self.name, f"moving to {target:g} deg",
                                 RuntimeError(f"stopped at {arrived:g} deg"))
-        tol = self._config.tolerance_deg
-        if abs(arrived - target) > tol and abs(await self.position() - target) > tol:
-            where = await self.readback.get_value()
-            raise DeviceFailure(self.name, f"moving to {target:g} deg", RuntimeError(
-                f"stopped at {where:.6g} deg, off target by more than {tol:g} deg"))
+        check = arrival(self._inst, self._role, target)
+        if not check.holds(arrived):
+            try:
+                check.confirm(await self.position())
+            except PositionMismatch as exc:
+                raise DeviceFailure(self.name, f"moving to {target:g} deg", RuntimeError(
+                    f"stopped at {exc.position_deg:.6g} deg, off target by more than "
+                    f"{check.tolerance_deg:g} deg")) from exc
 
     async def stop(self, success: bool = True) -> None:
         """Decelerate to a stop (Bluesky's pause and abort call this)."""

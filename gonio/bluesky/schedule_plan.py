@@ -3,10 +3,10 @@ by row under the RunEngine, so its suspenders, pauses and callbacks apply.
 
 Each row starts at a checkpoint (a suspender that fires makes the RunEngine measure the row
 again when it resumes), sets the detector's range when it changes, moves the axes whose
-target changes (together), settles and dwells as gonio's engine does, and takes one event in
-the primary stream: the detector, every axis's readback and the row's schedule fields
-(`schedule-index`, `schedule-kind`: sample, dark, beam or signature; side, point, the plan's
-angles).
+target changes (together), settles and dwells as gonio's engine does (the same step,
+gonio.row_step), and takes one event in the primary stream: the detector, every axis's
+readback and the row's schedule fields (`schedule-index`, `schedule-kind`: sample, dark, beam
+or signature; side, point, the plan's angles).
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from ophyd_async.plan_stubs import ensure_connected
 
 from gonio.bluesky.ophyd_devices import GonioDevices
 from gonio.engine import schedule_tags
-from gonio.instrument import real_seconds
 from gonio.plan import Plan, build_schedule, load_plan
+from gonio.row_step import row_step
 
 PYTHON_TYPES = {"i": int, "f": float, "O": str}  # schedule field kind -> signal datatype
 
@@ -76,19 +76,16 @@ def plan(gonio_plan: str | Path | Plan, devices: GonioDevices, md: dict[str, Any
         range_w, commanded = None, dict.fromkeys(devices.axes)
         for row in readings:
             yield from bps.checkpoint()  # a suspender replays the row from here
-            if row["range_w"] != range_w:
-                range_w = row["range_w"]
-                yield from bps.mv(devices.detector.range_setting, float(range_w))
-            targets = {role: float(row[f"{role}_deg"]) for role in devices.axes}
-            moved = [role for role, target in targets.items() if commanded[role] != target]
-            if moved:
+            step = row_step(inst, row, commanded, p.dwell_s)
+            if step.range_w != range_w:
+                range_w = step.range_w
+                yield from bps.mv(devices.detector.range_setting, range_w)
+            if step.moved:
                 yield from bps.mv(*itertools.chain.from_iterable(
-                    (devices.axes[role], targets[role]) for role in moved))
-                commanded.update({role: targets[role] for role in moved})
-            pause = real_seconds(inst, max((cfg.axes[r].settle_s for r in moved), default=0.0)
-                                 + p.dwell_s)
-            if pause > 0:
-                yield from bps.sleep(pause)
+                    (devices.axes[role], step.targets[role]) for role in step.moved))
+                commanded.update({role: step.targets[role] for role in step.moved})
+            if step.pause_s > 0:
+                yield from bps.sleep(step.pause_s)
             yield from bps.mv(row_device, row)
             yield from bps.trigger_and_read(detectors)
 
