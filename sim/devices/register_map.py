@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import math
 import struct
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import tomllib
 
 # Modbus exception codes a unit answers with.
 ILLEGAL_FUNCTION = 1

@@ -65,7 +65,7 @@ def test_exporting_twice_gives_the_same_file(scanned, tmp_path):
 
 
 def test_the_runengine_measures_the_rows_gonio_scan_stored(scanned):
-    pytest.importorskip("ophyd_async", reason="gonio.bluesky needs ophyd-async (Python >= 3.11)")
+    pytest.importorskip("ophyd_async", reason="gonio.bluesky needs ophyd-async (the bluesky extra)")
     from bluesky import RunEngine
 
     from gonio.bluesky import devices, plan

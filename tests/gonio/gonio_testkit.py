@@ -12,11 +12,10 @@ import signal
 import subprocess
 import sys
 import time
+import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-
-import tomllib
 
 from gonio.engine import Engine, Outcome
 from gonio.events import EventBus
