@@ -77,10 +77,12 @@ def compiled(**options: object) -> Callable[[Callable], Callable]:
 
 @cache
 def _tolerant_cache() -> type:
-    """numba's FunctionCache, but a save the disk refuses warns (once) instead of raising."""
+    """numba's FunctionCache, but a save the disk refuses warns instead of raising."""
     from numba.core.caching import FunctionCache
 
     class TolerantCache(FunctionCache):
+        """A kernel's cache whose refused write leaves the kernel in memory only."""
+
         def save_overload(self, sig, data) -> None:
             try:
                 super().save_overload(sig, data)
@@ -92,5 +94,6 @@ def _tolerant_cache() -> type:
 
 @cache
 def _warn_refused(folder: str, reason: str) -> None:
+    """One warning per cache folder and reason, however many kernels it refuses."""
     warnings.warn(f"numba's kernel cache in {folder} refused a write ({reason}): kernels "
                   "compiled by this process stay in memory only", RuntimeWarning, stacklevel=2)
