@@ -17,9 +17,9 @@ import argparse
 import math
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
-import tomllib
 from bluesky import RunEngine
 from scan_throughput import config_text, load, plan_text
 

@@ -41,12 +41,12 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 import urllib.request
 from pathlib import Path
 
 import numpy as np
 import serial
-import tomllib
 
 from gonio.config import parse_config
 from gonio.plan import build_schedule, parse_plan

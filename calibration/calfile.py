@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 
 from calibration.detector import correct_power
 from calibration.values import CalibrationError, Measured

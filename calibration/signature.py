@@ -21,15 +21,12 @@ shot noise) and their dark level's. Per sample point reduction then gets
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from calibration.beam import BeamPower
+from calibration.dark import DarkModel
 from calibration.values import CalibrationError
-
-if TYPE_CHECKING:  # calibration.reduce imports this module
-    from calibration.reduce import DarkModel
 
 DEFAULT_SHARE = 0.1  # flag points whose signature exceeds this share of the net signal
 FLAG = "signature"

@@ -13,11 +13,10 @@ from __future__ import annotations
 
 import math
 import struct
+import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-
-import tomllib
 
 _TYPES = {  # type -> (struct code of its big-endian bytes, number of registers)
     "uint16": ("H", 1),

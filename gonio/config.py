@@ -16,28 +16,13 @@ from typing import Any
 import numpy as np
 
 from gonio.device_kinds import KINDS, DeviceConfig
+from gonio.device_kinds.kind import AxisConfig
 from gonio.device_kinds.settings import read_settings
 from gonio.errors import ConfigError
 from gonio.fields import REQUIRED, Fields, location, read_toml
 from gonio.optics import Optics, parse_optics
 
 ROLES = ("sample", "arm", "azimuth", "elevation")
-
-
-@dataclass(frozen=True)
-class AxisConfig:
-    """One rotation axis in a role (sample, arm, azimuth, elevation) and its motion profile."""
-
-    role: str
-    device: str
-    axis: int
-    limits_deg: tuple[float, float]
-    speed_deg_s: float
-    accel_deg_s2: float
-    settle_s: float = 0.0
-    tolerance_deg: float = 0.01
-    home: bool = False
-    repeatability_deg: float = 0.0  # 1-sigma scatter of where a move ends (the GUM budget's)
 
 
 @dataclass(frozen=True)

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import difflib
 import math
+import tomllib
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 
 from gonio.errors import GonioError
 

@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.base import Axis, Detector, DriverError
-from gonio.config import AxisConfig, InstrumentConfig
+from gonio.config import InstrumentConfig
 from gonio.device_kinds import DeviceConfig
+from gonio.device_kinds.kind import AxisConfig
 from gonio.errors import ConfigError
 
 STOP_ATTEMPTS = 2

@@ -16,13 +16,12 @@ import fcntl
 import json
 import os
 import shutil
+import tomllib
 from collections.abc import Callable, Collection, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 from drivers.base import DriverError
 from gonio.config import load_config

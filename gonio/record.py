@@ -83,9 +83,3 @@ def run_record(run: Run) -> dict[str, Any]:
 def record_lines(record: Mapping[str, Any]) -> list[str]:
     """`key: value` lines of a record, each value as JSON (one line, parseable back)."""
     return [f"{key}: {json.dumps(value, ensure_ascii=False)}" for key, value in record.items()]
-
-
-def record_attributes(record: Mapping[str, Any]) -> dict[str, str | int | float]:
-    """A record as NetCDF attributes: numbers and strings as they are, the rest as JSON."""
-    return {key: value if isinstance(value, (str, int, float)) and not isinstance(value, bool)
-            else json.dumps(value, ensure_ascii=False) for key, value in record.items()}

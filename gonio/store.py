@@ -45,7 +45,7 @@ import zlib
 from collections.abc import Collection
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +76,7 @@ has none."""
 
 def utc_now() -> str:
     """Current UTC time, ISO 8601."""
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def fsync_dir(path: Path) -> None:
@@ -459,7 +459,7 @@ class RunWriter:
                plan: dict[str, Any], config: dict[str, Any], meta: dict[str, Any]) -> RunWriter:
         """Make a new run directory under root (name + UTC timestamp, unique), whole or not at
         all: StoreError (one line) if the disk refuses, and nothing is left behind."""
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         name = re.sub(r"[^A-Za-z0-9._-]", "_", name)[:60].lstrip(".") or "run"
         making, base = root / PARTIAL, f"{stamp}-{name}"
         tmp = making / f"{base}-{secrets.token_hex(4)}"

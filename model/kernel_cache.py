@@ -8,12 +8,19 @@ written with; numba recompiles on first use (tens of seconds once, then cached a
 A process started before an edit can still save a kernel compiled from the old sources after
 another process kept the new digest (numba stamps it with its own, unchanged file): editing
 while such a process compiles needs a second `import model` after it ends.
+
+`compiled` is how model/ asks numba for a cached kernel: a cache file the disk refuses (full,
+read-only, a file-size limit) is one warning per cache folder and the kernel stays in memory;
+numba's own cache lets the write's OSError end the call that compiled it.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import warnings
+from collections.abc import Callable
+from functools import cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
@@ -52,3 +59,41 @@ def drop_stale_kernels(root: Path = ROOT) -> bool:
     except OSError:
         pass
     return True
+
+
+def compiled(**options: object) -> Callable[[Callable], Callable]:
+    """numba.njit(cache=True, **options), its cache writes made non-fatal (module docstring)."""
+    from numba import njit
+
+    def decorate(function: Callable) -> Callable:
+        dispatcher = njit(**options)(function)
+        if hasattr(dispatcher, "enable_caching"):  # not a plain function (NUMBA_DISABLE_JIT)
+            # what dispatcher.enable_caching() sets (njit(cache=True)), but tolerant
+            dispatcher._cache = _tolerant_cache()(function)
+        return dispatcher
+
+    return decorate
+
+
+@cache
+def _tolerant_cache() -> type:
+    """numba's FunctionCache, but a save the disk refuses warns instead of raising."""
+    from numba.core.caching import FunctionCache
+
+    class TolerantCache(FunctionCache):
+        """A kernel's cache whose refused write leaves the kernel in memory only."""
+
+        def save_overload(self, sig, data) -> None:
+            try:
+                super().save_overload(sig, data)
+            except OSError as exc:
+                _warn_refused(self.cache_path, exc.strerror or str(exc))
+
+    return TolerantCache
+
+
+@cache
+def _warn_refused(folder: str, reason: str) -> None:
+    """One warning per cache folder and reason, however many kernels it refuses."""
+    warnings.warn(f"numba's kernel cache in {folder} refused a write ({reason}): kernels "
+                  "compiled by this process stay in memory only", RuntimeWarning, stacklevel=2)

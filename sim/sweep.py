@@ -12,12 +12,12 @@ import copy
 import itertools
 import json
 import time
+import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import tomllib
 
 from model.cluster import map_tasks
 from sim.bench import build_power_source

@@ -3,10 +3,10 @@ protocol neither knows is one clear error listing the kinds, in config and in em
 
 import contextlib
 import io
+import tomllib
 from pathlib import Path
 
 import pytest
-import tomllib
 
 import gonio.device_kinds
 import sim.device_kinds

@@ -1,7 +1,14 @@
 """model.kernel_cache drops numba's cache files when any source under the package changed (numba
-alone misses a change in a file a kernel calls into), and only then."""
+alone misses a change in a file a kernel calls into), and only then; a cache file the disk
+refuses leaves the compiled kernel working in memory."""
 
+import os
+import resource
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 from model.kernel_cache import ROOT, STAMP, drop_stale_kernels, sources_digest
 
@@ -36,3 +43,39 @@ def test_caches_go_when_a_source_changes_and_stay_otherwise(tmp_path):
 
 def test_importing_sim_keeps_the_digest_of_its_sources():
     assert (ROOT / STAMP).read_text() == sources_digest(ROOT)
+
+
+KERNEL = """
+from model.kernel_cache import compiled
+
+
+@compiled(error_model="numpy")
+def twice(x):
+    return 2.0 * x
+"""
+
+
+@pytest.mark.parametrize("limit_bytes", [100, None])
+def test_a_kernel_whose_cache_file_the_disk_refuses_still_runs(tmp_path, limit_bytes):
+    """Every file the process writes limited to 100 bytes (RLIMIT_FSIZE: EFBIG, as under `ulimit
+    -f`): the kernel compiles and runs, one warning names the cache folder, no file is left;
+    without the limit numba caches it as usual."""
+    pytest.importorskip("numba")
+    (tmp_path / "kernel.py").write_text(KERNEL)
+    cache = tmp_path / "numba"
+
+    def limit() -> None:
+        if limit_bytes is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    path = os.pathsep.join([str(tmp_path), str(ROOT.parent), os.environ.get("PYTHONPATH", "")])
+    done = subprocess.run([sys.executable, "-c", "import kernel; print(kernel.twice(21.0))"],
+                          capture_output=True, text=True, timeout=300, preexec_fn=limit,
+                          env={**os.environ, "NUMBA_CACHE_DIR": str(cache),
+                               "PYTHONPATH": path, "PYTHONDONTWRITEBYTECODE": "1"})
+    assert (done.returncode, done.stdout) == (0, "42.0\n"), done.stderr
+    written = sorted(p.suffix for p in cache.rglob("*") if p.is_file())
+    if limit_bytes is None:
+        assert written == [".nbc", ".nbi"] and "refused" not in done.stderr
+    else:
+        assert written == [] and done.stderr.count("refused a write (File too large)") == 1

@@ -222,7 +222,7 @@ BLUESKY = {"bluesky", "ophyd_async", "event_model"}  # the `bluesky` extra
 def test_bluesky_is_reached_through_gonio_bluesky_and_one_export_only():
     # gonio.bluesky (the ophyd-async devices and the schedule plan) is an optional integration
     # that users import; nothing in the project imports it, so the base install never needs
-    # the extra. The bluesky export needs event-model only (it installs on Python 3.10).
+    # the extra. The bluesky export needs event-model only.
     users = {
         str(path.relative_to(ROOT)): sorted(imported_packages(path) & BLUESKY)
         for package in PACKAGES for path in (ROOT / package).rglob("*.py")
@@ -265,7 +265,7 @@ def test_the_graphs_see_lazy_and_package_imports():
 def test_every_module_imports_in_a_fresh_process(package):
     # One interpreter per top-level package (numpy and scipy cost a second or more each time),
     # importing each of its modules in turn; __main__ modules run a program, so not those.
-    # gonio.bluesky needs the `bluesky` extra's ophyd-async, which needs Python >= 3.11.
+    # gonio.bluesky needs the `bluesky` extra's ophyd-async.
     optional = () if importlib.util.find_spec("ophyd_async") else ("gonio.bluesky",)
     names = sorted(m for m, p in MODULES.items()
                    if m.split(".")[0] == package and p.name != "__main__.py"

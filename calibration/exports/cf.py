@@ -11,7 +11,7 @@ import json
 import math
 import re
 from collections.abc import Mapping
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -112,7 +112,7 @@ def _globals(ds: Any, title: str, record: Mapping[str, Any], extra: Mapping[str,
                 continue
             ds.setncattr(key, value if isinstance(value, (str, int, float))
                          and not isinstance(value, bool) else json.dumps(value))
-    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    now = datetime.now(UTC).isoformat(timespec="seconds")
     emulated = "the emulated bench" if record.get("emulated") else (
         f"instrument {record.get('instrument') or 'unnamed'}")
     ds.Conventions = CONVENTIONS
@@ -135,7 +135,7 @@ def epoch_units(t0_epoch: float | None) -> str:
     every reading's `t_s` counts from), in UTC."""
     if t0_epoch is None:
         return "s"
-    start = datetime.fromtimestamp(float(t0_epoch), tz=timezone.utc)
+    start = datetime.fromtimestamp(float(t0_epoch), tz=UTC)
     return f"seconds since {start.strftime('%Y-%m-%d %H:%M:%S.%f')}"
 
 

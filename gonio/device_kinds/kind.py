@@ -1,5 +1,5 @@
-"""What a device kind is (`StageKind`, `DetectorKind`) and a device of a config
-(`DeviceConfig`: its name, its kind and the values of the kind's settings).
+"""What a device kind is (`StageKind`, `DetectorKind`), a device of a config (`DeviceConfig`:
+its name, its kind and the values of the kind's settings) and an axis of one (`AxisConfig`).
 
 A kind says once what the rest of gonio asks of a protocol: its config settings, how a
 device of it opens as `Axis` drivers or a `Detector`, and its own config checks.
@@ -10,13 +10,10 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import Any, ClassVar, Protocol
 
 from drivers.base import Axis, Detector
 from gonio.device_kinds.settings import Setting
-
-if TYPE_CHECKING:
-    from gonio.config import AxisConfig
 
 
 class StageController(Protocol):
@@ -32,6 +29,22 @@ class StageController(Protocol):
 #: A kind's own config check, after the whole config is read: (device, the axes it drives,
 #: the config's name for messages) -> None, or a ConfigError naming the field.
 Check = Callable[["DeviceConfig", Sequence["AxisConfig"], str], None]
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    """One rotation axis in a role (sample, arm, azimuth, elevation) and its motion profile."""
+
+    role: str
+    device: str
+    axis: int
+    limits_deg: tuple[float, float]
+    speed_deg_s: float
+    accel_deg_s2: float
+    settle_s: float = 0.0
+    tolerance_deg: float = 0.01
+    home: bool = False
+    repeatability_deg: float = 0.0  # 1-sigma scatter of where a move ends (the GUM budget's)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -8,16 +8,13 @@ same shape needs a map and no code (docs/modbus.md).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from drivers.register_map import RegisterMap
-from gonio.device_kinds.kind import DeviceConfig, driver_class
+from gonio.device_kinds.kind import AxisConfig, DeviceConfig, driver_class
 from gonio.device_kinds.settings import BAUDRATE, PORT, TIMEOUT_S, Setting, only_when
 from gonio.errors import ConfigError
 from gonio.fields import location
-
-if TYPE_CHECKING:
-    from gonio.config import AxisConfig
 
 MODBUS_SETTINGS = (
     TIMEOUT_S,

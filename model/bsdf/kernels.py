@@ -41,6 +41,7 @@ from model.bsdf.primitives import (
     walter_scale,
 )
 from model.cluster import run_with_one_kernel_thread
+from model.kernel_cache import compiled
 
 #: True when numba imports: the kernels below exist only then.
 AVAILABLE = COMPILED
@@ -60,7 +61,7 @@ class DielectricBlock(IntEnum):
 
 
 if AVAILABLE:
-    from numba import njit, prange
+    from numba import prange
     from numba.core import types
     from numba.extending import intrinsic
 
@@ -75,7 +76,7 @@ if AVAILABLE:
 
         return types.none(), codegen
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _dielectric_one(wi, wo, k, ndf, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
         ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
@@ -130,7 +131,7 @@ if AVAILABLE:
         return (im * om * e * e * ft * normal_density(ndf, ax, ay, mx, my, mz)
                 * g2_over_cosines(masking, iz, abs(oz), li, lo, True) / n2)
 
-    @njit(cache=True, parallel=True, error_model="numpy")
+    @compiled(parallel=True, error_model="numpy")
     def _dielectric(wi, wo, ndf, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
         """Pair-by-pair eval (want_pdf False) or pdf of RoughDielectric, pairs of shape (N, 3)."""
         out = np.empty(wi.shape[0])
@@ -139,7 +140,7 @@ if AVAILABLE:
                                      sampling, want_pdf)
         return out
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
@@ -156,7 +157,7 @@ if AVAILABLE:
         return (0.25 * f * normal_density(ndf, ax, ay, hx, hy, hz)
                 * g2_over_cosines(masking, iz, oz, li, lo, False))
 
-    @njit(cache=True, parallel=True, error_model="numpy")
+    @compiled(parallel=True, error_model="numpy")
     def _conductor(wi, wo, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         """Pair-by-pair eval (want_pdf False) or pdf of RoughConductor, pairs (N, 3)."""
         out = np.empty(wi.shape[0])
@@ -178,7 +179,7 @@ if AVAILABLE:
     #: ... and pairs whose numerator or denominator of f falls below TINY (precision lost).
     TINY = 1e-290
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _normalised(f):
         """A normalised copy of the flat (3 m) directions f."""
         g = np.empty(f.shape[0])
@@ -187,13 +188,13 @@ if AVAILABLE:
             g[j], g[j + 1], g[j + 2] = f[j] * inv, f[j + 1] * inv, f[j + 2] * inv
         return g
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _one_plus_lambda(ax, ay, w, k):
         """1 + Lambda of GGX for direction k of w (N, 3), as the scalar kernel computes it."""
         x, y, z = unit(w[k, 0], w[k, 1], w[k, 2])
         return 1.0 + cos_lambda(Ndf.GGX.value, ax, ay, x, y, z) / abs(z)
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _times_beta(x, ax, ay, wi, wo, k):
         """x B(1 + Lambda_i, 1 + Lambda_o) for pair k (log form, _log_beta), or NaN when that
         is not a finite number above TINY: the caller then recomputes the pair in the scalar
@@ -205,7 +206,7 @@ if AVAILABLE:
             v = x * math.exp(log_beta(p, q))
         return v if TINY < v < math.inf else math.nan
 
-    @njit(cache=True, error_model="numpy", inline="always")
+    @compiled(error_model="numpy", inline="always")
     def _block_constants(ax, ay, eta):
         """Per-call constants of the SIMD blocks: 1/alpha_x, 1/alpha_y, pi alpha_x alpha_y, and
         for light arriving from inside 1/eta and 1/eta - 1; eta^2 - 1 from outside and
@@ -215,7 +216,7 @@ if AVAILABLE:
         return (1.0 / ax, 1.0 / ay, math.pi * ax * ay, e_in, em1_in, (eta - 1.0) * (eta + 1.0),
                 em1_in * (e_in + 1.0))
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _ggx_dielectric_block(fi, fo, ax, ay, eta, mode, refl_on, trans_on, res):
         """SIMD loop of _ggx_dielectric over flat (3 m) wi and wo into res (m): 3 sqrt and 1
         division per pair; pairs it cannot vouch for (off unit length, near-grazing, tiny or
@@ -301,7 +302,7 @@ if AVAILABLE:
             res[j] = math.nan if not safe or (ok and not sure) else (val if ok else 0.0)
         return far
 
-    @njit(cache=True, parallel=True, error_model="numpy")
+    @compiled(parallel=True, error_model="numpy")
     def _ggx_dielectric(wi, wo, ax, ay, eta, mode, refl_on, trans_on):
         """GGX dielectric eval or visible pdf (mode, a DielectricBlock): SIMD blocks, the Beta
         factor of correlated transmission, then the pairs left NaN by the scalar kernel."""
@@ -360,7 +361,7 @@ if AVAILABLE:
         return _launch(_conductor, len(wi), wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking),
                        int(sampling), want_pdf)
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _sampling_weight(ndf, ax, ay, masking, sampling, ix, iy, iz, li, ox, oy, oz, mx, my, mz,
                          c, transmitted):
         """f |cos o| / pdf without Fresnel and lobe choice (MicrofacetModel._sampling_weight)."""
@@ -375,7 +376,7 @@ if AVAILABLE:
             return 0.0
         return normal_density(ndf, ax, ay, mx, my, mz) / d_s * c * aoz * g2oc / mz
 
-    @njit(cache=True, parallel=True, error_model="numpy")
+    @compiled(parallel=True, error_model="numpy")
     def _conductor_sample(wi, u, ndf, ax, ay, has_f, n_c, masking, sampling):
         """sample() of RoughConductor pair by pair: (wo, weight, pdf), failed samples 0."""
         n = wi.shape[0]
@@ -402,7 +403,7 @@ if AVAILABLE:
             pdf[k] = p
         return wo, weight, pdf
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _dielectric_sample_one(wi, u, k, ndf, ax, ay, eta, masking, refl_on, trans_on,
                                sampling):
         """One sample of RoughDielectric for pair k: (ox, oy, oz, weight, pdf), all 0 if it
@@ -442,7 +443,7 @@ if AVAILABLE:
             return 0.0, 0.0, 0.0, 0.0, 0.0
         return ox, oy, oz * sgn, (1.0 if both else lobe) * w, p
 
-    @njit(cache=True, parallel=True, error_model="numpy")
+    @compiled(parallel=True, error_model="numpy")
     def _dielectric_sample(wi, u, ndf, ax, ay, eta, masking, refl_on, trans_on, sampling):
         """sample() of RoughDielectric pair by pair: (wo, weight, pdf), failed samples 0."""
         n = wi.shape[0]
@@ -459,7 +460,7 @@ if AVAILABLE:
     SIN_TERMS = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(8, -1, -1))
     COS_TERMS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(9, -1, -1))
 
-    @njit(cache=True, error_model="numpy", inline="always")
+    @compiled(error_model="numpy", inline="always")
     def _cos_sin_2pi(u):
         """(cos 2 pi u, sin 2 pi u) for 0 <= u <= 1 by quadrant and Taylor polynomials:
         branch-free, so that it vectorises (math.cos and sin do not)."""
@@ -479,7 +480,7 @@ if AVAILABLE:
         return (-cq if (quadrant == 1.0) | (quadrant == 2.0) else cq,
                 -sq if (quadrant == 2.0) | (quadrant == 3.0) else sq)
 
-    @njit(cache=True, error_model="numpy")
+    @compiled(error_model="numpy")
     def _ggx_visible_sample_block(fi, fu, ax, ay, eta, correlated, refl_on, trans_on, fwo,
                                   weight, pdf):
         """SIMD loop of _ggx_visible_sample over flat (3 m) wi and u into fwo (3 m), weight and
@@ -582,7 +583,7 @@ if AVAILABLE:
             pdf[j] = math.nan if not safe or (ok and not sure) else (p if ok else 0.0)
         return far
 
-    @njit(cache=True, parallel=True, error_model="numpy")
+    @compiled(parallel=True, error_model="numpy")
     def _ggx_visible_sample(wi, u, ax, ay, eta, correlated, refl_on, trans_on):
         """sample() of the GGX RoughDielectric with visible-normal sampling: SIMD blocks, the
         Beta factor of correlated transmission, then the samples left NaN by

@@ -31,9 +31,16 @@ from model.bsdf.constants import (
     Ndf,
     Sampling,
 )
+from model.kernel_cache import compiled
 
 try:
-    from numba import njit
+    #: How every scalar formula is compiled: cached, with numpy's floating-point error model,
+    #: releasing the GIL (keyed walks fill one batch from several threads).
+    scalar = compiled(error_model="numpy", nogil=True)
+    #: The same, inlined into each caller by numba (inline="always"): the random walk's
+    #: per-event formulas, which LLVM otherwise leaves as calls (a sixth of a walk's time).
+    inlined = compiled(error_model="numpy", inline="always")
+    COMPILED = True
 except ImportError:  # pragma: no cover - exercised only without the [fast] extra
     COMPILED = False
 
@@ -42,14 +49,6 @@ except ImportError:  # pragma: no cover - exercised only without the [fast] extr
         return fn
 
     inlined = scalar
-else:
-    COMPILED = True
-    #: How every scalar formula is compiled: cached, with numpy's floating-point error model,
-    #: releasing the GIL (keyed walks fill one batch from several threads).
-    scalar = njit(cache=True, error_model="numpy", nogil=True)
-    #: The same, inlined into each caller by numba (inline="always"): the random walk's
-    #: per-event formulas, which LLVM otherwise leaves as calls (a sixth of a walk's time).
-    inlined = njit(cache=True, error_model="numpy", inline="always")
 
 STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
 #: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.

@@ -11,14 +11,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from model.lut.spec import FORMAT, TableSpec
-
-if TYPE_CHECKING:  # model.lut.table calls this module to store and read .exr tables
-    from model.lut.table import Table
 
 #: EXR channel carrying each table channel (texture-style names: R, G).
 EXR_CHANNELS = ("R", "G")
@@ -58,17 +54,17 @@ def atlas_description(spec: TableSpec) -> dict:
             "pixel_type": PIXEL_TYPES.get(spec.dtype)}
 
 
-def save_exr(table: Table, path: str | Path) -> Path:
-    """Write table as a scanline, ZIP-compressed .exr with gonio's metadata attributes."""
-    check_exr(table.spec)
+def save_exr(spec: TableSpec, data: np.ndarray, metadata: dict, path: str | Path) -> Path:
+    """Write a table (its spec, stored array and metadata, as read_exr gives them back) as a
+    scanline, ZIP-compressed .exr with gonio's metadata attributes."""
+    check_exr(spec)
     exr = _openexr()
     path = Path(path)
-    spec = table.spec
-    image = np.ascontiguousarray(table.data).reshape(-1, spec.shape[0], len(spec.channels))
+    image = np.ascontiguousarray(data).reshape(-1, spec.shape[0], len(spec.channels))
     channels = {name: np.ascontiguousarray(image[..., k])
                 for k, name in enumerate(EXR_CHANNELS[: len(spec.channels)])}
     header = {"compression": exr.ZIP_COMPRESSION, "type": exr.scanlineimage}
-    fields = {**table.metadata(), "atlas": atlas_description(spec)}
+    fields = {**metadata, "atlas": atlas_description(spec)}
     header |= {PREFIX + key: json.dumps(value) for key, value in fields.items()}
     try:
         with exr.File(header, channels) as out:

@@ -94,7 +94,7 @@ class Table:
         path = Path(path)
         check_storable(self.spec, path)
         if is_exr(path):
-            return save_exr(self, path)
+            return save_exr(self.spec, self.data, self.metadata(), path)
         axes = {f"axis_{a.name}": a.values() for a in self.spec.axes}
         with open(path, "wb") as fh:
             np.savez(fh, table=self.data, metadata=np.array(json.dumps(self.metadata())),

@@ -52,6 +52,9 @@ ANGULAR_UNITS = {7: 1.0, 8: 400.0 / 360.0, 9: math.pi / 180.0, 10: 1e3 * math.pi
                  11: 1e6 * math.pi / 180.0}
 DEGREE = 7
 SERVO_TICK_S = 400e-6  # TB? timestamps count servo interrupts (400 us by default)
+# A wait or motion that would end later than this after power-up is a parameter out of range:
+# TB?'s timestamp then stays an exact integer count of servo ticks (2**53, about 114000 years).
+HORIZON_S = 2.0**53 * SERVO_TICK_S
 
 AXIS_KEYS = {
     "limits_deg": (-170.0, 170.0),
@@ -263,6 +266,8 @@ class EspEmulator(PtyDevice):
         if axis.homing and axis.moving():
             raise axis.fail(30)
         try:
+            if not axis.motion.move_end(target_deg) <= HORIZON_S:
+                raise axis.fail(1)
             axis.motion.move_to(target_deg)
         except LimitError as exc:
             raise axis.fail(6 if exc.side == "positive" else 7) from None
@@ -320,6 +325,8 @@ class EspEmulator(PtyDevice):
         if not axis.motor_on:
             raise axis.fail(13)
         try:
+            if not axis.motion.home_end() <= HORIZON_S:
+                raise axis.fail(1)
             axis.motion.home()
         except MotionError:
             raise axis.fail(1) from None
@@ -333,7 +340,10 @@ class EspEmulator(PtyDevice):
         value = self._number(param, required=False) or 0.0
         if axis.moving():
             raise axis.fail(26)
-        axis.motion.define_position(value / axis.scale)
+        try:
+            axis.motion.define_position(value / axis.scale)
+        except MotionError:
+            raise axis.fail(1) from None
         return None
 
     def _rate(self, axis: _EmulatedAxis, query: bool, param: str, attr: str, top: float,
@@ -366,7 +376,7 @@ class EspEmulator(PtyDevice):
             return self._fmt((lo, hi)[side] * axis.scale)
         value = self._number(param) / axis.scale
         new = (value, hi) if side == 0 else (lo, value)
-        if not new[0] < new[1]:
+        if not (new[0] < new[1] and math.isfinite(value)):
             raise axis.fail(1)
         axis.motion.limits = new
         return None
@@ -421,17 +431,17 @@ class EspEmulator(PtyDevice):
         """WS[ms]: hold the command line until the axis (all axes) stops, then ms more."""
         if query:
             raise _Fail(6)
-        delay_ms = self._number(param, required=False) or 0.0
-        if delay_ms < 0:
+        delay_s = (self._number(param, required=False) or 0.0) / 1000.0
+        if not 0.0 <= delay_s <= HORIZON_S - self.clock.now():
             raise _Fail(7)
         targets = self._targets(axis)
         while any(t.moving() for t in targets) and not self._stopping.is_set():
             time.sleep(0.002)
-        real = self.clock.real_seconds(delay_ms / 1000.0)
+        real = self.clock.real_seconds(delay_s)
         if 0.0 < real < math.inf:
-            self._stopping.wait(real)
+            self._stopping.wait(min(real, threading.TIMEOUT_MAX))
         else:  # an instant or a frozen clock: only advances move it
-            self.clock.advance(delay_ms / 1000.0)
+            self.clock.advance(delay_s)
         return None
 
     def _cmd_te(self, axis: None, query: bool, param: str) -> str:

@@ -265,52 +265,75 @@ class TrapezoidAxis:
 
         Raises LimitError (target outside limits) or MotionError (target not finite).
         """
+        target = self._reachable(target)
+        with self._lock:
+            self._homing_done_at = None
+            return self._plan(target)
+
+    def _reachable(self, target: float) -> float:
+        """`target` as a float; raises MotionError if not finite, LimitError outside limits."""
         target = float(target)
         if not math.isfinite(target):
             raise MotionError(f"target must be finite, got {target!r}")
         lo, hi = self._limits
         if not lo <= target <= hi:
             raise LimitError(target, self._limits)
-        with self._lock:
-            self._homing_done_at = None
-            return self._plan(target)
+        return target
 
     def move_by(self, delta: float) -> float:
         """Start a relative move from the current target; returns its end time."""
         return self.move_to(self.target() + float(delta))
 
     def _plan(self, target: float) -> float:
-        t = self.clock.now()
-        t_start, p_start = self._decelerate(t)
-        dist = target - p_start
-        if dist != 0.0:
-            sign = math.copysign(1.0, dist)
-            t_acc, t_cruise, t_dec = profile_times(dist, self._speed, self._accel, self._decel)
-            v_peak = sign * self._accel * t_acc
-            p1 = p_start + 0.5 * v_peak * t_acc
-            p2 = p1 + v_peak * t_cruise
-            self._segments += [
-                _Segment(t_start, t_acc, p_start, 0.0, sign * self._accel),
-                _Segment(t_start + t_acc, t_cruise, p1, v_peak, 0.0),
-                _Segment(t_start + t_acc + t_cruise, t_dec, p2, v_peak, -sign * self._decel),
-            ]
-            self._segments = [s for s in self._segments if s.dt > 0.0]
-            self._rest = target  # at rest exactly on target, no rounding drift
+        self._segments, self._rest = self._profile(self.clock.now(), target)
         return self._finish()
 
-    def _decelerate(self, t: float) -> tuple[float, float]:
-        """Replace any motion by a deceleration to rest from time t; return (t_rest, p_rest)."""
+    def _profile(self, t: float, target: float) -> tuple[list[_Segment], float]:
+        """Segments of a move to `target` begun at time t (any motion first decelerated to
+        rest) and the rest position they end at; changes nothing."""
+        t_start, p_start, segments = self._stopping(t)
+        dist = target - p_start
+        if dist == 0.0:
+            return segments, p_start
+        sign = math.copysign(1.0, dist)
+        t_acc, t_cruise, t_dec = profile_times(dist, self._speed, self._accel, self._decel)
+        v_peak = sign * self._accel * t_acc
+        p1 = p_start + 0.5 * v_peak * t_acc
+        p2 = p1 + v_peak * t_cruise
+        segments += [
+            _Segment(t_start, t_acc, p_start, 0.0, sign * self._accel),
+            _Segment(t_start + t_acc, t_cruise, p1, v_peak, 0.0),
+            _Segment(t_start + t_acc + t_cruise, t_dec, p2, v_peak, -sign * self._decel),
+        ]
+        # at rest exactly on target, no rounding drift
+        return [s for s in segments if s.dt > 0.0], target
+
+    def _stopping(self, t: float) -> tuple[float, float, list[_Segment]]:
+        """(t_rest, p_rest, segments): a deceleration to rest from the state at time t."""
         p, v = self._state(t)
-        self._segments = []
         if v == 0.0:
-            self._rest = p
-            return t, p
-        a = -math.copysign(self._decel, v)
-        dt = abs(v) / self._decel
-        seg = _Segment(t, dt, p, v, a)
-        self._segments.append(seg)
-        self._rest = seg.at(seg.t_end)[0]
-        return seg.t_end, self._rest
+            return t, p, []
+        seg = _Segment(t, abs(v) / self._decel, p, v, -math.copysign(self._decel, v))
+        return seg.t_end, seg.at(seg.t_end)[0], [seg]
+
+    def _decelerate(self, t: float) -> None:
+        """Replace any motion by a deceleration to rest from time t."""
+        _, self._rest, self._segments = self._stopping(t)
+
+    def move_end(self, target: float) -> float:
+        """Virtual time a move_to(target) started now would end (a preview; moves nothing).
+
+        Raises as move_to does.
+        """
+        target = self._reachable(target)
+        with self._lock:
+            t = self.clock.now()
+            segments, _ = self._profile(t, target)
+            return segments[-1].t_end if segments else t
+
+    def home_end(self) -> float:
+        """Virtual time a home() started now would end (a preview; moves nothing)."""
+        return self.move_end(self._home_target())
 
     def _finish(self) -> float:
         """End time of the planned motion; an instant clock jumps straight to it."""
@@ -349,15 +372,15 @@ class TrapezoidAxis:
             self._homing_done_at = None
             self._homed = True
 
+    def _home_target(self) -> float:
+        lo, hi = self._limits
+        return min(max(0.0, lo), hi) if self._home_position is None else self._home_position
+
     def home(self) -> float:
         """Move to the home position and set `homed` when it arrives; returns the end time."""
         with self._lock:
             self._homed = False
-            lo, hi = self._limits
-            home = min(max(0.0, lo), hi) if self._home_position is None else self._home_position
-            if not lo <= home <= hi:
-                raise LimitError(home, self._limits)
-            t_end = self._plan(home)
+            t_end = self._plan(self._reachable(self._home_target()))
             self._homing_done_at = t_end
             self._settle_homing(self.clock.now())
             return t_end

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibration.beam import beam_power
-from calibration.reduce import DarkModel
+from calibration.dark import DarkModel
 from calibration.reduced import ReducedData
 from calibration.signature import apply_signature, interpolate, summary
 from calibration.values import CalibrationError

@@ -10,7 +10,7 @@ import threading
 import numpy as np
 import pytest
 
-pytest.importorskip("ophyd_async", reason="gonio.bluesky needs ophyd-async (Python >= 3.11)")
+pytest.importorskip("ophyd_async", reason="gonio.bluesky needs ophyd-async (the bluesky extra)")
 
 import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402

@@ -6,7 +6,7 @@ import math
 
 import pytest
 import serial
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from sim.devices.esp import EspEmulator
@@ -44,11 +44,31 @@ FAST = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCh
 
 @FAST
 @given(st.one_of(st.binary(max_size=400), esp_units().map(str.encode)))
+@example(b"WS7.2e307;TB?")  # a wait past the horizon, then any error stamp
 def test_esp_interpreter_never_raises(line):
     emu = EspEmulator(VirtualClock(math.inf), {1: {"motor_on": True}, 2: {}})
     reply = emu.handle_line(line)
     assert reply is None or (reply.endswith(b"\r\n") and reply.isascii())
     assert len(emu.errors) <= 10
+
+
+@pytest.mark.parametrize("line", [
+    b"WS7.2e307", b"1WS1.7e308", b"WS1e400", b"WSnan", b"WS-1",  # waits past the horizon
+    b"1VA1e-300;1PA100", b"1AC1e-300;1PA100", b"1AG1e-300;1PA100",  # moves past it
+    b"1SL-1e300;1PA-1e300", b"1SN9;1SL-1e307", b"1SN9;1DH1e307",  # infinite once in degrees
+    b"1SL-1e300;1DH-1e300;1VA1e-10;1OR",  # a home search past it
+])
+def test_esp_refuses_what_its_clock_cannot_reach_and_keeps_serving(line):
+    """A wait, move or setting whose value overflows is PARAMETER OUT OF RANGE (7, or x01 on an
+    axis), buffered for TB?; the controller answers every line after it."""
+    emu = EspEmulator(VirtualClock(math.inf), {1: {"motor_on": True}, 2: {}})
+    assert emu.handle_line(line) is None
+    code, _, text = emu.handle_line(b"TB?").decode().rstrip("\r\n").split(", ")
+    assert (code, text) in {("7", "PARAMETER OUT OF RANGE"), ("101", "PARAMETER OUT OF RANGE")}
+    assert emu.handle_line(b"TB?").startswith(b"0, ")
+    position, code, _, text = emu.handle_line(b"2MO;2PA10;2WS;2TP?;TB?").split(b",")
+    assert (position, code, text) == (b"10.00000", b"0", b" NO ERROR DETECTED\r\n")
+    assert emu.handle_line(b"VE?") == b"ESP301 Version 3.0.2 (emulated)\r\n"
 
 
 @FAST

@@ -10,7 +10,7 @@ import csv
 import json
 import math
 from dataclasses import replace
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -169,7 +169,7 @@ def test_raw_netcdf_is_cf_with_an_epoch(tmp_path):
     r["saturated"] = [False, False, True, False]
     # t_s counts from meta.json's t0_epoch, taken before the devices open: seconds before the
     # record's started_utc (00:20:05.757 here); the times must decode from t0, not from it
-    t0 = datetime(2026, 12, 2, 0, 20, 3, 250000, tzinfo=timezone.utc).timestamp()
+    t0 = datetime(2026, 12, 2, 0, 20, 3, 250000, tzinfo=UTC).timestamp()
     path = write_raw_netcdf(r, RECORD, tmp_path / "raw.nc", t0_epoch=t0)
     checked = cf_counts(path)
     assert checked["said"] == [] and checked["counts"]["ERROR"] == 0

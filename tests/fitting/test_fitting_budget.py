@@ -6,10 +6,10 @@ readings whose every error is drawn from its own process (tests/fitting/budget_k
 from __future__ import annotations
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
-import tomllib
 from budget_kit import Scan, run_of
 from fitting_bench_runs import EXAMPLE, instrument, plan, scan
 

@@ -11,11 +11,11 @@ import re
 import signal
 import subprocess
 import sys
+import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-import tomllib
 from waiting import wait_until
 
 from gonio.engine import Engine, Outcome

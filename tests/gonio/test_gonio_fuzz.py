@@ -7,10 +7,10 @@ import contextlib
 import io
 import json
 import tempfile
+import tomllib
 from pathlib import Path
 
 import pytest
-import tomllib
 from gonio_testkit import EXAMPLES, dump_toml, fast_config, one_line_error
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st

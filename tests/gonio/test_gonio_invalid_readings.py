@@ -2,8 +2,9 @@
 `gonio scan --sim`: the engine retries such a reading, records one that stays invalid as
 `invalid` with no power, never as light, and reduction leaves it out."""
 
-import numpy as np
 import tomllib
+
+import numpy as np
 from gonio_testkit import EXAMPLES, fast_config, gonio_cli, one_line_error, run_dir_of, write_plan
 
 from calibration.pipeline import reduce_run

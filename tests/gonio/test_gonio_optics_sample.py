@@ -2,10 +2,10 @@
 in the plan; one clear error per bad field, and the emulated bench built from them."""
 
 import json
+import tomllib
 import warnings
 
 import pytest
-import tomllib
 from gonio_testkit import EXAMPLES, fast_config, gonio_cli, one_line_error, run_dir_of, write_toml
 
 from gonio.config import parse_config

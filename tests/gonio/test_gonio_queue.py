@@ -5,9 +5,9 @@ unless --keep-going; a bad plan is refused whole at add. Then queue.toml's own c
 process."""
 
 import signal
+import tomllib
 
 import pytest
-import tomllib
 from gonio_testkit import (
     fast_config,
     gonio_cli,
