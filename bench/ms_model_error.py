@@ -12,7 +12,7 @@ and the term at the fit's result walked MS_CENTRE_WALKS times the table's walks 
 both ways, then, as the fit has it now (calibration.fit.refit_orders), its points whose error
 exceeds MS_REWALK_SIGMA of their data sigma walked again.
 "walks": those behind the estimate at the truth alpha; "table s": CPU time (and "wall s", on
-keyed.THREADS threads) of the walks of one fit (calibration.fit._OrdersTable: 7 alphas 0.1
+keyed.THREADS threads) of the walks of one fit (calibration.fit.orders.OrdersTable: 7 alphas 0.1
 apart in log alpha, the covariance at the centre one, forward; and the refit's term, both ways
 for "both"). The reference's own standard error is shown in its row.
 Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 33554432]

@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import calibration.fit as fit_module  # noqa: E402
+import calibration.fit.orders as orders_module  # noqa: E402
 from calibration.fit import FitOptions  # noqa: E402
 from calibration.pipeline import fit_run  # noqa: E402
 from model.bsdf.multiple_scattering import lobe  # noqa: E402
@@ -69,17 +69,17 @@ def scan(name: str, out: Path, bench_walks: int | None) -> Path:
 
 def fitted(run: Path, forward_only: bool, rewalk: bool) -> tuple[object, object, float, float]:
     """(reduced data, fit result, wall s, CPU s) of the multiple-scattering fit of run."""
-    both_ways, threshold = lobe.walk_both_ways, fit_module.MS_REWALK_SIGMA
+    both_ways, threshold = lobe.walk_both_ways, orders_module.MS_REWALK_SIGMA
     if forward_only:
         lobe.walk_both_ways = lobe.walk_to_targets
     if not rewalk:
-        fit_module.MS_REWALK_SIGMA = np.inf
+        orders_module.MS_REWALK_SIGMA = np.inf
     try:
         wall, cpu = time.perf_counter(), time.process_time()
         data, result = fit_run(run, FitOptions(multiple_scattering=True))
         return data, result, time.perf_counter() - wall, time.process_time() - cpu
     finally:
-        lobe.walk_both_ways, fit_module.MS_REWALK_SIGMA = both_ways, threshold
+        lobe.walk_both_ways, orders_module.MS_REWALK_SIGMA = both_ways, threshold
 
 
 def alone(data, result) -> tuple[float, float, float]:

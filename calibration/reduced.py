@@ -79,17 +79,23 @@ class ReducedData:
     @property
     def sigma_own(self) -> np.ndarray:
         """Each point's independent 1-sigma: `sigma` without its share of the shared errors."""
-        shared = np.abs(self.bsdf) * np.linalg.norm(self.shared_rel, axis=1)
-        return np.sqrt(np.maximum(self.sigma**2 - shared**2, 0.0))
+        return self._own(self.sigma)
 
-    def whitened(self, model: np.ndarray) -> np.ndarray:
+    def _own(self, sigma: np.ndarray) -> np.ndarray:
+        """The independent part of a 1-sigma per point: without its share of the shared errors."""
+        shared = np.abs(self.bsdf) * np.linalg.norm(self.shared_rel, axis=1)
+        return np.sqrt(np.maximum(sigma**2 - shared**2, 0.0))
+
+    def whitened(self, model: np.ndarray, sigma: np.ndarray | None = None) -> np.ndarray:
         """Normalised residuals of model values against the data under the full covariance
         (independent sigma_own plus the shared relative errors, scaled by the model, so a
         normalisation error cannot bias the fit towards low values): the shared errors' z are
         profiled out with their N(0, 1) priors, which is exact for errors linear in z, so the
         sum of squares of the N + k entries returned is the generalised chi-square
-        r^T C^-1 r with C = diag(sigma_own^2) + (model shared_rel)(model shared_rel)^T."""
-        own = self.sigma_own
+        r^T C^-1 r with C = diag(sigma_own^2) + (model shared_rel)(model shared_rel)^T.
+        `sigma` replaces the data's own 1-sigma per point (a fit adds its model's Monte Carlo
+        error to it); None: `sigma`."""
+        own = self.sigma_own if sigma is None else self._own(sigma)
         r = (model - self.bsdf) / own
         if self.shared_rel.shape[1] == 0:
             return r
