@@ -71,17 +71,28 @@ def opened():
 
 
 @pytest.fixture
-def pm_pair(opened):
+def start_pair(opened):
+    """start(emulator, driver_class, **options) -> (emulator, driver): the emulator started
+    and the driver opened on its endpoint with `options`, both closed after the test."""
+
+    def start(emulator, driver_class, **options):
+        emulator.start()
+        opened.append(emulator)
+        driver = driver_class(emulator.endpoint, **options)
+        opened.append(driver)
+        return emulator, driver
+
+    return start
+
+
+@pytest.fixture
+def pm_pair(start_pair):
     """make(power_w, faults, timeout_s, retries, detector) -> (emulator, driver)."""
 
     def make(power_w=2e-6, faults=None, timeout_s=0.3, retries=2, detector=None, source=None):
         emu = Pm100Emulator(source or ConstantPower(power_w),
                             faults=FaultSpec(**faults) if faults else None,
                             seed=3, detector=detector)
-        emu.start()
-        opened.append(emu)
-        drv = Pm100(emu.endpoint, timeout_s=timeout_s, retries=retries, name="pm100")
-        opened.append(drv)
-        return emu, drv
+        return start_pair(emu, Pm100, timeout_s=timeout_s, retries=retries, name="pm100")
 
     return make

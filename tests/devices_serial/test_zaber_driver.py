@@ -21,16 +21,13 @@ AXES = {
 
 
 @pytest.fixture
-def zaber_pair(opened):
+def zaber_pair(start_pair):
     """make(time_scale, axes, timeout_s, retries, clock) -> (emulator, controller)."""
 
     def make(time_scale=math.inf, axes=None, timeout_s=0.3, retries=2, clock=None):
         emu = ZaberEmulator(clock or VirtualClock(time_scale), axes or AXES)
-        emu.start()
-        opened.append(emu)
-        ctl = ZaberController(emu.endpoint, timeout_s=timeout_s, retries=retries, name="zaber")
-        opened.append(ctl)
-        return emu, ctl
+        return start_pair(emu, ZaberController, timeout_s=timeout_s, retries=retries,
+                          name="zaber")
 
     return make
 
