@@ -1,61 +1,96 @@
-"""The random walk compiled, one walk at a time (numba): what Walker.run does, at native speed.
+"""The random walk compiled (numba): one walker, one walk at a time, for every estimator.
 
-Walker.run's numpy path is the reference and the fallback (diffuse facets, no numba); this
-kernel follows the same steps per walk (forced hits and Russian roulette when evaluating, the
-roulette played before the facet normal is drawn, so an event it ends costs no normal and no
-scattering; next-event estimation towards wo or towards every target, guided next directions
-(guiding.py) towards wo, only the proposal drawn computed, the analog walk when sampling,
-order and cap), with the scalar formulas of nee_kernel.py and visible_kernel.py, and its own
-xoshiro256+ generator (uniform) seeded from the caller's numpy Generator (so a seed gives the
-same walks, not the numpy path's numbers; numba's np.random.random cost 12 ns a draw, 1 ns here).
+walk_path is the walk: from a direction and height on one side of the surface, free paths to
+the next event (forced hits and Russian roulette when evaluating, the analog walk when
+sampling), visible normals, reflection or refraction, order and cap, with the scalar formulas
+of nee_kernel.py and visible_kernel.py. At each event it hands the event to the estimator it
+was given, next-event estimation towards a set of Targets (one wo per walk, the targets every
+walk shares, or the one target of a reverse walk), and it returns what the walk did (events,
+first height, exit direction and weight, energy left at the cap). What differs between uses is
+in three small records: Rules (forced or analog, orders, roulette, branch share), Guide (the
+wo that guided next directions aim at, guiding_kernel.py) and the Stream of uniforms
+(random_kernel.py: sequential or keyed). walk_batch drives it for Walker.run (whose numpy path
+is the reference and the fallback for diffuse facets and without numba); keyed_kernel.py drives
+it for the shared-path estimators of the tables and fits.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from model.bsdf.multiple_scattering.guiding import BACKWARDS
+from model.bsdf.multiple_scattering.guiding_kernel import mixture_weight, sample_backwards
 from model.bsdf.multiple_scattering.nee_kernel import (
     escape,
     facet_fresnel,
     next_event,
-    phase_reflect,
-    phase_transmit,
     projected_area,
-    refraction_normal,
     side_eta,
-    surface_arguments,
+    surface,
     target_lambdas,
     unsigned_lambda,
 )
+from model.bsdf.multiple_scattering.random_kernel import (
+    BACK_1,
+    BACK_2,
+    GUIDE,
+    HEIGHT,
+    NORMAL_1,
+    NORMAL_2,
+    ROULETTE_DRAW,
+    SCATTER,
+    Stream,
+    draw,
+)
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
-from model.bsdf.primitives import inlined, normal_density, scalar, unit
+from model.bsdf.primitives import inlined, scalar, unit
 
 #: What a batch does: follow the analog walk to its exit, score towards one wo per walk, or
 #: score towards every one of a set of targets.
 SAMPLE, EVALUATE, TARGETS = 0, 1, 2
 LOG_2 = math.log(2.0)
-#: xoshiro256+'s shifts and rotation, as uint64 (numba would take a mixed int64 to float).
-SHIFT_A, ROTATE, ROTATE_BACK, DROP = (np.uint64(k) for k in (17, 45, 19, 11))
 
 
-@scalar
-def uniform(state):
-    """The next uniform in [0, 1) of the xoshiro256+ generator `state` (4 uint64, advanced in
-    place; Blackman and Vigna 2018): its top 53 bits, in about 1 ns."""
-    s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
-    result = s0 + s3
-    t = s1 << SHIFT_A
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    state[0], state[1], state[2] = s0, s1, s2
-    state[3] = (s3 << ROTATE) | (s3 >> ROTATE_BACK)
-    return float(result >> DROP) * 2.0**-53
+class Rules(NamedTuple):
+    """How a walk goes: forced hits (evaluating) or the analog walk; score only order `order`
+    and stop there (0: every order from min_order); stop after max_order events (0: no cap);
+    Russian roulette below weight `roulette`, played after scattering (late) or before the
+    facet normal is drawn; dielectric branches drawn with probability at least `share`
+    (0: by F)."""
+
+    forced: bool
+    order: int
+    min_order: int
+    max_order: int
+    roulette: float
+    late_roulette: bool
+    share: float
+
+
+class Guide(NamedTuple):
+    """The wo (x, y, z) that guided next directions aim at, and its projected area |o_z| +
+    cos_lambda(o); on: guide at all."""
+
+    on: bool
+    x: float
+    y: float
+    z: float
+    area: float
+
+
+class Targets(NamedTuple):
+    """The next-event estimator: directions (m, 3), their unsigned_lambda (m,), and the row
+    (m,) that each event's scores are added to."""
+
+    directions: np.ndarray
+    lam: np.ndarray
+    row: np.ndarray
+
+
+NO_GUIDE = Guide(False, 0.0, 0.0, 0.0, 0.0)
 
 
 @scalar
@@ -90,201 +125,149 @@ def free_path(u, p):
 
 
 @inlined
-def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
+def event_area(s, ix, iy, iz, lam_up):
     """projected_area of the event's w_in = (ix, iy, iz) from its Lambda lam_up, which the
     walk has already computed (the full formula only on the horizon)."""
     if abs(iz) > 0.0:
         return max(iz, 0.0) + abs(iz) * lam_up
-    return projected_area(ndf, ax, ay, ix, iy, iz)
-
-
-@inlined
-def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u):
-    """Next direction from the phase function (micro.scatter): (x, y, z, factor, crossed)."""
-    c = ix * mx + iy * my + iz * mz
-    if conductor:
-        f = facet_fresnel(True, has_f, n_c, c, 1.0, 0.0)
-        return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
-    el, elm1 = side_eta(eta, outside)
-    c = min(max(c, 0.0), 1.0)
-    f = facet_fresnel(False, False, n_c, c, el, elm1)
-    sin2_t = (1.0 - c * c) / (el * el)
-    if u >= f and sin2_t < 1.0:
-        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-        k = c / el - cos_t
-        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
-        return x, y, z, 1.0, True
-    x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
-    return x, y, z, 1.0, False
-
-
-@inlined
-def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
-    """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density);
-    area: projected_area of wo (above) or of -wo (below), |o_z| + cos_lambda(o) either way."""
-    if oz > 0.0:
-        hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
-        if hz > 0.0 and ox * hx + oy * hy + oz * hz > 0.0 and area > 0.0:
-            return normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
-        return 0.0
-    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, eta)
-    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
-        return 0.0
-    denom = ci + eta * co  # D_visible(-o, h) = -co D(h) / area
-    value = -co * normal_density(ndf, ax, ay, hx, hy, hz) / area * ci / (denom * denom)
-    return value if math.isfinite(value) else 0.0
-
-
-@inlined
-def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
-    """An arriving direction drawn backwards from wo (guiding.sample_adjoint): (x, y, z, ok)."""
-    above = oz > 0.0
-    s = 1.0 if above else -1.0
-    mx, my, mz = visible_normal(ndf, ax, ay, s * ox, s * oy, s * oz, u1, u2)
-    c = ox * mx + oy * my + oz * mz
-    if above:
-        x, y, z = 2.0 * c * mx - ox, 2.0 * c * my - oy, 2.0 * c * mz - oz
-        ok = c > 0.0
-    else:  # refract wo through the facet -m into a medium 1/eta times denser
-        e = 1.0 / eta
-        cn = -c
-        sin2 = (1.0 - cn * cn) / (e * e)
-        ok = sin2 < 1.0 and cn > 0.0
-        k = cn / e - math.sqrt(max(0.0, 1.0 - sin2))
-        x, y, z = unit(-ox / e - k * mx, -oy / e - k * my, -oz / e - k * mz)
-    return x, y, z, ok and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
-
-
-@inlined
-def sample_backwards(ndf, ax, ay, conductor, eta, outside, ox, oy, oz, u1, u2, u3):
-    """The guided proposal's backwards-from-wo draw (guiding.guided_scatter): a next direction
-    in this side's frame whose arrival at the next event m sends into wo, the next event on
-    the far side when u1 < 1/2 (dielectric): (x, y, z, crossed, ok)."""
-    crossed = (not conductor) and u1 < 0.5
-    side = outside != crossed
-    e_side = side_eta(eta, side)[0] if not conductor else 1.0
-    bx, by, bz, ok = sample_adjoint(ndf, ax, ay, ox, oy, oz if side else -oz, e_side, u2, u3)
-    return -bx, -by, (bz if crossed else -bz), crossed, ok  # travel along minus the arrival
-
-
-@inlined
-def mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy,
-                   oz, area_o, wx, wy, wz, crossed):
-    """The walk's weight factor for next direction w however drawn, by one-sample MIS of the
-    phase function and the backwards proposal (guiding.guided_scatter): phase (with F) over
-    the mixture density. area_o: |o_z| + cos_lambda(o)."""
-    el, elm1 = side_eta(eta, outside)
-    if crossed:
-        p_phase = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, wx, wy, wz)
-        p_energy = p_phase
-    else:
-        p_phase = phase_reflect(ndf, ax, ay, conductor, False, n_c, el, elm1, ix, iy, iz, area,
-                                wx, wy, wz)
-        p_energy = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz,
-                                 area, wx, wy, wz) if has_f else p_phase
-    next_side = outside != crossed
-    nz = oz if next_side else -oz
-    e_next = side_eta(eta, next_side)[0] if not conductor else 1.0
-    arz = wz if crossed else -wz  # arriving direction in the next event's frame
-    p_adj = adjoint_density(ndf, ax, ay, -wx, -wy, arz, ox, oy, nz, area_o, e_next)
-    if not conductor:
-        p_adj *= 0.5
-    mixture = (1.0 - BACKWARDS) * p_phase + BACKWARDS * p_adj
-    return p_energy / mixture if mixture > 0.0 else 0.0
+    return projected_area(s, ix, iy, iz)
 
 
 @scalar
-def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, targets, u_first,
-               order, max_order, min_order, roulette, state, value, exit_dir, weight, truncated,
-               orders, first):
-    """One walk from each row of wi, uniforms from the generator state (uniform); outputs as
+def branch_share(f, c, el, share):
+    """The probability scatter reflects with at a dielectric facet of reflectance f and cosine
+    c towards the relative index el: clip(f, share, 1 - share), f itself where only one branch
+    exists (total internal reflection, f in {0, 1}) or share is 0."""
+    if (1.0 - c * c) / (el * el) >= 1.0 or not 0.0 < f < 1.0:
+        return f
+    return min(max(f, share), 1.0 - share)
+
+
+@inlined
+def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
+    """Next direction from the phase function (micro.scatter), a dielectric facet's branch
+    chosen with probability branch_share (the weight taking F / that, or (1 - F) / its
+    complement; by F itself at share 0): (x, y, z, factor, crossed)."""
+    c = ix * mx + iy * my + iz * mz
+    if s.conductor:
+        f = facet_fresnel(s, True, c, 1.0, 0.0)
+        return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
+    el, elm1 = side_eta(s.eta, outside)
+    c = min(max(c, 0.0), 1.0)
+    f = facet_fresnel(s, True, c, el, elm1)
+    q = branch_share(f, c, el, share)
+    sin2_t = (1.0 - c * c) / (el * el)
+    if u >= q and sin2_t < 1.0:
+        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
+        k = c / el - cos_t
+        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
+        return x, y, z, (1.0 if q == f else (1.0 - f) / (1.0 - q)), True
+    x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
+    return x, y, z, (1.0 if q == f else f / q), False
+
+
+@inlined
+def score(s, targets, beta, outside, ix, iy, iz, area, log_here, log_there):
+    """Next-event estimation at one event: targets.row[t] += beta x phase towards direction t x
+    its escape probability."""
+    directions, lam, row = targets
+    for t in range(directions.shape[0]):
+        row[t] += beta * next_event(s, outside, ix, iy, iz, area, directions[t, 0],
+                                    directions[t, 1], directions[t, 2], lam[t], log_here,
+                                    log_there)
+
+
+@inlined
+def walk_path(s, stream, rules, guide, targets, outside, dx, dy, dz, cur, beta, k):
+    """Walk on from direction d (local frame of its side, outside or not), log height CDF cur
+    of that side, weight beta and k events done, scoring targets at every event Rules count:
+    (events, log C1 of the first event's height (nan if none or k > 0), exit direction (world)
+    and weight of an analog walk that left (nan and 0 otherwise), energy still inside at the
+    cap). Evaluating, the roulette (unless late) comes after an event's score and before its
+    facet normal, so an event it ends costs no normal and no scattering."""
+    events, first = 0, math.nan
+    ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
+    while True:
+        k += 1
+        u = draw(stream, k, HEIGHT)
+        lam_up = unsigned_lambda(s, dx, dy, dz)
+        lam = lam_up if dz >= 0.0 else -1.0 - lam_up
+        p_hit = hit_probability(lam, cur) if rules.forced else 1.0
+        beta *= p_hit
+        e = free_path(u, p_hit)
+        new = math.inf if lam == 0.0 else cur + e / lam
+        if not new < 0.0:
+            if not rules.forced:
+                ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
+            break
+        other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
+        events = k
+        if k == 1:
+            first = new if outside else other
+        ix, iy, iz = -dx, -dy, -dz
+        area = event_area(s, ix, iy, iz, lam_up)
+        if k >= rules.min_order and (rules.order == 0 or rules.order == k):
+            score(s, targets, beta, outside, ix, iy, iz, area, new, other)
+        if rules.order and k >= rules.order:
+            break
+        if rules.forced and not rules.late_roulette and beta < rules.roulette:
+            if draw(stream, k, ROULETTE_DRAW) * rules.roulette < beta:
+                beta = rules.roulette
+            else:
+                break
+        if guide.on and draw(stream, k, GUIDE) < BACKWARDS:  # only the proposal drawn is computed
+            wx, wy, wz, crossed, ok = sample_backwards(
+                s, outside, guide.x, guide.y, guide.z, draw(stream, k, SCATTER),
+                draw(stream, k, BACK_1), draw(stream, k, BACK_2))
+            factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
+        else:
+            mx, my, mz = visible_normal(s, ix, iy, iz, draw(stream, k, NORMAL_1),
+                                        draw(stream, k, NORMAL_2))
+            wx, wy, wz, factor, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz,
+                                                  draw(stream, k, SCATTER), rules.share)
+        if guide.on and factor > 0.0:
+            factor = mixture_weight(s, outside, ix, iy, iz, area, guide, wx, wy, wz, crossed)
+        beta *= factor
+        if crossed:
+            outside = not outside
+            dx, dy, dz, cur = wx, wy, -wz, other
+        else:
+            dx, dy, dz, cur = wx, wy, wz, new
+        if rules.max_order and k >= rules.max_order:
+            truncated = beta * (1.0 - escape(s, dx, dy, dz, cur))
+            break
+        if rules.late_roulette and beta < rules.roulette:
+            beta = rules.roulette if draw(stream, k, ROULETTE_DRAW) * rules.roulette < beta \
+                else 0.0
+        if not beta > 0.0:
+            break
+    return events, first, ex, ey, ez, weight, truncated
+
+
+@scalar
+def walk_batch(s, mode, guided, wi, wo, targets, u_first, order, max_order, min_order, roulette,
+               state, value, exit_dir, weight, truncated, orders, first):
+    """One walk from each row of wi on the Surface s, uniforms from the generator state
+    (random_kernel.uniform; u_first (n, 3) or empty: the first event's); outputs as
     Walker.run's WalkResult (value (n, m))."""
-    forced = mode != SAMPLE
-    lam_t = target_lambdas(ndf, ax, ay, targets)
-    lam_o = target_lambdas(ndf, ax, ay, wo)
+    rules = Rules(mode != SAMPLE, order, min_order, max_order, roulette, False, 0.0)
+    each = mode == EVALUATE  # one target per walk, its wo, which guiding aims at
+    aims = wo if each else targets
+    lam = target_lambdas(s, aims)
+    none = np.empty(0)
     for i in range(wi.shape[0]):
         outside = wi[i, 2] > 0.0
-        if conductor and not outside:
+        if s.conductor and not outside:
             continue
-        if mode == EVALUATE:  # wo's Lambda and projected area, the same from either side
-            area_o = abs(wo[i, 2]) * (1.0 + lam_o[i])
-        dx, dy = -wi[i, 0], -wi[i, 1]
-        dz = -wi[i, 2] if outside else wi[i, 2]
-        cur = 0.0  # log C1 of the height on this side (h = +inf above, -inf below)
-        beta = 1.0
-        k = 0
-        while True:
-            k += 1
-            given = k == 1 and u_first.shape[0] > 0  # the caller's uniforms for event 1
-            ua = u_first[i, 0] if given else uniform(state)
-            lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
-            lam = lam_up if dz >= 0.0 else -1.0 - lam_up
-            if forced:
-                p_hit = hit_probability(lam, cur)
-                beta *= p_hit
-                e = free_path(ua, p_hit)
-            else:
-                e = free_path(ua, 1.0)
-            new = math.inf if lam == 0.0 else cur + e / lam
-            if not new < 0.0:
-                if not forced:
-                    exit_dir[i, 0], exit_dir[i, 1] = dx, dy
-                    exit_dir[i, 2] = dz if outside else -dz
-                    weight[i] = beta
-                break
-            other = 0.0 if conductor else log1mexp(new)  # the side below, if there is one
-            orders[i] = k
-            if k == 1:
-                first[i] = new if outside else other
-            ix, iy, iz = -dx, -dy, -dz
-            area = event_area(ndf, ax, ay, ix, iy, iz, lam_up)
-            if k >= min_order and (order == 0 or order == k):
-                if mode == EVALUATE:
-                    value[i, 0] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,
-                                                     outside, ix, iy, iz, area, wo[i, 0],
-                                                     wo[i, 1], wo[i, 2], lam_o[i], new, other)
-                elif mode == TARGETS:
-                    for t in range(targets.shape[0]):
-                        value[i, t] += beta * next_event(ndf, ax, ay, conductor, eta, has_f,
-                                                         n_c, outside, ix, iy, iz, area,
-                                                         targets[t, 0], targets[t, 1],
-                                                         targets[t, 2], lam_t[t], new, other)
-            if order and k >= order:
-                break
-            if forced and beta < roulette:  # Russian roulette before scattering: a walk it
-                if uniform(state) * roulette < beta:  # ends costs no normal, no scatter
-                    beta = roulette
-                else:
-                    break
-            if guide and uniform(state) < BACKWARDS:  # only the proposal drawn is computed
-                wx, wy, wz, crossed, ok = sample_backwards(
-                    ndf, ax, ay, conductor, eta, outside, wo[i, 0], wo[i, 1], wo[i, 2],
-                    uniform(state), uniform(state), uniform(state))
-                factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
-            else:
-                ub = u_first[i, 1] if given else uniform(state)
-                uc = u_first[i, 2] if given else uniform(state)
-                mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
-                wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
-                                                      outside, ix, iy, iz, mx, my, mz,
-                                                      uniform(state))
-            if guide and factor > 0.0:
-                factor = mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy,
-                                        iz, area, wo[i, 0], wo[i, 1], wo[i, 2], area_o, wx, wy,
-                                        wz, crossed)
-            beta *= factor
-            if crossed:
-                outside = not outside
-                dx, dy, dz = wx, wy, -wz
-                cur = other
-            else:
-                dx, dy, dz = wx, wy, wz
-                cur = new
-            if max_order and k >= max_order:
-                truncated[i] = beta * (1.0 - escape(ndf, ax, ay, dx, dy, dz, cur))
-                break
-            if not beta > 0.0:
-                break
+        lo, hi = (i, i + 1) if each else (0, aims.shape[0])
+        guide = Guide(guided, wo[i, 0], wo[i, 1], wo[i, 2], abs(wo[i, 2]) * (1.0 + lam[i])) \
+            if each else NO_GUIDE
+        stream = Stream(False, np.uint64(0), state, u_first[i] if u_first.shape[0] else none)
+        result = walk_path(s, stream, rules, guide, Targets(aims[lo:hi], lam[lo:hi], value[i]),
+                           outside, -wi[i, 0], -wi[i, 1], -wi[i, 2] if outside else wi[i, 2],
+                           0.0, 1.0, 0)
+        orders[i], first[i] = result[0], result[1]
+        exit_dir[i, 0], exit_dir[i, 1], exit_dir[i, 2], weight[i], truncated[i] = result[2:]
 
 
 def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, unit_mode,
@@ -299,7 +282,7 @@ def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, 
     orders = np.zeros(n, dtype=np.int64)
     first = np.full(n, np.nan)
     empty = np.zeros((0, 3))
-    walk_batch(*surface_arguments(walker.slopes, walker.micro, unit_mode), mode,
+    walk_batch(surface(walker.slopes, walker.micro, unit_mode), mode,
                mode == EVALUATE and walker.guided,
                np.ascontiguousarray(wi, dtype=np.float64),
                empty if wo is None else np.ascontiguousarray(wo, dtype=np.float64),
