@@ -1,6 +1,6 @@
 """Shared-path walks towards many targets, and from many starts, keyed and branch-split (numba).
 
-Both drive walk_kernel.walk_path with forced hits, unguided, next-event estimation at every
+Both drive walk_kernel.walk_all with forced hits, unguided, next-event estimation at every
 event of order >= min_order, and:
 
 * a dielectric facet's branch chosen with probability clip(F, share, 1 - share) instead of F,
@@ -15,13 +15,14 @@ event of order >= min_order, and:
 
 walk_from_starts is the reverse, for reciprocity: to estimate orders >= 3 of f(wi, wo) at many
 wo for one wi, walk from the wo towards wi. Walk j starts from starts[j mod n]; its first event
-(its height and scattered direction, the only part of a path that depends on where it started)
-is weighted for every start b by the balance heuristic: the density of that event from b over
-the sum of the densities all starts sample it with. Each estimate is unbiased and uses every
-walk, for about 30 ns per start and walk. (Sharing only among nearby starts was tried: at every
-window from 0 to 60 degrees it gave less precision per CPU-second than sharing among all.) In
-the transmitted wings at normal incidence the forward walk's scores are heavy-tailed (rare
-grazing paths carry them) and the reverse walk's are not: it starts on those paths.
+(first_events: its height and scattered direction, the only part of a path that depends on
+where it started) is weighted for every start b by the balance heuristic: the density of that
+event from b over the sum of the densities all starts sample it with. Each estimate is unbiased
+and uses every walk, for about 30 ns per start and walk. (Sharing only among nearby starts was
+tried: at every window from 0 to 60 degrees it gave less precision per CPU-second than sharing
+among all.) In the transmitted wings at normal incidence the forward walk's scores are
+heavy-tailed (rare grazing paths carry them) and the reverse walk's are not: it starts on those
+paths.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import math
 import numpy as np
 
 from model.bsdf.multiple_scattering.nee_kernel import (
+    Surface,
     facet_fresnel,
     reflect_density,
     side_eta,
@@ -43,50 +45,41 @@ from model.bsdf.multiple_scattering.random_kernel import (
     NORMAL_1,
     NORMAL_2,
     SCATTER,
-    Stream,
     draw,
     key_of_walk,
 )
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
 from model.bsdf.multiple_scattering.walk_kernel import (
-    NO_GUIDE,
     Rules,
-    Targets,
     branch_share,
     event_area,
     free_path,
     log1mexp,
+    paths,
     scatter,
-    walk_path,
+    walk_all,
 )
 from model.bsdf.primitives import inlined, scalar
 
+#: A keyed walk's sequential generator, given uniforms and per-walk outcome: none; and what
+#: walk_all takes for "no direction of incidence" (every walk resumed) and "no walk resumed".
+NO_STATE, NOTHING_GIVEN, NO_OUTCOME = np.zeros(0, np.uint64), np.zeros((0, 3)), np.zeros((0, 7))
+NO_INCIDENCE, NONE_RESUMED = np.zeros((0, 3)), paths(0)
 
-@inlined
-def keyed_rules(min_order, roulette, share):
+
+def keyed_rules(min_order: int, roulette: float, share: float) -> Rules:
     """The Rules of a keyed walk."""
-    return Rules(True, 0, min_order, 0, roulette, True, share)
+    return Rules(True, True, False, False, 0, int(min_order), 0, float(roulette), True,
+                 float(share))
 
 
-@inlined
-def keyed_stream(key, walk):
-    """The Stream of walk index `walk` under the estimate's key."""
-    return Stream(True, key_of_walk(key, walk), np.empty(0, np.uint64), np.empty(0))
-
-
-@scalar
-def walk_targets(s, wi, targets, key, first, min_order, roulette, share, value):
+def walk_targets(s: Surface, wi: np.ndarray, targets: np.ndarray, key: np.uint64, first: int,
+                 min_order: int, roulette: float, share: float, value: np.ndarray) -> None:
     """value[j, t] = the NEE sum of orders >= min_order of walk first + j on the Surface s
-    (from wi (3,)) towards target t."""
-    start_out = wi[2] > 0.0
-    if s.conductor and not start_out:
-        return
-    lam_t = target_lambdas(s, targets)
-    rules = keyed_rules(min_order, roulette, share)
-    for j in range(value.shape[0]):
-        walk_path(s, keyed_stream(key, first + j), rules, NO_GUIDE,
-                  Targets(targets, lam_t, value[j]), start_out, -wi[0], -wi[1],
-                  -wi[2] if start_out else wi[2], 0.0, 1.0, 0)
+    (from wi (3,)) towards target t (m, 3)."""
+    walk_all(s, keyed_rules(min_order, roulette, share), wi.reshape(1, 3), NONE_RESUMED, key,
+             first, NO_STATE, NOTHING_GIVEN, targets, target_lambdas(s, targets), value,
+             NO_OUTCOME)
 
 
 @inlined
@@ -107,19 +100,13 @@ def first_event(s, el, elm1, ix, iy, iz, area, ox, oy, oz, crossed, share):
 
 
 @scalar
-def walk_from_starts(s, starts, target, key, first, min_order, roulette, share, value):
-    """value[j, b] = walk first + j's NEE sum of orders >= min_order on the Surface s towards
-    target (3,), as an estimate from start b (starts (n, 3), all on one side): the walk starts
-    from starts[(first + j) mod n], its first event weighted for b by the balance heuristic
-    over all starts. Unbiased for every b when the walks cover whole rounds of the starts."""
+def first_events(s, starts, key, first, share, begin, physical, sampled):
+    """The first event of walk first + j (from starts[(first + j) mod n], all on one side):
+    begin[j] (PATH) where it leaves that event, beta 0 where no start could have sampled it;
+    physical[j, b] x the density of its height from start b, and sampled[j] the sum over
+    starts of the density they sample it with (the balance heuristic's weights)."""
     n = starts.shape[0]
-    targets = np.empty((1, 3))
-    targets[0, 0], targets[0, 1], targets[0, 2] = target[0], target[1], target[2]
-    lam_t = target_lambdas(s, targets)
     outside = starts[0, 2] > 0.0
-    if s.conductor and not outside:
-        return
-    rules = keyed_rules(min_order, roulette, share)
     el, elm1 = side_eta(s.eta, outside)
     local = np.empty((n, 3))
     rate, area = np.empty(n), np.empty(n)
@@ -128,33 +115,46 @@ def walk_from_starts(s, starts, target, key, first, min_order, roulette, share, 
         lam_up = unsigned_lambda(s, local[b, 0], local[b, 1], local[b, 2])
         rate[b] = 1.0 + lam_up  # the first height's log C1 ~ Exp(rate), downwards from the top
         area[b] = event_area(s, local[b, 0], local[b, 1], local[b, 2], lam_up)
-    physical = np.empty(n)
-    score = np.zeros(1)
-    for j in range(value.shape[0]):
-        stream = keyed_stream(key, first + j)
+    state, given = np.empty(0, np.uint64), np.empty((0, 3))
+    for j in range(begin.shape[0]):
+        walk_key = key_of_walk(key, first + j)
         a = (first + j) % n
         ix, iy, iz = local[a, 0], local[a, 1], local[a, 2]
-        height = -free_path(draw(stream, 1, HEIGHT), 1.0) / rate[a]
-        mx, my, mz = visible_normal(s, ix, iy, iz, draw(stream, 1, NORMAL_1),
-                                    draw(stream, 1, NORMAL_2))
+        height = -free_path(draw(True, state, given, j, walk_key, 1, HEIGHT), 1.0) / rate[a]
+        mx, my, mz = visible_normal(s, ix, iy, iz, draw(True, state, given, j, walk_key, 1,
+                                                        NORMAL_1),
+                                    draw(True, state, given, j, walk_key, 1, NORMAL_2))
         ox, oy, oz, _, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz,
-                                         draw(stream, 1, SCATTER), share)
-        sampled = 0.0
+                                         draw(True, state, given, j, walk_key, 1, SCATTER), share)
+        total = 0.0
         for b in range(n):
             at_height = rate[b] * math.exp(rate[b] * height)
             p, d = first_event(s, el, elm1, local[b, 0], local[b, 1], local[b, 2], area[b], ox,
                                oy, oz, crossed, share)
-            physical[b] = at_height * p
-            sampled += at_height * d
-        if not sampled > 0.0:
-            continue
-        score[0] = 0.0
-        if crossed:
-            walk_path(s, stream, rules, NO_GUIDE, Targets(targets, lam_t, score), not outside,
-                      ox, oy, -oz, log1mexp(height), 1.0, 1)
-        else:
-            walk_path(s, stream, rules, NO_GUIDE, Targets(targets, lam_t, score), outside, ox,
-                      oy, oz, height, 1.0, 1)
-        if score[0] != 0.0:
-            for b in range(n):
-                value[j, b] = score[0] * n * physical[b] / sampled
+            physical[j, b] = at_height * p
+            total += at_height * d
+        sampled[j] = total
+        start = begin[j]
+        start.k, start.beta = 1, 1.0 if total > 0.0 else 0.0
+        start.outside, start.dx, start.dy = outside != crossed, ox, oy
+        start.dz, start.cur = (-oz, log1mexp(height)) if crossed else (oz, height)
+
+
+def walk_from_starts(s: Surface, starts: np.ndarray, target: np.ndarray, key: np.uint64,
+                     first: int, min_order: int, roulette: float, share: float,
+                     value: np.ndarray) -> None:
+    """value[j, b] = walk first + j's NEE sum of orders >= min_order on the Surface s towards
+    target (3,), as an estimate from start b (starts (n, 3), all on one side): the walk starts
+    from starts[(first + j) mod n], its first event weighted for b by the balance heuristic
+    over all starts. Unbiased for every b when the walks cover whole rounds of the starts."""
+    n, walks = len(starts), len(value)
+    if s.conductor and not starts[0, 2] > 0.0:
+        return
+    begin, physical, sampled = paths(walks), np.empty((walks, n)), np.empty(walks)
+    first_events(s, starts, key, first, share, begin, physical, sampled)
+    targets = np.ascontiguousarray(target, dtype=np.float64).reshape(1, 3)
+    score = np.zeros((walks, 1))
+    walk_all(s, keyed_rules(min_order, roulette, share), NO_INCIDENCE, begin, key, first,
+             NO_STATE, NOTHING_GIVEN, targets, target_lambdas(s, targets), score, NO_OUTCOME)
+    live = score[:, 0] != 0.0
+    value[live] = score[live] * n * physical[live] / sampled[live, None]

@@ -1,6 +1,6 @@
 """The random walk's uniforms (numba): one sequential stream per batch, or keyed per walk.
 
-A Stream is what walk_kernel.walk_path draws from. Sequential: the batch's own xoshiro256+
+What walk_kernel.walk_path draws from (draw). Sequential: the batch's own xoshiro256+
 generator (numba's np.random.random cost 12 ns a draw, 1 ns here), seeded from the caller's
 numpy Generator, with the caller's uniforms for the first event's height and normal when given
 (stratification); the draws' order is the walk's. Keyed: each uniform a splitmix64 hash of
@@ -10,11 +10,9 @@ numpy Generator, with the caller's uniforms for the first event's height and nor
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
-from model.bsdf.primitives import inlined, scalar
+from model.bsdf.primitives import scalar
 
 #: xoshiro256+'s shifts and rotation, as uint64 (numba would take a mixed int64 to float).
 SHIFT_A, ROTATE, ROTATE_BACK, DROP = (np.uint64(k) for k in (17, 45, 19, 11))
@@ -28,16 +26,6 @@ SLOTS = 8
 HEIGHT, NORMAL_1, NORMAL_2, SCATTER, ROULETTE_DRAW, GUIDE, BACK_1, BACK_2 = range(SLOTS)
 #: Slots below this take the caller's uniforms at the first event of a sequential stream.
 GIVEN_SLOTS = 3
-
-
-class Stream(NamedTuple):
-    """Where one walk's uniforms come from: keyed (key) or sequential (state, 4 uint64 advanced
-    in place; given: the first event's HEIGHT, NORMAL_1, NORMAL_2 uniforms, or empty)."""
-
-    keyed: bool
-    key: np.uint64
-    state: np.ndarray
-    given: np.ndarray
 
 
 @scalar
@@ -78,11 +66,14 @@ def key_of_walk(key, walk):
     return mix64(np.uint64(key) ^ mix64(np.uint64(walk) * GOLDEN))
 
 
-@inlined
-def draw(stream, k, slot):
-    """The uniform of `slot` at event k (1, 2, ...) of the walk drawing from `stream`."""
-    if stream.keyed:
-        return keyed_uniform(stream.key, k * SLOTS + slot)
-    if k == 1 and slot < GIVEN_SLOTS and stream.given.shape[0] > 0:
-        return stream.given[slot]
-    return uniform(stream.state)
+@scalar
+def draw(keyed, state, given, row, key, k, slot):
+    """The uniform of `slot` at event k (1, 2, ...) of walk `row` of a batch: keyed by its key,
+    or the next of the sequential generator `state` (4 uint64), or at the first event the
+    caller's given[row] (given may be (0, 3))."""
+    if keyed:
+        return keyed_uniform(key, k * SLOTS + slot)
+    if k == 1 and slot < GIVEN_SLOTS and given.shape[0] > 0:
+        return given[row, slot]
+    return uniform(state)
+

@@ -1,17 +1,21 @@
-"""The random walk compiled (numba): one walker, one walk at a time, for every estimator.
+"""The random walk compiled (numba): one walker for every estimator, one walk at a time.
 
-walk_path is the walk: from a direction and height on one side of the surface, free paths to
-the next event (forced hits and Russian roulette when evaluating, the analog walk when
-sampling), visible normals, reflection or refraction, order and cap, with the scalar formulas
-of nee_kernel.py and visible_kernel.py. At each event it hands the event to the estimator it
-was given, next-event estimation towards a set of Targets (one wo per walk, the targets every
-walk shares, or the one target of a reverse walk), and it returns what the walk did (events,
-first height, exit direction and weight, energy left at the cap). What differs between uses is
-in three small records: Rules (forced or analog, orders, roulette, branch share), Guide (the
-wo that guided next directions aim at, guiding_kernel.py) and the Stream of uniforms
-(random_kernel.py: sequential or keyed). walk_batch drives it for Walker.run (whose numpy path
-is the reference and the fallback for diffuse facets and without numba); keyed_kernel.py drives
-it for the shared-path estimators of the tables and fits.
+walk_all is the walk, for a batch of walks each from the top of the side its direction of
+incidence lights, or resumed where a PATH record says (side, direction, height, weight, events
+done): free paths to the next event (forced hits and Russian
+roulette when evaluating, the analog walk when sampling), visible normals, reflection or
+refraction, order and cap, with the scalar formulas of nee_kernel.py and visible_kernel.py.
+Its events go to next-event estimation towards target directions (one wo per walk, which
+guiding_kernel.py's proposal may aim at; targets all walks share; or the one target of a
+reverse walk), and its outcome per walk (events, first height, exit direction and weight,
+energy left at the cap) is the sampling estimator. What differs between uses is a record of
+scalars, Rules (forced or analog, uniforms keyed or sequential, one target per walk or all,
+guided, orders, roulette, branch share), and where the walks start. Arrays cross into it once
+per batch: numba counts references to a function's array arguments at every call, which,
+once per walk, cost a third of a sampling walk.
+
+run serves Walker.run (whose numpy path is the reference and the fallback for diffuse facets
+and without numba); keyed_kernel.py serves the shared-path estimators of the tables and fits.
 """
 
 from __future__ import annotations
@@ -42,26 +46,28 @@ from model.bsdf.multiple_scattering.random_kernel import (
     NORMAL_2,
     ROULETTE_DRAW,
     SCATTER,
-    Stream,
     draw,
+    key_of_walk,
 )
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
 from model.bsdf.primitives import inlined, scalar, unit
 
-#: What a batch does: follow the analog walk to its exit, score towards one wo per walk, or
-#: score towards every one of a set of targets.
-SAMPLE, EVALUATE, TARGETS = 0, 1, 2
 LOG_2 = math.log(2.0)
 
 
 class Rules(NamedTuple):
-    """How a walk goes: forced hits (evaluating) or the analog walk; score only order `order`
-    and stop there (0: every order from min_order); stop after max_order events (0: no cap);
-    Russian roulette below weight `roulette`, played after scattering (late) or before the
-    facet normal is drawn; dielectric branches drawn with probability at least `share`
-    (0: by F)."""
+    """How a batch's walks go: forced hits (evaluating) or the analog walk; uniforms keyed or
+    from the batch's sequential generator (random_kernel.draw); each walk scoring its own row
+    of the directions (each: one wo per walk, guided towards it when guided) or all of them;
+    score only order `order` and stop there (0: every order from min_order); stop after
+    max_order events (0: no cap); Russian roulette below weight `roulette`, played after
+    scattering (late) or before the facet normal is drawn; dielectric branches drawn with
+    probability at least `share` (0: by F)."""
 
     forced: bool
+    keyed: bool
+    each: bool
+    guided: bool
     order: int
     min_order: int
     max_order: int
@@ -72,25 +78,29 @@ class Rules(NamedTuple):
 
 class Guide(NamedTuple):
     """The wo (x, y, z) that guided next directions aim at, and its projected area |o_z| +
-    cos_lambda(o); on: guide at all."""
+    cos_lambda(o)."""
 
-    on: bool
     x: float
     y: float
     z: float
     area: float
 
 
-class Targets(NamedTuple):
-    """The next-event estimator: directions (m, 3), their unsigned_lambda (m,), and the row
-    (m,) that each event's scores are added to."""
+#: Where a walk resumes (a numpy record per walk): on the outside or not, travelling along d
+#: (local frame of its side), from log height CDF cur of that side, with weight beta (0: not
+#: walked) after k events.
+PATH = np.dtype([("dx", np.float64), ("dy", np.float64), ("dz", np.float64),
+                 ("cur", np.float64), ("beta", np.float64), ("k", np.int64),
+                 ("outside", np.bool_)], align=True)
+#: Columns of walk_all's per-walk outcome: events, log C1 of the first event's height (nan if
+#: none or the walk started after one), exit direction (world; nan unless an analog walk left)
+#: and weight, energy still inside at the cap.
+EVENTS, FIRST, EXIT_X, EXIT_Y, EXIT_Z, WEIGHT, TRUNCATED = range(7)
 
-    directions: np.ndarray
-    lam: np.ndarray
-    row: np.ndarray
 
-
-NO_GUIDE = Guide(False, 0.0, 0.0, 0.0, 0.0)
+def paths(n: int) -> np.ndarray:
+    """n PATH records, zeros."""
+    return np.zeros(n, PATH)
 
 
 @scalar
@@ -166,130 +176,122 @@ def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
     return x, y, z, (1.0 if q == f else f / q), False
 
 
-@inlined
-def score(s, targets, beta, outside, ix, iy, iz, area, log_here, log_there):
-    """Next-event estimation at one event: targets.row[t] += beta x phase towards direction t x
-    its escape probability."""
-    directions, lam, row = targets
-    for t in range(directions.shape[0]):
-        row[t] += beta * next_event(s, outside, ix, iy, iz, area, directions[t, 0],
-                                    directions[t, 1], directions[t, 2], lam[t], log_here,
-                                    log_there)
-
-
-@inlined
-def walk_path(s, stream, rules, guide, targets, outside, dx, dy, dz, cur, beta, k):
-    """Walk on from direction d (local frame of its side, outside or not), log height CDF cur
-    of that side, weight beta and k events done, scoring targets at every event Rules count:
-    (events, log C1 of the first event's height (nan if none or k > 0), exit direction (world)
-    and weight of an analog walk that left (nan and 0 otherwise), energy still inside at the
-    cap). Evaluating, the roulette (unless late) comes after an event's score and before its
-    facet normal, so an event it ends costs no normal and no scattering."""
-    events, first = 0, math.nan
-    ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
-    while True:
-        k += 1
-        u = draw(stream, k, HEIGHT)
-        lam_up = unsigned_lambda(s, dx, dy, dz)
-        lam = lam_up if dz >= 0.0 else -1.0 - lam_up
-        p_hit = hit_probability(lam, cur) if rules.forced else 1.0
-        beta *= p_hit
-        e = free_path(u, p_hit)
-        new = math.inf if lam == 0.0 else cur + e / lam
-        if not new < 0.0:
-            if not rules.forced:
-                ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
-            break
-        other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
-        events = k
-        if k == 1:
-            first = new if outside else other
-        ix, iy, iz = -dx, -dy, -dz
-        area = event_area(s, ix, iy, iz, lam_up)
-        if k >= rules.min_order and (rules.order == 0 or rules.order == k):
-            score(s, targets, beta, outside, ix, iy, iz, area, new, other)
-        if rules.order and k >= rules.order:
-            break
-        if rules.forced and not rules.late_roulette and beta < rules.roulette:
-            if draw(stream, k, ROULETTE_DRAW) * rules.roulette < beta:
-                beta = rules.roulette
-            else:
-                break
-        if guide.on and draw(stream, k, GUIDE) < BACKWARDS:  # only the proposal drawn is computed
-            wx, wy, wz, crossed, ok = sample_backwards(
-                s, outside, guide.x, guide.y, guide.z, draw(stream, k, SCATTER),
-                draw(stream, k, BACK_1), draw(stream, k, BACK_2))
-            factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
-        else:
-            mx, my, mz = visible_normal(s, ix, iy, iz, draw(stream, k, NORMAL_1),
-                                        draw(stream, k, NORMAL_2))
-            wx, wy, wz, factor, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz,
-                                                  draw(stream, k, SCATTER), rules.share)
-        if guide.on and factor > 0.0:
-            factor = mixture_weight(s, outside, ix, iy, iz, area, guide, wx, wy, wz, crossed)
-        beta *= factor
-        if crossed:
-            outside = not outside
-            dx, dy, dz, cur = wx, wy, -wz, other
-        else:
-            dx, dy, dz, cur = wx, wy, wz, new
-        if rules.max_order and k >= rules.max_order:
-            truncated = beta * (1.0 - escape(s, dx, dy, dz, cur))
-            break
-        if rules.late_roulette and beta < rules.roulette:
-            beta = rules.roulette if draw(stream, k, ROULETTE_DRAW) * rules.roulette < beta \
-                else 0.0
-        if not beta > 0.0:
-            break
-    return events, first, ex, ey, ez, weight, truncated
-
-
 @scalar
-def walk_batch(s, mode, guided, wi, wo, targets, u_first, order, max_order, min_order, roulette,
-               state, value, exit_dir, weight, truncated, orders, first):
-    """One walk from each row of wi on the Surface s, uniforms from the generator state
-    (random_kernel.uniform; u_first (n, 3) or empty: the first event's); outputs as
-    Walker.run's WalkResult (value (n, m))."""
-    rules = Rules(mode != SAMPLE, order, min_order, max_order, roulette, False, 0.0)
-    each = mode == EVALUATE  # one target per walk, its wo, which guiding aims at
-    aims = wo if each else targets
-    lam = target_lambdas(s, aims)
-    none = np.empty(0)
-    for i in range(wi.shape[0]):
-        outside = wi[i, 2] > 0.0
-        if s.conductor and not outside:
-            continue
-        lo, hi = (i, i + 1) if each else (0, aims.shape[0])
-        guide = Guide(guided, wo[i, 0], wo[i, 1], wo[i, 2], abs(wo[i, 2]) * (1.0 + lam[i])) \
-            if each else NO_GUIDE
-        stream = Stream(False, np.uint64(0), state, u_first[i] if u_first.shape[0] else none)
-        result = walk_path(s, stream, rules, guide, Targets(aims[lo:hi], lam[lo:hi], value[i]),
-                           outside, -wi[i, 0], -wi[i, 1], -wi[i, 2] if outside else wi[i, 2],
-                           0.0, 1.0, 0)
-        orders[i], first[i] = result[0], result[1]
-        exit_dir[i, 0], exit_dir[i, 1], exit_dir[i, 2], weight[i], truncated[i] = result[2:]
+def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, scores, out):
+    """Walk j on the Surface s, for every row j of scores: from the top of the side wi[j]
+    lights (wi[0] for all if wi has one row; none for a conductor lit from below) down into
+    it, or where resumed[j] (PATH) says if wi has no rows; uniforms by random_kernel.draw (from
+    state and given, or keyed by walk index first + j under key), with next-event estimation
+    at every event the Rules count: scores[j, t - lo] += beta x phase towards directions[t]
+    (unsigned_lambda lam[t]) x its escape probability, t in [lo, hi) (j alone if rules.each,
+    else all); out[j] (if out has rows) = the walk's outcome (EVENTS ... TRUNCATED; a walk of
+    weight 0 is not walked). Evaluating, the roulette (unless late) comes after an event's
+    score and before its facet normal, so an event it ends costs no normal and no
+    scattering."""
+    keyed = rules.keyed
+    for j in range(scores.shape[0]):
+        if wi.shape[0]:
+            r = j if wi.shape[0] > 1 else 0
+            outside = wi[r, 2] > 0.0
+            dx, dy, dz = -wi[r, 0], -wi[r, 1], -wi[r, 2] if outside else wi[r, 2]
+            cur, k = 0.0, 0
+            beta = 0.0 if s.conductor and not outside else 1.0
+        else:
+            start = resumed[j]
+            outside, dx, dy, dz, cur = start.outside, start.dx, start.dy, start.dz, start.cur
+            beta, k = start.beta, start.k
+        walk_key = key_of_walk(key, first + j) if keyed else np.uint64(0)
+        events, first_height = 0, math.nan
+        ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
+        lo, hi = (j, j + 1) if rules.each else (0, directions.shape[0])
+        if rules.guided:
+            guide = Guide(directions[j, 0], directions[j, 1], directions[j, 2],
+                          abs(directions[j, 2]) * (1.0 + lam[j]))
+        else:
+            guide = Guide(0.0, 0.0, 0.0, 0.0)
+        while beta > 0.0:
+            k += 1
+            u = draw(keyed, state, given, j, walk_key, k, HEIGHT)
+            lam_up = unsigned_lambda(s, dx, dy, dz)
+            lam_d = lam_up if dz >= 0.0 else -1.0 - lam_up
+            p_hit = hit_probability(lam_d, cur) if rules.forced else 1.0
+            beta *= p_hit
+            e = free_path(u, p_hit)
+            new = math.inf if lam_d == 0.0 else cur + e / lam_d
+            if not new < 0.0:
+                if not rules.forced:
+                    ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
+                break
+            other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
+            events = k
+            if k == 1:
+                first_height = new if outside else other
+            ix, iy, iz = -dx, -dy, -dz
+            area = event_area(s, ix, iy, iz, lam_up)
+            if k >= rules.min_order and (rules.order == 0 or rules.order == k):
+                for t in range(lo, hi):
+                    scores[j, t - lo] += beta * next_event(
+                        s, outside, ix, iy, iz, area, directions[t, 0], directions[t, 1],
+                        directions[t, 2], lam[t], new, other)
+            if rules.order and k >= rules.order:
+                break
+            if rules.forced and not rules.late_roulette and beta < rules.roulette:
+                if draw(keyed, state, given, j, walk_key, k, ROULETTE_DRAW) * rules.roulette < beta:
+                    beta = rules.roulette
+                else:
+                    break
+            # only the proposal drawn is computed
+            if rules.guided and draw(keyed, state, given, j, walk_key, k, GUIDE) < BACKWARDS:
+                u1 = draw(keyed, state, given, j, walk_key, k, SCATTER)
+                u2 = draw(keyed, state, given, j, walk_key, k, BACK_1)
+                u3 = draw(keyed, state, given, j, walk_key, k, BACK_2)
+                wx, wy, wz, crossed, ok = sample_backwards(s, outside, guide.x, guide.y, guide.z,
+                                                           u1, u2, u3)
+                factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
+            else:
+                u1 = draw(keyed, state, given, j, walk_key, k, NORMAL_1)
+                u2 = draw(keyed, state, given, j, walk_key, k, NORMAL_2)
+                mx, my, mz = visible_normal(s, ix, iy, iz, u1, u2)
+                u3 = draw(keyed, state, given, j, walk_key, k, SCATTER)
+                wx, wy, wz, factor, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz, u3,
+                                                      rules.share)
+            if rules.guided and factor > 0.0:
+                factor = mixture_weight(s, outside, ix, iy, iz, area, guide, wx, wy, wz,
+                                        crossed)
+            beta *= factor
+            if crossed:
+                outside = not outside
+                dx, dy, dz, cur = wx, wy, -wz, other
+            else:
+                dx, dy, dz, cur = wx, wy, wz, new
+            if rules.max_order and k >= rules.max_order:
+                truncated = beta * (1.0 - escape(s, dx, dy, dz, cur))
+                break
+            if rules.late_roulette and beta < rules.roulette:
+                u = draw(keyed, state, given, j, walk_key, k, ROULETTE_DRAW)
+                beta = rules.roulette if u * rules.roulette < beta else 0.0
+        if out.shape[0]:
+            out[j, EVENTS], out[j, FIRST], out[j, WEIGHT], out[j, TRUNCATED] = (
+                events, first_height, weight, truncated)
+            out[j, EXIT_X], out[j, EXIT_Y], out[j, EXIT_Z] = ex, ey, ez
 
 
 def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, unit_mode,
         u_first, targets, min_order, roulette):
     """Walker.run by the kernel: the arrays of a WalkResult, in its field order."""
     n = wi.shape[0]
-    mode = SAMPLE if wo is None and targets is None else (EVALUATE if targets is None
-                                                          else TARGETS)
-    value = np.zeros((n, 1 if targets is None else len(targets)))
-    exit_dir = np.full((n, 3), np.nan)
-    weight, truncated = np.zeros(n), np.zeros(n)
-    orders = np.zeros(n, dtype=np.int64)
-    first = np.full(n, np.nan)
-    empty = np.zeros((0, 3))
-    walk_batch(surface(walker.slopes, walker.micro, unit_mode), mode,
-               mode == EVALUATE and walker.guided,
-               np.ascontiguousarray(wi, dtype=np.float64),
-               empty if wo is None else np.ascontiguousarray(wo, dtype=np.float64),
-               empty if targets is None else np.ascontiguousarray(targets, dtype=np.float64),
-               empty if u_first is None else np.ascontiguousarray(u_first, dtype=np.float64),
-               order or 0, max_order or 0, int(min_order), float(roulette),
-               rng.integers(0, 2**64, size=4, dtype=np.uint64), value, exit_dir, weight,
-               truncated, orders, first)
-    return (value if targets is not None else value[:, 0], exit_dir, weight, truncated, orders,
-            first)
+    wi = np.ascontiguousarray(wi, dtype=np.float64)
+    each = wo is not None and targets is None  # one target per walk: its wo
+    sampling = wo is None and targets is None
+    aims = np.ascontiguousarray(wo if each else (np.zeros((0, 3)) if sampling else targets),
+                                dtype=np.float64).reshape(-1, 3)
+    s = surface(walker.slopes, walker.micro, unit_mode)
+    value = np.zeros((n, 1 if each or sampling else len(aims)))
+    out = np.empty((n, 7))
+    walk_all(s, Rules(not sampling, False, each, each and walker.guided, order or 0,
+                      int(min_order), max_order or 0, float(roulette), False, 0.0),
+             wi, paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64),
+             np.zeros((0, 3)) if u_first is None else np.ascontiguousarray(u_first, np.float64),
+             aims, target_lambdas(s, aims), value, out)
+    return (value if targets is not None else value[:, 0], out[:, EXIT_X:EXIT_Z + 1],
+            out[:, WEIGHT], out[:, TRUNCATED], out[:, EVENTS].astype(np.int64), out[:, FIRST])
