@@ -61,15 +61,15 @@ from model.bsdf.multiple_scattering.walk_kernel import (
 )
 from model.bsdf.primitives import inlined, scalar
 
-#: A keyed walk's sequential generator, given uniforms and per-walk outcome: none; and what
-#: walk_all takes for "no direction of incidence" (every walk resumed) and "no walk resumed".
-NO_STATE, NOTHING_GIVEN, NO_OUTCOME = np.zeros(0, np.uint64), np.zeros((0, 3)), np.zeros((0, 7))
+#: A keyed walk's given uniforms and per-walk outcome: none; and what walk_all takes for "no
+#: direction of incidence" (every walk resumed) and "no walk resumed".
+NOTHING_GIVEN, NO_OUTCOME = np.zeros((0, 3)), np.zeros((0, 7))
 NO_INCIDENCE, NONE_RESUMED = np.zeros((0, 3)), paths(0)
 
 
 def keyed_rules(min_order: int, roulette: float, share: float) -> Rules:
     """The Rules of a keyed walk."""
-    return Rules(True, True, False, False, 0, int(min_order), 0, float(roulette), True,
+    return Rules(True, False, False, 0, int(min_order), 0, float(roulette), True,
                  float(share))
 
 
@@ -78,7 +78,7 @@ def walk_targets(s: Surface, wi: np.ndarray, targets: np.ndarray, key: np.uint64
     """value[j, t] = the NEE sum of orders >= min_order of walk first + j on the Surface s
     (from wi (3,)) towards target t (m, 3)."""
     walk_all(s, keyed_rules(min_order, roulette, share), wi.reshape(1, 3), NONE_RESUMED, key,
-             first, NO_STATE, NOTHING_GIVEN, targets, target_lambdas(s, targets), value,
+             first, None, NOTHING_GIVEN, targets, target_lambdas(s, targets), value,
              NO_OUTCOME)
 
 
@@ -115,17 +115,15 @@ def first_events(s, starts, key, first, share, begin, physical, sampled):
         lam_up = unsigned_lambda(s, local[b, 0], local[b, 1], local[b, 2])
         rate[b] = 1.0 + lam_up  # the first height's log C1 ~ Exp(rate), downwards from the top
         area[b] = event_area(s, local[b, 0], local[b, 1], local[b, 2], lam_up)
-    state, given = np.empty(0, np.uint64), np.empty((0, 3))
     for j in range(begin.shape[0]):
         walk_key = key_of_walk(key, first + j)
         a = (first + j) % n
         ix, iy, iz = local[a, 0], local[a, 1], local[a, 2]
-        height = -free_path(draw(True, state, given, j, walk_key, 1, HEIGHT), 1.0) / rate[a]
-        mx, my, mz = visible_normal(s, ix, iy, iz, draw(True, state, given, j, walk_key, 1,
-                                                        NORMAL_1),
-                                    draw(True, state, given, j, walk_key, 1, NORMAL_2))
+        height = -free_path(draw(None, walk_key, 1, HEIGHT), 1.0) / rate[a]
+        mx, my, mz = visible_normal(s, ix, iy, iz, draw(None, walk_key, 1, NORMAL_1),
+                                    draw(None, walk_key, 1, NORMAL_2))
         ox, oy, oz, _, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz,
-                                         draw(True, state, given, j, walk_key, 1, SCATTER), share)
+                                         draw(None, walk_key, 1, SCATTER), share)
         total = 0.0
         for b in range(n):
             at_height = rate[b] * math.exp(rate[b] * height)
@@ -155,6 +153,6 @@ def walk_from_starts(s: Surface, starts: np.ndarray, target: np.ndarray, key: np
     targets = np.ascontiguousarray(target, dtype=np.float64).reshape(1, 3)
     score = np.zeros((walks, 1))
     walk_all(s, keyed_rules(min_order, roulette, share), NO_INCIDENCE, begin, key, first,
-             NO_STATE, NOTHING_GIVEN, targets, target_lambdas(s, targets), score, NO_OUTCOME)
+             None, NOTHING_GIVEN, targets, target_lambdas(s, targets), score, NO_OUTCOME)
     live = score[:, 0] != 0.0
     value[live] = score[live] * n * physical[live] / sampled[live, None]

@@ -1,9 +1,8 @@
 """The random walk's uniforms (numba): one sequential stream per batch, or keyed per walk.
 
-What walk_kernel.walk_path draws from (draw). Sequential: the batch's own xoshiro256+
+What walk_kernel.walk_all draws from (draw). Sequential: the batch's own xoshiro256+
 generator (numba's np.random.random cost 12 ns a draw, 1 ns here), seeded from the caller's
-numpy Generator, with the caller's uniforms for the first event's height and normal when given
-(stratification); the draws' order is the walk's. Keyed: each uniform a splitmix64 hash of
+numpy Generator; the draws' order is the walk's. Keyed: each uniform a splitmix64 hash of
 (key, walk index, event, slot), so walk j is the same path whatever the batch or the thread
 (keyed.py takes the covariance from a prefix of the walks).
 """
@@ -24,8 +23,6 @@ MIX_B = np.uint64(0x94D049BB133111EB)
 #: guided), the Russian roulette, the guided proposal's choice and its facet normal (two).
 SLOTS = 8
 HEIGHT, NORMAL_1, NORMAL_2, SCATTER, ROULETTE_DRAW, GUIDE, BACK_1, BACK_2 = range(SLOTS)
-#: Slots below this take the caller's uniforms at the first event of a sequential stream.
-GIVEN_SLOTS = 3
 
 
 @scalar
@@ -67,13 +64,11 @@ def key_of_walk(key, walk):
 
 
 @scalar
-def draw(keyed, state, given, row, key, k, slot):
-    """The uniform of `slot` at event k (1, 2, ...) of walk `row` of a batch: keyed by its key,
-    or the next of the sequential generator `state` (4 uint64), or at the first event the
-    caller's given[row] (given may be (0, 3))."""
-    if keyed:
+def draw(state, key, k, slot):
+    """The uniform of `slot` at event k (1, 2, ...) of a walk: the next of the sequential
+    generator `state` (4 uint64), or keyed by the walk's key where state is None (numba then
+    compiles the keyed draw alone: a None argument prunes the branch)."""
+    if state is None:
         return keyed_uniform(key, k * SLOTS + slot)
-    if k == 1 and slot < GIVEN_SLOTS and given.shape[0] > 0:
-        return given[row, slot]
     return uniform(state)
 

@@ -2,17 +2,17 @@
 
 walk_all is the walk, for a batch of walks each from the top of the side its direction of
 incidence lights, or resumed where a PATH record says (side, direction, height, weight, events
-done): free paths to the next event (forced hits and Russian
-roulette when evaluating, the analog walk when sampling), visible normals, reflection or
-refraction, order and cap, with the scalar formulas of nee_kernel.py and visible_kernel.py.
-Its events go to next-event estimation towards target directions (one wo per walk, which
-guiding_kernel.py's proposal may aim at; targets all walks share; or the one target of a
-reverse walk), and its outcome per walk (events, first height, exit direction and weight,
-energy left at the cap) is the sampling estimator. What differs between uses is a record of
-scalars, Rules (forced or analog, uniforms keyed or sequential, one target per walk or all,
-guided, orders, roulette, branch share), and where the walks start. Arrays cross into it once
-per batch: numba counts references to a function's array arguments at every call, which,
-once per walk, cost a third of a sampling walk.
+done): free paths to the next event (forced hits and Russian roulette when evaluating, the
+analog walk when sampling), visible normals, reflection or refraction, order and cap, with the
+scalar formulas of nee_kernel.py and visible_kernel.py. Its events go to next-event estimation
+towards target directions (one wo per walk, which guiding_kernel.py's proposal may aim at;
+targets all walks share; or the one target of a reverse walk), and its outcome per walk
+(events, first height, exit direction and weight, energy left at the cap) is the sampling
+estimator. What differs between uses is a record of scalars, Rules (forced or analog, one
+target per walk or all, guided, orders, roulette, branch share), where the walks start, and
+their uniforms (random_kernel: a sequential generator, or keyed; numba compiles the two
+apart). Arrays cross into it once per batch: numba counts references to a function's array
+arguments at every call, which, once per walk, cost a third of a sampling walk.
 
 run serves Walker.run (whose numpy path is the reference and the fallback for diffuse facets
 and without numba); keyed_kernel.py serves the shared-path estimators of the tables and fits.
@@ -56,16 +56,14 @@ LOG_2 = math.log(2.0)
 
 
 class Rules(NamedTuple):
-    """How a batch's walks go: forced hits (evaluating) or the analog walk; uniforms keyed or
-    from the batch's sequential generator (random_kernel.draw); each walk scoring its own row
-    of the directions (each: one wo per walk, guided towards it when guided) or all of them;
-    score only order `order` and stop there (0: every order from min_order); stop after
-    max_order events (0: no cap); Russian roulette below weight `roulette`, played after
-    scattering (late) or before the facet normal is drawn; dielectric branches drawn with
-    probability at least `share` (0: by F)."""
+    """How a batch's walks go: forced hits (evaluating) or the analog walk; each walk scoring
+    its own row of the directions (each: one wo per walk, guided towards it when guided) or
+    all of them; score only order `order` and stop there (0: every order from min_order);
+    stop after max_order events (0: no cap); Russian roulette below weight `roulette`, played
+    after scattering (late) or before the facet normal is drawn; dielectric branches drawn
+    with probability at least `share` (0: by F)."""
 
     forced: bool
-    keyed: bool
     each: bool
     guided: bool
     order: int
@@ -181,14 +179,16 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
     """Walk j on the Surface s, for every row j of scores: from the top of the side wi[j]
     lights (wi[0] for all if wi has one row; none for a conductor lit from below) down into
     it, or where resumed[j] (PATH) says if wi has no rows; uniforms by random_kernel.draw (from
-    state and given, or keyed by walk index first + j under key), with next-event estimation
+    state, or keyed by walk index first + j under key if state is None, which numba compiles
+    apart; the first event's height and normal
+    from given[j] if given has rows, for stratification), with next-event estimation
     at every event the Rules count: scores[j, t - lo] += beta x phase towards directions[t]
     (unsigned_lambda lam[t]) x its escape probability, t in [lo, hi) (j alone if rules.each,
     else all); out[j] (if out has rows) = the walk's outcome (EVENTS ... TRUNCATED; a walk of
     weight 0 is not walked). Evaluating, the roulette (unless late) comes after an event's
     score and before its facet normal, so an event it ends costs no normal and no
     scattering."""
-    keyed = rules.keyed
+    has_given = given.shape[0] > 0
     for j in range(scores.shape[0]):
         if wi.shape[0]:
             r = j if wi.shape[0] > 1 else 0
@@ -200,7 +200,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             start = resumed[j]
             outside, dx, dy, dz, cur = start.outside, start.dx, start.dy, start.dz, start.cur
             beta, k = start.beta, start.k
-        walk_key = key_of_walk(key, first + j) if keyed else np.uint64(0)
+        walk_key = key_of_walk(key, first + j) if state is None else np.uint64(0)
         events, first_height = 0, math.nan
         ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
         lo, hi = (j, j + 1) if rules.each else (0, directions.shape[0])
@@ -211,7 +211,8 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             guide = Guide(0.0, 0.0, 0.0, 0.0)
         while beta > 0.0:
             k += 1
-            u = draw(keyed, state, given, j, walk_key, k, HEIGHT)
+            given_here = k == 1 and has_given  # the caller's uniforms for event 1
+            u = given[j, HEIGHT] if given_here else draw(state, walk_key, k, HEIGHT)
             lam_up = unsigned_lambda(s, dx, dy, dz)
             lam_d = lam_up if dz >= 0.0 else -1.0 - lam_up
             p_hit = hit_probability(lam_d, cur) if rules.forced else 1.0
@@ -236,23 +237,25 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             if rules.order and k >= rules.order:
                 break
             if rules.forced and not rules.late_roulette and beta < rules.roulette:
-                if draw(keyed, state, given, j, walk_key, k, ROULETTE_DRAW) * rules.roulette < beta:
+                if draw(state, walk_key, k, ROULETTE_DRAW) * rules.roulette < beta:
                     beta = rules.roulette
                 else:
                     break
             # only the proposal drawn is computed
-            if rules.guided and draw(keyed, state, given, j, walk_key, k, GUIDE) < BACKWARDS:
-                u1 = draw(keyed, state, given, j, walk_key, k, SCATTER)
-                u2 = draw(keyed, state, given, j, walk_key, k, BACK_1)
-                u3 = draw(keyed, state, given, j, walk_key, k, BACK_2)
+            if rules.guided and draw(state, walk_key, k, GUIDE) < BACKWARDS:
+                u1 = draw(state, walk_key, k, SCATTER)
+                u2 = draw(state, walk_key, k, BACK_1)
+                u3 = draw(state, walk_key, k, BACK_2)
                 wx, wy, wz, crossed, ok = sample_backwards(s, outside, guide.x, guide.y, guide.z,
                                                            u1, u2, u3)
                 factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
             else:
-                u1 = draw(keyed, state, given, j, walk_key, k, NORMAL_1)
-                u2 = draw(keyed, state, given, j, walk_key, k, NORMAL_2)
+                u1 = given[j, NORMAL_1] if given_here else draw(state, walk_key, k,
+                                                                NORMAL_1)
+                u2 = given[j, NORMAL_2] if given_here else draw(state, walk_key, k,
+                                                                NORMAL_2)
                 mx, my, mz = visible_normal(s, ix, iy, iz, u1, u2)
-                u3 = draw(keyed, state, given, j, walk_key, k, SCATTER)
+                u3 = draw(state, walk_key, k, SCATTER)
                 wx, wy, wz, factor, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz, u3,
                                                       rules.share)
             if rules.guided and factor > 0.0:
@@ -268,7 +271,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
                 truncated = beta * (1.0 - escape(s, dx, dy, dz, cur))
                 break
             if rules.late_roulette and beta < rules.roulette:
-                u = draw(keyed, state, given, j, walk_key, k, ROULETTE_DRAW)
+                u = draw(state, walk_key, k, ROULETTE_DRAW)
                 beta = rules.roulette if u * rules.roulette < beta else 0.0
         if out.shape[0]:
             out[j, EVENTS], out[j, FIRST], out[j, WEIGHT], out[j, TRUNCATED] = (
@@ -288,7 +291,7 @@ def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, 
     s = surface(walker.slopes, walker.micro, unit_mode)
     value = np.zeros((n, 1 if each or sampling else len(aims)))
     out = np.empty((n, 7))
-    walk_all(s, Rules(not sampling, False, each, each and walker.guided, order or 0,
+    walk_all(s, Rules(not sampling, each, each and walker.guided, order or 0,
                       int(min_order), max_order or 0, float(roulette), False, 0.0),
              wi, paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64),
              np.zeros((0, 3)) if u_first is None else np.ascontiguousarray(u_first, np.float64),
