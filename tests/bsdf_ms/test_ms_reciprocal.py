@@ -1,5 +1,5 @@
-"""The reverse shared-path walk (reciprocal_kernel.py, keyed.keyed_walk_from_starts) and
-lobe.walk_both_ways: each start's estimate against walks from that start alone, and the
+"""The reverse shared-path walk (keyed_kernel.walk_from_starts, keyed.keyed_walk_from_starts)
+and lobe.walk_both_ways: each start's estimate against walks from that start alone, and the
 transmitted orders >= 3 by reciprocity against the forward walk."""
 
 import numpy as np

@@ -10,7 +10,8 @@ from scipy.stats import kstest
 from model.bsdf import beckmann_sphere
 from model.bsdf.distributions import make_distribution
 from model.bsdf.multiple_scattering import Microsurface, RandomWalkBSDF
-from model.bsdf.multiple_scattering.nee_kernel import AVAILABLE
+from model.bsdf.multiple_scattering.nee_kernel import AVAILABLE, Surface
+from model.bsdf.multiple_scattering.random_kernel import uniform
 from model.bsdf.multiple_scattering.visible_kernel import (
     START_THETA_MAX,
     _visible_slope,
@@ -19,7 +20,6 @@ from model.bsdf.multiple_scattering.visible_kernel import (
     visible_normal,
 )
 from model.bsdf.multiple_scattering.walk import Walker
-from model.bsdf.multiple_scattering.walk_kernel import uniform
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="the walk kernel needs numba (gonio[fast])")
 Z_MAX = 4.5
@@ -52,8 +52,8 @@ def test_visible_normals_match_the_numpy_sampler_on_the_whole_sphere(name, alpha
     w[:3] = [direction(0), direction(180), direction(90, 30)]
     u = rng.random((2, 300))
     ref = slopes.sample_visible_sphere(w, u[0], u[1])
-    ours = np.array([visible_normal(int(slopes.kernel), *map(float, alpha), *w[i], u[0, i], u[1, i])
-                     for i in range(300)])
+    s = Surface(int(slopes.kernel), *map(float, alpha), True, 1.0, False, 0j)
+    ours = np.array([visible_normal(s, *w[i], u[0, i], u[1, i]) for i in range(300)])
     assert np.allclose(ours, ref, atol=1e-9)
 
 

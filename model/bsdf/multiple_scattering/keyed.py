@@ -15,12 +15,12 @@ from functools import cache
 
 import numpy as np
 
-from model.bsdf.multiple_scattering import keyed_kernel, reciprocal_kernel
-from model.bsdf.multiple_scattering.nee_kernel import surface_arguments
+from model.bsdf.multiple_scattering import keyed_kernel
+from model.bsdf.multiple_scattering.nee_kernel import surface
 from model.bsdf.multiple_scattering.walk import ROULETTE
 from model.cluster import usable_cores
 
-#: Least probability of either branch at a dielectric facet (keyed_kernel.split_scatter), for
+#: Least probability of either branch at a dielectric facet (walk_kernel.branch_share), for
 #: forward walks and reverse ones from outside, and for reverse walks from inside
 #: (keyed_walk_from_starts: their useful paths stay in at the first events; 0.15 gave 6-9 %
 #: less error at the Walter fits' worst points than 0.25, 0.1 about the same).
@@ -141,9 +141,9 @@ def keyed_walk_to_targets(walker, wi: np.ndarray, targets: np.ndarray, walks: in
     key = np.uint64(int(rng.integers(0, 2**63)))
     targets = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3)
     wi = np.ascontiguousarray(wi, dtype=np.float64)
-    args = surface_arguments(walker.slopes, walker.micro)
+    s = surface(walker.slopes, walker.micro)
     return _walk_in_batches(
-        lambda first, value: keyed_kernel.walk_targets(*args, wi, targets, key, first,
+        lambda first, value: keyed_kernel.walk_targets(s, wi, targets, key, first,
                                                        int(min_order), float(ROULETTE),
                                                        float(share), value),
         len(targets), walks, covariance)
@@ -156,7 +156,7 @@ def keyed_walk_from_starts(walker, starts: np.ndarray, target: np.ndarray, walks
     """(mean, standard error, covariance of the mean or None) of orders >= min_order of
     f(start, target) |cos target| for every start (n, 3, all on one side of the surface)
     towards one target (3,), over `walks` keyed walks (rounded up to whole rounds of the
-    starts), each shared by all of them (reciprocal_kernel): the reverse of
+    starts), each shared by all of them (keyed_kernel.walk_from_starts): the reverse of
     keyed_walk_to_targets. share: the branch share, by default INSIDE_SHARE for starts inside
     a dielectric and SHARE for starts above it."""
     starts = np.ascontiguousarray(starts, dtype=np.float64).reshape(-1, 3)
@@ -167,12 +167,12 @@ def keyed_walk_from_starts(walker, starts: np.ndarray, target: np.ndarray, walks
                          f"not scored), not {min_order}")
     key = np.uint64(int(rng.integers(0, 2**63)))
     target = np.ascontiguousarray(target, dtype=np.float64).reshape(3)
-    args = surface_arguments(walker.slopes, walker.micro)
+    s = surface(walker.slopes, walker.micro)
     if share is None:
         share = SHARE if starts[0, 2] > 0.0 else INSIDE_SHARE
     n = len(starts)
     return _walk_in_batches(
-        lambda first, value: reciprocal_kernel.walk_from_starts(
-            *args, starts, target, key, first, int(min_order), float(ROULETTE),
-            float(share), value),
+        lambda first, value: keyed_kernel.walk_from_starts(
+            s, starts, target, key, first, int(min_order), float(ROULETTE), float(share),
+            value),
         n, -(-walks // n) * n, covariance)

@@ -126,7 +126,7 @@ def second_order(walker: Walker, wi: np.ndarray, targets: np.ndarray,
     a0 = -float(walker.slopes.signed_lambda(-wi[None, :])[0])
     out = np.empty(len(targets))
     second_order_kernel.second_order_all(
-        *nee_kernel.surface_arguments(walker.slopes, walker.micro), wi, a0,
+        nee_kernel.surface(walker.slopes, walker.micro), wi, a0,
         np.ascontiguousarray(targets), float(polar), float(azimuth), xs, ws, hx, hw, out)
     return out
 

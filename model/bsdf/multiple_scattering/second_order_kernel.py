@@ -32,11 +32,11 @@ from model.bsdf.primitives import log_beta, scalar
 
 
 @scalar
-def signed_lambda(ndf, ax, ay, x, y, z):
+def signed_lambda(s, x, y, z):
     """Distribution.signed_lambda: Lambda >= 0 upward, -1 - Lambda(-w) downward, inf flat."""
     if z == 0.0:
         return math.inf
-    up = unsigned_lambda(ndf, ax, ay, x, y, z)
+    up = unsigned_lambda(s, x, y, z)
     return up if z > 0.0 else -1.0 - up
 
 
@@ -190,14 +190,15 @@ def cell_nodes(span, density, rules):
 
 
 @scalar
-def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx, ty, tz,
-                     polar, azimuth, xs, ws, hx, hw):
-    """Order 2 of f |cos o| from wi = (ix, iy, iz), iz > 0, towards the world target t:
+def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, hw):
+    """Order 2 of f |cos o| of the Surface s from wi = (ix, iy, iz), iz > 0, towards the world
+    target t:
     `polar` nodes per radian of w1's polar angle and `azimuth` per radian of its azimuth, per
     cell, from the Gauss-Legendre rules on [0, 1] xs[n, :n], ws[n, :n]."""
-    area_i = projected_area(ndf, ax, ay, ix, iy, iz)
+    conductor, eta = s.conductor, s.eta
+    area_i = projected_area(s, ix, iy, iz)
     el, elm1 = side_eta(eta, True)
-    lam_e = unsigned_lambda(ndf, ax, ay, tx, ty, tz)
+    lam_e = unsigned_lambda(s, tx, ty, tz)
     flat_i = math.hypot(ix, iy) > 1e-12
     flat_t = math.hypot(tx, ty) > 1e-12
     phi_i = math.atan2(iy, ix) if flat_i else 0.0
@@ -222,12 +223,12 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
         lz = -tz if crossed else tz  # the target in d1's frame
         axes, cosines, cones = kink_cones(ix, iy, iz, tx, ty, tz, eta, conductor, crossed)
         edges = polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones)
-        for s in range(edges.shape[0] - 1):
-            if edges[s + 1] - edges[s] <= 1e-12:
+        for cell in range(edges.shape[0] - 1):
+            if edges[cell + 1] - edges[cell] <= 1e-12:
                 continue
             # in the polar angle: smooth also where a support edge shrinks onto a pole
-            t0 = math.acos(edges[s + 1])
-            span = math.acos(edges[s]) - t0
+            t0 = math.acos(edges[cell + 1])
+            span = math.acos(edges[cell]) - t0
             n_p = cell_nodes(span, polar, xs)
             for p in range(n_p):
                 theta = t0 + span * xs[n_p, p]
@@ -235,7 +236,7 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                 dz = z if not crossed else -z  # d1's z in its own frame
                 arcs = ring_breaks(planes, z, sin_z, axes, cosines, cones)
                 # the second event's w_in = -d1 in d1's frame: isotropic, one area per ring
-                area = projected_area(ndf, ax, ay, sin_z, 0.0, -dz)
+                area = projected_area(s, sin_z, 0.0, -dz)
                 ring = 0.0
                 for a in range(arcs.shape[0] - 1):
                     f0, fspan = arcs[a], arcs[a + 1] - arcs[a]
@@ -246,35 +247,32 @@ def second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, ix, iy, iz, a0, tx
                         phi = f0 + fspan * xs[n_q, q]
                         ox, oy = sin_z * math.cos(phi), sin_z * math.sin(phi)
                         if crossed:
-                            first = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area_i,
-                                                   ox, oy, z)
+                            first = phase_transmit(s, el, elm1, ix, iy, iz, area_i, ox, oy, z)
                         else:
-                            first = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1,
-                                                  ix, iy, iz, area_i, ox, oy, z)
+                            first = phase_reflect(s, True, el, elm1, ix, iy, iz, area_i, ox, oy,
+                                                  z)
                         if first <= 0.0:
                             continue
                         # the second event (nee_kernel.next_event without the escape)
                         if lz > 0.0:
-                            second = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el2,
-                                                   el2m1, -ox, -oy, -dz, area, tx, ty, lz)
+                            second = phase_reflect(s, True, el2, el2m1, -ox, -oy, -dz, area, tx,
+                                                   ty, lz)
                         elif conductor:
                             second = 0.0
                         else:
-                            second = phase_transmit(ndf, ax, ay, el2, el2m1, -ox, -oy, -dz, area,
-                                                    tx, ty, lz)
+                            second = phase_transmit(s, el2, el2m1, -ox, -oy, -dz, area, tx, ty,
+                                                    lz)
                         ring += fspan * ws[n_q, q] * first * second
                 if ring > 0.0:  # light leaving the glass backwards never is: no H for it
-                    lam = signed_lambda(ndf, ax, ay, sin_z, 0.0, dz)
+                    lam = signed_lambda(s, sin_z, 0.0, dz)
                     h = height_expectation(a0, lam, crossed, lam_e, same, hx, hw)
                     total += span * ws[n_p, p] * sin_z * h * ring
     return scale * total
 
 
 @scalar
-def second_order_all(ndf, ax, ay, conductor, eta, has_f, n_c, wi, a0, targets, polar, azimuth,
-                     xs, ws, hx, hw, result):
-    """result[t] = second_order_one towards every target (m, 3)."""
+def second_order_all(s, wi, a0, targets, polar, azimuth, xs, ws, hx, hw, result):
+    """result[t] = second_order_one of the Surface s towards every target (m, 3)."""
     for t in range(targets.shape[0]):
-        result[t] = second_order_one(ndf, ax, ay, conductor, eta, has_f, n_c, wi[0], wi[1],
-                                     wi[2], a0, targets[t, 0], targets[t, 1], targets[t, 2],
-                                     polar, azimuth, xs, ws, hx, hw)
+        result[t] = second_order_one(s, wi[0], wi[1], wi[2], a0, targets[t, 0], targets[t, 1],
+                                     targets[t, 2], polar, azimuth, xs, ws, hx, hw)

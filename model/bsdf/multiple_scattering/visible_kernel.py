@@ -185,10 +185,11 @@ def beckmann_visible_unit(vx, vy, vz, u1, u2):
 
 
 @inlined
-def visible_normal(ndf, ax, ay, x, y, z, u1, u2):
-    """m ~ D_visible((x, y, z), .) for a direction anywhere on the sphere
-    (Distribution.sample_visible_sphere)."""
-    if ndf == Ndf.GGX:
+def visible_normal(s, x, y, z, u1, u2):
+    """m ~ D_visible((x, y, z), .) on the slopes of the Surface s, for a direction anywhere on
+    the sphere (Distribution.sample_visible_sphere)."""
+    ax, ay = s.alpha_x, s.alpha_y
+    if s.ndf == Ndf.GGX:
         return ggx_visible_normal(ax, ay, x, y, z, u1, u2)
     vx, vy, vz = unit(ax * x, ay * y, z)
     nx, ny, nz = beckmann_visible_unit(vx, vy, vz, u1, u2)

@@ -1,61 +1,104 @@
-"""The random walk compiled, one walk at a time (numba): what Walker.run does, at native speed.
+"""The random walk compiled (numba): one walker for every estimator, one walk at a time.
 
-Walker.run's numpy path is the reference and the fallback (diffuse facets, no numba); this
-kernel follows the same steps per walk (forced hits and Russian roulette when evaluating, the
-roulette played before the facet normal is drawn, so an event it ends costs no normal and no
-scattering; next-event estimation towards wo or towards every target, guided next directions
-(guiding.py) towards wo, only the proposal drawn computed, the analog walk when sampling,
-order and cap), with the scalar formulas of nee_kernel.py and visible_kernel.py, and its own
-xoshiro256+ generator (uniform) seeded from the caller's numpy Generator (so a seed gives the
-same walks, not the numpy path's numbers; numba's np.random.random cost 12 ns a draw, 1 ns here).
+walk_all is the walk, for a batch of walks each from the top of the side its direction of
+incidence lights, or resumed where a PATH record says (side, direction, height, weight, events
+done): free paths to the next event (forced hits and Russian roulette when evaluating, the
+analog walk when sampling), visible normals, reflection or refraction, order and cap, with the
+scalar formulas of nee_kernel.py and visible_kernel.py. Its events go to next-event estimation
+towards target directions (one wo per walk, which guiding_kernel.py's proposal may aim at;
+targets all walks share; or the one target of a reverse walk), and its outcome per walk
+(events, first height, exit direction and weight, energy left at the cap) is the sampling
+estimator. What differs between uses is a record of scalars, Rules (forced or analog, one
+target per walk or all, guided, orders, roulette, branch share), where the walks start, and
+their uniforms (random_kernel: a sequential generator, or keyed; numba compiles the two
+apart). Arrays cross into it once per batch: numba counts references to a function's array
+arguments at every call, which, once per walk, cost a third of a sampling walk.
+
+run serves Walker.run (whose numpy path is the reference and the fallback for diffuse facets
+and without numba); keyed_kernel.py serves the shared-path estimators of the tables and fits.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from model.bsdf.multiple_scattering.guiding import BACKWARDS
+from model.bsdf.multiple_scattering.guiding_kernel import mixture_weight, sample_backwards
 from model.bsdf.multiple_scattering.nee_kernel import (
     escape,
     facet_fresnel,
     next_event,
-    phase_reflect,
-    phase_transmit,
     projected_area,
-    refraction_normal,
     side_eta,
-    surface_arguments,
+    surface,
     target_lambdas,
     unsigned_lambda,
 )
+from model.bsdf.multiple_scattering.random_kernel import (
+    BACK_1,
+    BACK_2,
+    GUIDE,
+    HEIGHT,
+    NORMAL_1,
+    NORMAL_2,
+    ROULETTE_DRAW,
+    SCATTER,
+    draw,
+    key_of_walk,
+)
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
-from model.bsdf.primitives import inlined, normal_density, scalar, unit
+from model.bsdf.primitives import inlined, scalar, unit
 
-#: What a batch does: follow the analog walk to its exit, score towards one wo per walk, or
-#: score towards every one of a set of targets.
-SAMPLE, EVALUATE, TARGETS = 0, 1, 2
 LOG_2 = math.log(2.0)
-#: xoshiro256+'s shifts and rotation, as uint64 (numba would take a mixed int64 to float).
-SHIFT_A, ROTATE, ROTATE_BACK, DROP = (np.uint64(k) for k in (17, 45, 19, 11))
 
 
-@scalar
-def uniform(state):
-    """The next uniform in [0, 1) of the xoshiro256+ generator `state` (4 uint64, advanced in
-    place; Blackman and Vigna 2018): its top 53 bits, in about 1 ns."""
-    s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
-    result = s0 + s3
-    t = s1 << SHIFT_A
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    state[0], state[1], state[2] = s0, s1, s2
-    state[3] = (s3 << ROTATE) | (s3 >> ROTATE_BACK)
-    return float(result >> DROP) * 2.0**-53
+class Rules(NamedTuple):
+    """How a batch's walks go: forced hits (evaluating) or the analog walk; each walk scoring
+    its own row of the directions (each: one wo per walk, guided towards it when guided) or
+    all of them; score only order `order` and stop there (0: every order from min_order);
+    stop after max_order events (0: no cap); Russian roulette below weight `roulette`, played
+    after scattering (late) or before the facet normal is drawn; dielectric branches drawn
+    with probability at least `share` (0: by F)."""
+
+    forced: bool
+    each: bool
+    guided: bool
+    order: int
+    min_order: int
+    max_order: int
+    roulette: float
+    late_roulette: bool
+    share: float
+
+
+class Guide(NamedTuple):
+    """The wo (x, y, z) that guided next directions aim at, and its projected area |o_z| +
+    cos_lambda(o)."""
+
+    x: float
+    y: float
+    z: float
+    area: float
+
+
+#: Where a walk resumes (a numpy record per walk): on the outside or not, travelling along d
+#: (local frame of its side), from log height CDF cur of that side, with weight beta (0: not
+#: walked) after k events.
+PATH = np.dtype([("dx", np.float64), ("dy", np.float64), ("dz", np.float64),
+                 ("cur", np.float64), ("beta", np.float64), ("k", np.int64),
+                 ("outside", np.bool_)], align=True)
+#: Columns of walk_all's per-walk outcome: events, log C1 of the first event's height (nan if
+#: none or the walk started after one), exit direction (world; nan unless an analog walk left)
+#: and weight, energy still inside at the cap.
+EVENTS, FIRST, EXIT_X, EXIT_Y, EXIT_Z, WEIGHT, TRUNCATED = range(7)
+
+
+def paths(n: int) -> np.ndarray:
+    """n PATH records, zeros."""
+    return np.zeros(n, PATH)
 
 
 @scalar
@@ -90,223 +133,168 @@ def free_path(u, p):
 
 
 @inlined
-def event_area(ndf, ax, ay, ix, iy, iz, lam_up):
+def event_area(s, ix, iy, iz, lam_up):
     """projected_area of the event's w_in = (ix, iy, iz) from its Lambda lam_up, which the
     walk has already computed (the full formula only on the horizon)."""
     if abs(iz) > 0.0:
         return max(iz, 0.0) + abs(iz) * lam_up
-    return projected_area(ndf, ax, ay, ix, iy, iz)
-
-
-@inlined
-def scatter(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, mx, my, mz, u):
-    """Next direction from the phase function (micro.scatter): (x, y, z, factor, crossed)."""
-    c = ix * mx + iy * my + iz * mz
-    if conductor:
-        f = facet_fresnel(True, has_f, n_c, c, 1.0, 0.0)
-        return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
-    el, elm1 = side_eta(eta, outside)
-    c = min(max(c, 0.0), 1.0)
-    f = facet_fresnel(False, False, n_c, c, el, elm1)
-    sin2_t = (1.0 - c * c) / (el * el)
-    if u >= f and sin2_t < 1.0:
-        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-        k = c / el - cos_t
-        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
-        return x, y, z, 1.0, True
-    x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
-    return x, y, z, 1.0, False
-
-
-@inlined
-def adjoint_density(ndf, ax, ay, ix, iy, iz, ox, oy, oz, area, eta):
-    """Density over w_in = i of the backwards-from-wo proposal (guiding.adjoint_density);
-    area: projected_area of wo (above) or of -wo (below), |o_z| + cos_lambda(o) either way."""
-    if oz > 0.0:
-        hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
-        if hz > 0.0 and ox * hx + oy * hy + oz * hz > 0.0 and area > 0.0:
-            return normal_density(ndf, ax, ay, hx, hy, hz) / (4.0 * area)
-        return 0.0
-    hx, hy, hz, ci, co = refraction_normal(ix, iy, iz, ox, oy, oz, eta)
-    if not (ci > 0.0 and co < 0.0 and hz > 0.0 and area > 0.0):
-        return 0.0
-    denom = ci + eta * co  # D_visible(-o, h) = -co D(h) / area
-    value = -co * normal_density(ndf, ax, ay, hx, hy, hz) / area * ci / (denom * denom)
-    return value if math.isfinite(value) else 0.0
-
-
-@inlined
-def sample_adjoint(ndf, ax, ay, ox, oy, oz, eta, u1, u2):
-    """An arriving direction drawn backwards from wo (guiding.sample_adjoint): (x, y, z, ok)."""
-    above = oz > 0.0
-    s = 1.0 if above else -1.0
-    mx, my, mz = visible_normal(ndf, ax, ay, s * ox, s * oy, s * oz, u1, u2)
-    c = ox * mx + oy * my + oz * mz
-    if above:
-        x, y, z = 2.0 * c * mx - ox, 2.0 * c * my - oy, 2.0 * c * mz - oz
-        ok = c > 0.0
-    else:  # refract wo through the facet -m into a medium 1/eta times denser
-        e = 1.0 / eta
-        cn = -c
-        sin2 = (1.0 - cn * cn) / (e * e)
-        ok = sin2 < 1.0 and cn > 0.0
-        k = cn / e - math.sqrt(max(0.0, 1.0 - sin2))
-        x, y, z = unit(-ox / e - k * mx, -oy / e - k * my, -oz / e - k * mz)
-    return x, y, z, ok and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
-
-
-@inlined
-def sample_backwards(ndf, ax, ay, conductor, eta, outside, ox, oy, oz, u1, u2, u3):
-    """The guided proposal's backwards-from-wo draw (guiding.guided_scatter): a next direction
-    in this side's frame whose arrival at the next event m sends into wo, the next event on
-    the far side when u1 < 1/2 (dielectric): (x, y, z, crossed, ok)."""
-    crossed = (not conductor) and u1 < 0.5
-    side = outside != crossed
-    e_side = side_eta(eta, side)[0] if not conductor else 1.0
-    bx, by, bz, ok = sample_adjoint(ndf, ax, ay, ox, oy, oz if side else -oz, e_side, u2, u3)
-    return -bx, -by, (bz if crossed else -bz), crossed, ok  # travel along minus the arrival
-
-
-@inlined
-def mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy, iz, area, ox, oy,
-                   oz, area_o, wx, wy, wz, crossed):
-    """The walk's weight factor for next direction w however drawn, by one-sample MIS of the
-    phase function and the backwards proposal (guiding.guided_scatter): phase (with F) over
-    the mixture density. area_o: |o_z| + cos_lambda(o)."""
-    el, elm1 = side_eta(eta, outside)
-    if crossed:
-        p_phase = phase_transmit(ndf, ax, ay, el, elm1, ix, iy, iz, area, wx, wy, wz)
-        p_energy = p_phase
-    else:
-        p_phase = phase_reflect(ndf, ax, ay, conductor, False, n_c, el, elm1, ix, iy, iz, area,
-                                wx, wy, wz)
-        p_energy = phase_reflect(ndf, ax, ay, conductor, has_f, n_c, el, elm1, ix, iy, iz,
-                                 area, wx, wy, wz) if has_f else p_phase
-    next_side = outside != crossed
-    nz = oz if next_side else -oz
-    e_next = side_eta(eta, next_side)[0] if not conductor else 1.0
-    arz = wz if crossed else -wz  # arriving direction in the next event's frame
-    p_adj = adjoint_density(ndf, ax, ay, -wx, -wy, arz, ox, oy, nz, area_o, e_next)
-    if not conductor:
-        p_adj *= 0.5
-    mixture = (1.0 - BACKWARDS) * p_phase + BACKWARDS * p_adj
-    return p_energy / mixture if mixture > 0.0 else 0.0
+    return projected_area(s, ix, iy, iz)
 
 
 @scalar
-def walk_batch(ndf, ax, ay, conductor, eta, has_f, n_c, mode, guide, wi, wo, targets, u_first,
-               order, max_order, min_order, roulette, state, value, exit_dir, weight, truncated,
-               orders, first):
-    """One walk from each row of wi, uniforms from the generator state (uniform); outputs as
-    Walker.run's WalkResult (value (n, m))."""
-    forced = mode != SAMPLE
-    lam_t = target_lambdas(ndf, ax, ay, targets)
-    lam_o = target_lambdas(ndf, ax, ay, wo)
-    for i in range(wi.shape[0]):
-        outside = wi[i, 2] > 0.0
-        if conductor and not outside:
-            continue
-        if mode == EVALUATE:  # wo's Lambda and projected area, the same from either side
-            area_o = abs(wo[i, 2]) * (1.0 + lam_o[i])
-        dx, dy = -wi[i, 0], -wi[i, 1]
-        dz = -wi[i, 2] if outside else wi[i, 2]
-        cur = 0.0  # log C1 of the height on this side (h = +inf above, -inf below)
-        beta = 1.0
-        k = 0
-        while True:
+def branch_share(f, c, el, share):
+    """The probability scatter reflects with at a dielectric facet of reflectance f and cosine
+    c towards the relative index el: clip(f, share, 1 - share), f itself where only one branch
+    exists (total internal reflection, f in {0, 1}) or share is 0."""
+    if (1.0 - c * c) / (el * el) >= 1.0 or not 0.0 < f < 1.0:
+        return f
+    return min(max(f, share), 1.0 - share)
+
+
+@inlined
+def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
+    """Next direction from the phase function (micro.scatter), a dielectric facet's branch
+    chosen with probability branch_share (the weight taking F / that, or (1 - F) / its
+    complement; by F itself at share 0): (x, y, z, factor, crossed)."""
+    c = ix * mx + iy * my + iz * mz
+    if s.conductor:
+        f = facet_fresnel(s, True, c, 1.0, 0.0)
+        return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
+    el, elm1 = side_eta(s.eta, outside)
+    c = min(max(c, 0.0), 1.0)
+    f = facet_fresnel(s, True, c, el, elm1)
+    q = branch_share(f, c, el, share)
+    sin2_t = (1.0 - c * c) / (el * el)
+    if u >= q and sin2_t < 1.0:
+        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
+        k = c / el - cos_t
+        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
+        return x, y, z, (1.0 if q == f else (1.0 - f) / (1.0 - q)), True
+    x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
+    return x, y, z, (1.0 if q == f else f / q), False
+
+
+@scalar
+def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, scores, out):
+    """Walk j on the Surface s, for every row j of scores: from the top of the side wi[j]
+    lights (wi[0] for all if wi has one row; none for a conductor lit from below) down into
+    it, or where resumed[j] (PATH) says if wi has no rows; uniforms by random_kernel.draw (from
+    state, or keyed by walk index first + j under key if state is None, which numba compiles
+    apart; the first event's height and normal
+    from given[j] if given has rows, for stratification), with next-event estimation
+    at every event the Rules count: scores[j, t - lo] += beta x phase towards directions[t]
+    (unsigned_lambda lam[t]) x its escape probability, t in [lo, hi) (j alone if rules.each,
+    else all); out[j] (if out has rows) = the walk's outcome (EVENTS ... TRUNCATED; a walk of
+    weight 0 is not walked). Evaluating, the roulette (unless late) comes after an event's
+    score and before its facet normal, so an event it ends costs no normal and no
+    scattering."""
+    has_given = given.shape[0] > 0
+    for j in range(scores.shape[0]):
+        if wi.shape[0]:
+            r = j if wi.shape[0] > 1 else 0
+            outside = wi[r, 2] > 0.0
+            dx, dy, dz = -wi[r, 0], -wi[r, 1], -wi[r, 2] if outside else wi[r, 2]
+            cur, k = 0.0, 0
+            beta = 0.0 if s.conductor and not outside else 1.0
+        else:
+            start = resumed[j]
+            outside, dx, dy, dz, cur = start.outside, start.dx, start.dy, start.dz, start.cur
+            beta, k = start.beta, start.k
+        walk_key = key_of_walk(key, first + j) if state is None else np.uint64(0)
+        events, first_height = 0, math.nan
+        ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
+        lo, hi = (j, j + 1) if rules.each else (0, directions.shape[0])
+        if rules.guided:
+            guide = Guide(directions[j, 0], directions[j, 1], directions[j, 2],
+                          abs(directions[j, 2]) * (1.0 + lam[j]))
+        else:
+            guide = Guide(0.0, 0.0, 0.0, 0.0)
+        while beta > 0.0:
             k += 1
-            given = k == 1 and u_first.shape[0] > 0  # the caller's uniforms for event 1
-            ua = u_first[i, 0] if given else uniform(state)
-            lam_up = unsigned_lambda(ndf, ax, ay, dx, dy, dz)
-            lam = lam_up if dz >= 0.0 else -1.0 - lam_up
-            if forced:
-                p_hit = hit_probability(lam, cur)
-                beta *= p_hit
-                e = free_path(ua, p_hit)
-            else:
-                e = free_path(ua, 1.0)
-            new = math.inf if lam == 0.0 else cur + e / lam
+            given_here = k == 1 and has_given  # the caller's uniforms for event 1
+            u = given[j, HEIGHT] if given_here else draw(state, walk_key, k, HEIGHT)
+            lam_up = unsigned_lambda(s, dx, dy, dz)
+            lam_d = lam_up if dz >= 0.0 else -1.0 - lam_up
+            p_hit = hit_probability(lam_d, cur) if rules.forced else 1.0
+            beta *= p_hit
+            e = free_path(u, p_hit)
+            new = math.inf if lam_d == 0.0 else cur + e / lam_d
             if not new < 0.0:
-                if not forced:
-                    exit_dir[i, 0], exit_dir[i, 1] = dx, dy
-                    exit_dir[i, 2] = dz if outside else -dz
-                    weight[i] = beta
+                if not rules.forced:
+                    ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
                 break
-            other = 0.0 if conductor else log1mexp(new)  # the side below, if there is one
-            orders[i] = k
+            other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
+            events = k
             if k == 1:
-                first[i] = new if outside else other
+                first_height = new if outside else other
             ix, iy, iz = -dx, -dy, -dz
-            area = event_area(ndf, ax, ay, ix, iy, iz, lam_up)
-            if k >= min_order and (order == 0 or order == k):
-                if mode == EVALUATE:
-                    value[i, 0] += beta * next_event(ndf, ax, ay, conductor, eta, has_f, n_c,
-                                                     outside, ix, iy, iz, area, wo[i, 0],
-                                                     wo[i, 1], wo[i, 2], lam_o[i], new, other)
-                elif mode == TARGETS:
-                    for t in range(targets.shape[0]):
-                        value[i, t] += beta * next_event(ndf, ax, ay, conductor, eta, has_f,
-                                                         n_c, outside, ix, iy, iz, area,
-                                                         targets[t, 0], targets[t, 1],
-                                                         targets[t, 2], lam_t[t], new, other)
-            if order and k >= order:
+            area = event_area(s, ix, iy, iz, lam_up)
+            if k >= rules.min_order and (rules.order == 0 or rules.order == k):
+                for t in range(lo, hi):
+                    scores[j, t - lo] += beta * next_event(
+                        s, outside, ix, iy, iz, area, directions[t, 0], directions[t, 1],
+                        directions[t, 2], lam[t], new, other)
+            if rules.order and k >= rules.order:
                 break
-            if forced and beta < roulette:  # Russian roulette before scattering: a walk it
-                if uniform(state) * roulette < beta:  # ends costs no normal, no scatter
-                    beta = roulette
+            if rules.forced and not rules.late_roulette and beta < rules.roulette:
+                if draw(state, walk_key, k, ROULETTE_DRAW) * rules.roulette < beta:
+                    beta = rules.roulette
                 else:
                     break
-            if guide and uniform(state) < BACKWARDS:  # only the proposal drawn is computed
-                wx, wy, wz, crossed, ok = sample_backwards(
-                    ndf, ax, ay, conductor, eta, outside, wo[i, 0], wo[i, 1], wo[i, 2],
-                    uniform(state), uniform(state), uniform(state))
+            # only the proposal drawn is computed
+            if rules.guided and draw(state, walk_key, k, GUIDE) < BACKWARDS:
+                u1 = draw(state, walk_key, k, SCATTER)
+                u2 = draw(state, walk_key, k, BACK_1)
+                u3 = draw(state, walk_key, k, BACK_2)
+                wx, wy, wz, crossed, ok = sample_backwards(s, outside, guide.x, guide.y, guide.z,
+                                                           u1, u2, u3)
                 factor = 1.0 if ok else 0.0  # a failed draw ends the walk (guiding.py)
             else:
-                ub = u_first[i, 1] if given else uniform(state)
-                uc = u_first[i, 2] if given else uniform(state)
-                mx, my, mz = visible_normal(ndf, ax, ay, ix, iy, iz, ub, uc)
-                wx, wy, wz, factor, crossed = scatter(ndf, ax, ay, conductor, eta, has_f, n_c,
-                                                      outside, ix, iy, iz, mx, my, mz,
-                                                      uniform(state))
-            if guide and factor > 0.0:
-                factor = mixture_weight(ndf, ax, ay, conductor, eta, has_f, n_c, outside, ix, iy,
-                                        iz, area, wo[i, 0], wo[i, 1], wo[i, 2], area_o, wx, wy,
-                                        wz, crossed)
+                u1 = given[j, NORMAL_1] if given_here else draw(state, walk_key, k,
+                                                                NORMAL_1)
+                u2 = given[j, NORMAL_2] if given_here else draw(state, walk_key, k,
+                                                                NORMAL_2)
+                mx, my, mz = visible_normal(s, ix, iy, iz, u1, u2)
+                u3 = draw(state, walk_key, k, SCATTER)
+                wx, wy, wz, factor, crossed = scatter(s, outside, ix, iy, iz, mx, my, mz, u3,
+                                                      rules.share)
+            if rules.guided and factor > 0.0:
+                factor = mixture_weight(s, outside, ix, iy, iz, area, guide, wx, wy, wz,
+                                        crossed)
             beta *= factor
             if crossed:
                 outside = not outside
-                dx, dy, dz = wx, wy, -wz
-                cur = other
+                dx, dy, dz, cur = wx, wy, -wz, other
             else:
-                dx, dy, dz = wx, wy, wz
-                cur = new
-            if max_order and k >= max_order:
-                truncated[i] = beta * (1.0 - escape(ndf, ax, ay, dx, dy, dz, cur))
+                dx, dy, dz, cur = wx, wy, wz, new
+            if rules.max_order and k >= rules.max_order:
+                truncated = beta * (1.0 - escape(s, dx, dy, dz, cur))
                 break
-            if not beta > 0.0:
-                break
+            if rules.late_roulette and beta < rules.roulette:
+                u = draw(state, walk_key, k, ROULETTE_DRAW)
+                beta = rules.roulette if u * rules.roulette < beta else 0.0
+        if out.shape[0]:
+            out[j, EVENTS], out[j, FIRST], out[j, WEIGHT], out[j, TRUNCATED] = (
+                events, first_height, weight, truncated)
+            out[j, EXIT_X], out[j, EXIT_Y], out[j, EXIT_Z] = ex, ey, ez
 
 
 def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, unit_mode,
         u_first, targets, min_order, roulette):
     """Walker.run by the kernel: the arrays of a WalkResult, in its field order."""
     n = wi.shape[0]
-    mode = SAMPLE if wo is None and targets is None else (EVALUATE if targets is None
-                                                          else TARGETS)
-    value = np.zeros((n, 1 if targets is None else len(targets)))
-    exit_dir = np.full((n, 3), np.nan)
-    weight, truncated = np.zeros(n), np.zeros(n)
-    orders = np.zeros(n, dtype=np.int64)
-    first = np.full(n, np.nan)
-    empty = np.zeros((0, 3))
-    walk_batch(*surface_arguments(walker.slopes, walker.micro, unit_mode), mode,
-               mode == EVALUATE and walker.guided,
-               np.ascontiguousarray(wi, dtype=np.float64),
-               empty if wo is None else np.ascontiguousarray(wo, dtype=np.float64),
-               empty if targets is None else np.ascontiguousarray(targets, dtype=np.float64),
-               empty if u_first is None else np.ascontiguousarray(u_first, dtype=np.float64),
-               order or 0, max_order or 0, int(min_order), float(roulette),
-               rng.integers(0, 2**64, size=4, dtype=np.uint64), value, exit_dir, weight,
-               truncated, orders, first)
-    return (value if targets is not None else value[:, 0], exit_dir, weight, truncated, orders,
-            first)
+    wi = np.ascontiguousarray(wi, dtype=np.float64)
+    each = wo is not None and targets is None  # one target per walk: its wo
+    sampling = wo is None and targets is None
+    aims = np.ascontiguousarray(wo if each else (np.zeros((0, 3)) if sampling else targets),
+                                dtype=np.float64).reshape(-1, 3)
+    s = surface(walker.slopes, walker.micro, unit_mode)
+    value = np.zeros((n, 1 if each or sampling else len(aims)))
+    out = np.empty((n, 7))
+    walk_all(s, Rules(not sampling, each, each and walker.guided, order or 0,
+                      int(min_order), max_order or 0, float(roulette), False, 0.0),
+             wi, paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64),
+             np.zeros((0, 3)) if u_first is None else np.ascontiguousarray(u_first, np.float64),
+             aims, target_lambdas(s, aims), value, out)
+    return (value if targets is not None else value[:, 0], out[:, EXIT_X:EXIT_Z + 1],
+            out[:, WEIGHT], out[:, TRUNCATED], out[:, EVENTS].astype(np.int64), out[:, FIRST])
