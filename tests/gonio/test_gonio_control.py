@@ -63,8 +63,9 @@ def test_status_pause_resume_abort_and_a_bad_token(tmp_path):
         assert channel.ask("pause")["state"] in ("pausing", "paused")
         paused = wait_until(lambda: (s := channel.ask("status"))["state"] == "paused" and s,
                             what="the run paused")
+        # meta.json follows the state (the engine's Paused event)
+        wait_until(lambda: open_run(run_dir).meta["status"] == "paused", what="meta.json paused")
         channel.stays_paused(paused["readings"])  # no terminal input: it waits on the channel
-        assert open_run(run_dir).meta["status"] == "paused"
         assert len(open_run(run_dir)) == paused["readings"]
 
         assert channel.ask("resume")["state"] == "running"
