@@ -1,7 +1,8 @@
 """Helpers for the gonio tests (a plain module, not a conftest, so its name is unique):
 example configs made fast (instant motion, cheap aperture integral), a small TOML writer,
-running the real `gonio` CLI (and `gonio emulate`) in a subprocess, and a Ctrl-C stand-in
-that aborts a scan after some points."""
+running the real `gonio` CLI (and `gonio emulate`) in a subprocess, the emulators `gonio
+emulate` serves in this process (to watch their motion), a scan's control channel, and a Ctrl-C
+stand-in that aborts a scan after some points."""
 
 from __future__ import annotations
 
@@ -22,9 +23,10 @@ from gonio.engine import Engine, Outcome
 from gonio.events import EventBus
 from gonio.recorder import RunRecorder
 from gonio.run_control import TERMINAL, PauseControl
+from sim.emulate import EmulatedBench
 
 ROOT = Path(__file__).resolve().parents[2]
-#: round trips over which an arm at rest must stay put
+#: round trips over which an arm at rest must stay put (or a paused run unchanged)
 REST_CHECKS = 30
 EXAMPLES = ROOT / "examples"
 
@@ -212,6 +214,26 @@ def emulating(config_path: Path, *options: str) -> Iterator[dict[str, tuple[str,
         assert proc.returncode == 0, err
 
 
+@contextmanager
+def serving(config_path: Path) -> Iterator[tuple[dict[str, tuple[str, str]], EmulatedBench]]:
+    """What `gonio emulate CFG` serves (gonio.simulate.serve), in this process; yields the
+    endpoints as `emulating` does and the bench, whose emulated axes a test may watch."""
+    from gonio.config import load_config
+    from gonio.simulate import serve
+
+    with serve(load_config(config_path)) as bench:
+        yield {name: (e.protocol, e.endpoint) for name, e in bench.endpoints.items()}, bench
+
+
+def arm_on_its_way(bench: EmulatedBench, target_deg: float, past_deg: float) -> None:
+    """Until the emulated ESP arm (axis 2) moves toward target_deg and has passed past_deg (a
+    move under way, watched in the emulator, not over the port the scan holds)."""
+    arm = bench.emulators["esp"].axes[2].motion
+    wait_until(lambda: arm.is_moving() and arm.target() == target_deg
+               and arm.position() >= past_deg, what=f"the arm past {past_deg:g} deg on its "
+               f"way to {target_deg:g} deg")
+
+
 def pointed(cfg: dict, endpoints: dict[str, tuple[str, str]]) -> dict:
     """What a user does by hand: a config with the endpoints `gonio emulate` printed."""
     cfg = {**cfg, "devices": {n: dict(d) for n, d in cfg["devices"].items()}}
@@ -241,3 +263,42 @@ def esp_arm_at_rest(port_path: str, timeout_s: float = 5.0) -> float:
         for _ in range(REST_CHECKS):
             assert ask("2MD?;2TP") == f"1,{first:.5f}"  # at rest, unmoved
         return first
+
+
+def token_of(proc: subprocess.Popen) -> tuple[str, str]:
+    """The token and run directory from a scan's `gonio: control token` stderr line (the
+    lines before it are read and dropped)."""
+    for line in proc.stderr:
+        if line.startswith("gonio: control token "):
+            words = line.split()
+            return words[3], words[6]
+    raise AssertionError(f"no token line; stdout: {proc.stdout.read()}")
+
+
+class Channel:
+    """One connection to a run's control channel (gonio.control), several requests on it."""
+
+    def __init__(self, run_dir: str | Path, token: str):
+        from gonio.control import connect
+
+        self.token = token
+        self.sock = connect(run_dir)
+        self.lines = self.sock.makefile("rb")
+
+    def ask(self, command: str, token: str | None = None) -> dict:
+        """The reply to one command, with the session's token unless another is given."""
+        request = {"token": self.token if token is None else token, "command": command}
+        self.sock.sendall(json.dumps(request).encode() + b"\n")
+        return json.loads(self.lines.readline())
+
+    def stays_paused(self, readings: int) -> None:
+        """The run answers paused with `readings` stored over REST_CHECKS round trips: the
+        scan's channel thread serves them while nothing is measured."""
+        for _ in range(REST_CHECKS):
+            status = self.ask("status")
+            assert (status["state"], status["readings"]) == ("paused", readings), status
+
+    def close(self) -> None:
+        """Close the connection."""
+        self.lines.close()
+        self.sock.close()

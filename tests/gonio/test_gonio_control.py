@@ -3,23 +3,25 @@
 status aborted), a bad token refused with nothing done, the socket mode 0600 and removed when
 the scan ends; the pause waits on the channel even with no terminal input."""
 
-import json
 import os
 import signal
 import stat
 import subprocess
 import sys
-import time
 
 from gonio_testkit import (
     ROOT,
-    emulating,
+    Channel,
+    arm_on_its_way,
     esp_arm_at_rest,
     fast_config,
     pointed,
+    serving,
+    token_of,
     write_plan,
     write_toml,
 )
+from waiting import wait_until
 
 from gonio.config import load_config
 from gonio.control import SOCKET, connect
@@ -39,69 +41,38 @@ def scan(plan, *args) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
 
 
-def token_of(proc: subprocess.Popen) -> tuple[str, str]:
-    """The token and run directory from the scan's `gonio: control token` stderr line."""
-    for line in proc.stderr:
-        if line.startswith("gonio: control token "):
-            words = line.split()
-            return words[3], words[6]
-    raise AssertionError(f"no token line; stdout: {proc.stdout.read()}")
-
-
-class Channel:
-    """One connection to a run's control channel, several requests on it."""
-
-    def __init__(self, run_dir: str):
-        self.sock = connect(run_dir)
-        self.lines = self.sock.makefile("rb")
-
-    def ask(self, token: str, command: str) -> dict:
-        self.sock.sendall(json.dumps({"token": token, "command": command}).encode() + b"\n")
-        return json.loads(self.lines.readline())
-
-    def close(self) -> None:
-        self.lines.close()
-        self.sock.close()
-
-
-def until(predicate, timeout: float = 30.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.01)
-    raise AssertionError("condition not reached")
-
-
 def test_status_pause_resume_abort_and_a_bad_token(tmp_path):
     proc = scan(write_plan(tmp_path, PLAN, fast_config(time_scale=8.0)), "--sim",
                 "--out", tmp_path / "runs")
     token, run_dir = token_of(proc)
     assert stat.S_IMODE(os.stat(os.path.join(run_dir, SOCKET)).st_mode) == 0o600
     assert token not in "".join(p.read_text() for p in tmp_path.glob("runs/*/*.json"))
-    channel = Channel(run_dir)
+    channel = Channel(run_dir, token)
     try:
-        first = channel.ask(token, "status")
+        first = channel.ask("status")
         assert first["ok"] and first["state"] in ("starting", "running")
-        first = until(lambda: (s := channel.ask(token, "status"))["state"] == "running" and s)
+        first = wait_until(lambda: (s := channel.ask("status"))["state"] == "running" and s,
+                           what="a running scan")
         assert first["planned"] > 20
-        assert channel.ask("0" * 32, "pause") == {"ok": False, "error": "bad token"}
-        assert channel.ask("", "status") == {"ok": False, "error": "bad token"}
-        until(lambda: channel.ask(token, "status")["readings"] >= first["readings"] + 2)
-        assert channel.ask(token, "status")["state"] == "running"  # the bad pause did nothing
+        assert channel.ask("pause", "0" * 32) == {"ok": False, "error": "bad token"}
+        assert channel.ask("status", "") == {"ok": False, "error": "bad token"}
+        wait_until(lambda: channel.ask("status")["readings"] >= first["readings"] + 2,
+                   what="two more readings")
+        assert channel.ask("status")["state"] == "running"  # the bad pause did nothing
 
-        assert channel.ask(token, "pause")["state"] in ("pausing", "paused")
-        paused = until(lambda: (s := channel.ask(token, "status"))["state"] == "paused" and s)
-        time.sleep(0.4)  # no terminal input: the pause waits on the channel
-        assert channel.ask(token, "status")["readings"] == paused["readings"]
-        assert open_run(run_dir).meta["status"] == "paused"
+        assert channel.ask("pause")["state"] in ("pausing", "paused")
+        paused = wait_until(lambda: (s := channel.ask("status"))["state"] == "paused" and s,
+                            what="the run paused")
+        # meta.json follows the state (the engine's Paused event)
+        wait_until(lambda: open_run(run_dir).meta["status"] == "paused", what="meta.json paused")
+        channel.stays_paused(paused["readings"])  # no terminal input: it waits on the channel
         assert len(open_run(run_dir)) == paused["readings"]
 
-        assert channel.ask(token, "resume")["state"] == "running"
-        until(lambda: channel.ask(token, "status")["readings"] > paused["readings"])
-        assert channel.ask(token, "resume") == {"ok": False, "error": "not paused (running)"}
-        assert channel.ask(token, "abort")["state"] == "stopping"
+        assert channel.ask("resume")["state"] == "running"
+        wait_until(lambda: channel.ask("status")["readings"] > paused["readings"],
+                   what="a reading after the resume")
+        assert channel.ask("resume") == {"ok": False, "error": "not paused (running)"}
+        assert channel.ask("abort")["state"] == "stopping"
     finally:
         channel.close()
     out, err = proc.communicate(timeout=30)
@@ -115,16 +86,15 @@ def test_status_pause_resume_abort_and_a_bad_token(tmp_path):
 
 
 def test_abort_from_the_channel_stops_the_arm_on_its_way(tmp_path):
-    cfg = fast_config(time_scale=5.0)  # moves of tens of degrees take about a second
-    with emulating(write_toml(tmp_path / "emulated.toml", cfg)) as endpoints:
+    cfg = fast_config(time_scale=1.0)  # real time: 10 -> 80 deg takes 2.6 s
+    with serving(write_toml(tmp_path / "emulated.toml", cfg)) as (endpoints, bench):
         plan = write_plan(tmp_path, FAR, pointed(cfg, endpoints))
         proc = scan(plan, "--out", tmp_path / "runs")
         token, run_dir = token_of(proc)
-        channel = Channel(run_dir)
+        channel = Channel(run_dir, token)
         try:
-            until(lambda: channel.ask(token, "status")["readings"] >= 1)
-            time.sleep(0.3)  # into the next move
-            assert channel.ask(token, "abort")["ok"]
+            arm_on_its_way(bench, 80.0, 30.0)  # from the first target to the second
+            assert channel.ask("abort")["ok"]
         finally:
             channel.close()
         _, err = proc.communicate(timeout=30)

@@ -4,10 +4,10 @@ where it is."""
 
 import signal
 import threading
-import time
 
 import pytest
 from gonio_testkit import fast_config, run_engine
+from waiting import wait_until
 
 from gonio.config import parse_config
 from gonio.instrument import build_instrument
@@ -49,20 +49,21 @@ def test_device_error_stops_at_once_with_the_devices_words(bench):
 def test_second_ctrl_c_during_a_move_stops_the_axis(bench):
     esp, run = bench
     arm = esp.axes[2].motion
+    pausing = threading.Event()
 
     def interrupt():
-        while arm.position() < 30.0:  # the move (6 -> 85 deg) is under way
-            time.sleep(0.005)
-        for _ in range(2):
-            signal.raise_signal(signal.SIGINT)
-            time.sleep(0.05)
+        wait_until(lambda: arm.position() >= 30.0, what="the move (6 -> 85 deg) under way")
+        signal.raise_signal(signal.SIGINT)
+        wait_until(pausing.is_set, what="the first Ctrl-C taken as a pause")
+        signal.raise_signal(signal.SIGINT)
 
     far = {"name": "far", "grid": [{"theta_i_deg": [0.0], "theta_o_deg": [85.0]}]}
     threading.Thread(target=interrupt, daemon=True).start()
-    outcome, writer = run(far, PauseControl(prompt=lambda: True, notify=lambda m: None))
+    outcome, writer = run(far, PauseControl(prompt=lambda: True,
+                                            notify=lambda message: pausing.set()))
     assert outcome.status == "aborted" and outcome.done == 0
-    time.sleep(0.5)  # the stop decelerates (ST), it does not jump
-    assert not arm.is_moving()
+    # the stop decelerates (ST), it does not jump: the arm comes to rest after the run ends
+    wait_until(lambda: not arm.is_moving(), what="the arm at rest")
     assert 30.0 < arm.position() < 80.0  # stopped well short of the target
     assert open_run(writer.path).meta["status"] == "aborted"
 
@@ -72,8 +73,7 @@ def test_the_arm_is_never_sent_through_the_source(bench):
     arm = esp.axes[2].motion
     arm.limits = (-170.0, 170.0)
     arm.move_to(-30.0)  # left on the far side of the source by someone else
-    while arm.is_moving():
-        time.sleep(0.01)
+    wait_until(lambda: not arm.is_moving(), what="the arm at -30 deg")
     outcome, writer = run(ONE_MOVE)
     assert outcome.status == "failed" and outcome.done == 0
     assert "sweep through the source (-30 -> 40 deg); not moved" in open_run(writer.path

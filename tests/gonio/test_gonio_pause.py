@@ -6,9 +6,9 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
-from gonio_testkit import ROOT, fast_config, gonio_cli, run_dir_of, write_toml
+from gonio_testkit import ROOT, Channel, fast_config, gonio_cli, run_dir_of, token_of, write_toml
+from waiting import wait_until
 
 from gonio.store import open_run
 
@@ -28,9 +28,9 @@ def start(tmp_path):
                             stderr=subprocess.PIPE, text=True, env=env)
 
 
-def wait_for(tmp_path, predicate, timeout=30.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+def wait_for(tmp_path, predicate):
+    """Until a run's meta.json and readings count satisfy predicate; returns its directory."""
+    def run_dir():
         for meta in (tmp_path / "runs").glob("*/meta.json"):
             try:
                 data = json.loads(meta.read_text())
@@ -39,21 +39,36 @@ def wait_for(tmp_path, predicate, timeout=30.0):
             lines = (meta.parent / "readings.jsonl").read_bytes().count(b"\n")
             if predicate(data, lines):
                 return meta.parent
-        time.sleep(0.01)
-    raise AssertionError("condition not reached")
+        return None
+
+    return wait_until(run_dir, what="the run's state", poll_s=0.01)
+
+
+def pausing(proc: subprocess.Popen) -> None:
+    """Until the scan has taken a Ctrl-C as a pause: its `pausing after this point` line."""
+    for line in proc.stderr:
+        if line.startswith("pausing after this point"):
+            return
+    raise AssertionError("the scan ended without pausing")
 
 
 def test_ctrl_c_pauses_and_resume_continues(tmp_path):
     proc = start(tmp_path)
+    token, _ = token_of(proc)
     wait_for(tmp_path, lambda m, n: n >= 3)
     proc.send_signal(signal.SIGINT)
+    pausing(proc)
     run_dir = wait_for(tmp_path, lambda m, n: m["status"] == "paused")
     paused_at = len(open_run(run_dir))
-    time.sleep(0.3)
+    channel = Channel(run_dir, token)
+    try:
+        channel.stays_paused(paused_at)
+    finally:
+        channel.close()
     assert len(open_run(run_dir)) == paused_at  # nothing measured while paused
     out, err = proc.communicate("r\n", timeout=60)
     assert proc.returncode == 0, err
-    assert "pausing after this point" in err and "paused: [r]esume or [a]bort?" in err
+    assert "paused: [r]esume or [a]bort?" in err
     assert run_dir_of(subprocess.CompletedProcess([], 0, out, err)) == run_dir
     run = open_run(run_dir)
     assert run.meta["status"] == "completed" and len(run) == run.meta["planned"]
@@ -83,7 +98,7 @@ def test_ctrl_c_twice_in_a_move_aborts_at_once(tmp_path):
     proc = start(tmp_path)
     wait_for(tmp_path, lambda m, n: n >= 2)
     proc.send_signal(signal.SIGINT)
-    time.sleep(0.02)
+    pausing(proc)  # the first taken: the second is not merged into it
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err

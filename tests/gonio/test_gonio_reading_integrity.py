@@ -53,6 +53,7 @@ class LateReplies(FaultInjector):
             self.measurements += 1
             if self.measurements % self.every == 0:
                 self.late += 1
+                # the fault under test: late past the driver's timeout, which is real time
                 time.sleep(self.timeout_s * self._draw.uniform(1.1, 1.9))
         return super().reply(data, keep_tail, crc_bytes)
 

@@ -9,22 +9,23 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 from gonio_testkit import (
     ROOT,
-    emulating,
+    arm_on_its_way,
     esp_arm_at_rest,
     fast_config,
     gonio_cli,
     pointed,
     run_dir_of,
+    serving,
     start_gonio,
     wait_for_lines,
     write_plan,
     write_toml,
 )
+from waiting import wait_until
 
 from gonio.config import load_config
 from gonio.plan import build_schedule, load_plan
@@ -39,12 +40,11 @@ def scan(*args: object, stdin=subprocess.DEVNULL) -> subprocess.Popen:
 
 
 def test_sigterm_stops_the_arm_of_a_two_process_rehearsal(tmp_path):
-    cfg = fast_config(time_scale=5.0)  # moves of tens of degrees take about a second
-    with emulating(write_toml(tmp_path / "emulated.toml", cfg)) as endpoints:
+    cfg = fast_config(time_scale=1.0)  # real time: 10 -> 80 deg takes 2.6 s
+    with serving(write_toml(tmp_path / "emulated.toml", cfg)) as (endpoints, bench):
         plan = write_plan(tmp_path, FAR, pointed(cfg, endpoints))
         proc = scan(plan, "--out", tmp_path / "runs")
-        wait_for_lines(tmp_path / "runs", 1, proc)
-        time.sleep(0.3)  # into the next move
+        arm_on_its_way(bench, 80.0, 30.0)  # from the first target to the second
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 128 + signal.SIGTERM, err
@@ -74,9 +74,9 @@ def test_sighup_aborts_and_the_run_resumes(tmp_path):
 def test_sigint_as_the_run_directory_appears_pauses_and_end_of_input_aborts(tmp_path):
     runs = tmp_path / "runs"
     proc = scan(write_plan(tmp_path, FAR, fast_config()), "--sim", "--out", runs)
-    while not list(runs.glob("*/meta.json")):
-        assert proc.poll() is None, proc.communicate()
-        time.sleep(0.001)
+    wait_until(lambda: list(runs.glob("*/meta.json")) or proc.poll() is not None,
+               what="the run directory", poll_s=0.001)
+    assert proc.poll() is None, proc.communicate()
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err

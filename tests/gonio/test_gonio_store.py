@@ -8,12 +8,14 @@ import os
 import re
 import shutil
 import signal
+import sys
 import threading
 import time
 import zlib
 
 import numpy as np
 import pytest
+from waiting import HANG_S, wait_until
 
 import gonio.store
 from gonio.errors import RunError
@@ -29,6 +31,8 @@ from gonio.store import (
     digest_problems,
     open_run,
 )
+
+SLOW_FSYNC_S = 0.02  # how long the slow recorder's fsync of a line takes
 
 
 def row(i, **kw):
@@ -236,10 +240,11 @@ def test_a_run_has_one_writer_at_a_time(writer):
     again.close()
 
 
-def _readings_fsyncs(monkeypatch, fail: bool = False, slow_s: float = 0.02
+def _readings_fsyncs(monkeypatch, fail: bool = False, held: threading.Event | None = None
                      ) -> list[tuple[int, int]]:
     """Route the store's fsyncs of readings.jsonl through a slow recorder (file size when the
-    fsync started and when it returned) or, with fail, an I/O error; returns the records."""
+    fsync started and when it returned), one held until `held` is set, or, with fail, an I/O
+    error; returns the records."""
     real_fsync, calls = os.fsync, []
 
     def fsync(fd: int) -> None:
@@ -248,12 +253,23 @@ def _readings_fsyncs(monkeypatch, fail: bool = False, slow_s: float = 0.02
         if fail:
             raise OSError(errno.EIO, "Input/output error")
         started = os.fstat(fd).st_size
-        time.sleep(slow_s)
+        if held is None:
+            time.sleep(SLOW_FSYNC_S)  # a slow disk, the thing tested: the next line waits
+        else:
+            assert held.wait(HANG_S), "the test never let the fsync return"
         real_fsync(fd)
         calls.append((started, os.fstat(fd).st_size))
 
     monkeypatch.setattr(gonio.store.os, "fsync", fsync)
     return calls
+
+
+def _main_thread_in(function: str) -> bool:
+    """True while the main thread runs `function` (at any depth of its stack)."""
+    frame = sys._current_frames().get(threading.main_thread().ident)
+    while frame is not None and frame.f_code.co_name != function:
+        frame = frame.f_back
+    return frame is not None
 
 
 def test_each_line_is_written_at_once_and_fsynced_before_the_next(writer, monkeypatch):
@@ -284,13 +300,19 @@ def test_a_failed_fsync_stops_the_writing(writer, monkeypatch):
 def test_ctrl_c_while_waiting_for_an_fsync_leaves_it_awaited(writer, monkeypatch):
     """A second Ctrl-C (KeyboardInterrupt) that lands while append waits for the previous
     line's fsync: the run then stops, and meta.json must still come after that fsync."""
-    fsyncs = _readings_fsyncs(monkeypatch, slow_s=1.0)
+    held = threading.Event()
+    fsyncs = _readings_fsyncs(monkeypatch, held=held)
     writer.append(row(0))
-    threading.Timer(0.1, signal.pthread_kill,
-                    (threading.main_thread().ident, signal.SIGINT)).start()
+
+    def ctrl_c_in_the_wait() -> None:
+        wait_until(lambda: _main_thread_in("wait_stored"), what="append waiting for the fsync")
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    threading.Thread(target=ctrl_c_in_the_wait, daemon=True).start()
     with pytest.raises(KeyboardInterrupt):
         writer.append(row(1))
     assert fsyncs == []  # interrupted before the fsync of line 0 returned
+    held.set()
     writer.set_status("aborted", "aborted by the user (Ctrl-C)")
     assert len(fsyncs) == 1  # set_status waited for it
     assert len(open_run(writer.path)) == 1

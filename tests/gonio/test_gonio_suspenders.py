@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from gonio_testkit import ROOT, fast_config, write_plan
+from waiting import wait_until
 
 from gonio.errors import PlanError
 from gonio.plan import parse_plan
@@ -44,6 +45,12 @@ def start(folder, name: str, sim: dict, suspend=SUSPEND) -> subprocess.Popen:
                             stderr=subprocess.PIPE, env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
+def run_seconds(out: Path) -> float:
+    """Seconds since the run under `out` started, on the clock its faults follow (wall time
+    since meta.json's t0_epoch, sim.emulate)."""
+    return time.time() - json.loads(next(out.glob("*/meta.json")).read_text())["t0_epoch"]
+
+
 def at_the_prompt(proc: subprocess.Popen, out: Path) -> float:
     """Wait for the signature pass's prompt; returns when it came (run seconds)."""
     seen = b""
@@ -51,16 +58,16 @@ def at_the_prompt(proc: subprocess.Popen, out: Path) -> float:
         chunk = os.read(proc.stderr.fileno(), 4096)
         assert chunk, (seen + proc.communicate()[1]).decode()
         seen += chunk
-    return time.time() - json.loads(next(out.glob("*/meta.json")).read_text())["t0_epoch"]
+    return run_seconds(out)
 
 
-def answer(proc: subprocess.Popen, prompted_s: float, at_s: float | None = None
+def answer(proc: subprocess.Popen, runs: Path, prompted_s: float, at_s: float | None = None
            ) -> tuple[Path, int]:
-    """Answer the prompt (once `at_s` run seconds have passed); the run directory and the
-    exit status."""
+    """Answer the prompt (once the run's clock has passed `at_s`: its faults have begun); the
+    run directory and the exit status."""
     if at_s is not None:
         assert prompted_s < at_s, "the run reached the prompt too late"
-        time.sleep(at_s - prompted_s)
+        wait_until(lambda: run_seconds(runs) >= at_s, what=f"run second {at_s:g}", poll_s=0.01)
     out, _ = proc.communicate(b"c\n", timeout=120)
     return Path(out.decode().split()[-1]), proc.returncode
 
@@ -72,7 +79,7 @@ def rows(run_dir):
 def test_suspended_runs_store_the_undisturbed_rows_or_fail_past_the_timeout(tmp_path):
     calm = start(tmp_path, "calm", {})
     calm_prompt = at_the_prompt(calm, tmp_path / "calm")
-    calm_dir, code = answer(calm, calm_prompt)
+    calm_dir, code = answer(calm, tmp_path / "calm", calm_prompt)
     assert code == 0
     # a fault may begin once a scan that starts like the calm one has surely reached its
     # prompt, however loaded the machine (two scans at once now)
@@ -84,8 +91,8 @@ def test_suspended_runs_store_the_undisturbed_rows_or_fail_past_the_timeout(tmp_
                                                        "depth": 0.5}}},
                  suspend={**SUSPEND, "timeout_s": 0.5})
     prompts = [at_the_prompt(held, tmp_path / "held"), at_the_prompt(long, tmp_path / "long")]
-    held_dir, held_code = answer(held, prompts[0], begin + 0.05)
-    long_dir, long_code = answer(long, prompts[1], begin + 0.05)
+    held_dir, held_code = answer(held, tmp_path / "held", prompts[0], begin + 0.05)
+    long_dir, long_code = answer(long, tmp_path / "long", prompts[1], begin + 0.05)
 
     # the emergency stop holds the first reading after the prompt, the dip the closing beam
     # reading; released, each is measured as if nothing had happened

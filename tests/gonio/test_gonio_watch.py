@@ -11,12 +11,12 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from contextlib import contextmanager
 
 import numpy as np
 import pytest
 from gonio_testkit import ROOT, gonio_cli, one_line_error
+from waiting import wait_until
 from watch_testkit import plan_file
 
 from calibration.pipeline import reduce_run
@@ -399,10 +399,10 @@ def test_scan_watch_serves_the_run_beside_the_scan(tmp_path):
     run = open_run(out.strip().splitlines()[-1])
     assert run.meta["status"] == "completed" and doc["run"] == run.path.name
     assert doc["planned"] == run.meta["planned"] == len(run.rows())
-    for _ in range(100):  # the viewer saw the page ask, so it lingers until told the end
+    def status() -> str:
         conn.request("GET", "/status.json")
-        if json.loads(conn.getresponse().read())["status"] == "completed":
-            break
-        time.sleep(0.1)
-    else:
-        raise AssertionError("the viewer never showed the run's end")
+        return json.loads(conn.getresponse().read())["status"]
+
+    # the viewer saw the page ask, so it lingers until told the end
+    wait_until(lambda: status() == "completed", what="the viewer showing the run's end",
+               poll_s=0.1)

@@ -4,15 +4,18 @@ with the emulator's truth once dark and beam readings allow it, and the page's p
 and abort buttons act on the scan through its control channel."""
 
 import json
-import time
+from functools import partial
 
 import pytest
 from waiting import wait_until
 from watch_testkit import (
     chromium,
     missing,
+    open_page,
+    page_clock,
     page_counts,
     plan_file,
+    polls_since,
     scanning,
     watching,
 )
@@ -22,8 +25,7 @@ from gonio.store import open_run
 pytestmark = [pytest.mark.browser,
               pytest.mark.skipif(missing() is not None, reason=str(missing()))]
 
-POLL_S = 1.0  # the page's polling interval (watch.js POLL_MS)
-LAG_S = 2.5 * POLL_S  # how far the page may be behind the store: a poll and its fetches
+LAG_POLLS = 2  # how far the page may be behind the store: a poll under way, and the next
 
 
 def reduced_points(driver) -> int:
@@ -33,18 +35,26 @@ def reduced_points(driver) -> int:
         " ? document.querySelectorAll('.bsdf-panel .pt').length : 0")
 
 
+def caught_up(driver, stored: int, mark_ms: float) -> tuple[int, int, int] | bool:
+    """(the page's count, its raw points, its polls since mark_ms) once a poll since the mark
+    has answered and the page shows `stored` readings; False until then."""
+    polls, (page, points, _) = polls_since(driver, mark_ms), page_counts(driver)
+    return polls >= 1 and min(page, points) >= stored and (page, points, polls)
+
+
 def test_page_follows_the_store_while_the_scan_runs(tmp_path):
     with scanning(plan_file(tmp_path, 4.0), tmp_path / "runs") as scan, \
             watching(scan.run_dir) as url, chromium(1400, 1250) as driver:
-        driver.get(url)
+        open_page(driver, url)
         seen = []
         while scan.proc.poll() is None:
-            before = scan.stored()
-            time.sleep(LAG_S)  # the page polls in between
-            page, points, _ = page_counts(driver)
+            before, mark = scan.stored(), page_clock(driver)
+            # the page polls in between and shows what was stored before
+            page, points, polls = wait_until(partial(caught_up, driver, before, mark),
+                                             what=f"{before} readings on the page", poll_s=0.05)
             after = scan.stored()
-            assert before <= page <= after and before <= points <= after, \
-                (before, page, points, after)
+            assert polls <= LAG_POLLS and page <= after and points <= after, \
+                (before, page, points, after, polls)
             seen.append(page)
             if len(seen) == 3:
                 driver.save_screenshot(str(tmp_path / "watch.png"))
@@ -73,7 +83,7 @@ def test_pause_resume_and_abort_from_the_page(tmp_path):
     with scanning(plan_file(tmp_path, 4.0), tmp_path / "runs") as scan, \
             watching(scan.run_dir, wait_until(scan.token, what="the token line")) as url, \
             chromium() as driver:
-        driver.get(url)
+        open_page(driver, url)
         pause = driver.find_element("id", "pause")
         wait_until(lambda: pause.is_enabled() and page_counts(driver)[0] >= 3,
                    what="a running scan with the pause button enabled")
@@ -81,8 +91,9 @@ def test_pause_resume_and_abort_from_the_page(tmp_path):
         wait_until(lambda: page_counts(driver)[2] == "paused", what="paused on the page")
         meta = json.loads((scan.run_dir / "meta.json").read_text())
         assert meta["status"] == "paused"
-        held = scan.stored()
-        time.sleep(LAG_S)
+        held, mark = scan.stored(), page_clock(driver)
+        wait_until(lambda: polls_since(driver, mark) >= LAG_POLLS, what="polls of the paused run",
+                   poll_s=0.05)
         assert scan.stored() == held and page_counts(driver)[0] == held  # nothing measured
         driver.find_element("id", "resume").click()
         wait_until(lambda: scan.stored() > held + 1, what="the scan going on after resume")

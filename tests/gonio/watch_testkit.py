@@ -149,3 +149,22 @@ def page_counts(driver) -> tuple[int, int, str]:
         " document.querySelectorAll('#raw-plot .pt').length,"
         " document.getElementById('status').textContent]")
     return int(readings), int(points), status
+
+
+def open_page(driver, url: str) -> None:
+    """Load the page with room to count its polls (the resource timing buffer holds 250
+    entries by default: four minutes of polling)."""
+    driver.get(url)
+    driver.execute_script("performance.setResourceTimingBufferSize(100000)")
+
+
+def page_clock(driver) -> float:
+    """The page's clock now (performance.now(), ms): a mark to count polls from."""
+    return driver.execute_script("return performance.now()")
+
+
+def polls_since(driver, mark_ms: float) -> int:
+    """The page's polls (its /status.json fetches) started after mark_ms and answered."""
+    return driver.execute_script(
+        "return performance.getEntriesByType('resource').filter(e => e.startTime > arguments[0]"
+        " && new URL(e.name).pathname === '/status.json').length", mark_ms)
