@@ -18,6 +18,8 @@ import termios
 import time
 import tty
 
+from sim.devices.pty_server import ARRIVAL_GRACE_S
+
 
 class PtyLine:
     """A raw pty pair: hosts open `path` (the slave); the server talks through the master.
@@ -58,7 +60,6 @@ class PtyMasterTransport(asyncio.Transport):
     that is full are lost, as on a line whose host has stopped reading."""
 
     HANG_UP_POLL_S = 0.0005
-    HANG_UP_GRACE_S = 0.05  # the host read the last bytes before they were ever seen queued
 
     def __init__(self, loop: asyncio.AbstractEventLoop, protocol: asyncio.Protocol,
                  line: PtyLine):
@@ -108,7 +109,7 @@ class PtyMasterTransport(asyncio.Transport):
             return
         waiting = self._line.unread_by_host()
         self._host_seen_queue = self._host_seen_queue or waiting > 0
-        grace_over = time.monotonic() - self._hang_up_since > self.HANG_UP_GRACE_S
+        grace_over = time.monotonic() - self._hang_up_since > ARRIVAL_GRACE_S
         if not waiting and (self._host_seen_queue or grace_over):
             self._cut()
         else:

@@ -22,6 +22,12 @@ from collections.abc import Callable
 
 from sim.devices.faults import FaultInjector
 
+#: How long bytes written to the pty may take to show up in the host's input queue (the kernel
+#: moves them asynchronously; tens of ms on a loaded machine): a hangup before they were ever
+#: seen queued waits this long, so a host that read them at once is told apart from one whose
+#: bytes are still on their way.
+ARRIVAL_GRACE_S = 0.5
+
 log = logging.getLogger(__name__)
 
 Handler = Callable[[bytes], bytes | None]
@@ -194,7 +200,7 @@ class PtyServer:
         wait (briefly) for them to show up there, then for the queue to empty.
         """
         deadline = time.monotonic() + timeout_s
-        arrived_by = time.monotonic() + 0.05
+        arrived_by = time.monotonic() + ARRIVAL_GRACE_S
         seen = False
         while time.monotonic() < deadline and not self._stop.is_set():
             pending = fcntl.ioctl(self._slave, termios.TIOCINQ, b"\0\0\0\0")
