@@ -11,40 +11,20 @@ solve (its solution), result (FitResult), run (fit) and progress (its progress l
 """
 
 from calibration.fit.model import build_model
-from calibration.fit.options import (
-    ALPHA_BOUNDS,
-    DIFFRACTION_SAMPLES,
-    ETA_BOUNDS,
-    MS_WALKS_MAX,
-    SCALE_BOUNDS,
-    Diffraction,
-    FitError,
-    FitOptions,
-    diffraction_settings,
-    fit_subset_mask,
-)
+from calibration.fit.options import Diffraction, FitError, FitOptions, fit_subset_mask
 from calibration.fit.orders import (
-    MS_CENTRE_REACH,
     MS_CENTRE_WALKS,
     MS_REWALK_SIGMA,
     MS_REWALK_WALKS,
-    MS_TABLE_NODES,
-    MS_TABLE_RECENTRE,
-    MS_TABLE_STEP,
     refit_orders,
     walked_orders,
 )
-from calibration.fit.problem import START_REFINE, initial_alpha
-from calibration.fit.progress import PROGRESS_EVERY_S
-from calibration.fit.result import PREFERENCE_DELTA_CHI2, FitResult
+from calibration.fit.problem import initial_alpha
+from calibration.fit.result import FitResult
 from calibration.fit.run import fit
-from calibration.fit.solve import MAX_CONDITION
 
 __all__ = [
-    "ALPHA_BOUNDS", "DIFFRACTION_SAMPLES", "ETA_BOUNDS", "MAX_CONDITION", "MS_CENTRE_REACH",
-    "MS_CENTRE_WALKS", "MS_REWALK_SIGMA", "MS_REWALK_WALKS", "MS_TABLE_NODES",
-    "MS_TABLE_RECENTRE", "MS_TABLE_STEP", "MS_WALKS_MAX", "PREFERENCE_DELTA_CHI2",
-    "PROGRESS_EVERY_S", "SCALE_BOUNDS", "START_REFINE", "Diffraction", "FitError", "FitOptions",
-    "FitResult", "build_model", "diffraction_settings", "fit", "fit_subset_mask",
-    "initial_alpha", "refit_orders", "walked_orders",
+    "MS_CENTRE_WALKS", "MS_REWALK_SIGMA", "MS_REWALK_WALKS", "Diffraction", "FitError",
+    "FitOptions", "FitResult", "build_model", "fit", "fit_subset_mask", "initial_alpha",
+    "refit_orders", "walked_orders",
 ]
