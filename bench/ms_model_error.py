@@ -51,7 +51,7 @@ ESTIMATES = (("sequential walk", False, 1 << 15, 1, False),
              ("both ways, refit x16", "both", 1 << 17, MS_CENTRE_WALKS, True),
              ("refit x16 + rewalk (now)", "refit", 1 << 17, MS_CENTRE_WALKS, True))
 REFERENCE_WALKS = 1 << 25
-#: The fit table's alphas (calibration.fit: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
+#: The fit table's alphas (calibration.fit.orders: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
 TABLE_NODES, TABLE_STEP = 7, 0.1
 
 

@@ -71,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Bake (and validate) the table and write it; one line per result on stdout."""
-    # lazy: gonio reaches sim only inside the commands that hand work to it (architecture.md)
+    # lazy: model.lut and the cluster helper load only when a table is baked
     from model.cluster import dask_client, describe
     from model.lut import TableSpec, bake, parse_size, validate
     from model.lut.table import check_storable
