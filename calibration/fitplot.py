@@ -11,18 +11,16 @@ import numpy as np
 
 from calibration.fit import FitOptions, FitResult, fit_subset_mask
 from calibration.reduced import ReducedData
+from model.optics.directions import in_plane_directions
 
 
 def model_curve(result: FitResult, theta_i_deg: float, transmission: bool,
                 n: int = 721) -> tuple[np.ndarray, np.ndarray]:
     """(signed outgoing angle deg, model BSDF) along the plane of incidence on one side, in the
     ReducedData.theta_o_deg convention (positive on the forward side)."""
-    theta = np.radians(np.linspace(-89.5, 89.5, n))
-    ti = np.radians(theta_i_deg)
-    wi = np.broadcast_to([-np.sin(ti), 0.0, np.cos(ti)], (n, 3))
-    z = -np.cos(theta) if transmission else np.cos(theta)
-    wo = np.stack([np.sin(theta), np.zeros(n), z], axis=1)
-    return np.degrees(theta), result.predict(wi, wo)
+    theta_deg = np.linspace(-89.5, 89.5, n)
+    wi, wo = in_plane_directions(theta_i_deg, theta_deg, transmission)
+    return theta_deg, result.predict(wi, wo)
 
 
 def fit_title(data: ReducedData, result: FitResult, title: str = "") -> str:
