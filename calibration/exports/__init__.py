@@ -57,4 +57,3 @@ def check_suffix(fmt: str, out_path: Path) -> None:
     hint = f", which is --format {' or '.join(others)}'s" if others else ""
     raise CalibrationError(f"export: --out {out_path} {said}{hint}; --format {fmt} writes "
                            f"{' or '.join(suffixes)}")
-

@@ -54,4 +54,3 @@ def write_mitsuba(material: dict[str, Any], path: str | Path, notes: list[str],
     ET.indent(scene)
     path.write_text(ET.tostring(scene, encoding="unicode") + "\n")
     return path
-

@@ -250,4 +250,3 @@ def _trapezoid_weights(x: np.ndarray) -> np.ndarray:
     w[:-1] += d / 2
     w[1:] += d / 2
     return w
-

@@ -48,6 +48,7 @@ class LobeScales(NamedTuple):
     edge_o: float
     edges: EdgeCircles | None = None
 
+
 def order_for(q: float, rtol: float) -> int:
     """Polar Gauss order for a cap whose half-angle is q local lobe scales (0 = one point)."""
     if q * q <= rtol:

@@ -71,4 +71,3 @@ def draw(state, key, k, slot):
     if state is None:
         return keyed_uniform(key, k * SLOTS + slot)
     return uniform(state)
-
