@@ -6,8 +6,9 @@ event of order >= min_order, and:
 * a dielectric facet's branch chosen with probability clip(F, share, 1 - share) instead of F,
   the weight taking F / that (or (1 - F) / its complement). With F ~ 0.04 at glass, paths that
   reflect at an early event (those that reach the air side again and score large towards
-  transmitted targets, or stay above and score towards reflected ones) were a few in a
-  thousand and carried most of the variance; now they are common, with small weights;
+  transmitted targets, or stay above and score towards reflected ones) are a few in a
+  thousand by F and carry most of the variance; by the share they are common, with small
+  weights;
 * each uniform keyed by (key, walk index, event, slot) (random_kernel), so walk j is the same
   path whatever the batch size and any prefix of the walks is a sample of its own
   (keyed.keyed_walk_to_targets takes the covariance from one);
@@ -18,9 +19,9 @@ wo for one wi, walk from the wo towards wi. Walk j starts from starts[j mod n]; 
 (first_events: its height and scattered direction, the only part of a path that depends on
 where it started) is weighted for every start b by the balance heuristic: the density of that
 event from b over the sum of the densities all starts sample it with. Each estimate is unbiased
-and uses every walk, for about 30 ns per start and walk. (Sharing only among nearby starts was
-tried: at every window from 0 to 60 degrees it gave less precision per CPU-second than sharing
-among all.) In the transmitted wings at normal incidence the forward walk's scores are
+and uses every walk, for about 30 ns per start and walk. (Sharing only among nearby starts,
+at any window from 0 to 60 degrees, gives less precision per CPU-second than sharing among
+all.) In the transmitted wings at normal incidence the forward walk's scores are
 heavy-tailed (rare grazing paths carry them) and the reverse walk's are not: it starts on those
 paths.
 """
