@@ -7,7 +7,8 @@ no provider installed an all-emulated run is reduced as a real one would be."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Protocol
 
 import numpy as np
@@ -45,7 +46,15 @@ def truth_of(sim: Mapping | None, optics: Mapping | None = None,
     a bad [sim] field is a CalibrationError naming it."""
     if not sim or not _providers:
         return None
-    try:
+    with run_config_errors():
         return _providers[0](sim, optics, sample)
+
+
+@contextmanager
+def run_config_errors() -> Iterator[None]:
+    """A bad [sim] field that the truth meets (its ValueError) as a CalibrationError naming it:
+    on building the truth, and on asking it what it reads only when asked (the meter)."""
+    try:
+        yield
     except ValueError as exc:
         raise CalibrationError(f"run config: {exc}") from None

@@ -38,7 +38,7 @@ from calibration.budget import (
 )
 from calibration.dark import DarkModel
 from calibration.detector import range_key
-from calibration.emulator_truth import EmulatorTruth, truth_of
+from calibration.emulator_truth import EmulatorTruth, run_config_errors, truth_of
 from calibration.reduced import ReducedData
 from calibration.signature import DEFAULT_SHARE, apply_signature
 from calibration.values import CalibrationError
@@ -143,7 +143,8 @@ def _shot_noise(detector: dict, truth: EmulatorTruth | None, shot_noise_w: float
     elif detector.get("shot_noise_w") is not None:
         coefficient, source = float(detector["shot_noise_w"]), "[detector] shot_noise_w"
     elif truth is not None:
-        coefficient = truth.shot_noise_w(wavelength_nm)
+        with run_config_errors():
+            coefficient = truth.shot_noise_w(wavelength_nm)
         source = "the emulated meter's [sim.detector] (2 q B / R)"
     else:
         return 0.0, SHOT_NOT_MODELLED

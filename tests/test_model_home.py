@@ -3,12 +3,18 @@ objects, with a DeprecationWarning that names the new import. The emulator's tru
 calibration through the provider the composition root installs (tests/conftest.py, as
 gonio_cli.main does), and a bad [sim] field is one calibration error naming it."""
 
+import tomllib
+from pathlib import Path
+
 import pytest
 
 import model.bsdf
 from calibration.emulator_truth import truth_of
+from calibration.reduce import optics_of
 from calibration.values import CalibrationError
 from sim.truth import EmulatorTruth
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("name", model.bsdf.__all__)
@@ -39,3 +45,14 @@ def test_the_installed_truth_is_the_emulators():
 def test_a_bad_sim_field_is_one_calibration_error_naming_it():
     with pytest.raises(CalibrationError, match=r"run config: \[sim.sample\] alpha"):
         truth_of({"sample": {"alpha": -1.0}})
+
+
+def test_a_bad_sim_detector_field_is_one_calibration_error_naming_it():
+    # the meter's table is read only when reduction asks the truth for its shot noise
+    config = tomllib.loads((ROOT / "examples/instruments/sim-serial.toml").read_text())
+    plan = tomllib.loads((ROOT / "examples/plans/demo.toml").read_text())
+    config["detector"].pop("shot_noise_w", None)
+    sim = {**config["sim"], "detector": {**config["sim"].get("detector", {}),
+                                         "bandwidth_hz": -5}}
+    with pytest.raises(CalibrationError, match=r"run config: \[sim.detector\] bandwidth_hz"):
+        optics_of(config, plan=plan, sim=sim)
