@@ -266,7 +266,7 @@ class ZaberController:
 
     def read_setting(self, setting: Setting, address: int, axis: int, who: str) -> int:
         """A declared setting of one axis (or of the device, axis 0), from its `get`."""
-        return int(self.query(address, axis, setting.query, who, integer=True).data)
+        return self.get(address, axis, setting.query.removeprefix("get "), who)
 
     def write_setting(self, setting: Setting, value: int, address: int, axis: int,
                       who: str) -> None:

@@ -1,6 +1,6 @@
 """`gonio export RUN --format FORMAT [--what raw|reduced|model] --out FILE`: write what a run
-measured (raw readings; reduced BSDF with its uncertainties) or its fitted model, in a format of
-calibration.formats; calibration.exports."""
+measured (raw readings; reduced BSDF with its uncertainties) or its fitted model;
+calibration.exports."""
 
 from __future__ import annotations
 
@@ -12,9 +12,8 @@ from calibration.exports import ExportRequest, write
 from calibration.formats import FORMATS, WHATS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 
-DESCRIPTION = (f"`gonio export RUN --format {'|'.join(FORMATS)} [--what {'|'.join(WHATS)}] "
-               "--out FILE`: write what a run measured (raw readings; reduced BSDF with its "
-               "uncertainties) or its fitted model; calibration.exports.")
+#: The module's docstring with FORMAT spelled out as the names of calibration.formats.
+DESCRIPTION = __doc__.replace("--format FORMAT", f"--format {'|'.join(FORMATS)}")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
