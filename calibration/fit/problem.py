@@ -32,7 +32,7 @@ class Problem:
 
     def __init__(self, data: ReducedData, distribution: str, masking: str, options: FitOptions,
                  eta0: float, k: float | None, optics: Smearing,
-                 diffraction: Diffraction | None = None):
+                 diffraction: Diffraction | None = None, progress: Progress | None = None):
         self.data, self.distribution, self.masking = data, distribution, masking
         self.diffraction = diffraction
         self.options, self.eta0, self.k = options, eta0, k
@@ -50,7 +50,7 @@ class Problem:
             hi.append(math.log(SCALE_BOUNDS[1]))
         self.names, self.lower, self.upper = tuple(names), np.array(lo), np.array(hi)
         self.orders: OrdersTable | None = None
-        self.progress = Progress(None)
+        self.progress = progress if progress is not None else Progress(None)
 
     @property
     def sigma(self) -> np.ndarray:

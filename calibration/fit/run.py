@@ -65,8 +65,7 @@ def fit(data: ReducedData, options: FitOptions | None = None,
     for distribution in options.distributions:
         for masking in options.maskings:
             problem = Problem(fit_data, distribution, masking, options, eta0, k, optics,
-                              diffraction)
-            problem.progress = reporter
+                              diffraction, reporter)
             try:
                 scored.append((problem, solve(problem, alpha0)))
             except FitError as exc:

@@ -77,8 +77,7 @@ def _solve_with_orders(problem: Problem, alpha0: float) -> OptimizeResult:
     quadrature (the model's own uncertainty)."""
     single = Problem(problem.data, problem.distribution, problem.masking,
                      replace(problem.options, multiple_scattering=False), problem.eta0,
-                     problem.k, problem.optics, problem.diffraction)
-    single.progress = problem.progress
+                     problem.k, problem.optics, problem.diffraction, problem.progress)
     centre = single.unpack(_least_squares(single, alpha0).x)[0]
     for _ in range(MS_TABLE_RECENTRE):
         problem.progress.stage(problem, f"multiple-scattering table about alpha {centre:.4g}")
