@@ -19,13 +19,13 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from calibration.exports.measured import ANGLE_COLUMNS, META_KEYS, unit_vectors
 from calibration.formats import format_to_read
+from calibration.formats.file_format import ImportOptions
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -41,15 +41,6 @@ class MissingInputs(CalibrationError):
         listed = (problems[0] if len(problems) == 1 else f"{len(problems)} inputs missing: "
                   + "; ".join(f"({n}) {p}" for n, p in enumerate(problems, 1)))
         super().__init__(f"{path}: {listed}")
-
-
-@dataclass(frozen=True)
-class ImportOptions:
-    """What a file may lack: the sample's index, and the relative standard uncertainty to
-    assume where the file has no uncertainties."""
-
-    eta: float | None = None
-    sigma_relative: float | None = None
 
 
 def read_measured(path: str | Path, options: ImportOptions | None = None) -> ReducedData:

@@ -49,16 +49,17 @@ MODULES = {module_name(path): path
            for package in PACKAGES for path in sorted((ROOT / package).rglob("*.py"))}
 
 
-def _runtime_imports(tree: ast.Module) -> Iterator[ast.Import | ast.ImportFrom]:
-    """Every import statement that may run, at module level or inside a function; not those
-    under `if TYPE_CHECKING:`, which never run."""
+def _runtime_imports(tree: ast.Module, typing: bool = False
+                     ) -> Iterator[ast.Import | ast.ImportFrom]:
+    """Every import statement that may run, at module level or inside a function; those under
+    `if TYPE_CHECKING:`, which never run, only with `typing`."""
     todo: list[ast.AST] = [tree]
     while todo:
         node = todo.pop()
         if isinstance(node, ast.Import | ast.ImportFrom):
             yield node
         elif (isinstance(node, ast.If) and isinstance(node.test, ast.Name)
-              and node.test.id == "TYPE_CHECKING"):
+              and node.test.id == "TYPE_CHECKING" and not typing):
             todo.extend(node.orelse)
         else:
             todo.extend(ast.iter_child_nodes(node))
@@ -72,13 +73,13 @@ def _project_module(name: str) -> str | None:
 
 
 @functools.cache
-def imported_modules(module: str) -> frozenset[str]:
+def imported_modules(module: str, typing: bool = False) -> frozenset[str]:
     """Project modules that `module`'s imports name (`from P import m` names P.m if that is a
     module, else P)."""
     path = MODULES[module]
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     found = set()
-    for node in _runtime_imports(ast.parse(path.read_text(), filename=str(path))):
+    for node in _runtime_imports(ast.parse(path.read_text(), filename=str(path)), typing):
         if isinstance(node, ast.Import):
             found.update(_project_module(alias.name) for alias in node.names)
             continue
@@ -97,24 +98,24 @@ def _packages_of(module: str) -> set[str]:
     return {".".join(parts[:k]) for k in range(1, len(parts))}
 
 
-def module_graph() -> dict[str, set[str]]:
+def module_graph(typing: bool = False) -> dict[str, set[str]]:
     """module -> the modules its imports run: each imported module, and the packages around
     it that the importer is not inside (their __init__ runs first)."""
     graph = {}
     for module in MODULES:
         runs = set()
-        for target in imported_modules(module):
+        for target in imported_modules(module, typing):
             runs |= {target} | (_packages_of(target) - _packages_of(module))
         graph[module] = runs - {module}
     return graph
 
 
-def sibling_graph() -> dict[str, set[str]]:
+def sibling_graph(typing: bool = False) -> dict[str, set[str]]:
     """At every level of the package tree, which child (subpackage or module) of a package
     imports which other child of it; the top level's children are PACKAGES."""
     graph: dict[str, set[str]] = {}
     for module in MODULES:
-        for target in imported_modules(module):
+        for target in imported_modules(module, typing):
             a, b = module.split("."), target.split(".")
             k = next(i for i in range(len(a) + 1) if i == len(a) or i == len(b) or a[i] != b[i])
             if k < len(a) and k < len(b):  # neither holds the other
@@ -236,11 +237,14 @@ def test_bluesky_is_reached_through_gonio_bluesky_and_one_export_only():
     assert importers == set()
 
 
+@pytest.mark.parametrize("typing", [False, True], ids=["run", "typing"])
 @pytest.mark.parametrize("graph", [module_graph, sibling_graph], ids=["modules", "packages"])
-def test_no_import_cycle(graph):
+def test_no_import_cycle(graph, typing):
     """No module imports itself through others, lazy imports included; at every level of the
-    package tree no subpackage or module imports itself through its siblings."""
-    edges = graph()
+    package tree no subpackage or module imports itself through its siblings. Nor with the
+    `TYPE_CHECKING` imports counted: a type that a module needs from one that imports it lives
+    in the wrong module."""
+    edges = graph(typing)
     found = [f"{describe_cycle(edges, c)} (one cycle of {', '.join(sorted(c))})"
              for c in cycles(edges)]
     assert not found, "import cycles:\n" + "\n".join(found)

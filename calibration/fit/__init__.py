@@ -10,8 +10,8 @@ The package's parts: options (FitOptions, the diffraction settings, the fitted s
 solve (its solution), result (FitResult), run (fit) and progress (its progress lines).
 """
 
-from calibration.fit.model import build_model
-from calibration.fit.options import Diffraction, FitError, FitOptions, fit_subset_mask
+from calibration.fit.model import Diffraction, build_model
+from calibration.fit.options import FitError, FitOptions, fit_subset_mask
 from calibration.fit.orders import (
     MS_CENTRE_WALKS,
     MS_REWALK_SIGMA,

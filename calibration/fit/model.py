@@ -3,12 +3,14 @@ two-scale diffraction term and the random walk's orders >= 2 when the fit asks f
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from calibration.fit.options import Diffraction
+# Points of the two-scale model's lobe integral per pair: the bench's (sim.bench.sample), so a
+# fit of an emulated run evaluates the same fixed point set.
+DIFFRACTION_SAMPLES = 256
 
 
 class Diffracted:
@@ -27,6 +29,29 @@ class Diffracted:
         """f(wi, wo) in 1/sr: specular share of the microfacet lobe plus the diffracted lobe."""
         wi, wo = np.broadcast_arrays(wi, wo)
         return self.two_scale.eval(wi, wo, self.wavelength_m)
+
+
+@dataclass(frozen=True)
+class Diffraction:
+    """Held-fixed nano-roughness and wavelength of a fit's two-scale diffraction term."""
+
+    rms_height_nm: float
+    correlation_length_um: float
+    psd_exponent: float
+    wavelength_nm: float
+    samples: int = DIFFRACTION_SAMPLES
+
+    def wrap(self, model: Any) -> Diffracted:
+        """The two-scale model (model.bsdf.diffraction.TwoScaleDiffraction) around `model`, with
+        eval(wi, wo) at this wavelength."""
+        return Diffracted(model, self)
+
+    def to_dict(self) -> dict[str, float]:
+        """The settings as a JSON-ready dict."""
+        return {"rms_height_nm": self.rms_height_nm,
+                "correlation_length_um": self.correlation_length_um,
+                "psd_exponent": self.psd_exponent, "wavelength_nm": self.wavelength_nm,
+                "samples": self.samples}
 
 
 class _WithHigherOrders:

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
-from calibration.fit.model import Diffracted
+from calibration.fit.model import DIFFRACTION_SAMPLES, Diffraction
 from calibration.reduced import ReducedData
 from gonio.errors import GonioError
 
@@ -18,9 +17,6 @@ ALPHA_BOUNDS = (1e-4, 4.0)
 ETA_BOUNDS = (1.001, 4.0)
 SCALE_BOUNDS = (1e-3, 1e3)
 MS_WALKS_MAX = 1 << 22
-# Points of the two-scale model's lobe integral per pair: the bench's (sim.bench.sample), so a
-# fit of an emulated run evaluates the same fixed point set.
-DIFFRACTION_SAMPLES = 256
 
 
 class FitError(GonioError):
@@ -75,29 +71,6 @@ class FitOptions:
         if self.eta is not None and not ETA_BOUNDS[0] <= self.eta <= ETA_BOUNDS[1]:
             raise FitError(f"fit: eta must be in [{ETA_BOUNDS[0]}, {ETA_BOUNDS[1]}], "
                            f"got {self.eta!r}")
-
-
-@dataclass(frozen=True)
-class Diffraction:
-    """Held-fixed nano-roughness and wavelength of a fit's two-scale diffraction term."""
-
-    rms_height_nm: float
-    correlation_length_um: float
-    psd_exponent: float
-    wavelength_nm: float
-    samples: int = DIFFRACTION_SAMPLES
-
-    def wrap(self, model: Any) -> Diffracted:
-        """The two-scale model (model.bsdf.diffraction.TwoScaleDiffraction) around `model`, with
-        eval(wi, wo) at this wavelength."""
-        return Diffracted(model, self)
-
-    def to_dict(self) -> dict[str, float]:
-        """The settings as a JSON-ready dict."""
-        return {"rms_height_nm": self.rms_height_nm,
-                "correlation_length_um": self.correlation_length_um,
-                "psd_exponent": self.psd_exponent, "wavelength_nm": self.wavelength_nm,
-                "samples": self.samples}
 
 
 def _check_diffraction_options(options: FitOptions) -> None:

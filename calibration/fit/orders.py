@@ -4,14 +4,24 @@ their error is not below the data's noise, and tabulated against alpha for the o
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from calibration.fit.model import build_model
+from calibration.fit.options import FitOptions
+from calibration.reduced import ReducedData
 
-if TYPE_CHECKING:
-    from calibration.fit.problem import Problem
+
+class Problem(Protocol):
+    """What the orders read of a fit's candidate (calibration.fit.problem.Problem): its
+    microsurface, its data's directions and sigma, and its walk settings."""
+
+    distribution: str
+    eta0: float
+    k: float | None
+    data: ReducedData
+    options: FitOptions
 
 # The multiple-scattering table of a fit: NODES alphas STEP apart in log alpha about a centre;
 # a fit ending outside its inner nodes is redone about its result, at most RECENTRE times. The

@@ -8,12 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from calibration.fit.model import build_model
+from calibration.fit.model import Diffraction, build_model
 from calibration.fit.options import (
     ALPHA_BOUNDS,
     ETA_BOUNDS,
     SCALE_BOUNDS,
-    Diffraction,
     FitOptions,
     walk_settings,
 )

@@ -6,12 +6,16 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from calibration.fit.problem import Problem
+
+class Problem(Protocol):
+    """What a progress line names of a fit's candidate (calibration.fit.problem.Problem)."""
+
+    distribution: str
+    masking: str
 
 #: Seconds between progress lines of a fit (a diffraction fit evaluates for minutes).
 PROGRESS_EVERY_S = 5.0

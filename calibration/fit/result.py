@@ -8,8 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.fit.model import build_model
-from calibration.fit.options import Diffraction
+from calibration.fit.model import Diffraction, build_model
 from calibration.fit.orders import MS_CENTRE_WALKS, walked_orders
 from calibration.smearing import Smearing
 

@@ -8,15 +8,22 @@ import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from calibration.imports import ImportOptions
-    from calibration.reduced import ReducedData
+from calibration.reduced import ReducedData
 
 #: What an export may write, in this order wherever they are listed: a run's readings, its
 #: reduced BSDF with uncertainties, or the fitted model.
 WHATS = ("raw", "reduced", "model")
+
+
+@dataclass(frozen=True)
+class ImportOptions:
+    """What a file may lack: the sample's index, and the relative standard uncertainty to
+    assume where the file has no uncertainties."""
+
+    eta: float | None = None
+    sigma_relative: float | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
