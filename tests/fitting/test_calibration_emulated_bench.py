@@ -19,12 +19,14 @@ from gonio.store import open_run
 from sim.devices.photodiode import SILICON_RESPONSIVITY
 
 SAMPLE_OFFSET, ARM_OFFSET, DARK_CURRENT_A = 0.3, -0.2, 1e-10
-#: The source drifts in wall seconds since the run started, and a run at time_scale "inf"
-#: lasts 0.7 s on a quiet machine, 4-11 s under load (the plan's dwell is virtual time), so the
-#: drift is nearly linear within any run: 1 %/s, beam drift rms 0.26-2.5 % over 21 runs. A
-#: 20 s period, as before, curved within a loaded run and biased the sample offset (pulls up to
-#: 7.0, mean +1.4, over 15 runs under load; within 2.4 on a quiet machine).
+#: The source drifts in wall seconds since the run started (the clock of the run's t_s), so
+#: how far it drifts depends on how long the run takes: the angle run moves its stages at a
+#: time scale of 50 (TIME_SCALE), so even an idle machine's run lasts seconds (an instant one
+#: took 0.25 s there, its drift hidden in the beam's noise), and a loaded one 4-11 s. The drift
+#: is nearly linear within any of them: 1 %/s. A 20 s period curved within a loaded run and
+#: biased the sample offset (pulls up to 7.0, mean +1.4, over 15 runs under load).
 DRIFT = {"drift_fraction": 0.5, "drift_period_s": 300.0}
+TIME_SCALE = 50.0
 #: Pulls (fit - truth) / sigma of the offsets and the dark offset over those 21 runs (seeds
 #: 1-12 quiet, 1-9 under 3 extra busy processes): spread 1.16-1.28, mean within 0.32, largest
 #: 2.68: the fits' sigmas are about 20 % small. 4 = 3 spreads and the means.
@@ -49,7 +51,7 @@ def angle_run(tmp_path_factory):
         "aperture": {"diameter_mm": 10.0, "distance_mm": 500.0},
         "alignment": {"sample_offset_deg": SAMPLE_OFFSET, "arm_offset_deg": ARM_OFFSET},
         "detector": {"dark_current_a": DARK_CURRENT_A},
-    }, optics=OPTICS)
+    }, optics=OPTICS, time_scale=TIME_SCALE)
     p = plan(tmp, "calib-angles-short", [
         {"side": "transmission", "theta_i_deg": 0.0,
          "theta_o_deg": {"start": -2.5, "stop": 2.5, "step": 0.25}},
