@@ -9,11 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-import numpy as np
-
-from calibration.values import CalibrationError
+if TYPE_CHECKING:  # the command line installs the provider at start-up: nothing heavy here
+    import numpy as np
 
 
 class EmulatorTruth(Protocol):
@@ -54,6 +53,8 @@ def truth_of(sim: Mapping | None, optics: Mapping | None = None,
 def run_config_errors() -> Iterator[None]:
     """A bad [sim] field that the truth meets (its ValueError) as a CalibrationError naming it:
     on building the truth, and on asking it what it reads only when asked (the meter)."""
+    from calibration.values import CalibrationError
+
     try:
         yield
     except ValueError as exc:
