@@ -59,7 +59,7 @@ class Instrument:
 
     def close(self) -> None:
         """Close every device connection (errors while closing are ignored)."""
-        _close_all(self.closers)
+        close_all(self.closers)
 
     def __enter__(self) -> Instrument:
         return self
@@ -68,14 +68,15 @@ class Instrument:
         self.close()
 
 
-def _close_all(closers: list[Callable[[], None]]) -> None:
+def close_all(closers: list[Callable[[], None]]) -> None:
+    """Call every close kept, last opened first, whatever each raises; empty the list."""
     for close in reversed(closers):
         with contextlib.suppress(Exception):
             close()
     closers.clear()
 
 
-def _opened(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Any:
+def open_device(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Any:
     """The device opened through its kind (one ConfigError if it cannot be reached), its
     close kept for the end."""
     try:
@@ -89,16 +90,22 @@ def _opened(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Any:
     return opened
 
 
+def axis_of(dev: DeviceConfig, ax: AxisConfig, opened: Any) -> Axis:
+    """The Axis driver of a role on its opened device: a multi-axis controller's axis (named
+    `device.role`), or the device itself."""
+    return opened.axis(ax.axis, f"{dev.name}.{ax.role}") if dev.kind.multi_axis else opened
+
+
 def _stage(dev: DeviceConfig, ax: AxisConfig, controllers: dict[str, Any],
            closers: list[Callable[[], None]]) -> Axis:
     """An Axis driver for a role, with the config's speed, acceleration and limits set; the
     axes of a multi-axis controller share its one connection."""
     if dev.kind.multi_axis:
         if dev.name not in controllers:
-            controllers[dev.name] = _opened(dev, closers)
-        axis = controllers[dev.name].axis(ax.axis, f"{dev.name}.{ax.role}")
+            controllers[dev.name] = open_device(dev, closers)
+        axis = axis_of(dev, ax, controllers[dev.name])
     else:
-        axis = _opened(dev, closers)
+        axis = axis_of(dev, ax, open_device(dev, closers))
     axis.configure(ax.speed_deg_s, ax.accel_deg_s2, ax.limits_deg)
     return axis
 
@@ -112,14 +119,14 @@ def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrume
     try:
         axes = {role: _stage(cfg.devices[ax.device], ax, controllers, closers)
                 for role, ax in cfg.axes.items()}
-        detector = _opened(cfg.devices[cfg.detector.device], closers)
+        detector = open_device(cfg.devices[cfg.detector.device], closers)
         drivers: dict[str, Axis | Detector] = {cfg.axes[role].device: axis
                                                for role, axis in axes.items()}
         drivers[cfg.detector.device] = detector  # one per device: an ESP's axes report alike
         devices = {name: _record(cfg.devices[name], drivers[name])
                    for name in cfg.devices if name in drivers}
     except BaseException:
-        _close_all(closers)
+        close_all(closers)
         raise
     return Instrument(cfg, axes, detector, closers, time_scale=float(time_scale),
                       devices=devices)

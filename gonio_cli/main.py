@@ -39,6 +39,7 @@ COMMANDS = [
     "fit",
     "export",
     "check",
+    "devices",
     "watch",
     "calibrate",
     "lut",
