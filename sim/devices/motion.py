@@ -205,6 +205,15 @@ class TrapezoidAxis:
             raise MotionError(f"limits must be (lo, hi) with lo < hi, got {value!r}")
         self._limits = (lo, hi)
 
+    @property
+    def home_position(self) -> float | None:
+        """Where home() ends (None: 0, or the nearest limit when 0 is outside the travel)."""
+        return self._home_position
+
+    @home_position.setter
+    def home_position(self, value: float | None) -> None:
+        self._home_position = None if value is None else float(value)
+
     def duration(self, distance: float) -> float:
         """Virtual seconds a rest-to-rest move over `distance` takes at the current settings."""
         return sum(profile_times(distance, self._speed, self._accel, self._decel))

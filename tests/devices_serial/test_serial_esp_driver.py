@@ -191,10 +191,10 @@ def test_query_error_raises_without_waiting_for_a_timeout(esp_pair):
 
 def test_error_buffer_fifo_te_tb_and_depth(esp_pair):
     emu, ctl = esp_pair()
-    raw(ctl, "1XX;PA1;TE?")  # an answer keeps the exchange synchronous
+    raw(ctl, "1YY;PA1;TE?")  # YY: no such command; an answer keeps the exchange synchronous
     assert ctl.errors() == [(37, "AXIS NUMBER MISSING")]  # TE? already took the 6
     for _ in range(12):
-        ctl.transport.send("1XX")
+        ctl.transport.send("1YY")
     assert raw(ctl, "TE?") == "6"
     assert len(ctl.errors()) == 9  # 10 kept, one read by TE?
     code, stamp, text = raw(ctl, "TB?").split(", ")
