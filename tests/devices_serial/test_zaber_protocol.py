@@ -85,8 +85,10 @@ def test_checksums_both_ways(port):
 
 
 def test_alerts_tell_a_motion_ended(port):
+    port.emulator.clock.time_scale = 0.0  # frozen: the move ends when the test moves time on
     assert ask(port, "/1 set comm.alert 1") == ["@01 0 OK IDLE WR 0"]
     ask(port, "/1 1 move rel 500")
+    port.emulator.clock.advance(60.0)
     assert ask(port, "/1 1 get pos") == ["!01 1 IDLE --", "@01 1 OK IDLE -- 500"]
     assert ask(port, "/1 1 get pos") == ["@01 1 OK IDLE -- 500"]  # once per motion
 
