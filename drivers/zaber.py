@@ -12,6 +12,12 @@ are retried after a timeout or garble; a state-changing command is sent exactly 
 its reply is lost the driver reads the device state back instead. After a timeout the sync
 query (`/<device> 0 99`) brings late replies back in step (drivers.serial_transport).
 
+An alert (`!dd a IDLE flag`: a device whose comm.alert is 1 telling that a motion ended, sent
+when it happens) can arrive between a request and its reply: a motion begun before the driver
+opened the device, or one of a device on the chain that the driver does not use. It is never
+read as the reply: the reply is then still to come, so the exchange counts as a garbled one
+and the sync query brings the line back in step before the next request.
+
 Units: positions are microsteps, degrees = data x full_step_deg / resolution (the resolution,
 microsteps per full step, read from each axis; full_step_deg defaults to the X-RSW60A's 0.015
 deg, so 0.000234375 deg per microstep at the default resolution 64); maxspeed data = 1.6384 x
@@ -166,6 +172,7 @@ class ZaberController:
         self._devices: dict[int, dict[str, str]] = {}  # opened devices: their identity
         self._axis_counts: dict[int, int] = {}
         self.latest: dict[tuple[int, int], Reply] = {}  # (device, axis): its latest reply
+        self.alerts_set_aside = 0  # alerts read where a reply was due
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries,
@@ -214,6 +221,17 @@ class ZaberController:
         except ProtocolError as exc:
             raise ProtocolError(f"{self.name}: {exc}") from None
 
+    def _answer(self, text: str, address: int, axis: int, message_id: int) -> Reply:
+        """The reply to request `message_id` in the line read for it. An alert there is no
+        reply, and the reply it came before is still to come: the transport is told that a
+        reply is owed (it sends the sync query before the next request), and the exchange
+        fails as a garbled one."""
+        if text.startswith("!"):
+            self.alerts_set_aside += 1
+            self.transport.replies.send_request()
+            self.transport.replies.timeout()
+        return self._parse(text, address, axis, message_id)
+
     def _is_sync_reply(self, text: str) -> bool:
         try:
             self._parse(text, self.address, 0, SYNC_ID)
@@ -233,7 +251,7 @@ class ZaberController:
         message_id = next(self._ids)
 
         def checked(text: str) -> Reply:
-            reply = self._parse(text, address, axis, message_id)
+            reply = self._answer(text, address, axis, message_id)
             self.latest[address, axis] = reply
             if reply.flag == "RJ":
                 raise self._rejected(who, command, reply)
@@ -250,9 +268,14 @@ class ZaberController:
         `verify()` (if given) reads the device state back; None when that confirmed it."""
         message_id = next(self._ids)
         what = f"{command!r} (device {address} axis {axis})"
-        reply = sent_once(lambda: self._parse(self.transport.exchange(
-            self._line(address, axis, message_id, command), what), address, axis, message_id),
-            lambda: _confirmed(verify), not_resent(who, command))
+        line = self._line(address, axis, message_id, command)
+
+        def send() -> Reply:
+            with self.transport.lock:  # no other exchange between this one and its reading
+                return self._answer(self.transport.exchange(line, what), address, axis,
+                                    message_id)
+
+        reply = sent_once(send, lambda: _confirmed(verify), not_resent(who, command))
         if reply is None:
             return None
         self.latest[address, axis] = reply

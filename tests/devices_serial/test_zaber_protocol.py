@@ -58,11 +58,37 @@ def test_replies_carry_scope_status_flag_and_data(port):
     ("/1 1 set limit.min 999999999", "BADDATA"),  # not below limit.max
     ("/1 set comm.alert 2", "BADDATA"),
     ("/1 1 get version", "DEVICEONLY"),
+    ("/1 set version.build 1", "BADCOMMAND"),  # the identity settings are read-only
+    ("/1 set comm.packet.size.max 200", "BADCOMMAND"),
+    ("/1 set comm.checksum yes", "BADDATA"),
+    ("/1 1 get deviceid", "DEVICEONLY"),
+    ("/1 1 system reset", "DEVICEONLY"),
+    ("/1 system restore", "BADCOMMAND"),  # not emulated
+    ("/1 1 get peripheralid", "BADCOMMAND"),  # an integrated product has no peripheral
 ])
 def test_rejections_name_the_manuals_reason(port, command, reason):
     axis = command.split()[1] if command.split()[1].isdigit() else "0"
     flag = "--" if axis == "1" else "WR"  # a device-scope reply shows axis 2's flag
     assert ask(port, command) == [f"@01 {axis} RJ IDLE {flag} {reason}"]
+
+
+def test_identity_settings_a_client_reads_while_it_detects_devices(port):
+    expected = {"deviceid": "50001", "version": "7.38", "version.build": "12870",
+                "system.serial": "120001", "system.axiscount": "2", "device.hw.modified": "0",
+                "comm.address": "1", "comm.rs232.baud": "115200", "comm.packet.size.max": "80",
+                "comm.command.packets.max": "1", "comm.word.size.max": "80",
+                "get.settings.max": "1", "comm.alert": "0", "comm.checksum": "0"}
+    for name, value in expected.items():
+        assert ask(port, f"/1 get {name}") == [f"@01 0 OK IDLE WR {value}"], name
+    assert ask(port, "/2 get system.axiscount") == ["@02 0 OK IDLE -- 1"]
+    assert ask(port, "/1 0 get resolution") == ["@01 0 OK IDLE WR 64 64"]  # one per axis
+
+
+def test_a_product_reports_its_own_identity():
+    with ZaberEmulator(VirtualClock(math.inf), {1: {}}, device_id=50419, firmware="7.33") \
+            as emu, serial.Serial(emu.endpoint, 115200, timeout=0.2) as session:
+        assert ask(session, "/get deviceid") == ["@01 0 OK IDLE -- 50419"]
+        assert ask(session, "/get version") == ["@01 0 OK IDLE -- 7.33"]
 
 
 def test_bad_message_id_and_busy_rejections(port):
@@ -85,8 +111,10 @@ def test_checksums_both_ways(port):
 
 
 def test_alerts_tell_a_motion_ended(port):
+    port.emulator.clock.time_scale = 0.0  # frozen: the move ends when the test moves time on
     assert ask(port, "/1 set comm.alert 1") == ["@01 0 OK IDLE WR 0"]
     ask(port, "/1 1 move rel 500")
+    port.emulator.clock.advance(60.0)
     assert ask(port, "/1 1 get pos") == ["!01 1 IDLE --", "@01 1 OK IDLE -- 500"]
     assert ask(port, "/1 1 get pos") == ["@01 1 OK IDLE -- 500"]  # once per motion
 

@@ -1,0 +1,105 @@
+"""Zaber alerts over a real pty: the emulator sends `!dd a IDLE flag` when a motion ends (while
+comm.alert is 1), and gonio's driver never takes an alert that arrives where a reply was due
+for that reply."""
+
+import math
+
+import pytest
+import serial
+from waiting import HANG_S
+
+from drivers.zaber import ZaberController
+from sim.devices.motion import VirtualClock
+from sim.devices.zaber import ZaberEmulator, lrc
+
+UNIT = 0.015 / 64  # X-RSW60A microstep at the default resolution, degrees
+
+
+@pytest.fixture
+def serve(opened):
+    """serve(clock, axes, alerts) -> a started emulator (stopped after the test)."""
+
+    def start(clock, axes, alerts=True):
+        emu = ZaberEmulator(clock, axes, alerts=alerts)
+        emu.start()
+        opened.append(emu)
+        return emu
+
+    return start
+
+
+def lines(session: serial.Serial, command: str | None = None, count: int = 1) -> list[str]:
+    """Send a command (if any), then read `count` lines (each ended by CR LF)."""
+    if command is not None:
+        session.write(command.encode("ascii") + b"\r\n")
+    read = [session.read_until(b"\r\n").decode("ascii") for _ in range(count)]
+    assert all(line.endswith("\r\n") for line in read), f"lines cut short: {read!r}"
+    return [line.removesuffix("\r\n") for line in read]
+
+
+def test_an_alert_goes_out_when_the_motion_ends_with_no_command_asking(serve):
+    emu = serve(VirtualClock(50.0), {1: {}})
+    with serial.Serial(emu.endpoint, 115200, timeout=HANG_S) as session:
+        assert lines(session, "/1 1 move abs 64000") == ["@01 1 OK BUSY -- 0"]  # 15 deg
+        assert lines(session) == ["!01 1 IDLE --"]  # nothing was sent: the device spoke
+        assert not emu.axes[1].busy() and emu.axis_position_deg(1) == pytest.approx(15.0)
+        assert lines(session, "/1 1 get pos") == ["@01 1 OK IDLE -- 64000"]  # once a motion
+
+
+def checked(kind: str, body: str) -> str:
+    """A message as a device sends it while comm.checksum is 1."""
+    return f"{kind}{body}:{lrc(body)}"
+
+
+def test_a_move_that_ends_at_once_alerts_after_its_reply_for_each_axis(serve):
+    emu = serve(VirtualClock(math.inf), {1: {}, 2: {"homed": False}})
+    with serial.Serial(emu.endpoint, 115200, timeout=HANG_S) as session:
+        assert lines(session, "/1 set comm.checksum 1") == [checked("@", "01 0 OK IDLE WR 0")]
+        assert lines(session, "/1 0 move abs 1000", 3) == [
+            checked("@", "01 0 OK IDLE WR 0"), checked("!", "01 1 IDLE --"),
+            checked("!", "01 2 IDLE WR")]  # axis 2 has no reference yet
+        assert lines(session, "/1 set comm.alert 0") == [checked("@", "01 0 OK IDLE WR 0")]
+        assert lines(session, "/1 1 move abs 0") == [checked("@", "01 1 OK IDLE -- 0")]
+        assert lines(session, "/1 1 get pos") == [checked("@", "01 1 OK IDLE -- 0")]
+
+
+def test_every_device_on_the_chain_alerts_whoever_the_command_addresses(serve):
+    clock = VirtualClock(0.0)  # frozen: motions end when the test moves time on
+    emu = serve(clock, {(1, 1): {}, (2, 1): {}})
+    with serial.Serial(emu.endpoint, 115200, timeout=HANG_S) as session:
+        assert lines(session, "/2 1 move rel 500") == ["@02 1 OK BUSY -- 0"]
+        assert lines(session, "/1 1 stop") == ["@01 1 OK IDLE -- 0"]  # device 2 still moving
+        clock.advance(60.0)
+        assert lines(session, "/1 1 get pos", 2) == ["!02 1 IDLE --", "@01 1 OK IDLE -- 0"]
+
+
+def test_the_driver_sets_aside_an_alert_that_comes_before_its_reply(serve):
+    """A motion begun before the driver opened the device ends during the opening: its alert
+    comes before the reply to the driver's first command, which is not taken for it."""
+    clock = VirtualClock(0.0)
+    emu = serve(clock, {1: {}})
+    with serial.Serial(emu.endpoint, 115200, timeout=HANG_S) as session:
+        assert lines(session, "/1 1 move abs 4000") == ["@01 1 OK BUSY -- 0"]
+    clock.advance(60.0)
+    with ZaberController(emu.endpoint, timeout_s=1.0, retries=2) as ctl:
+        assert ctl.alerts_set_aside == 1 and ctl.transport.resyncs == 1
+        assert emu.devices[1].settings["comm.alert"] == 0  # the driver turned them off
+        assert emu.devices[1].settings["comm.checksum"] == 1
+        assert ctl.identity() == {"device_id": "50001", "serial": "120001",
+                                  "firmware": "7.38", "address": "1"}
+        assert ctl.axis(1).position() == pytest.approx(4000 * UNIT)
+
+
+def test_the_driver_reads_through_alerts_of_a_device_it_does_not_use(serve):
+    clock = VirtualClock(0.0)
+    emu = serve(clock, {(1, 1): {}, (2, 1): {}})
+    with serial.Serial(emu.endpoint, 115200, timeout=HANG_S) as session:
+        assert lines(session, "/2 1 move rel 500") == ["@02 1 OK BUSY -- 0"]
+    with ZaberController(emu.endpoint, timeout_s=1.0, retries=2, address=1) as ctl:
+        axis = ctl.axis(1)
+        axis.move_to(2.0)
+        clock.advance(60.0)  # both motions end: device 2's alert comes before the next reply
+        assert axis.position() == pytest.approx(2.0, abs=UNIT)
+        assert ctl.alerts_set_aside == 1 and ctl.transport.resyncs == 1
+        assert emu.devices[2].settings["comm.alert"] == 1  # a device the driver left alone
+        assert axis.wait(timeout_s=HANG_S) == pytest.approx(2.0, abs=UNIT)
