@@ -62,7 +62,7 @@ def _holder(pid: int | None) -> str:
         words = Path(f"/proc/{pid}/cmdline").read_bytes().rstrip(b"\0").split(b"\0")
     except OSError:
         return f"process {pid}"
-    command = " ".join(w.decode(errors="replace") for w in words)
+    command = " ".join(" ".join(w.decode(errors="replace").split()) for w in words)
     if len(command) > COMMAND_SHOWN:
         command = command[:COMMAND_SHOWN - 3] + "..."
     return f"process {pid} ({command})" if command else f"process {pid}"
