@@ -45,12 +45,15 @@ VISA_ASRL_PATH = re.compile(r"ASRL(/[^:]+)::INSTR", re.IGNORECASE)
 
 
 class PortInUse(DriverError):
-    """Another process holds the port: `holder_pid` names it (None where the platform does
-    not tell); the message is one line naming the port and the holder."""
+    """Another process holds the port (as configured; `device_file` what it resolves to):
+    `holder_pid` names it (None where the platform does not tell); the message is one line
+    naming the port and the holder, `how` saying more of the lock that refused."""
 
-    def __init__(self, device: str, port: str, holder_pid: int | None, how: str = ""):
+    def __init__(self, device: str, port: str, holder_pid: int | None, how: str = "",
+                 device_file: Path | None = None):
         self.device, self.port, self.holder_pid = device, port, holder_pid
-        super().__init__(f"{device}: {port} is in use by {_holder(holder_pid)}{how}")
+        resolved = f" ({device_file})" if device_file and str(device_file) != port else ""
+        super().__init__(f"{device}: {port}{resolved} is in use by {_holder(holder_pid)}{how}")
 
 
 def _holder(pid: int | None) -> str:
@@ -129,22 +132,21 @@ def hold(endpoint: str, device: str) -> HeldPort:
     path = device_path(endpoint)
     if path is None:
         return _hold_by_name(endpoint, device)
-    shown = endpoint if str(path) == endpoint else f"{endpoint} ({path})"
-    lock_file = _claim_uucp_lock(path, device, shown)
+    lock_file = _claim_uucp_lock(path, device, endpoint)
     try:
         fd = os.open(path, DEVICE_OPEN)
     except OSError as exc:
         _remove(lock_file)
         if exc.errno == errno.EBUSY:
-            raise PortInUse(device, shown, _flock_holder(path),
-                            " (opened for exclusive use)") from None
+            raise PortInUse(device, endpoint, _flock_holder(path),
+                            " (opened for exclusive use)", path) from None
         return HeldPort()
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
         _remove(lock_file)
-        raise PortInUse(device, shown, _flock_holder(path)) from None
+        raise PortInUse(device, endpoint, _flock_holder(path), device_file=path) from None
     return HeldPort(fd, tty=os.isatty(fd), lock_file=lock_file)
 
 
@@ -169,7 +171,7 @@ def uucp_lock_name(path: Path) -> str:
     return "LCK.." + name.replace("/", "_")
 
 
-def _claim_uucp_lock(path: Path, device: str, shown: str) -> Path | None:
+def _claim_uucp_lock(path: Path, device: str, endpoint: str) -> Path | None:
     """Our LCK file for the device in the first lock directory there is (None where there is
     none, or it is not writable and holds no live holder's file); PortInUse for a live
     holder's file, or one that names no PID we can read (its writer may be mid-write)."""
@@ -197,9 +199,9 @@ def _claim_uucp_lock(path: Path, device: str, shown: str) -> Path | None:
                 continue  # removed since: try again
             return None
         if pid is None:
-            raise PortInUse(device, shown, None, f" (lock file {lock_file})")
+            raise PortInUse(device, endpoint, None, f" (lock file {lock_file})", path)
         if _alive(pid):
-            raise PortInUse(device, shown, pid)
+            raise PortInUse(device, endpoint, pid, device_file=path)
         try:
             lock_file.unlink()
         except FileNotFoundError:

@@ -118,8 +118,9 @@ def test_a_symlink_to_the_port_is_the_same_port(pty, tmp_path):
     with child(HOLDER, path) as first:
         assert said(first) == "held"
         with pytest.raises(PortInUse, match=f"^esp: {alias} \\({path}\\) is in use by process "
-                                            f"{first.pid} "):
+                                            f"{first.pid} ") as refused:
             hold(str(alias), "esp")
+        assert refused.value.port == str(alias)
 
 
 def test_pyserial_exclusive_clients_and_gonio_keep_each_other_out(pty):
