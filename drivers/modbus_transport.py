@@ -10,7 +10,9 @@ failed exchange (replies carry transaction ids, and a new connection carries not
 RTU the line is brought back in step by a diagnostics echo first (drivers.modbus_rtu_sync).
 pymodbus gives the client's port or socket, its connection handling and every codec; the
 request and reply loop is this module's, so a timeout is a timeout (no frame by the deadline)
-and never read out of an exception's text.
+and never read out of an exception's text. An RTU link holds its serial port
+(drivers.port_lock) from its making to its close (while it is open, by the flock pymodbus's
+serial client takes, pyserial's exclusive=True).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
 from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
+from drivers.port_lock import HeldPort, hold
 from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
@@ -74,7 +77,7 @@ class ModbusLink:
 
     def __init__(self, transport: str, port_or_host: str, *, tcp_port: int = 502,
                  baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
-                 read_retries: int = 2):
+                 read_retries: int = 2, device: str = "modbus"):
         self.timeouts = timeouts or ModbusTimeouts()
         if transport not in ("tcp", "rtu"):
             raise ValueError(f"Modbus transport must be 'tcp' or 'rtu', got {transport!r}")
@@ -87,9 +90,16 @@ class ModbusLink:
             self._client = ModbusTcpClient(port_or_host, port=tcp_port, timeout=reply_s,
                                            retries=0)
             self._cut, self._sort, self._recv = cut_tcp, sort_tcp, self._recv_tcp
+            self._held = HeldPort()  # a Modbus TCP server serves several clients
         else:
             self.endpoint = port_or_host
-            self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s, retries=0)
+            self._held = hold(port_or_host, device)  # the port is opened at the first request
+            try:
+                self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s,
+                                         retries=0)
+            except BaseException:
+                self._held.release()
+                raise
             self._cut, self._sort, self._recv = cut_rtu, sort_rtu, self._recv_rtu
         self._lock = threading.Lock()
         self.users = 0
@@ -168,10 +178,13 @@ class ModbusLink:
         return reply
 
     def _connect(self) -> None:
+        self._held.hand_over()  # pymodbus opens with pyserial's exclusive=True: its own flock
         if not self._client.connect():
             raise ConnectionException(f"cannot open {self.endpoint}")
         if self.transport == "tcp":  # waits are on select: no poll inside every send and recv
             self._client.socket.setblocking(False)
+        else:
+            self._held.exclusive(self._client.socket.fileno())
 
     def _lose_connection(self) -> None:
         self._client.close()
@@ -250,9 +263,12 @@ class ModbusLink:
             pass  # up to the silence ending its frame (a babbling line: the deadline)
 
     def close(self) -> None:
-        """Close the client connection."""
+        """Close the client connection and release the port's hold."""
         with self._lock:
-            self._client.close()
+            try:
+                self._client.close()
+            finally:
+                self._held.release()
 
 
 _links: dict[tuple[str, str], ModbusLink] = {}
@@ -261,15 +277,16 @@ _links_lock = threading.Lock()
 
 def open_link(transport: str, port_or_host: str, *, tcp_port: int = 502,
               baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
-              read_retries: int = 2) -> ModbusLink:
-    """The shared link to an endpoint (made on first use); pair with `release_link`."""
+              read_retries: int = 2, device: str = "modbus") -> ModbusLink:
+    """The shared link to an endpoint (made on first use, its serial port held for `device`,
+    named if another process holds it); pair with `release_link`."""
     key = (transport, f"{port_or_host}:{tcp_port}" if transport == "tcp" else port_or_host)
     with _links_lock:
         link = _links.get(key)
         if link is None:
             link = _links[key] = ModbusLink(transport, port_or_host, tcp_port=tcp_port,
                                             baudrate=baudrate, timeouts=timeouts,
-                                            read_retries=read_retries)
+                                            read_retries=read_retries, device=device)
         link.users += 1
         return link
 

@@ -32,7 +32,7 @@ class MappedUnit:
         self.map = (register_map if isinstance(register_map, RegisterMap)
                     else RegisterMap.load(register_map))
         self.link = open_link(transport, port_or_host, tcp_port=tcp_port, baudrate=baudrate,
-                              timeouts=timeouts, read_retries=read_retries)
+                              timeouts=timeouts, read_retries=read_retries, device=name)
         self._closed = False
         self._read_plans: dict[tuple[str, ...], list] = {}
 

@@ -4,7 +4,9 @@ Protocol drivers send a line and read a reply line through it. Only queries are 
 (after a timeout or a garbled reply); a command that changes the device's state is sent
 exactly once and its outcome is re-read by the driver instead. Every failure of the port
 itself (pyserial's SerialException, OSError, and the termios.error a vanished pty or USB
-adaptor raises) becomes a SerialPortError, so callers see only DriverError subclasses.
+adaptor raises) becomes a SerialPortError, so callers see only DriverError subclasses. The
+port is held (drivers.port_lock) from before it opens until close: one another process holds
+is PortInUse, the line untouched.
 
 A reply that missed its timeout may still arrive, after the next query has been sent, and
 would be read as that query's answer (a power reading taken at the previous stage position).
@@ -31,6 +33,7 @@ from typing import TypeVar
 import serial
 
 from drivers.base import DeviceTimeout, DriverError, ProtocolError
+from drivers.port_lock import hold
 from drivers.reply_sync import Garbled, Reply, ReplySync, State, SyncReply, UnitKind
 
 T = TypeVar("T")
@@ -115,15 +118,18 @@ class SerialLineTransport:
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
         self._rx = bytearray()  # bytes read past the last reply line
         self.lock = threading.RLock()
+        self._held = hold(port, name)  # PortInUse before the line is touched
         try:
             self._serial = serial.serial_for_url(
                 port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s,
                 rtscts=rtscts,
             )
         except (*PORT_FAILURES, ValueError) as exc:
+            self._held.release()
             raise SerialPortError(name, port, "opening", exc) from exc
         self._fd = self._serial.fileno()
         try:
+            self._held.exclusive(self._fd)
             self._flush_input()
         except DriverError:
             self.close()
@@ -137,11 +143,14 @@ class SerialLineTransport:
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
         """Close the port (idempotent; a port that has already gone away closes quietly,
-        so closing in a `finally` never hides the error that ended the session)."""
+        so closing in a `finally` never hides the error that ended the session); the port's
+        hold is released."""
         try:
             self._serial.close()
         except PORT_FAILURES:
             pass
+        finally:
+            self._held.release()
 
     def __enter__(self) -> SerialLineTransport:
         return self

@@ -1,6 +1,7 @@
 """Fixtures: Modbus emulators (TCP on 127.0.0.1, RTU on a real pty) with drivers connected."""
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +40,17 @@ class Rig:
     detector: ModbusDetector
     stage_map: Path
     detector_map: Path
+    open_drivers: Callable[[], tuple[ModbusStage, ModbusStage, ModbusDetector]]
+
+    def step_aside(self) -> None:
+        """Close the drivers, so that another master may take the port (a gonio link holds its
+        serial port from its making to its close: drivers.port_lock)."""
+        for drv in (self.stage, self.second, self.detector):
+            drv.close()
+
+    def step_back(self) -> None:
+        """Open the drivers again once the other master is done."""
+        self.stage, self.second, self.detector = self.open_drivers()
 
 
 # every transport x word order the drivers and emulators must agree on
@@ -78,11 +90,15 @@ def rig(tmp_path):
         kind, where, kw = endpoint_args(server)
         timeouts = ModbusTimeouts(reply_s=reply_s)
         common = dict(timeouts=timeouts, read_retries=read_retries, **kw)
-        rig = Rig(server, stage_emu, second_emu, detector_emu,
-                  ModbusStage(kind, where, STAGE_UNIT, stage_map, name="sample", **common),
-                  ModbusStage(kind, where, SECOND_STAGE_UNIT, stage_map, name="arm", **common),
-                  ModbusDetector(kind, where, DETECTOR_UNIT, detector_map, name="det", **common),
-                  stage_map, detector_map)
+
+        def open_drivers() -> tuple[ModbusStage, ModbusStage, ModbusDetector]:
+            return (ModbusStage(kind, where, STAGE_UNIT, stage_map, name="sample", **common),
+                    ModbusStage(kind, where, SECOND_STAGE_UNIT, stage_map, name="arm", **common),
+                    ModbusDetector(kind, where, DETECTOR_UNIT, detector_map, name="det",
+                                   **common))
+
+        rig = Rig(server, stage_emu, second_emu, detector_emu, *open_drivers(), stage_map,
+                  detector_map, open_drivers)
         made.append(rig)
         return rig
 

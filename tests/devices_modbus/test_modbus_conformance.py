@@ -142,6 +142,7 @@ def test_rtu_diagnostics_per_spec_and_the_resync_echo_still_works(rig):
 @pytest.mark.parametrize("transport", ["tcp", "rtu"])
 def test_pymodbus_client_sees_the_echo_and_refused_sub_functions(rig, transport):
     r = rig(transport)
+    r.step_aside()  # pymodbus's serial client opens the port for exclusive use too
     if transport == "tcp":
         host, port = r.server.endpoint.rsplit(":", 1)
         client = ModbusTcpClient(host, port=int(port), timeout=1, retries=0)

@@ -95,6 +95,7 @@ def pymodbus_client(server):
 
 def test_pymodbus_client_reads_and_writes_both_emulators(rig, link):
     r = rig(*link)
+    r.step_aside()  # pymodbus's serial client opens the port for exclusive use too
     order = link[1]
     client = pymodbus_client(r.server)
     try:
@@ -118,4 +119,5 @@ def test_pymodbus_client_reads_and_writes_both_emulators(rig, link):
         assert both.registers == [16]  # averaging set and read back in one request
     finally:
         client.close()
+    r.step_back()
     assert r.stage.position() == 45.25

@@ -1,0 +1,239 @@
+"""Ports held, not shared (drivers.port_lock), with real ptys and real processes: a second
+holder in another process is refused naming the first's PID, and gets in once the first
+releases; a pyserial client that opens with `exclusive=True` and gonio keep each other out;
+the UUCP LCK file of a dead process is cleaned, a live one's refuses; a refused open leaves
+the line as it was; a VISA resource is held by a lock file; the serial transport holds its
+port from before opening to close, and its exclusive open keeps other users out."""
+
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import subprocess
+import sys
+import termios
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from drivers.port_lock import PortInUse, hold, lock_dir, uucp_lock_name
+from drivers.serial_transport import SerialLineTransport
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+# a holder in its own process: holds argv[1], says so, releases on its first input line
+# (staying alive), ends on its second
+HOLDER = """
+import sys
+from drivers.port_lock import hold
+held = hold(sys.argv[1], "first")
+print("held", flush=True)
+sys.stdin.readline()
+held.release()
+print("released", flush=True)
+sys.stdin.readline()
+"""
+# a client that opens the port with pyserial's own exclusive lock (flock), as pymodbus does
+PYSERIAL_EXCLUSIVE = """
+import sys, serial
+try:
+    port = serial.Serial(sys.argv[1], exclusive=True)
+except serial.SerialException as exc:
+    print("refused:", exc, flush=True)
+    sys.exit(0)
+print("held", flush=True)
+sys.stdin.readline()
+"""
+# an open of the port by an unprivileged user (root's opens pass TIOCEXCL)
+OPEN = """
+import os, sys
+try:
+    os.close(os.open(sys.argv[1], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK))
+except OSError as exc:
+    print(exc.errno)
+else:
+    print("opened")
+"""
+
+
+@pytest.fixture
+def pty() -> Iterator[tuple[int, str]]:
+    """A real pseudo-terminal: (master fd, slave path), the slave open to every user."""
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    os.chmod(path, 0o666)
+    os.close(slave)
+    yield master, path
+    os.close(master)
+    uucp_file(path).unlink(missing_ok=True)
+
+
+def uucp_file(path: str) -> Path:
+    return Path("/run/lock") / uucp_lock_name(Path(path))
+
+
+@contextmanager
+def child(script: str, *args: str) -> Iterator[subprocess.Popen]:
+    """A Python process running script with args (stdin and stdout piped); ended after."""
+    proc = subprocess.Popen([sys.executable, "-c", script, *args], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        yield proc
+    finally:
+        proc.stdin.close()
+        proc.stdout.close()
+        proc.wait(timeout=30)
+
+
+def said(proc: subprocess.Popen) -> str:
+    return proc.stdout.readline().strip()
+
+
+def test_a_second_holder_is_refused_naming_the_first_and_gets_in_once_it_releases(pty):
+    _, path = pty
+    with child(HOLDER, path) as first:
+        assert said(first) == "held"
+        with pytest.raises(PortInUse) as refused:
+            hold(path, "pm100")
+        assert refused.value.holder_pid == first.pid
+        assert refused.value.port == path and refused.value.device == "pm100"
+        message = str(refused.value)
+        assert message.startswith(f"pm100: {path} is in use by process {first.pid} (")
+        assert "\n" not in message and "-c import sys from drivers.port_lock" in message
+        first.stdin.write("\n")
+        first.stdin.flush()
+        assert said(first) == "released"  # still running: the release let go, not its end
+        with hold(path, "pm100"):
+            assert int(uucp_file(path).read_text()) == os.getpid()
+    assert not uucp_file(path).exists()
+
+
+def test_a_symlink_to_the_port_is_the_same_port(pty, tmp_path):
+    _, path = pty
+    alias = tmp_path / "usb-Thorlabs_PM100USB-if00"
+    alias.symlink_to(path)
+    with child(HOLDER, path) as first:
+        assert said(first) == "held"
+        with pytest.raises(PortInUse, match=f"^esp: {alias} \\({path}\\) is in use by process "
+                                            f"{first.pid} ") as refused:
+            hold(str(alias), "esp")
+        assert refused.value.port == str(alias)
+
+
+def test_pyserial_exclusive_clients_and_gonio_keep_each_other_out(pty):
+    master, path = pty
+    with hold(path, "esp"), child(PYSERIAL_EXCLUSIVE, path) as other:
+        assert said(other).startswith("refused: [Errno 11] Could not exclusively lock port")
+    uucp_file(path).unlink(missing_ok=True)
+    with child(PYSERIAL_EXCLUSIVE, path) as other, open(path, "rb+", buffering=0) as port:
+        assert said(other) == "held"
+        before = termios.tcgetattr(port)  # as the holder set the line up
+        with pytest.raises(PortInUse) as refused:  # no LCK file: the holder from /proc/locks
+            hold(path, "esp")
+        assert refused.value.holder_pid == other.pid
+        assert termios.tcgetattr(port) == before
+        assert select.select([master], [], [], 0)[0] == []  # nothing written to the line
+    assert not uucp_file(path).exists()  # ours, taken before the flock refused, is gone
+
+
+def test_a_stale_lck_file_of_a_dead_process_is_cleaned(pty):
+    _, path = pty
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()
+    uucp_file(path).write_text(f"{ended.pid:10d}\n")
+    with hold(path, "esp"):
+        assert uucp_file(path).read_text() == f"{os.getpid():10d}\n"  # HDB: ten-byte ASCII
+    assert not uucp_file(path).exists()
+
+
+def test_a_live_foreign_lck_file_refuses(pty):
+    _, path = pty
+    with child("import sys; sys.stdin.readline()") as other:
+        uucp_file(path).write_text(f"{other.pid:10d}\n")
+        with pytest.raises(PortInUse, match=f"is in use by process {other.pid}"):
+            hold(path, "esp")
+        assert uucp_file(path).read_text() == f"{other.pid:10d}\n"  # theirs, kept
+
+
+def test_a_lck_file_that_names_no_process_refuses_naming_it(pty):
+    _, path = pty
+    uucp_file(path).write_text("")  # its writer may be between creating and writing it
+    with pytest.raises(PortInUse, match=f"in use by another process \\(lock file "
+                                        f"{uucp_file(path)}\\)$") as refused:
+        hold(path, "esp")
+    assert refused.value.holder_pid is None
+
+
+def test_a_visa_resource_is_held_by_a_lock_file_with_the_holders_pid(tmp_path, monkeypatch):
+    monkeypatch.setenv("GONIO_LOCK_DIR", str(tmp_path))
+    resource = "TCPIP::127.0.0.1::5025::SOCKET"
+    env = {**ENV, "GONIO_LOCK_DIR": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-c", HOLDER, resource], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert said(proc) == "held"
+        assert lock_dir() == tmp_path
+        [lock_file] = tmp_path.iterdir()
+        assert lock_file.read_text() == f"{proc.pid}\n"
+        with pytest.raises(PortInUse) as refused:  # the same resource, written otherwise
+            hold("tcpip0::127.0.0.1::5025::socket", "meter")
+        assert refused.value.holder_pid == proc.pid
+        assert str(refused.value).startswith("meter: tcpip0::127.0.0.1::5025::socket is in "
+                                             f"use by process {proc.pid} (")
+        with hold("TCPIP0::127.0.0.1::5026::SOCKET", "other"):
+            pass  # another port of the host is another resource
+        proc.stdin.write("\n")
+        proc.stdin.flush()
+        assert said(proc) == "released"
+        assert lock_file.read_text() == ""
+        with hold(resource, "meter"):
+            assert lock_file.read_text() == f"{os.getpid()}\n"
+    finally:
+        proc.stdin.close()
+        proc.wait(timeout=30)
+
+
+def test_an_asrl_resource_holds_its_device(pty):
+    _, path = pty
+    with child(HOLDER, f"ASRL{path}::INSTR") as first:
+        assert said(first) == "held"
+        with pytest.raises(PortInUse, match=f"process {first.pid}"):
+            hold(path, "pm100")
+
+
+def test_a_port_that_cannot_be_opened_is_the_transports_own_error(tmp_path):
+    missing = str(tmp_path / "ttyUSB9")
+    with pytest.raises(Exception, match="could not be opened") as failed:
+        SerialLineTransport(missing, name="esp")
+    assert not isinstance(failed.value, PortInUse)
+
+
+def opens_as_another_user(path: str) -> str:
+    """What an open of path by an unprivileged user gives: "opened" or the errno."""
+    prefix = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"] \
+        if os.geteuid() == 0 else []
+    done = subprocess.run([*prefix, sys.executable, "-c", OPEN, path], capture_output=True,
+                          text=True, timeout=30, check=True)
+    return done.stdout.strip()
+
+
+@pytest.mark.skipif(os.geteuid() == 0 and shutil.which("setpriv") is None,
+                    reason="root, and no setpriv to open the port as another user")
+def test_the_transport_holds_its_port_from_opening_to_close(pty):
+    _, path = pty
+    transport = SerialLineTransport(path, name="esp")
+    try:
+        assert int(uucp_file(path).read_text()) == os.getpid()
+        assert opens_as_another_user(path) == str(16)  # EBUSY: opened for exclusive use
+        with pytest.raises(PortInUse):
+            hold(path, "pm100")
+    finally:
+        transport.close()
+    transport.close()  # idempotent
+    assert not uucp_file(path).exists()
+    assert opens_as_another_user(path) == "opened"  # the pty's exclusive flag is cleared
+    with hold(path, "pm100"):
+        pass
