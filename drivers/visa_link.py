@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 import os
 import termios
-import threading
 from typing import Any
 
 from drivers.byte_link import LineSettings, LinkFailure
@@ -25,25 +24,11 @@ from drivers.byte_link import LineSettings, LinkFailure
 LIBRARY_ENV = "GONIO_VISA_LIBRARY"
 DEFAULT_LIBRARY = "@py"  # pyvisa-py (with pyusb for USB-TMC)
 VISA_MISSING = "PyVISA is not installed (pip install 'gonio[visa]')"
-
-_managers: dict[str, Any] = {}
-_managers_lock = threading.Lock()
-
+MESSAGE_BASED = ("INSTR", "SOCKET")  # the resource classes a line device is reached by
 
 def visa_library() -> str:
     """The VISA backend links open resources with: GONIO_VISA_LIBRARY, else pyvisa-py."""
     return os.environ.get(LIBRARY_ENV, "").strip() or DEFAULT_LIBRARY
-
-
-def _manager(library: str) -> Any:
-    """The library's one ResourceManager (PyVISA keeps one per library: closing it would close
-    every resource of the process, so it stays open)."""
-    import pyvisa
-
-    with _managers_lock:
-        if library not in _managers:
-            _managers[library] = pyvisa.ResourceManager(library)
-        return _managers[library]
 
 
 class VisaLink:
@@ -55,16 +40,24 @@ class VisaLink:
         self.endpoint = resource
         try:
             import pyvisa
-            from pyvisa import constants
+            from pyvisa import constants, rname
         except ImportError as exc:
             raise LinkFailure(ImportError(VISA_MISSING)) from exc
+        try:
+            kind = rname.parse_resource_name(resource).resource_class
+        except rname.InvalidResourceName as exc:
+            raise LinkFailure(exc) from exc
+        if kind not in MESSAGE_BASED:
+            raise LinkFailure(ValueError(f"{kind} resources exchange no lines; give an "
+                                         f"{' or '.join(MESSAGE_BASED)} resource"))
         self._constants = constants
         self._io_failures = (pyvisa.errors.Error, OSError, termios.error)
         self._write_ms = self._timeout_ms = max(1, math.ceil(timeout_s * 1000))
         self._res: Any = None
         self._closed = False
         try:
-            self._res = _manager(visa_library()).open_resource(
+            # PyVISA keeps one ResourceManager per library, shared by the whole process
+            self._res = pyvisa.ResourceManager(visa_library()).open_resource(
                 resource, timeout=self._timeout_ms, read_termination=read_eol.decode("ascii"))
             self._asrl = self._res.interface_type == constants.InterfaceType.asrl
             if self._asrl:
