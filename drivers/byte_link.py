@@ -4,7 +4,7 @@ drivers.visa_link), with the line settings an RS-232 adaptor needs.
 
 drivers.serial_transport runs its line logic (reply sync, retries, garble checks, deadlines)
 over either. A link reports every failure of its own as one LinkFailure carrying the library's
-exception, which the transport names. `open_byte_link` is the one place a link is opened.
+exception, which the transport names. drivers.open_link is the one place a link is opened.
 """
 
 from __future__ import annotations
@@ -81,19 +81,3 @@ class ByteLink(Protocol):
     def close(self) -> None:
         """Close the link (quiet and idempotent: a link already gone closes without error)."""
 
-
-def open_byte_link(port: str | None, resource: str | None, line: LineSettings,
-                   read_eol: bytes, timeout_s: float) -> ByteLink:
-    """Open the link to a device given by exactly one of a serial port or a VISA resource
-    string (ValueError otherwise); line settings apply to a port and to an ASRL resource.
-    read_eol ends each reply (a VISA read returns one line); timeout_s bounds a write."""
-    if (port is None) == (resource is None):
-        raise ValueError("give a serial port or a VISA resource, exactly one of them; got "
-                         f"port {port!r} and resource {resource!r}")
-    if resource is not None:
-        from drivers.visa_link import VisaLink  # PyVISA only when a resource is asked for
-
-        return VisaLink(resource, line, read_eol, timeout_s)
-    from drivers.serial_link import SerialLink
-
-    return SerialLink(port, line, timeout_s)

@@ -4,7 +4,7 @@ named timeouts and safe retries.
 Protocol drivers send a line and read a reply line through it. Only queries are retried
 (after a timeout or a garbled reply); a command that changes the device's state is sent
 exactly once and its outcome is re-read by the driver instead. The link (drivers.byte_link:
-pyserial's port or PyVISA's resource, opened by `open_byte_link`) moves the bytes; every
+pyserial's port or PyVISA's resource, opened by drivers.open_link) moves the bytes; every
 failure of the link itself becomes a SerialPortError naming the port or the resource, so
 callers see only DriverError subclasses.
 
@@ -29,7 +29,8 @@ from dataclasses import dataclass
 from typing import TypeVar, Unpack
 
 from drivers.base import DeviceTimeout, DriverError, ProtocolError
-from drivers.byte_link import LineSettings, LinkFailure, LinkOptions, open_byte_link
+from drivers.byte_link import LineSettings, LinkFailure, LinkOptions
+from drivers.open_link import open_byte_link
 from drivers.reply_sync import Garbled, Reply, ReplySync, State, SyncReply, UnitKind
 
 T = TypeVar("T")

@@ -11,12 +11,14 @@ from contextlib import contextmanager
 import pytest
 from gonio_testkit import (
     EXAMPLES,
+    AbortAfter,
     emulating,
     fast_config,
     gonio_cli,
     load_example,
     run_dir_of,
     write_plan,
+    write_toml,
 )
 
 from drivers.esp import DECIMALS
@@ -25,6 +27,7 @@ from gonio.config import parse_config
 from gonio.device_kinds import KINDS, endpoint_keys
 from gonio.errors import ConfigError
 from gonio.instrument import build_instrument
+from gonio.runner import new_scan
 from gonio.simulate import simulation
 from gonio.store import open_run
 
@@ -184,3 +187,23 @@ def test_a_scan_reaches_the_meter_over_tcpip_socket(tmp_path):
     run = open_run(run_dir_of(proc))
     assert run.meta["status"] == "completed" and len(run) == run.meta["planned"]
     assert re.fullmatch(SOCKET, run.meta["sessions"][-1]["devices"]["pm100"]["endpoint"])
+
+
+def test_a_run_started_on_a_port_resumes_with_the_meter_given_by_resource(tmp_path):
+    cfg = fast_config()
+    plan = write_plan(tmp_path, SMALL_PLAN, cfg)
+    started = new_scan(plan, sim=True, out=tmp_path / "runs", progress=False,
+                       control=AbortAfter(2))
+    assert started.outcome.status == "aborted"
+    by_resource = config_with("pm100", drop=("port",), resource=USB_METER)
+    moved = write_toml(tmp_path / "moved.toml", by_resource)
+    proc = gonio_cli("scan", "--resume", started.path, "--instrument", moved, "--no-plot",
+                     "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    run = open_run(started.path)
+    assert run.meta["status"] == "completed" and len(run) == run.meta["planned"]
+    session = run.meta["sessions"][-1]
+    assert session["endpoint_changes"] == {
+        "devices.pm100.port": {"from": cfg["devices"]["pm100"]["port"], "to": None},
+        "devices.pm100.resource": {"from": None, "to": USB_METER}}
+    assert re.fullmatch(ASRL, session["devices"]["pm100"]["endpoint"])
