@@ -42,15 +42,40 @@ class _Closed(Exception):
     """The channel is gone for good (the pty closed, the listener shut): serving ends."""
 
 
-class _PtyChannel:
-    """A pty: the host opens the slave (the endpoint), the server reads and writes the
-    master."""
+class PtyPair:
+    """A raw pty pair: hosts open `path` (the slave); the server talks through the master
+    (non-blocking). The pair keeps a slave fd of its own, so the pty lives on while hosts
+    open and close it."""
 
     def __init__(self) -> None:
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         os.set_blocking(self.master, False)
-        self.endpoint = os.ttyname(self.slave)
+        self.path = os.ttyname(self.slave)
+
+    def unread_by_host(self) -> int:
+        """Bytes sent to the host that it has not read yet (the slave's input queue)."""
+        return int.from_bytes(fcntl.ioctl(self.slave, termios.TIOCINQ, b"\0\0\0\0"),
+                              sys.byteorder)
+
+    def close(self) -> None:
+        """Close both ends (idempotent): the host's reads fail and the path goes away."""
+        for fd in (self.master, self.slave):
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.master = self.slave = -1
+
+
+class _PtyChannel(PtyPair):
+    """A pty: the host opens the slave (the endpoint), the server reads and writes the
+    master."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.endpoint = self.path
 
     def waitable(self) -> int:
         return self.master
@@ -87,22 +112,12 @@ class _PtyChannel:
         arrived_by = time.monotonic() + ARRIVAL_GRACE_S
         seen = False
         while time.monotonic() < deadline and not stopping.is_set():
-            pending = fcntl.ioctl(self.slave, termios.TIOCINQ, b"\0\0\0\0")
-            if int.from_bytes(pending, sys.byteorder) > 0:
+            if self.unread_by_host() > 0:
                 seen = True
             elif seen or time.monotonic() > arrived_by:
                 break
             time.sleep(0.001)
         self.close()
-
-    def close(self) -> None:
-        for fd in (self.master, self.slave):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self.master = self.slave = -1
 
 
 class _TcpChannel:
