@@ -26,6 +26,7 @@ DEFAULT_LIBRARY = "@py"  # pyvisa-py (with pyusb for USB-TMC)
 VISA_MISSING = "PyVISA is not installed (pip install 'gonio[visa]')"
 MESSAGE_BASED = ("INSTR", "SOCKET")  # the resource classes a line device is reached by
 
+
 def visa_library() -> str:
     """The VISA backend links open resources with: GONIO_VISA_LIBRARY, else pyvisa-py."""
     return os.environ.get(LIBRARY_ENV, "").strip() or DEFAULT_LIBRARY
@@ -50,7 +51,7 @@ class VisaLink:
         if kind not in MESSAGE_BASED:
             raise LinkFailure(ValueError(f"{kind} resources exchange no lines; give an "
                                          f"{' or '.join(MESSAGE_BASED)} resource"))
-        self._constants = constants
+        self._constants, self._socket = constants, kind == "SOCKET"
         self._io_failures = (pyvisa.errors.Error, OSError, termios.error)
         self._write_ms = self._timeout_ms = max(1, math.ceil(timeout_s * 1000))
         self._res: Any = None
@@ -89,7 +90,7 @@ class VisaLink:
         try:
             if self._asrl:
                 self._res.flush(ops.discard_read_buffer | ops.discard_receive_buffer)
-            elif self._res.resource_class == "SOCKET":
+            elif self._socket:
                 self._res.flush(ops.discard_read_buffer_no_io)
         except self._io_failures as exc:
             raise LinkFailure(exc) from exc
