@@ -67,7 +67,7 @@ class Setting:
                              integer=self.type == "integer", low_open=self.low_open)
             if self.choices and value not in self.choices:
                 raise f.fail(self.key, f"must be one of {', '.join(map(str, self.choices))}; "
-                                       f"got {value!r}")
+                                       f"got {value:g}")
             return value
         if self.type == "boolean":
             return f.boolean(self.key, self.default)
