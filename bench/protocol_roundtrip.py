@@ -5,6 +5,11 @@ bare transport's echo round trip measured in the same run (the floor no protocol
 
 - ESP300/301 over a pty: EspAxis.position() (a "1TP?" query) vs a pty echo of the same bytes
   through pyserial.
+- PM100 through the same driver (Pm100.measure(): MEAS:POW? with the range and the error
+  status, one line each way) over each link it may be given: a pty through pyserial, the same
+  pty through PyVISA as an ASRL resource, and raw TCP on 127.0.0.1 through PyVISA as a TCPIP
+  SOCKET resource (pyvisa-py); beside each, plain PyVISA querying the same message (no gonio
+  driver), and the pty or TCP echo of the request.
 - Modbus TCP on 127.0.0.1: ModbusStage.position() (function 03, two registers) vs a TCP echo
   of a 12-byte request on a plain socket.
 - Modbus RTU over a pty: the same driver call vs the pty echo (the emulator serves the
@@ -37,13 +42,21 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from drivers.esp import EspController
 from drivers.modbus_stage import ModbusStage
+from drivers.pm100 import Pm100
 from sim.devices.esp import EspEmulator
 from sim.devices.modbus_server import ModbusEmulatorServer
 from sim.devices.modbus_stage import ModbusStageEmulator
 from sim.devices.motion import VirtualClock
+from sim.devices.photodiode import ConstantPower
+from sim.devices.pm100 import Pm100Emulator
+from sim.served_resources import serve_resource
 
 STAGE_MAP = Path(__file__).resolve().parents[1] / "examples" / "registermaps" / "stepper-drive.toml"
 ESP_QUERY = b"1TP?\r"
+PM100_QUERY = ":MEAS:POW?;:SENS:POW:RANG?;:SYST:ERR?"  # what Pm100.measure() sends
+#: the meter's links: what a config names, served by the emulator as sim serves it
+PM100_LINKS = {"ASRL": "USB0::0x1313::0x8072::P2000000::INSTR",
+               "TCPIP SOCKET": "TCPIP0::127.0.0.1::5025::SOCKET"}
 MODBUS_TCP_REQUEST = bytes.fromhex("000100000006010300080002")  # read holding 8..9 of unit 1
 MODBUS_TCP_REPLY_BYTES = 13  # MBAP 7 + function, byte count, 4 data bytes
 MODBUS_RTU_REQUEST = bytes.fromhex("01030008000245c9")  # the same read as an RTU frame
@@ -154,6 +167,38 @@ def esp_rate(seconds: float) -> float:
         emulator.stop()
 
 
+def pm100_serial_rate(seconds: float) -> float:
+    """Pm100.measure() round trips per second on the PM100 emulator over a pty (pyserial)."""
+    emulator = Pm100Emulator(ConstantPower(2e-6))
+    emulator.start()
+    try:
+        with Pm100(emulator.endpoint, timeout_s=1.0) as meter:
+            return rate(meter.measure, seconds)
+    finally:
+        emulator.stop()
+
+
+def pm100_visa_rates(link: str, seconds: float) -> tuple[float, float]:
+    """Round trips per second on the PM100 emulator served for a `link` resource, through
+    PyVISA: Pm100.measure() given the resource, and plain PyVISA querying the same line."""
+    import pyvisa
+
+    emulator = Pm100Emulator(ConstantPower(2e-6))
+    resource = serve_resource(emulator, PM100_LINKS[link], "127.0.0.1")
+    try:
+        with Pm100(resource=resource, timeout_s=1.0) as meter:
+            driver = rate(meter.measure, seconds)
+        port = pyvisa.ResourceManager("@py").open_resource(
+            resource, read_termination="\n", write_termination="\n", timeout=1000)
+        try:
+            bare = rate(lambda: port.query(PM100_QUERY), seconds)
+        finally:
+            port.close()
+        return driver, bare
+    finally:
+        emulator.stop()
+
+
 def modbus_rates(transport: str, seconds: float) -> tuple[float, float, float]:
     """Round trips per second on the Modbus emulator: ModbusStage.position(), stock pymodbus's
     client reading the same two registers, and the raw request frame with no client."""
@@ -226,9 +271,24 @@ def main() -> None:
     rtu_driver, rtu_bare, rtu_raw = modbus_rates("rtu", s)
     rtu_echo = pty_echo_rate(MODBUS_RTU_REQUEST, s)
     tcp_floor, rtu_floor = "TCP echo, 12 bytes", "pty echo, 8 bytes"
+    pm100_request = PM100_QUERY.encode() + b"\n"
+    pm100_floor = f"pty echo, {len(pm100_request)} bytes"
+    pm100_echo = pty_echo_rate(pm100_request, s)
+    pm100_tcp_floor = f"TCP echo, {len(pm100_request)} bytes"
+    pm100_tcp_echo = tcp_echo_rate(pm100_request, s)
+    asrl_driver, asrl_bare = pm100_visa_rates("ASRL", s)
+    socket_driver, socket_bare = pm100_visa_rates("TCPIP SOCKET", s)
     rows = [
         ("ESP TP? over pty (EspAxis.position)", esp_rate(s),
          "pty echo, 5 bytes", pty_echo_rate(ESP_QUERY, s)),
+        ("PM100 MEAS:POW? over pty (Pm100.measure)", pm100_serial_rate(s), pm100_floor,
+         pm100_echo),
+        ("PM100 MEAS:POW? PyVISA ASRL (Pm100.measure)", asrl_driver, pm100_floor, pm100_echo),
+        ("PM100 MEAS:POW? PyVISA ASRL (plain query)", asrl_bare, pm100_floor, pm100_echo),
+        ("PM100 MEAS:POW? PyVISA SOCKET (Pm100.measure)", socket_driver, pm100_tcp_floor,
+         pm100_tcp_echo),
+        ("PM100 MEAS:POW? PyVISA SOCKET (plain query)", socket_bare, pm100_tcp_floor,
+         pm100_tcp_echo),
         ("Modbus TCP read 2 regs (ModbusStage.position)", tcp_driver, tcp_floor, tcp_echo),
         ("Modbus TCP read 2 regs (stock pymodbus client)", tcp_bare, tcp_floor, tcp_echo),
         ("Modbus TCP read 2 regs (raw frame, no client)", tcp_raw, tcp_floor, tcp_echo),

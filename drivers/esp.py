@@ -23,9 +23,10 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, Unpack
 
 from drivers.base import DeviceError, DriverError, Interlocked, ProtocolError
+from drivers.byte_link import LinkOptions
 from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
 from drivers.serial_transport import SerialLineTransport, SyncQuery
@@ -88,7 +89,8 @@ TB_DIALECT = StatusDialect(suffix=";TB?", status_query="TB?", split=_split_tb,
 
 
 class EspController(StatusLineDevice):
-    """One ESP300/ESP301 on a serial port; `axis(n, name)` gives engine-facing Axis objects.
+    """One ESP300/ESP301 on a serial port (or, by `resource`, a VISA resource: LinkOptions);
+    `axis(n, name)` gives engine-facing Axis objects.
 
     timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is how
     often wait() asks MD?; rtscts: the ESP's RS-232 port (19200 8N1) uses RTS/CTS
@@ -99,16 +101,16 @@ class EspController(StatusLineDevice):
     integer = staticmethod(_integer)
     flag = staticmethod(_flag)
 
-    def __init__(self, port: str, baudrate: int = 19200, timeout_s: float = 1.0,
+    def __init__(self, port: str | None = None, baudrate: int = 19200, timeout_s: float = 1.0,
                  name: str = "esp", retries: int = 2, poll_s: float = 0.01, rtscts: bool = True,
-                 decimals: int = DECIMALS):
+                 decimals: int = DECIMALS, **link: Unpack[LinkOptions]):
         self.poll_s = poll_s
         self.number = decimal_parser(decimals)
         self.version: str | None = None
         super().__init__(name, SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\r", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries, rtscts=rtscts,
-            sync=SyncQuery("VE?", self._is_version),
+            sync=SyncQuery("VE?", self._is_version), **link,
         ))
         try:
             self.errors()  # start from an empty error buffer

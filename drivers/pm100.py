@@ -22,9 +22,10 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, Unpack
 
 from drivers.base import DriverError, InvalidReading, ProtocolError, Reading
+from drivers.byte_link import LinkOptions
 from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
 from drivers.serial_transport import SerialLineTransport, SyncQuery
@@ -123,7 +124,8 @@ class SensorIdentity:
 
 
 class Pm100(StatusLineDevice):
-    """A PM100-series meter as the engine's Detector (power in W)."""
+    """A PM100-series meter as the engine's Detector (power in W), on a serial port or, by
+    `resource`, a VISA resource (a PM100USB's USB-TMC, ASRL, TCPIP SOCKET; LinkOptions)."""
 
     dialect = ERR_DIALECT
     integer = staticmethod(_nr1)
@@ -138,15 +140,15 @@ class Pm100(StatusLineDevice):
                       _same_range, "the fixed range's full scale, W, or None while autoranging",
                       value=_fixed_or_auto)
 
-    def __init__(self, port: str, baudrate: int = 115200, timeout_s: float = 1.0,
+    def __init__(self, port: str | None = None, baudrate: int = 115200, timeout_s: float = 1.0,
                  name: str = "pm100", retries: int = 2, zero_timeout_s: float = 10.0,
-                 nr3_decimals: int = NR3_DECIMALS):
+                 nr3_decimals: int = NR3_DECIMALS, **link: Unpack[LinkOptions]):
         self.zero_timeout_s = zero_timeout_s
         self._full_scales: tuple[float, ...] | None = None
         self.number = nr3_parser(nr3_decimals)
         super().__init__(name, SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
-            timeout_s=timeout_s, retries=retries, sync=SyncQuery("*OPC?", _is_opc),
+            timeout_s=timeout_s, retries=retries, sync=SyncQuery("*OPC?", _is_opc), **link,
         ))
         try:
             self.errors()  # start from an empty error queue

@@ -1,12 +1,13 @@
-"""Line-oriented serial transport (pyserial) with bounded, named timeouts and safe retries.
+"""Line-oriented transport over a byte link (a serial port or a VISA resource) with bounded,
+named timeouts and safe retries.
 
 Protocol drivers send a line and read a reply line through it. Only queries are retried
 (after a timeout or a garbled reply); a command that changes the device's state is sent
-exactly once and its outcome is re-read by the driver instead. Every failure of the port
-itself (pyserial's SerialException, OSError, and the termios.error a vanished pty or USB
-adaptor raises) becomes a SerialPortError, so callers see only DriverError subclasses. The
-port is held (drivers.port_lock) from before it opens until close: one another process holds
-is PortInUse, the line untouched.
+exactly once and its outcome is re-read by the driver instead. The link (drivers.byte_link:
+pyserial's port or PyVISA's resource, opened by drivers.open_link) moves the bytes; every
+failure of the link itself becomes a SerialPortError naming the port or the resource, so
+callers see only DriverError subclasses. The port or resource is held (drivers.port_lock)
+from before it opens until close: one another process holds is PortInUse, the line untouched.
 
 A reply that missed its timeout may still arrive, after the next query has been sent, and
 would be read as that query's answer (a power reading taken at the previous stage position).
@@ -20,38 +21,34 @@ just sent, garbled.
 
 from __future__ import annotations
 
-import os
 import re
-import select
 import termios
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
-
-import serial
+from typing import TypeVar, Unpack
 
 from drivers.base import DeviceTimeout, DriverError, ProtocolError
-from drivers.port_lock import hold
+from drivers.byte_link import LineSettings, LinkFailure, LinkOptions
+from drivers.open_link import open_byte_link
 from drivers.reply_sync import Garbled, Reply, ReplySync, State, SyncReply, UnitKind
 
 T = TypeVar("T")
 
-# What pyserial lets through when a port fails: its own exception, OSError from os.read /
-# os.write / ioctl, and termios.error (no OSError subclass) from tcflush / tcdrain / tcsetattr.
-PORT_FAILURES = (serial.SerialException, OSError, termios.error)
 PRINTABLE = bytes(range(0x20, 0x7F))
 
 
 class SerialPortError(DriverError):
-    """The serial port itself failed (could not be opened, or went away: unplugged USB
-    adaptor, pty whose far side closed); `action` says what the driver was doing."""
+    """The link itself failed (could not be opened, or went away: unplugged USB adaptor, pty
+    whose far side closed, instrument switched off); `port` is the serial port or VISA
+    resource (`noun` says which), `action` what the driver was doing."""
 
-    def __init__(self, device: str, port: str, action: str, cause: BaseException):
+    def __init__(self, device: str, port: str, action: str, cause: BaseException,
+                 noun: str = "serial port"):
         self.device, self.port, self.action, self.cause = device, port, action, cause
         what = "could not be opened" if action == "opening" else f"went away ({action})"
-        super().__init__(f"{device}: serial port {port} {what}: {_describe(cause)}")
+        super().__init__(f"{device}: {noun} {port} {what}: {_describe(cause)}")
 
 
 def _describe(exc: BaseException) -> str:
@@ -85,17 +82,19 @@ class SyncQuery:
 
 
 class SerialLineTransport:
-    """A serial port exchanging ASCII lines, thread-safe (one exchange at a time).
+    """A device's line (a serial port, or a VISA resource given by `resource` instead of the
+    port) exchanging ASCII lines, thread-safe (one exchange at a time).
 
     write_eol / read_eol: the line terminators sent and expected; timeout_s: how long a
     reply may take; retries: extra attempts a query gets after a timeout or garbled reply;
     sync: the driver's SyncQuery (None: input is only flushed before each write, which
-    catches a late reply only if it has already arrived).
+    catches a late reply only if it has already arrived). baudrate and the LinkOptions'
+    parity, stopbits, rtscts and xonxoff set a serial port's or an ASRL resource's line.
     """
 
     def __init__(
         self,
-        port: str,
+        port: str | None = None,
         *,
         name: str,
         baudrate: int = 19200,
@@ -103,14 +102,20 @@ class SerialLineTransport:
         read_eol: bytes = b"\r\n",
         timeout_s: float = 1.0,
         retries: int = 2,
-        rtscts: bool = False,
         sync: SyncQuery | None = None,
+        **link: Unpack[LinkOptions],
     ):
         if not timeout_s > 0:
             raise ValueError(f"{name}: timeout_s must be > 0, got {timeout_s!r}")
         if retries < 0:
             raise ValueError(f"{name}: retries must be >= 0, got {retries!r}")
-        self.name, self.port = name, port
+        resource = link.pop("resource", None)
+        try:
+            line = LineSettings(baudrate, **link)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name}: {exc}") from None
+        self.name = name
+        self.port = port if resource is None else resource
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
         self.sync = sync
@@ -118,18 +123,15 @@ class SerialLineTransport:
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
         self._rx = bytearray()  # bytes read past the last reply line
         self.lock = threading.RLock()
-        self._held = hold(port, name)  # PortInUse before the line is touched
         try:
-            self._serial = serial.serial_for_url(
-                port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s,
-                rtscts=rtscts,
-            )
-        except (*PORT_FAILURES, ValueError) as exc:
-            self._held.release()
-            raise SerialPortError(name, port, "opening", exc) from exc
-        self._fd = self._serial.fileno()
+            self.link, self._held = open_byte_link(port, resource, line, read_eol,
+                                                   self.timeout_s, name)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+        except LinkFailure as exc:
+            noun = "serial port" if resource is None else "VISA resource"
+            raise SerialPortError(name, self.port, "opening", exc.cause, noun) from exc.cause
         try:
-            self._held.exclusive(self._fd)
             self._flush_input()
         except DriverError:
             self.close()
@@ -142,13 +144,11 @@ class SerialLineTransport:
 
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
-        """Close the port (idempotent; a port that has already gone away closes quietly,
+        """Close the link (idempotent; a link that has already gone away closes quietly,
         so closing in a `finally` never hides the error that ended the session); the port's
         hold is released."""
         try:
-            self._serial.close()
-        except PORT_FAILURES:
-            pass
+            self.link.close()
         finally:
             self._held.release()
 
@@ -159,12 +159,12 @@ class SerialLineTransport:
         self.close()
 
     # -- bytes ------------------------------------------------------------------
-    def _port_error(self, action: str, exc: BaseException) -> DriverError:
-        """A port failure during `action` as the DriverError callers see (a blocked write:
+    def _port_error(self, action: str, failure: LinkFailure) -> DriverError:
+        """A link failure during `action` as the DriverError callers see (a blocked write:
         DeviceTimeout, and whatever was being written may have partly gone out)."""
-        if isinstance(exc, serial.SerialTimeoutException):
+        if failure.write_timed_out:
             return DeviceTimeout(self.name, f"the port to take {action}", self.timeout_s)
-        return SerialPortError(self.name, self.port, action, exc)
+        return SerialPortError(self.name, self.port, action, failure.cause, self.link.noun)
 
     def send(self, line: str, what: str | None = None) -> None:
         """Bring replies back in step if a reply was missed (DeviceTimeout naming `what`
@@ -188,9 +188,9 @@ class SerialLineTransport:
 
     def _flush_input(self) -> None:
         try:
-            self._serial.reset_input_buffer()
-        except PORT_FAILURES as exc:
-            raise self._port_error("discarding stale input", exc) from exc
+            self.link.discard_input()
+        except LinkFailure as exc:
+            raise self._port_error("discarding stale input", exc) from exc.cause
         self._rx.clear()
 
     def _write(self, line: str, request: bool) -> None:
@@ -201,38 +201,13 @@ class SerialLineTransport:
             self.replies.send_request(sync_shaped=self.sync is not None and
                                       line == self.sync.line)
         try:
-            self._write_bytes(data)
-            self._serial.flush()
-        except PORT_FAILURES as exc:
-            if isinstance(exc, serial.SerialTimeoutException) and not self.replies.awaiting:
+            self.link.write(data)
+        except LinkFailure as exc:
+            if exc.write_timed_out and not self.replies.awaiting:
                 self.replies.send_request()  # part of a silent line went out: it may be
                 self.replies.timeout()  # answered after all (an error, an echo)
             raise self._port_error(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}",
-                                   exc) from exc
-
-    def _write_bytes(self, data: bytes) -> None:
-        """One os.write on the port's descriptor (pyserial opens it non-blocking); pyserial's
-        write, which waits for room up to the write timeout, only for what the port did not
-        take at once (it would select for room after every write, room or not)."""
-        try:
-            written = os.write(self._fd, data)
-        except BlockingIOError:
-            written = 0
-        if written < len(data):
-            self._serial.write(data[written:])
-
-    def _read_ready(self) -> bytes:
-        """What has arrived on a port select found readable, in one os.read (pyserial's read
-        would ask for the count and select again); nothing if it was a spurious wake-up."""
-        try:
-            chunk = os.read(self._fd, 4096)
-        except BlockingIOError:
-            return b""
-        if not chunk:  # what pyserial's read raises for a readable port with nothing to read
-            raise serial.SerialException("device reports readiness to read but returned no "
-                                         "data (device disconnected or multiple access on "
-                                         "port?)")
-        return chunk
+                                   exc) from exc.cause
 
     def _abandon_wait(self) -> None:
         """After an exchange: a wait cut short (the port lost, a signal) leaves its reply to
@@ -287,23 +262,21 @@ class SerialLineTransport:
     def _read_line(self, what: str, deadline: float) -> str:
         """Read one reply line (terminator stripped) by the monotonic `deadline`.
 
-        Waits on the port's descriptor (select, up to the deadline) and reads whatever has
-        arrived in one call, rather than pyserial's byte-at-a-time read_until or re-setting
-        pyserial's timeout per read (each set re-applies the port's termios settings: two
-        system calls per chunk); bytes after the terminator are kept for the next line (and
+        Reads whatever the link has within the time left (a serial port: what has arrived; a
+        VISA resource: a line); bytes after the terminator are kept for the next line (and
         discarded by the next send: a line protocol sends one reply per request). Raises
-        DeviceTimeout(what) when no complete line arrives in time (the reply may still
-        come), ProtocolError when it holds bytes that are not printable ASCII.
+        DeviceTimeout(what) when no complete line arrives in time (the reply may still come),
+        ProtocolError when it holds bytes that are not printable ASCII.
         """
         data, eol = self._rx, self.read_eol
         try:
             while eol not in data:
                 left = deadline - time.monotonic()
-                if left <= 0 or not select.select([self._fd], [], [], left)[0]:
+                if left <= 0:
                     raise DeviceTimeout(self.name, what, self.timeout_s)
-                data += self._read_ready()
-        except PORT_FAILURES as exc:
-            raise self._port_error(f"reading the reply to {what}", exc) from exc
+                data += self.link.read(left)
+        except LinkFailure as exc:
+            raise self._port_error(f"reading the reply to {what}", exc) from exc.cause
         end = data.index(eol)
         body = bytes(data[:end])
         del data[: end + len(eol)]

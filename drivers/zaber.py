@@ -31,8 +31,10 @@ import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Unpack
 
 from drivers.base import DeviceError, DriverError, ProtocolError
+from drivers.byte_link import LinkOptions
 from drivers.lost_reply import LOST, not_resent, sent_once
 from drivers.polling import poll_until
 from drivers.serial_transport import SerialLineTransport, SyncQuery
@@ -143,8 +145,8 @@ def parse_reply(text: str, address: int, axis: int, message_id: int, checksummed
 
 
 class ZaberController:
-    """The Zaber devices on one serial port; `axis(n, name, address)` gives engine-facing
-    Axis objects.
+    """The Zaber devices on one serial port (or, by `resource`, a VISA resource: LinkOptions);
+    `axis(n, name, address)` gives engine-facing Axis objects.
 
     address: the device (1..99) axes belong to unless axis() names another one of the daisy
     chain; timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is
@@ -153,7 +155,7 @@ class ZaberController:
 
     def __init__(
         self,
-        port: str,
+        port: str | None = None,
         baudrate: int = 115200,
         timeout_s: float = 1.0,
         name: str = "zaber",
@@ -161,6 +163,7 @@ class ZaberController:
         poll_s: float = 0.01,
         address: int = 1,
         full_step_deg: float = X_RSW60A_STEP_DEG,
+        **link: Unpack[LinkOptions],
     ):
         _check_address(name, address)
         if not (full_step_deg > 0 and math.isfinite(full_step_deg)):
@@ -176,7 +179,7 @@ class ZaberController:
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries,
-            sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply),
+            sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply), **link,
         )
         try:
             self._open(address)

@@ -1,9 +1,9 @@
 """Start every emulated device of an instrument config, and the optical bench behind them.
 
 `start(config)` takes the config as a plain dict (the parsed TOML) and serves each device
-on a real pty (serial, Modbus RTU) or TCP socket (Modbus TCP; on loopback unless `bind`
-names another address: the config's hosts are the real devices', never listen addresses),
-with motion on one
+on a real pty (serial, Modbus RTU) or TCP socket (Modbus TCP, and a line device whose
+`resource` is a TCPIP SOCKET one; on loopback unless `bind` names another address: the
+config's hosts are the real devices', never listen addresses), with motion on one
 VirtualClock and the detectors' light from the bench at the stages' positions. It returns
 the endpoints, so a caller can point the config's ports at them. `devices` limits it to
 some of the devices (hardware in the loop); then `positions()` must say where the real
@@ -32,6 +32,7 @@ from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
 from sim.emulator_factories import EmulatedDevice, Light
+from sim.served_resources import serve_resource
 
 SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
             "faults")
@@ -43,7 +44,8 @@ Visit = tuple[Mapping[str, float], float | None]
 
 @dataclass(frozen=True)
 class Endpoint:
-    """Where one emulated device listens: a pty path or 127.0.0.1:PORT."""
+    """Where one emulated device listens: a pty path, 127.0.0.1:PORT (Modbus TCP), or the VISA
+    resource string of what it serves for a device the config gives by `resource`."""
 
     name: str
     protocol: str
@@ -195,7 +197,8 @@ class _Builder:
         return EmulatedDevice(name, self.devices[name], self._roles(name), self.bench.clock,
                               self._seed(name), self._faults(name), self._serial(name),
                               self._interlock(name),
-                              serve=lambda emu: _serve(self.bench, name, emu),
+                              serve=lambda emu: _serve(self.bench, name, emu,
+                                                       self.devices[name], self.bind),
                               join_bus=lambda unit: self._add_modbus(name, unit), stage=stage)
 
     def _add_modbus(self, name: str, unit: Any) -> None:
@@ -298,10 +301,14 @@ def _place(positions: Mapping[str, float]) -> tuple[float, ...]:
     return tuple(float(positions.get(role, 0.0)) for role in ROLES)
 
 
-def _serve(bench: EmulatedBench, name: str, emu: Any) -> None:
+def _serve(bench: EmulatedBench, name: str, emu: Any, table: Mapping[str, Any],
+           bind: str) -> None:
+    """Serve a line emulator on a pty, or, for a device given by a VISA resource, on the link
+    the resource names (sim.served_resources); its endpoint is then that resource string."""
     if emu.server.faults.spec.active:
         bench.injectors.setdefault(name, []).append(emu.server.faults)
-    endpoint = emu.start()
+    resource = table.get("resource")
+    endpoint = emu.start() if resource is None else serve_resource(emu, resource, bind)
     bench._stops.append(emu.stop)
     bench.emulators[name] = emu
     bench.endpoints[name] = Endpoint(name, emu.protocol, endpoint)

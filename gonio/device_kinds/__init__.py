@@ -9,8 +9,6 @@ Adding a kind is one entry here pointing at its driver module (docs/extending.md
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind
 from gonio.device_kinds.modbus import (
     MODBUS_SETTINGS,
@@ -20,21 +18,25 @@ from gonio.device_kinds.modbus import (
     modbus_unit,
 )
 from gonio.device_kinds.serial_line import serial_device
-from gonio.device_kinds.settings import BAUDRATE, PORT, SERIAL_SETTINGS, TIMEOUT_S, Setting
+from gonio.device_kinds.settings import Setting, serial_settings
 
 KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
-    StageKind(name="esp", settings=SERIAL_SETTINGS, multi_axis=True,
-              open=serial_device("drivers.esp:EspController")),
-    DetectorKind(name="pm100", settings=SERIAL_SETTINGS,
-                 open=serial_device("drivers.pm100:Pm100")),
+    # the ESP301's RS-232 port hands shake by RTS/CTS; its replies carry 5 decimals
+    StageKind(name="esp", multi_axis=True, open=serial_device("drivers.esp:EspController"),
+              settings=serial_settings(Setting("decimals", "integer", 5, low=1, high=10),
+                                       rtscts=True)),
+    # NR3 as the PM100 manual gives it: 1.234567E-06
+    DetectorKind(name="pm100", open=serial_device("drivers.pm100:Pm100"),
+                 settings=serial_settings(Setting("nr3_decimals", "integer", 6, low=1,
+                                                  high=14))),
     StageKind(name="modbus-stage", settings=MODBUS_SETTINGS, check=check_stage_registers,
               open=modbus_unit("drivers.modbus_stage:ModbusStage")),
     DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS, check=check_register_map,
                  config_full_scales_w=map_full_scales_w,
                  open=modbus_unit("drivers.modbus_detector:ModbusDetector")),
     StageKind(name="zaber", multi_axis=True, open=serial_device("drivers.zaber:ZaberController"),
-              settings=(TIMEOUT_S, PORT, replace(BAUDRATE, default=115200),
-                        Setting("address", "integer", 1, low=1, high=99))),
+              settings=serial_settings(Setting("address", "integer", 1, low=1, high=99),
+                                       baudrate=115200)),
 )}
 
 

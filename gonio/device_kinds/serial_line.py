@@ -1,4 +1,5 @@
-"""Opening a device on a serial line of its own (the ESP controllers, the PM100 meters)."""
+"""Opening a device on a line of its own (the ESP controllers, the PM100 meters, a Zaber
+chain), reached by a serial port or a VISA resource."""
 
 from __future__ import annotations
 
@@ -10,11 +11,10 @@ from gonio.device_kinds.kind import DeviceConfig, driver_class
 
 def serial_device(driver: str) -> Callable[[DeviceConfig], Any]:
     """An opener for the driver class `driver` ("module:Class"), constructed as
-    `Class(port, baudrate=, timeout_s=, name=, **others)` from the SERIAL_SETTINGS of a
-    device and any other settings its kind declares (a Zaber chain's `address`)."""
+    `Class(name=, **settings)` from the serial_settings of a device (its `port` or its
+    `resource`, the line settings, timeout_s) and any other settings its kind declares (a
+    Zaber chain's `address`, the ESP's reply `decimals`): a setting's key is the driver's
+    argument."""
     def open_device(dev: DeviceConfig) -> Any:
-        s = dev.settings
-        others = {k: v for k, v in s.items() if k not in ("port", "baudrate", "timeout_s")}
-        return driver_class(driver)(s["port"], baudrate=s["baudrate"],
-                                    timeout_s=s["timeout_s"], name=dev.name, **others)
+        return driver_class(driver)(name=dev.name, **dev.settings)
     return open_device

@@ -17,10 +17,11 @@ from typing import Any
 
 from gonio.fields import REQUIRED, Fields
 
-#: "string" (one of `choices` if given), "integer" and "number" (within low..high), "file"
-#: (a path relative to the config's folder, made absolute; it must exist) and "host" (a
-#: device's network address; a wildcard listen address is refused). file and host are required.
-TYPES = ("string", "integer", "number", "file", "host")
+#: "string" (one of `choices` if given), "integer" and "number" (within low..high, or one of
+#: `choices`), "boolean", "file" (a path relative to the config's folder, made absolute; it
+#: must exist) and "host" (a device's network address; a wildcard listen address is refused).
+#: file and host are required.
+TYPES = ("string", "integer", "number", "boolean", "file", "host")
 
 
 @dataclass(frozen=True)
@@ -31,7 +32,8 @@ class Setting:
     when: (key, value) of an earlier setting this one applies under (a Modbus TCP device has
     a host, an RTU one a port); endpoint: part of where the device is reached (joined by ":"
     in declaration order; may change when a run resumes); recorded: kept in each session's
-    record of the device in meta.json.
+    record of the device in meta.json; one_of: the name of a group of alternatives of which
+    a device gives exactly one (a serial port or a VISA resource), each with no default.
     """
 
     key: str
@@ -41,14 +43,18 @@ class Setting:
     low: float = -math.inf
     high: float = math.inf
     low_open: bool = False
-    choices: tuple[str, ...] = ()
+    choices: tuple[Any, ...] = ()
     when: tuple[str, str] | None = None
     endpoint: bool = False
     recorded: bool = False
+    one_of: str = ""
 
     def __post_init__(self) -> None:
         if self.type not in TYPES:
             raise ValueError(f"setting {self.key!r}: type {self.type!r} is not one of {TYPES}")
+        if self.one_of and self.default is not None:
+            raise ValueError(f"setting {self.key!r}: an alternative of {self.one_of!r} has no "
+                             "default")
 
     def applies(self, values: Mapping[str, Any]) -> bool:
         """True if this setting belongs to a device whose earlier settings are `values`."""
@@ -57,8 +63,14 @@ class Setting:
     def read(self, f: Fields, base: Path) -> Any:
         """This setting's value from a device table (relative files resolve against base)."""
         if self.type in ("integer", "number"):
-            return f.number(self.key, self.default, self.low, self.high,
-                            integer=self.type == "integer", low_open=self.low_open)
+            value = f.number(self.key, self.default, self.low, self.high,
+                             integer=self.type == "integer", low_open=self.low_open)
+            if self.choices and value not in self.choices:
+                raise f.fail(self.key, f"must be one of {', '.join(map(str, self.choices))}; "
+                                       f"got {value:g}")
+            return value
+        if self.type == "boolean":
+            return f.boolean(self.key, self.default)
         value = f.string(self.key, self.default, self.choices)
         if self.type == "file":
             return _existing_file(f, self.key, value, base)
@@ -73,11 +85,24 @@ class Setting:
 
 def read_settings(f: Fields, settings: tuple[Setting, ...], base: Path) -> dict[str, Any]:
     """The values of the settings that apply to the device table `f`, by key, defaults
-    filled in (the caller's f.done() then refuses any key no setting asked for)."""
+    filled in, and of each one_of group the one alternative given (none or several: one
+    error naming the table); the caller's f.done() then refuses any key no setting asked for."""
     values: dict[str, Any] = {}
+    groups: dict[str, list[str]] = {}
     for setting in settings:
         if setting.applies(values):
-            values[setting.key] = setting.read(f, base)
+            value = setting.read(f, base)
+            if setting.one_of:
+                groups.setdefault(setting.one_of, []).append(setting.key)
+                if value is None:
+                    continue
+            values[setting.key] = value
+    for group, keys in groups.items():
+        given = [key for key in keys if key in values]
+        if len(given) != 1:
+            named = " or ".join(repr(key) for key in keys)
+            how = "not both" if given else "none is given"
+            raise f.error(f"{f.where}: give exactly one of {named} ({group}); {how}")
     return values
 
 
@@ -104,8 +129,26 @@ def _device_host(f: Fields, key: str, host: str) -> str:
 TIMEOUT_S = Setting("timeout_s", "number", 1.0, unit="s", low=0.0, low_open=True)
 PORT = Setting("port", "string", endpoint=True)
 BAUDRATE = Setting("baudrate", "integer", 19200, unit="baud", low=1)
-#: A device on a serial line of its own: the reply timeout, the port and its baud rate.
-SERIAL_SETTINGS = (TIMEOUT_S, PORT, BAUDRATE)
+LINK = "a serial port or a VISA resource string"
+
+
+def serial_settings(*own: Setting, baudrate: int = 19200,
+                    rtscts: bool = False) -> tuple[Setting, ...]:
+    """The settings of a device on a line of its own, then its kind's `own`: the reply
+    timeout; where it is reached, a serial port or a VISA resource (exactly one); the line
+    of a port or an ASRL resource (baudrate, parity, stopbits and flow control, with the
+    kind's default baud rate and RTS/CTS)."""
+    return (
+        TIMEOUT_S,
+        dataclasses.replace(PORT, default=None, one_of=LINK),
+        Setting("resource", "string", None, endpoint=True, one_of=LINK),
+        dataclasses.replace(BAUDRATE, default=baudrate),
+        Setting("parity", "string", "none", choices=("none", "even", "odd", "mark", "space")),
+        Setting("stopbits", "number", 1, choices=(1, 1.5, 2)),
+        Setting("rtscts", "boolean", rtscts),
+        Setting("xonxoff", "boolean", False),
+        *own,
+    )
 
 
 def only_when(key: str, value: str, *settings: Setting) -> tuple[Setting, ...]:

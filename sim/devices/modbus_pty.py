@@ -11,47 +11,20 @@ was sent to it (a hangup earlier would flush those bytes).
 from __future__ import annotations
 
 import asyncio
-import fcntl
 import os
-import sys
-import termios
 import time
-import tty
 
-from sim.devices.pty_server import ARRIVAL_GRACE_S
+from sim.devices.pty_server import ARRIVAL_GRACE_S, PtyPair
 
 
-class PtyLine:
-    """A raw pty pair: hosts open `path` (the slave); the server talks through the master.
-
-    The line keeps a slave fd of its own, so the pty lives on while hosts open and close it.
-    """
-
-    def __init__(self):
-        self.master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        os.set_blocking(self.master, False)
-        self.path = os.ttyname(self._slave)
+class PtyLine(PtyPair):
+    """A raw pty pair (sim.devices.pty_server.PtyPair) whose master pymodbus's server serves
+    through a PtyMasterTransport."""
 
     async def open(self, protocol_factory) -> tuple[PtyMasterTransport, asyncio.Protocol]:
         """Stand-in for pymodbus's create_serial_connection: a transport over the master."""
         protocol = protocol_factory()
         return PtyMasterTransport(asyncio.get_running_loop(), protocol, self), protocol
-
-    def unread_by_host(self) -> int:
-        """Bytes sent to the host that it has not read yet (the slave's input queue)."""
-        return int.from_bytes(fcntl.ioctl(self._slave, termios.TIOCINQ, b"\0\0\0\0"),
-                              sys.byteorder)
-
-    def close(self) -> None:
-        """Close both ends (idempotent): the host's reads fail and the path goes away."""
-        for fd in (self.master, self._slave):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self.master = self._slave = -1
 
 
 class PtyMasterTransport(asyncio.Transport):

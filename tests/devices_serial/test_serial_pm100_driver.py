@@ -200,7 +200,7 @@ def test_overlong_line_and_invalid_character(pm_pair):
     emu, pm = pm_pair()
     pm.transport.send("SENS:CORR:WAV " + "1" * 600)
     assert pm.errors() == [(-363, "Input buffer overrun")]
-    pm.transport._serial.write(b"\xff\xfe\n")
+    pm.transport.link.write(b"\xff\xfe\n")
     assert pm.errors() == [(-101, "Invalid character")]
 
 

@@ -242,8 +242,8 @@ def pointed(cfg: dict, endpoints: dict[str, tuple[str, str]]) -> dict:
         if protocol == "modbus-tcp":
             host, port = endpoint.rsplit(":", 1)
             dev.update(host=host, tcp_port=int(port))
-        else:
-            dev["port"] = endpoint
+        else:  # a pty path for a port, a VISA resource string for a resource
+            dev["resource" if "resource" in dev else "port"] = endpoint
     return cfg
 
 
