@@ -5,14 +5,17 @@ Written from the PM100D / PM100USB / PM400 operation manuals ("SCPI commands" / 
 interface" chapters) and Thorlabs' own PM100 instrument drivers (PM100D_Drv.c, TLPM.h: the
 commands they send, the status register bits): program messages end in LF (CR LF
 accepted), keywords have a short (upper-case part) and a long form in any letter case,
-optional nodes in brackets, several message units separated by ';' (a unit without a leading
-':' first continues the previous header's path, as SCPI says; failing that it is read from
-the root). Replies: one line ended by LF, several query answers joined by ';'. Errors go into
-the SCPI error queue read by SYST:ERR? as `code,"message"` and set their class's bit of the
-Standard Event Status Register; a failed query answers nothing. The console (`model`) gives
-the *IDN? answer and the front-panel commands (display, clock, beeper: pm100_panel), the
-sensor head (`sensor`) SYST:SENS:IDN? and the wavelength range; the optical power comes from
-a PowerSource through sim.devices.photodiode.
+optional nodes in brackets, several message units separated by ';'. A unit without a leading
+':' continues the previous header's path, as SCPI and the manual say ("CORR:BEAM 1; WAVE
+1310" sets both); failing that it is read from the root only if it names a root keyword
+itself, so "MEAS:POW?;SYST:ERR?" works while "CORR:BEAM 1;AVER 300", which needs the implied
+SENSe, is an undefined header, as the manual says; common commands leave the path as it is.
+Replies: one line ended by LF, several query answers joined by ';'. Errors go into the SCPI
+error queue read by SYST:ERR? as `code,"message"` and set their class's bit of the Standard
+Event Status Register; a failed query answers nothing. The console (`model`) gives the *IDN?
+answer and the front-panel commands (display, clock, beeper: pm100_panel), the sensor head
+(`sensor`) SYST:SENS:IDN? and the wavelength range; the optical power comes from a
+PowerSource through sim.devices.photodiode.
 """
 
 from __future__ import annotations
@@ -200,11 +203,12 @@ class Pm100Emulator(PtyDevice):
 
     def _execute(self, text: str, path: list) -> tuple[str | None, list]:
         unit = parse_unit(text)
-        candidates = [unit.tokens] if unit.rooted or unit.common else [path + unit.tokens,
-                                                                       unit.tokens]
-        for full in candidates:
+        candidates = [(unit.tokens, False)] if unit.rooted or unit.common or not path else [
+            (path + unit.tokens, False), (unit.tokens, True)]
+        for full, fallback in candidates:
             for nodes, can_query, can_set, action in self._commands:
-                if matches(nodes, full) and (can_query if unit.query else can_set):
+                if (matches(nodes, full) and (can_query if unit.query else can_set)
+                        and (not fallback or nodes[0].spells(full[0][0]))):
                     if any(suffix and int(suffix) != 1 for _, suffix in unit.tokens):
                         raise ScpiError(-114)  # one sensor channel: only suffix 1 exists
                     return action(unit.query, unit.args), path if unit.common else full[:-1]
