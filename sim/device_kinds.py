@@ -98,7 +98,7 @@ def check_settings(name: str, kind: EmulatorKind, settings: Mapping[str, Any]) -
     for key, value in settings.items():
         if key not in kind.settings:
             known = ", ".join(kind.settings) or "none"
-            raise SimConfigError(f"[sim.devices.{name}] {key}: a {kind.name} emulator takes "
+            raise SimConfigError(f"[sim.devices.{name}] {key}: the {kind.name} emulator takes "
                                  f"no such key (keys: {known})")
         if value not in kind.settings[key]:
             raise SimConfigError(f"[sim.devices.{name}] {key}: {value!r} is not one of "
