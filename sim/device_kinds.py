@@ -1,5 +1,6 @@
 """The device kinds sim emulates, each declared once: its name (a config's `protocol`),
-stage or detector, the factory that starts its emulator, and the fault keys only it acts on.
+stage or detector, the factory that starts its emulator, the fault keys only it acts on and
+the [sim.devices.<name>] keys that say what its emulator is (a PM100's console and head).
 
 gonio.device_kinds declares the same names with the same roles (how the real devices are
 configured and opened); sim never imports it, and tests/test_device_kinds.py checks that the

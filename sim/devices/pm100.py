@@ -35,8 +35,9 @@ from sim.devices.scpi_program import (
     SCPI_ERRORS,
     Limits,
     ScpiError,
-    boolean,
+    attribute_flag,
     choice,
+    flag_setting,
     integer,
     limits_query,
     matches,
@@ -261,19 +262,21 @@ class Pm100Emulator(PtyDevice):
              lambda q, a: no_args(a) or "0"),
             ("[SENSe#]:CORRection:COLLect:ZERO:MAGNitude", True, False,
              lambda q, a: no_args(a) or nr3(self.photodiode.zero_offset_w)),
-            ("[SENSe#]:POWer[:DC]:RANGe:AUTO", True, True, self._range_auto),
+            ("[SENSe#]:POWer[:DC]:RANGe:AUTO", True, True, attribute_flag(self, "autorange")),
             ("[SENSe#]:POWer[:DC]:RANGe[:UPPer]", True, True, self._range(1.0, POWER_UNITS)),
             ("[SENSe#]:POWer[:DC]:REFerence", True, True, self._reference("POW")),
             ("[SENSe#]:POWer[:DC]:REFerence:STATe", True, True, self._reference_state("POW")),
             ("[SENSe#]:POWer[:DC]:UNIT", True, True, self._unit),
-            ("[SENSe#]:CURRent[:DC]:RANGe:AUTO", True, True, self._photodiode(self._range_auto)),
+            ("[SENSe#]:CURRent[:DC]:RANGe:AUTO", True, True,
+             self._photodiode(attribute_flag(self, "autorange"))),
             ("[SENSe#]:CURRent[:DC]:RANGe[:UPPer]", True, True,
              self._photodiode(self._range(None, CURRENT_UNITS))),
             ("[SENSe#]:CURRent[:DC]:REFerence", True, True,
              self._photodiode(self._reference("CURR"))),
             ("[SENSe#]:CURRent[:DC]:REFerence:STATe", True, True,
              self._photodiode(self._reference_state("CURR"))),
-            ("INPut#:PDIode:FILTer:LPASs:STATe", True, True, self._photodiode(self._lowpass)),
+            ("INPut#:PDIode:FILTer:LPASs:STATe", True, True,
+             self._photodiode(attribute_flag(self, "lowpass"))),
         ]
         return [(pattern(spec), q, s, action) for spec, q, s, action in table]
 
@@ -472,13 +475,6 @@ class Pm100Emulator(PtyDevice):
         self.operation.pulse(OPER_CORR)
         self.photodiode.zero(self.wavelength_nm)
 
-    def _range_auto(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            no_args(args)
-            return "1" if self.autorange else "0"
-        self.autorange = boolean(one_arg(args))
-        return None
-
     def _range(self, scale: float | None, units: Mapping[str, float]) -> Callable:
         """A range setting in W (scale 1) or in A (scale None: the power ranges times the
         responsivity); setting one picks the smallest range holding it, autorange off."""
@@ -494,6 +490,11 @@ class Pm100Emulator(PtyDevice):
             return None
         return access
 
+    def _reference_state(self, quantity: str) -> Callable:
+        """The delta mode's switch (SENS:POW:REF:STAT, SENS:CURR:REF:STAT)."""
+        return flag_setting(lambda: self.references[quantity][1],
+                            lambda on: self.references[quantity].__setitem__(1, on))
+
     def _reference(self, quantity: str) -> Callable:
         """The delta mode's reference (W or A; 0 to the top range, default 0)."""
         def access(query: bool, args: list[str]) -> str | None:
@@ -506,27 +507,11 @@ class Pm100Emulator(PtyDevice):
             return None
         return access
 
-    def _reference_state(self, quantity: str) -> Callable:
-        def access(query: bool, args: list[str]) -> str | None:
-            if query:
-                no_args(args)
-                return "1" if self.references[quantity][1] else "0"
-            self.references[quantity][1] = boolean(one_arg(args))
-            return None
-        return access
-
     def _unit(self, query: bool, args: list[str]) -> str | None:
         if query:
             no_args(args)
             return self.power_unit
         self.power_unit = choice(one_arg(args), ("W", "DBM"))
-        return None
-
-    def _lowpass(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            no_args(args)
-            return "1" if self.lowpass else "0"
-        self.lowpass = boolean(one_arg(args))
         return None
 
 

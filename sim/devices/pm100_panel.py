@@ -10,13 +10,13 @@ and time last set.
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from sim.devices.pm100_models import Console
 from sim.devices.scpi_program import (
     Limits,
     ScpiError,
-    boolean,
+    attribute_flag,
     integer,
     limits_query,
     no_args,
@@ -27,6 +27,8 @@ from sim.devices.scpi_program import (
 DISPLAY_LIMITS = {"BRIGhtness": Limits(0.0, 1.0, 1.0), "CONTrast": Limits(0.0, 1.0, 0.5)}
 CALIBRATION = "01-Jan-2026"  # CALibration:STRing?: the console's calibration message
 LINE_FREQUENCIES = (50, 60)
+DATE_FIELDS = {"year": Limits(2000, 2099), "month": Limits(1, 12), "day": Limits(1, 31)}
+TIME_FIELDS = {"hour": Limits(0, 23), "minute": Limits(0, 59), "second": Limits(0, 59)}
 
 
 class Panel:
@@ -48,11 +50,11 @@ class Panel:
         ]
         table += [(f"DISPlay:{name}", True, True, self._display(name)) for name in self.display]
         if self.console.clock:
-            table += [("SYSTem:DATE", True, True, self._date),
-                      ("SYSTem:TIME", True, True, self._time)]
+            table += [("SYSTem:DATE", True, True, self._clock(DATE_FIELDS)),
+                      ("SYSTem:TIME", True, True, self._clock(TIME_FIELDS))]
         if self.console.beeper:
             table += [("SYSTem:BEEPer[:IMMediate]", False, True, self._beep),
-                      ("SYSTem:BEEPer:STATe", True, True, self._beeper_state)]
+                      ("SYSTem:BEEPer:STATe", True, True, attribute_flag(self, "beeper_on"))]
         return table
 
     def _line_frequency(self, query: bool, args: list[str]) -> str | None:
@@ -83,40 +85,26 @@ class Panel:
     def _set_clock(self, when: dt.datetime) -> None:
         self._clock_offset_s = when.timestamp() - self.wall()
 
-    def _fields(self, args: list[str], limits: tuple[Limits, Limits, Limits]) -> list[int]:
-        if len(args) != 3:
-            raise ScpiError(-109 if len(args) < 3 else -108)
-        return [integer(arg, lim, exact=True) for arg, lim in zip(args, limits, strict=True)]
-
-    def _date(self, query: bool, args: list[str]) -> str | None:
-        now = self.now()
-        if query:
-            no_args(args)
-            return f"{now.year},{now.month},{now.day}"
-        year, month, day = self._fields(args, (Limits(2000, 2099), Limits(1, 12), Limits(1, 31)))
-        try:
-            self._set_clock(now.replace(year=year, month=month, day=day))
-        except ValueError:  # a day the month does not have
-            raise ScpiError(-222) from None
-        return None
-
-    def _time(self, query: bool, args: list[str]) -> str | None:
-        now = self.now()
-        if query:
-            no_args(args)
-            return f"{now.hour},{now.minute},{now.second}"
-        hour, minute, second = self._fields(args, (Limits(0, 23), Limits(0, 59), Limits(0, 59)))
-        self._set_clock(now.replace(hour=hour, minute=minute, second=second, microsecond=0))
-        return None
+    def _clock(self, fields: Mapping[str, Limits]) -> Callable:
+        """SYSTem:DATE (year, month, day) or :TIME (hour, minute, second): three NR1 fields
+        set together (-222 for a day the month does not have) and answered together."""
+        def access(query: bool, args: list[str]) -> str | None:
+            now = self.now()
+            if query:
+                no_args(args)
+                return ",".join(str(getattr(now, name)) for name in fields)
+            if len(args) != len(fields):
+                raise ScpiError(-109 if len(args) < len(fields) else -108)
+            values = {name: integer(arg, limits, exact=True)
+                      for (name, limits), arg in zip(fields.items(), args, strict=True)}
+            try:
+                self._set_clock(now.replace(**values))
+            except ValueError:
+                raise ScpiError(-222) from None
+            return None
+        return access
 
     # -- beeper -----------------------------------------------------------------------
     def _beep(self, query: bool, args: list[str]) -> None:
         no_args(args)
         self.beeps += 1 if self.beeper_on else 0
-
-    def _beeper_state(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            no_args(args)
-            return "1" if self.beeper_on else "0"
-        self.beeper_on = boolean(one_arg(args))
-        return None

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 SCPI_ERRORS = {
@@ -217,6 +217,24 @@ def boolean(text: str) -> bool:
     if match is None or match.group(2):
         raise ScpiError(-104)
     return round(float(match.group(1))) != 0
+
+
+def flag_setting(read: Callable[[], bool], write: Callable[[bool], None]
+                 ) -> Callable[[bool, list[str]], str | None]:
+    """A boolean setting's command and query (ON / OFF / a number; answers 1 or 0), as a
+    command-table action."""
+    def access(query: bool, args: list[str]) -> str | None:
+        if query:
+            no_args(args)
+            return "1" if read() else "0"
+        write(boolean(one_arg(args)))
+        return None
+    return access
+
+
+def attribute_flag(owner: object, name: str) -> Callable[[bool, list[str]], str | None]:
+    """flag_setting on the boolean attribute `name` of `owner`."""
+    return flag_setting(lambda: getattr(owner, name), lambda on: setattr(owner, name, on))
 
 
 def choice(text: str, options: tuple[str, ...]) -> str:

@@ -7,6 +7,7 @@ reading it, and an enable mask whose AND with the events is the group's summary 
 status byte. `StatusModel` adds the Standard Event Status Register (ESR) with its enable (ESE),
 the Service Request Enable (SRE) and the status byte (*STB?), whose bit 6 is the master
 summary: (status byte AND SRE) over bits 0-5 and 7 (IEEE 488.2, 11.2 and 11.5).
+`register_commands` gives the STATus subsystem's commands for a set of register groups.
 """
 
 from __future__ import annotations

@@ -139,3 +139,17 @@ def test_filter_beam_and_averaging_limits(scpi):
     assert port.errors() == [-224, -222, -222]
     port.send("*RST")
     assert port.ask("INP:PDI:FILT:LPAS:STAT?;:SENS:CORR:BEAM?") == "0;9.500000E+00"
+
+
+def test_reset_returns_the_measurement_settings_to_their_defaults(scpi):
+    emu, port = scpi()
+    port.send("SENS:POW:REF 1E-6;REF:STAT ON;:SENS:POW:UNIT DBM;:SENS:CURR:REF:STAT 1;:CONF:CURR")
+    port.send("SENS:CORR:LOSS 3;:SENS:CORR:POW:RESP 0.2;:SENS:POW:RANG:AUTO OFF")
+    port.send("*RST")
+    assert port.errors() == []
+    assert port.ask("SENS:POW:REF?;REF:STAT?;:SENS:POW:UNIT?;:SENS:CURR:REF:STAT?;:CONF?") == (
+        "0.000000E+00;0;W;0;POW")
+    assert port.ask("SENS:CORR:LOSS?;:SENS:POW:RANG:AUTO?") == "0.000000E+00;1"
+    assert port.ask("SENS:CORR:POW:RESP?") == port.ask("SENS:CORR:POW:RESP? DEF")
+    port.send("SENS:POW:REF:STAT ON")
+    assert port.ask("SENS:POW:REF:STAT?") == "1" and port.errors() == []
