@@ -216,7 +216,7 @@ def boolean(text: str) -> bool:
     match = _NRF.fullmatch(text)
     if match is None or match.group(2):
         raise ScpiError(-104)
-    return round(float(match.group(1))) != 0
+    return abs(float(match.group(1))) >= 0.5  # rounds to a nonzero integer
 
 
 def flag_setting(read: Callable[[], bool], write: Callable[[bool], None]
