@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any, Unpack
 
-from drivers.base import DriverError, InvalidReading, ProtocolError, Reading
+from drivers.base import DeviceError, DriverError, InvalidReading, ProtocolError, Reading
 from drivers.byte_link import LinkOptions
 from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
@@ -39,6 +39,22 @@ SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
 MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
 ERROR_QUEUE_DEPTH = 32
 ZERO_POLL_S = 0.05  # how often zero() asks whether the adjustment is still running
+DATA_OUT_OF_RANGE = -222  # the SCPI error a setting outside its limits raises
+
+
+class WavelengthOutsideHead(DeviceError):
+    """The connected sensor head cannot take the correction wavelength asked for (the meter
+    refused it as out of range): names the wavelength, the head and the head's range."""
+
+    def __init__(self, device: str, wavelength_nm: float, head: str,
+                 limits_nm: tuple[float, float]):
+        super().__init__(device, DATA_OUT_OF_RANGE, "Data out of range")
+        self.wavelength_nm, self.head, self.limits_nm = wavelength_nm, head, limits_nm
+
+    def __str__(self) -> str:
+        low, high = self.limits_nm
+        return (f"{self.device}: wavelength {self.wavelength_nm:g} nm is outside the sensor "
+                f"head {self.head}'s range {low:g}-{high:g} nm")
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> StrictNumber:
@@ -171,12 +187,27 @@ class Pm100(StatusLineDevice):
 
     # -- Detector interface -------------------------------------------------------
     def configure(self, wavelength_nm: float, averaging: int, range_w: float | None) -> None:
-        """Set the correction wavelength, averaged samples and a fixed range (None = auto)."""
+        """Set the correction wavelength, averaged samples and a fixed range (None = auto);
+        a wavelength the sensor head cannot take is a WavelengthOutsideHead."""
         if isinstance(averaging, bool) or int(averaging) != averaging or averaging < 1:
             raise ValueError(f"{self.name}: averaging must be an integer >= 1, got {averaging!r}")
-        self.wavelength_nm = wavelength_nm
+        self._set_wavelength(wavelength_nm)
         self.averaging = averaging
         self.range_w = range_w
+
+    def _set_wavelength(self, wavelength_nm: float) -> None:
+        """SENS:CORR:WAV; when the meter refuses it as out of range and the head's range
+        (SENS:CORR:WAV? MIN / MAX) does not hold it, the error names the head and its range."""
+        try:
+            self.wavelength_nm = wavelength_nm
+        except DeviceError as exc:
+            if exc.code != DATA_OUT_OF_RANGE:
+                raise
+            low, high = self.wavelength_limits_nm()
+            if low <= wavelength_nm <= high:
+                raise
+            raise WavelengthOutsideHead(self.name, wavelength_nm, self.sensor().name,
+                                        (low, high)) from None
 
     def wavelength_limits_nm(self) -> tuple[float, float]:
         """SENS:CORR:WAV? MIN / MAX: the sensor's wavelength range, nm."""

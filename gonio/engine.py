@@ -91,6 +91,13 @@ def home_axes(instrument: Instrument) -> None:
                                        + WAIT_MARGIN_S)
 
 
+def configure_detector(instrument: Instrument, plan: Plan, range_w: float | None) -> None:
+    """Set the detector's correction wavelength ([detector] / [optics]), the samples it
+    averages (the plan's, else the config's) and its range (None: autorange)."""
+    det = instrument.config.detector
+    instrument.detector.configure(det.wavelength_nm, plan.averaging or det.averaging, range_w)
+
+
 class StopRun(Exception):
     """The run cannot go on; the message is the reason recorded in meta.json."""
 
@@ -177,11 +184,9 @@ class Engine:
         """Set the detector's range (AUTO_RANGE: autorange) unless it is set already."""
         if range_w == self._range:
             return
-        det = self.inst.config.detector
         self._doing = f"setting the detector ({self.inst.detector.name}) range"
         self._range = None  # unknown until the device confirms
-        self.inst.detector.configure(det.wavelength_nm, self.plan.averaging or det.averaging,
-                                     None if range_w == AUTO_RANGE else range_w)
+        configure_detector(self.inst, self.plan, None if range_w == AUTO_RANGE else range_w)
         self._range = range_w
 
     def _measure(self, row: np.void, flags: list[str]) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from drivers.base import Detector
 from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.control import RunStatus, serving
 from gonio.device_kinds import endpoint_keys
-from gonio.engine import Engine, Outcome
+from gonio.engine import Engine, Outcome, configure_detector
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.events import EventBus, Subscriber
 from gonio.instrument import build_instrument
@@ -99,8 +99,10 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          check: DetectorCheck | None = None, session: dict[str, Any] | None = None,
          channel: bool = False, started: Started | None = None,
          created: Callable[[Path], None] | None = None) -> ScanResult:
-    """Open the devices, check the detector (`check`), then open the run (so a device that
-    cannot be opened or a failed check leaves no new run behind), and measure what is left
+    """Open the devices, set the detector's wavelength and averaging and check it (`check`),
+    then open the run (so a device that cannot be opened, a setting it refuses, such as a
+    wavelength its sensor head cannot take, or a failed check leaves no new run behind), and
+    measure what is left
     of the schedule (`stored`: the readings stored already; the run started at t0_epoch).
     session: more for meta.json's record of this session; channel: serve the control channel
     (gonio.control) in the run directory; started: told the run directory once it exists, and
@@ -113,6 +115,7 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
     done = sched.readings[[row["index"] for row in stored]]
     with _devices(cfg, sim, plan, t0_epoch, done) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
+        configure_detector(inst, plan, None)
         if check is not None:
             check(sched.readings, inst.detector)
         with control:

@@ -1,5 +1,6 @@
 """The device kinds sim emulates, each declared once: its name (a config's `protocol`),
-stage or detector, the factory that starts its emulator, and the fault keys only it acts on.
+stage or detector, the factory that starts its emulator, the fault keys only it acts on and
+the [sim.devices.<name>] keys that say what its emulator is (a PM100's console and head).
 
 gonio.device_kinds declares the same names with the same roles (how the real devices are
 configured and opened); sim never imports it, and tests/test_device_kinds.py checks that the
@@ -10,13 +11,14 @@ two registries agree. Adding a kind is one entry here pointing at its emulator m
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from sim.devices.esp import EspEmulator
 from sim.devices.faults import KIND_FAULTS
 from sim.devices.photodiode import SimConfigError
 from sim.devices.pm100 import Pm100Emulator
+from sim.devices.pm100_models import CONSOLES, HEADS
 from sim.devices.zaber import ZaberEmulator
 from sim.emulator_factories import (
     DetectorFactory,
@@ -30,10 +32,13 @@ from sim.emulator_factories import (
 
 @dataclass(frozen=True, kw_only=True)
 class _Kind:
-    """What every emulated kind declares: its name and the fault keys only it acts on."""
+    """What every emulated kind declares: its name, the fault keys only it acts on, and the
+    [sim.devices.<name>] keys that say what its emulator pretends to be, each with its
+    choices."""
 
     name: str
     own_faults: tuple[str, ...] = ()
+    settings: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,7 +63,8 @@ KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
     StageEmulator(name="esp", start=controller_on_pty(EspEmulator, interlock_arg="estop"),
                   own_faults=("interlock",)),
     DetectorEmulator(name="pm100", start=meter_on_pty(Pm100Emulator),
-                     own_faults=("invalid_prob",)),
+                     own_faults=("invalid_prob",),
+                     settings={"model": tuple(CONSOLES), "sensor": tuple(HEADS)}),
     StageEmulator(name="modbus-stage", start=modbus_stage_units, own_faults=("interlock",)),
     DetectorEmulator(name="modbus-detector", start=modbus_detector_unit,
                      own_faults=("interlock",)),
@@ -85,3 +91,16 @@ def check_faults(name: str, kind: EmulatorKind, faults: Mapping[str, Any]) -> No
                                    if key in k.own_faults)
             raise SimConfigError(f"[sim.faults.{name}] {key}: only a {takers} "
                                  f"{KIND_FAULTS[key]}")
+
+
+def check_settings(name: str, kind: EmulatorKind, settings: Mapping[str, Any]) -> None:
+    """Refuse a [sim.devices.<name>] key the device's kind does not take, or a value that is
+    none of the key's choices, with one SimConfigError naming the key."""
+    for key, value in settings.items():
+        if key not in kind.settings:
+            known = ", ".join(kind.settings) or "none"
+            raise SimConfigError(f"[sim.devices.{name}] {key}: the {kind.name} emulator takes "
+                                 f"no such key (keys: {known})")
+        if value not in kind.settings[key]:
+            raise SimConfigError(f"[sim.devices.{name}] {key}: {value!r} is not one of "
+                                 f"{', '.join(kind.settings[key])}")

@@ -26,7 +26,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sim.bench import build_power_source
-from sim.device_kinds import DetectorEmulator, EmulatorKind, StageEmulator, check_faults, kind_of
+from sim.device_kinds import (
+    DetectorEmulator,
+    EmulatorKind,
+    StageEmulator,
+    check_faults,
+    check_settings,
+    kind_of,
+)
 from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
 from sim.devices.motion import VirtualClock
@@ -35,7 +42,7 @@ from sim.emulator_factories import EmulatedDevice, Light
 from sim.served_resources import serve_resource
 
 SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
-            "faults")
+            "faults", "devices")
 ROLES = ("sample", "arm", "azimuth", "elevation")
 #: A reading taken before this bench started: its commanded positions ({role: deg}) and its
 #: range setting (full scale in W; None = autorange).
@@ -132,16 +139,24 @@ def _sim_table(config: Mapping[str, Any], kinds: Mapping[str, EmulatorKind]) -> 
     seed = sim.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise SimConfigError(f"[sim] seed: must be an integer, got {seed!r}")
-    faults = sim.get("faults", {})
-    if not isinstance(faults, Mapping):
-        raise SimConfigError(f"[sim.faults]: must be a table of device tables, got {faults!r}")
-    for device, table in faults.items():
-        if device not in config.get("devices", {}):
-            raise SimConfigError(f"[sim.faults.{device}]: no device {device!r} under [devices]")
-        if not isinstance(table, Mapping):
-            raise SimConfigError(f"[sim.faults.{device}]: must be a table, got {table!r}")
-        check_faults(device, kinds[device], table)
+    for key, check in (("faults", check_faults), ("devices", check_settings)):
+        for device, table in _device_tables(config, sim, key).items():
+            check(device, kinds[device], table)
     return dict(sim)
+
+
+def _device_tables(config: Mapping[str, Any], sim: Mapping[str, Any], key: str
+                   ) -> Mapping[str, Mapping[str, Any]]:
+    """[sim.<key>]: a table of tables, one per device of [devices] (SimConfigError otherwise)."""
+    tables = sim.get(key, {})
+    if not isinstance(tables, Mapping):
+        raise SimConfigError(f"[sim.{key}]: must be a table of device tables, got {tables!r}")
+    for device, table in tables.items():
+        if device not in config.get("devices", {}):
+            raise SimConfigError(f"[sim.{key}.{device}]: no device {device!r} under [devices]")
+        if not isinstance(table, Mapping):
+            raise SimConfigError(f"[sim.{key}.{device}]: must be a table, got {table!r}")
+    return tables
 
 
 def _modbus_group(dev: Mapping[str, Any]) -> tuple[str, str]:
@@ -196,7 +211,7 @@ class _Builder:
 
         return EmulatedDevice(name, self.devices[name], self._roles(name), self.bench.clock,
                               self._seed(name), self._faults(name), self._serial(name),
-                              self._interlock(name),
+                              self._interlock(name), self.sim.get("devices", {}).get(name, {}),
                               serve=lambda emu: _serve(self.bench, name, emu,
                                                        self.devices[name], self.bind),
                               join_bus=lambda unit: self._add_modbus(name, unit), stage=stage)

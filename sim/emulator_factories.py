@@ -26,11 +26,12 @@ from sim.devices.pty_server import PtyDevice
 class EmulatedDevice:
     """One device of a config as its factory sees it: its [devices.<name>] table, the
     [axes.<role>] tables of the roles it drives, the bench's clock, its seed, faults, serial
-    number and interlock input (its faults open it), and where to serve it and report its
-    stages: `serve` starts a PtyDevice on a pty of its own (its `protocol` names it in `gonio
-    emulate`'s output), `join_bus` puts a Modbus unit on the one server of its bus or TCP
-    endpoint, `stage(role, position, target)` says where an emulated stage is and where it
-    was told to go."""
+    number and interlock input (its faults open it), what the emulator pretends to be (its
+    [sim.devices.<name>] table, `settings`, checked against its kind's `settings` choices),
+    and where to serve it and report its stages: `serve` starts a PtyDevice on a pty of its
+    own (its `protocol` names it in `gonio emulate`'s output), `join_bus` puts a Modbus unit
+    on the one server of its bus or TCP endpoint, `stage(role, position, target)` says where
+    an emulated stage is and where it was told to go."""
 
     name: str
     table: Mapping[str, Any]
@@ -40,6 +41,7 @@ class EmulatedDevice:
     faults: FaultSpec | None
     serial: str
     interlock: InterlockInput | None
+    settings: Mapping[str, Any]
     serve: Callable[[PtyDevice], None]
     join_bus: Callable[[EmulatedUnit], None]
     stage: Callable[[str, Callable[[], float], Callable[[], float]], None]
@@ -95,11 +97,12 @@ def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = (),
 
 def meter_on_pty(emulator: type) -> DetectorFactory:
     """A meter served on a pty of its own, built as `emulator(source, faults=, seed=,
-    detector=, light_wavelength_nm=, place=)` with its model at `.photodiode` (the PM100's)."""
+    detector=, light_wavelength_nm=, place=, **its [sim.devices.<name>] settings)` (the
+    PM100's console `model` and `sensor` head) with its model at `.photodiode`."""
     def start(device: EmulatedDevice, light: Light) -> PhotodiodeModel:
         emu = emulator(light.source, faults=device.faults, seed=device.seed,
                        detector=light.detector, light_wavelength_nm=light.wavelength_nm,
-                       place=light.place)
+                       place=light.place, **device.settings)
         device.serve(emu)
         return emu.photodiode
     return start

@@ -1,127 +1,100 @@
-"""Emulated Thorlabs PM100-series power meter speaking its SCPI subset on a pty.
+"""Emulated Thorlabs PM100-family power meter (PM100D, PM100A, PM100USB, PM400) speaking the
+SCPI command set of its manuals on a pty.
 
-Written from the PM100D/PM100USB operation manuals ("Computer interface" / "SCPI
-commands" chapter): program messages end in LF (CR LF accepted), keywords have a short
-(upper-case part) and a long form in any letter case, optional nodes in brackets,
-several message units separated by ';' (a unit without a leading ':' first continues the
-previous header's path, as SCPI says; failing that it is read from the root). Replies:
-one line ended by LF, several query answers joined by ';'. Errors go into the SCPI error
-queue read by SYST:ERR? as `code,"message"` (standard SCPI codes); a failed query answers
-nothing. SYST:SENS:IDN? gives name, serial number, calibration message, type, subtype,
-flags. The optical power comes from a PowerSource through sim.devices.photodiode.
+Written from the PM100D / PM100USB / PM400 operation manuals ("SCPI commands" / "Computer
+interface" chapters) and Thorlabs' own PM100 instrument drivers (PM100D_Drv.c, TLPM.h: the
+commands they send, the status register bits): program messages end in LF (CR LF
+accepted), keywords have a short (upper-case part) and a long form in any letter case,
+optional nodes in brackets, several message units separated by ';'. A unit without a leading
+':' continues the previous header's path, as SCPI and the manual say ("CORR:BEAM 1; WAVE
+1310" sets both); failing that it is read from the root only if it names a root keyword
+itself, so "MEAS:POW?;SYST:ERR?" works while "CORR:BEAM 1;AVER 300", which needs the implied
+SENSe, is an undefined header, as the manual says; common commands leave the path as it is.
+Replies: one line ended by LF, several query answers joined by ';'. Errors go into the SCPI
+error queue read by SYST:ERR? as `code,"message"` and set their class's bit of the Standard
+Event Status Register; a failed query answers nothing. The console (`model`) gives the *IDN?
+answer and the front-panel commands (display, clock, beeper: pm100_panel), the sensor head
+(`sensor`) SYST:SENS:IDN? and the wavelength range; the optical power comes from a
+PowerSource through sim.devices.photodiode.
 """
 
 from __future__ import annotations
 
 import math
-import re
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.photodiode import PhotodiodeModel, PowerSource
+from sim.devices.pm100_models import DEFAULT_HEAD, SensorHead, console, head
+from sim.devices.pm100_panel import Panel
 from sim.devices.pty_server import PtyDevice, PtyServer
+from sim.devices.scpi_program import (
+    SCPI_ERRORS,
+    Limits,
+    ScpiError,
+    attribute_flag,
+    choice,
+    flag_setting,
+    integer,
+    limits_query,
+    matches,
+    no_args,
+    nr3,
+    number,
+    one_arg,
+    optional_arg,
+    parse_unit,
+    pattern,
+)
+from sim.devices.scpi_status import (
+    ESR_OPC,
+    StatusModel,
+    StatusRegister,
+    error_class_bit,
+    register_commands,
+)
 
-SCPI_ERRORS = {
-    0: "No error",
-    -101: "Invalid character",
-    -102: "Syntax error",
-    -104: "Data type error",
-    -108: "Parameter not allowed",
-    -109: "Missing parameter",
-    -113: "Undefined header",
-    -114: "Header suffix out of range",
-    -131: "Invalid suffix",
-    -138: "Suffix not allowed",
-    -222: "Data out of range",
-    -230: "Data corrupt or stale",
-    -350: "Queue overflow",
-    -224: "Illegal parameter value",
-    -363: "Input buffer overrun",
-}
 ERROR_QUEUE_DEPTH = 10
-
-
-@dataclass(frozen=True)
-class SensorInfo:
-    """What SYST:SENS:IDN? reports (flags: 1 power sensor, 16 response settable,
-    32 wavelength settable, 256 temperature sensor)."""
-
-    name: str = "S121C"
-    serial: str = "EMU00001"
-    calibration: str = "01-Jan-2026"
-    type: int = 1  # photodiode sensor
-    subtype: int = 1
-    flags: int = 1 + 16 + 32
-    wavelength_min_nm: float = 400.0
-    wavelength_max_nm: float = 1100.0
-
-
-class _ScpiError(Exception):
-    def __init__(self, code: int):
-        self.code = code
-
-
-@dataclass(frozen=True)
-class _Node:
-    short: str
-    long: str
-    optional: bool
-    numbered: bool  # takes a numeric keyword suffix (SENSe1); 1 is the only channel
-
-
-def _pattern(spec: str) -> tuple[_Node, ...]:
-    """'[SENSe#]:POWer[:DC]:RANGe' -> nodes with short/long forms, optional and numbered
-    ('#') flags."""
-    nodes = []
-    for opt, word, numbered in re.findall(r"(\[?):?([A-Za-z*]+)(#?)\]?", spec):
-        short = "".join(ch for ch in word if ch.isupper() or ch == "*")
-        nodes.append(_Node(short, word.upper(), bool(opt), bool(numbered)))
-    return tuple(nodes)
-
-
-Token = tuple[str, str]  # (keyword, numeric suffix or "")
-
-
-def _matches(nodes: tuple[_Node, ...], tokens: list[Token]) -> bool:
-    if not nodes:
-        return not tokens
-    head, rest = nodes[0], nodes[1:]
-    if (tokens and tokens[0][0] in (head.short, head.long)
-            and (head.numbered or not tokens[0][1]) and _matches(rest, tokens[1:])):
-        return True
-    return head.optional and _matches(rest, tokens)
-
-
-_UNIT = re.compile(r"(:?)([A-Za-z*][A-Za-z0-9:*]*)(\?)?(?:\s+(.*))?")
-_KEYWORD = re.compile(r"([A-Z*]+)(\d*)")
-_NRF = re.compile(r"([+-]?(?:\d+\.?\d*|\.\d+)(?:E[+-]?\d+)?)\s*([A-Z]*)")
 # Unit suffixes a numeric parameter may carry (upper case; SCPI reads M as milli, so MW is
-# a milliwatt), as factors to the parameter's own unit: nm for the wavelength, W for
-# ranges (bare SI multipliers too, as the manual's "M, K, or u" engineering suffixes).
+# a milliwatt), as factors to the parameter's own unit: nm for the wavelength, W for power,
+# A for current, mm for the beam (bare SI multipliers too, as the manual's "M, K, or u").
 WAVELENGTH_UNITS = {"NM": 1.0, "UM": 1e3}
-POWER_UNITS = {f"{prefix}{unit}": factor
-               for prefix, factor in (("", 1.0), ("K", 1e3), ("M", 1e-3), ("U", 1e-6),
-                                      ("N", 1e-9), ("P", 1e-12))
-               for unit in ("W", "") if prefix or unit}
-
-
-def _nr3(value: float) -> str:
-    return f"{value:.6E}"
-
-
+_PREFIXES = (("", 1.0), ("K", 1e3), ("M", 1e-3), ("U", 1e-6), ("N", 1e-9), ("P", 1e-12))
+POWER_UNITS = {f"{p}{u}": f for p, f in _PREFIXES for u in ("W", "") if p or u}
+CURRENT_UNITS = {f"{p}{u}": f for p, f in _PREFIXES for u in ("A", "") if p or u}
+LENGTH_UNITS = {"MM": 1.0, "UM": 1e-3, "CM": 10.0}
+RESPONSE_UNITS = {"A": 1.0, "MA": 1e-3}  # the manual writes the A/W responsivity as [A]
 SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: what the meter answers when it has no reading
+SCPI_NINF = -9.9e37  # SCPI-99's negative infinity: 0 W in dBm
+POWER_UP_NM = 632.8  # the correction wavelength at power-up, within the head's range
+
+# Status byte bits and register bits as Thorlabs' TLPM.h defines them for the PM100 family
+STB_AUX, STB_MEAS, STB_EAV, STB_QUES, STB_OPER = 0x01, 0x02, 0x04, 0x08, 0x80
+OPER_RANG = 0x0004  # changing its range (autorange)
+OPER_MEAS = 0x0010  # actively measuring
+OPER_CORR = 0x0080  # performing a correction (the dark zero)
+OPER_SENS = 0x0100  # sensor connected and operable
+OPER_DATA = 0x0200  # measurement data ready for fetch
+QUES_POW = 0x0008  # questionable power measurement (over range, or no valid reading)
+
+RESPONSE_LIMITS = (1e-5, 10.0)  # settable photodiode responsivity, A/W
+ATTENUATION_LIMITS = Limits(-60.0, 60.0, 0.0)  # SENS:CORR:LOSS:INP:MAGN, dB
+AVERAGING_LIMITS = Limits(1, 10000, 1)
 
 
 class Pm100Emulator(PtyDevice):
-    """A PM100-series meter with a photodiode sensor, served on a pty.
+    """A PM100-family meter with a C-series sensor head, served on a pty.
 
     source: a PowerSource (or any callable returning watts) giving the true power at the
-    detector now; detector: the [sim.detector] table for PhotodiodeModel; seed: noise and
-    fault seed; place: the commanded stage positions now (deg), which key the noise (None:
-    the noise keys on the range and the visit count only).
+    detector now; wavelength_nm: the correction wavelength at power-up and after *RST (None:
+    632.8 nm, or the head's nearest bound); detector: the [sim.detector] table for
+    PhotodiodeModel; seed: noise and fault seed; sensor: the head (a SensorHead or its name,
+    pm100_models.HEADS); model: the console (PM100D, PM100A, PM100USB, PM400); place: the
+    commanded stage positions now (deg), which key the noise (None: the noise keys on the
+    range and the visit count only); wall: the clock SYST:DATE / TIME run on (epoch seconds).
     """
 
     protocol = "pm100"
@@ -129,31 +102,36 @@ class Pm100Emulator(PtyDevice):
     def __init__(
         self,
         source: PowerSource | Callable[[], float],
-        wavelength_nm: float = 632.8,
+        wavelength_nm: float | None = None,
         faults: FaultSpec | None = None,
         seed: int = 0,
         detector: Mapping | None = None,
         light_wavelength_nm: float | None = None,
-        sensor: SensorInfo | None = None,
+        sensor: SensorHead | str | None = None,
         model: str = "PM100D",
         place: Callable[[], Sequence[float]] | None = None,
+        wall: Callable[[], float] = time.time,
     ):
         self._place = place or tuple
         self._power = source.power_w if hasattr(source, "power_w") else source
         if not callable(self._power):
             raise TypeError("pm100: source must be a PowerSource or a callable returning W")
-        self.sensor = sensor or SensorInfo()
-        if not self.sensor.wavelength_min_nm <= wavelength_nm <= self.sensor.wavelength_max_nm:
-            raise ValueError(
-                f"pm100: wavelength_nm {wavelength_nm!r} outside the sensor's range "
-                f"{self.sensor.wavelength_min_nm:g}..{self.sensor.wavelength_max_nm:g} nm"
-            )
+        self.sensor = head(sensor or DEFAULT_HEAD) if not isinstance(sensor, SensorHead) \
+            else sensor
+        self.console = console(model)
+        self.default_wavelength_nm = self._power_up_wavelength(wavelength_nm)
         self.photodiode = PhotodiodeModel(detector, seed=seed,
                                           light_wavelength_nm=light_wavelength_nm)
-        self.idn = f"THORLABS,{model},P0000000,2.4.0"
-        self.default_wavelength_nm = float(wavelength_nm)
+        self.idn = self.console.idn
         self.errors: deque[int] = deque()
+        self.operation, self.questionable = StatusRegister(), StatusRegister()
+        self.measurement, self.auxiliary = StatusRegister(), StatusRegister()
+        self.status = StatusModel({STB_OPER: self.operation, STB_QUES: self.questionable,
+                                   STB_MEAS: self.measurement, STB_AUX: self.auxiliary})
+        self.operation.condition = OPER_SENS  # a head is connected from power-up
+        self.panel = Panel(self.console, wall)
         self._lock = threading.Lock()
+        self._answers: list[str] = []  # this message's answers so far (MAV)
         self._reset()
         self._commands = self._command_table()
         self._server = PtyServer(
@@ -162,16 +140,37 @@ class Pm100Emulator(PtyDevice):
             reply_tail=1, name="pm100",
         )
 
+    def _power_up_wavelength(self, wavelength_nm: float | None) -> float:
+        lo, hi = self.sensor.wavelength_min_nm, self.sensor.wavelength_max_nm
+        if wavelength_nm is None:
+            return min(max(POWER_UP_NM, lo), hi)
+        if not lo <= wavelength_nm <= hi:
+            raise ValueError(f"pm100: wavelength_nm {wavelength_nm!r} outside the sensor "
+                             f"head {self.sensor.name}'s range {self.sensor.range_text}")
+        return float(wavelength_nm)
+
     def _reset(self) -> None:
+        """*RST and power-up: every measurement setting to its default (the status registers
+        and the panel's system settings are not reset, as IEEE 488.2 says)."""
         self.wavelength_nm = self.default_wavelength_nm
         self.averaging = 1
         self.autorange = True
         self.range_w = self.photodiode.ranges_w[-1]
+        self.beam_mm = self.sensor.aperture_mm
+        self.user_response: float | None = None
+        self.attenuation_db = 0.0
+        self.references = {"POW": [0.0, False], "CURR": [0.0, False]}
+        self.power_unit = "W"
+        self.mode = "POW"
+        self.lowpass = False
         self.last_reading: float | None = None
+        self.operation.assign(OPER_DATA, False)
 
     # -- error queue --------------------------------------------------------------
     def _push(self, code: int) -> None:
-        """SCPI error queue: when full, the newest entry becomes -350 Queue overflow."""
+        """SCPI error queue (when full, the newest entry becomes -350 Queue overflow); the
+        error's class sets its Standard Event Status bit."""
+        self.status.record(error_class_bit(code))
         if len(self.errors) >= ERROR_QUEUE_DEPTH:
             self.errors[-1] = -350
         else:
@@ -188,154 +187,167 @@ class Pm100Emulator(PtyDevice):
             if any(b < 0x20 or b > 0x7E for b in line.replace(b"\t", b" ")):
                 self._push(-101)
                 return None
-            replies: list[str] = []
-            path: list[str] = []
-            for unit in line.decode("ascii").split(";"):
-                unit = unit.strip()
-                if not unit:
+            self._answers = []
+            path: list[tuple[str, str]] = []
+            for text in line.decode("ascii").split(";"):
+                text = text.strip()
+                if not text:
                     continue
                 try:
-                    reply, path = self._execute(unit, path)
-                except _ScpiError as exc:
+                    reply, path = self._execute(text, path)
+                except ScpiError as exc:
                     self._push(exc.code)
                     continue
                 if reply is not None:
-                    replies.append(reply)
-            return (";".join(replies) + "\n").encode("ascii") if replies else None
+                    self._answers.append(reply)
+            return (";".join(self._answers) + "\n").encode("ascii") if self._answers else None
 
-    def _execute(self, unit: str, path: list[str]) -> tuple[str | None, list[str]]:
-        match = _UNIT.fullmatch(unit)
-        if match is None:
-            raise _ScpiError(-102)
-        rooted, header, question, params = match.groups()
-        words = header.upper().split(":")
-        if any(not w for w in words):
-            raise _ScpiError(-102)
-        keywords = [_KEYWORD.fullmatch(w) for w in words]
-        if any(k is None for k in keywords):
-            raise _ScpiError(-113)
-        tokens = [(k.group(1), k.group(2)) for k in keywords]
-        common = tokens[0][0].startswith("*")
-        query = question is not None
-        candidates = [tokens] if rooted or common else [path + tokens, tokens]
-        for full in candidates:
+    def _execute(self, text: str, path: list) -> tuple[str | None, list]:
+        unit = parse_unit(text)
+        candidates = [(unit.tokens, False)] if unit.rooted or unit.common or not path else [
+            (path + unit.tokens, False), (unit.tokens, True)]
+        for full, fallback in candidates:
             for nodes, can_query, can_set, action in self._commands:
-                if _matches(nodes, full) and (can_query if query else can_set):
-                    if any(suffix and int(suffix) != 1 for _, suffix in tokens):
-                        raise _ScpiError(-114)  # one sensor channel: only suffix 1 exists
-                    args = [a.strip() for a in params.split(",")] if params else []
-                    return action(query, args), path if common else full[:-1]
-        raise _ScpiError(-113)
-
-    @staticmethod
-    def _no_args(args: list[str]) -> None:
-        if args:
-            raise _ScpiError(-108)
-
-    @staticmethod
-    def _one_arg(args: list[str]) -> str:
-        if not args:
-            raise _ScpiError(-109)
-        if len(args) > 1:
-            raise _ScpiError(-108)
-        return args[0].upper()
-
-    @staticmethod
-    def _number(text: str, lo: float, hi: float, units: Mapping[str, float] | None = None
-                ) -> float:
-        """A decimal numeric parameter (or MIN / MAX), optionally with one of `units`
-        (e.g. 633NM, 633 nm, 1.5 uW), in the parameter's own unit."""
-        if text in ("MIN", "MINIMUM"):
-            return lo
-        if text in ("MAX", "MAXIMUM"):
-            return hi
-        match = _NRF.fullmatch(text)
-        if match is None:
-            raise _ScpiError(-104)
-        number, suffix = match.groups()
-        if suffix and units is None:
-            raise _ScpiError(-138)
-        if suffix and suffix not in units:
-            raise _ScpiError(-131)
-        value = float(number) * (units[suffix] if suffix else 1.0)
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise _ScpiError(-222)
-        return value
-
-    @staticmethod
-    def _bool(text: str) -> bool:
-        if text in ("ON", "1"):
-            return True
-        if text in ("OFF", "0"):
-            return False
-        raise _ScpiError(-104)
-
-    def _limits_query(self, args: list[str], lo: float, hi: float, now: float) -> str:
-        """A setting's '?': its value now, or with MIN / MAX its allowed bounds."""
-        if not args:
-            return _nr3(now)
-        word = self._one_arg(args)
-        if word in ("MIN", "MINIMUM"):
-            return _nr3(lo)
-        if word in ("MAX", "MAXIMUM"):
-            return _nr3(hi)
-        raise _ScpiError(-224)
+                if (matches(nodes, full) and (can_query if unit.query else can_set)
+                        and (not fallback or nodes[0].spells(full[0][0]))):
+                    if any(suffix and int(suffix) != 1 for _, suffix in unit.tokens):
+                        raise ScpiError(-114)  # one sensor channel: only suffix 1 exists
+                    return action(unit.query, unit.args), path if unit.common else full[:-1]
+        raise ScpiError(-113)
 
     # -- command table ----------------------------------------------------------
-    def _command_table(self):
+    def _command_table(self) -> list:
         """(pattern nodes, query allowed, set allowed, action(query, args))."""
         table = [
             ("*IDN", True, False, self._idn),
             ("*RST", False, True, self._rst),
             ("*CLS", False, True, self._cls),
-            ("*OPC", True, False, lambda q, a: "1"),
+            ("*OPC", True, True, self._opc),
+            ("*WAI", False, True, lambda q, a: no_args(a)),
+            ("*TST", True, False, self._tst),
+            ("*ESE", True, True, self._byte_setting("ese")),
+            ("*SRE", True, True, self._byte_setting("sre")),
+            ("*ESR", True, False, lambda q, a: no_args(a) or str(self.status.read_esr())),
+            ("*STB", True, False, self._stb),
             ("SYSTem:ERRor[:NEXT]", True, False, self._syst_err),
+            ("SYSTem:ERRor:COUNt", True, False, lambda q, a: no_args(a) or str(len(self.errors))),
+            ("SYSTem:VERSion", True, False, lambda q, a: no_args(a) or "1999.0"),
             ("SYSTem:SENSor:IDN", True, False, self._sensor_idn),
-            ("MEASure#[:SCALar]:POWer", True, False, self._meas_pow),
-            ("CONFigure#[:SCALar]:POWer", False, True, self._conf_pow),
-            ("CONFigure#", True, False, self._conf_query),
+            ("STATus:PRESet", False, True, lambda q, a: no_args(a) or self.status.preset()),
+            *register_commands({"OPERation": self.operation, "QUEStionable": self.questionable,
+                                "MEASurement": self.measurement, "AUXiliary": self.auxiliary}),
+            *self.panel.commands(),
+            ("ABORt#", False, True, self._abort),
             ("INITiate#[:IMMediate]", False, True, self._init),
             ("FETCh#", True, False, self._fetch),
             ("READ#", True, False, self._read),
-            ("[SENSe#]:CORRection:WAVelength", True, True, self._wavelength),
-            ("[SENSe#]:POWer[:DC]:RANGe:AUTO", True, True, self._range_auto),
-            ("[SENSe#]:POWer[:DC]:RANGe[:UPPer]", True, True, self._range),
+            ("CONFigure#", True, False, lambda q, a: no_args(a) or self.mode),
+            ("CONFigure#[:SCALar]:POWer", False, True, self._configure("POW")),
+            ("CONFigure#[:SCALar]:CURRent[:DC]", False, True, self._photodiode(
+                self._configure("CURR"))),
+            ("CONFigure#[:SCALar]:PDENsity", False, True, self._configure("PDEN")),
+            ("MEASure#[:SCALar]:POWer", True, False, self._measure_as("POW")),
+            ("MEASure#[:SCALar]:CURRent[:DC]", True, False, self._photodiode(
+                self._measure_as("CURR"))),
+            ("MEASure#[:SCALar]:PDENsity", True, False, self._measure_as("PDEN")),
             ("[SENSe#]:AVERage[:COUNt]", True, True, self._average),
+            ("[SENSe#]:CORRection:WAVelength/WAVE", True, True, self._wavelength),
+            ("[SENSe#]:CORRection:BEAMdiameter", True, True, self._beam),
+            ("[SENSe#]:CORRection:LOSS[:INPut][:MAGNitude]", True, True, self._attenuation),
+            ("[SENSe#]:CORRection:POWer[:PDIode][:RESPonse]", True, True,
+             self._photodiode(self._response)),
             ("[SENSe#]:CORRection:COLLect:ZERO[:INITiate]", False, True, self._zero),
-            ("[SENSe#]:CORRection:COLLect:ZERO:STATe", True, False, lambda q, a: "0"),
+            ("[SENSe#]:CORRection:COLLect:ZERO:ABORt", False, True, lambda q, a: no_args(a)),
+            ("[SENSe#]:CORRection:COLLect:ZERO:STATe", True, False,
+             lambda q, a: no_args(a) or "0"),
             ("[SENSe#]:CORRection:COLLect:ZERO:MAGNitude", True, False,
-             lambda q, a: _nr3(self.photodiode.zero_offset_w)),
+             lambda q, a: no_args(a) or nr3(self.photodiode.zero_offset_w)),
+            ("[SENSe#]:POWer[:DC]:RANGe:AUTO", True, True, attribute_flag(self, "autorange")),
+            ("[SENSe#]:POWer[:DC]:RANGe[:UPPer]", True, True, self._range(1.0, POWER_UNITS)),
+            ("[SENSe#]:POWer[:DC]:REFerence", True, True, self._reference("POW")),
+            ("[SENSe#]:POWer[:DC]:REFerence:STATe", True, True, self._reference_state("POW")),
+            ("[SENSe#]:POWer[:DC]:UNIT", True, True, self._unit),
+            ("[SENSe#]:CURRent[:DC]:RANGe:AUTO", True, True,
+             self._photodiode(attribute_flag(self, "autorange"))),
+            ("[SENSe#]:CURRent[:DC]:RANGe[:UPPer]", True, True,
+             self._photodiode(self._range(None, CURRENT_UNITS))),
+            ("[SENSe#]:CURRent[:DC]:REFerence", True, True,
+             self._photodiode(self._reference("CURR"))),
+            ("[SENSe#]:CURRent[:DC]:REFerence:STATe", True, True,
+             self._photodiode(self._reference_state("CURR"))),
+            ("INPut#:PDIode:FILTer:LPASs:STATe", True, True,
+             self._photodiode(attribute_flag(self, "lowpass"))),
         ]
-        return [(_pattern(spec), q, s, action) for spec, q, s, action in table]
+        return [(pattern(spec), q, s, action) for spec, q, s, action in table]
 
-    # -- actions ----------------------------------------------------------------
+    def _photodiode(self, action: Callable) -> Callable:
+        """A command of photodiode heads only: -241 Hardware missing with a thermal head."""
+        def guarded(query: bool, args: list[str]):
+            if self.sensor.kind != "photodiode":
+                raise ScpiError(-241)
+            return action(query, args)
+        return guarded
+
+    # -- IEEE 488.2 common commands and status --------------------------------------
     def _idn(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
+        no_args(args)
         return self.idn
 
     def _rst(self, query: bool, args: list[str]) -> None:
-        self._no_args(args)
+        no_args(args)
         self._reset()
 
     def _cls(self, query: bool, args: list[str]) -> None:
-        self._no_args(args)
+        no_args(args)
         self.errors.clear()
+        self.status.clear()
+
+    def _opc(self, query: bool, args: list[str]) -> str | None:
+        """*OPC sets the OPC event bit, *OPC? answers 1: every command completes before the
+        next one is read."""
+        no_args(args)
+        if query:
+            return "1"
+        self.status.record(ESR_OPC)
+        return None
+
+    def _tst(self, query: bool, args: list[str]) -> str:
+        no_args(args)
+        return "0"  # self-test passed
+
+    def _byte_setting(self, field: str) -> Callable:
+        """*ESE / *SRE: an 8-bit enable register (SRE's bit 6 is ignored, IEEE 488.2 11.3.2)."""
+        ignored = 0x40 if field == "sre" else 0
+
+        def access(query: bool, args: list[str]) -> str | None:
+            if query:
+                no_args(args)
+                return str(getattr(self.status, field))
+            setattr(self.status, field, integer(one_arg(args), Limits(0, 255)) & ~ignored)
+            return None
+        return access
+
+    def _stb(self, query: bool, args: list[str]) -> str:
+        no_args(args)
+        return str(self.status.status_byte(STB_EAV, bool(self.errors), bool(self._answers)))
 
     def _syst_err(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
+        no_args(args)
         code = self.errors.popleft() if self.errors else 0
         return f'{code},"{SCPI_ERRORS[code]}"'
 
     def _sensor_idn(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
+        no_args(args)
         s = self.sensor
         return f"{s.name},{s.serial},{s.calibration},{s.type},{s.subtype},{s.flags}"
 
+    # -- measuring ------------------------------------------------------------------
     def _measure(self) -> float:
-        """Take one averaged reading of the source's power now (autoranging if on); SCPI_NAN
-        when the invalid-reading fault strikes."""
+        """Take one averaged reading of the source's power now (autoranging if on), in the
+        configured quantity and unit; SCPI_NAN when the invalid-reading fault strikes."""
+        self.operation.pulse(OPER_MEAS)
         if self._server.faults.invalid_reading():
-            self.last_reading = SCPI_NAN
+            self._stored(SCPI_NAN, questionable=True)
             return SCPI_NAN
         try:
             power = float(self._power())
@@ -344,71 +356,165 @@ class Pm100Emulator(PtyDevice):
                 self.wavelength_nm, self._place(),
             )
         except (ValueError, TypeError, ArithmeticError):
-            self.last_reading = None
-            raise _ScpiError(-230) from None
+            self._stored(None, questionable=True)
+            raise ScpiError(-230) from None
+        if result.range_w != self.range_w:
+            self.operation.pulse(OPER_RANG)
         self.range_w = result.range_w
-        self.last_reading = result.reading_w
-        return result.reading_w
+        over = result.saturated or result.reading_w > result.range_w
+        return self._stored(self._quantity(result.reading_w), questionable=over)
 
-    def _conf_pow(self, query: bool, args: list[str]) -> None:
-        self._no_args(args)
-        self.last_reading = None
+    def _stored(self, value: float | None, questionable: bool) -> float | None:
+        """Keep a reading for FETCh? (None: none), with its data-ready and questionable bits."""
+        self.last_reading = value
+        self.operation.assign(OPER_DATA, value is not None)
+        self.questionable.assign(QUES_POW, questionable)
+        return value
 
-    def _conf_query(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
-        return "POW"
+    def _responsivity(self) -> float:
+        """The photodiode responsivity in use, A/W: the head's at the wavelength, or the one
+        set by SENS:CORR:POW:PDI:RESP."""
+        return self.user_response or self.photodiode.responsivity_a_w(self.wavelength_nm)
 
-    def _meas_pow(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
-        return _nr3(self._measure())
+    def _quantity(self, reading_w: float) -> float:
+        """A reading (W, as the head's responsivity gives it) in the configured quantity:
+        power (W or dBm) corrected by the set responsivity and attenuation, photocurrent (A)
+        or power density (W/cm^2 over the beam diameter), less the delta reference if on."""
+        current = reading_w * self.photodiode.responsivity_a_w(self.wavelength_nm)
+        if self.mode == "CURR":
+            return current - self._reference_value("CURR")
+        power = current / self._responsivity() * 10.0 ** (self.attenuation_db / 10.0)
+        if self.mode == "PDEN":
+            return power / (math.pi * (self.beam_mm / 20.0) ** 2)
+        if self.power_unit == "DBM":
+            dbm = _dbm(power)
+            reference = self._reference_value("POW")
+            return dbm - _dbm(reference) if reference and dbm > SCPI_NINF else dbm
+        return power - self._reference_value("POW")
+
+    def _reference_value(self, quantity: str) -> float:
+        value, on = self.references[quantity]
+        return value if on else 0.0
+
+    def _abort(self, query: bool, args: list[str]) -> None:
+        no_args(args)
+        self._stored(None, questionable=False)
 
     def _init(self, query: bool, args: list[str]) -> None:
-        self._no_args(args)
+        no_args(args)
         self._measure()
 
     def _fetch(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
+        no_args(args)
         if self.last_reading is None:
-            raise _ScpiError(-230)
-        return _nr3(self.last_reading)
+            raise ScpiError(-230)
+        return nr3(self.last_reading)
 
     def _read(self, query: bool, args: list[str]) -> str:
-        self._no_args(args)
-        return _nr3(self._measure())
+        no_args(args)
+        return nr3(self._measure())
 
-    def _wavelength(self, query: bool, args: list[str]) -> str | None:
-        lo, hi = self.sensor.wavelength_min_nm, self.sensor.wavelength_max_nm
-        if query:
-            return self._limits_query(args, lo, hi, self.wavelength_nm)
-        self.wavelength_nm = self._number(self._one_arg(args), lo, hi, WAVELENGTH_UNITS)
-        return None
+    def _configure(self, mode: str) -> Callable:
+        def configure(query: bool, args: list[str]) -> None:
+            no_args(args)
+            self.mode = mode
+            self._stored(None, questionable=False)
+        return configure
 
-    def _range_auto(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            self._no_args(args)
-            return "1" if self.autorange else "0"
-        self.autorange = self._bool(self._one_arg(args))
-        return None
+    def _measure_as(self, mode: str) -> Callable:
+        """MEASure:<quantity>?: configure for it, then READ?."""
+        configure = self._configure(mode)
 
-    def _range(self, query: bool, args: list[str]) -> str | None:
-        ranges = self.photodiode.ranges_w
-        if query:
-            return self._limits_query(args, ranges[0], ranges[-1], self.range_w)
-        value = self._number(self._one_arg(args), 0.0, ranges[-1], POWER_UNITS)
-        self.range_w = self.photodiode.range_for(value)
-        self.autorange = False
-        return None
+        def measure(query: bool, args: list[str]) -> str:
+            configure(False, args)
+            return nr3(self._measure())
+        return measure
 
+    # -- sense settings ---------------------------------------------------------------
     def _average(self, query: bool, args: list[str]) -> str | None:
         if query:
-            self._no_args(args)
-            return str(self.averaging)
-        value = self._number(self._one_arg(args), 1, 10000)
-        if value != int(value):
-            raise _ScpiError(-222)
-        self.averaging = int(value)
+            word = optional_arg(args)
+            value = self.averaging if word is None else AVERAGING_LIMITS.word(word)
+            if value is None:
+                raise ScpiError(-224)
+            return str(int(value))
+        self.averaging = integer(one_arg(args), AVERAGING_LIMITS, exact=True)
+        return None
+
+    def _wavelength(self, query: bool, args: list[str]) -> str | None:
+        limits = Limits(self.sensor.wavelength_min_nm, self.sensor.wavelength_max_nm)
+        if query:
+            return limits_query(args, limits, self.wavelength_nm)
+        self.wavelength_nm = number(one_arg(args), limits, WAVELENGTH_UNITS)
+        self.user_response = None  # the head's responsivity at the new wavelength
+        return None
+
+    def _beam(self, query: bool, args: list[str]) -> str | None:
+        limits = Limits(0.01, 100.0, self.sensor.aperture_mm)
+        if query:
+            return limits_query(args, limits, self.beam_mm)
+        self.beam_mm = number(one_arg(args), limits, LENGTH_UNITS)
+        return None
+
+    def _attenuation(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            return limits_query(args, ATTENUATION_LIMITS, self.attenuation_db)
+        self.attenuation_db = number(one_arg(args), ATTENUATION_LIMITS)
+        return None
+
+    def _response(self, query: bool, args: list[str]) -> str | None:
+        limits = Limits(*RESPONSE_LIMITS, self.photodiode.responsivity_a_w(self.wavelength_nm))
+        if query:
+            return limits_query(args, limits, self._responsivity())
+        value = number(one_arg(args), limits, RESPONSE_UNITS)
+        self.user_response = None if value == limits.default else value
         return None
 
     def _zero(self, query: bool, args: list[str]) -> None:
-        self._no_args(args)
+        no_args(args)
+        self.operation.pulse(OPER_CORR)
         self.photodiode.zero(self.wavelength_nm)
+
+    def _range(self, scale: float | None, units: Mapping[str, float]) -> Callable:
+        """A range setting in W (scale 1) or in A (scale None: the power ranges times the
+        responsivity); setting one picks the smallest range holding it, autorange off."""
+        def access(query: bool, args: list[str]) -> str | None:
+            factor = scale or self._responsivity()
+            ranges = self.photodiode.ranges_w
+            if query:
+                return limits_query(args, Limits(ranges[0] * factor, ranges[-1] * factor),
+                                    self.range_w * factor)
+            value = number(one_arg(args), Limits(0.0, ranges[-1] * factor), units)
+            self.range_w = self.photodiode.range_for(value / factor)
+            self.autorange = False
+            return None
+        return access
+
+    def _reference_state(self, quantity: str) -> Callable:
+        """The delta mode's switch (SENS:POW:REF:STAT, SENS:CURR:REF:STAT)."""
+        return flag_setting(lambda: self.references[quantity][1],
+                            lambda on: self.references[quantity].__setitem__(1, on))
+
+    def _reference(self, quantity: str) -> Callable:
+        """The delta mode's reference (W or A; 0 to the top range, default 0)."""
+        def access(query: bool, args: list[str]) -> str | None:
+            factor = 1.0 if quantity == "POW" else self._responsivity()
+            limits = Limits(0.0, self.photodiode.ranges_w[-1] * factor, 0.0)
+            units = POWER_UNITS if quantity == "POW" else CURRENT_UNITS
+            if query:
+                return limits_query(args, limits, self.references[quantity][0])
+            self.references[quantity][0] = number(one_arg(args), limits, units)
+            return None
+        return access
+
+    def _unit(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            no_args(args)
+            return self.power_unit
+        self.power_unit = choice(one_arg(args), ("W", "DBM"))
+        return None
+
+
+def _dbm(power_w: float) -> float:
+    """Power in dBm (SCPI's negative infinity for no power)."""
+    return 10.0 * math.log10(power_w / 1e-3) if power_w > 0 else SCPI_NINF

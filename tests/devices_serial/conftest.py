@@ -3,6 +3,8 @@
 import math
 
 import pytest
+import serial
+from waiting import HANG_S
 
 from drivers.esp import EspController
 from drivers.pm100 import Pm100
@@ -96,3 +98,48 @@ def pm_pair(start_pair):
         return start_pair(emu, Pm100, timeout_s=timeout_s, retries=retries, name="pm100")
 
     return make
+
+
+class ScpiPort:
+    """A plain pyserial session with a SCPI emulator: the bytes a client writes (LF-ended) and
+    the lines it reads back (reads wait HANG_S at most: a hang guard, never a verdict)."""
+
+    def __init__(self, endpoint: str):
+        self.port = serial.Serial(endpoint, 115200, timeout=HANG_S)
+
+    def send(self, text: str) -> None:
+        """Write one program message."""
+        self.port.write(text.encode("ascii") + b"\n")
+
+    def ask(self, text: str) -> str:
+        """Write a program message and read its one response line (without the LF)."""
+        self.send(text)
+        line = self.port.readline()
+        assert line.endswith(b"\n"), f"no answer to {text!r} (got {line!r})"
+        return line.decode("ascii")[:-1]
+
+    def errors(self) -> list[int]:
+        """Drain the error queue: the codes in order."""
+        codes = []
+        while (code := int(self.ask("SYST:ERR?").split(",")[0])) != 0:
+            codes.append(code)
+        return codes
+
+    def close(self) -> None:
+        self.port.close()
+
+
+@pytest.fixture
+def scpi(opened):
+    """start(power_w=2e-6, **Pm100Emulator options) -> (emulator, ScpiPort): a PM100 emulator
+    on a pty and a raw session with it, both closed after the test."""
+
+    def start(power_w=2e-6, **options):
+        emu = Pm100Emulator(ConstantPower(power_w), **options)
+        emu.start()
+        opened.append(emu)
+        port = ScpiPort(emu.endpoint)
+        opened.append(port)
+        return emu, port
+
+    return start

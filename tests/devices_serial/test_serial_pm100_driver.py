@@ -15,6 +15,7 @@ from drivers.base import (
     ProtocolError,
     Reading,
 )
+from drivers.pm100 import WavelengthOutsideHead
 from sim.devices.faults import FaultInjector, FaultSpec
 
 QUIET = {"read_noise_fraction": 1e-3, "dark_current_a": 0.0, "bandwidth_hz": 0.0}
@@ -53,6 +54,20 @@ def test_configure_and_read_back(pm_pair):
     assert pm.wavelength_limits_nm() == (400.0, 1100.0)
     with pytest.raises(ValueError, match="averaging"):
         pm.configure(632.8, 0, None)
+
+
+def test_a_wavelength_the_head_cannot_take_names_the_head_and_its_range(pm_pair):
+    emu, pm = pm_pair()
+    pm.configure(850.0, 4, None)
+    with pytest.raises(WavelengthOutsideHead) as caught:
+        pm.configure(1550.0, 2, 1e-4)
+    assert str(caught.value) == ("pm100: wavelength 1550 nm is outside the sensor head S121C's "
+                                 "range 400-1100 nm")
+    assert isinstance(caught.value, DeviceError) and caught.value.code == -222
+    assert (emu.wavelength_nm, emu.averaging, emu.autorange) == (850.0, 4, True)  # untouched
+    assert pm.errors() == []  # the refusal was read with the command, nothing left queued
+    pm.configure(1100.0, 2, None)  # the range's own bound is taken
+    assert emu.wavelength_nm == 1100.0
 
 
 def test_full_scales_are_the_sensors_ranges_and_leave_the_setting_alone(pm_pair):
