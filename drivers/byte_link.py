@@ -9,7 +9,9 @@ exception, which the transport names. drivers.open_link is the one place a link 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Protocol, TypedDict
 
 PARITIES = ("none", "even", "odd", "mark", "space")
@@ -40,6 +42,21 @@ class LineSettings:
         for flag in ("rtscts", "xonxoff"):
             if not isinstance(getattr(self, flag), bool):
                 raise ValueError(f"{flag} must be true or false, got {getattr(self, flag)!r}")
+
+
+def on_the_line(line: LineSettings, path: Path | None) -> LineSettings:
+    """The settings a port can take: a pseudo-terminal (an emulator's, or socat's bridge to a
+    network serial server) carries no parity bit, and Linux refuses a tcsetattr that asks for
+    one and changes nothing else (EINVAL), so a pty gets no parity; a real port, all of them."""
+    try:
+        pty = path is not None and os.major(os.stat(path).st_rdev) in PTY_MAJORS
+    except OSError:  # the open that follows names what is wrong with the port
+        pty = False
+    return replace(line, parity="none") if pty else line
+
+
+# Unix 98 pty slaves (/dev/pts/N): the kernel's device majors for them
+PTY_MAJORS = range(136, 144)
 
 
 class LinkOptions(TypedDict, total=False):

@@ -11,7 +11,8 @@ import math
 from pathlib import Path
 
 from drivers.base import DeviceError, Reading
-from drivers.modbus_transport import ModbusTimeouts
+from drivers.byte_link import LineSettings
+from drivers.modbus_transport import RTU_LINE, ModbusTimeouts
 from drivers.modbus_unit import MappedUnit
 from drivers.register_map import RegisterMap
 
@@ -26,10 +27,10 @@ class ModbusDetector(MappedUnit):
 
     def __init__(self, transport: str, port_or_host: str, unit: int,
                  register_map: str | Path | RegisterMap, *, name: str = "modbus-detector",
-                 tcp_port: int = 502, baudrate: int = 115200,
+                 tcp_port: int = 502, line: LineSettings = RTU_LINE,
                  timeouts: ModbusTimeouts | None = None, read_retries: int = 2):
         super().__init__(transport, port_or_host, unit, register_map, name=name,
-                         tcp_port=tcp_port, baudrate=baudrate, timeouts=timeouts,
+                         tcp_port=tcp_port, line=line, timeouts=timeouts,
                          read_retries=read_retries)
         try:
             self.map.require(DETECTOR_REGISTERS, DETECTOR_COMMANDS, DETECTOR_BITS)

@@ -12,8 +12,9 @@ import math
 from pathlib import Path
 
 from drivers.base import DeviceError
+from drivers.byte_link import LineSettings
 from drivers.lost_reply import reraise, sent_once
-from drivers.modbus_transport import ModbusTimeouts
+from drivers.modbus_transport import RTU_LINE, ModbusTimeouts
 from drivers.modbus_unit import MappedUnit
 from drivers.polling import poll_until
 from drivers.register_map import RegisterMap
@@ -31,11 +32,11 @@ class ModbusStage(MappedUnit):
 
     def __init__(self, transport: str, port_or_host: str, unit: int,
                  register_map: str | Path | RegisterMap, *, name: str = "modbus-stage",
-                 tcp_port: int = 502, baudrate: int = 115200,
+                 tcp_port: int = 502, line: LineSettings = RTU_LINE,
                  timeouts: ModbusTimeouts | None = None, read_retries: int = 2,
                  poll_s: float = 0.005):
         super().__init__(transport, port_or_host, unit, register_map, name=name,
-                         tcp_port=tcp_port, baudrate=baudrate, timeouts=timeouts,
+                         tcp_port=tcp_port, line=line, timeouts=timeouts,
                          read_retries=read_retries)
         try:
             self.map.require(STAGE_REGISTERS, STAGE_COMMANDS, STAGE_BITS)

@@ -32,10 +32,11 @@ from pymodbus.pdu.register_message import (
 )
 
 from drivers.base import DeviceError, DeviceTimeout, DriverError, ProtocolError
+from drivers.byte_link import LineSettings, on_the_line
 from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
-from drivers.port_lock import HeldPort, hold
+from drivers.port_lock import HeldPort, device_path, hold
 from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
@@ -54,6 +55,11 @@ MODBUS_EXCEPTIONS = {
     10: "gateway path unavailable",
     11: "gateway target device failed to respond",
 }
+
+#: An RTU line as the Modbus serial-line specification sets it by default: even parity, one
+#: stop bit (this driver's baud rate, 115200, is the drives' usual fast one).
+RTU_LINE = LineSettings(115200, parity="even")
+PYMODBUS_PARITY = {"none": "N", "even": "E", "odd": "O", "mark": "M", "space": "S"}
 
 
 @dataclass(frozen=True)
@@ -76,7 +82,7 @@ class ModbusLink:
     out, frames in through the reply machine, failures mapped to DriverErrors."""
 
     def __init__(self, transport: str, port_or_host: str, *, tcp_port: int = 502,
-                 baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
+                 line: LineSettings = RTU_LINE, timeouts: ModbusTimeouts | None = None,
                  read_retries: int = 2, device: str = "modbus"):
         self.timeouts = timeouts or ModbusTimeouts()
         if transport not in ("tcp", "rtu"):
@@ -94,9 +100,11 @@ class ModbusLink:
         else:
             self.endpoint = port_or_host
             self._held = hold(port_or_host, device)  # the port is opened at the first request
+            line = on_the_line(line, device_path(port_or_host))
             try:
-                self._client = RtuClient(port_or_host, baudrate=baudrate, timeout=reply_s,
-                                         retries=0)
+                self._client = RtuClient(port_or_host, baudrate=line.baudrate,
+                                         parity=PYMODBUS_PARITY[line.parity],
+                                         stopbits=line.stopbits, timeout=reply_s, retries=0)
             except BaseException:
                 self._held.release()
                 raise
@@ -276,7 +284,7 @@ _links_lock = threading.Lock()
 
 
 def open_link(transport: str, port_or_host: str, *, tcp_port: int = 502,
-              baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
+              line: LineSettings = RTU_LINE, timeouts: ModbusTimeouts | None = None,
               read_retries: int = 2, device: str = "modbus") -> ModbusLink:
     """The shared link to an endpoint (made on first use, its serial port held for `device`,
     named if another process holds it); pair with `release_link`."""
@@ -285,7 +293,7 @@ def open_link(transport: str, port_or_host: str, *, tcp_port: int = 502,
         link = _links.get(key)
         if link is None:
             link = _links[key] = ModbusLink(transport, port_or_host, tcp_port=tcp_port,
-                                            baudrate=baudrate, timeouts=timeouts,
+                                            line=line, timeouts=timeouts,
                                             read_retries=read_retries, device=device)
         link.users += 1
         return link

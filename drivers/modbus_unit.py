@@ -7,8 +7,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from drivers.base import DeviceError, DeviceTimeout, Interlocked, ProtocolError
+from drivers.byte_link import LineSettings
 from drivers.lost_reply import reraise, sent_once
-from drivers.modbus_transport import BASIC_OBJECTS, ModbusTimeouts, open_link, release_link
+from drivers.modbus_transport import (
+    BASIC_OBJECTS,
+    RTU_LINE,
+    ModbusTimeouts,
+    open_link,
+    release_link,
+)
 from drivers.register_map import Register, RegisterMap, decode_text
 
 INTERLOCK_BIT = "interlock"  # optional [status_bits] entry: the unit's interlock input is open
@@ -24,14 +31,14 @@ class MappedUnit:
 
     def __init__(self, transport: str, port_or_host: str, unit: int,
                  register_map: str | Path | RegisterMap, *, name: str, tcp_port: int = 502,
-                 baudrate: int = 115200, timeouts: ModbusTimeouts | None = None,
+                 line: LineSettings = RTU_LINE, timeouts: ModbusTimeouts | None = None,
                  read_retries: int = 2):
         if isinstance(unit, bool) or not isinstance(unit, int) or not 0 <= unit <= 247:
             raise ValueError(f"{name}: Modbus unit id must be an integer in 0..247, got {unit!r}")
         self.name, self.unit = name, unit
         self.map = (register_map if isinstance(register_map, RegisterMap)
                     else RegisterMap.load(register_map))
-        self.link = open_link(transport, port_or_host, tcp_port=tcp_port, baudrate=baudrate,
+        self.link = open_link(transport, port_or_host, tcp_port=tcp_port, line=line,
                               timeouts=timeouts, read_retries=read_retries, device=name)
         self._closed = False
         self._read_plans: dict[tuple[str, ...], list] = {}

@@ -4,8 +4,8 @@ resource (drivers.visa_link), whichever the device is given, held for the device
 
 from __future__ import annotations
 
-from drivers.byte_link import ByteLink, LineSettings
-from drivers.port_lock import HeldPort, hold
+from drivers.byte_link import ByteLink, LineSettings, on_the_line
+from drivers.port_lock import HeldPort, device_path, hold
 from drivers.serial_link import SerialLink
 from drivers.visa_link import VisaLink
 
@@ -15,14 +15,17 @@ def open_byte_link(port: str | None, resource: str | None, line: LineSettings,
                    device: str) -> tuple[ByteLink, HeldPort]:
     """Open the link to a device given by exactly one of a serial port or a VISA resource
     string (ValueError otherwise; LinkFailure if it cannot be opened); line settings apply to
-    a port and to an ASRL resource. read_eol ends each reply (a VISA read returns one line);
-    timeout_s bounds a write. The hold (PortInUse, naming `device`, if another process has
-    it) is taken before the link opens and given back with it: release it after closing
-    the link. A serial port is also opened for exclusive use (TIOCEXCL)."""
+    a port and to an ASRL resource (no parity on a pseudo-terminal). read_eol ends each reply
+    (a VISA read returns one line); timeout_s bounds a write. The hold (PortInUse, naming
+    `device`, if another process has it) is taken before the link opens and given back with
+    it: release it after closing the link. A serial port is also opened for exclusive use
+    (TIOCEXCL)."""
     if (port is None) == (resource is None):
         raise ValueError("give a serial port or a VISA resource, exactly one of them; got "
                          f"port {port!r} and resource {resource!r}")
-    held = hold(port if resource is None else resource, device)
+    endpoint = port if resource is None else resource
+    line = on_the_line(line, device_path(endpoint))
+    held = hold(endpoint, device)
     try:
         if resource is not None:
             return VisaLink(resource, line, read_eol, timeout_s), held

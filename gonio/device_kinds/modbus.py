@@ -7,12 +7,21 @@ same shape needs a map and no code (docs/modbus.md).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from drivers.register_map import RegisterMap
 from gonio.device_kinds.kind import AxisConfig, DeviceConfig, driver_class
-from gonio.device_kinds.settings import BAUDRATE, PORT, TIMEOUT_S, Setting, only_when
+from gonio.device_kinds.settings import (
+    BAUDRATE,
+    PARITY,
+    PORT,
+    STOPBITS,
+    TIMEOUT_S,
+    Setting,
+    only_when,
+)
 from gonio.errors import ConfigError
 from gonio.fields import location
 
@@ -24,7 +33,9 @@ MODBUS_SETTINGS = (
     *only_when("transport", "tcp",
                Setting("host", "host", endpoint=True),
                Setting("tcp_port", "integer", 502, low=1, high=65535, endpoint=True)),
-    *only_when("transport", "rtu", PORT, BAUDRATE),
+    # an RTU line's default is the Modbus serial-line specification's: 19200 baud, even parity
+    *only_when("transport", "rtu", PORT, BAUDRATE, dataclasses.replace(PARITY, default="even"),
+               STOPBITS),
 )
 
 
@@ -37,7 +48,9 @@ def modbus_unit(driver: str) -> Callable[[DeviceConfig], Any]:
         if s["transport"] == "tcp":
             address, link = s["host"], {"tcp_port": s["tcp_port"]}
         else:
-            address, link = s["port"], {"baudrate": s["baudrate"]}
+            line = driver_class("drivers.byte_link:LineSettings")(
+                s["baudrate"], parity=s["parity"], stopbits=s["stopbits"])
+            address, link = s["port"], {"line": line}
         return driver_class(driver)(s["transport"], address, s["unit"], s["register_map"],
                                     name=dev.name, timeouts=timeouts, **link)
     return open_unit

@@ -130,6 +130,8 @@ TIMEOUT_S = Setting("timeout_s", "number", 1.0, unit="s", low=0.0, low_open=True
 PORT = Setting("port", "string", endpoint=True)
 BAUDRATE = Setting("baudrate", "integer", 19200, unit="baud", low=1)
 LINK = "a serial port or a VISA resource string"
+PARITY = Setting("parity", "string", "none", choices=("none", "even", "odd", "mark", "space"))
+STOPBITS = Setting("stopbits", "number", 1, choices=(1, 1.5, 2))
 
 
 def serial_settings(*own: Setting, baudrate: int = 19200,
@@ -143,8 +145,8 @@ def serial_settings(*own: Setting, baudrate: int = 19200,
         dataclasses.replace(PORT, default=None, one_of=LINK),
         Setting("resource", "string", None, endpoint=True, one_of=LINK),
         dataclasses.replace(BAUDRATE, default=baudrate),
-        Setting("parity", "string", "none", choices=("none", "even", "odd", "mark", "space")),
-        Setting("stopbits", "number", 1, choices=(1, 1.5, 2)),
+        PARITY,
+        STOPBITS,
         Setting("rtscts", "boolean", rtscts),
         Setting("xonxoff", "boolean", False),
         *own,
