@@ -63,6 +63,12 @@ def link(request):
     return request.param
 
 
+@pytest.fixture(params=["big", "little"])
+def word_order(request):
+    """Word order of a rig's maps, for tests whose transport is fixed."""
+    return request.param
+
+
 @pytest.fixture
 def rig(tmp_path):
     """make(transport, word_order, time_scale, stage_faults, server_faults, source, reply_s,
