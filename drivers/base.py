@@ -92,6 +92,15 @@ class Interlock(Protocol):
         holds it."""
 
 
+@runtime_checkable
+class LineCounts(Protocol):
+    """A device on a line that counts what the line has seen, for the run's record."""
+
+    def line_counts(self) -> dict[str, int]:
+        """Counts by name since the device was opened (a line transport's `resyncs`, sync
+        queries answered, and `unsolicited`, unprompted lines set aside)."""
+
+
 @dataclass(frozen=True)
 class Reading:
     """One detector reading: optical power in W and what the device said about it."""

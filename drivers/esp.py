@@ -268,6 +268,10 @@ class EspAxis:
         """The controller's identity (every axis of one ESP reports the same)."""
         return self.controller.identity()
 
+    def line_counts(self) -> dict[str, int]:
+        """What the controller's line has seen (drivers.base.LineCounts)."""
+        return self.controller.line_counts()
+
     def define_position(self, position_deg: float = 0.0) -> None:
         """DH: call the current position `position_deg` (defines home)."""
         self._command(f"DH{_fmt(position_deg)}")

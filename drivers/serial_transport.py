@@ -17,6 +17,11 @@ sends the driver's sync query, whose answer no other exchange produces, and drop
 before that answer (the device answers in order, so whatever was late has come out by then).
 A garbled line that arrives in step, with nothing older unanswered, is the answer to the line
 just sent, garbled.
+
+Some devices also speak unprompted (a Zaber device's alerts). The driver declares such lines
+(`is_unsolicited`): the transport never takes one for a reply, garbled or not, but hands it to
+the reply machine as a unit that can answer nothing here (UnitKind.FOREIGN), so it neither
+ends a wait nor puts the line out of step, and counts it (`unsolicited`).
 """
 
 from __future__ import annotations
@@ -88,8 +93,10 @@ class SerialLineTransport:
     write_eol / read_eol: the line terminators sent and expected; timeout_s: how long a
     reply may take; retries: extra attempts a query gets after a timeout or garbled reply;
     sync: the driver's SyncQuery (None: input is only flushed before each write, which
-    catches a late reply only if it has already arrived). baudrate and the LinkOptions'
-    parity, stopbits, rtscts and xonxoff set a serial port's or an ASRL resource's line.
+    catches a late reply only if it has already arrived); is_unsolicited: tells a line the
+    device sends unprompted, never a reply (None: every line may be one). baudrate and the
+    LinkOptions' parity, stopbits, rtscts and xonxoff set a serial port's or an ASRL
+    resource's line.
     """
 
     def __init__(
@@ -103,6 +110,7 @@ class SerialLineTransport:
         timeout_s: float = 1.0,
         retries: int = 2,
         sync: SyncQuery | None = None,
+        is_unsolicited: Callable[[str], bool] | None = None,
         **link: Unpack[LinkOptions],
     ):
         if not timeout_s > 0:
@@ -118,9 +126,10 @@ class SerialLineTransport:
         self.port = port if resource is None else resource
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
-        self.sync = sync
+        self.sync, self.is_unsolicited = sync, is_unsolicited
         self.replies = ReplySync()  # which request each line answers
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
+        self.unsolicited = 0  # unprompted lines read while a reply was awaited, set aside
         self._rx = bytearray()  # bytes read past the last reply line
         self.lock = threading.RLock()
         try:
@@ -141,6 +150,11 @@ class SerialLineTransport:
     def in_step(self) -> bool:
         """False from a missed reply until a sync query brings the replies back in step."""
         return self.replies.state is State.IN_STEP
+
+    def line_counts(self) -> dict[str, int]:
+        """What the line has seen so far: sync queries answered (`resyncs`) and unprompted
+        lines set aside (`unsolicited`)."""
+        return {"resyncs": self.resyncs, "unsolicited": self.unsolicited}
 
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
@@ -247,26 +261,32 @@ class SerialLineTransport:
 
     def _next_unit(self, what: str, deadline: float):
         """Read one line and feed it to the machine (DeviceTimeout, the machine told, if none
-        comes by the deadline); the event it is."""
+        comes by the deadline); the event it is. A line the driver declares unsolicited is
+        foreign, whatever its bytes."""
         try:
-            line = self._read_line(what, deadline)
-        except ProtocolError as garbled:
-            return self.replies.receive(UnitKind.GARBLED, garbled)
+            body = self._read_line(what, deadline)
         except DeviceTimeout:
             self.replies.timeout()
             raise
+        text = body.decode("ascii", errors="replace")
+        if self.is_unsolicited is not None and self.is_unsolicited(text):
+            self.unsolicited += 1
+            return self.replies.receive(UnitKind.FOREIGN, text)
+        if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
+            garbled = ProtocolError(f"{self.name}: garbled reply to {what}: "
+                                    f"{body + self.read_eol!r}")
+            return self.replies.receive(UnitKind.GARBLED, garbled)
         sync = self.sync
-        kind = UnitKind.SYNC if sync is not None and sync.is_reply(line) else UnitKind.ANSWER
-        return self.replies.receive(kind, line)
+        kind = UnitKind.SYNC if sync is not None and sync.is_reply(text) else UnitKind.ANSWER
+        return self.replies.receive(kind, text)
 
-    def _read_line(self, what: str, deadline: float) -> str:
-        """Read one reply line (terminator stripped) by the monotonic `deadline`.
+    def _read_line(self, what: str, deadline: float) -> bytes:
+        """Read one line's bytes (terminator stripped) by the monotonic `deadline`.
 
         Reads whatever the link has within the time left (a serial port: what has arrived; a
         VISA resource: a line); bytes after the terminator are kept for the next line (and
         discarded by the next send: a line protocol sends one reply per request). Raises
-        DeviceTimeout(what) when no complete line arrives in time (the reply may still come),
-        ProtocolError when it holds bytes that are not printable ASCII.
+        DeviceTimeout(what) when no complete line arrives in time (the reply may still come).
         """
         data, eol = self._rx, self.read_eol
         try:
@@ -280,9 +300,7 @@ class SerialLineTransport:
         end = data.index(eol)
         body = bytes(data[:end])
         del data[: end + len(eol)]
-        if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
-            raise ProtocolError(f"{self.name}: garbled reply to {what}: {body + eol!r}")
-        return body.decode("ascii")
+        return body
 
     def exchange(self, line: str, what: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""

@@ -52,6 +52,10 @@ class StatusLineDevice:
     def __init__(self, name: str, transport: SerialLineTransport):
         self.name, self.transport = name, transport
 
+    def line_counts(self) -> dict[str, int]:
+        """What the line has seen (drivers.base.LineCounts)."""
+        return self.transport.line_counts()
+
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
         """Close the serial port."""

@@ -4,19 +4,20 @@ From Zaber's ASCII protocol manual (firmware 7). Every request is `/<device> <ax
 <command>:<CC>`: the message id (0..98 in turn; 99 is the sync query's) ties a reply to its
 request, and CC is the manual's checksum (two hex digits: the two's complement of the byte
 sum of what lies between '/' and ':'). Opening a device switches its reply checksums on
-(comm.checksum 1) and its alerts off (comm.alert 0), both verified by read-back and left so;
-replies are then `@dd a id OK|RJ BUSY|IDLE flag data:CC`, and one whose checksum, shape,
-address, axis or id is wrong is garbled: a dropped digit of a position breaks the checksum
-rather than pass as another number. RJ is a DeviceError naming the rejection reason. Queries
-are retried after a timeout or garble; a state-changing command is sent exactly once, and if
-its reply is lost the driver reads the device state back instead. After a timeout the sync
-query (`/<device> 0 99`) brings late replies back in step (drivers.serial_transport).
+(comm.checksum 1, verified by read-back and left so); replies are then `@dd a id OK|RJ
+BUSY|IDLE flag data:CC`, and one whose checksum, shape, address, axis or id is wrong is
+garbled: a dropped digit of a position breaks the checksum rather than pass as another number.
+RJ is a DeviceError naming the rejection reason. Queries are retried after a timeout or
+garble; a state-changing command is sent exactly once, and if its reply is lost the driver
+reads the device state back instead. After a timeout the sync query (`/<device> 0 99`) brings
+late replies back in step (drivers.serial_transport).
 
-An alert (`!dd a IDLE flag`: a device whose comm.alert is 1 telling that a motion ended, sent
-when it happens) can arrive between a request and its reply: a motion begun before the driver
-opened the device, or one of a device on the chain that the driver does not use. It is never
-read as the reply: the reply is then still to come, so the exchange counts as a garbled one
-and the sync query brings the line back in step before the next request.
+Alerts (`!dd a IDLE flag[:CC]`: a device whose comm.alert is 1 telling that a motion ended,
+sent when it happens) are left on or off as the lab saved them. A message's first character
+is its type (Zaber's ASCII protocol article): `@` a reply, `#` an info message (sent after the
+reply to some commands), `!` an alert (sent spontaneously when an event occurs). So the
+transport sets every line starting with `!` aside (`is_alert`), wherever it arrives and its
+checksum right or wrong, and an alert costs no retry and no resync.
 
 Units: positions are microsteps, degrees = data x full_step_deg / resolution (the resolution,
 microsteps per full step, read from each axis; full_step_deg defaults to the X-RSW60A's 0.015
@@ -88,7 +89,6 @@ def integer_setting(name: str, doc: str) -> Setting:
 
 
 CHECKSUM = integer_setting("comm.checksum", "comm.checksum: 1 = replies carry a checksum")
-ALERTS = integer_setting("comm.alert", "comm.alert: 1 = the device sends alerts")
 LIMIT_MIN = integer_setting("limit.min", "limit.min: the lower travel limit, microsteps")
 LIMIT_MAX = integer_setting("limit.max", "limit.max: the upper travel limit, microsteps")
 
@@ -96,6 +96,11 @@ LIMIT_MAX = integer_setting("limit.max", "limit.max: the upper travel limit, mic
 def lrc(text: str) -> str:
     """The manual's message checksum of `text`, two upper-case hex digits."""
     return f"{-sum(text.encode('ascii')) & 0xFF:02X}"
+
+
+def is_alert(line: str) -> bool:
+    """An alert: a message a device sends unprompted (`!`), never a reply to a request."""
+    return line.startswith("!")
 
 
 def flag_text(flag: str) -> str:
@@ -175,11 +180,11 @@ class ZaberController:
         self._devices: dict[int, dict[str, str]] = {}  # opened devices: their identity
         self._axis_counts: dict[int, int] = {}
         self.latest: dict[tuple[int, int], Reply] = {}  # (device, axis): its latest reply
-        self.alerts_set_aside = 0  # alerts read where a reply was due
         self.transport = SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
             timeout_s=timeout_s, retries=retries,
-            sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply), **link,
+            sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply),
+            is_unsolicited=is_alert, **link,
         )
         try:
             self._open(address)
@@ -199,11 +204,11 @@ class ZaberController:
         self.close()
 
     def _open(self, address: int) -> None:
-        """Reply checksums on, alerts off (each verified), then the device's identity."""
+        """Reply checksums on (verified; comm.alert is left as it is), then the device's
+        identity."""
         who = f"{self.name} device {address}"
         self.write_setting(CHECKSUM, 1, address, 0, who)
         self._checksummed.add(address)
-        self.write_setting(ALERTS, 0, address, 0, who)
         self._axis_counts[address] = self.get(address, 0, "system.axiscount", who)
         self._devices[address] = {
             "device_id": self.query(address, 0, "get deviceid", who).data,
@@ -224,17 +229,6 @@ class ZaberController:
         except ProtocolError as exc:
             raise ProtocolError(f"{self.name}: {exc}") from None
 
-    def _answer(self, text: str, address: int, axis: int, message_id: int) -> Reply:
-        """The reply to request `message_id` in the line read for it. An alert there is no
-        reply, and the reply it came before is still to come: the transport is told that a
-        reply is owed (it sends the sync query before the next request), and the exchange
-        fails as a garbled one."""
-        if text.startswith("!"):
-            self.alerts_set_aside += 1
-            self.transport.replies.send_request()
-            self.transport.replies.timeout()
-        return self._parse(text, address, axis, message_id)
-
     def _is_sync_reply(self, text: str) -> bool:
         try:
             self._parse(text, self.address, 0, SYNC_ID)
@@ -254,7 +248,7 @@ class ZaberController:
         message_id = next(self._ids)
 
         def checked(text: str) -> Reply:
-            reply = self._answer(text, address, axis, message_id)
+            reply = self._parse(text, address, axis, message_id)
             self.latest[address, axis] = reply
             if reply.flag == "RJ":
                 raise self._rejected(who, command, reply)
@@ -274,9 +268,7 @@ class ZaberController:
         line = self._line(address, axis, message_id, command)
 
         def send() -> Reply:
-            with self.transport.lock:  # no other exchange between this one and its reading
-                return self._answer(self.transport.exchange(line, what), address, axis,
-                                    message_id)
+            return self._parse(self.transport.exchange(line, what), address, axis, message_id)
 
         reply = sent_once(send, lambda: _confirmed(verify), not_resent(who, command))
         if reply is None:
@@ -459,6 +451,10 @@ class ZaberAxis:
     def identity(self) -> dict[str, str]:
         """The identity of the device this axis belongs to."""
         return self.controller.identity(self.address)
+
+    def line_counts(self) -> dict[str, int]:
+        """What the chain's line has seen (drivers.base.LineCounts)."""
+        return self.controller.transport.line_counts()
 
     # -- settings ---------------------------------------------------------------
     def configure(self, speed_deg_s: float, accel_deg_s2: float,

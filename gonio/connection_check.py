@@ -5,8 +5,8 @@ detector reads, without moving anything or pushing any of the config's settings.
 No Axis.configure (speed, acceleration, travel limits), no Detector.configure (wavelength,
 averaging, range), no home and no move is sent. What a driver does to open a device still
 happens, since its replies rest on it: an ESP axis is switched on in degrees (MO, SN7), a
-Zaber device's replies carry checksums and it sends no alerts, a PM100 measures power
-(CONF:POW). Each device is opened on its own, so one that cannot be reached (its port
+Zaber device's replies carry checksums (its alerts are left on or off as saved), a PM100
+measures power (CONF:POW). Each device is opened on its own, so one that cannot be reached (its port
 missing or held, no reply) is one line of the report and the others are still asked.
 """
 

@@ -2,8 +2,8 @@
 
 Each device opens through its kind (gonio.device_kinds); this module opens them, shares a
 multi-axis controller among its axes, pushes the config's motion settings and travel limits
-to every axis (`Axis.configure`), records what each device reports, and closes everything
-again.
+to every axis (`Axis.configure`), records what each device reports (its identity when
+opened, what its line has seen when the run ends), and closes everything again.
 """
 
 from __future__ import annotations
@@ -15,11 +15,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.base import Axis, Detector, DriverError
+from drivers.base import Axis, Detector, DriverError, LineCounts
 from gonio.config import InstrumentConfig
 from gonio.device_kinds import DeviceConfig
 from gonio.device_kinds.kind import AxisConfig
 from gonio.errors import ConfigError
+from gonio.events import Stopping
 
 STOP_ATTEMPTS = 2
 
@@ -57,6 +58,19 @@ class Instrument:
                         failed[role] = str(exc) or type(exc).__name__
         return failed
 
+    def line_counts(self) -> dict[str, dict[str, int]]:
+        """Per device whose driver counts them (drivers.base.LineCounts), what its line has
+        seen since it was opened: resyncs, unsolicited lines set aside."""
+        drivers = drivers_by_device(self.config, self.axes, self.detector)
+        return {name: driver.line_counts() for name, driver in drivers.items()
+                if isinstance(driver, LineCounts)}
+
+    def record_lines(self, event: object) -> None:
+        """A subscriber to the engine's events: the session's record gets `lines` (what
+        line_counts says) as the run ends."""
+        if isinstance(event, Stopping):
+            event.session.update(lines=self.line_counts())
+
     def close(self) -> None:
         """Close every device connection (errors while closing are ignored)."""
         close_all(self.closers)
@@ -74,6 +88,15 @@ def close_all(closers: list[Callable[[], None]]) -> None:
         with contextlib.suppress(Exception):
             close()
     closers.clear()
+
+
+def drivers_by_device(cfg: InstrumentConfig, axes: dict[str, Axis], detector: Detector
+                      ) -> dict[str, Axis | Detector]:
+    """One driver per device name (an axis of a multi-axis controller speaks for it)."""
+    drivers: dict[str, Axis | Detector] = {cfg.axes[role].device: axis
+                                           for role, axis in axes.items()}
+    drivers[cfg.detector.device] = detector
+    return drivers
 
 
 def open_device(dev: DeviceConfig, closers: list[Callable[[], None]]) -> Any:
@@ -120,9 +143,7 @@ def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrume
         axes = {role: _stage(cfg.devices[ax.device], ax, controllers, closers)
                 for role, ax in cfg.axes.items()}
         detector = open_device(cfg.devices[cfg.detector.device], closers)
-        drivers: dict[str, Axis | Detector] = {cfg.axes[role].device: axis
-                                               for role, axis in axes.items()}
-        drivers[cfg.detector.device] = detector  # one per device: an ESP's axes report alike
+        drivers = drivers_by_device(cfg, axes, detector)  # an ESP's axes report alike
         devices = {name: _record(cfg.devices[name], drivers[name])
                    for name in cfg.devices if name in drivers}
     except BaseException:

@@ -128,7 +128,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                 status = RunStatus()
                 bar = Progress(len(sched), writer.stored, plan.name,
                                disable=None if progress is None else not progress)
-                bus = EventBus([RunRecorder(writer), bar, *dev.subscribers, status])
+                bus = EventBus([RunRecorder(writer), bar, *dev.subscribers, status,
+                                inst.record_lines])
                 engine = Engine(inst, plan, sched.readings, todo, bus, stored=writer.stored,
                                 control=control, t0_epoch=writer.meta["t0_epoch"],
                                 prompts=operator_prompts(plan, sched.readings, todo),

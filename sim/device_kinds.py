@@ -1,6 +1,7 @@
 """The device kinds sim emulates, each declared once: its name (a config's `protocol`),
 stage or detector, the factory that starts its emulator, the fault keys only it acts on and
-the [sim.devices.<name>] keys that say what its emulator is (a PM100's console and head).
+the [sim.devices.<name>] keys that say what its emulator is (a PM100's console and head, a
+Zaber product's device id, firmware and saved comm.alert).
 
 gonio.device_kinds declares the same names with the same roles (how the real devices are
 configured and opened); sim never imports it, and tests/test_device_kinds.py checks that the
@@ -10,7 +11,7 @@ two registries agree. Adding a kind is one entry here pointing at its emulator m
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -20,6 +21,7 @@ from sim.devices.photodiode import SimConfigError
 from sim.devices.pm100 import Pm100Emulator
 from sim.devices.pm100_models import CONSOLES, HEADS
 from sim.devices.zaber import ZaberEmulator
+from sim.devices.zaber_device import IDENTITY_CHECKS
 from sim.emulator_factories import (
     DetectorFactory,
     StageFactory,
@@ -29,16 +31,26 @@ from sim.emulator_factories import (
     modbus_stage_units,
 )
 
+#: a [sim.devices.<name>] key's check of its value: None, or what is wrong with it
+SettingCheck = Callable[[Any], str | None]
+
+
+def one_of(choices: tuple[str, ...]) -> SettingCheck:
+    """The check of a key that takes one of `choices`."""
+    def problem(value: Any) -> str | None:
+        return None if value in choices else f"{value!r} is not one of {', '.join(choices)}"
+    return problem
+
 
 @dataclass(frozen=True, kw_only=True)
 class _Kind:
     """What every emulated kind declares: its name, the fault keys only it acts on, and the
-    [sim.devices.<name>] keys that say what its emulator pretends to be, each with its
-    choices."""
+    [sim.devices.<name>] keys that say what its emulator pretends to be, each with the check
+    of its value."""
 
     name: str
     own_faults: tuple[str, ...] = ()
-    settings: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    settings: Mapping[str, SettingCheck] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -64,11 +76,12 @@ KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
                   own_faults=("interlock",)),
     DetectorEmulator(name="pm100", start=meter_on_pty(Pm100Emulator),
                      own_faults=("invalid_prob",),
-                     settings={"model": tuple(CONSOLES), "sensor": tuple(HEADS)}),
+                     settings={"model": one_of(tuple(CONSOLES)), "sensor": one_of(tuple(HEADS))}),
     StageEmulator(name="modbus-stage", start=modbus_stage_units, own_faults=("interlock",)),
     DetectorEmulator(name="modbus-detector", start=modbus_detector_unit,
                      own_faults=("interlock",)),
-    StageEmulator(name="zaber", start=controller_on_pty(ZaberEmulator, ("address",))),
+    StageEmulator(name="zaber", start=controller_on_pty(ZaberEmulator, ("address",)),
+                  settings=IDENTITY_CHECKS),
 )}
 
 
@@ -94,13 +107,13 @@ def check_faults(name: str, kind: EmulatorKind, faults: Mapping[str, Any]) -> No
 
 
 def check_settings(name: str, kind: EmulatorKind, settings: Mapping[str, Any]) -> None:
-    """Refuse a [sim.devices.<name>] key the device's kind does not take, or a value that is
-    none of the key's choices, with one SimConfigError naming the key."""
+    """Refuse a [sim.devices.<name>] key the device's kind does not take, or a value the key's
+    check refuses, with one SimConfigError naming the key."""
     for key, value in settings.items():
         if key not in kind.settings:
             known = ", ".join(kind.settings) or "none"
             raise SimConfigError(f"[sim.devices.{name}] {key}: the {kind.name} emulator takes "
                                  f"no such key (keys: {known})")
-        if value not in kind.settings[key]:
-            raise SimConfigError(f"[sim.devices.{name}] {key}: {value!r} is not one of "
-                                 f"{', '.join(kind.settings[key])}")
+        problem = kind.settings[key](value)
+        if problem is not None:
+            raise SimConfigError(f"[sim.devices.{name}] {key}: {problem}")

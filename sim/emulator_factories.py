@@ -75,7 +75,8 @@ def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = (),
                       interlock_arg: str | None = None) -> StageFactory:
     """A multi-axis controller served on a pty of its own, built as `emulator(clock,
     {axis number: {limits_deg, speed_deg_s, accel_deg_s2, position_deg}}, faults, seed,
-    **device_keys the [devices] table gives)` with each axis's TrapezoidAxis at
+    **device_keys the [devices] table gives, **its [sim.devices.<name>] settings)` (a Zaber
+    product's `device_id`, `firmware`, `alerts`) with each axis's TrapezoidAxis at
     `.axes[number].motion` (the ESP emulator's shape); interlock_arg: the constructor argument
     that takes its interlock input (the ESP's `estop`), if it has one."""
     def start(device: EmulatedDevice) -> None:
@@ -87,7 +88,8 @@ def controller_on_pty(emulator: type, device_keys: tuple[str, ...] = (),
         given = {key: device.table[key] for key in device_keys if key in device.table}
         if interlock_arg is not None:
             given[interlock_arg] = device.interlock
-        emu = emulator(device.clock, tables, device.faults, device.seed, **given)
+        emu = emulator(device.clock, tables, device.faults, device.seed, **given,
+                       **device.settings)
         device.serve(emu)
         for role, ax in device.axes.items():
             motion = emu.axes[_axis_number(ax)].motion

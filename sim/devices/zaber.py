@@ -41,7 +41,14 @@ from sim.devices.zaber_axis import (
     integer,
     is_integer,
 )
-from sim.devices.zaber_device import DEVICE_ID, FIRMWARE, EmulatedDevice, by_priority, lrc
+from sim.devices.zaber_device import (
+    DEVICE_ID,
+    FIRMWARE,
+    IDENTITY_CHECKS,
+    EmulatedDevice,
+    by_priority,
+    lrc,
+)
 
 __all__ = ["MAX_AXES", "ZaberConfigError", "ZaberEmulator", "lrc"]
 
@@ -58,7 +65,8 @@ class ZaberEmulator(PtyDevice):
     sim.devices.zaber_axis.AXIS_KEYS (degrees). faults: injected on replies and alerts; seed:
     mixed into the fault RNG seed. device_id and firmware: what `get deviceid` and
     `get version` answer (the product's identity); alerts: comm.alert at power-up (a device
-    whose setting was saved on). `axes` of the emulator maps the same keys to the emulated
+    whose setting was saved on); each checked (zaber_device.IDENTITY_CHECKS), ZaberConfigError
+    naming the one that is wrong. `axes` of the emulator maps the same keys to the emulated
     axes (`.motion` is the TrapezoidAxis the optical bench reads).
     """
 
@@ -75,6 +83,10 @@ class ZaberEmulator(PtyDevice):
         firmware: str = FIRMWARE,
         alerts: bool = False,
     ):
+        for key, value in (("device_id", device_id), ("firmware", firmware), ("alerts", alerts)):
+            problem = IDENTITY_CHECKS[key](value)
+            if problem is not None:
+                raise ZaberConfigError(f"zaber: {key}: {problem}")
         self.clock = clock or VirtualClock(1.0)
         tables = axes if axes is not None else {1: {}}
         if not tables:

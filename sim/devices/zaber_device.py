@@ -13,6 +13,9 @@ integrated rotary stage.
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
+
 from sim.devices.zaber_axis import EmulatedAxis, Reject
 
 #: what `get deviceid` answers by default: the id Zaber's MATLAB toolbox tests give an
@@ -31,6 +34,27 @@ LIMITS = {"comm.packet.size.max": 80, "comm.command.packets.max": 1,
 
 #: device settings `set` may change, with the values each takes
 WRITABLE = {"comm.alert": (0, 1), "comm.checksum": (0, 1)}
+
+_FIRMWARE_7 = re.compile(r"7\.\d+")
+
+
+def _must_be(accepts: Callable[[object], bool], expected: str) -> Callable[[object], str | None]:
+    """A check of one value: None if `accepts` it, else what it must be and what it is."""
+    def problem(value: object) -> str | None:
+        return None if accepts(value) else f"must be {expected}, got {value!r}"
+    return problem
+
+
+#: what the emulated product says it is, checked alike as ZaberEmulator's arguments and as a
+#: config's [sim.devices.<name>] keys: each key's check (None, or what is wrong)
+IDENTITY_CHECKS: dict[str, Callable[[object], str | None]] = {
+    "device_id": _must_be(lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1,
+                          "a positive integer (the product's Zaber device id)"),
+    "firmware": _must_be(lambda v: isinstance(v, str) and _FIRMWARE_7.fullmatch(v) is not None,
+                         'a firmware-7 version such as "7.38" (the protocol emulated)'),
+    "alerts": _must_be(lambda v: isinstance(v, bool),
+                       "true or false (the comm.alert the device saved)"),
+}
 
 
 def lrc(text: str) -> str:

@@ -1,6 +1,7 @@
 """Zaber alerts over a real pty: the emulator sends `!dd a IDLE flag` when a motion ends (while
-comm.alert is 1), and gonio's driver never takes an alert that arrives where a reply was due
-for that reply."""
+comm.alert is 1), and gonio's driver, which leaves comm.alert as the device has it, never takes
+an alert that arrives where a reply was due for that reply: its transport sets every alert
+aside (a wrong checksum or not), with no retry and no resync."""
 
 import math
 
@@ -82,8 +83,8 @@ def test_the_driver_sets_aside_an_alert_that_comes_before_its_reply(serve):
         assert lines(session, "/1 1 move abs 4000") == ["@01 1 OK BUSY -- 0"]
     clock.advance(60.0)
     with ZaberController(emu.endpoint, timeout_s=1.0, retries=2) as ctl:
-        assert ctl.alerts_set_aside == 1 and ctl.transport.resyncs == 1
-        assert emu.devices[1].settings["comm.alert"] == 0  # the driver turned them off
+        assert ctl.transport.unsolicited == 1 and ctl.transport.resyncs == 0
+        assert emu.devices[1].settings["comm.alert"] == 1  # the device's saved setting stays
         assert emu.devices[1].settings["comm.checksum"] == 1
         assert ctl.identity() == {"device_id": "50001", "serial": "120001",
                                   "firmware": "7.38", "address": "1"}
@@ -95,11 +96,67 @@ def test_the_driver_reads_through_alerts_of_a_device_it_does_not_use(serve):
     emu = serve(clock, {(1, 1): {}, (2, 1): {}})
     with serial.Serial(emu.endpoint, 115200, timeout=HANG_S) as session:
         assert lines(session, "/2 1 move rel 500") == ["@02 1 OK BUSY -- 0"]
+        # the lab saved device 1 with alerts off: only device 2 alerts
+        assert lines(session, "/1 set comm.alert 0") == ["@01 0 OK IDLE -- 0"]
     with ZaberController(emu.endpoint, timeout_s=1.0, retries=2, address=1) as ctl:
         axis = ctl.axis(1)
         axis.move_to(2.0)
         clock.advance(60.0)  # both motions end: device 2's alert comes before the next reply
         assert axis.position() == pytest.approx(2.0, abs=UNIT)
-        assert ctl.alerts_set_aside == 1 and ctl.transport.resyncs == 1
+        assert ctl.transport.unsolicited == 1 and ctl.transport.resyncs == 0
         assert emu.devices[2].settings["comm.alert"] == 1  # a device the driver left alone
         assert axis.wait(timeout_s=HANG_S) == pytest.approx(2.0, abs=UNIT)
+
+
+def test_moves_and_waits_with_alerts_on_take_no_alert_for_a_reply(serve):
+    """Each motion's end is heard as an alert before the next reply (one per axis that moved):
+    every wait returns the target at its first poll, each alert set aside, none retried."""
+    clock = VirtualClock(0.0)
+    emu = serve(clock, {1: {}, 2: {}})
+    with ZaberController(emu.endpoint, timeout_s=1.0, retries=0) as ctl:
+        sample, arm = ctl.axis(1), ctl.axis(2)
+        requests = emu.server.requests
+        for n, target in enumerate((5.0, -12.5, 30.0), start=1):
+            sample.move_to(target)
+            clock.advance(60.0)
+            assert sample.wait(timeout_s=HANG_S) == pytest.approx(target, abs=UNIT)
+            assert ctl.transport.unsolicited == n
+        sample.move_to(0.0)
+        arm.move_to(45.0)
+        clock.advance(60.0)  # both end: two alerts before the next reply
+        assert arm.wait(timeout_s=HANG_S) == pytest.approx(45.0, abs=UNIT)
+        assert sample.position() == 0.0
+        assert ctl.transport.line_counts() == {"resyncs": 0, "unsolicited": 5}
+        assert sample.line_counts() == arm.line_counts() == ctl.transport.line_counts()
+        # a move and one poll each: no query asked twice, no sync query
+        assert emu.server.requests - requests == 3 * 2 + 2 + 2
+    assert emu.devices[1].settings["comm.alert"] == 1
+
+
+def wrong_checksums(handler, spoiled: list[bytes]):
+    """The handler, its alerts' checksums made wrong (a device whose alert was hit by noise),
+    each spoiled alert appended to `spoiled`."""
+    def spoil(msg: bytes) -> bytes:
+        if not msg.startswith(b"!"):
+            return msg
+        spoiled.append(msg[:-4] + b"00\r\n")
+        return spoiled[-1]
+
+    def handle(line: bytes) -> bytes | None:
+        out = handler(line)
+        return None if out is None else b"".join(map(spoil, out.splitlines(keepends=True)))
+    return handle
+
+
+def test_an_alert_with_a_wrong_checksum_is_set_aside_too(serve):
+    clock = VirtualClock(0.0)
+    emu = serve(clock, {1: {}})
+    spoiled: list[bytes] = []
+    emu.server.handler = wrong_checksums(emu.handle_line, spoiled)
+    with ZaberController(emu.endpoint, timeout_s=1.0, retries=0) as ctl:
+        axis = ctl.axis(1)
+        axis.move_to(3.0)
+        clock.advance(60.0)
+        assert axis.wait(timeout_s=HANG_S) == pytest.approx(3.0, abs=UNIT)
+        assert spoiled == [b"!01 1 IDLE --:00\r\n"] and lrc("01 1 IDLE --") != "00"
+        assert ctl.transport.line_counts() == {"resyncs": 0, "unsolicited": 1}

@@ -151,6 +151,26 @@ def test_emulator_tables_are_checked(table, message):
         ZaberEmulator(VirtualClock(math.inf), table)
 
 
+@pytest.mark.parametrize("identity, message", [
+    ({"device_id": "50419"}, "zaber: device_id: must be a positive integer (the product's "
+                             "Zaber device id), got '50419'"),
+    ({"device_id": 0}, "zaber: device_id: must be a positive integer (the product's Zaber "
+                       "device id), got 0"),
+    ({"device_id": True}, "zaber: device_id: must be a positive integer (the product's Zaber "
+                          "device id), got True"),
+    ({"firmware": 7.38}, 'zaber: firmware: must be a firmware-7 version such as "7.38" (the '
+                         'protocol emulated), got 7.38'),
+    ({"firmware": "6.32"}, 'zaber: firmware: must be a firmware-7 version such as "7.38" (the '
+                           "protocol emulated), got '6.32'"),
+    ({"alerts": 1}, "zaber: alerts: must be true or false (the comm.alert the device saved), "
+                    "got 1"),
+])
+def test_the_products_identity_is_checked(identity, message):
+    with pytest.raises(ZaberConfigError) as err:
+        ZaberEmulator(VirtualClock(math.inf), {1: {}}, **identity)
+    assert str(err.value) == message
+
+
 def reply(body: str) -> str:
     return f"@{body}:{lrc(body)}"
 
