@@ -18,6 +18,9 @@ before that answer (the device answers in order, so whatever was late has come o
 A garbled line that arrives in step, with nothing older unanswered, is the answer to the line
 just sent, garbled.
 
+Devices of a daisy chain share one transport (drivers.zaber): each names itself with every
+exchange (`device=`), and the errors of that exchange name it.
+
 Some devices also speak unprompted (a Zaber device's alerts). The driver declares such lines
 (`is_unsolicited`): the transport never takes one for a reply, garbled or not, but hands it to
 the reply machine as a unit that can answer nothing here (UnitKind.FOREIGN), so it neither
@@ -30,7 +33,8 @@ import re
 import termios
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TypeVar, Unpack
 
@@ -96,7 +100,8 @@ class SerialLineTransport:
     catches a late reply only if it has already arrived); is_unsolicited: tells a line the
     device sends unprompted, never a reply (None: every line may be one). baudrate and the
     LinkOptions' parity, stopbits, rtscts and xonxoff set a serial port's or an ASRL
-    resource's line.
+    resource's line. `name` is the device its errors name, unless an exchange names another
+    (`device=`: a device of a chain sharing the transport).
     """
 
     def __init__(
@@ -122,7 +127,7 @@ class SerialLineTransport:
             line = LineSettings(baudrate, **link)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{name}: {exc}") from None
-        self.name = name
+        self.name = self._speaker = name
         self.port = port if resource is None else resource
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
@@ -177,14 +182,14 @@ class SerialLineTransport:
         """A link failure during `action` as the DriverError callers see (a blocked write:
         DeviceTimeout, and whatever was being written may have partly gone out)."""
         if failure.write_timed_out:
-            return DeviceTimeout(self.name, f"the port to take {action}", self.timeout_s)
-        return SerialPortError(self.name, self.port, action, failure.cause, self.link.noun)
+            return DeviceTimeout(self._speaker, f"the port to take {action}", self.timeout_s)
+        return SerialPortError(self._speaker, self.port, action, failure.cause, self.link.noun)
 
-    def send(self, line: str, what: str | None = None) -> None:
+    def send(self, line: str, what: str | None = None, device: str | None = None) -> None:
         """Bring replies back in step if a reply was missed (DeviceTimeout naming `what`
         if that fails), discard stale input, then write one line (terminator added) that
         gets no reply (a silent command)."""
-        with self.lock:
+        with self.lock, self._for(device):
             try:
                 self._in_step(what or repr(line))
                 self._write(line, request=False)
@@ -222,6 +227,17 @@ class SerialLineTransport:
                 self.replies.timeout()  # answered after all (an error, an echo)
             raise self._port_error(f"writing {line[:40]!r}{'...' if len(line) > 40 else ''}",
                                    exc) from exc.cause
+
+    @contextmanager
+    def _for(self, device: str | None) -> Iterator[None]:
+        """Under the lock: the errors of an exchange name `device` (None: whoever the
+        enclosing exchange names, else the transport's own name) until it ends."""
+        outer = self._speaker
+        self._speaker = device or outer
+        try:
+            yield
+        finally:
+            self._speaker = outer
 
     def _abandon_wait(self) -> None:
         """After an exchange: a wait cut short (the port lost, a signal) leaves its reply to
@@ -273,7 +289,7 @@ class SerialLineTransport:
             self.unsolicited += 1
             return self.replies.receive(UnitKind.FOREIGN, text)
         if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
-            garbled = ProtocolError(f"{self.name}: garbled reply to {what}: "
+            garbled = ProtocolError(f"{self._speaker}: garbled reply to {what}: "
                                     f"{body + self.read_eol!r}")
             return self.replies.receive(UnitKind.GARBLED, garbled)
         sync = self.sync
@@ -293,7 +309,7 @@ class SerialLineTransport:
             while eol not in data:
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    raise DeviceTimeout(self.name, what, self.timeout_s)
+                    raise DeviceTimeout(self._speaker, what, self.timeout_s)
                 data += self.link.read(left)
         except LinkFailure as exc:
             raise self._port_error(f"reading the reply to {what}", exc) from exc.cause
@@ -302,10 +318,10 @@ class SerialLineTransport:
         del data[: end + len(eol)]
         return body
 
-    def exchange(self, line: str, what: str | None = None) -> str:
+    def exchange(self, line: str, what: str | None = None, device: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""
         what = what or repr(line)
-        with self.lock:
+        with self.lock, self._for(device):
             try:
                 self._in_step(what)
                 self._write(line, request=True)
@@ -318,6 +334,7 @@ class SerialLineTransport:
         line: str,
         parse: Callable[[str], T],
         what: str | None = None,
+        device: str | None = None,
     ) -> T:
         """Send a query and parse its reply, retrying after a timeout or garbled reply.
 
@@ -327,7 +344,7 @@ class SerialLineTransport:
         """
         what = what or repr(line)
         last: DriverError | None = None
-        with self.lock:
+        with self.lock, self._for(device):
             for _ in range(1 + self.retries):
                 try:
                     return parse(self.exchange(line, what))

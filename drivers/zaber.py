@@ -12,6 +12,13 @@ garble; a state-changing command is sent exactly once, and if its reply is lost 
 reads the device state back instead. After a timeout the sync query (`/<device> 0 99`) brings
 late replies back in step (drivers.serial_transport).
 
+A daisy chain is one serial port (or resource) on which each device answers to its address
+(1..99). Controllers of devices on one port, in one process, share one transport
+(`CHAIN_LINES`, drivers.shared_links): one hold of the port, one connection, one sync query
+(the first controller's, to its device), each controller reading only the replies of its own
+devices; the line opens with the first and closes with the last, and a controller asking for
+other line settings than the open line's is refused (ValueError naming both).
+
 Alerts (`!dd a IDLE flag[:CC]`: a device whose comm.alert is 1 telling that a motion ended,
 sent when it happens) are left on or off as the lab saved them. A message's first character
 is its type (Zaber's ASCII protocol article): `@` a reply, `#` an info message (sent after the
@@ -31,15 +38,17 @@ import itertools
 import math
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Unpack
 
 from drivers.base import DeviceError, DriverError, ProtocolError
-from drivers.byte_link import LinkOptions
+from drivers.byte_link import LineSettings, LinkOptions
 from drivers.lost_reply import LOST, not_resent, sent_once
 from drivers.polling import poll_until
+from drivers.port_lock import device_path, normalised
 from drivers.serial_transport import SerialLineTransport, SyncQuery
 from drivers.settings import Setting, exactly
+from drivers.shared_links import SharedLinks
 
 X_RSW60A_STEP_DEG = 0.015  # stage rotation per full motor step
 SPEED_UNIT = 1.6384  # maxspeed data per microstep/s
@@ -91,6 +100,21 @@ def integer_setting(name: str, doc: str) -> Setting:
 CHECKSUM = integer_setting("comm.checksum", "comm.checksum: 1 = replies carry a checksum")
 LIMIT_MIN = integer_setting("limit.min", "limit.min: the lower travel limit, microsteps")
 LIMIT_MAX = integer_setting("limit.max", "limit.max: the upper travel limit, microsteps")
+
+
+#: the lines of the chains open in this process, by the port or resource they hold
+CHAIN_LINES: SharedLinks[SerialLineTransport] = SharedLinks(SerialLineTransport.close)
+
+
+def chain_endpoint(port: str | None, resource: str | None) -> str | None:
+    """What a chain's line is known by: the device file its port or ASRL resource opens
+    (symlinks resolved), else the resource in its canonical form; None unless exactly one of
+    the two is given (which the transport refuses)."""
+    if (port is None) == (resource is None):
+        return None
+    endpoint = port if resource is None else resource
+    path = device_path(endpoint)
+    return normalised(endpoint) if path is None else str(path)
 
 
 def lrc(text: str) -> str:
@@ -151,7 +175,8 @@ def parse_reply(text: str, address: int, axis: int, message_id: int, checksummed
 
 class ZaberController:
     """The Zaber devices on one serial port (or, by `resource`, a VISA resource: LinkOptions);
-    `axis(n, name, address)` gives engine-facing Axis objects.
+    `axis(n, name, address)` gives engine-facing Axis objects. Controllers on one port share
+    its line (`CHAIN_LINES`), so each device of a chain may have its own.
 
     address: the device (1..99) axes belong to unless axis() names another one of the daisy
     chain; timeout_s bounds every reply; retries is how often a query is re-asked; poll_s is
@@ -180,22 +205,26 @@ class ZaberController:
         self._devices: dict[int, dict[str, str]] = {}  # opened devices: their identity
         self._axis_counts: dict[int, int] = {}
         self.latest: dict[tuple[int, int], Reply] = {}  # (device, axis): its latest reply
-        self.transport = SerialLineTransport(
-            port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
-            timeout_s=timeout_s, retries=retries,
-            sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply),
-            is_unsolicited=is_alert, **link,
-        )
+        line = {**asdict(LineSettings()), "baudrate": baudrate, "timeout_s": timeout_s,
+                "retries": retries, **{k: v for k, v in link.items() if k != "resource"}}
+        self._line_lease = CHAIN_LINES.open(
+            chain_endpoint(port, link.get("resource")), line, name,
+            lambda: SerialLineTransport(
+                port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
+                timeout_s=timeout_s, retries=retries,
+                sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply),
+                is_unsolicited=is_alert, **link))
+        self.transport = self._line_lease.link
         try:
             self._open(address)
         except DriverError:
-            self.transport.close()
+            self.close()
             raise
 
     # -- lifecycle --------------------------------------------------------------
     def close(self) -> None:
-        """Close the serial port."""
-        self.transport.close()
+        """Give the chain's line back (the last controller on it closes the port)."""
+        self._line_lease.release()
 
     def __enter__(self) -> ZaberController:
         return self
@@ -257,7 +286,8 @@ class ZaberController:
             return reply
 
         return self.transport.query(self._line(address, axis, message_id, command), checked,
-                                    f"{command or 'status'} (device {address} axis {axis})")
+                                    f"{command or 'status'} (device {address} axis {axis})",
+                                    self.name)
 
     def command(self, address: int, axis: int, command: str, who: str,
                 verify: Callable[[], bool] | None = None) -> Reply | None:
@@ -268,7 +298,8 @@ class ZaberController:
         line = self._line(address, axis, message_id, command)
 
         def send() -> Reply:
-            return self._parse(self.transport.exchange(line, what), address, axis, message_id)
+            return self._parse(self.transport.exchange(line, what, self.name),
+                               address, axis, message_id)
 
         reply = sent_once(send, lambda: _confirmed(verify), not_resent(who, command))
         if reply is None:

@@ -163,11 +163,12 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
 
 def _check_devices(devices: dict[str, DeviceConfig], axes: dict[str, AxisConfig],
                    where: str) -> None:
-    """Each kind's own checks of its devices (a Modbus map bounds what a drive accepts),
-    before motion."""
+    """Each kind's own checks of its devices (a Modbus map bounds what a drive accepts, the
+    devices of a Zaber chain agree on its line), before motion."""
     for dev in devices.values():
         if dev.kind.check is not None:
-            dev.kind.check(dev, [ax for ax in axes.values() if ax.device == dev.name], where)
+            dev.kind.check(dev, [ax for ax in axes.values() if ax.device == dev.name], where,
+                           devices)
 
 
 def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None

@@ -11,7 +11,7 @@ two registries agree. Adding a kind is one entry here pointing at its emulator m
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -25,7 +25,9 @@ from sim.devices.zaber_device import IDENTITY_CHECKS
 from sim.emulator_factories import (
     DetectorFactory,
     StageFactory,
+    chain_on_pty,
     controller_on_pty,
+    line_of,
     meter_on_pty,
     modbus_detector_unit,
     modbus_stage_units,
@@ -55,10 +57,13 @@ class _Kind:
 
 @dataclass(frozen=True, kw_only=True)
 class StageEmulator(_Kind):
-    """An emulated stage kind: `start` serves a device's emulator with all its axes."""
+    """An emulated stage kind: `start` serves a device's emulator with all its axes;
+    chained: the kind's devices that name one port or resource are a daisy chain, started
+    together (the first, its `mates` the others) by one emulator on one line."""
 
     role: ClassVar[str] = "stage"
     start: StageFactory
+    chained: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -72,7 +77,7 @@ class DetectorEmulator(_Kind):
 EmulatorKind = StageEmulator | DetectorEmulator
 
 KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
-    StageEmulator(name="esp", start=controller_on_pty(EspEmulator, interlock_arg="estop"),
+    StageEmulator(name="esp", start=controller_on_pty(EspEmulator, "estop"),
                   own_faults=("interlock",)),
     DetectorEmulator(name="pm100", start=meter_on_pty(Pm100Emulator),
                      own_faults=("invalid_prob",),
@@ -80,7 +85,7 @@ KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
     StageEmulator(name="modbus-stage", start=modbus_stage_units, own_faults=("interlock",)),
     DetectorEmulator(name="modbus-detector", start=modbus_detector_unit,
                      own_faults=("interlock",)),
-    StageEmulator(name="zaber", start=controller_on_pty(ZaberEmulator, ("address",)),
+    StageEmulator(name="zaber", start=chain_on_pty(ZaberEmulator), chained=True,
                   settings=IDENTITY_CHECKS),
 )}
 
@@ -117,3 +122,23 @@ def check_settings(name: str, kind: EmulatorKind, settings: Mapping[str, Any]) -
         problem = kind.settings[key](value)
         if problem is not None:
             raise SimConfigError(f"[sim.devices.{name}] {key}: {problem}")
+
+
+def lines(chosen: Sequence[str], devices: Mapping[str, Mapping[str, Any]],
+          kinds: Mapping[str, EmulatorKind]) -> list[tuple[str, ...]]:
+    """The chosen devices as their emulators serve them, in config order: each device alone,
+    but the devices of a chained kind on one port or resource together (a daisy chain), the
+    first leading; SimConfigError if a chain is only partly chosen (a chain is one line: it is
+    emulated whole or not at all)."""
+    groups: dict[Any, list[str]] = {}
+    for name in chosen:
+        kind, line = kinds[name], line_of(devices[name])
+        chained = isinstance(kind, StageEmulator) and kind.chained and line is not None
+        groups.setdefault((kind.name, line) if chained else name, []).append(name)
+        if chained:
+            left_out = [other for other in devices if other not in chosen
+                        and kinds[other] is kind and line_of(devices[other]) == line]
+            if left_out:
+                raise SimConfigError(f"{name} and {left_out[0]} are one {kind.name} chain "
+                                     f"({line}): emulate both or neither")
+    return [tuple(names) for names in groups.values()]

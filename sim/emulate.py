@@ -33,6 +33,7 @@ from sim.device_kinds import (
     check_faults,
     check_settings,
     kind_of,
+    lines,
 )
 from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
@@ -204,17 +205,19 @@ class _Builder:
     def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
         return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
 
-    def _device(self, name: str) -> EmulatedDevice:
-        """What the device's kind starts its emulator from, and where it serves it."""
+    def _device(self, name: str, mates: tuple[str, ...] = ()) -> EmulatedDevice:
+        """What the device's kind starts its emulator from (with the `mates` on its chain),
+        and where it serves it."""
         def stage(role: str, position: Callable[[], float], target: Callable[[], float]) -> None:
             self.readers[role], self.targets[role] = position, target
 
         return EmulatedDevice(name, self.devices[name], self._roles(name), self.bench.clock,
                               self._seed(name), self._faults(name), self._serial(name),
                               self._interlock(name), self.sim.get("devices", {}).get(name, {}),
-                              serve=lambda emu: _serve(self.bench, name, emu,
+                              serve=lambda emu: _serve(self.bench, (name, *mates), emu,
                                                        self.devices[name], self.bind),
-                              join_bus=lambda unit: self._add_modbus(name, unit), stage=stage)
+                              join_bus=lambda unit: self._add_modbus(name, unit), stage=stage,
+                              mates=tuple(self._device(mate) for mate in mates))
 
     def _add_modbus(self, name: str, unit: Any) -> None:
         dev = self.devices[name]
@@ -224,11 +227,12 @@ class _Builder:
             self.bench.injectors.setdefault(name, []).append(unit.faults)
 
     def stages(self) -> None:
-        """Emulators of the chosen stage devices (served on ptys now, Modbus units collected)."""
-        for name in self.chosen:
+        """Emulators of the chosen stage devices (served on ptys now, a chain's devices by
+        one, Modbus units collected)."""
+        for name, *mates in lines(self.chosen, self.devices, self.kinds):
             kind = self.kinds[name]
             if isinstance(kind, StageEmulator):
-                kind.start(self._device(name))
+                kind.start(self._device(name, tuple(mates)))
 
     def detectors(self, source: Any, place: Callable[[], tuple[float, ...]],
                   visited: list[tuple[tuple[float, ...], float | None]]) -> None:
@@ -316,14 +320,16 @@ def _place(positions: Mapping[str, float]) -> tuple[float, ...]:
     return tuple(float(positions.get(role, 0.0)) for role in ROLES)
 
 
-def _serve(bench: EmulatedBench, name: str, emu: Any, table: Mapping[str, Any],
+def _serve(bench: EmulatedBench, names: tuple[str, ...], emu: Any, table: Mapping[str, Any],
            bind: str) -> None:
-    """Serve a line emulator on a pty, or, for a device given by a VISA resource, on the link
-    the resource names (sim.served_resources); its endpoint is then that resource string."""
+    """Serve a line emulator of the devices `names` (one, or a chain's) on a pty, or, for a
+    device given by a VISA resource, on the link the resource names (sim.served_resources);
+    its endpoint is then that resource string, every device's."""
     if emu.server.faults.spec.active:
-        bench.injectors.setdefault(name, []).append(emu.server.faults)
+        bench.injectors.setdefault(names[0], []).append(emu.server.faults)
     resource = table.get("resource")
     endpoint = emu.start() if resource is None else serve_resource(emu, resource, bind)
     bench._stops.append(emu.stop)
-    bench.emulators[name] = emu
-    bench.endpoints[name] = Endpoint(name, emu.protocol, endpoint)
+    for name in names:
+        bench.emulators[name] = emu
+        bench.endpoints[name] = Endpoint(name, emu.protocol, endpoint)

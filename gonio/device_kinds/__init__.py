@@ -17,7 +17,7 @@ from gonio.device_kinds.modbus import (
     map_full_scales_w,
     modbus_unit,
 )
-from gonio.device_kinds.serial_line import serial_device
+from gonio.device_kinds.serial_line import chain_check, serial_device
 from gonio.device_kinds.settings import Setting, serial_settings
 
 KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
@@ -34,9 +34,10 @@ KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
     DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS, check=check_register_map,
                  config_full_scales_w=map_full_scales_w,
                  open=modbus_unit("drivers.modbus_detector:ModbusDetector")),
+    # a daisy chain: the devices on one port share its line, each at its own address
     StageKind(name="zaber", multi_axis=True, open=serial_device("drivers.zaber:ZaberController"),
               settings=serial_settings(Setting("address", "integer", 1, low=1, high=99),
-                                       baudrate=115200)),
+                                       baudrate=115200), check=chain_check("address")),
 )}
 
 

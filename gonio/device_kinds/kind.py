@@ -27,8 +27,10 @@ class StageController(Protocol):
 
 
 #: A kind's own config check, after the whole config is read: (device, the axes it drives,
-#: the config's name for messages) -> None, or a ConfigError naming the field.
-Check = Callable[["DeviceConfig", Sequence["AxisConfig"], str], None]
+#: the config's name for messages, every device of the config by name) -> None, or a
+#: ConfigError naming the field.
+Check = Callable[["DeviceConfig", Sequence["AxisConfig"], str, Mapping[str, "DeviceConfig"]],
+                 None]
 
 
 @dataclass(frozen=True)

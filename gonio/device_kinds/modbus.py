@@ -8,7 +8,7 @@ same shape needs a map and no code (docs/modbus.md).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from drivers.register_map import RegisterMap
@@ -65,12 +65,14 @@ def register_map(dev: DeviceConfig, where: str) -> RegisterMap:
                           f"{exc}") from None
 
 
-def check_register_map(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str) -> None:
+def check_register_map(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str,
+                       devices: Mapping[str, DeviceConfig]) -> None:
     """A Modbus detector's check: its register map loads."""
     register_map(dev, where)
 
 
-def check_stage_registers(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str) -> None:
+def check_stage_registers(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str,
+                          devices: Mapping[str, DeviceConfig]) -> None:
     """A Modbus stage's check: the map bounds what the drive accepts, so each of its axes'
     speed, acceleration and limits must encode, before motion."""
     registers = register_map(dev, where)
