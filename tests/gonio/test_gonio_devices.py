@@ -75,7 +75,7 @@ def leave_bench_off_config(path) -> tuple[dict[str, dict], float]:
         return {name: record["identity"] for name, record in inst.devices.items()}, range_w
 
 
-@pytest.mark.parametrize("example", ["sim-serial", "sim-modbus", "sim-zaber"])
+@pytest.mark.parametrize("example", ["sim-serial", "sim-modbus", "sim-zaber", "sim-zaber-chain"])
 def test_devices_reports_every_device_and_moves_nothing(tmp_path, example):
     cfg = fast_config(example)
     with serving(write_toml(tmp_path / "served.toml", cfg)) as (endpoints, bench):
