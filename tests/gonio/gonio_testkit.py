@@ -151,6 +151,20 @@ def run_dir_of(proc: subprocess.CompletedProcess) -> Path:
     return Path(lines[-1])
 
 
+def completed_unretried(proc: subprocess.CompletedProcess):
+    """The run a `gonio scan` made, checked whole: exit 0, status completed, every planned
+    reading stored and none of them retried."""
+    from gonio.store import open_run
+
+    assert proc.returncode == 0, proc.stderr
+    run = open_run(run_dir_of(proc))
+    assert run.meta["status"] == "completed"
+    readings = run.readings()
+    assert len(readings) == run.meta["planned"]
+    assert not any("retried" in flags.split(",") for flags in readings["flags"])
+    return run
+
+
 def scan_messages(stderr: str) -> list[str]:
     """A scan's stderr lines, less the control channel's token line (gonio.control)."""
     return [ln for ln in stderr.splitlines()

@@ -5,9 +5,8 @@ retried and the Zaber line needed no resync (the session's record of its line), 
 identity the product reported recorded; a bad [sim.devices.zaber] value is one error line."""
 
 import pytest
-from gonio_testkit import gonio_cli, load_example, one_line_error, run_dir_of, write_plan
+from gonio_testkit import completed_unretried, gonio_cli, load_example, one_line_error, write_plan
 
-from gonio.store import open_run
 from sim.devices.photodiode import SimConfigError
 from sim.emulate import start
 
@@ -42,12 +41,7 @@ def test_a_scan_with_alerts_on_is_never_retried_nor_resynced(tmp_path):
     plan = write_plan(tmp_path, PLAN, cfg)
     proc = gonio_cli("scan", plan, "--sim", "--out", tmp_path / "runs", "--no-plot",
                      "--no-progress")
-    assert proc.returncode == 0, proc.stderr
-    run = open_run(run_dir_of(proc))
-    assert run.meta["status"] == "completed"
-    readings = run.readings()
-    assert len(readings) == run.meta["planned"]
-    assert not any("retried" in flags.split(",") for flags in readings["flags"])
+    run = completed_unretried(proc)
     session = run.meta["sessions"][0]
     # how many alerts came where a reply was due depends on real-time races (a few, most
     # runs); none of them may cost a resync

@@ -6,11 +6,17 @@ one chain are one config error naming both, and a chain the emulators cannot ser
 (only part of it emulated, faults or products given apart) is one error naming two devices."""
 
 import pytest
-from gonio_testkit import fast_config, gonio_cli, one_line_error, run_dir_of, write_plan, write_toml
+from gonio_testkit import (
+    completed_unretried,
+    fast_config,
+    gonio_cli,
+    one_line_error,
+    write_plan,
+    write_toml,
+)
 
 from gonio.config import parse_config
 from gonio.errors import ConfigError
-from gonio.store import open_run
 from sim.devices.photodiode import SimConfigError
 from sim.emulate import start
 
@@ -54,12 +60,7 @@ def test_a_scan_on_the_chain_completes_with_no_reading_retried(tmp_path):
     plan = write_plan(tmp_path, PLAN, fast_config(EXAMPLE))
     proc = gonio_cli("scan", plan, "--sim", "--out", tmp_path / "runs", "--no-plot",
                      "--no-progress")
-    assert proc.returncode == 0, proc.stderr
-    run = open_run(run_dir_of(proc))
-    assert run.meta["status"] == "completed"
-    readings = run.readings()
-    assert len(readings) == run.meta["planned"]
-    assert not any("retried" in flags.split(",") for flags in readings["flags"])
+    run = completed_unretried(proc)
     session = run.meta["sessions"][0]
     devices = session["devices"]
     assert devices["sample_stage"]["endpoint"] == devices["arm_stage"]["endpoint"]
