@@ -124,8 +124,8 @@ def check_settings(name: str, kind: EmulatorKind, settings: Mapping[str, Any]) -
             raise SimConfigError(f"[sim.devices.{name}] {key}: {problem}")
 
 
-def lines(chosen: Sequence[str], devices: Mapping[str, Mapping[str, Any]],
-          kinds: Mapping[str, EmulatorKind]) -> list[tuple[str, ...]]:
+def emulator_groups(chosen: Sequence[str], devices: Mapping[str, Mapping[str, Any]],
+                    kinds: Mapping[str, EmulatorKind]) -> list[tuple[str, ...]]:
     """The chosen devices as their emulators serve them, in config order: each device alone,
     but the devices of a chained kind on one port or resource together (a daisy chain), the
     first leading; SimConfigError if a chain is only partly chosen (a chain is one line: it is

@@ -32,8 +32,8 @@ from sim.device_kinds import (
     StageEmulator,
     check_faults,
     check_settings,
+    emulator_groups,
     kind_of,
-    lines,
 )
 from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
@@ -229,7 +229,7 @@ class _Builder:
     def stages(self) -> None:
         """Emulators of the chosen stage devices (served on ptys now, a chain's devices by
         one, Modbus units collected)."""
-        for name, *mates in lines(self.chosen, self.devices, self.kinds):
+        for name, *mates in emulator_groups(self.chosen, self.devices, self.kinds):
             kind = self.kinds[name]
             if isinstance(kind, StageEmulator):
                 kind.start(self._device(name, tuple(mates)))
