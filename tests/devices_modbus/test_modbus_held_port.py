@@ -4,15 +4,12 @@ keep another master and another gonio out, and once a connection is lost the hol
 does until the link reconnects; once its drivers close, the port is free."""
 
 import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
+from port_testkit import TRY_HOLD, elsewhere
 
 from drivers.port_lock import PortInUse, hold
 
-ROOT = Path(__file__).resolve().parents[2]
 EXCLUSIVE_OPEN = """
 import sys, serial
 try:
@@ -22,26 +19,7 @@ except serial.SerialException as exc:
 else:
     print("opened")
 """
-# a gonio in another process: prints its refusal, or "held"
-HOLD = """
-import sys
-from drivers.port_lock import PortInUse, hold
-try:
-    hold(sys.argv[1], "x").release()
-except PortInUse as exc:
-    print(exc)
-else:
-    print("held")
-"""
 REFUSED = "refused: [Errno 11] Could not exclusively lock port"
-
-
-def elsewhere(script: str, path: str) -> str:
-    """What script prints, run on the port in another process."""
-    done = subprocess.run([sys.executable, "-c", script, path], capture_output=True, text=True,
-                          timeout=30, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    assert done.returncode == 0, done.stderr
-    return done.stdout.strip()
 
 
 def test_the_rtu_link_holds_its_port_while_its_drivers_are_open(rig):
@@ -49,7 +27,7 @@ def test_the_rtu_link_holds_its_port_while_its_drivers_are_open(rig):
     path = r.server.endpoint
     assert r.stage.position() == 0.0  # connected: pymodbus's serial client holds the flock
     assert elsewhere(EXCLUSIVE_OPEN, path).startswith(REFUSED)
-    assert elsewhere(HOLD, path).startswith(f"x: {path} is in use by process {os.getpid()} ")
+    assert elsewhere(TRY_HOLD, path).startswith(f"x: {path} is in use by process {os.getpid()} ")
     with pytest.raises(PortInUse, match=f"^x: {path} is in use: already opened by this gonio "
                                         "for device sample$"):
         hold(path, "x")

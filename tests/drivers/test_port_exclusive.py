@@ -18,47 +18,33 @@ import stat
 import termios
 
 import pytest
-from port_testkit import as_another_user, child, needs_another_user, opens_as_another_user, said
+from port_testkit import (
+    TRY_HOLD,
+    as_another_user,
+    child,
+    holding,
+    needs_another_user,
+    opens_as_another_user,
+    said,
+)
 from port_testkit import tell as release
 
 pytestmark = needs_another_user
 CONTROLLING_TERMINAL = (5, 0)  # /dev/tty's device number
 
-# opens argv[1] (a pty) as its controlling terminal, then the serial transport on argv[2] (a
-# node of the controlling terminal) as argv[3] says ("port" or "resource"); says "held",
-# closes on its first input line, says "released", ends on its second
-SERIAL_PORT_HOLDER = """
-import os, sys
+# opens argv[1] (a pty) as its controlling terminal, then holds the serial transport on argv[2]
+# (a node of the controlling terminal) as argv[3] says ("port" or "resource")
+SERIAL_PORT_HOLDER = holding("""
+import os
 from drivers.serial_transport import SerialLineTransport
 terminal = os.open(sys.argv[1], os.O_RDWR)  # a new session's first tty: its controlling one
 node = sys.argv[2]
 kind = {"port": {"port": node}, "resource": {"resource": f"ASRL{node}::INSTR"}}
-transport = SerialLineTransport(name="pm100", **kind[sys.argv[3]])
-print("held", flush=True)
-sys.stdin.readline()
-transport.close()
-print("released", flush=True)
-sys.stdin.readline()
-"""
-# holds argv[1] with the serial transport, says "held" and waits (to be killed)
-TRANSPORT_HOLDER = """
-import sys
+transport = SerialLineTransport(name="pm100", **kind[sys.argv[3]])""", "transport.close()")
+# holds argv[1] with the serial transport (to be killed)
+TRANSPORT_HOLDER = holding("""
 from drivers.serial_transport import SerialLineTransport
-transport = SerialLineTransport(sys.argv[1], name="esp")
-print("held", flush=True)
-sys.stdin.readline()
-"""
-# tries to hold argv[1]; prints the refusal, or "held"
-TRY_HOLD = """
-import sys
-from drivers.port_lock import PortInUse, hold
-try:
-    hold(sys.argv[1], "pm100").release()
-except PortInUse as exc:
-    print(exc)
-else:
-    print("held")
-"""
+transport = SerialLineTransport(sys.argv[1], name="esp")""", "transport.close()")
 
 
 @pytest.fixture
@@ -101,6 +87,6 @@ def test_a_tty_left_exclusive_by_a_program_is_refused_saying_so(pty):
     fcntl.ioctl(left, termios.TIOCEXCL)  # a program's, closed without clearing it
     os.close(left)
     assert as_another_user(TRY_HOLD, path) == (
-        f"pm100: {path} is in use: opened for exclusive use by a process that did not release "
+        f"x: {path} is in use: opened for exclusive use by a process that did not release "
         f"it (no lock names it); end the program that has it open (fuser -v {path}) or unplug "
         "and replug the port")

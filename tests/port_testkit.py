@@ -15,19 +15,39 @@ import pytest
 
 from drivers.port_lock import uucp_lock_name
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
-# a holder in its own process: holds argv[1], says so, releases on its first input line
-# (staying alive), ends on its second
-HOLDER = """
+HOLDING = """
 import sys
-from drivers.port_lock import hold
-held = hold(sys.argv[1], "first")
+{take}
 print("held", flush=True)
 sys.stdin.readline()
-held.release()
+{give_back}
 print("released", flush=True)
 sys.stdin.readline()
+"""
+
+
+def holding(take: str, give_back: str) -> str:
+    """A holder's script: takes a port (the statements `take`), says "held", gives it back
+    (`give_back`) on its first input line and says "released", staying alive; ends on its
+    second."""
+    return HOLDING.format(take=take, give_back=give_back)
+
+
+# a holder in its own process of argv[1]
+HOLDER = holding('from drivers.port_lock import hold\nheld = hold(sys.argv[1], "first")',
+                 "held.release()")
+# tries to hold argv[1] as "x"; prints the refusal, or "held"
+TRY_HOLD = """
+import sys
+from drivers.port_lock import PortInUse, hold
+try:
+    hold(sys.argv[1], "x").release()
+except PortInUse as exc:
+    print(exc)
+else:
+    print("held")
 """
 # an open of the port by an unprivileged user (root's opens pass TIOCEXCL)
 OPEN = """
@@ -77,12 +97,18 @@ def tell(proc: subprocess.Popen) -> None:
     proc.stdin.flush()
 
 
-def as_another_user(script: str, *args: str) -> str:
-    """What a Python script prints, run by an unprivileged user (this one if not root)."""
-    done = subprocess.run([*AS_ANOTHER_USER, sys.executable, "-c", script, *args],
+def elsewhere(script: str, *args: str, user: list[str] | None = None) -> str:
+    """What a Python script prints, run with args in another process (as `user`, a command
+    prefix that changes it, if given)."""
+    done = subprocess.run([*(user or []), sys.executable, "-c", script, *args],
                           capture_output=True, text=True, timeout=30, env=ENV, cwd="/")
     assert done.returncode == 0, done.stderr
     return done.stdout.strip()
+
+
+def as_another_user(script: str, *args: str) -> str:
+    """What a Python script prints, run by an unprivileged user (this one if not root)."""
+    return elsewhere(script, *args, user=AS_ANOTHER_USER)
 
 
 def opens_as_another_user(path: str) -> str:
