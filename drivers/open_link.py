@@ -4,9 +4,9 @@ resource (drivers.visa_link), whichever the device is given, held for the device
 
 from __future__ import annotations
 
-from drivers.byte_link import ByteLink, LineSettings, on_the_line
+from drivers.byte_link import ByteLink, LineSettings, LinkFailure, on_the_line
 from drivers.port_identity import device_path
-from drivers.port_lock import HeldPort, hold
+from drivers.port_lock import HeldPort, Unholdable, hold
 from drivers.serial_link import SerialLink
 from drivers.visa_link import VisaLink
 
@@ -15,7 +15,8 @@ def open_byte_link(port: str | None, resource: str | None, line: LineSettings,
                    read_eol: bytes, timeout_s: float,
                    device: str) -> tuple[ByteLink, HeldPort]:
     """Open the link to a device given by exactly one of a serial port or a VISA resource
-    string (ValueError otherwise; LinkFailure if it cannot be opened); line settings apply to
+    string (ValueError otherwise; LinkFailure if it cannot be opened, or is a resource whose
+    port cannot be held); line settings apply to
     a port and to an ASRL resource (no parity on a pseudo-terminal). read_eol ends each reply
     (a VISA read returns one line); timeout_s bounds a write. The hold (PortInUse, naming
     `device`, if another process has it) is taken before the link opens and given back with
@@ -26,7 +27,10 @@ def open_byte_link(port: str | None, resource: str | None, line: LineSettings,
                          f"port {port!r} and resource {resource!r}")
     endpoint = port if resource is None else resource
     line = on_the_line(line, device_path(endpoint))
-    held = hold(endpoint, device)
+    try:
+        held = hold(endpoint, device)
+    except Unholdable as exc:  # a resource that cannot be held is not opened either
+        raise LinkFailure(exc.cause) from exc
     try:
         link: ByteLink = SerialLink(port, line, timeout_s) if resource is None \
             else VisaLink(resource, line, read_eol, timeout_s)

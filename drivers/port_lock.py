@@ -64,6 +64,15 @@ class PortInUse(DriverError):
         super().__init__(f"{device}: {port}{resolved} is in use{holder}{how}")
 
 
+class Unholdable(DriverError):
+    """A VISA resource whose port cannot be held, so it is not opened either: it names no
+    device file, or one that cannot be opened (`cause`, the error that says why)."""
+
+    def __init__(self, device: str, endpoint: str, cause: Exception):
+        self.cause = cause
+        super().__init__(f"{device}: cannot hold {endpoint}: {cause}")
+
+
 def _holder(pid: int | None) -> str:
     """`process PID (its command line, paths by their base names)`, `process PID` when /proc
     does not tell the command, `another process` without a PID."""
@@ -172,11 +181,11 @@ def hold(endpoint: str, device: str) -> HeldPort:
     """Hold the port `endpoint` names for `device` (named in the error) before opening it:
     PortInUse if another process holds it, or this one for another device. A serial port
     this process cannot open is not held (the transport's own open then reports what is
-    wrong with it); a VISA resource whose port cannot be held is a DriverError."""
+    wrong with it); a VISA resource whose port cannot be held is Unholdable."""
     try:
         key, resource = port_identity(endpoint)
     except UnsettledPort as exc:
-        raise DriverError(f"{device}: cannot hold {endpoint}: {exc}") from None
+        raise Unholdable(device, endpoint, exc) from None
     path = key if isinstance(key, Path) else None
     if (other := _held_here.get(key)) is not None:
         raise PortInUse(device, endpoint, os.getpid(), device_file=path,
@@ -198,8 +207,7 @@ def _hold_device(path: Path, resource: bool, endpoint: str, device: str) -> Held
         if exc.errno == errno.EBUSY:
             raise _exclusive_refusal(device, endpoint, path) from None
         if resource:
-            raise DriverError(f"{device}: cannot hold {endpoint}: {exc.strerror}: "
-                              f"{path}") from None
+            raise Unholdable(device, endpoint, exc) from None
         return HeldPort()
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -3,16 +3,17 @@ held by its path is refused to an ASRL resource naming it with or without `::INS
 a symlink whose name has colons (/dev/serial/by-path/...), and the other way round; a USB
 resource with its ids in hex and in decimal and its serial number in either case, and a TCPIP
 resource by host name and by address, are one lock; an ASRL resource whose port cannot be
-held is one error before anything opens."""
+held is one error, the transport's, before anything opens."""
 
 from __future__ import annotations
+
+import re
 
 import pytest
 from port_testkit import ENV, HOLDER, child, said
 
-from drivers.base import DriverError
-from drivers.port_lock import PortInUse, hold
-from drivers.serial_transport import SerialLineTransport
+from drivers.port_lock import PortInUse, Unholdable, hold
+from drivers.serial_transport import SerialLineTransport, SerialPortError
 
 BY_PATH = "pci-0000:00:14.0-usb-0:2:1.0-port0"  # a /dev/serial/by-path name: colons in it
 
@@ -54,11 +55,13 @@ def test_a_resource_written_another_way_is_the_same_resource(tmp_path, monkeypat
 @pytest.mark.parametrize(("resource", "why"), [
     ("ASRL1::INSTR", "ASRL1 names no device file: write the port's path, as in "
                      "ASRL/dev/ttyUSB0::INSTR"),
-    ("ASRL{missing}::INSTR", "No such file or directory: {missing}"),
+    ("ASRL{missing}::INSTR", "[Errno 2] No such file or directory: '{missing}'"),
 ])
 def test_an_asrl_resource_whose_port_cannot_be_held_is_one_error(tmp_path, resource, why):
     missing = tmp_path / "ttyUSB9"
     resource, why = resource.format(missing=missing), why.format(missing=missing)
-    with pytest.raises(DriverError) as failed:
+    with pytest.raises(Unholdable, match=f"^pm100: cannot hold {re.escape(resource)}: "):
+        hold(resource, "pm100")
+    with pytest.raises(SerialPortError) as failed:  # the transport's one error: not opened
         SerialLineTransport(resource=resource, name="pm100")
-    assert str(failed.value) == f"pm100: cannot hold {resource}: {why}"
+    assert str(failed.value) == f"pm100: VISA resource {resource} could not be opened: {why}"
