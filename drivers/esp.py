@@ -25,7 +25,7 @@ import re
 from collections.abc import Callable
 from typing import Any, TypeVar, Unpack
 
-from drivers.base import DeviceError, DriverError, Interlocked, ProtocolError
+from drivers.base import DeviceError, Interlocked, ProtocolError
 from drivers.byte_link import LinkOptions
 from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
@@ -115,7 +115,7 @@ class EspController(StatusLineDevice):
         try:
             self.errors()  # start from an empty error buffer
             self.version = self.query("VE?")
-        except DriverError:
+        except BaseException:  # a Ctrl-C too: a long-lived process must not keep the port
             self.close()
             raise
 

@@ -11,8 +11,9 @@ RTU the line is brought back in step by a diagnostics echo first (drivers.modbus
 pymodbus gives the client's port or socket, its connection handling and every codec; the
 request and reply loop is this module's, so a timeout is a timeout (no frame by the deadline)
 and never read out of an exception's text. An RTU link holds its serial port
-(drivers.port_lock) from its making to its close (while it is open, by the flock pymodbus's
-serial client takes, pyserial's exclusive=True).
+(drivers.port_lock) from its making to its close: while pymodbus's serial client has it open,
+by the flock that client takes (pyserial's exclusive=True), and before and between its
+connections by the hold's own.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ from drivers.byte_link import LineSettings, on_the_line
 from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
-from drivers.port_lock import HeldPort, device_path, hold
+from drivers.port_identity import device_path
+from drivers.port_lock import HeldPort, hold
 from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
@@ -192,10 +194,11 @@ class ModbusLink:
         if self.transport == "tcp":  # waits are on select: no poll inside every send and recv
             self._client.socket.setblocking(False)
         else:
-            self._held.exclusive(self._client.socket.fileno())
+            self._held.exclusive()
 
     def _lose_connection(self) -> None:
         self._client.close()
+        self._held.take_back()  # pymodbus's flock went with its port: the hold's guards it
         self.replies.reset()  # nothing sent on the old connection can arrive on a new one
 
     def _exchange(self, request: ModbusPDU, device: str, what: str) -> ModbusPDU:

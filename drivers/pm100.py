@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any, Unpack
 
-from drivers.base import DeviceError, DriverError, InvalidReading, ProtocolError, Reading
+from drivers.base import DeviceError, InvalidReading, ProtocolError, Reading
 from drivers.byte_link import LinkOptions
 from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
@@ -170,7 +170,7 @@ class Pm100(StatusLineDevice):
             self.errors()  # start from an empty error queue
             self.idn = self.query("*IDN?")[0]
             self.query(":CONF:POW")
-        except DriverError:
+        except BaseException:  # a Ctrl-C too: a long-lived process must not keep the port
             self.close()
             raise
 

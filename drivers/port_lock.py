@@ -2,22 +2,26 @@
 
 `hold(endpoint, device)` is taken before a transport opens its port, so that a port another
 process holds is refused (`PortInUse`, naming the port and the holder) before the refused
-process touches the line: no termios change, no DTR toggle, no byte. What holds it:
+process touches the line: no termios change, no DTR toggle, no byte. What an endpoint names
+comes from drivers.port_identity (one device written two ways is one port). What holds it:
 
-- a device file (symlinks such as /dev/serial/by-id/... resolved; a VISA `ASRL<path>::INSTR`
-  resource names one too), by the platform's conventions on Linux: the UUCP / FHS lock file
-  `LCK..<name>` in /run/lock (or /var/lock), a live holder's honoured, a dead one's removed,
-  ours written (where the directory lets us) and removed on release; and
-  `flock(LOCK_EX | LOCK_NB)` on a descriptor of the device (the lock pyserial's
-  `exclusive=True`, picocom and others take; its holder's PID from /proc/locks). Once the
-  transport has opened the port, `HeldPort.exclusive(fd)` sets TIOCEXCL (further opens of the
-  tty fail with EBUSY, root's excepted), cleared on release.
+- a device file (symlinks such as /dev/serial/by-id/... resolved; a VISA ASRL resource names
+  one too), by the platform's conventions on Linux: the UUCP / FHS lock file `LCK..<name>` in
+  /run/lock (or /var/lock), a live holder's honoured; and `flock(LOCK_EX | LOCK_NB)` on a
+  descriptor of the device (the lock pyserial's `exclusive=True`, picocom and others take;
+  its holder's PID from /proc/locks). Only the flock's holder removes a dead process's LCK
+  file and writes ours (where the directory lets us), so two processes never remove each
+  other's. Once the transport has opened the port, `HeldPort.exclusive()` sets TIOCEXCL on a
+  serial port (further opens of the tty fail with EBUSY, root's excepted), cleared on
+  release; not on a pseudo-terminal, whose flag outlives its holder while the far side keeps
+  the master open.
 - anything else (a VISA resource such as `TCPIP0::host::5025::SOCKET`, a pyserial URL): an
-  flock'd file named from the normalised endpoint in the gonio lock directory (`lock_dir`),
-  our PID written in it.
+  flock'd file named from the resource's canonical name in the gonio lock directory
+  (`lock_dir`), our PID written in it.
 
 The flocks end with the process however it ends; a LCK file a killed process left names a
-dead PID, and the next holder removes it.
+dead PID, and the next holder removes it. A port this process already holds for another
+device is refused naming that device.
 """
 
 from __future__ import annotations
@@ -26,13 +30,14 @@ import contextlib
 import errno
 import fcntl
 import os
-import re
 import stat
 import termios
 from pathlib import Path
 from urllib.parse import quote
 
 from drivers.base import DriverError
+from drivers.byte_link import PTY_MAJORS
+from drivers.port_identity import UnsettledPort, port_identity
 
 UUCP_LOCK_DIRS = (Path("/run/lock"), Path("/var/lock"))  # FHS, then its older name
 LOCK_DIR_ENV = "GONIO_LOCK_DIR"
@@ -41,64 +46,109 @@ SHARED_DIR_MODE = 0o1777  # every user's gonio writes there; none removes anothe
 COMMAND_SHOWN = 80  # characters of the holder's command line in the message
 # how the device is opened to be locked: no controlling tty, no wait for carrier
 DEVICE_OPEN = os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK
-VISA_ASRL_PATH = re.compile(r"ASRL(/[^:]+)::INSTR", re.IGNORECASE)
+
+_held_here: dict[Path | str, str] = {}  # what this process holds: port -> device
 
 
 class PortInUse(DriverError):
     """Another process holds the port (as configured; `device_file` what it resolves to):
     `holder_pid` names it (None where the platform does not tell); the message is one line
-    naming the port and the holder, `how` saying more of the lock that refused."""
+    naming the port and the holder (`holder` says it otherwise), `how` saying more of the
+    lock that refused."""
 
     def __init__(self, device: str, port: str, holder_pid: int | None, how: str = "",
-                 device_file: Path | None = None):
+                 device_file: Path | None = None, *, holder: str | None = None):
         self.device, self.port, self.holder_pid = device, port, holder_pid
         resolved = f" ({device_file})" if device_file and str(device_file) != port else ""
-        super().__init__(f"{device}: {port}{resolved} is in use by {_holder(holder_pid)}{how}")
+        holder = holder or f" by {_holder(holder_pid)}"
+        super().__init__(f"{device}: {port}{resolved} is in use{holder}{how}")
+
+
+class Unholdable(DriverError):
+    """A VISA resource whose port cannot be held, so it is not opened either: it names no
+    device file, or one that cannot be opened (`cause`, the error that says why)."""
+
+    def __init__(self, device: str, endpoint: str, cause: Exception):
+        self.cause = cause
+        super().__init__(f"{device}: cannot hold {endpoint}: {cause}")
 
 
 def _holder(pid: int | None) -> str:
-    """`process PID (its command line)`, `process PID` when /proc does not tell the command,
-    `another process` without a PID."""
+    """`process PID (its command line, paths by their base names)`, `process PID` when /proc
+    does not tell the command, `another process` without a PID."""
     if pid is None:
         return "another process"
     try:
         words = Path(f"/proc/{pid}/cmdline").read_bytes().rstrip(b"\0").split(b"\0")
     except OSError:
         return f"process {pid}"
-    command = " ".join(" ".join(w.decode(errors="replace").split()) for w in words)
+    command = " ".join(_shown(" ".join(w.decode(errors="replace").split())) for w in words)
     if len(command) > COMMAND_SHOWN:
         command = command[:COMMAND_SHOWN - 3] + "..."
     return f"process {pid} ({command})" if command else f"process {pid}"
 
 
+def _shown(word: str) -> str:
+    """A command line word as the message shows it: a path by its base name
+    (/usr/bin/python3.11: python3.11), any other word as it is."""
+    if "/" not in word or " " in word or "://" in word:
+        return word
+    return Path(word).name or word
+
+
 class HeldPort:
-    """A port this process holds until `release()` (idempotent; also a context manager)."""
+    """A port this process holds for `device` until `release()` (idempotent; also a context
+    manager); `key` is the port as drivers.port_identity names it."""
 
-    def __init__(self, fd: int | None = None, *, tty: bool = False,
-                 lock_file: Path | None = None, named: bool = False):
-        self._fd, self._tty, self._lock_file, self._named = fd, tty, lock_file, named
+    def __init__(self, fd: int | None = None, *, key: Path | str | None = None,
+                 device: str = "", endpoint: str = "", lock_file: Path | None = None):
+        self._fd, self._key, self._lock_file = fd, key, lock_file
+        self.device, self.endpoint = device, endpoint
+        self._serial = fd is not None and os.isatty(fd) \
+            and os.major(os.fstat(fd).st_rdev) not in PTY_MAJORS
+        if key is not None:
+            _held_here[key] = device
 
-    def exclusive(self, fd: int) -> None:
-        """TIOCEXCL on the port the transport opened on `fd`: later opens of the tty fail with
-        EBUSY until release (root's do not: the flock is the guard for every process). Best
-        effort: a port that refuses it is still held by the flock."""
-        if self._tty:
+    def exclusive(self) -> None:
+        """TIOCEXCL on a serial port once the transport has opened it (a property of the
+        tty, set through the hold's own descriptor): later opens of the tty fail with EBUSY
+        until release (root's do not: the flock is the guard for every process). Not on a
+        pseudo-terminal; best effort: a port that refuses it is still held by the flock."""
+        if self._serial:
             with contextlib.suppress(OSError):
-                fcntl.ioctl(fd, termios.TIOCEXCL)
+                fcntl.ioctl(self._fd, termios.TIOCEXCL)
 
     def hand_over(self) -> None:
         """Before a transport's own exclusive open (pymodbus's serial client opens with
         pyserial's `exclusive=True`, its own flock), and again before each reopen: drop the
-        hold's flock and the tty's exclusive flag (a pty's outlives every descriptor of it),
-        so that the open succeeds and its flock guards the port while it is open; the LCK
-        file stays. `exclusive` then closes the tty to others again."""
+        hold's flock and the tty's exclusive flag, so that the open succeeds and its flock
+        guards the port while it is open (the LCK file stays); `exclusive` then closes the
+        tty to others again, and `take_back` takes the flock once the transport has closed.
+        PortInUse if another process took the port in between."""
+        if self._fd is None:
+            return
+        self._lock_device()
         self._shared()
+        fcntl.flock(self._fd, fcntl.LOCK_UN)
+
+    def take_back(self) -> None:
+        """The hold's flock again, once the transport's own exclusive open has closed (a
+        connection lost or closed): the port stays guarded until the next `hand_over`."""
         if self._fd is not None:
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            with contextlib.suppress(PortInUse):  # taken meanwhile: hand_over will say by whom
+                self._lock_device()
+
+    def _lock_device(self) -> None:
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            path = self._key if isinstance(self._key, Path) else None
+            raise PortInUse(self.device, self.endpoint, _flock_holder(path) if path else None,
+                            device_file=path) from None
 
     def _shared(self) -> None:
         """Clear the tty's exclusive flag (TIOCNXCL; the hold's descriptor reaches the tty)."""
-        if self._tty and self._fd is not None:
+        if self._serial:
             with contextlib.suppress(OSError):
                 fcntl.ioctl(self._fd, termios.TIOCNXCL)
 
@@ -106,13 +156,15 @@ class HeldPort:
         """Give the port back: exclusive open cleared, flock dropped, our LCK file removed (a
         named lock file is emptied, kept: removing a locked file lets two processes lock)."""
         self._shared()
-        fd, lock_file = self._fd, self._lock_file
-        self._fd = self._lock_file = None
+        fd, key, lock_file = self._fd, self._key, self._lock_file
+        self._fd = self._key = self._lock_file = None
         if fd is not None:
-            if self._named:  # the PID goes while the lock is still ours
+            if isinstance(key, str):  # a named lock file: the PID goes while it is still ours
                 with contextlib.suppress(OSError):
                     os.ftruncate(fd, 0)
             os.close(fd)
+        if key is not None:
+            _held_here.pop(key, None)
         if lock_file is not None:
             with contextlib.suppress(FileNotFoundError):
                 if _lock_file_pid(lock_file) == os.getpid():
@@ -127,40 +179,58 @@ class HeldPort:
 
 def hold(endpoint: str, device: str) -> HeldPort:
     """Hold the port `endpoint` names for `device` (named in the error) before opening it:
-    PortInUse if another process holds it. A device file this process cannot open is not
-    held: the transport's own open then reports what is wrong with it."""
-    path = device_path(endpoint)
+    PortInUse if another process holds it, or this one for another device. A serial port
+    this process cannot open is not held (the transport's own open then reports what is
+    wrong with it); a VISA resource whose port cannot be held is Unholdable."""
+    try:
+        key, resource = port_identity(endpoint)
+    except UnsettledPort as exc:
+        raise Unholdable(device, endpoint, exc) from None
+    path = key if isinstance(key, Path) else None
+    if (other := _held_here.get(key)) is not None:
+        raise PortInUse(device, endpoint, os.getpid(), device_file=path,
+                        holder=f": already opened by this gonio for device {other}")
     if path is None:
-        return _hold_by_name(endpoint, device)
-    lock_file = _claim_uucp_lock(path, device, endpoint)
+        return _hold_by_name(key, endpoint, device)
+    return _hold_device(path, resource, endpoint, device)
+
+
+def _hold_device(path: Path, resource: bool, endpoint: str, device: str) -> HeldPort:
+    """The device file's hold: a live holder's LCK file refuses before the device is opened;
+    the flock, then (holding it) our LCK file in place of a dead process's."""
+    lock_file = _uucp_lock_file(path)
+    if lock_file is not None:
+        _stale_lock_file(lock_file, device, endpoint, path)
     try:
         fd = os.open(path, DEVICE_OPEN)
     except OSError as exc:
-        _remove(lock_file)
         if exc.errno == errno.EBUSY:
-            raise PortInUse(device, endpoint, _flock_holder(path),
-                            " (opened for exclusive use)", path) from None
+            raise _exclusive_refusal(device, endpoint, path) from None
+        if resource:
+            raise Unholdable(device, endpoint, exc) from None
         return HeldPort()
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        lock_file = _write_lock_file(lock_file, device, endpoint, path)
     except BlockingIOError:
         os.close(fd)
-        _remove(lock_file)
         raise PortInUse(device, endpoint, _flock_holder(path), device_file=path) from None
-    return HeldPort(fd, tty=os.isatty(fd), lock_file=lock_file)
+    except BaseException:
+        os.close(fd)
+        raise
+    return HeldPort(fd, key=path, device=device, endpoint=endpoint, lock_file=lock_file)
 
 
-def device_path(endpoint: str) -> Path | None:
-    """The device file an endpoint opens, symlinks resolved; None for one that names no file
-    (a VISA resource other than `ASRL<path>::INSTR`, a pyserial URL such as socket://)."""
-    if "::" in endpoint:
-        asrl = VISA_ASRL_PATH.fullmatch(endpoint.strip())
-        if asrl is None:
-            return None
-        endpoint = asrl.group(1)
-    elif "://" in endpoint:
-        return None
-    return Path(os.path.realpath(endpoint))
+def _exclusive_refusal(device: str, endpoint: str, path: Path) -> PortInUse:
+    """The refusal of an open that got EBUSY (the tty's exclusive flag): naming the flock's
+    holder where there is one; else saying that the process that set it did not release it
+    (no lock of any kind names it)."""
+    pid = _flock_holder(path)
+    if pid is not None:
+        return PortInUse(device, endpoint, pid, " (opened for exclusive use)", path)
+    return PortInUse(device, endpoint, None, device_file=path, holder=(
+        ": opened for exclusive use by a process that did not release it (no lock names it); "
+        f"end the program that has it open (fuser -v {path}) or unplug and replug the port"))
 
 
 def uucp_lock_name(path: Path) -> str:
@@ -171,37 +241,48 @@ def uucp_lock_name(path: Path) -> str:
     return "LCK.." + name.replace("/", "_")
 
 
-def _claim_uucp_lock(path: Path, device: str, endpoint: str) -> Path | None:
-    """Our LCK file for the device in the first lock directory there is (None where there is
-    none, or it is not writable and holds no live holder's file); PortInUse for a live
-    holder's file, or one that names no PID we can read (its writer may be mid-write)."""
+def _uucp_lock_file(path: Path) -> Path | None:
+    """The device's LCK file in the first lock directory there is (None where there is none)."""
     folder = next((d for d in UUCP_LOCK_DIRS if d.is_dir()), None)
-    if folder is None:
+    return None if folder is None else folder / uucp_lock_name(path)
+
+
+def _stale_lock_file(lock_file: Path, device: str, endpoint: str, path: Path) -> bool:
+    """Whether the device's LCK file is there and a dead holder's (False: there is none);
+    PortInUse for a live holder's, or one that names no PID we can read (its writer may be
+    mid-write). It only reads the file."""
+    try:
+        pid = _lock_file_pid(lock_file)
+    except FileNotFoundError:
+        return False
+    if pid is None:
+        raise PortInUse(device, endpoint, None, f" (lock file {lock_file})", path)
+    if _alive(pid):
+        raise PortInUse(device, endpoint, pid, device_file=path)
+    return True
+
+
+def _write_lock_file(lock_file: Path | None, device: str, endpoint: str,
+                     path: Path) -> Path | None:
+    """Our LCK file, written while we hold the device's flock (a dead holder's removed first);
+    None where the directory does not let us (then a live holder's file is only honoured);
+    PortInUse for a live holder's file, written since the first look by a program that takes
+    no flock."""
+    if lock_file is None or not os.access(lock_file.parent, os.W_OK):
         return None
-    lock_file = folder / uucp_lock_name(path)
-    writable = os.access(folder, os.W_OK)
     while True:
-        if writable:
-            try:
-                fd = os.open(lock_file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-            except FileExistsError:
-                pass
-            except OSError:  # refused after all (read-only, a security module): only honour
-                writable = False
-            else:
-                with os.fdopen(fd, "w") as out:  # HDB UUCP: ten-byte ASCII PID, newline
-                    out.write(f"{os.getpid():10d}\n")
-                return lock_file
         try:
-            pid = _lock_file_pid(lock_file)
-        except FileNotFoundError:
-            if writable:
-                continue  # removed since: try again
+            fd = os.open(lock_file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            pass
+        except OSError:  # refused after all (read-only, a security module): only honour
             return None
-        if pid is None:
-            raise PortInUse(device, endpoint, None, f" (lock file {lock_file})", path)
-        if _alive(pid):
-            raise PortInUse(device, endpoint, pid, device_file=path)
+        else:
+            with os.fdopen(fd, "w") as out:  # HDB UUCP: ten-byte ASCII PID, newline
+                out.write(f"{os.getpid():10d}\n")
+            return lock_file
+        if not _stale_lock_file(lock_file, device, endpoint, path):
+            continue  # removed since: try again
         try:
             lock_file.unlink()
         except FileNotFoundError:
@@ -231,13 +312,6 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
-
-
-def _remove(lock_file: Path | None) -> None:
-    """Remove our LCK file after a refusal (no file: nothing to do)."""
-    if lock_file is not None:
-        with contextlib.suppress(FileNotFoundError):
-            lock_file.unlink()
 
 
 def _flock_holder(path: Path) -> int | None:
@@ -273,25 +347,10 @@ def lock_dir() -> Path:
     return folder
 
 
-def normalised(endpoint: str) -> str:
-    """The endpoint as its lock file is named: a VISA resource in its canonical form
-    (PyVISA's: board 0 and the defaults written out) and upper case (VISA resource names are
-    case-insensitive); anything else as written, spaces stripped."""
-    text = endpoint.strip()
-    if "::" not in text:
-        return text
-    try:
-        from pyvisa import rname
-    except ImportError:  # no PyVISA: no VISA transport either, only the case to fold
-        return text.upper()
-    with contextlib.suppress(rname.InvalidResourceName):
-        text = str(rname.parse_resource_name(text))
-    return text.upper()
-
-
-def _hold_by_name(endpoint: str, device: str) -> HeldPort:
-    """An flock'd lock file for a resource that names no device file, our PID in it."""
-    lock_path = Path(quote(normalised(endpoint), safe="") + ".lock")
+def _hold_by_name(name: str, endpoint: str, device: str) -> HeldPort:
+    """An flock'd lock file for a resource that names no device file (`name` its canonical
+    name), our PID in it."""
+    lock_path = Path(quote(name, safe="") + ".lock")
     try:
         lock_path = lock_dir() / lock_path
         fd = _open_shared(lock_path)
@@ -306,7 +365,7 @@ def _hold_by_name(endpoint: str, device: str) -> HeldPort:
         raise PortInUse(device, endpoint, pid) from None
     os.ftruncate(fd, 0)
     os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-    return HeldPort(fd, named=True)
+    return HeldPort(fd, key=name, device=device, endpoint=endpoint)
 
 
 def _open_shared(lock_path: Path) -> int:

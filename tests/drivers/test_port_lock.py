@@ -2,40 +2,37 @@
 holder in another process is refused naming the first's PID, and gets in once the first
 releases; a pyserial client that opens with `exclusive=True` and gonio keep each other out;
 the UUCP LCK file of a dead process is cleaned, a live one's refuses; a refused open leaves
-the line as it was; a VISA resource is held by a lock file; the serial transport holds its
-port from before opening to close, and its exclusive open keeps other users out."""
+the line as it was; a dead holder's LCK file is replaced only by the flock's holder, so two
+processes never remove each other's; a VISA resource is held by a lock file; the serial
+transport holds its port from before opening to close; a port this process holds for one
+device is refused to another, naming it; the holder's command line shows base names."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
-import shutil
 import subprocess
 import sys
 import termios
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from port_testkit import (
+    ENV,
+    HOLDER,
+    child,
+    needs_another_user,
+    opens_as_another_user,
+    said,
+    tell,
+    uucp_file,
+)
 
-from drivers.port_lock import PortInUse, hold, lock_dir, uucp_lock_name
+from drivers import port_lock
+from drivers.port_lock import PortInUse, hold, lock_dir
 from drivers.serial_transport import SerialLineTransport
 
-ROOT = Path(__file__).resolve().parents[2]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
-# a holder in its own process: holds argv[1], says so, releases on its first input line
-# (staying alive), ends on its second
-HOLDER = """
-import sys
-from drivers.port_lock import hold
-held = hold(sys.argv[1], "first")
-print("held", flush=True)
-sys.stdin.readline()
-held.release()
-print("released", flush=True)
-sys.stdin.readline()
-"""
 # a client that opens the port with pyserial's own exclusive lock (flock), as pymodbus does
 PYSERIAL_EXCLUSIVE = """
 import sys, serial
@@ -47,49 +44,6 @@ except serial.SerialException as exc:
 print("held", flush=True)
 sys.stdin.readline()
 """
-# an open of the port by an unprivileged user (root's opens pass TIOCEXCL)
-OPEN = """
-import os, sys
-try:
-    os.close(os.open(sys.argv[1], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK))
-except OSError as exc:
-    print(exc.errno)
-else:
-    print("opened")
-"""
-
-
-@pytest.fixture
-def pty() -> Iterator[tuple[int, str]]:
-    """A real pseudo-terminal: (master fd, slave path), the slave open to every user."""
-    master, slave = os.openpty()
-    path = os.ttyname(slave)
-    os.chmod(path, 0o666)
-    os.close(slave)
-    yield master, path
-    os.close(master)
-    uucp_file(path).unlink(missing_ok=True)
-
-
-def uucp_file(path: str) -> Path:
-    return Path("/run/lock") / uucp_lock_name(Path(path))
-
-
-@contextmanager
-def child(script: str, *args: str) -> Iterator[subprocess.Popen]:
-    """A Python process running script with args (stdin and stdout piped); ended after."""
-    proc = subprocess.Popen([sys.executable, "-c", script, *args], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, env=ENV)
-    try:
-        yield proc
-    finally:
-        proc.stdin.close()
-        proc.stdout.close()
-        proc.wait(timeout=30)
-
-
-def said(proc: subprocess.Popen) -> str:
-    return proc.stdout.readline().strip()
 
 
 def test_a_second_holder_is_refused_naming_the_first_and_gets_in_once_it_releases(pty):
@@ -103,8 +57,7 @@ def test_a_second_holder_is_refused_naming_the_first_and_gets_in_once_it_release
         message = str(refused.value)
         assert message.startswith(f"pm100: {path} is in use by process {first.pid} (")
         assert "\n" not in message and "-c import sys from drivers.port_lock" in message
-        first.stdin.write("\n")
-        first.stdin.flush()
+        tell(first)
         assert said(first) == "released"  # still running: the release let go, not its end
         with hold(path, "pm100"):
             assert int(uucp_file(path).read_text()) == os.getpid()
@@ -185,8 +138,7 @@ def test_a_visa_resource_is_held_by_a_lock_file_with_the_holders_pid(tmp_path, m
                                              f"use by process {proc.pid} (")
         with hold("TCPIP0::127.0.0.1::5026::SOCKET", "other"):
             pass  # another port of the host is another resource
-        proc.stdin.write("\n")
-        proc.stdin.flush()
+        tell(proc)
         assert said(proc) == "released"
         assert lock_file.read_text() == ""
         with hold(resource, "meter"):
@@ -211,23 +163,16 @@ def test_a_port_that_cannot_be_opened_is_the_transports_own_error(tmp_path):
     assert not isinstance(failed.value, PortInUse)
 
 
-def opens_as_another_user(path: str) -> str:
-    """What an open of path by an unprivileged user gives: "opened" or the errno."""
-    prefix = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"] \
-        if os.geteuid() == 0 else []
-    done = subprocess.run([*prefix, sys.executable, "-c", OPEN, path], capture_output=True,
-                          text=True, timeout=30, check=True)
-    return done.stdout.strip()
-
-
-@pytest.mark.skipif(os.geteuid() == 0 and shutil.which("setpriv") is None,
-                    reason="root, and no setpriv to open the port as another user")
+@needs_another_user
 def test_the_transport_holds_its_port_from_opening_to_close(pty):
     _, path = pty
     transport = SerialLineTransport(path, name="esp")
     try:
         assert int(uucp_file(path).read_text()) == os.getpid()
-        assert opens_as_another_user(path) == str(16)  # EBUSY: opened for exclusive use
+        # a pty is not opened for exclusive use (its flag would outlive a killed holder while
+        # the far side keeps the master open): the locks keep others out
+        # (test_port_exclusive.py: a serial port's TIOCEXCL)
+        assert opens_as_another_user(path) == "opened"
         with pytest.raises(PortInUse):
             hold(path, "pm100")
     finally:
@@ -237,3 +182,57 @@ def test_the_transport_holds_its_port_from_opening_to_close(pty):
     assert opens_as_another_user(path) == "opened"  # the pty's exclusive flag is cleared
     with hold(path, "pm100"):
         pass
+
+
+def test_a_stale_lck_file_is_replaced_only_by_the_flocks_holder(pty, monkeypatch):
+    """Two processes find the same dead holder's LCK file: the one preempted after reading it
+    (here: the other one holds the port in between) is refused by the flock and leaves the
+    other's fresh LCK file in place."""
+    _, path = pty
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()
+    uucp_file(path).write_text(f"{ended.pid:10d}\n")
+    check_alive = port_lock._alive
+    with contextlib.ExitStack() as others:
+        first: list[subprocess.Popen] = []
+
+        def preempted_after_reading(pid: int) -> bool:
+            alive = check_alive(pid)
+            if pid == ended.pid and not first:  # the other process runs here, to the end
+                first.append(others.enter_context(child(HOLDER, path)))
+                assert said(first[0]) == "held"
+            return alive
+
+        monkeypatch.setattr(port_lock, "_alive", preempted_after_reading)
+        with pytest.raises(PortInUse) as refused:
+            hold(path, "esp")
+        assert refused.value.holder_pid == first[0].pid
+        assert uucp_file(path).read_text() == f"{first[0].pid:10d}\n"  # theirs, kept
+
+
+def test_a_port_this_process_holds_is_refused_naming_the_device_that_has_it(pty):
+    _, path = pty
+    resource = f"ASRL{path}::INSTR"
+    esp = SerialLineTransport(path, name="esp")
+    try:
+        with pytest.raises(PortInUse, match=f"^pm100: {resource} \\({path}\\) is in use: "
+                                            "already opened by this gonio for device esp$"):
+            SerialLineTransport(resource=resource, name="pm100")
+    finally:
+        esp.close()
+    with hold(resource, "pm100"):
+        assert int(uucp_file(path).read_text()) == os.getpid()
+
+
+def test_the_holders_command_line_shows_base_names(pty, tmp_path):
+    _, path = pty
+    script = tmp_path / "hold_port.py"
+    script.write_text(HOLDER)
+    with subprocess.Popen([sys.executable, str(script), path], stdin=subprocess.PIPE,
+                          stdout=subprocess.PIPE, text=True, env=ENV) as first:
+        assert said(first) == "held"
+        with pytest.raises(PortInUse) as refused:
+            hold(path, "esp")
+        first.stdin.close()
+    assert str(refused.value) == (f"esp: {path} is in use by process {first.pid} "
+                                  f"({Path(sys.executable).name} hold_port.py {Path(path).name})")

@@ -1,0 +1,103 @@
+"""What a port or VISA resource string names, so that one device written two ways is one port
+to hold (drivers.port_lock): the device file it opens, or a resource's canonical name.
+
+A string PyVISA parses as a resource (`rname.parse_resource_name`; VISA names are
+case-insensitive, `::INSTR` may be left out) is a resource: an ASRL resource names its board's
+device file (`ASRL/dev/ttyUSB0`, `ASRL/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0-port0::
+INSTR`), any other is named canonically (USB ids as numbers, the serial number in upper case,
+a host by its address). Anything else is a port: a device file, or a pyserial URL such as
+`socket://host:port` named as written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import socket
+from pathlib import Path
+from typing import Any, NamedTuple
+
+USB_IDS = ("manufacturer_id", "model_code")  # a USB resource's ids: hex or decimal alike
+HOST = "host_address"
+
+
+class PortIdentity(NamedTuple):
+    """The device file an endpoint opens (symlinks resolved) or, for a resource that names no
+    file, its canonical name; `resource`: given as a VISA resource string."""
+
+    key: Path | str
+    resource: bool
+
+
+class UnsettledPort(ValueError):
+    """A resource that names a serial port gonio cannot find the device file of."""
+
+
+def port_identity(endpoint: str) -> PortIdentity:
+    """What endpoint names; UnsettledPort for an ASRL resource whose board is not a device
+    path (`ASRL1::INSTR`: the VISA library's own numbering of ports)."""
+    resource = _visa_resource(endpoint)
+    if resource is None:
+        if "::" in endpoint:  # no PyVISA, or no resource it knows: only the case to fold
+            return PortIdentity(endpoint.strip().upper(), True)
+        if "://" in endpoint:
+            return PortIdentity(endpoint.strip(), False)
+        return PortIdentity(Path(os.path.realpath(endpoint)), False)
+    if resource.interface_type == "ASRL":
+        if not resource.board.startswith("/"):
+            raise UnsettledPort(f"ASRL{resource.board} names no device file: write the port's "
+                                "path, as in ASRL/dev/ttyUSB0::INSTR")
+        return PortIdentity(Path(os.path.realpath(resource.board)), True)
+    return PortIdentity(_canonical(resource), True)
+
+
+def device_path(endpoint: str) -> Path | None:
+    """The device file an endpoint opens, symlinks resolved; None for one that names none
+    (a VISA resource other than ASRL, a pyserial URL)."""
+    with contextlib.suppress(UnsettledPort):
+        key = port_identity(endpoint).key
+        return key if isinstance(key, Path) else None
+    return None
+
+
+def _visa_resource(endpoint: str) -> Any | None:
+    """PyVISA's parse of endpoint (its resource class in upper case if that alone stops the
+    parse); None without PyVISA or for a string that is no resource."""
+    try:
+        from pyvisa import rname
+    except ImportError:
+        return None
+    head, sep, tail = endpoint.rpartition("::")
+    for text in dict.fromkeys((endpoint, head + sep + tail.upper())):
+        with contextlib.suppress(rname.InvalidResourceName):
+            return rname.parse_resource_name(text)
+    return None
+
+
+def _canonical(resource: Any) -> str:
+    """A resource in PyVISA's canonical form (board and defaults written out) with USB ids
+    in hex, a host name as its address, upper case."""
+    fields = {name: f"0x{number:04X}" for name in USB_IDS
+              if (number := _number(getattr(resource, name, None))) is not None}
+    if (host := getattr(resource, HOST, None)) is not None:
+        fields[HOST] = _address(host)
+    return str(dataclasses.replace(resource, **fields)).upper()
+
+
+def _number(text: str | None) -> int | None:
+    """A USB id as written (0x1313 or 4883) as a number; None if it is none."""
+    with contextlib.suppress(TypeError, ValueError):
+        return int(text, 0)
+    return None
+
+
+def _address(host: str) -> str:
+    """The address a host name resolves to (IPv4 first, as a client connects); the name as
+    written where it does not resolve (the link's connect then says so)."""
+    try:
+        found = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        return host
+    found.sort(key=lambda info: info[0] != socket.AF_INET)
+    return str(found[0][4][0]) if found else host
