@@ -45,7 +45,7 @@ from drivers.base import DeviceError, DriverError, ProtocolError
 from drivers.byte_link import LineSettings, LinkOptions
 from drivers.lost_reply import LOST, not_resent, sent_once
 from drivers.polling import poll_until
-from drivers.port_lock import device_path, normalised
+from drivers.port_identity import UnsettledPort, port_identity
 from drivers.serial_transport import SerialLineTransport, SyncQuery
 from drivers.settings import Setting, exactly
 from drivers.shared_links import SharedLinks
@@ -107,14 +107,16 @@ CHAIN_LINES: SharedLinks[SerialLineTransport] = SharedLinks(SerialLineTransport.
 
 
 def chain_endpoint(port: str | None, resource: str | None) -> str | None:
-    """What a chain's line is known by: the device file its port or ASRL resource opens
-    (symlinks resolved), else the resource in its canonical form; None unless exactly one of
-    the two is given (which the transport refuses)."""
+    """What a chain's line is known by: the key its port is held by (drivers.port_identity:
+    the device file a port or ASRL resource opens, else the resource's canonical name); None
+    unless exactly one of the two is given (which the transport refuses)."""
     if (port is None) == (resource is None):
         return None
     endpoint = port if resource is None else resource
-    path = device_path(endpoint)
-    return normalised(endpoint) if path is None else str(path)
+    try:
+        return str(port_identity(endpoint).key)
+    except UnsettledPort:  # the transport's opening names what is wrong with it
+        return endpoint
 
 
 def lrc(text: str) -> str:
