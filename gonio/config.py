@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from gonio.device_kinds import KINDS, DeviceConfig
-from gonio.device_kinds.endpoints import check_shared_links
 from gonio.device_kinds.kind import AxisConfig
+from gonio.device_kinds.line_checks import check_shared_links
 from gonio.device_kinds.settings import read_settings
 from gonio.errors import ConfigError
 from gonio.fields import REQUIRED, Fields, location, read_toml

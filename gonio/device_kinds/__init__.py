@@ -9,8 +9,8 @@ Adding a kind is one entry here pointing at its driver module (docs/extending.md
 
 from __future__ import annotations
 
-from gonio.device_kinds.endpoints import check_line
 from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind
+from gonio.device_kinds.line_checks import check_line
 from gonio.device_kinds.modbus import (
     MODBUS_SETTINGS,
     check_register_map,

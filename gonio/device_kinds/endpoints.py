@@ -1,22 +1,14 @@
-"""Where a device on a line of its own is reached, checked when its config is read rather than
+"""Where a device on a line of its own is reached, read from its config rather than found out
 when it opens: a serial port is no VISA resource string, a VISA resource is one PyVISA parses,
-of a class that exchanges lines; the backend can set the line it asks for; and no two devices
-of one config reach one device file or resource, unless their kinds share a line by design
-(a Zaber chain's devices by their addresses, a Modbus RTU bus's units by their unit ids).
+of a class that exchanges lines (gonio.device_kinds.line_checks checks devices against each
+other and against the VISA backend).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from drivers.port_lock import device_path
-from drivers.visa_link import DEFAULT_LIBRARY, line_resource, visa_library
-from gonio.errors import ConfigError
-from gonio.fields import location
-
-if TYPE_CHECKING:
-    from gonio.device_kinds.kind import AxisConfig, DeviceConfig
+from drivers.visa_link import line_resource
 
 #: The setting types whose value is a device file or a VISA resource a device is reached by.
 LINK_TYPES = ("port", "resource")
@@ -49,70 +41,6 @@ def visa_resource(resource: str) -> str:
 def socket_resource(resource: str) -> bool:
     """Whether a (valid) resource is a raw TCP one, `TCPIP::host::port::SOCKET`."""
     return line_resource(resource).resource_class == "SOCKET"
-
-
-def check_line(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str) -> None:
-    """A line device's check: the VISA backend can set the line it asks for. pyvisa-py sets no
-    mark parity on an ASRL resource (VI_ERROR_NSUP_ATTR_STATE: it compares the state with
-    pyserial's constant), so that is refused, pointing at the same port given as `port`."""
-    resource = dev.settings.get("resource")
-    if resource is None or dev.settings["parity"] != "mark" \
-            or not visa_library().endswith(DEFAULT_LIBRARY):
-        return
-    parsed = line_resource(resource)
-    if parsed.interface_type != "ASRL":
-        return
-    raise ConfigError(f"{location(where, f'devices.{dev.name}', 'parity')}: pyvisa-py cannot "
-                      f"set mark parity on {resource} (VI_ERROR_NSUP_ATTR_STATE); give the "
-                      f'port as port = "{parsed.board}", or open it through another VISA '
-                      f"(GONIO_VISA_LIBRARY=@ivi)")
-
-
-def _reached(dev: DeviceConfig) -> list[tuple[str, str]]:
-    """(setting key, what it reaches) for each device file or resource the device is given:
-    a device file with its symlinks resolved, else the resource's name as PyVISA writes it."""
-    out = []
-    for setting in dev.kind.settings:
-        value = dev.settings.get(setting.key)
-        if setting.type in LINK_TYPES and value is not None:
-            path = device_path(value)
-            if path is not None:
-                out.append((setting.key, str(path)))
-            elif setting.type == "resource":
-                out.append((setting.key, str(line_resource(value))))
-            else:
-                out.append((setting.key, value))
-    return out
-
-
-def _told_apart(a: DeviceConfig, b: DeviceConfig) -> bool:
-    """Whether two devices on one line are told apart there: kinds with the same bus setting
-    (an address, a unit id) and different values of it."""
-    bus = a.kind.bus
-    return bool(bus) and bus == b.kind.bus and a.settings[bus] != b.settings[bus]
-
-
-def check_shared_links(devices: Mapping[str, DeviceConfig], where: str) -> None:
-    """No two devices reach one device file or resource (an ESP's port given again as the
-    meter's ASRL resource), unless they share a bus and are told apart on it: one
-    ConfigError naming both."""
-    seen: dict[str, list[tuple[DeviceConfig, str]]] = {}
-    for dev in devices.values():
-        for key, link in _reached(dev):
-            for other, other_key in seen.get(link.casefold(), []):
-                if not _told_apart(other, dev):
-                    raise ConfigError(f"{where}: [devices.{other.name}] {other_key} and "
-                                      f"[devices.{dev.name}] {key} both reach {link}"
-                                      f"{_same_address(other, dev)}")
-            seen.setdefault(link.casefold(), []).append((dev, key))
-
-
-def _same_address(a: DeviceConfig, b: DeviceConfig) -> str:
-    """What makes two devices of one bus the same device: their equal address or unit id."""
-    bus = a.kind.bus
-    if bus and bus == b.kind.bus:
-        return f" at {bus} {a.settings[bus]}"
-    return ": one device file or resource reaches one device"
 
 
 def read_link(value: Any, setting_type: str, alternative: bool) -> Any:
