@@ -53,7 +53,7 @@ class _Kind:
     """What every kind declares: its name (a config's `protocol`), its settings, its check,
     and `bus`: the setting that tells its devices apart on a line they share (a Zaber chain's
     address, a Modbus RTU unit id); devices whose kinds name the same bus setting may share a
-    port when their values of it differ (gonio.device_kinds.endpoints), no others."""
+    port when their values of it differ (gonio.device_kinds.line_checks), no others."""
 
     name: str
     settings: tuple[Setting, ...]
