@@ -33,12 +33,22 @@ LIBRARY_ENV = "GONIO_VISA_LIBRARY"
 DEFAULT_LIBRARY = "@py"  # pyvisa-py (with pyusb for USB-TMC)
 VISA_MISSING = "PyVISA is not installed (pip install 'gonio[visa]')"
 MESSAGE_BASED = ("INSTR", "SOCKET")  # the resource classes a line device is reached by
+#: VISA's resource classes (VPP-4.3), the last part of a resource string
+RESOURCE_CLASSES = ("INSTR", "SOCKET", "INTFC", "BACKPLANE", "MEMACC", "SERVANT", "RAW")
 READ_SLICE_S = 0.05  # an ASRL read waits for its first byte this long at a time
 
 
 def visa_library() -> str:
     """The VISA backend links open resources with: GONIO_VISA_LIBRARY, else pyvisa-py."""
     return os.environ.get(LIBRARY_ENV, "").strip() or DEFAULT_LIBRARY
+
+
+def visa_name(resource: str) -> str:
+    """The resource string with its class in capitals: VISA resource names ignore case, and
+    PyVISA's parser reads the class in capitals only (`tcpip::host::5025::socket`)."""
+    head, sep, last = resource.strip().rpartition("::")
+    return f"{head}{sep}{last.upper()}" if sep and last.upper() in RESOURCE_CLASSES \
+        else resource.strip()
 
 
 def line_resource(resource: str) -> Any:
@@ -51,7 +61,7 @@ def line_resource(resource: str) -> Any:
     except ImportError:
         raise ImportError(VISA_MISSING) from None
     try:
-        parsed = rname.parse_resource_name(resource)
+        parsed = rname.parse_resource_name(visa_name(resource))
     except rname.InvalidResourceName as exc:
         raise ValueError(str(exc)) from None
     if parsed.resource_class not in MESSAGE_BASED:
@@ -90,7 +100,8 @@ class VisaLink:
         try:
             # PyVISA keeps one ResourceManager per library, shared by the whole process
             self._res = pyvisa.ResourceManager(visa_library()).open_resource(
-                resource, timeout=self._timeout_ms, read_termination=read_eol.decode("ascii"))
+                visa_name(resource), timeout=self._timeout_ms,
+                read_termination=read_eol.decode("ascii"))
             if self._asrl:
                 self._set_line(line)
         except Exception as exc:  # any backend's failure to open (pyvisa-py raises bare ones)
