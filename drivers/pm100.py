@@ -51,10 +51,31 @@ class WavelengthOutsideHead(DeviceError):
         super().__init__(device, DATA_OUT_OF_RANGE, "Data out of range")
         self.wavelength_nm, self.head, self.limits_nm = wavelength_nm, head, limits_nm
 
+    @classmethod
+    def asked(cls, meter: Pm100, wavelength_nm: float) -> WavelengthOutsideHead | None:
+        """Whether the meter's head can take wavelength_nm, asked without setting it (its
+        range, SENS:CORR:WAV? MIN / MAX, and its name): the error a setting would meet, or
+        None when the range holds it."""
+        low, high = meter.wavelength_limits_nm()
+        if low <= wavelength_nm <= high:
+            return None
+        return cls(meter.name, wavelength_nm, meter.sensor().name, (low, high))
+
+    @property
+    def reason(self) -> str:
+        """The wavelength, the head and its range, each number in as many digits as tell it
+        apart (1100.0004 nm is outside 400-1100 nm, never "1100 nm is outside")."""
+        low, high = (self.nm(limit) for limit in self.limits_nm)
+        return (f"wavelength {self.nm(self.wavelength_nm)} nm is outside the sensor head "
+                f"{self.head}'s range {low}-{high} nm")
+
+    @staticmethod
+    def nm(value: float) -> str:
+        """A wavelength in the fewest digits that give it back exactly (1550, 1100.0004)."""
+        return repr(float(value)).removesuffix(".0")
+
     def __str__(self) -> str:
-        low, high = self.limits_nm
-        return (f"{self.device}: wavelength {self.wavelength_nm:g} nm is outside the sensor "
-                f"head {self.head}'s range {low:g}-{high:g} nm")
+        return f"{self.device}: {self.reason}"
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> StrictNumber:

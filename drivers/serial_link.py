@@ -4,7 +4,8 @@ byte-at-a-time reads or a per-read timeout (each set re-applies the port's termi
 settings: two system calls per chunk).
 
 Every failure of the port (pyserial's SerialException, OSError, and the termios.error a
-vanished pty or USB adaptor raises) becomes a LinkFailure carrying it.
+vanished pty or USB adaptor raises) becomes a LinkFailure carrying it; one that keeps the port
+from opening carries it as one clause with what a lab can do about it (drivers.open_failure).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import termios
 import serial
 
 from drivers.byte_link import LineSettings, LinkFailure
+from drivers.open_failure import port_open_failure
 
 # What pyserial lets through when a port fails: its own exception, OSError from os.read /
 # os.write / ioctl, and termios.error (no OSError subclass) from tcflush / tcdrain / tcsetattr.
@@ -39,7 +41,7 @@ class SerialLink:
                 timeout=timeout_s, write_timeout=timeout_s,
             )
         except (*PORT_FAILURES, ValueError) as exc:
-            raise LinkFailure(exc) from exc
+            raise LinkFailure(port_open_failure(exc)) from exc
         self.fd = self._serial.fileno()
 
     def discard_input(self) -> None:

@@ -17,6 +17,7 @@ import numpy as np
 
 from gonio.device_kinds import KINDS, DeviceConfig
 from gonio.device_kinds.kind import AxisConfig
+from gonio.device_kinds.line_checks import check_shared_links
 from gonio.device_kinds.settings import read_settings
 from gonio.errors import ConfigError
 from gonio.fields import REQUIRED, Fields, location, read_toml
@@ -164,11 +165,13 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
 def _check_devices(devices: dict[str, DeviceConfig], axes: dict[str, AxisConfig],
                    where: str) -> None:
     """Each kind's own checks of its devices (a Modbus map bounds what a drive accepts, the
-    devices of a Zaber chain agree on its line), before motion."""
+    devices of a Zaber chain agree on its line), and no two devices on one device file or
+    resource unless they share a bus, before motion."""
     for dev in devices.values():
         if dev.kind.check is not None:
             dev.kind.check(dev, [ax for ax in axes.values() if ax.device == dev.name], where,
                            devices)
+    check_shared_links(devices, where)
 
 
 def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None

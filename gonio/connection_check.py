@@ -1,13 +1,16 @@
 """The check behind `gonio devices CONFIG`: open every device of a config as a scan does
 (gonio.instrument) and report who each says it is, where each axis stands and what the
-detector reads, without moving anything or pushing any of the config's settings.
+detector reads, without moving anything or pushing any of the config's settings; and whether
+the detector can measure at the config's wavelength, where it tells its sensor head's range.
 
 No Axis.configure (speed, acceleration, travel limits), no Detector.configure (wavelength,
 averaging, range), no home and no move is sent. What a driver does to open a device still
 happens, since its replies rest on it: an ESP axis is switched on in degrees (MO, SN7), a
 Zaber device's replies carry checksums (its alerts are left on or off as saved), a PM100
-measures power (CONF:POW). Each device is opened on its own, so one that cannot be reached (its port
-missing or held, no reply) is one line of the report and the others are still asked.
+measures power (CONF:POW). Each device is opened on its own, so one that cannot be reached
+(its port missing or held, no reply) is one line of the report and the others are still
+asked. A head whose range leaves out the config's wavelength (1550 nm on a silicon head) is a
+line of its own, a problem of its device as one that does not answer is.
 """
 
 from __future__ import annotations
@@ -32,12 +35,14 @@ UNANSWERED = (DriverError, GonioError, OSError, ValueError, termios.error)
 @dataclass(frozen=True)
 class Answer:
     """One line of the report: its subject (`device esp (...)`, `axis arm (esp.2)`,
-    `detector (pm100)`), the device asked, and what it said or why it did not answer."""
+    `detector (pm100)`), the device asked, and what it said or why it did not answer;
+    problem: what it said means it cannot be used as configured."""
 
     subject: str
     device: str
     text: str
     answered: bool
+    problem: bool = False
 
     def __str__(self) -> str:
         return f"{self.subject}: {self.text}" if self.answered else \
@@ -54,6 +59,11 @@ class ConnectionReport:
     def silent(self) -> list[str]:
         """The devices that did not answer something asked of them, in config order."""
         return list(dict.fromkeys(a.device for a in self.answers if not a.answered))
+
+    @property
+    def unfit(self) -> list[str]:
+        """The devices that answered something that keeps them from running as configured."""
+        return list(dict.fromkeys(a.device for a in self.answers if a.problem))
 
     def lines(self) -> list[str]:
         """The report as printed, one line per answer."""
@@ -98,12 +108,30 @@ def reading_text(detector: Any) -> str:
     return f"{reading.power_w:.4e} W on the {reading.range_w:g} W range{over}"
 
 
+def wavelength_answer(subject: str, detector: Any, wavelength_nm: float) -> Answer | None:
+    """A problem line when the detector's sensor head cannot take the config's wavelength,
+    asked read-only where the detector tells its head's range (a PM100's SENS:CORR:WAV? MIN /
+    MAX); None when the range holds it or the detector tells none."""
+    if not hasattr(detector, "wavelength_limits_nm"):
+        return None
+    from drivers.pm100 import WavelengthOutsideHead
+
+    try:
+        outside = WavelengthOutsideHead.asked(detector, wavelength_nm)
+    except UNANSWERED as exc:
+        return Answer(subject, detector.name, str(exc) or type(exc).__name__, False)
+    if outside is None:
+        return None
+    return Answer(subject, detector.name, outside.reason, True, problem=True)
+
+
 def check_connections(cfg: InstrumentConfig,
                       at_positions: Callable[[dict[str, float]], None] | None = None
                       ) -> ConnectionReport:
-    """Open each device, ask its identity, each axis's position and one detector reading;
-    close everything. at_positions(positions by role) is told where the axes stand before the
-    detector is read (the emulated detector of `--sim detector` lights itself from it)."""
+    """Open each device, ask its identity, each axis's position, one detector reading and
+    whether its head takes the config's wavelength; close everything. at_positions(positions
+    by role) is told where the axes stand before the detector is read (the emulated detector
+    of `--sim detector` lights itself from it)."""
     closers: list[Callable[[], None]] = []
     opened: dict[str, Any] = {}
     positions: dict[str, float] = {}
@@ -133,6 +161,9 @@ def check_connections(cfg: InstrumentConfig,
         if name in opened:
             answers.append(_asked(f"detector ({name})", name,
                                   lambda: reading_text(opened[name])))
+            head = wavelength_answer(f"detector ({name})", opened[name],
+                                     cfg.detector.wavelength_nm)
+            answers.extend([head] if head is not None else [])
     finally:
         close_all(closers)
     return ConnectionReport(answers)

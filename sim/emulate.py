@@ -265,7 +265,9 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
           positions: Callable[[], Mapping[str, float]] | None = None,
           sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK,
           t0_epoch: float | None = None, visited: Iterable[Visit] = ()) -> EmulatedBench:
-    """Serve the config's devices (all, or those named) and return the running bench.
+    """Serve the config's devices (all, or those named) and return the running bench, ready:
+    with a detector among them, the model's kernels and what a reading where the stages stand
+    needs (sim.bench.scene.Bench.warm_up) are built before it is served.
 
     positions: where the stages that are not emulated are ({role: deg}); needed when a
     detector is emulated but some stage is real. The bench is the config's [optics] with the
@@ -304,8 +306,9 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
 
         source = build_power_source(sim, lambda: read(build.readers), build.wall,
                                     optics=config.get("optics"), sample=sample)
-        if detectors:  # a first reading must not stall for a compile: timeouts are short
-            source.bench.warm_up()
+        if detectors:  # the first reading must not stall past a driver's timeout: the model
+            # compiled and what a reading where the stages stand needs built, before serving
+            source.bench.warm_up(read(build.readers))
         build.detectors(source, lambda: _place(read(build.targets)),
                         [(_place(where), range_w) for where, range_w in visited])
         build.serve_modbus()

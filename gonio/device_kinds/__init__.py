@@ -10,6 +10,7 @@ Adding a kind is one entry here pointing at its driver module (docs/extending.md
 from __future__ import annotations
 
 from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind
+from gonio.device_kinds.line_checks import check_line
 from gonio.device_kinds.modbus import (
     MODBUS_SETTINGS,
     check_register_map,
@@ -23,21 +24,23 @@ from gonio.device_kinds.settings import Setting, serial_settings
 KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
     # the ESP301's RS-232 port hands shake by RTS/CTS; its replies carry 5 decimals
     StageKind(name="esp", multi_axis=True, open=serial_device("drivers.esp:EspController"),
+              check=check_line,
               settings=serial_settings(Setting("decimals", "integer", 5, low=1, high=10),
                                        rtscts=True)),
     # NR3 as the PM100 manual gives it: 1.234567E-06
-    DetectorKind(name="pm100", open=serial_device("drivers.pm100:Pm100"),
+    DetectorKind(name="pm100", open=serial_device("drivers.pm100:Pm100"), check=check_line,
                  settings=serial_settings(Setting("nr3_decimals", "integer", 6, low=1,
                                                   high=14))),
     StageKind(name="modbus-stage", settings=MODBUS_SETTINGS, check=check_stage_registers,
-              open=modbus_unit("drivers.modbus_stage:ModbusStage")),
+              bus="unit", open=modbus_unit("drivers.modbus_stage:ModbusStage")),
     DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS, check=check_register_map,
-                 config_full_scales_w=map_full_scales_w,
+                 bus="unit", config_full_scales_w=map_full_scales_w,
                  open=modbus_unit("drivers.modbus_detector:ModbusDetector")),
     # a daisy chain: the devices on one port share its line, each at its own address
     StageKind(name="zaber", multi_axis=True, open=serial_device("drivers.zaber:ZaberController"),
+              check=chain_check("address"), bus="address",
               settings=serial_settings(Setting("address", "integer", 1, low=1, high=99),
-                                       baudrate=115200), check=chain_check("address")),
+                                       baudrate=115200)),
 )}
 
 

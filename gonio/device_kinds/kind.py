@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from drivers.base import Axis, Detector
+from gonio.device_kinds.endpoints import socket_resource
 from gonio.device_kinds.settings import Setting
 
 
@@ -51,11 +52,15 @@ class AxisConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class _Kind:
-    """What every kind declares: its name (a config's `protocol`), its settings, its check."""
+    """What every kind declares: its name (a config's `protocol`), its settings, its check,
+    and `bus`: the setting that tells its devices apart on a line they share (a Zaber chain's
+    address, a Modbus RTU unit id); devices whose kinds name the same bus setting may share a
+    port when their values of it differ (gonio.device_kinds.line_checks), no others."""
 
     name: str
     settings: tuple[Setting, ...]
     check: Check | None = None
+    bus: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,8 +117,11 @@ class DeviceConfig:
 
     @property
     def networked(self) -> bool:
-        """True if the device is reached at a network address (a host setting applies)."""
-        return any(s.type == "host" for s in self._applied("endpoint"))
+        """True if the device is reached at a network port its emulator listens on too (a
+        host setting applies, or its resource is a TCPIP SOCKET one)."""
+        return any(s.type == "host" or (s.type == "resource"
+                                        and socket_resource(self.settings[s.key]))
+                   for s in self._applied("endpoint"))
 
     @property
     def recorded(self) -> dict[str, Any]:

@@ -9,6 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from gonio.device_kinds.kind import AxisConfig, Check, DeviceConfig, driver_class
+from gonio.device_kinds.line_checks import check_line
 from gonio.errors import ConfigError
 from gonio.fields import location
 
@@ -26,12 +27,14 @@ def serial_device(driver: str) -> Callable[[DeviceConfig], Any]:
 
 def chain_check(address: str) -> Check:
     """The check of a kind whose devices naming one port or resource are a daisy chain on one
-    line (Zaber's), each answering to its own `address` setting: each device has an address
+    line (Zaber's), each answering to its own `address` setting: a line device's check
+    (check_line), then each device has an address
     no earlier device of its chain has, and every other setting but the endpoint (baud rate,
     parity, timeout...) as the chain's first device has it; else one ConfigError naming
     both devices."""
     def check(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str,
               devices: Mapping[str, DeviceConfig]) -> None:
+        check_line(dev, axes, where, devices)
         chain = [d for d in devices.values() if d.kind is dev.kind and d.endpoint == dev.endpoint]
         earlier = chain[:chain.index(dev)]
         if not earlier:

@@ -15,13 +15,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drivers import byte_link
+from gonio.device_kinds.endpoints import LINK_TYPES, read_link
 from gonio.fields import REQUIRED, Fields
 
 #: "string" (one of `choices` if given), "integer" and "number" (within low..high, or one of
 #: `choices`), "boolean", "file" (a path relative to the config's folder, made absolute; it
-#: must exist) and "host" (a device's network address; a wildcard listen address is refused).
-#: file and host are required.
-TYPES = ("string", "integer", "number", "boolean", "file", "host")
+#: must exist), "host" (a device's network address; a wildcard listen address is refused),
+#: "port" (a serial port, not a VISA resource string) and "resource" (a VISA resource string
+#: of a line device, as PyVISA parses it: gonio.device_kinds.endpoints). file and host are
+#: required.
+TYPES = ("string", "integer", "number", "boolean", "file", "host", "port", "resource")
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,11 @@ class Setting:
             return _existing_file(f, self.key, value, base)
         if self.type == "host":
             return _device_host(f, self.key, value)
+        if self.type in LINK_TYPES:
+            try:
+                return read_link(value, self.type, alternative=bool(self.one_of))
+            except ValueError as exc:
+                raise f.fail(self.key, str(exc)) from None
         return value
 
     def value_of(self, text: str) -> Any:
@@ -127,11 +136,11 @@ def _device_host(f: Fields, key: str, host: str) -> str:
 
 
 TIMEOUT_S = Setting("timeout_s", "number", 1.0, unit="s", low=0.0, low_open=True)
-PORT = Setting("port", "string", endpoint=True)
+PORT = Setting("port", "port", endpoint=True)
 BAUDRATE = Setting("baudrate", "integer", 19200, unit="baud", low=1)
 LINK = "a serial port or a VISA resource string"
-PARITY = Setting("parity", "string", "none", choices=("none", "even", "odd", "mark", "space"))
-STOPBITS = Setting("stopbits", "number", 1, choices=(1, 1.5, 2))
+PARITY = Setting("parity", "string", "none", choices=byte_link.PARITIES)
+STOPBITS = Setting("stopbits", "number", 1, choices=byte_link.STOPBITS)
 
 
 def serial_settings(*own: Setting, baudrate: int = 19200,
@@ -143,7 +152,7 @@ def serial_settings(*own: Setting, baudrate: int = 19200,
     return (
         TIMEOUT_S,
         dataclasses.replace(PORT, default=None, one_of=LINK),
-        Setting("resource", "string", None, endpoint=True, one_of=LINK),
+        Setting("resource", "resource", None, endpoint=True, one_of=LINK),
         dataclasses.replace(BAUDRATE, default=baudrate),
         PARITY,
         STOPBITS,

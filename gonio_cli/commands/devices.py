@@ -1,8 +1,12 @@
 """`gonio devices CONFIG`: open every device of an instrument config and print one line per
 device (its identity as it reported it), one per axis (its position in degrees) and the
-detector's reading; nothing moves and none of the config's settings is sent. Exit 0 when
-every device answered, 1 when one did not (its line says why; the others are still asked).
-`--sim [NAMES]` asks the emulated devices instead, as `gonio scan --sim` does.
+detector's reading, and a line when the detector's sensor head cannot take the config's
+wavelength; nothing moves and none of the config's settings is sent. `--sim [NAMES]` asks the
+emulated devices instead, as `gonio scan --sim` does.
+
+exit status: 0 every device answered, 1 some did not (its line says why; the others are
+still asked) or cannot measure as configured (its head's range leaves out the wavelength),
+2 bad input (a config that does not load, a bad option).
 
 `gonio devices --list`: the serial ports and VISA resources of this machine, each as a
 `port = "..."` or `resource = "..."` line to paste into a config.
@@ -30,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The listing, or the check of CONFIG's devices (0: every device answered, 1: not)."""
+    """The listing, or the check of CONFIG's devices (the exit status of the module doc)."""
     if args.config is None:
         args.config, args.sim = plan_given_to_sim(args.sim)
     if args.list:
@@ -62,5 +66,7 @@ def _check(path: str, sim: list[str] | bool | None) -> int:
     if report.silent:
         print(f"gonio devices: {len(report.silent)} of {len(cfg.devices)} devices did not "
               f"answer: {', '.join(report.silent)}", file=sys.stderr)
-        return 1
-    return 0
+    if report.unfit:
+        print(f"gonio devices: cannot measure as configured: {', '.join(report.unfit)}",
+              file=sys.stderr)
+    return 1 if report.silent or report.unfit else 0

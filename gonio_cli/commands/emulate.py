@@ -1,7 +1,9 @@
 """`gonio emulate CFG`: serve a config's devices on ptys and loopback sockets until interrupted,
-printing one line per device, `NAME PROTOCOL ENDPOINT`. `--bind HOST` makes the Modbus TCP
-emulators listen on HOST instead of 127.0.0.1, with a warning: they are then open to
-whoever can reach that address."""
+printing one line per device, `NAME PROTOCOL ENDPOINT`, once every emulator is ready to answer
+(the emulated bench has computed what the stages' first reading needs). `--bind HOST` makes
+the emulators that listen on TCP (Modbus TCP, and a line device given a TCPIP SOCKET
+resource) listen on HOST instead of 127.0.0.1, with a warning: they are then open to whoever
+can reach that address."""
 
 from __future__ import annotations
 
@@ -24,8 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="virtual seconds per real second (inf = instant moves), instead of "
                         "the config's [sim] time_scale")
     p.add_argument("--bind", metavar="HOST", default="127.0.0.1",
-                   help="address the Modbus TCP emulators listen on (default 127.0.0.1: this "
-                        "machine only; another opens the devices to the network)")
+                   help="address the TCP emulators listen on, Modbus TCP and TCPIP SOCKET "
+                        "(default 127.0.0.1: this machine only; another opens the devices to "
+                        "the network)")
     p.set_defaults(func=run)
 
 

@@ -2,8 +2,10 @@
 
 Once a run directory exists it is the last line printed on stdout, whatever the outcome; while
 it measures, RUN_DIR/control.sock serves the control channel (its token on stderr). The
-exit status: 0 completed, 1 failed, 130 aborted by Ctrl-C, 128 + N ended by signal N (SIGTERM,
-SIGHUP).
+exit status: 0 completed, 1 failed, 2 bad input or a device that cannot be used (a plan or
+config that does not load, a port another process holds, a device that cannot be opened or
+refuses a setting: before anything moves), 130 aborted by Ctrl-C, 128 + N ended by signal N
+(SIGTERM, SIGHUP).
 """
 
 from __future__ import annotations

@@ -152,11 +152,19 @@ class Bench:
         _, factor = exit_view(self.sample.spec, wi, wo)
         return fraction / (self.integral.solid_angle_sr * factor * np.abs(wo[..., 2]))
 
-    def warm_up(self) -> None:
+    def warm_up(self, at: Mapping[str, float] | None = None) -> None:
         """Evaluate one reflected and one transmitted reading, so the model's compiled kernels
-        are built (seconds on a fresh machine) before an emulated device has to answer."""
-        for arm_deg in (140.0, 200.0):
-            self.scattered_fraction({"sample": 20.0, "arm": arm_deg})
+        are built (seconds on a fresh machine), and with `at` (reported stage positions, by
+        role) a reading there, so what it needs (its incidence's multiple-scattering tables)
+        is built too, before an emulated device has to answer. No move's scatter is drawn:
+        the alignment's offsets alone place `at`."""
+        places: list[Mapping[str, float]] = [{"sample": 20.0, "arm": arm} for arm in (140.0, 200.0)]
+        if at is not None and not self.retracted(at["sample"]):
+            offsets = self.alignment
+            places.append({**at, "sample": at["sample"] + offsets.sample_offset_deg,
+                           "arm": at["arm"] + offsets.arm_offset_deg})
+        for place in places:
+            self.scattered_fraction(place)
 
     def power_w(self, positions: Mapping[str, float], t_s: float = 0.0) -> float:
         """True optical power at the detector for reported stage positions at time t_s."""

@@ -1,6 +1,10 @@
 """The PM100 family consoles and Thorlabs C-series sensor heads the PM100 emulator can be.
 
-A console answers *IDN? as `THORLABS,<model>,<serial>,<firmware>` (the manuals' format) and
+A console answers *IDN? as `Thorlabs,<model>,<serial>,<firmware>`. The manuals write the
+format `THORLABS,MMM,SSS,X.X.X`; the units answer with the name in mixed case, as logs of real
+units in public code show: `Thorlabs,PM100USB,P2004081,1.4.0`,
+`Thorlabs,PM100A,P1003352,2.4.0`, `Thorlabs,PM100D,P0027168,2.7.0`
+(tests/devices_serial/test_pm100_manual_examples.py checks the emulator against them). It
 has the front-panel functions its manual gives it (display brightness and contrast, clock,
 beeper). A head answers SYST:SENS:IDN? as `name,serial,calibration,type,subtype,flags` (type
 1 photodiode, 2 thermopile; subtype 2 standard, 3 with a filter slide, 0x12 with a
@@ -29,7 +33,7 @@ class Console:
     @property
     def idn(self) -> str:
         """The *IDN? answer."""
-        return f"THORLABS,{self.model},{self.serial},{self.firmware}"
+        return f"Thorlabs,{self.model},{self.serial},{self.firmware}"
 
 
 CONSOLES = {console.model: console for console in (

@@ -2,8 +2,8 @@
 to the emulator: the common-command message, the wavelength queries with MIN / MAX, the
 compound messages of the "Command Separators" section (with and without the colon), the
 letter-case and short / long form rules, the optional [:DC] node, MIN / MAX / DEF parameters,
-the clock's three-parameter command, *IDN? and SYST:SENS:IDN? in the manual's formats, *TST?,
-*OPC and *WAI as the PM100 manual describes them."""
+the clock's three-parameter command, *IDN? as real units answer it and SYST:SENS:IDN? in the
+manual's format, *TST?, *OPC and *WAI as the PM100 manual describes them."""
 
 import re
 
@@ -109,10 +109,23 @@ def test_clock_command_takes_three_parameters(scpi):
     assert port.errors() == [-109, -222]
 
 
-def test_identification_in_the_manuals_format(scpi):
-    """'THORLABS,MMM,SSS,X.X.X'."""
-    emu, port = scpi(model="PM100USB")
-    assert re.fullmatch(r"THORLABS,PM100USB,[^,]+,\d+\.\d+\.\d+", port.ask("*IDN?"))
+#: *IDN? answers of real units, as logs in public code give them (a MATLAB setup routine's
+#: comments: PM100USB, PM100A; a PyVISA script's header: PM100D)
+REAL_IDN = ("Thorlabs,PM100USB,P2004081,1.4.0", "Thorlabs,PM100A,P1003352,2.4.0",
+            "Thorlabs,PM100D,P0027168,2.7.0")
+
+
+@pytest.mark.parametrize("real", REAL_IDN)
+def test_identification_as_real_units_answer(scpi, real):
+    """'THORLABS,MMM,SSS,X.X.X', where MMM is the model code, SSS the serial number, X.X.X the
+    firmware revision: real units write the maker in mixed case (REAL_IDN), their serial
+    numbers a letter and seven digits, the first digit the model's series."""
+    maker, model, serial, firmware = real.split(",")
+    emu, port = scpi(model=model)
+    answer = port.ask("*IDN?").split(",")
+    assert answer[:2] == [maker, model] and len(answer) == 4
+    assert re.fullmatch(r"P\d{7}", answer[2]) and answer[2][:2] == serial[:2]
+    assert re.fullmatch(r"\d+\.\d+\.\d+", answer[3]) and re.fullmatch(r"\d+\.\d+\.\d+", firmware)
 
 
 def test_sensor_information_fields(scpi):

@@ -23,7 +23,7 @@ QUIET = {"read_noise_fraction": 0.0, "bandwidth_hz": 0.0, "dark_current_a": 0.0,
 ])
 def test_each_console_identifies_itself_and_has_its_panel(scpi, model, display, clock, beeper):
     emu, port = scpi(model=model)
-    assert port.ask("*IDN?").startswith(f"THORLABS,{model},P")
+    assert port.ask("*IDN?").startswith(f"Thorlabs,{model},P")
     expected = []
     for setting in ("BRIG", "CONT"):
         port.send(f"DISP:{setting} 0.25")

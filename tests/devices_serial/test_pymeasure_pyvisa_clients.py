@@ -81,7 +81,7 @@ def test_pymeasure_esp300_moves_homes_and_reads_the_error_fifo(esp):
 def test_pymeasure_pm100usb_reads_power_sets_wavelength_and_reads_errors(pm100):
     meter = ThorlabsPM100USB(f"ASRL{pm100.endpoint}::INSTR", **VISA)
     try:
-        assert meter.id.startswith("THORLABS,PM100USB,")
+        assert meter.id.startswith("Thorlabs,PM100USB,")
         assert (meter.sensor_name, meter.sensor_sn) == ("S121C", "EMU00001")
         assert meter.is_power_sensor and meter.wavelength_settable
         assert not meter.is_energy_sensor
@@ -121,7 +121,7 @@ def test_pyvisa_asrl_reads_the_pm100_and_its_error_queue(pm100, visa):
     port = visa.open_resource(f"ASRL{pm100.endpoint}::INSTR", baud_rate=115200,
                               write_termination="\n", read_termination="\n", timeout=3000)
     try:
-        assert port.query("*IDN?").startswith("THORLABS,PM100USB,")
+        assert port.query("*IDN?").startswith("Thorlabs,PM100USB,")
         port.write("SENS:POW:RANG:AUTO OFF;:SENS:POW:RANG 1E-5")
         assert port.query_ascii_values("POW:RANG?;:SENS:AVER:COUN 8;COUN?",
                                      separator=";") == [1e-5, 8.0]

@@ -32,7 +32,7 @@ def raw(drv, line):
 def test_identity_and_sensor(pm_pair):
     emu, pm = pm_pair()
     assert isinstance(pm, Detector) and pm.name == "pm100"
-    assert pm.idn.startswith("THORLABS,PM100D,")
+    assert pm.idn.startswith("Thorlabs,PM100D,")
     s = pm.sensor()
     assert (s.name, s.type, s.flags & 1, s.flags & 32) == ("S121C", 1, 1, 32)
     assert raw(pm, "SYST:SENSOR:IDN?") == raw(pm, "system:sensor:idn?")
@@ -68,6 +68,21 @@ def test_a_wavelength_the_head_cannot_take_names_the_head_and_its_range(pm_pair)
     assert pm.errors() == []  # the refusal was read with the command, nothing left queued
     pm.configure(1100.0, 2, None)  # the range's own bound is taken
     assert emu.wavelength_nm == 1100.0
+
+
+def test_a_wavelength_just_past_the_range_is_named_as_asked(pm_pair):
+    """1100.0004 nm on a 400-1100 nm head: the message says 1100.0004, never "1100 nm is
+    outside 400-1100 nm"; asked without setting, the head's range gives the same answer."""
+    emu, pm = pm_pair()
+    with pytest.raises(WavelengthOutsideHead) as caught:
+        pm.configure(1100.0004, 1, None)
+    assert str(caught.value) == ("pm100: wavelength 1100.0004 nm is outside the sensor head "
+                                 "S121C's range 400-1100 nm")
+    assert str(WavelengthOutsideHead.asked(pm, 1100.0004)) == str(caught.value)
+    assert WavelengthOutsideHead.asked(pm, 1100.0) is None
+    assert WavelengthOutsideHead.asked(pm, 399.99).reason == (
+        "wavelength 399.99 nm is outside the sensor head S121C's range 400-1100 nm")
+    assert emu.wavelength_nm != 1100.0004 and pm.errors() == []
 
 
 def test_full_scales_are_the_sensors_ranges_and_leave_the_setting_alone(pm_pair):

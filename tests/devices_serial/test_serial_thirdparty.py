@@ -66,7 +66,7 @@ def test_socat_drives_the_pm100(pm100):
     out = socat(pm100.endpoint, b"*IDN?\nSYST:SENS:IDN?\nSENS:CORR:WAV 850\r\n"
                 b"SENS:CORR:WAV?\nMEAS:POW?\nSYST:ERR?\n")
     lines = out.decode().split("\n")
-    assert lines[0].startswith("THORLABS,PM100D")
+    assert lines[0].startswith("Thorlabs,PM100D")
     assert len(lines[1].split(",")) == 6
     assert lines[2] == "8.500000E+02"
     assert float(lines[3]) == pytest.approx(1e-6, rel=0.05)

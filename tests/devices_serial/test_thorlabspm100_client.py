@@ -38,7 +38,7 @@ def session():
 
 def test_a_lab_session_through_thorlabspm100(session):
     emu, meter, inst = session
-    assert inst.query("*IDN?").startswith("THORLABS,PM100D,")
+    assert inst.query("*IDN?").startswith("Thorlabs,PM100D,")
     assert meter.system.sensor.idn.split(",")[0] == "S122C"
     assert meter.system.version == 1999.0
     assert meter.calibration.string.startswith('"')

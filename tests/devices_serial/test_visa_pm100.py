@@ -89,7 +89,7 @@ def visa_pm(opened, served):
 def test_identity_and_readings_through_visa(visa_pm):
     emu, pm, resource = visa_pm(source=ConstantPower(3.3e-6), detector=QUIET)
     assert pm.transport.port == resource and pm.transport.link.noun == "VISA resource"
-    assert pm.idn == emu.idn and pm.idn.startswith("THORLABS,PM100USB,")
+    assert pm.idn == emu.idn and pm.idn.startswith("Thorlabs,PM100USB,")
     assert pm.identity()["sensor_name"] == emu.sensor.name
     reading = pm.read()
     assert isinstance(reading, Reading) and reading.range_w == 1e-5 and not reading.saturated

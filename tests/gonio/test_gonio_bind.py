@@ -94,3 +94,30 @@ def test_bad_or_useless_bind_is_one_line(tmp_path, capsys):
     proc = gonio_cli("emulate", serial, "--bind", "0.0.0.0")
     assert proc.returncode == 2 and one_line_error(proc.stderr).endswith(
         "has no Modbus TCP device (serial and RTU devices are ptys, local only)")
+
+
+def test_a_meter_given_a_socket_resource_listens_where_bind_says_with_a_warning(tmp_path):
+    """A line device given a TCPIP SOCKET resource is served on TCP too: --bind applies to it
+    and warns about it, as it does to a Modbus TCP device."""
+    cfg = fast_config()
+    del cfg["devices"]["pm100"]["port"]
+    cfg["devices"]["pm100"]["resource"] = "TCPIP0::192.0.2.7::5025::SOCKET"
+    path = write_toml(tmp_path / "socket.toml", cfg)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "emulate", str(path), "--bind",
+                             "0.0.0.0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    try:
+        served = dict(proc.stdout.readline().split()[::2] for _ in cfg["devices"])
+        resource = served["pm100"]
+        assert resource.startswith("TCPIP0::0.0.0.0::") and resource.endswith("::SOCKET")
+        with socket.create_connection(("127.0.0.1", int(resource.split("::")[2]))) as meter:
+            meter.sendall(b"*IDN?\n")
+            assert meter.makefile("rb").readline().startswith(b"Thorlabs,PM100")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    assert err.strip() == ("gonio emulate: warning: --bind 0.0.0.0: pm100 listen beyond this "
+                           "machine: anyone who can reach it can move the stages and read the "
+                           "detector")

@@ -154,6 +154,30 @@ def test_emulated_detector_reads_the_light_where_the_real_stages_stand(tmp_path)
     assert float(reading[2]) > 0.5 * cfg["sim"]["source"]["power_w"]  # the whole beam
 
 
+@pytest.mark.parametrize("sensor, fit", [("S120C", False), ("S122C", True)])
+def test_a_head_that_cannot_take_the_wavelength_is_a_device_problem(tmp_path, sensor, fit):
+    """1550 nm in [optics]: a silicon S120C (400-1100 nm) cannot measure there, a germanium
+    S122C can; asked read-only, the meter's wavelength stays as it was left."""
+    cfg = fast_config()
+    cfg["optics"]["wavelength_nm"] = 1550.0
+    cfg["sim"]["devices"] = {"pm100": {"sensor": sensor}}
+    with serving(write_toml(tmp_path / "served.toml", cfg)) as (endpoints, bench):
+        before = detector_truth(bench, "pm100")
+        proc = gonio_cli("devices", write_toml(tmp_path / "bench.toml",
+                                               pointed(cfg, endpoints)))
+        # (wavelength, averaging, autorange): the range in use follows the light
+        assert detector_truth(bench, "pm100")[:3] == before[:3] and before[0] != 1550.0
+    lines = proc.stdout.splitlines()
+    assert DETECTOR_LINE.fullmatch(lines[-1 if fit else -2]), proc.stdout
+    if fit:
+        assert proc.returncode == 0, proc.stderr
+        return
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert lines[-1] == ("detector (pm100): wavelength 1550 nm is outside the sensor head "
+                         "S120C's range 400-1100 nm")
+    assert proc.stderr.splitlines() == ["gonio devices: cannot measure as configured: pm100"]
+
+
 def test_list_shows_every_serial_port_and_the_visa_resources():
     from pyvisa_py.serial import SerialSession
     from serial.tools import list_ports

@@ -61,7 +61,7 @@ def test_meta_names_every_device_by_its_identity(tmp_path, instrument):
     if instrument == "sim-serial":
         assert devices["esp"]["identity"] == {"version": "ESP301 Version 3.0.2 (emulated)"}
         pm = devices["pm100"]["identity"]
-        assert pm["idn"].startswith("THORLABS,PM100D,")
+        assert pm["idn"].startswith("Thorlabs,PM100D,")
         assert (pm["sensor_name"], pm["sensor_serial"]) == ("S121C", "EMU00001")
         assert pm["sensor_calibration"] and pm["sensor_type"] == "1"
         return

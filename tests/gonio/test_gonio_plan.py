@@ -53,6 +53,17 @@ def test_demo_plan_schedule():
     assert set(samples["side"]) == {"reflection", "transmission"} and set(r["side"][extra]) == {""}
 
 
+def test_demo_plan_runs_on_the_lab_bench_less_what_its_table_post_hides():
+    """A lab's rehearsal has a short plan that runs: on lab.toml (arm 268-276 deg forbidden)
+    the demo drops the one more point the post hides, and nothing it keeps moves into it."""
+    plan = load_plan(EXAMPLES / "plans" / "demo.toml")
+    cfg = load_config(EXAMPLES / "instruments" / "lab.toml")
+    sched = build_schedule(plan, cfg)
+    assert sched.skipped == 3
+    (low, high), = cfg.arm_forbidden_deg
+    assert not np.any((sched.readings["arm_deg"] >= low) & (sched.readings["arm_deg"] <= high))
+
+
 def test_schedule_is_deterministic():
     plan = load_plan(EXAMPLES / "plans" / "demo.toml")
     cfg = load_config(plan.instrument)

@@ -133,8 +133,8 @@ def test_a_failed_run_stops_the_queue_unless_keep_going(bench):
     """Real devices on ports that do not exist: each entry fails as it opens them."""
     root, out = bench
     real = fast_config()
-    for dev in real["devices"].values():
-        dev["port"] = str(root / "no-such-port")
+    for name, dev in real["devices"].items():
+        dev["port"] = str(root / f"no-such-port-{name}")
     write_toml(root / "real.toml", real)
     assert queue("add", root / "short.toml", root / "long.toml", "--instrument",
                  root / "real.toml", "--out", out).returncode == 0

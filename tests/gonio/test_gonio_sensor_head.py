@@ -43,7 +43,7 @@ def test_a_germanium_head_takes_it_and_the_run_records_console_and_head(tmp_path
     assert proc.returncode == 0, proc.stderr
     run = open_run(run_dir_of(proc))
     identity = run.meta["sessions"][0]["devices"]["pm100"]["identity"]
-    assert identity["idn"].startswith("THORLABS,PM100USB,")
+    assert identity["idn"].startswith("Thorlabs,PM100USB,")
     assert identity["sensor_name"] == "S122C"
     assert len(run.lines().rows) == 2
 

@@ -163,7 +163,7 @@ def test_gonio_emulate_prints_the_resource_it_serves():
         assert protocol == "pm100" and re.fullmatch(ASRL, resource)
         assert not endpoints["esp"][1].startswith("ASRL")  # the ESP is given by its port
         with Pm100(resource=resource, timeout_s=2.0) as meter:
-            assert meter.idn.startswith("THORLABS,") and meter.read().power_w >= 0.0
+            assert meter.idn.startswith("Thorlabs,") and meter.read().power_w >= 0.0
 
 
 def test_the_demo_scan_runs_with_the_meter_configured_by_resource(tmp_path):
@@ -175,7 +175,7 @@ def test_the_demo_scan_runs_with_the_meter_configured_by_resource(tmp_path):
     assert run.meta["status"] == "completed" and len(run) == run.meta["planned"] == 72
     meter = run.meta["sessions"][-1]["devices"]["pm100"]
     assert re.fullmatch(ASRL, meter["endpoint"])
-    assert meter["identity"]["idn"].startswith("THORLABS,")
+    assert meter["identity"]["idn"].startswith("Thorlabs,")
     assert load_example("sim-visa")["devices"]["pm100"]["resource"] == USB_METER
 
 
