@@ -5,6 +5,7 @@ resource (drivers.visa_link), whichever the device is given, held for the device
 from __future__ import annotations
 
 from drivers.byte_link import ByteLink, LineSettings, LinkFailure, on_the_line
+from drivers.open_failure import port_open_failure
 from drivers.port_identity import device_path
 from drivers.port_lock import HeldPort, Unholdable, hold
 from drivers.serial_link import SerialLink
@@ -30,7 +31,7 @@ def open_byte_link(port: str | None, resource: str | None, line: LineSettings,
     try:
         held = hold(endpoint, device)
     except Unholdable as exc:  # a resource that cannot be held is not opened either
-        raise LinkFailure(exc.cause) from exc
+        raise LinkFailure(port_open_failure(exc.cause)) from exc
     try:
         link: ByteLink = SerialLink(port, line, timeout_s) if resource is None \
             else VisaLink(resource, line, read_eol, timeout_s)

@@ -147,7 +147,7 @@ class SerialLineTransport:
             raise SerialPortError(name, self.port, "opening", exc.cause, noun) from exc.cause
         try:
             self._flush_input()
-        except DriverError:
+        except BaseException:  # an interrupted open too: the port's hold goes with it
             self.close()
             raise
 

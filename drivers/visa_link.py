@@ -98,10 +98,13 @@ class VisaLink:
         self._res: Any = None
         self._closed = False
         try:
-            # PyVISA keeps one ResourceManager per library, shared by the whole process
+            # PyVISA keeps one ResourceManager per library, shared by the whole process; an
+            # exclusive lock keeps other sessions out where the library locks (NI-VISA's do:
+            # a second one is VI_ERROR_RSRC_LOCKED; pyvisa-py ignores it, the hold guards)
             self._res = pyvisa.ResourceManager(visa_library()).open_resource(
                 visa_name(resource), timeout=self._timeout_ms,
-                read_termination=read_eol.decode("ascii"))
+                read_termination=read_eol.decode("ascii"),
+                access_mode=pyvisa.constants.AccessModes.exclusive_lock)
             if self._asrl:
                 self._set_line(line)
         except Exception as exc:  # any backend's failure to open (pyvisa-py raises bare ones)

@@ -219,7 +219,7 @@ class ZaberController:
         self.transport = self._line_lease.link
         try:
             self._open(address)
-        except DriverError:
+        except BaseException:  # an interrupted open too: the chain's line goes with it
             self.close()
             raise
 

@@ -28,10 +28,9 @@ def serial_device(driver: str) -> Callable[[DeviceConfig], Any]:
 def chain_check(address: str) -> Check:
     """The check of a kind whose devices naming one port or resource are a daisy chain on one
     line (Zaber's), each answering to its own `address` setting: a line device's check
-    (check_line), then each device has an address
-    no earlier device of its chain has, and every other setting but the endpoint (baud rate,
-    parity, timeout...) as the chain's first device has it; else one ConfigError naming
-    both devices."""
+    (check_line), then every setting but the endpoint and the address (baud rate, parity,
+    timeout...) as the chain's first device has it; else one ConfigError naming both devices
+    (gonio.device_kinds.endpoints refuses two devices of a chain at one address)."""
     def check(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str,
               devices: Mapping[str, DeviceConfig]) -> None:
         check_line(dev, axes, where, devices)
@@ -40,12 +39,6 @@ def chain_check(address: str) -> Check:
         if not earlier:
             return
         table = f"devices.{dev.name}"
-        for other in earlier:
-            if other.settings[address] == dev.settings[address]:
-                raise ConfigError(f"{location(where, table, address)}: "
-                                  f"{dev.settings[address]} is also [devices.{other.name}]'s "
-                                  f"on the chain at {dev.endpoint}: each device of a chain "
-                                  "answers to its own")
         first = earlier[0]
         for setting in dev.kind.settings:
             key = setting.key

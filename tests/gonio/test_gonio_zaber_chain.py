@@ -76,13 +76,18 @@ LINE = "both are on the chain at /dev/ttyUSB0, one line with one setting"
     ("baudrate", 9600, f"9600 differs from [devices.sample_stage]'s 115200: {LINE}"),
     ("timeout_s", 0.5, f"0.5 differs from [devices.sample_stage]'s 1.0: {LINE}"),
     ("parity", "even", f'"even" differs from [devices.sample_stage]\'s "none": {LINE}'),
-    ("address", 1, "1 is also [devices.sample_stage]'s on the chain at /dev/ttyUSB0: each "
-                   "device of a chain answers to its own"),
 ])
 def test_a_chains_devices_that_disagree_are_one_config_error_naming_both(key, value, message):
     with pytest.raises(ConfigError) as err:
         parse_config(fast_config(EXAMPLE, arm_stage={key: value}))
     assert str(err.value) == f"config: [devices.arm_stage] {key}: {message}"
+
+
+def test_two_devices_of_a_chain_at_one_address_are_one_config_error_naming_both():
+    with pytest.raises(ConfigError) as err:
+        parse_config(fast_config(EXAMPLE, arm_stage={"address": 1}))
+    assert str(err.value) == ("config: [devices.sample_stage] port and [devices.arm_stage] port "
+                              "both reach /dev/ttyUSB0 at address 1")
 
 
 def test_the_config_error_is_one_line_before_any_device_is_opened(tmp_path):
