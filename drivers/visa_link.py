@@ -67,7 +67,24 @@ def line_resource(resource: str) -> Any:
     if parsed.resource_class not in MESSAGE_BASED:
         raise ValueError(f"{parsed.resource_class} resources exchange no lines; give an "
                          f"{' or '.join(MESSAGE_BASED)} resource")
+    if parsed.interface_type == "USB":
+        _check_usb_numbers(parsed)
     return parsed
+
+
+def _check_usb_numbers(parsed: Any) -> None:
+    """A USB resource's vendor and product ids (hex or decimal) and interface number (decimal)
+    are numbers: PyVISA parses `...::P2000000::INSTRR` as interface `INSTRR` of an INSTR
+    resource, which would only fail later as a meter not found."""
+    for field, text, base in (("vendor id", parsed.manufacturer_id, 0),
+                              ("product id", parsed.model_code, 0),
+                              ("interface number", parsed.usb_interface_number, 10)):
+        try:
+            int(text, base)
+        except ValueError:
+            raise ValueError(f"its USB {field} {text!r} is not a number (a USB resource is "
+                             "USB<board>::<vendor id>::<product id>::<serial>"
+                             "[::<interface>]::INSTR)") from None
 
 
 def _ms(seconds: float) -> int:

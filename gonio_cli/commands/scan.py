@@ -158,8 +158,10 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
         except KeyboardInterrupt:
             print(f"{verb}: warning: no plot: interrupted", file=sys.stderr)
     if outcome.status != "completed":
+        again = (f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
+                 if outcome.status == "failed" else "")
         print(f"{verb}: run {outcome.status} after {outcome.done} readings: "
-              f"{outcome.reason}", file=sys.stderr)
+              f"{outcome.reason}{again}", file=sys.stderr)
     else:
         plotted_to = f"; plot {result.path / 'plot.png'}" if plotted else ""
         print(f"{verb}: completed, {outcome.done} readings stored{plotted_to}", file=sys.stderr)

@@ -50,6 +50,8 @@ def refused_then_resumed(proc: subprocess.CompletedProcess, why: str) -> Path:
     assert proc.returncode == 1 and len(lines) == 1 and why in lines[0], proc.stderr
     assert lines[0].startswith("gonio scan: run failed after ")
     run_dir = run_dir_of(proc)
+    assert lines[0].endswith(f"(once that is fixed, `gonio scan --resume {run_dir}` "
+                             "continues it)")
     assert [p.name for p in run_dir.parent.iterdir()] == [run_dir.name]  # no .partial left
     resumed = gonio_cli("scan", "--resume", run_dir, "--no-plot")
     assert resumed.returncode == 0, resumed.stderr

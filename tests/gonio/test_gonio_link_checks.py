@@ -40,6 +40,12 @@ def refused(cfg: dict) -> str:
     ("GPIB0::INTFC", "INTFC resources exchange no lines; give an INSTR or SOCKET resource"),
     ("USB0::0x1313::0x8072::P2000000::RAW",
      "RAW resources exchange no lines; give an INSTR or SOCKET resource"),
+    ("USB0::0x1313::0x8072::P2000000::INSTRR",  # PyVISA: interface "INSTRR" of an INSTR
+     "its USB interface number 'INSTRR' is not a number (a USB resource is USB<board>::"
+     "<vendor id>::<product id>::<serial>[::<interface>]::INSTR)"),
+    ("USB0::0x13G3::0x8072::P2000000::INSTR",
+     "its USB vendor id '0x13G3' is not a number (a USB resource is USB<board>::"
+     "<vendor id>::<product id>::<serial>[::<interface>]::INSTR)"),
 ])
 def test_a_resource_is_parsed_when_the_config_is_read(resource, why):
     assert refused(meter_by(fast_config(), resource=resource)) == (
