@@ -86,8 +86,9 @@ class ByteLink(Protocol):
     endpoint: str
     noun: str
 
-    def discard_input(self) -> None:
-        """Drop input that has arrived and not been read (stale replies)."""
+    def take_input(self) -> bytes:
+        """The input that has arrived and not been read, taken without waiting (the
+        transport sorts it: whole lines are stale, a part line's tail is still to come)."""
 
     def write(self, data: bytes) -> None:
         """Send all of data (LinkFailure with write_timed_out if it does not go in time)."""

@@ -20,7 +20,7 @@ from drivers.byte_link import LineSettings, LinkFailure
 from drivers.open_failure import port_open_failure
 
 # What pyserial lets through when a port fails: its own exception, OSError from os.read /
-# os.write / ioctl, and termios.error (no OSError subclass) from tcflush / tcdrain / tcsetattr.
+# os.write / ioctl, and termios.error (no OSError subclass) from tcdrain / tcsetattr.
 PORT_FAILURES = (serial.SerialException, OSError, termios.error)
 PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.PARITY_ODD,
           "mark": serial.PARITY_MARK, "space": serial.PARITY_SPACE}
@@ -44,12 +44,13 @@ class SerialLink:
             raise LinkFailure(port_open_failure(exc)) from exc
         self.fd = self._serial.fileno()
 
-    def discard_input(self) -> None:
-        """Flush the port's input queue (tcflush)."""
-        try:
-            self._serial.reset_input_buffer()
-        except PORT_FAILURES as exc:
-            raise LinkFailure(exc) from exc
+    def take_input(self) -> bytes:
+        """What the port's input queue holds, read out rather than flushed (tcflush would drop
+        the head of a line whose tail is still to come)."""
+        taken = bytearray()
+        while chunk := self.read(0):
+            taken += chunk
+        return bytes(taken)
 
     def write(self, data: bytes) -> None:
         """One os.write on the port's descriptor (pyserial opens it non-blocking); pyserial's

@@ -25,6 +25,19 @@ Some devices also speak unprompted (a Zaber device's alerts). The driver declare
 (`is_unsolicited`): the transport never takes one for a reply, garbled or not, but hands it to
 the reply machine as a unit that can answer nothing here (UnitKind.FOREIGN), so it neither
 ends a wait nor puts the line out of step, and counts it (`unsolicited`).
+
+Before each write the transport takes what has arrived: it came before the request, so it
+answers nothing sent now. Its whole lines are dropped (the unsolicited ones counted); a part
+line is kept, marked stale, until its terminator comes, and is then dropped whole (counted if
+unsolicited). The reply machine sees neither: a stale line may be an earlier request's late
+reply, which the machine then leaves unaccounted for until the sync reply. Cut at the write, a
+part line's tail would pass for a line of its own: an alert's tail, which no longer starts with
+`!`, for the reply; a late reply's tail for the next request's answer. A stale part line that
+never ends (noise with no terminator) swallows the line it runs into, the reply: a timeout,
+which the reply machine recovers from, rather than a wrong reply. Bytes still in a UART's FIFO
+or a USB adaptor when the input is taken come after the write (tcflush does not drop them
+either); a line they begin arrives whole and is sorted by its content (`is_unsolicited`) and by
+the reply machine, as a late reply is.
 """
 
 from __future__ import annotations
@@ -96,8 +109,8 @@ class SerialLineTransport:
 
     write_eol / read_eol: the line terminators sent and expected; timeout_s: how long a
     reply may take; retries: extra attempts a query gets after a timeout or garbled reply;
-    sync: the driver's SyncQuery (None: input is only flushed before each write, which
-    catches a late reply only if it has already arrived); is_unsolicited: tells a line the
+    sync: the driver's SyncQuery (None: only the stale input set aside before each write
+    keeps a late reply out, if it has begun to arrive by then); is_unsolicited: tells a line the
     device sends unprompted, never a reply (None: every line may be one). baudrate and the
     LinkOptions' parity, stopbits, rtscts and xonxoff set a serial port's or an ASRL
     resource's line. `name` is the device its errors name, unless an exchange names another
@@ -134,8 +147,9 @@ class SerialLineTransport:
         self.sync, self.is_unsolicited = sync, is_unsolicited
         self.replies = ReplySync()  # which request each line answers
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
-        self.unsolicited = 0  # unprompted lines read while a reply was awaited, set aside
-        self._rx = bytearray()  # bytes read past the last reply line
+        self.unsolicited = 0  # unprompted lines read, set aside
+        self._rx = bytearray()  # bytes read past the last line taken
+        self._stale_head = False  # _rx begins with a line begun before the last write
         self.lock = threading.RLock()
         try:
             self.link, self._held = open_byte_link(port, resource, line, read_eol,
@@ -146,7 +160,7 @@ class SerialLineTransport:
             noun = "serial port" if resource is None else "VISA resource"
             raise SerialPortError(name, self.port, "opening", exc.cause, noun) from exc.cause
         try:
-            self._flush_input()
+            self._set_aside_stale_input()
         except BaseException:  # an interrupted open too: the port's hold goes with it
             self.close()
             raise
@@ -187,7 +201,7 @@ class SerialLineTransport:
 
     def send(self, line: str, what: str | None = None, device: str | None = None) -> None:
         """Bring replies back in step if a reply was missed (DeviceTimeout naming `what`
-        if that fails), discard stale input, then write one line (terminator added) that
+        if that fails), set stale input aside, then write one line (terminator added) that
         gets no reply (a silent command)."""
         with self.lock, self._for(device):
             try:
@@ -198,24 +212,38 @@ class SerialLineTransport:
 
     def _in_step(self, what: str) -> None:
         """Out of step: send the sync query and drop every line before its reply, or, with no
-        sync query, only trust the flush before the next write."""
+        sync query, only trust the stale input set aside before the next write."""
         if self.replies.state is State.OUT_OF_STEP:
             if self.sync is None:
                 self.replies.reset()
             else:
                 self._resync(what)
 
-    def _flush_input(self) -> None:
+    def _set_aside_stale_input(self) -> None:
+        """Take what has arrived before a write: drop its whole lines, keep a part line as
+        the stale head of `_rx` (dropped whole once its terminator comes, never cut)."""
         try:
-            self.link.discard_input()
+            self._rx += self.link.take_input()
         except LinkFailure as exc:
             raise self._port_error("discarding stale input", exc) from exc.cause
-        self._rx.clear()
+        *lines, part = bytes(self._rx).split(self.read_eol)
+        for body in lines:
+            self._count_if_unsolicited(body)
+        self._rx[:] = part
+        self._stale_head = bool(part)
+
+    def _count_if_unsolicited(self, body: bytes) -> bool:
+        """Whether the driver declares the line one its device sends unprompted; counted if so."""
+        if self.is_unsolicited is None or not self.is_unsolicited(
+                body.decode("ascii", errors="replace")):
+            return False
+        self.unsolicited += 1
+        return True
 
     def _write(self, line: str, request: bool) -> None:
         """Write a line; request: its reply is awaited (the machine is told first)."""
         data = line.encode("ascii") + self.write_eol
-        self._flush_input()
+        self._set_aside_stale_input()
         if request:
             self.replies.send_request(sync_shaped=self.sync is not None and
                                       line == self.sync.line)
@@ -285,8 +313,7 @@ class SerialLineTransport:
             self.replies.timeout()
             raise
         text = body.decode("ascii", errors="replace")
-        if self.is_unsolicited is not None and self.is_unsolicited(text):
-            self.unsolicited += 1
+        if self._count_if_unsolicited(body):
             return self.replies.receive(UnitKind.FOREIGN, text)
         if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
             garbled = ProtocolError(f"{self._speaker}: garbled reply to {what}: "
@@ -300,23 +327,28 @@ class SerialLineTransport:
         """Read one line's bytes (terminator stripped) by the monotonic `deadline`.
 
         Reads whatever the link has within the time left (a serial port: what has arrived; a
-        VISA resource: a line); bytes after the terminator are kept for the next line (and
-        discarded by the next send: a line protocol sends one reply per request). Raises
+        VISA resource: a line); bytes after the terminator are kept for the next line (and set
+        aside by the next send: a line protocol sends one reply per request). The stale line
+        `_rx` may begin with is dropped here (counted if unsolicited). Raises
         DeviceTimeout(what) when no complete line arrives in time (the reply may still come).
         """
         data, eol = self._rx, self.read_eol
-        try:
-            while eol not in data:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceTimeout(self._speaker, what, self.timeout_s)
-                data += self.link.read(left)
-        except LinkFailure as exc:
-            raise self._port_error(f"reading the reply to {what}", exc) from exc.cause
-        end = data.index(eol)
-        body = bytes(data[:end])
-        del data[: end + len(eol)]
-        return body
+        while True:
+            try:
+                while eol not in data:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        raise DeviceTimeout(self._speaker, what, self.timeout_s)
+                    data += self.link.read(left)
+            except LinkFailure as exc:
+                raise self._port_error(f"reading the reply to {what}", exc) from exc.cause
+            end = data.index(eol)
+            body = bytes(data[:end])
+            del data[: end + len(eol)]
+            if not self._stale_head:
+                return body
+            self._stale_head = False  # begun before the request: it answers nothing awaited
+            self._count_if_unsolicited(body)
 
     def exchange(self, line: str, what: str | None = None, device: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""

@@ -107,7 +107,7 @@ class VisaLink:
             from pyvisa import constants
         except (ImportError, ValueError) as exc:
             raise LinkFailure(exc) from exc
-        self._constants, self._socket = constants, parsed.resource_class == "SOCKET"
+        self._constants = constants
         self._asrl = parsed.interface_type == "ASRL"
         self._io_failures = (pyvisa.errors.Error, OSError, termios.error)
         # what writes wait and, on an ASRL resource, each read slice
@@ -144,17 +144,17 @@ class VisaLink:
             self._res.timeout = ms
             self._timeout_ms = ms
 
-    def discard_input(self) -> None:
-        """An ASRL resource's receive buffer is flushed; a socket's bytes held past the last
-        line are dropped (message-based resources, USB-TMC, hold none between requests)."""
-        ops = self._constants.BufferOperation
+    def take_input(self) -> bytes:
+        """What an ASRL resource's receive buffer holds, read out without waiting; nothing
+        from a socket or USB-TMC resource, whose library keeps what came after the last line
+        and hands it over as lines (a line's head joined by its tail)."""
+        taken = bytearray()
         try:
-            if self._asrl:
-                self._res.flush(ops.discard_read_buffer | ops.discard_receive_buffer)
-            elif self._socket:
-                self._res.flush(ops.discard_read_buffer_no_io)
+            while self._asrl and (chunk := self._arrived(time.monotonic())):
+                taken += chunk
         except self._io_failures as exc:
             raise LinkFailure(exc) from exc
+        return bytes(taken)
 
     def write(self, data: bytes) -> None:
         """write_raw within the transport's timeout."""

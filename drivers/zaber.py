@@ -23,8 +23,9 @@ Alerts (`!dd a IDLE flag[:CC]`: a device whose comm.alert is 1 telling that a mo
 sent when it happens) are left on or off as the lab saved them. A message's first character
 is its type (Zaber's ASCII protocol article): `@` a reply, `#` an info message (sent after the
 reply to some commands), `!` an alert (sent spontaneously when an event occurs). So the
-transport sets every line starting with `!` aside (`is_alert`), wherever it arrives and its
-checksum right or wrong, and an alert costs no retry and no resync.
+transport sets every line starting with `!` aside (`is_alert`), wherever it arrives (begun
+before a request and ended after it too) and its checksum right or wrong, and an alert costs
+no retry and no resync.
 
 Units: positions are microsteps, degrees = data x full_step_deg / resolution (the resolution,
 microsteps per full step, read from each axis; full_step_deg defaults to the X-RSW60A's 0.015

@@ -1,7 +1,8 @@
 """Zaber alerts over a real pty: the emulator sends `!dd a IDLE flag` when a motion ends (while
 comm.alert is 1), and gonio's driver, which leaves comm.alert as the device has it, never takes
 an alert that arrives where a reply was due for that reply: its transport sets every alert
-aside (a wrong checksum or not), with no retry and no resync."""
+aside (a wrong checksum or not, whole or cut by the driver's next request), with no retry and
+no resync."""
 
 import math
 
@@ -160,3 +161,40 @@ def test_an_alert_with_a_wrong_checksum_is_set_aside_too(serve):
         assert axis.wait(timeout_s=HANG_S) == pytest.approx(3.0, abs=UNIT)
         assert spoiled == [b"!01 1 IDLE --:00\r\n"] and lrc("01 1 IDLE --") != "00"
         assert ctl.transport.line_counts() == {"resyncs": 0, "unsolicited": 1}
+
+
+def cut_after_reply(handler, cut: list[bytes]):
+    """The handler, an alert that ends its output cut in two as a port may cut it: its first
+    bytes go out with the reply, the rest just before the next reply (after the driver has
+    written its next request); each cut alert appended to `cut`."""
+    tail = b""
+
+    def handle(line: bytes) -> bytes | None:
+        nonlocal tail
+        out = handler(line)
+        if out is None:
+            return None
+        held, tail = tail, b""
+        *replies, last = out.splitlines(keepends=True)
+        if last.startswith(b"!"):
+            cut.append(last)
+            last, tail = last[:8], last[8:]
+        return held + b"".join(replies) + last
+    return handle
+
+
+def test_an_alert_cut_by_the_next_request_is_set_aside_whole(serve):
+    """A motion that ends as its move's reply goes out: the alert's head is on the line when
+    the driver writes its next request, its tail comes after it, before that request's reply."""
+    emu = serve(VirtualClock(math.inf), {1: {}})
+    cut: list[bytes] = []
+    emu.server.handler = cut_after_reply(emu.handle_line, cut)
+    with ZaberController(emu.endpoint, timeout_s=1.0, retries=2) as ctl:
+        axis = ctl.axis(1)
+        requests = emu.server.requests
+        axis.move_to(10.0)
+        assert axis.position() == pytest.approx(10.0, abs=UNIT)
+        assert cut == [checked("!", "01 1 IDLE --").encode("ascii") + b"\r\n"]
+        assert emu.server.requests - requests == 2  # the move and one get pos: no retry
+        assert ctl.transport.line_counts() == {"resyncs": 0, "unsolicited": 1}
+        assert ctl.transport.in_step
