@@ -153,7 +153,8 @@ def test_wait_times_out_by_name(rig):
 
 def test_absent_unit_on_rtu_bus_times_out_and_tcp_gateway_answers_11(rig, tmp_path):
     r = rig("rtu", reply_s=0.05, read_retries=1)
-    with ModbusStage("rtu", r.server.endpoint, 9, r.stage_map, name="ghost") as ghost:
+    with ModbusStage("rtu", r.server.endpoint, 9, r.stage_map, name="ghost", read_retries=1,
+                     timeouts=ModbusTimeouts(reply_s=0.05)) as ghost:  # the bus's own line
         t0 = time.monotonic()
         with pytest.raises(DeviceTimeout, match="ghost: timeout after 0.05 s waiting for"):
             ghost.position()
