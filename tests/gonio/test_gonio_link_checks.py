@@ -190,7 +190,7 @@ def rtu_bus(alias: Path, **amplifier) -> dict:
 @pytest.mark.parametrize("key, value, mine, theirs", [
     ("baudrate", 9600, "9600", "115200"),
     ("parity", "none", '"none"', '"even"'),
-    ("stopbits", 2, "2.0", "1"),
+    ("stopbits", 2, "2.0", "1.0"),
     ("timeout_s", 2.0, "2.0", "0.5"),
 ])
 def test_the_units_of_a_modbus_bus_agree_on_its_line(tmp_path, key, value, mine, theirs):
