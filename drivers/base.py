@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+DATA_OUT_OF_RANGE = -222  # the SCPI error a setting outside its limits raises
+
 
 class DriverError(Exception):
     """Base of every driver failure; the message names the device."""
@@ -99,6 +101,56 @@ class LineCounts(Protocol):
     def line_counts(self) -> dict[str, int]:
         """Counts by name since the device was opened (a line transport's `resyncs`, sync
         queries answered, and `unsolicited`, unprompted lines set aside)."""
+
+
+@runtime_checkable
+class HeadRange(Protocol):
+    """A detector whose sensor head tells the wavelengths it takes and its name, asked without
+    setting anything (a PM100's head: SENS:CORR:WAV? MIN / MAX, SYST:SENS:IDN?)."""
+
+    name: str
+
+    def wavelength_limits_nm(self) -> tuple[float, float]:
+        """The lowest and highest wavelength the head takes, nm."""
+
+    def head_name(self) -> str:
+        """The connected head's name as it reports it."""
+
+
+class WavelengthOutsideHead(DeviceError):
+    """The connected sensor head cannot take the correction wavelength asked for (the meter
+    refused it as out of range): names the wavelength, the head and the head's range."""
+
+    def __init__(self, device: str, wavelength_nm: float, head: str,
+                 limits_nm: tuple[float, float]):
+        super().__init__(device, DATA_OUT_OF_RANGE, "Data out of range")
+        self.wavelength_nm, self.head, self.limits_nm = wavelength_nm, head, limits_nm
+
+    @classmethod
+    def asked(cls, meter: HeadRange, wavelength_nm: float) -> WavelengthOutsideHead | None:
+        """Whether the meter's head can take wavelength_nm, asked without setting it (its
+        range and its name, HeadRange): the error a setting would meet, or None when the
+        range holds it."""
+        low, high = meter.wavelength_limits_nm()
+        if low <= wavelength_nm <= high:
+            return None
+        return cls(meter.name, wavelength_nm, meter.head_name(), (low, high))
+
+    @property
+    def reason(self) -> str:
+        """The wavelength, the head and its range, each number in as many digits as tell it
+        apart (1100.0004 nm is outside 400-1100 nm, never "1100 nm is outside")."""
+        low, high = (self.nm(limit) for limit in self.limits_nm)
+        return (f"wavelength {self.nm(self.wavelength_nm)} nm is outside the sensor head "
+                f"{self.head}'s range {low}-{high} nm")
+
+    @staticmethod
+    def nm(value: float) -> str:
+        """A wavelength in the fewest digits that give it back exactly (1550, 1100.0004)."""
+        return repr(float(value)).removesuffix(".0")
+
+    def __str__(self) -> str:
+        return f"{self.device}: {self.reason}"
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 One `ModbusLink` per endpoint (serial port or host:port), shared by every unit on it:
 `open_link` hands out the same link to drivers of several units on one RTU bus or one
-TCP server, and closes it when the last user is done. Reads may be retried after a
+TCP server (a port however it is written: drivers.port_identity), and closes it when the last
+user is done (drivers.shared_links); a unit asking for another line than the link's is
+refused. Reads may be retried after a
 timeout or a garbled reply; writes never are (a write may already have acted). A late reply
 never answers a later request: drivers.reply_sync decides which request each frame answers
 (drivers.modbus_frames cuts and sorts the frames); on TCP the connection is also closed after a
@@ -21,7 +23,7 @@ from __future__ import annotations
 import select
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException
@@ -37,9 +39,10 @@ from drivers.byte_link import LineSettings, on_the_line
 from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
-from drivers.port_identity import device_path
+from drivers.port_identity import device_path, port_key
 from drivers.port_lock import HeldPort, hold
 from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
+from drivers.shared_links import Lease, SharedLinks
 
 BASIC_DEVICE_ID = 1  # read device id code: the basic objects, as a stream
 # the basic objects VendorName, ProductCode, MajorMinorRevision (Modbus Application Protocol
@@ -112,7 +115,6 @@ class ModbusLink:
                 raise
             self._cut, self._sort, self._recv = cut_rtu, sort_rtu, self._recv_rtu
         self._lock = threading.Lock()
-        self.users = 0
         self.replies = ReplySync()  # which request each frame answers
         self._tid = 0
         self._echoes = EchoTokens()
@@ -282,32 +284,24 @@ class ModbusLink:
                 self._held.release()
 
 
-_links: dict[tuple[str, str], ModbusLink] = {}
-_links_lock = threading.Lock()
+#: the links open in this process, by the port (drivers.port_identity.port_key) or host:port
+#: they reach: the units on one RTU bus or one TCP server share one, on one line's settings
+LINKS: SharedLinks[ModbusLink] = SharedLinks(ModbusLink.close)
 
 
 def open_link(transport: str, port_or_host: str, *, tcp_port: int = 502,
               line: LineSettings = RTU_LINE, timeouts: ModbusTimeouts | None = None,
-              read_retries: int = 2, device: str = "modbus") -> ModbusLink:
-    """The shared link to an endpoint (made on first use, its serial port held for `device`,
-    named if another process holds it); pair with `release_link`."""
-    key = (transport, f"{port_or_host}:{tcp_port}" if transport == "tcp" else port_or_host)
-    with _links_lock:
-        link = _links.get(key)
-        if link is None:
-            link = _links[key] = ModbusLink(transport, port_or_host, tcp_port=tcp_port,
-                                            line=line, timeouts=timeouts,
-                                            read_retries=read_retries, device=device)
-        link.users += 1
-        return link
-
-
-def release_link(link: ModbusLink) -> None:
-    """Drop one user of a link; the last one closes it."""
-    with _links_lock:
-        link.users -= 1
-        if link.users <= 0:
-            link.close()
-            key = (link.transport, link.endpoint)
-            if _links.get(key) is link:
-                del _links[key]
+              read_retries: int = 2, device: str = "modbus") -> Lease[ModbusLink]:
+    """`device`'s lease of the shared link to an endpoint (made on first use, its serial port
+    held for `device`, named if another process holds it). Every unit on the link asks for
+    the same line (RTU), timeouts and retries: ValueError naming both devices otherwise."""
+    timeouts = timeouts or ModbusTimeouts()
+    settings = {**asdict(timeouts), "read_retries": read_retries}
+    if transport == "rtu":
+        endpoint = port_key(port_or_host)
+        settings |= asdict(line)
+    else:
+        endpoint = f"{port_or_host}:{tcp_port}"
+    return LINKS.open(endpoint, settings, device, lambda: ModbusLink(
+        transport, port_or_host, tcp_port=tcp_port, line=line, timeouts=timeouts,
+        read_retries=read_retries, device=device))

@@ -14,7 +14,6 @@ from drivers.modbus_transport import (
     RTU_LINE,
     ModbusTimeouts,
     open_link,
-    release_link,
 )
 from drivers.register_map import Register, RegisterMap, decode_text
 
@@ -38,9 +37,9 @@ class MappedUnit:
         self.name, self.unit = name, unit
         self.map = (register_map if isinstance(register_map, RegisterMap)
                     else RegisterMap.load(register_map))
-        self.link = open_link(transport, port_or_host, tcp_port=tcp_port, line=line,
-                              timeouts=timeouts, read_retries=read_retries, device=name)
-        self._closed = False
+        self._lease = open_link(transport, port_or_host, tcp_port=tcp_port, line=line,
+                                timeouts=timeouts, read_retries=read_retries, device=name)
+        self.link = self._lease.link
         self._read_plans: dict[tuple[str, ...], list] = {}
 
     def read_values(self, *names: str) -> dict[str, float]:
@@ -143,9 +142,7 @@ class MappedUnit:
 
     def close(self) -> None:
         """Release the link (the last unit on it closes the connection); idempotent."""
-        if not self._closed:
-            self._closed = True
-            release_link(self.link)
+        self._lease.release()
 
     def __enter__(self):
         return self

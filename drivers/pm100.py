@@ -24,7 +24,14 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any, Unpack
 
-from drivers.base import DeviceError, InvalidReading, ProtocolError, Reading
+from drivers.base import (
+    DATA_OUT_OF_RANGE,
+    DeviceError,
+    InvalidReading,
+    ProtocolError,
+    Reading,
+    WavelengthOutsideHead,
+)
 from drivers.byte_link import LinkOptions
 from drivers.polling import poll_until
 from drivers.reply_numbers import StrictNumber
@@ -39,43 +46,6 @@ SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
 MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
 ERROR_QUEUE_DEPTH = 32
 ZERO_POLL_S = 0.05  # how often zero() asks whether the adjustment is still running
-DATA_OUT_OF_RANGE = -222  # the SCPI error a setting outside its limits raises
-
-
-class WavelengthOutsideHead(DeviceError):
-    """The connected sensor head cannot take the correction wavelength asked for (the meter
-    refused it as out of range): names the wavelength, the head and the head's range."""
-
-    def __init__(self, device: str, wavelength_nm: float, head: str,
-                 limits_nm: tuple[float, float]):
-        super().__init__(device, DATA_OUT_OF_RANGE, "Data out of range")
-        self.wavelength_nm, self.head, self.limits_nm = wavelength_nm, head, limits_nm
-
-    @classmethod
-    def asked(cls, meter: Pm100, wavelength_nm: float) -> WavelengthOutsideHead | None:
-        """Whether the meter's head can take wavelength_nm, asked without setting it (its
-        range, SENS:CORR:WAV? MIN / MAX, and its name): the error a setting would meet, or
-        None when the range holds it."""
-        low, high = meter.wavelength_limits_nm()
-        if low <= wavelength_nm <= high:
-            return None
-        return cls(meter.name, wavelength_nm, meter.sensor().name, (low, high))
-
-    @property
-    def reason(self) -> str:
-        """The wavelength, the head and its range, each number in as many digits as tell it
-        apart (1100.0004 nm is outside 400-1100 nm, never "1100 nm is outside")."""
-        low, high = (self.nm(limit) for limit in self.limits_nm)
-        return (f"wavelength {self.nm(self.wavelength_nm)} nm is outside the sensor head "
-                f"{self.head}'s range {low}-{high} nm")
-
-    @staticmethod
-    def nm(value: float) -> str:
-        """A wavelength in the fewest digits that give it back exactly (1550, 1100.0004)."""
-        return repr(float(value)).removesuffix(".0")
-
-    def __str__(self) -> str:
-        return f"{self.device}: {self.reason}"
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> StrictNumber:
@@ -222,18 +192,20 @@ class Pm100(StatusLineDevice):
         try:
             self.wavelength_nm = wavelength_nm
         except DeviceError as exc:
-            if exc.code != DATA_OUT_OF_RANGE:
+            outside = exc.code == DATA_OUT_OF_RANGE and WavelengthOutsideHead.asked(
+                self, wavelength_nm)
+            if not outside:
                 raise
-            low, high = self.wavelength_limits_nm()
-            if low <= wavelength_nm <= high:
-                raise
-            raise WavelengthOutsideHead(self.name, wavelength_nm, self.sensor().name,
-                                        (low, high)) from None
+            raise outside from None
 
     def wavelength_limits_nm(self) -> tuple[float, float]:
         """SENS:CORR:WAV? MIN / MAX: the sensor's wavelength range, nm."""
         lo, hi = self.query(":SENS:CORR:WAV? MIN;:SENS:CORR:WAV? MAX", self.number, self.number)
         return lo, hi
+
+    def head_name(self) -> str:
+        """The connected sensor head's name, as SYST:SENS:IDN? gives it (S121C)."""
+        return self.sensor().name
 
     def full_scales_w(self) -> tuple[float, ...]:
         """The sensor's ranges (full scale, W, increasing), found once and kept: SCPI lists

@@ -52,6 +52,16 @@ def port_identity(endpoint: str) -> PortIdentity:
     return PortIdentity(_canonical(resource), True)
 
 
+def port_key(endpoint: str) -> str:
+    """What a port or resource is known by wherever gonio asks whether two are one (the hold,
+    a Modbus bus's shared link, a daisy chain, a config's devices): port_identity's key as
+    text; an ASRL resource that names no device file as written (its opening says why)."""
+    try:
+        return str(port_identity(endpoint).key)
+    except UnsettledPort:
+        return endpoint
+
+
 def device_path(endpoint: str) -> Path | None:
     """The device file an endpoint opens, symlinks resolved; None for one that names none
     (a VISA resource other than ASRL, a pyserial URL)."""
@@ -76,13 +86,15 @@ def _visa_resource(endpoint: str) -> Any | None:
 
 
 def _canonical(resource: Any) -> str:
-    """A resource in PyVISA's canonical form (board and defaults written out) with USB ids
-    in hex, a host name as its address, upper case."""
-    fields = {name: f"0x{number:04X}" for name in USB_IDS
-              if (number := _number(getattr(resource, name, None))) is not None}
+    """A resource in PyVISA's canonical form (board and defaults written out), upper case,
+    with USB ids in hex as VISA writes them (0x1313) and a host name as its address."""
+    fields = {f.name: value.upper() for f in dataclasses.fields(resource)
+              if isinstance(value := getattr(resource, f.name), str)}
+    fields |= {name: f"0x{number:04X}" for name in USB_IDS
+               if (number := _number(getattr(resource, name, None))) is not None}
     if (host := getattr(resource, HOST, None)) is not None:
-        fields[HOST] = _address(host)
-    return str(dataclasses.replace(resource, **fields)).upper()
+        fields[HOST] = _address(host).upper()
+    return str(dataclasses.replace(resource, **fields))
 
 
 def _number(text: str | None) -> int | None:

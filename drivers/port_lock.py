@@ -355,17 +355,28 @@ def _hold_by_name(name: str, endpoint: str, device: str) -> HeldPort:
         lock_path = lock_dir() / lock_path
         fd = _open_shared(lock_path)
     except OSError as exc:
-        raise DriverError(f"{device}: cannot hold {endpoint}: {exc.strerror or exc}: "
-                          f"{exc.filename or lock_path}") from None
+        raise _cannot_hold(device, endpoint, exc, lock_path) from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         pid = _lock_file_pid(lock_path)
         os.close(fd)
         raise PortInUse(device, endpoint, pid) from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    except BaseException as exc:  # not held: the lock goes with the descriptor
+        os.close(fd)
+        if isinstance(exc, OSError):  # a full disk, a file-size limit
+            raise _cannot_hold(device, endpoint, exc, lock_path) from None
+        raise
     return HeldPort(fd, key=name, device=device, endpoint=endpoint)
+
+
+def _cannot_hold(device: str, endpoint: str, exc: OSError, lock_path: Path) -> DriverError:
+    """The error of a lock file that could not be opened or written: why, and which file."""
+    return DriverError(f"{device}: cannot hold {endpoint}: {exc.strerror or exc}: "
+                       f"{exc.filename or lock_path}")
 
 
 def _open_shared(lock_path: Path) -> int:

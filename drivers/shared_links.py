@@ -1,6 +1,7 @@
 """Links shared within a process by the devices on one endpoint (the devices of a Zaber daisy
-chain on one serial port), reference counted: the first device's `open` makes the link, every
-later one's gets the same link, and the last `Lease.release` closes it.
+chain on one serial port, the units of a Modbus bus or TCP server), reference counted: the
+first device's `open` makes the link, every later one's gets the same link, and the last
+`Lease.release` closes it.
 
 A link is made with the settings its first device asks for; a later device that asks for
 others (another baud rate on the same wire) is refused with one ValueError naming both devices

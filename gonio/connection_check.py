@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from drivers.base import DriverError, InvalidReading
+from drivers.base import DriverError, HeadRange, InvalidReading, WavelengthOutsideHead
 from gonio.config import InstrumentConfig
 from gonio.device_kinds import DeviceConfig
 from gonio.device_kinds.kind import AxisConfig
@@ -112,10 +112,8 @@ def wavelength_answer(subject: str, detector: Any, wavelength_nm: float) -> Answ
     """A problem line when the detector's sensor head cannot take the config's wavelength,
     asked read-only where the detector tells its head's range (a PM100's SENS:CORR:WAV? MIN /
     MAX); None when the range holds it or the detector tells none."""
-    if not hasattr(detector, "wavelength_limits_nm"):
+    if not isinstance(detector, HeadRange):
         return None
-    from drivers.pm100 import WavelengthOutsideHead
-
     try:
         outside = WavelengthOutsideHead.asked(detector, wavelength_nm)
     except UNANSWERED as exc:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.port_identity import port_key
 from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
 from gonio.events import Moved, ReadingDiscarded, Stopping
@@ -92,7 +93,8 @@ def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float
            sample: dict | None = None, bind: str = LOOPBACK, t0_epoch: float | None = None,
            visited: Iterable[Visit] = ()) -> EmulatedBench:
     try:
-        return start(cfg.raw, devices, lambda: positions, sample, bind, t0_epoch, visited)
+        return start(cfg.raw, devices, lambda: positions, sample, bind, t0_epoch, visited,
+                     line_key=port_key)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
 

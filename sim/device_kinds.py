@@ -11,7 +11,7 @@ two registries agree. Adding a kind is one entry here pointing at its emulator m
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -35,6 +35,8 @@ from sim.emulator_factories import (
 
 #: a [sim.devices.<name>] key's check of its value: None, or what is wrong with it
 SettingCheck = Callable[[Any], str | None]
+#: what a port or resource is known by (a device file and a symlink to it: one line)
+LineKey = Callable[[str], Hashable]
 
 
 def one_of(choices: tuple[str, ...]) -> SettingCheck:
@@ -125,20 +127,25 @@ def check_settings(name: str, kind: EmulatorKind, settings: Mapping[str, Any]) -
 
 
 def emulator_groups(chosen: Sequence[str], devices: Mapping[str, Mapping[str, Any]],
-                    kinds: Mapping[str, EmulatorKind]) -> list[tuple[str, ...]]:
+                    kinds: Mapping[str, EmulatorKind], line_key: LineKey) -> list[tuple[str, ...]]:
     """The chosen devices as their emulators serve them, in config order: each device alone,
     but the devices of a chained kind on one port or resource together (a daisy chain), the
     first leading; SimConfigError if a chain is only partly chosen (a chain is one line: it is
-    emulated whole or not at all)."""
+    emulated whole or not at all). line_key: what a port or resource is known by, so that one
+    written two ways is one line."""
+    def line(name: str) -> Hashable | None:
+        written = line_of(devices[name])
+        return None if written is None else line_key(written)
+
     groups: dict[Any, list[str]] = {}
     for name in chosen:
-        kind, line = kinds[name], line_of(devices[name])
-        chained = isinstance(kind, StageEmulator) and kind.chained and line is not None
-        groups.setdefault((kind.name, line) if chained else name, []).append(name)
+        kind, on = kinds[name], line(name)
+        chained = isinstance(kind, StageEmulator) and kind.chained and on is not None
+        groups.setdefault((kind.name, on) if chained else name, []).append(name)
         if chained:
             left_out = [other for other in devices if other not in chosen
-                        and kinds[other] is kind and line_of(devices[other]) == line]
+                        and kinds[other] is kind and line(other) == on]
             if left_out:
                 raise SimConfigError(f"{name} and {left_out[0]} are one {kind.name} chain "
-                                     f"({line}): emulate both or neither")
+                                     f"({on}): emulate both or neither")
     return [tuple(names) for names in groups.values()]

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ from sim.bench import build_power_source
 from sim.device_kinds import (
     DetectorEmulator,
     EmulatorKind,
+    LineKey,
     StageEmulator,
     check_faults,
     check_settings,
@@ -160,11 +161,12 @@ def _device_tables(config: Mapping[str, Any], sim: Mapping[str, Any], key: str
     return tables
 
 
-def _modbus_group(dev: Mapping[str, Any]) -> tuple[str, str]:
-    """Devices sharing a bus or a TCP endpoint share one emulated server."""
+def _modbus_group(dev: Mapping[str, Any], line_key: LineKey) -> tuple[str, Hashable]:
+    """Devices sharing a bus (its port by line_key) or a TCP endpoint share one emulated
+    server."""
     if dev["transport"] == "tcp":
         return "tcp", f"{dev['host']}:{dev.get('tcp_port', 502)}"
-    return "rtu", str(dev["port"])
+    return "rtu", line_key(str(dev["port"]))
 
 
 class _Builder:
@@ -172,14 +174,15 @@ class _Builder:
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
                  kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str,
-                 wall: Callable[[], float]):
+                 wall: Callable[[], float], line_key: LineKey):
         self.config, self.sim, self.bench, self.bind, self.wall = config, sim, bench, bind, wall
+        self.line_key = line_key
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen, self.kinds = chosen, kinds
         self.seed = sim.get("seed", 0)
         self.readers: dict[str, Callable[[], float]] = {}  # where each stage is
         self.targets: dict[str, Callable[[], float]] = {}  # where it was told to go
-        self.modbus: dict[tuple[str, str], dict[int, tuple[str, Any]]] = {}
+        self.modbus: dict[tuple[str, Hashable], dict[int, tuple[str, Any]]] = {}
 
     def _seed(self, name: str) -> int:
         return self.seed + list(self.devices).index(name)
@@ -221,7 +224,7 @@ class _Builder:
 
     def _add_modbus(self, name: str, unit: Any) -> None:
         dev = self.devices[name]
-        units = self.modbus.setdefault(_modbus_group(dev), {})
+        units = self.modbus.setdefault(_modbus_group(dev, self.line_key), {})
         units[dev.get("unit", 1)] = (name, unit)
         if unit.faults is not None:
             self.bench.injectors.setdefault(name, []).append(unit.faults)
@@ -229,7 +232,8 @@ class _Builder:
     def stages(self) -> None:
         """Emulators of the chosen stage devices (served on ptys now, a chain's devices by
         one, Modbus units collected)."""
-        for name, *mates in emulator_groups(self.chosen, self.devices, self.kinds):
+        for name, *mates in emulator_groups(self.chosen, self.devices, self.kinds,
+                                            self.line_key):
             kind = self.kinds[name]
             if isinstance(kind, StageEmulator):
                 kind.start(self._device(name, tuple(mates)))
@@ -264,7 +268,8 @@ class _Builder:
 def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
           positions: Callable[[], Mapping[str, float]] | None = None,
           sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK,
-          t0_epoch: float | None = None, visited: Iterable[Visit] = ()) -> EmulatedBench:
+          t0_epoch: float | None = None, visited: Iterable[Visit] = (),
+          line_key: LineKey = str) -> EmulatedBench:
     """Serve the config's devices (all, or those named) and return the running bench, ready:
     with a detector among them, the model's kernels and what a reading where the stages stand
     needs (sim.bench.scene.Bench.warm_up) are built before it is served.
@@ -274,7 +279,10 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     plan's [sample] table (`sample`, if a plan is known) and the [sim] truth (sim.bench.config).
     bind: the address Modbus TCP emulators listen on (loopback by default). t0_epoch: the
     run's start (`time.time()` seconds; default now), the origin of the source's drift;
-    visited: the readings the run took before this bench (a resume), see Visit.
+    visited: the readings the run took before this bench (a resume), see Visit. line_key:
+    what a port or resource is known by, so that a chain's or a bus's port written two ways
+    (a device file and a symlink to it) is one line (gonio hands it its ports' hold's key);
+    by default as written.
     """
     kinds = _kinds(config)
     sim = _sim_table(config, kinds)
@@ -289,7 +297,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     # (a lamp does not follow the motion's virtual clock), as the run store's t_s does: drift
     # normalisation needs both
     t0 = time.time() if t0_epoch is None else t0_epoch
-    build = _Builder(config, sim, chosen, kinds, bench, bind, lambda: time.time() - t0)
+    build = _Builder(config, sim, chosen, kinds, bench, bind, lambda: time.time() - t0, line_key)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)

@@ -191,6 +191,19 @@ def test_gonio_imports_sim_only_where_documented():
     assert users <= allowed
 
 
+def test_gonio_reaches_a_devices_driver_only_through_its_kind():
+    # a kind names its driver class as "module:Class" (gonio.device_kinds), loaded when a
+    # device opens; the rest of gonio asks what a driver offers through drivers.base's
+    # protocols (a sensor head's range: HeadRange), never by importing a device's module
+    kinds = (ROOT / "gonio" / "device_kinds" / "__init__.py").read_text()
+    drivers = set(re.findall(r'(?:serial_device|modbus_unit)\("(drivers\.\w+):', kinds))
+    assert {"drivers.pm100", "drivers.esp", "drivers.zaber"} <= drivers
+    importers = {module: sorted(imported_modules(module) & drivers) for module in MODULES
+                 if module.split(".")[0] in ("gonio", "gonio_cli")
+                 and imported_modules(module) & drivers}
+    assert importers == {}
+
+
 def test_the_cli_reaches_the_live_view_only_through_its_verb():
     # gonio_watch sits above gonio and calibration, below the CLI; `gonio watch` (and `gonio
     # scan --watch`, which starts it in a process of its own) is the one way in.

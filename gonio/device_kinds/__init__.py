@@ -9,8 +9,8 @@ Adding a kind is one entry here pointing at its driver module (docs/extending.md
 
 from __future__ import annotations
 
-from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind
-from gonio.device_kinds.line_checks import check_line
+from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind, all_checks
+from gonio.device_kinds.line_checks import check_line, line_agreement
 from gonio.device_kinds.modbus import (
     MODBUS_SETTINGS,
     check_register_map,
@@ -18,8 +18,11 @@ from gonio.device_kinds.modbus import (
     map_full_scales_w,
     modbus_unit,
 )
-from gonio.device_kinds.serial_line import chain_check, serial_device
+from gonio.device_kinds.serial_line import serial_device
 from gonio.device_kinds.settings import Setting, serial_settings
+
+#: a Modbus bus's (or TCP server's) units agree on its line; each has its own register map
+MODBUS_LINK = line_agreement("Modbus link", "register_map")
 
 KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
     # the ESP301's RS-232 port hands shake by RTS/CTS; its replies carry 5 decimals
@@ -31,14 +34,16 @@ KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
     DetectorKind(name="pm100", open=serial_device("drivers.pm100:Pm100"), check=check_line,
                  settings=serial_settings(Setting("nr3_decimals", "integer", 6, low=1,
                                                   high=14))),
-    StageKind(name="modbus-stage", settings=MODBUS_SETTINGS, check=check_stage_registers,
-              bus="unit", open=modbus_unit("drivers.modbus_stage:ModbusStage")),
-    DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS, check=check_register_map,
-                 bus="unit", config_full_scales_w=map_full_scales_w,
+    StageKind(name="modbus-stage", settings=MODBUS_SETTINGS,
+              check=all_checks(check_stage_registers, MODBUS_LINK), bus="unit",
+              open=modbus_unit("drivers.modbus_stage:ModbusStage")),
+    DetectorKind(name="modbus-detector", settings=MODBUS_SETTINGS,
+                 check=all_checks(check_register_map, MODBUS_LINK), bus="unit",
+                 config_full_scales_w=map_full_scales_w,
                  open=modbus_unit("drivers.modbus_detector:ModbusDetector")),
     # a daisy chain: the devices on one port share its line, each at its own address
     StageKind(name="zaber", multi_axis=True, open=serial_device("drivers.zaber:ZaberController"),
-              check=chain_check("address"), bus="address",
+              check=all_checks(check_line, line_agreement("chain")), bus="address",
               settings=serial_settings(Setting("address", "integer", 1, low=1, high=99),
                                        baudrate=115200)),
 )}

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from drivers.base import Axis, Detector
-from gonio.device_kinds.endpoints import socket_resource
+from drivers.port_identity import port_key
+from gonio.device_kinds.endpoints import LINK_TYPES, socket_resource
 from gonio.device_kinds.settings import Setting
 
 
@@ -32,6 +33,15 @@ class StageController(Protocol):
 #: ConfigError naming the field.
 Check = Callable[["DeviceConfig", Sequence["AxisConfig"], str, Mapping[str, "DeviceConfig"]],
                  None]
+
+
+def all_checks(*checks: Check) -> Check:
+    """One check that runs each of `checks` in turn (a kind's own, then a shared line's)."""
+    def check(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str,
+              devices: Mapping[str, DeviceConfig]) -> None:
+        for each in checks:
+            each(dev, axes, where, devices)
+    return check
 
 
 @dataclass(frozen=True)
@@ -107,6 +117,14 @@ class DeviceConfig:
     def endpoint(self) -> str:
         """Where the device is reached: a serial port, or host:port."""
         return ":".join(str(self.settings[s.key]) for s in self._applied("endpoint"))
+
+    @property
+    def line(self) -> str:
+        """What the device's line is known by, however the config writes it: its port or
+        resource as the port's hold names it (drivers.port_identity.port_key: a symlink and
+        the device file it names are one line), else its endpoint (a TCP server's host:port)."""
+        links = [self.settings[s.key] for s in self._applied("endpoint") if s.type in LINK_TYPES]
+        return port_key(links[0]) if links else self.endpoint
 
     def endpoint_values(self, endpoint: str) -> dict[str, Any]:
         """The endpoint settings that point this device at `endpoint` (an `endpoint` string

@@ -25,6 +25,9 @@ from sim.bench.stray import InstrumentScatter
 
 ONE_POINT = LobeScales(1.0, 1.0, 1.0, 1.0)  # scales for a probe whose order is fixed anyway
 NEGLIGIBLE = 1e-14  # fraction of the incident power below which a tail is not refined
+#: where warm_up reads when it does not know where the stages stand: sample 20 deg, the arm on
+#: the transmitted side (its mirror, arm 320 deg, on the reflected)
+WARM_UP_PLACE = {"sample": 20.0, "arm": 140.0}
 
 
 @dataclass(frozen=True)
@@ -153,18 +156,21 @@ class Bench:
         return fraction / (self.integral.solid_angle_sr * factor * np.abs(wo[..., 2]))
 
     def warm_up(self, at: Mapping[str, float] | None = None) -> None:
-        """Evaluate one reflected and one transmitted reading, so the model's compiled kernels
-        are built (seconds on a fresh machine), and with `at` (reported stage positions, by
-        role) a reading there, so what it needs (its incidence's multiple-scattering tables)
-        is built too, before an emulated device has to answer. No move's scatter is drawn:
-        the alignment's offsets alone place `at`."""
-        places: list[Mapping[str, float]] = [{"sample": 20.0, "arm": arm} for arm in (140.0, 200.0)]
-        if at is not None and not self.retracted(at["sample"]):
+        """Build what the first reading needs before an emulated device has to answer: the
+        model's compiled kernels (seconds on a fresh machine) and the multiple-scattering
+        tables of one incidence, by a reading and its mirror across the sample (the arm turned
+        half a turn: one reflected, one transmitted). The incidence is where the stages stand
+        (`at`: reported positions by role; the alignment's offsets alone place them, no move's
+        scatter is drawn), so nothing is built that the readings there do not need; a fixed
+        WARM_UP_PLACE when that is unknown or the sample is out of the beam."""
+        if at is None or self.retracted(at["sample"]):
+            place: Mapping[str, float] = WARM_UP_PLACE
+        else:
             offsets = self.alignment
-            places.append({**at, "sample": at["sample"] + offsets.sample_offset_deg,
-                           "arm": at["arm"] + offsets.arm_offset_deg})
-        for place in places:
-            self.scattered_fraction(place)
+            place = {**at, "sample": at["sample"] + offsets.sample_offset_deg,
+                     "arm": at["arm"] + offsets.arm_offset_deg}
+        for turn in (0.0, 180.0):
+            self.scattered_fraction({**place, "arm": place["arm"] + turn})
 
     def power_w(self, positions: Mapping[str, float], t_s: float = 0.0) -> float:
         """True optical power at the detector for reported stage positions at time t_s."""

@@ -153,15 +153,17 @@ def test_wait_times_out_by_name(rig):
 
 def test_absent_unit_on_rtu_bus_times_out_and_tcp_gateway_answers_11(rig, tmp_path):
     r = rig("rtu", reply_s=0.05, read_retries=1)
-    with ModbusStage("rtu", r.server.endpoint, 9, r.stage_map, name="ghost") as ghost:
+    with ModbusStage("rtu", r.server.endpoint, 9, r.stage_map, name="ghost", read_retries=1,
+                     timeouts=ModbusTimeouts(reply_s=0.05)) as ghost:  # the bus's own line
         t0 = time.monotonic()
         with pytest.raises(DeviceTimeout, match="ghost: timeout after 0.05 s waiting for"):
             ghost.position()
         assert time.monotonic() - t0 < 1.0  # bounded: two attempts of 0.05 s and pauses
     assert r.stage.position() == 0.0  # the bus still works
-    t = rig("tcp")
+    t = rig("tcp", reply_s=0.2)
     host, port = t.server.endpoint.split(":")
-    with ModbusStage("tcp", host, 9, t.stage_map, tcp_port=int(port), name="ghost") as ghost:
+    with ModbusStage("tcp", host, 9, t.stage_map, tcp_port=int(port), name="ghost",
+                     timeouts=ModbusTimeouts(reply_s=0.2)) as ghost:  # the server's link's
         with pytest.raises(DeviceError, match="Modbus exception 11"):
             ghost.position()
 
@@ -178,11 +180,12 @@ def test_connection_refused_is_a_named_driver_error(rig):
 
 
 def test_bad_unit_id_and_missing_map_entries_fail_before_traffic(rig, tmp_path):
-    r = rig("tcp")
+    r = rig("tcp", reply_s=0.2)
     host, port = r.server.endpoint.split(":")
+    link = dict(tcp_port=int(port), timeouts=ModbusTimeouts(reply_s=0.2))  # the rig's link's
     with pytest.raises(ValueError, match="unit id must be an integer in 0..247"):
-        ModbusStage("tcp", host, 300, r.stage_map, tcp_port=int(port))
+        ModbusStage("tcp", host, 300, r.stage_map, **link)
     broken = tmp_path / "no-home.toml"
     broken.write_text(r.stage_map.read_text().replace("home = 3", ""))
     with pytest.raises(RegisterMapError, match=r"\[commands\] lacks home"):
-        ModbusStage("tcp", host, 1, broken, tcp_port=int(port))
+        ModbusStage("tcp", host, 1, broken, **link)

@@ -11,6 +11,7 @@ from drivers.base import (
     DeviceError,
     DeviceTimeout,
     DriverError,
+    HeadRange,
     InvalidReading,
     ProtocolError,
     Reading,
@@ -83,6 +84,14 @@ def test_a_wavelength_just_past_the_range_is_named_as_asked(pm_pair):
     assert WavelengthOutsideHead.asked(pm, 399.99).reason == (
         "wavelength 399.99 nm is outside the sensor head S121C's range 400-1100 nm")
     assert emu.wavelength_nm != 1100.0004 and pm.errors() == []
+
+
+def test_the_meter_tells_its_heads_range_and_name_as_any_head_range_does(pm_pair):
+    # gonio asks a detector's head through drivers.base's HeadRange (gonio devices' check of
+    # the config's wavelength), never through the PM100's module
+    emu, pm = pm_pair()
+    assert isinstance(pm, HeadRange)
+    assert (pm.wavelength_limits_nm(), pm.head_name()) == ((400.0, 1100.0), "S121C")
 
 
 def test_full_scales_are_the_sensors_ranges_and_leave_the_setting_alone(pm_pair):

@@ -5,7 +5,8 @@ the UUCP LCK file of a dead process is cleaned, a live one's refuses; a refused 
 the line as it was; a dead holder's LCK file is replaced only by the flock's holder, so two
 processes never remove each other's; a VISA resource is held by a lock file; the serial
 transport holds its port from before opening to close; a port this process holds for one
-device is refused to another, naming it; the holder's command line shows base names."""
+device is refused to another, naming it; the holder's command line shows base names; a lock
+file that cannot be written is one error and holds nothing."""
 
 from __future__ import annotations
 
@@ -236,3 +237,36 @@ def test_the_holders_command_line_shows_base_names(pty, tmp_path):
         first.stdin.close()
     assert str(refused.value) == (f"esp: {path} is in use by process {first.pid} "
                                   f"({Path(sys.executable).name} hold_port.py {Path(path).name})")
+
+
+# holds argv[1] with no room to write the lock file's PID (a file-size limit of 0 bytes, as a
+# full disk would refuse it), then with room again, in one process
+HOLD_WITHOUT_ROOM = """
+import resource, signal, sys
+from drivers.base import DriverError
+from drivers.port_lock import hold
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails with EFBIG instead
+soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+resource.setrlimit(resource.RLIMIT_FSIZE, (0, hard))
+try:
+    hold(sys.argv[1], "meter")
+except DriverError as exc:
+    print(exc)
+resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+hold(sys.argv[1], "meter").release()
+print("held")
+"""
+
+
+
+def test_a_lock_file_that_cannot_be_written_is_one_error_and_leaves_the_resource_free(tmp_path):
+    resource = "TCPIP0::127.0.0.1::5025::SOCKET"
+    done = subprocess.run([sys.executable, "-c", HOLD_WITHOUT_ROOM, resource],
+                          capture_output=True, text=True, timeout=30,
+                          env={**ENV, "GONIO_LOCK_DIR": str(tmp_path)})
+    assert done.returncode == 0, done.stderr
+    [lock_file] = tmp_path.iterdir()
+    assert done.stdout.splitlines() == [
+        f"meter: cannot hold {resource}: File too large: {lock_file}",
+        "held",  # the failed hold let its lock go
+    ]

@@ -2,11 +2,15 @@
 `resource` PyVISA cannot parse or that exchanges no lines, a VISA resource string given as a
 `port`, a config with a resource and no PyVISA, mark parity that pyvisa-py cannot set on an
 ASRL resource, and two devices reaching one device file or resource (but a Zaber chain's
-devices and a Modbus bus's units share one by design). Each is one error naming the field,
-and `gonio devices` refuses the config (exit 2) before anything opens."""
+devices and a Modbus bus's units share one by design, and agree on its settings). Each is one
+error naming the field, and `gonio devices` refuses the config (exit 2) before anything opens.
+A port is one however it is written (a /dev/serial/by-id symlink and its device file; device
+names are case-sensitive): to the checks, the emulators and the drivers' shared link."""
 
+import contextlib
 import os
 import sys
+from pathlib import Path
 
 import pytest
 from gonio_testkit import fast_config, gonio_cli, one_line_error, write_toml
@@ -15,6 +19,7 @@ from drivers import byte_link
 from gonio.config import parse_config
 from gonio.device_kinds.settings import PARITY, STOPBITS
 from gonio.errors import ConfigError
+from gonio.simulate import simulation
 
 USB_METER = "USB0::0x1313::0x8072::P2000000::INSTR"
 
@@ -166,3 +171,61 @@ def test_devices_of_other_kinds_never_share_a_port():
     cfg["devices"]["pm100"]["port"] = cfg["devices"]["zaber"]["port"]
     assert refused(cfg) == ("config: [devices.zaber] port and [devices.pm100] port both reach "
                             "/dev/ttyUSB0: one device file or resource reaches one device")
+
+
+def test_device_paths_that_differ_in_case_are_different_devices():
+    cfg = fast_config("sim-zaber")
+    cfg["devices"]["pm100"]["port"] = cfg["devices"]["zaber"]["port"].lower()  # /dev/ttyusb0
+    assert cfg["devices"]["pm100"]["port"] != cfg["devices"]["zaber"]["port"]
+    parse_config(cfg)  # Linux's device names are case-sensitive: two ports
+
+
+def rtu_bus(alias: Path, **amplifier) -> dict:
+    """The Modbus bench with a second amplifier on the photodiode's RTU bus, its port written
+    as `alias`, a /dev/serial/by-id symlink to the bus's device file, and `amplifier` set on
+    it."""
+    cfg = fast_config("sim-modbus")
+    photodiode = cfg["devices"]["photodiode"]
+    if not alias.is_symlink():
+        alias.symlink_to(photodiode["port"])
+    cfg["devices"]["amplifier"] = dict(photodiode, port=str(alias),
+                                       unit=photodiode["unit"] + 1, **amplifier)
+    return cfg
+
+
+@pytest.mark.parametrize("key, value, mine, theirs", [
+    ("baudrate", 9600, "9600", "115200"),
+    ("parity", "none", '"none"', '"even"'),
+    ("stopbits", 2, "2.0", "1.0"),
+    ("timeout_s", 2.0, "2.0", "0.5"),
+])
+def test_the_units_of_a_modbus_bus_agree_on_its_line(tmp_path, key, value, mine, theirs):
+    alias = tmp_path / "usb-FTDI_USB-RS485_Cable-if00-port0"
+    parse_config(rtu_bus(alias))  # one bus, written two ways, told apart by unit
+    assert refused(rtu_bus(alias, **{key: value})) == (
+        f"config: [devices.amplifier] {key}: {mine} differs from "
+        f"[devices.photodiode]'s {theirs}: both are on the Modbus link at /dev/ttyUSB2, one "
+        "line with one setting")
+
+
+def test_the_units_of_a_modbus_tcp_server_agree_on_its_timeout():
+    cfg = fast_config("sim-modbus")
+    cfg["devices"]["arm_drive"]["timeout_s"] = 2.0
+    assert refused(cfg) == (
+        "config: [devices.arm_drive] timeout_s: 2.0 differs from [devices.sample_drive]'s 0.5: "
+        "both are on the Modbus link at 192.168.0.20:502, one line with one setting")
+    cfg["devices"]["arm_drive"]["tcp_port"] = 503  # another server: a link of its own
+    parse_config(cfg)
+
+
+def test_a_bus_written_two_ways_is_one_emulated_bus_and_one_link(tmp_path):
+    cfg = parse_config(rtu_bus(tmp_path / "usb-FTDI_USB-RS485_Cable-if00-port0"))
+    with simulation(cfg) as sim:
+        assert sim.bench.emulators["amplifier"] is sim.bench.emulators["photodiode"]
+        units = [sim.config.devices[name] for name in ("photodiode", "amplifier")]
+        assert units[0].endpoint == units[1].endpoint
+        with contextlib.ExitStack() as opened:
+            photodiode, amplifier = (opened.enter_context(dev.kind.open(dev)) for dev in units)
+            assert amplifier.link is photodiode.link
+            assert [unit.identity()["serial"] for unit in (photodiode, amplifier)] == [
+                "SIM00004", "SIM00005"]

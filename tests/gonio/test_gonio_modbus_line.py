@@ -4,6 +4,7 @@ set on the real port the driver opens (on the emulated bus's pty)."""
 
 import os
 import termios
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -71,3 +72,15 @@ def test_parity_is_dropped_on_a_pty_only():
         os.close(slave)
     assert on_the_line(even, Path("/dev/null")) == even  # a character device that is no pty
     assert on_the_line(even, None) == even  # a resource that names no file (USB, TCPIP)
+
+
+def test_every_example_rtu_device_writes_its_parity():
+    # the config's default is the Modbus specification's even parity, pymodbus's own was none:
+    # a lab copying an example sees which its line is
+    examples = Path(__file__).resolve().parents[2] / "examples" / "instruments"
+    rtu = {f"{path.name} [devices.{name}]": table
+           for path in sorted(examples.glob("*.toml"))
+           for name, table in tomllib.loads(path.read_text())["devices"].items()
+           if table.get("transport") == "rtu"}
+    assert rtu, "no example has an RTU device"
+    assert [where for where, table in rtu.items() if "parity" not in table] == []

@@ -3,7 +3,11 @@ stage at address 1 and the arm stage at address 2, one port): the emulated bench
 as one chain on one pty, `gonio devices` and `gonio scan --sim` open the port once for both
 (every device answers, no reading retried), line settings that differ between the devices of
 one chain are one config error naming both, and a chain the emulators cannot serve as one
-(only part of it emulated, faults or products given apart) is one error naming two devices."""
+(only part of it emulated, faults or products given apart) is one error naming two devices.
+A chain's port written once as a /dev/serial/by-id symlink and once as its device file is
+one chain, to the config check and to the emulators."""
+
+from pathlib import Path
 
 import pytest
 from gonio_testkit import (
@@ -17,6 +21,7 @@ from gonio_testkit import (
 
 from gonio.config import parse_config
 from gonio.errors import ConfigError
+from gonio.simulate import simulation
 from sim.devices.photodiode import SimConfigError
 from sim.emulate import start
 
@@ -129,3 +134,25 @@ def test_one_product_table_given_for_one_device_is_the_chains():
     with start(cfg, devices=list(STAGES)) as bench:
         chain = bench.emulators["arm_stage"]
         assert [chain.devices[n].get("deviceid") for n in (1, 2)] == ["50419", "50419"]
+
+
+def chain_by_id(alias: Path, **arm_stage) -> dict:
+    """The chain with its arm stage's port written as `alias`, a /dev/serial/by-id symlink to
+    the sample stage's device file (one port, written two ways)."""
+    cfg = fast_config(EXAMPLE)
+    if not alias.is_symlink():
+        alias.symlink_to(cfg["devices"]["sample_stage"]["port"])
+    cfg["devices"]["arm_stage"].update(port=str(alias), **arm_stage)
+    return cfg
+
+
+def test_a_chain_written_by_symlink_and_device_file_is_one_chain(tmp_path):
+    alias = tmp_path / "usb-Zaber_Technologies_Inc._X-RSW60A-if00-port0"
+    with pytest.raises(ConfigError) as err:
+        parse_config(chain_by_id(alias, timeout_s=2.0))
+    assert str(err.value) == ("config: [devices.arm_stage] timeout_s: 2.0 differs from "
+                              f"[devices.sample_stage]'s 1.0: {LINE}")
+    with simulation(parse_config(chain_by_id(alias)), list(STAGES)) as sim:
+        assert sim.bench.emulators["arm_stage"] is sim.bench.emulators["sample_stage"]
+        sample, arm = (sim.config.devices[name].endpoint for name in STAGES)
+        assert sample == arm and sample.startswith("/dev/pts/")
