@@ -112,16 +112,23 @@ class EmulatedBench:
         self.stop()
 
 
+#: The fastest finite time scale: the emulated ESP refuses a motion that would end past its
+#: clock's horizon (sim.devices.esp_commands.HORIZON_S, 3.6e12 virtual s), which a clock a
+#: fuzzed 8e13 times faster than real time passed within a second of starting.
+MAX_TIME_SCALE = 1e6
+
+
 def time_scale_of(sim: Mapping[str, Any]) -> float:
     """The [sim] time_scale: virtual seconds per real second, real time (1) or accelerated
-    (a number >= 1, or "inf": moves complete at once). Slow motion is refused: a fuzzed
+    (1 to MAX_TIME_SCALE, or "inf": moves complete at once). Slow motion is refused: a fuzzed
     8e-244 once made a one-degree move outlast the universe."""
     value = sim.get("time_scale", 1.0)
     if value == "inf":
         return math.inf
-    if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 1:
-        raise SimConfigError(f'[sim] time_scale: must be a number >= 1 (1 = real time) or '
-                             f'"inf", got {value!r}')
+    if isinstance(value, bool) or not isinstance(value, int | float) \
+            or not 1 <= value <= MAX_TIME_SCALE:
+        raise SimConfigError(f"[sim] time_scale: must be a number >= 1 (1 = real time) and "
+                             f'<= {MAX_TIME_SCALE:.0f}, or "inf" (instant), got {value!r}')
     return float(value)
 
 

@@ -174,7 +174,7 @@ def test_fuzzed_sim_sections(data, action, value):
         one_line_error(err)
 
 
-@pytest.mark.parametrize("scale", [8e-244, 0.5, 0, -1, "fast", True])
+@pytest.mark.parametrize("scale", [8e-244, 0.5, 0, -1, "fast", True, 81535644010803.0])
 def test_slow_motion_or_nonsense_time_scale_is_refused(scale):
     """Slow motion would let a fuzzed time scale stretch a move beyond any timeout."""
     cfg = {**SIM_CONFIG, "sim": {**SIM_CONFIG["sim"], "time_scale": scale}}
