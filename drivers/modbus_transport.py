@@ -40,7 +40,7 @@ from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
 from drivers.port_identity import device_path, port_key
-from drivers.port_lock import HeldPort, hold
+from drivers.port_lock import hold
 from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 from drivers.shared_links import Lease, SharedLinks
 
@@ -101,7 +101,9 @@ class ModbusLink:
             self._client = ModbusTcpClient(port_or_host, port=tcp_port, timeout=reply_s,
                                            retries=0)
             self._cut, self._sort, self._recv = cut_tcp, sort_tcp, self._recv_tcp
-            self._held = HeldPort()  # a Modbus TCP server serves several clients
+            # a TCP server serves several clients, but one gonio at a time drives its units:
+            # the endpoint is held by name, as a VISA resource that names no file is
+            self._held = hold(f"modbus-tcp://{self.endpoint}", device)
         else:
             self.endpoint = port_or_host
             self._held = hold(port_or_host, device)  # the port is opened at the first request
@@ -190,7 +192,8 @@ class ModbusLink:
         return reply
 
     def _connect(self) -> None:
-        self._held.hand_over()  # pymodbus opens with pyserial's exclusive=True: its own flock
+        if self.transport == "rtu":  # pymodbus opens with pyserial's exclusive=True: its flock
+            self._held.hand_over()
         if not self._client.connect():
             raise ConnectionException(f"cannot open {self.endpoint}")
         if self.transport == "tcp":  # waits are on select: no poll inside every send and recv
@@ -200,7 +203,8 @@ class ModbusLink:
 
     def _lose_connection(self) -> None:
         self._client.close()
-        self._held.take_back()  # pymodbus's flock went with its port: the hold's guards it
+        if self.transport == "rtu":  # pymodbus's flock went with its port: the hold's guards it
+            self._held.take_back()
         self.replies.reset()  # nothing sent on the old connection can arrive on a new one
 
     def _exchange(self, request: ModbusPDU, device: str, what: str) -> ModbusPDU:

@@ -1,7 +1,8 @@
 """A Modbus RTU link holds its serial port from its making to its close (drivers.port_lock):
 while it is connected pymodbus's own exclusive open (pyserial's flock) and gonio's LCK file
 keep another master and another gonio out, and once a connection is lost the hold's own flock
-does until the link reconnects; once its drivers close, the port is free."""
+does until the link reconnects; once its drivers close, the port is free. A Modbus TCP link
+holds its endpoint by name (`modbus-tcp://host:port`) against another gonio."""
 
 import os
 
@@ -46,3 +47,17 @@ def test_a_lost_rtu_connection_leaves_the_port_held_until_the_link_reconnects(ri
     assert elsewhere(EXCLUSIVE_OPEN, path).startswith(REFUSED)
     r.step_aside()
     assert elsewhere(EXCLUSIVE_OPEN, path) == "opened"
+
+
+def test_a_tcp_link_holds_its_endpoint_by_name_against_another_gonio(rig):
+    # a Modbus TCP server serves several masters, but one gonio at a time drives its units
+    r = rig("tcp")
+    name = f"modbus-tcp://{r.stage.link.endpoint}"
+    assert r.stage.position() == 0.0
+    assert elsewhere(TRY_HOLD, name).startswith(f"x: {name} is in use by process {os.getpid()} ")
+    assert r.stage.position() == 0.0  # a lost and remade connection keeps the hold
+    r.stage.link._lose_connection()
+    assert r.stage.position() == 0.0
+    assert elsewhere(TRY_HOLD, name).startswith(f"x: {name} is in use by process {os.getpid()} ")
+    r.step_aside()
+    assert elsewhere(TRY_HOLD, name) == "held"
