@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from typing import Any
 
 from sim.devices.pty_server import Handler, PtyServer
 
@@ -33,9 +34,10 @@ class AlertingPtyServer(PtyServer):
         self._wake = threading.Event()
         self._watcher: threading.Thread | None = None
 
-    def start(self) -> str:
-        """Serve, and watch for alerts; returns the endpoint."""
-        endpoint = super().start()
+    def _start(self, channel: Callable[[], Any]) -> str:
+        """Serve on the channel (a pty or TCP: start and start_tcp alike), and watch for
+        alerts; returns the endpoint."""
+        endpoint = super()._start(channel)
         self._watcher = threading.Thread(target=self._watch, name=f"alerts-{self.name}",
                                          daemon=True)
         self._watcher.start()

@@ -48,6 +48,18 @@ def test_an_alert_goes_out_when_the_motion_ends_with_no_command_asking(serve):
         assert lines(session, "/1 1 get pos") == ["@01 1 OK IDLE -- 64000"]  # once a motion
 
 
+def test_an_alert_goes_out_unasked_over_tcp_too():
+    # served over TCP (a TCPIP SOCKET resource under --sim), the alert watcher runs as on a pty
+    emu = ZaberEmulator(VirtualClock(50.0), {1: {}}, alerts=True)
+    try:
+        endpoint = emu.start_tcp()
+        with serial.serial_for_url(f"socket://{endpoint}", timeout=HANG_S) as session:
+            assert lines(session, "/1 1 move abs 64000") == ["@01 1 OK BUSY -- 0"]
+            assert lines(session) == ["!01 1 IDLE --"]  # nothing was sent: the device spoke
+    finally:
+        emu.stop()
+
+
 def checked(kind: str, body: str) -> str:
     """A message as a device sends it while comm.checksum is 1."""
     return f"{kind}{body}:{lrc(body)}"
