@@ -20,6 +20,7 @@ connections by the hold's own.
 
 from __future__ import annotations
 
+import logging
 import select
 import threading
 import time
@@ -39,7 +40,7 @@ from drivers.byte_link import LineSettings, on_the_line
 from drivers.modbus_frames import Expected, cut_rtu, cut_tcp, sort_rtu, sort_tcp
 from drivers.modbus_rtu_client import RtuClient
 from drivers.modbus_rtu_sync import EchoTokens, echo_answer_end, silent_interval_s
-from drivers.port_identity import device_path, port_key
+from drivers.port_identity import device_path, port_key, tcp_url
 from drivers.port_lock import hold
 from drivers.reply_sync import Event, Garbled, Reply, ReplySync, State, UnitKind
 from drivers.shared_links import Lease, SharedLinks
@@ -65,6 +66,11 @@ MODBUS_EXCEPTIONS = {
 #: stop bit (this driver's baud rate, 115200, is the drives' usual fast one).
 RTU_LINE = LineSettings(115200, parity="even")
 PYMODBUS_PARITY = {"none": "N", "even": "E", "odd": "O", "mark": "M", "space": "S"}
+
+# pymodbus logs each failed connect and retry as lines of its own (Python's last-resort
+# handler prints them on stderr); this driver's errors say once what failed, so the library's
+# records go nowhere unless the program that runs gonio configures logging itself
+logging.getLogger("pymodbus").addHandler(logging.NullHandler())
 
 
 @dataclass(frozen=True)
@@ -103,7 +109,7 @@ class ModbusLink:
             self._cut, self._sort, self._recv = cut_tcp, sort_tcp, self._recv_tcp
             # a TCP server serves several clients, but one gonio at a time drives its units:
             # the endpoint is held by name, as a VISA resource that names no file is
-            self._held = hold(f"modbus-tcp://{self.endpoint}", device)
+            self._held = hold(tcp_url("modbus-tcp", port_or_host, tcp_port), device)
         else:
             self.endpoint = port_or_host
             self._held = hold(port_or_host, device)  # the port is opened at the first request
@@ -288,7 +294,7 @@ class ModbusLink:
                 self._held.release()
 
 
-#: the links open in this process, by the port (drivers.port_identity.port_key) or host:port
+#: the links open in this process, by the port or TCP endpoint (drivers.port_identity.port_key)
 #: they reach: the units on one RTU bus or one TCP server share one, on one line's settings
 LINKS: SharedLinks[ModbusLink] = SharedLinks(ModbusLink.close)
 
@@ -305,7 +311,7 @@ def open_link(transport: str, port_or_host: str, *, tcp_port: int = 502,
         endpoint = port_key(port_or_host)
         settings |= asdict(line)
     else:
-        endpoint = f"{port_or_host}:{tcp_port}"
+        endpoint = port_key(tcp_url("modbus-tcp", port_or_host, tcp_port))
     return LINKS.open(endpoint, settings, device, lambda: ModbusLink(
         transport, port_or_host, tcp_port=tcp_port, line=line, timeouts=timeouts,
         read_retries=read_retries, device=device))

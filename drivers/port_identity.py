@@ -5,21 +5,30 @@ A string PyVISA parses as a resource (`rname.parse_resource_name`; VISA names ar
 case-insensitive, `::INSTR` may be left out) is a resource: an ASRL resource names its board's
 device file (`ASRL/dev/ttyUSB0`, `ASRL/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0-port0::
 INSTR`), any other is named canonically (USB ids as numbers, the serial number in upper case,
-a host by its address). Anything else is a port: a device file, or a pyserial URL such as
-`socket://host:port` named as written.
+a host by its address). A URL (`socket://host:port`, gonio's `modbus-tcp://host:port` for a
+Modbus TCP server) names its host by its address too. Anything else is a port: a device file.
+Only a string that may be a resource is given to PyVISA (imported then), so a serial port's
+name costs no import.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import socket
 from pathlib import Path
 from typing import Any, NamedTuple
+from urllib.parse import urlsplit
+
+from drivers.visa_link import visa_name
 
 USB_IDS = ("manufacturer_id", "model_code")  # a USB resource's ids: hex or decimal alike
 HOST = "host_address"
+#: how every VISA resource name begins (its interface type): only such a string, or one with
+#: `::` in it, may be a resource
+VISA_INTERFACES = ("ASRL", "USB", "TCPIP", "GPIB", "VXI", "PXI", "VICP", "FIREWIRE")
 
 
 class PortIdentity(NamedTuple):
@@ -37,12 +46,13 @@ class UnsettledPort(ValueError):
 def port_identity(endpoint: str) -> PortIdentity:
     """What endpoint names; UnsettledPort for an ASRL resource whose board is not a device
     path (`ASRL1::INSTR`: the VISA library's own numbering of ports)."""
-    resource = _visa_resource(endpoint)
+    text = endpoint.strip()
+    if "://" in text:
+        return PortIdentity(_url_key(text), False)
+    resource = _visa_resource(text) if may_be_resource(text) else None
     if resource is None:
-        if "::" in endpoint:  # no PyVISA, or no resource it knows: only the case to fold
-            return PortIdentity(endpoint.strip().upper(), True)
-        if "://" in endpoint:
-            return PortIdentity(endpoint.strip(), False)
+        if "::" in text:  # no PyVISA, or no resource it knows: only the case to fold
+            return PortIdentity(text.upper(), True)
         return PortIdentity(Path(os.path.realpath(endpoint)), False)
     if resource.interface_type == "ASRL":
         if not resource.board.startswith("/"):
@@ -50,6 +60,17 @@ def port_identity(endpoint: str) -> PortIdentity:
                                 "path, as in ASRL/dev/ttyUSB0::INSTR")
         return PortIdentity(Path(os.path.realpath(resource.board)), True)
     return PortIdentity(_canonical(resource), True)
+
+
+def may_be_resource(text: str) -> bool:
+    """True for a string that may be a VISA resource name (it has `::` or begins with an
+    interface type); a device path never is."""
+    return "::" in text or text.upper().startswith(VISA_INTERFACES)
+
+
+def tcp_url(scheme: str, host: str, port: int) -> str:
+    """`scheme://host:port`, an IPv6 address in brackets: how a TCP endpoint is named."""
+    return f"{scheme}://[{host}]:{port}" if ":" in host else f"{scheme}://{host}:{port}"
 
 
 def port_key(endpoint: str) -> str:
@@ -78,10 +99,8 @@ def _visa_resource(endpoint: str) -> Any | None:
         from pyvisa import rname
     except ImportError:
         return None
-    head, sep, tail = endpoint.rpartition("::")
-    for text in dict.fromkeys((endpoint, head + sep + tail.upper())):
-        with contextlib.suppress(rname.InvalidResourceName):
-            return rname.parse_resource_name(text)
+    with contextlib.suppress(rname.InvalidResourceName):
+        return rname.parse_resource_name(visa_name(endpoint))
     return None
 
 
@@ -104,9 +123,24 @@ def _number(text: str | None) -> int | None:
     return None
 
 
+def _url_key(url: str) -> str:
+    """A URL with its host as the address it resolves to (upper case: IPv6 hex), else as
+    written (no host and port in it)."""
+    parts = urlsplit(url)
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:  # a port that is no number: the link's opening says so
+        return url
+    if host is None or port is None:
+        return url
+    return tcp_url(parts.scheme, _address(host).upper(), port)
+
+
+@functools.lru_cache(maxsize=64)
 def _address(host: str) -> str:
     """The address a host name resolves to (IPv4 first, as a client connects); the name as
-    written where it does not resolve (the link's connect then says so)."""
+    written where it does not resolve (the link's connect then says so). Asked once per host
+    in a process: a config's checks and a run's holds name the same hosts again and again."""
     try:
         found = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
     except (OSError, UnicodeError):

@@ -46,7 +46,7 @@ from drivers.base import DeviceError, DriverError, ProtocolError
 from drivers.byte_link import LineSettings, LinkOptions
 from drivers.lost_reply import LOST, not_resent, sent_once
 from drivers.polling import poll_until
-from drivers.port_identity import UnsettledPort, port_identity
+from drivers.port_identity import port_key
 from drivers.serial_transport import SerialLineTransport, SyncQuery
 from drivers.settings import Setting, exactly
 from drivers.shared_links import SharedLinks
@@ -113,11 +113,7 @@ def chain_endpoint(port: str | None, resource: str | None) -> str | None:
     unless exactly one of the two is given (which the transport refuses)."""
     if (port is None) == (resource is None):
         return None
-    endpoint = port if resource is None else resource
-    try:
-        return str(port_identity(endpoint).key)
-    except UnsettledPort:  # the transport's opening names what is wrong with it
-        return endpoint
+    return port_key(port if resource is None else resource)
 
 
 def lrc(text: str) -> str:

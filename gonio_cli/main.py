@@ -22,7 +22,6 @@ signal.signal(signal.SIGINT, _interrupted_loading)  # until main() runs: no impo
 
 import argparse  # noqa: E402
 import importlib  # noqa: E402
-import logging  # noqa: E402
 import os  # noqa: E402
 
 from drivers.base import DriverError  # noqa: E402
@@ -75,18 +74,10 @@ def _quiet_stdout() -> None:
     os.dup2(devnull, sys.stdout.fileno())
 
 
-def _quiet_libraries() -> None:
-    """pymodbus logs each failed connect and retry as lines of its own on stderr (Python's
-    last-resort handler); gonio's own error says once what failed, so the library's records
-    go nowhere unless a program that embeds gonio configures logging itself."""
-    logging.getLogger("pymodbus").addHandler(logging.NullHandler())
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     verb = "gonio"
     emulator_truth.install()
-    _quiet_libraries()
     try:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         args = build_parser().parse_args(argv)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from drivers.port_identity import may_be_resource
 from drivers.visa_link import line_resource
 
 #: The setting types whose value is a device file or a VISA resource a device is reached by.
@@ -18,7 +19,7 @@ def serial_port(port: str, alternative: bool) -> str:
     """A serial port (a device file, or a pyserial URL); a VISA resource string is refused
     (ValueError), pointing at the `resource` setting when the device may be given one
     (`alternative`)."""
-    if "::" not in port:
+    if "://" in port or not may_be_resource(port.strip()):
         return port
     hint = (f'; give it as resource = "{port}"' if alternative else
             "; give the line's device file, such as /dev/ttyUSB0")

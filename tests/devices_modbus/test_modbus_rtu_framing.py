@@ -40,7 +40,7 @@ class ScriptedDevice:
         tty.setraw(self.slave)
         self.path = os.ttyname(self.slave)
         self.pieces, self.pause_s = pieces, pause_s
-        self.sent = 0  # pieces written so far
+        self.sent = 0  # pieces written so far (counted as each write begins)
         self.closing = threading.Event()
         self.thread = threading.Thread(target=self._serve, daemon=True)
         self.thread.start()
@@ -53,9 +53,9 @@ class ScriptedDevice:
         for i, size in enumerate(self.pieces):
             if i and self.closing.wait(self.pause_s):
                 return
+            self.sent += 1  # before the write: a reader done with the reply sees it counted
             os.write(self.master, REPLY[start:start + size])
             start += size
-            self.sent += 1
 
     def close(self) -> None:
         self.closing.set()

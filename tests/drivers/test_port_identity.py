@@ -2,16 +2,20 @@
 held by its path is refused to an ASRL resource naming it with or without `::INSTR`, through
 a symlink whose name has colons (/dev/serial/by-path/...), and the other way round; a USB
 resource with its ids in hex and in decimal and its serial number in either case, and a TCPIP
-resource by host name and by address, are one lock; an ASRL resource whose port cannot be
-held is one error, the transport's, before anything opens."""
+resource by host name and by address, are one lock, as is a Modbus TCP server; an ASRL
+resource whose port cannot be held is one error, the transport's, before anything opens; a
+serial port's name costs no PyVISA import."""
 
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 
 import pytest
 from port_testkit import ENV, HOLDER, child, said
 
+from drivers.port_identity import port_key, tcp_url
 from drivers.port_lock import PortInUse, Unholdable, hold
 from drivers.serial_transport import SerialLineTransport, SerialPortError
 
@@ -65,3 +69,23 @@ def test_an_asrl_resource_whose_port_cannot_be_held_is_one_error(tmp_path, resou
     with pytest.raises(SerialPortError) as failed:  # the transport's one error: not opened
         SerialLineTransport(resource=resource, name="pm100")
     assert str(failed.value) == f"pm100: VISA resource {resource} could not be opened: {why}"
+
+
+@pytest.mark.parametrize("spelt", ["modbus-tcp://localhost:1502", "modbus-tcp://LOCALHOST:1502",
+                                   "modbus-tcp://127.0.0.1:1502"])
+def test_a_modbus_tcp_server_by_name_or_address_is_one_endpoint(spelt):
+    assert port_key(spelt) == "modbus-tcp://127.0.0.1:1502"
+    assert port_key(tcp_url("modbus-tcp", "::1", 502)) == "modbus-tcp://[::1]:502"
+    with hold("modbus-tcp://127.0.0.1:1502", "first"), \
+            pytest.raises(PortInUse, match="already opened by this gonio for device first"):
+        hold(spelt, "second")
+
+
+def test_a_serial_ports_name_costs_no_visa_import():
+    # only a string that may be a resource goes to PyVISA: a config of serial ports, and every
+    # port its run holds, never import it
+    code = ("import sys; from drivers.port_identity import port_key; "
+            "port_key('/dev/ttyUSB0'); port_key('socket://localhost:4001'); "
+            "print('pyvisa' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=ENV, check=True).stdout.strip() == "False"
