@@ -55,6 +55,8 @@ from drivers.base import DeviceTimeout, DriverError, ProtocolError
 from drivers.byte_link import LineSettings, LinkFailure, LinkOptions
 from drivers.open_link import open_byte_link
 from drivers.reply_sync import Garbled, Reply, ReplySync, State, SyncReply, UnitKind
+from drivers.serial_link import SerialLink
+from drivers.visa_link import VisaLink
 
 T = TypeVar("T")
 
@@ -66,8 +68,7 @@ class SerialPortError(DriverError):
     whose far side closed, instrument switched off); `port` is the serial port or VISA
     resource (`noun` says which), `action` what the driver was doing."""
 
-    def __init__(self, device: str, port: str, action: str, cause: BaseException,
-                 noun: str = "serial port"):
+    def __init__(self, device: str, port: str, action: str, cause: BaseException, noun: str):
         self.device, self.port, self.action, self.cause = device, port, action, cause
         what = "could not be opened" if action == "opening" else f"went away ({action})"
         super().__init__(f"{device}: {noun} {port} {what}: {_describe(cause)}")
@@ -103,6 +104,16 @@ class SyncQuery:
     is_reply: Callable[[str], bool]
 
 
+def line_settings(name: str, baudrate: int, link: LinkOptions) -> LineSettings:
+    """The line settings a device's driver asks for: its baud rate and the LinkOptions' line
+    settings (their resource is none); a bad one is a ValueError naming the device."""
+    options = {key: value for key, value in link.items() if key != "resource"}
+    try:
+        return LineSettings(baudrate, **options)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: {exc}") from None
+
+
 class SerialLineTransport:
     """A device's line (a serial port, or a VISA resource given by `resource` instead of the
     port) exchanging ASCII lines, thread-safe (one exchange at a time).
@@ -135,11 +146,8 @@ class SerialLineTransport:
             raise ValueError(f"{name}: timeout_s must be > 0, got {timeout_s!r}")
         if retries < 0:
             raise ValueError(f"{name}: retries must be >= 0, got {retries!r}")
-        resource = link.pop("resource", None)
-        try:
-            line = LineSettings(baudrate, **link)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name}: {exc}") from None
+        resource = link.get("resource")
+        line = line_settings(name, baudrate, link)
         self.name = self._speaker = name
         self.port = port if resource is None else resource
         self.write_eol, self.read_eol = write_eol, read_eol
@@ -157,7 +165,7 @@ class SerialLineTransport:
         except ValueError as exc:
             raise ValueError(f"{name}: {exc}") from None
         except LinkFailure as exc:
-            noun = "serial port" if resource is None else "VISA resource"
+            noun = (SerialLink if resource is None else VisaLink).noun  # no link to ask yet
             raise SerialPortError(name, self.port, "opening", exc.cause, noun) from exc.cause
         try:
             self._set_aside_stale_input()
