@@ -74,6 +74,11 @@ class SerialPortError(DriverError):
         super().__init__(f"{device}: {noun} {port} {what}: {_describe(cause)}")
 
 
+def _text(body: bytes) -> str:
+    """A line's bytes as text (a byte that is not ASCII as U+FFFD)."""
+    return body.decode("ascii", errors="replace")
+
+
 def _describe(exc: BaseException) -> str:
     """termios.error carries (errno, text) as a tuple; show it as OSError does."""
     if isinstance(exc, termios.error) and len(exc.args) == 2:
@@ -236,14 +241,13 @@ class SerialLineTransport:
             raise self._port_error("discarding stale input", exc) from exc.cause
         *lines, part = bytes(self._rx).split(self.read_eol)
         for body in lines:
-            self._count_if_unsolicited(body)
+            self._count_if_unsolicited(_text(body))
         self._rx[:] = part
         self._stale_head = bool(part)
 
-    def _count_if_unsolicited(self, body: bytes) -> bool:
+    def _count_if_unsolicited(self, text: str) -> bool:
         """Whether the driver declares the line one its device sends unprompted; counted if so."""
-        if self.is_unsolicited is None or not self.is_unsolicited(
-                body.decode("ascii", errors="replace")):
+        if self.is_unsolicited is None or not self.is_unsolicited(text):
             return False
         self.unsolicited += 1
         return True
@@ -320,8 +324,8 @@ class SerialLineTransport:
         except DeviceTimeout:
             self.replies.timeout()
             raise
-        text = body.decode("ascii", errors="replace")
-        if self._count_if_unsolicited(body):
+        text = _text(body)
+        if self._count_if_unsolicited(text):
             return self.replies.receive(UnitKind.FOREIGN, text)
         if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
             garbled = ProtocolError(f"{self._speaker}: garbled reply to {what}: "
@@ -356,7 +360,7 @@ class SerialLineTransport:
             if not self._stale_head:
                 return body
             self._stale_head = False  # begun before the request: it answers nothing awaited
-            self._count_if_unsolicited(body)
+            self._count_if_unsolicited(_text(body))
 
     def exchange(self, line: str, what: str | None = None, device: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""
