@@ -55,6 +55,8 @@ from drivers.base import DeviceTimeout, DriverError, ProtocolError
 from drivers.byte_link import LineSettings, LinkFailure, LinkOptions
 from drivers.open_link import open_byte_link
 from drivers.reply_sync import Garbled, Reply, ReplySync, State, SyncReply, UnitKind
+from drivers.serial_link import SerialLink
+from drivers.visa_link import VisaLink
 
 T = TypeVar("T")
 
@@ -66,11 +68,15 @@ class SerialPortError(DriverError):
     whose far side closed, instrument switched off); `port` is the serial port or VISA
     resource (`noun` says which), `action` what the driver was doing."""
 
-    def __init__(self, device: str, port: str, action: str, cause: BaseException,
-                 noun: str = "serial port"):
+    def __init__(self, device: str, port: str, action: str, cause: BaseException, noun: str):
         self.device, self.port, self.action, self.cause = device, port, action, cause
         what = "could not be opened" if action == "opening" else f"went away ({action})"
         super().__init__(f"{device}: {noun} {port} {what}: {_describe(cause)}")
+
+
+def _text(body: bytes) -> str:
+    """A line's bytes as text (a byte that is not ASCII as U+FFFD)."""
+    return body.decode("ascii", errors="replace")
 
 
 def _describe(exc: BaseException) -> str:
@@ -101,6 +107,16 @@ class SyncQuery:
 
     line: str
     is_reply: Callable[[str], bool]
+
+
+def line_settings(name: str, baudrate: int, link: LinkOptions) -> LineSettings:
+    """The line settings a device's driver asks for: its baud rate and the LinkOptions' line
+    settings (their resource is none); a bad one is a ValueError naming the device."""
+    options = {key: value for key, value in link.items() if key != "resource"}
+    try:
+        return LineSettings(baudrate, **options)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: {exc}") from None
 
 
 class SerialLineTransport:
@@ -135,11 +151,8 @@ class SerialLineTransport:
             raise ValueError(f"{name}: timeout_s must be > 0, got {timeout_s!r}")
         if retries < 0:
             raise ValueError(f"{name}: retries must be >= 0, got {retries!r}")
-        resource = link.pop("resource", None)
-        try:
-            line = LineSettings(baudrate, **link)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name}: {exc}") from None
+        resource = link.get("resource")
+        line = line_settings(name, baudrate, link)
         self.name = self._speaker = name
         self.port = port if resource is None else resource
         self.write_eol, self.read_eol = write_eol, read_eol
@@ -157,7 +170,7 @@ class SerialLineTransport:
         except ValueError as exc:
             raise ValueError(f"{name}: {exc}") from None
         except LinkFailure as exc:
-            noun = "serial port" if resource is None else "VISA resource"
+            noun = (SerialLink if resource is None else VisaLink).noun  # no link to ask yet
             raise SerialPortError(name, self.port, "opening", exc.cause, noun) from exc.cause
         try:
             self._set_aside_stale_input()
@@ -228,14 +241,13 @@ class SerialLineTransport:
             raise self._port_error("discarding stale input", exc) from exc.cause
         *lines, part = bytes(self._rx).split(self.read_eol)
         for body in lines:
-            self._count_if_unsolicited(body)
+            self._count_if_unsolicited(_text(body))
         self._rx[:] = part
         self._stale_head = bool(part)
 
-    def _count_if_unsolicited(self, body: bytes) -> bool:
+    def _count_if_unsolicited(self, text: str) -> bool:
         """Whether the driver declares the line one its device sends unprompted; counted if so."""
-        if self.is_unsolicited is None or not self.is_unsolicited(
-                body.decode("ascii", errors="replace")):
+        if self.is_unsolicited is None or not self.is_unsolicited(text):
             return False
         self.unsolicited += 1
         return True
@@ -312,8 +324,8 @@ class SerialLineTransport:
         except DeviceTimeout:
             self.replies.timeout()
             raise
-        text = body.decode("ascii", errors="replace")
-        if self._count_if_unsolicited(body):
+        text = _text(body)
+        if self._count_if_unsolicited(text):
             return self.replies.receive(UnitKind.FOREIGN, text)
         if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
             garbled = ProtocolError(f"{self._speaker}: garbled reply to {what}: "
@@ -348,7 +360,7 @@ class SerialLineTransport:
             if not self._stale_head:
                 return body
             self._stale_head = False  # begun before the request: it answers nothing awaited
-            self._count_if_unsolicited(body)
+            self._count_if_unsolicited(_text(body))
 
     def exchange(self, line: str, what: str | None = None, device: str | None = None) -> str:
         """Send a line and read its reply once (no retry: for state-changing commands)."""

@@ -43,11 +43,11 @@ from dataclasses import asdict, dataclass
 from typing import Unpack
 
 from drivers.base import DeviceError, DriverError, ProtocolError
-from drivers.byte_link import LineSettings, LinkOptions
+from drivers.byte_link import LinkOptions
 from drivers.lost_reply import LOST, not_resent, sent_once
 from drivers.polling import poll_until
 from drivers.port_identity import port_key
-from drivers.serial_transport import SerialLineTransport, SyncQuery
+from drivers.serial_transport import SerialLineTransport, SyncQuery, line_settings
 from drivers.settings import Setting, exactly
 from drivers.shared_links import SharedLinks
 
@@ -204,15 +204,15 @@ class ZaberController:
         self._devices: dict[int, dict[str, str]] = {}  # opened devices: their identity
         self._axis_counts: dict[int, int] = {}
         self.latest: dict[tuple[int, int], Reply] = {}  # (device, axis): its latest reply
-        line = {**asdict(LineSettings()), "baudrate": baudrate, "timeout_s": timeout_s,
-                "retries": retries, **{k: v for k, v in link.items() if k != "resource"}}
+        line = asdict(line_settings(name, baudrate, link))
+        resource = link.get("resource")
         self._line_lease = CHAIN_LINES.open(
-            chain_endpoint(port, link.get("resource")), line, name,
-            lambda: SerialLineTransport(
-                port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\r\n",
+            chain_endpoint(port, resource), {**line, "timeout_s": timeout_s, "retries": retries},
+            name, lambda: SerialLineTransport(
+                port, name=name, write_eol=b"\n", read_eol=b"\r\n",
                 timeout_s=timeout_s, retries=retries,
                 sync=SyncQuery(self._line(address, 0, SYNC_ID, ""), self._is_sync_reply),
-                is_unsolicited=is_alert, **link))
+                is_unsolicited=is_alert, resource=resource, **line))
         self.transport = self._line_lease.link
         try:
             self._open(address)

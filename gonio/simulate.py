@@ -20,7 +20,7 @@ from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
 from gonio.events import Moved, ReadingDiscarded, Stopping
 from gonio.plan import AUTO_RANGE
-from sim.devices.modbus_server import LOOPBACK
+from sim.devices.pty_server import LOOPBACK
 from sim.emulate import EmulatedBench, Visit, start, time_scale_of
 
 

@@ -37,9 +37,10 @@ from sim.device_kinds import (
     kind_of,
 )
 from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
-from sim.devices.modbus_server import LOOPBACK, ModbusEmulatorServer
+from sim.devices.modbus_server import ModbusEmulatorServer
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
+from sim.devices.pty_server import LOOPBACK
 from sim.emulator_factories import EmulatedDevice, Light
 from sim.served_resources import serve_resource
 

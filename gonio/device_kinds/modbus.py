@@ -11,6 +11,7 @@ import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from drivers.byte_link import LineSettings
 from drivers.register_map import RegisterMap
 from gonio.device_kinds.kind import AxisConfig, DeviceConfig, driver_class
 from gonio.device_kinds.settings import (
@@ -48,8 +49,7 @@ def modbus_unit(driver: str) -> Callable[[DeviceConfig], Any]:
         if s["transport"] == "tcp":
             address, link = s["host"], {"tcp_port": s["tcp_port"]}
         else:
-            line = driver_class("drivers.byte_link:LineSettings")(
-                s["baudrate"], parity=s["parity"], stopbits=s["stopbits"])
+            line = LineSettings(s["baudrate"], parity=s["parity"], stopbits=s["stopbits"])
             address, link = s["port"], {"line": line}
         return driver_class(driver)(s["transport"], address, s["unit"], s["register_map"],
                                     name=dev.name, timeouts=timeouts, **link)

@@ -9,9 +9,10 @@ Errors are not answered either: they go into a 10-deep FIFO read with TE? (code)
 ("code, timestamp, MESSAGE", the timestamp in 400 us servo ticks since reset: ESP300
 manual, TB command, p. 3-138); axis errors are numbered axis*100 + code.
 
-This module parses lines and dispatches; the handlers are in `esp_commands`, an axis and its
-stored settings in `esp_axis`, the manual's command summary in `esp_manual`. A command of
-that summary the emulator does not model is error 27 COMMAND NOT ALLOWED, never 6.
+This module parses lines and dispatches; the handlers and the error buffer are in
+`esp_commands`, an axis and its stored settings in `esp_axis`, the manual's command summary
+in `esp_manual`. A command of that summary the emulator does not model is error 27 COMMAND
+NOT ALLOWED, never 6.
 """
 
 from __future__ import annotations
@@ -22,37 +23,13 @@ from collections import Counter, deque
 from collections.abc import Mapping
 
 from sim.devices.esp_axis import EmulatedAxis, EspConfigError, Fail
-from sim.devices.esp_commands import HORIZON_S, SERVO_TICK_S, EspCommands
+from sim.devices.esp_commands import AXIS_ERRORS, GENERAL_ERRORS, HORIZON_S, EspCommands
 from sim.devices.esp_manual import COMMAND_SUMMARY
 from sim.devices.faults import FaultInjector, FaultSpec, InterlockInput
 from sim.devices.motion import VirtualClock
 from sim.devices.pty_server import PtyDevice, PtyServer
 
 __all__ = ["AXIS_ERRORS", "GENERAL_ERRORS", "HORIZON_S", "EspConfigError", "EspEmulator"]
-
-# General errors (ESP301 manual, Appendix A "Error messages"), the ones this emulator raises.
-GENERAL_ERRORS = {
-    0: "NO ERROR DETECTED",
-    4: "EMERGENCY STOP ACTIVATED",
-    6: "COMMAND DOES NOT EXIST",
-    7: "PARAMETER OUT OF RANGE",
-    9: "AXIS NUMBER OUT OF RANGE",
-    27: "COMMAND NOT ALLOWED",
-    37: "AXIS NUMBER MISSING",
-    38: "COMMAND PARAMETER MISSING",
-}
-# Axis errors: reported as axis * 100 + code.
-AXIS_ERRORS = {
-    1: "PARAMETER OUT OF RANGE",
-    6: "POSITIVE SOFTWARE LIMIT DETECTED",
-    7: "NEGATIVE SOFTWARE LIMIT DETECTED",
-    10: "MAXIMUM VELOCITY EXCEEDED",
-    11: "MAXIMUM ACCELERATION EXCEEDED",
-    13: "MOTOR NOT ENABLED",
-    20: "HOMING ABORTED",
-    26: "PARAMETER CHANGE NOT ALLOWED",
-    30: "COMMAND NOT ALLOWED DURING HOMING",
-}
 
 _UNIT = re.compile(r"(\d*)([A-Z]{2})(\?)?(.*)")
 QUERY_ONLY = {"TP", "MD", "TE", "TB", "VE", "DP", "DV", "TV"}
@@ -140,22 +117,6 @@ class EspEmulator(EspCommands, PtyDevice):
                 axis.motion.abort()
                 axis.homing, axis.motor_on = False, False
             self._log_error(4)
-
-    def _ticks(self) -> int:
-        return int(self.clock.now() / SERVO_TICK_S)
-
-    def _log_error(self, code: int) -> None:
-        self.errors.append((code, self._ticks()))
-
-    def _pop_error(self) -> tuple[int, int]:
-        """The oldest buffered (code, timestamp), removed; (0, now) when there is none."""
-        return self.errors.popleft() if self.errors else (0, self._ticks())
-
-    @staticmethod
-    def _error_text(code: int) -> str:
-        if code >= 100:
-            return AXIS_ERRORS.get(code % 100, "UNKNOWN ERROR")
-        return GENERAL_ERRORS.get(code, "UNKNOWN ERROR")
 
     def _execute(self, unit: str) -> str | None:
         if unit.upper() == "*IDN?":

@@ -2,8 +2,9 @@
 EDH0235En1030, section 3.7): a mixin of `EspEmulator`, which parses lines and dispatches.
 
 Each handler takes (axis or None, query flag, parameter text) and returns the reply text or
-None; a failure raises `Fail(code)` for the error buffer. Positions and rates are kept in
-degrees and shown in the axis's SN units, numbers with 5 decimals.
+None; a failure raises `Fail(code)` for the error buffer, which is kept here too (TE?, TB?,
+with the manual's error messages). Positions and rates are kept in degrees and shown in the
+axis's SN units, numbers with 5 decimals.
 """
 
 from __future__ import annotations
@@ -12,8 +13,8 @@ import math
 import re
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from sim.devices.esp_axis import (
     ANGULAR_UNITS,
@@ -31,6 +32,30 @@ SERVO_TICK_S = 400e-6  # TB? timestamps count servo interrupts (400 us by defaul
 HORIZON_S = 2.0**53 * SERVO_TICK_S
 MAX_WAIT_MS = 60000.0  # WT (and the manual's WS delay): 0 to 60000 ms
 POLL_S = 0.002  # real seconds between looks at the clock while a wait holds the line
+
+# General errors (ESP301 manual, Appendix A "Error messages"), the ones this emulator raises.
+GENERAL_ERRORS = {
+    0: "NO ERROR DETECTED",
+    4: "EMERGENCY STOP ACTIVATED",
+    6: "COMMAND DOES NOT EXIST",
+    7: "PARAMETER OUT OF RANGE",
+    9: "AXIS NUMBER OUT OF RANGE",
+    27: "COMMAND NOT ALLOWED",
+    37: "AXIS NUMBER MISSING",
+    38: "COMMAND PARAMETER MISSING",
+}
+# Axis errors: reported as axis * 100 + code.
+AXIS_ERRORS = {
+    1: "PARAMETER OUT OF RANGE",
+    6: "POSITIVE SOFTWARE LIMIT DETECTED",
+    7: "NEGATIVE SOFTWARE LIMIT DETECTED",
+    10: "MAXIMUM VELOCITY EXCEEDED",
+    11: "MAXIMUM ACCELERATION EXCEEDED",
+    13: "MOTOR NOT ENABLED",
+    20: "HOMING ABORTED",
+    26: "PARAMETER CHANGE NOT ALLOWED",
+    30: "COMMAND NOT ALLOWED DURING HOMING",
+}
 
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 _HEX = re.compile(r"([0-9A-F]+)H")
@@ -77,11 +102,7 @@ class EspCommands:
     version: str
     _stopping: threading.Event
     _estop_open: bool
-
-    if TYPE_CHECKING:
-        def _log_error(self, code: int) -> None: ...
-        def _pop_error(self) -> tuple[int, int]: ...
-        def _error_text(self, code: int) -> str: ...
+    errors: deque[tuple[int, int]]  # the error buffer: (code, timestamp in servo ticks)
 
     def handler(self, cmd: str) -> Callable[..., str | None] | None:
         """The handler of mnemonic `cmd` (a stored setting's included), or None."""
@@ -91,6 +112,23 @@ class EspCommands:
         if cmd in STORED_SETTINGS:
             return lambda axis, query, param: self._stored(cmd, axis, query, param)
         return None
+
+    # -- error buffer -------------------------------------------------------------
+    def _ticks(self) -> int:
+        return int(self.clock.now() / SERVO_TICK_S)
+
+    def _log_error(self, code: int) -> None:
+        self.errors.append((code, self._ticks()))
+
+    def _pop_error(self) -> tuple[int, int]:
+        """The oldest buffered (code, timestamp), removed; (0, now) when there is none."""
+        return self.errors.popleft() if self.errors else (0, self._ticks())
+
+    @staticmethod
+    def _error_text(code: int) -> str:
+        if code >= 100:
+            return AXIS_ERRORS.get(code % 100, "UNKNOWN ERROR")
+        return GENERAL_ERRORS.get(code, "UNKNOWN ERROR")
 
     # -- helpers ------------------------------------------------------------------
     def _targets(self, axis: EmulatedAxis | None) -> list[EmulatedAxis]:

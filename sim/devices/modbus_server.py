@@ -39,6 +39,7 @@ from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from sim.devices.faults import FaultInjector, FaultSpec
 from sim.devices.modbus_pty import PtyLine
+from sim.devices.pty_server import LOOPBACK
 from sim.devices.register_map import (
     ILLEGAL_ADDRESS,
     ILLEGAL_FUNCTION,
@@ -57,7 +58,6 @@ _ANSWERED = (ReadHoldingRegistersRequest, ReadInputRegistersRequest, WriteSingle
 _ANSWERED_FUNCTIONS = frozenset(request.function_code for request in _ANSWERED)
 RTU_CHARACTER_BITS = 11  # start, 8 data, parity (or a second stop bit), stop
 RTU_FIXED_T35_S = 0.00175  # the spec's t3.5 above 19200 baud
-LOOPBACK = "127.0.0.1"
 _MBAP_BYTES = 7  # Modbus TCP header: transaction id, protocol id, length, unit id
 FIRMWARE = "1.0.0-emulated"
 BASIC_CONFORMITY = 0x81  # basic identification objects, stream and individual access

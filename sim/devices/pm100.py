@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 
 from sim.devices.faults import FaultInjector, FaultSpec
@@ -32,7 +31,6 @@ from sim.devices.pm100_models import DEFAULT_HEAD, SensorHead, console, head
 from sim.devices.pm100_panel import Panel
 from sim.devices.pty_server import PtyDevice, PtyServer
 from sim.devices.scpi_program import (
-    SCPI_ERRORS,
     Limits,
     ScpiError,
     attribute_flag,
@@ -49,13 +47,7 @@ from sim.devices.scpi_program import (
     parse_unit,
     pattern,
 )
-from sim.devices.scpi_status import (
-    ESR_OPC,
-    StatusModel,
-    StatusRegister,
-    error_class_bit,
-    register_commands,
-)
+from sim.devices.scpi_status import StatusModel, StatusRegister, register_commands
 
 ERROR_QUEUE_DEPTH = 10
 # Unit suffixes a numeric parameter may carry (upper case; SCPI reads M as milli, so MW is
@@ -123,11 +115,11 @@ class Pm100Emulator(PtyDevice):
         self.photodiode = PhotodiodeModel(detector, seed=seed,
                                           light_wavelength_nm=light_wavelength_nm)
         self.idn = self.console.idn
-        self.errors: deque[int] = deque()
         self.operation, self.questionable = StatusRegister(), StatusRegister()
         self.measurement, self.auxiliary = StatusRegister(), StatusRegister()
         self.status = StatusModel({STB_OPER: self.operation, STB_QUES: self.questionable,
-                                   STB_MEAS: self.measurement, STB_AUX: self.auxiliary})
+                                   STB_MEAS: self.measurement, STB_AUX: self.auxiliary},
+                                  error_queue_bit=STB_EAV, error_queue_depth=ERROR_QUEUE_DEPTH)
         self.operation.condition = OPER_SENS  # a head is connected from power-up
         self.panel = Panel(self.console, wall)
         self._lock = threading.Lock()
@@ -166,26 +158,16 @@ class Pm100Emulator(PtyDevice):
         self.last_reading: float | None = None
         self.operation.assign(OPER_DATA, False)
 
-    # -- error queue --------------------------------------------------------------
-    def _push(self, code: int) -> None:
-        """SCPI error queue (when full, the newest entry becomes -350 Queue overflow); the
-        error's class sets its Standard Event Status bit."""
-        self.status.record(error_class_bit(code))
-        if len(self.errors) >= ERROR_QUEUE_DEPTH:
-            self.errors[-1] = -350
-        else:
-            self.errors.append(code)
-
     def _overflow(self) -> None:
         with self._lock:
-            self._push(-363)
+            self.status.push_error(-363)
 
     # -- message parsing --------------------------------------------------------
     def handle_line(self, line: bytes) -> bytes | None:
         """Execute one program message; returns the response message (LF) or None."""
         with self._lock:
             if any(b < 0x20 or b > 0x7E for b in line.replace(b"\t", b" ")):
-                self._push(-101)
+                self.status.push_error(-101)
                 return None
             self._answers = []
             path: list[tuple[str, str]] = []
@@ -196,7 +178,7 @@ class Pm100Emulator(PtyDevice):
                 try:
                     reply, path = self._execute(text, path)
                 except ScpiError as exc:
-                    self._push(exc.code)
+                    self.status.push_error(exc.code)
                     continue
                 if reply is not None:
                     self._answers.append(reply)
@@ -221,19 +203,10 @@ class Pm100Emulator(PtyDevice):
         table = [
             ("*IDN", True, False, self._idn),
             ("*RST", False, True, self._rst),
-            ("*CLS", False, True, self._cls),
-            ("*OPC", True, True, self._opc),
-            ("*WAI", False, True, lambda q, a: no_args(a)),
             ("*TST", True, False, self._tst),
-            ("*ESE", True, True, self._byte_setting("ese")),
-            ("*SRE", True, True, self._byte_setting("sre")),
-            ("*ESR", True, False, lambda q, a: no_args(a) or str(self.status.read_esr())),
-            ("*STB", True, False, self._stb),
-            ("SYSTem:ERRor[:NEXT]", True, False, self._syst_err),
-            ("SYSTem:ERRor:COUNt", True, False, lambda q, a: no_args(a) or str(len(self.errors))),
+            *self.status.common_commands(lambda: bool(self._answers)),
             ("SYSTem:VERSion", True, False, lambda q, a: no_args(a) or "1999.0"),
             ("SYSTem:SENSor:IDN", True, False, self._sensor_idn),
-            ("STATus:PRESet", False, True, lambda q, a: no_args(a) or self.status.preset()),
             *register_commands({"OPERation": self.operation, "QUEStionable": self.questionable,
                                 "MEASurement": self.measurement, "AUXiliary": self.auxiliary}),
             *self.panel.commands(),
@@ -297,44 +270,9 @@ class Pm100Emulator(PtyDevice):
         no_args(args)
         self._reset()
 
-    def _cls(self, query: bool, args: list[str]) -> None:
-        no_args(args)
-        self.errors.clear()
-        self.status.clear()
-
-    def _opc(self, query: bool, args: list[str]) -> str | None:
-        """*OPC sets the OPC event bit, *OPC? answers 1: every command completes before the
-        next one is read."""
-        no_args(args)
-        if query:
-            return "1"
-        self.status.record(ESR_OPC)
-        return None
-
     def _tst(self, query: bool, args: list[str]) -> str:
         no_args(args)
         return "0"  # self-test passed
-
-    def _byte_setting(self, field: str) -> Callable:
-        """*ESE / *SRE: an 8-bit enable register (SRE's bit 6 is ignored, IEEE 488.2 11.3.2)."""
-        ignored = 0x40 if field == "sre" else 0
-
-        def access(query: bool, args: list[str]) -> str | None:
-            if query:
-                no_args(args)
-                return str(getattr(self.status, field))
-            setattr(self.status, field, integer(one_arg(args), Limits(0, 255)) & ~ignored)
-            return None
-        return access
-
-    def _stb(self, query: bool, args: list[str]) -> str:
-        no_args(args)
-        return str(self.status.status_byte(STB_EAV, bool(self.errors), bool(self._answers)))
-
-    def _syst_err(self, query: bool, args: list[str]) -> str:
-        no_args(args)
-        code = self.errors.popleft() if self.errors else 0
-        return f'{code},"{SCPI_ERRORS[code]}"'
 
     def _sensor_idn(self, query: bool, args: list[str]) -> str:
         no_args(args)

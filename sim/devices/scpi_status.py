@@ -6,18 +6,23 @@ sets its event bit; NTRansition: a 1 -> 0 change does), a latched event register
 reading it, and an enable mask whose AND with the events is the group's summary bit in the
 status byte. `StatusModel` adds the Standard Event Status Register (ESR) with its enable (ESE),
 the Service Request Enable (SRE) and the status byte (*STB?), whose bit 6 is the master
-summary: (status byte AND SRE) over bits 0-5 and 7 (IEEE 488.2, 11.2 and 11.5).
-`register_commands` gives the STATus subsystem's commands for a set of register groups.
+summary: (status byte AND SRE) over bits 0-5 and 7 (IEEE 488.2, 11.2 and 11.5), and the SCPI
+error queue (SCPI-99 vol. 2, 21.8) whose non-empty state is a status byte bit.
+`StatusModel.common_commands` gives the IEEE 488.2 status commands with SYSTem:ERRor and
+STATus:PRESet; `register_commands` the STATus subsystem's commands for a set of register groups.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Mapping
 
-from sim.devices.scpi_program import Limits, integer, no_args, one_arg
+from sim.devices.scpi_program import SCPI_ERRORS, Limits, integer, no_args, one_arg
 
 REGISTER_MASK = 0x7FFF  # SCPI: bit 15 of a 16-bit status register is always 0
-MASK_LIMITS = Limits(0, 65535)
+REGISTER_SETTING = (Limits(0, 65535), REGISTER_MASK)  # a register's mask: 0-65535, bit 15 reads 0
+BYTE_LIMITS = Limits(0, 255)  # *ESE, *SRE: 8-bit enable registers
+QUEUE_OVERFLOW = -350
 
 # Standard Event Status Register bits (IEEE 488.2, 11.5.1.1)
 ESR_OPC = 0x01  # operation complete (*OPC)
@@ -82,13 +87,32 @@ class StatusRegister:
 
 class StatusModel:
     """The status byte with its SCPI register groups (`groups`: status byte bit -> the group
-    it summarises), the Standard Event Status Register and the enables."""
+    it summarises), the Standard Event Status Register, the enables and the error queue
+    (`error_queue_depth` entries; `error_queue_bit`: its status byte bit while not empty)."""
 
-    def __init__(self, groups: Mapping[int, StatusRegister]):
+    def __init__(self, groups: Mapping[int, StatusRegister], error_queue_bit: int,
+                 error_queue_depth: int):
         self.groups = dict(groups)
         self.esr = ESR_PON
         self.ese = 0
         self.sre = 0
+        self.errors: deque[int] = deque()
+        self.error_queue_bit = error_queue_bit
+        self.error_queue_depth = error_queue_depth
+
+    def push_error(self, code: int) -> None:
+        """Queue a SCPI error (when full, the newest entry becomes -350 Queue overflow); the
+        error's class sets its Standard Event Status bit."""
+        self.record(error_class_bit(code))
+        if len(self.errors) >= self.error_queue_depth:
+            self.errors[-1] = QUEUE_OVERFLOW
+        else:
+            self.errors.append(code)
+
+    def next_error(self) -> str:
+        """SYSTem:ERRor[:NEXT]?: the oldest queued error as `code,"message"` (0 when none)."""
+        code = self.errors.popleft() if self.errors else 0
+        return f'{code},"{SCPI_ERRORS[code]}"'
 
     def record(self, bits: int) -> None:
         """Set Standard Event Status Register bits (an error's class, OPC)."""
@@ -99,18 +123,19 @@ class StatusModel:
         value, self.esr = self.esr, 0
         return value
 
-    def status_byte(self, error_queue_bit: int, errors_queued: bool,
-                    message_available: bool) -> int:
-        """*STB?: every summary bit (the error queue's is `error_queue_bit` while errors are
-        queued; MAV while an answer waits to be sent), with the master summary in bit 6."""
+    def status_byte(self, message_available: bool) -> int:
+        """*STB?: every summary bit (the error queue's while errors are queued; MAV while an
+        answer waits to be sent), with the master summary in bit 6."""
         stb = sum(bit for bit, group in self.groups.items() if group.summary)
-        stb |= error_queue_bit if errors_queued else 0
+        stb |= self.error_queue_bit if self.errors else 0
         stb |= STB_MAV if message_available else 0
         stb |= STB_ESB if self.esr & self.ese else 0
         return stb | (STB_MSS if stb & self.sre & ~STB_MSS else 0)
 
     def clear(self) -> None:
-        """*CLS: every event register cleared (ESR and the groups'); enables stay."""
+        """*CLS: the error queue and every event register cleared (ESR and the groups');
+        enables stay."""
+        self.errors.clear()
         self.esr = 0
         for group in self.groups.values():
             group.event = 0
@@ -119,6 +144,33 @@ class StatusModel:
         """STATus:PRESet: every group's enable and transition filters to their defaults."""
         for group in self.groups.values():
             group.preset()
+
+    def common_commands(self, message_available: Callable[[], bool]) -> list[tuple]:
+        """The IEEE 488.2 status commands (*CLS, *ESE, *SRE, *ESR?, *STB?, and *OPC / *WAI
+        for an instrument that completes each command before reading the next), the error
+        queue's SYSTem:ERRor[:NEXT]? and :COUNt? and STATus:PRESet, as register_commands
+        gives them; `message_available` tells *STB? whether an answer waits (MAV)."""
+        return [
+            ("*CLS", False, True, lambda q, a: no_args(a) or self.clear()),
+            ("*OPC", True, True, self._opc),
+            ("*WAI", False, True, lambda q, a: no_args(a)),
+            ("*ESE", True, True, _mask(self, "ese", BYTE_LIMITS, 0xFF)),
+            # SRE's bit 6 is not settable (IEEE 488.2, 11.3.2)
+            ("*SRE", True, True, _mask(self, "sre", BYTE_LIMITS, 0xFF & ~STB_MSS)),
+            ("*ESR", True, False, _reader(self.read_esr)),
+            ("*STB", True, False, _reader(lambda: self.status_byte(message_available()))),
+            ("SYSTem:ERRor[:NEXT]", True, False, lambda q, a: no_args(a) or self.next_error()),
+            ("SYSTem:ERRor:COUNt", True, False, _reader(lambda: len(self.errors))),
+            ("STATus:PRESet", False, True, lambda q, a: no_args(a) or self.preset()),
+        ]
+
+    def _opc(self, query: bool, args: list[str]) -> str | None:
+        """*OPC sets the OPC event bit, *OPC? answers 1 (every command is complete)."""
+        no_args(args)
+        if query:
+            return "1"
+        self.record(ESR_OPC)
+        return None
 
 
 def register_commands(groups: Mapping[str, StatusRegister]) -> list[tuple]:
@@ -131,9 +183,9 @@ def register_commands(groups: Mapping[str, StatusRegister]) -> list[tuple]:
         table += [
             (f"{root}[:EVENt]", True, False, _reader(group.read_event)),
             (f"{root}:CONDition", True, False, _reader(lambda g=group: g.condition)),
-            (f"{root}:ENABle", True, True, _mask(group, "enable")),
-            (f"{root}:PTRansition", True, True, _mask(group, "ptr")),
-            (f"{root}:NTRansition", True, True, _mask(group, "ntr")),
+            (f"{root}:ENABle", True, True, _mask(group, "enable", *REGISTER_SETTING)),
+            (f"{root}:PTRansition", True, True, _mask(group, "ptr", *REGISTER_SETTING)),
+            (f"{root}:NTRansition", True, True, _mask(group, "ntr", *REGISTER_SETTING)),
         ]
     return table
 
@@ -145,12 +197,14 @@ def _reader(value: Callable[[], int]) -> Callable[[bool, list[str]], str]:
     return query
 
 
-def _mask(group: StatusRegister, field: str) -> Callable[[bool, list[str]], str | None]:
-    """A 16-bit mask setting (<NRf> or non-decimal numeric, 0-65535; bit 15 reads 0)."""
+def _mask(owner: object, field: str, limits: Limits, bits: int
+          ) -> Callable[[bool, list[str]], str | None]:
+    """A mask setting held in `owner.field` (<NRf> or non-decimal numeric within `limits`;
+    the bits outside `bits` read 0)."""
     def access(query: bool, args: list[str]) -> str | None:
         if query:
             no_args(args)
-            return str(getattr(group, field))
-        setattr(group, field, integer(one_arg(args), MASK_LIMITS) & REGISTER_MASK)
+            return str(getattr(owner, field))
+        setattr(owner, field, integer(one_arg(args), limits) & bits)
         return None
     return access

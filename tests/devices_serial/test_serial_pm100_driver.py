@@ -227,7 +227,7 @@ def test_error_queue_overflow_and_cls(pm_pair):
     emu, pm = pm_pair()
     for _ in range(12):
         pm.transport.send("BOGUS")
-    wait_until(lambda: list(emu.errors)[-1:] == [-350], what="the emulator's queue overflow")
+    wait_until(lambda: list(emu.status.errors)[-1:] == [-350], what="the emulator's queue overflow")
     errors = pm.errors()
     assert len(errors) == 10 and errors[-1] == (-350, "Queue overflow")
     pm.transport.send("BOGUS")
