@@ -77,7 +77,7 @@ def test_pm100_interpreter_never_raises(line):
     emu = Pm100Emulator(ConstantPower(1e-6), seed=0)
     reply = emu.handle_line(line)
     assert reply is None or (reply.endswith(b"\n") and reply.isascii())
-    assert len(emu.errors) <= 10
+    assert len(emu.status.errors) <= 10
 
 
 def stays_alive(emu, probe: bytes, eol: bytes, reply_eol: bytes, expect: bytes, garbage_strategy):
