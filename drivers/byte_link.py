@@ -49,7 +49,7 @@ def on_the_line(line: LineSettings, path: Path | None) -> LineSettings:
     network serial server) carries no parity bit, and Linux refuses a tcsetattr that asks for
     one and changes nothing else (EINVAL), so a pty gets no parity; a real port, all of them."""
     try:
-        pty = path is not None and os.major(os.stat(path).st_rdev) in PTY_MAJORS
+        pty = path is not None and is_pty(os.stat(path))
     except OSError:  # the open that follows names what is wrong with the port
         pty = False
     return replace(line, parity="none") if pty else line
@@ -57,6 +57,11 @@ def on_the_line(line: LineSettings, path: Path | None) -> LineSettings:
 
 # Unix 98 pty slaves (/dev/pts/N): the kernel's device majors for them
 PTY_MAJORS = range(136, 144)
+
+
+def is_pty(status: os.stat_result) -> bool:
+    """True for the status (os.stat / os.fstat) of a pseudo-terminal's slave side."""
+    return os.major(status.st_rdev) in PTY_MAJORS
 
 
 class LinkOptions(TypedDict, total=False):

@@ -36,7 +36,7 @@ from pathlib import Path
 from urllib.parse import quote
 
 from drivers.base import DriverError
-from drivers.byte_link import PTY_MAJORS
+from drivers.byte_link import is_pty
 from drivers.port_identity import UnsettledPort, port_identity
 
 UUCP_LOCK_DIRS = (Path("/run/lock"), Path("/var/lock"))  # FHS, then its older name
@@ -105,7 +105,7 @@ class HeldPort:
         self._fd, self._key, self._lock_file = fd, key, lock_file
         self.device, self.endpoint = device, endpoint
         self._serial = fd is not None and os.isatty(fd) \
-            and os.major(os.fstat(fd).st_rdev) not in PTY_MAJORS
+            and not is_pty(os.fstat(fd))
         if key is not None:
             _held_here[key] = device
 
