@@ -11,7 +11,9 @@ Failures: a device that reports an error (DeviceError) is not retried; a timeout
 or lost connection is retried (absolute moves and reads are safe to repeat) up to `retries`
 times, after which the run stops cleanly with the reason recorded. An invalid reading
 (InvalidReading) is retried the same way and, if every try gives one, recorded with power NaN
-and the flag "invalid", and the run goes on. Pause, resume and abort come from the terminal and
+and the flag "invalid", and the run goes on. A reading's t_s and the waits (settling, dwell, a
+suspension's recheck and timeout) are on the run's clock (gonio.run_clock: the wall clock, or
+an all-emulated bench's virtual one). Pause, resume and abort come from the terminal and
 the control channel (gonio.run_control); suspenders (gonio.suspenders) hold the run while a
 condition lasts and measure the interrupted point again. However a run ends short of
 completion (abort, signal, failure, an exception, a full disk), every axis that can be reached
@@ -58,6 +60,7 @@ from gonio.plan import (
 )
 from gonio.reading_flags import INVALID, RETRIED
 from gonio.row_step import RowStep, arrival, row_step
+from gonio.run_clock import RunClock, wall_clock
 from gonio.run_control import Aborted, PauseControl
 from gonio.store import StoreError
 from gonio.suspenders import Watch
@@ -131,17 +134,18 @@ class Engine:
     """Runs the readings `todo` (indices into the schedule `readings`) on an instrument and
     publishes what happens on `bus`; `session` is what the RunStarted event carries for the
     session record, `prompts` the operator prompts by reading index, `watch` the suspenders
-    (None: none)."""
+    (None: none), `clock` the run's clock (None: the wall clock since t0_epoch)."""
 
     def __init__(self, instrument: Instrument, plan: Plan, readings: np.ndarray,
                  todo: list[int], bus: EventBus, *, stored: int = 0, retries: int = 2,
                  control: PauseControl | None = None, t0_epoch: float | None = None,
                  session: dict[str, Any] | None = None, prompts: dict[int, str] | None = None,
-                 watch: Watch | None = None):
+                 watch: Watch | None = None, clock: RunClock | None = None):
         self.inst, self.plan, self.readings, self.todo = instrument, plan, readings, todo
         self.bus, self.stored, self.retries = bus, stored, retries
         self.control = control or PauseControl()
-        self.t0 = t0_epoch if t0_epoch is not None else time.time()
+        self.clock = clock or wall_clock(time.time() if t0_epoch is None else t0_epoch,
+                                         instrument.time_scale)
         self.session = session or {}
         self.prompts = prompts or {}
         self.watch = watch
@@ -193,8 +197,9 @@ class Engine:
         step = row_step(self.inst, row, self._commanded, self.plan.dwell_s)
         self._use_range(step.range_w)
         self._move(row, step)
-        if step.pause_s > 0:  # instant time: no sleep(0), which only yields the core away
-            time.sleep(step.pause_s)
+        pause_s = self.clock.wait_s(step.hold_s)
+        if pause_s > 0:  # instant time: no sleep(0), which only yields the core away
+            time.sleep(pause_s)
         self._doing = f"reading the detector ({self.inst.detector.name})"
         return self._record(row, self.inst.detector.read(), flags)
 
@@ -216,7 +221,7 @@ class Engine:
 
     def _now(self) -> float:
         """Seconds since the run's first start (the clock of t_s)."""
-        return time.time() - self.t0
+        return self.clock.now()
 
     def _with_retries(self, row: np.void) -> dict[str, Any]:
         where = f"reading {int(row['index'])} ({row['kind']})" if "kind" in row.dtype.names \
@@ -288,13 +293,13 @@ class Engine:
                 return record
             if suspension is None:
                 suspension = Suspension(why, index, self._now())
-                deadline = time.monotonic() + self.watch.spec.timeout_s
+                deadline = suspension.t_s + self.watch.spec.timeout_s
                 self.control.enter(State.SUSPENDED)
                 self.bus.publish(Suspended(suspension))
-            elif time.monotonic() > deadline:
+            elif self._now() > deadline:
                 raise StopRun(f"reading {index}: suspended ({suspension.reason}) and not "
                               f"cleared within {self.watch.spec.timeout_s:g} s: {why}")
-            self.control.wait(self.watch.spec.recheck_s)
+            self.control.wait(self.clock.wait_s(self.watch.spec.recheck_s))
 
     # -- the run ----------------------------------------------------------------
     def _check_ranges(self) -> None:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.base import DriverError
-from gonio.instrument import Instrument, real_seconds
+from gonio.instrument import Instrument
 
 
 class PositionMismatch(DriverError):
@@ -26,13 +26,13 @@ class PositionMismatch(DriverError):
 class RowStep:
     """What a schedule row asks of the instrument: the detector range (W; AUTO_RANGE
     autoranges), every axis's target (deg), the axes that must move (their target is not the
-    one last commanded), and the real seconds to wait once they arrived (the slowest moved
+    one last commanded), and the device seconds to wait once they arrived (the slowest moved
     axis's settling plus the plan's dwell)."""
 
     range_w: float
     targets: dict[str, float]
     moved: list[str]
-    pause_s: float
+    hold_s: float
 
 
 def row_step(instrument: Instrument, row: np.void, commanded: Mapping[str, float | None],
@@ -41,8 +41,7 @@ def row_step(instrument: Instrument, row: np.void, commanded: Mapping[str, float
     targets = {role: float(row[f"{role}_deg"]) for role in instrument.axes}
     moved = [role for role, target in targets.items() if commanded[role] != target]
     settle_s = max((instrument.config.axes[role].settle_s for role in moved), default=0.0)
-    return RowStep(float(row["range_w"]), targets, moved,
-                   real_seconds(instrument, settle_s + dwell_s))
+    return RowStep(float(row["range_w"]), targets, moved, settle_s + dwell_s)
 
 
 @dataclass(frozen=True)

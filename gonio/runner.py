@@ -28,6 +28,7 @@ from gonio.instrument import build_instrument
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
 from gonio.recorder import RunRecorder
+from gonio.run_clock import RunClock
 from gonio.run_control import PauseControl
 from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
 from gonio.suspenders import Watch
@@ -57,27 +58,30 @@ def instrument_path(plan: Plan, instrument: str | Path | None) -> Path:
 @dataclass
 class _Devices:
     """What to open: the config (pointed at emulators under --sim), its time scale, the
-    emulated devices and the emulation's subscribers to the engine's events."""
+    emulated devices, the emulation's subscribers to the engine's events and the run's clock
+    (None: the wall clock)."""
 
     config: InstrumentConfig
     time_scale: float = 1.0
     emulated: tuple[str, ...] = ()
     subscribers: tuple[Subscriber, ...] = ()
+    clock: RunClock | None = None
 
 
 @contextmanager
 def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch: float,
-             stored: np.ndarray) -> Iterator[_Devices]:
+             stored: np.ndarray, clock_start_s: float) -> Iterator[_Devices]:
     """The devices to open; under --sim the emulators, told the `stored` schedule rows (what
-    an emulated detector of a resumed run has measured already)."""
+    an emulated detector of a resumed run has measured already) and, all emulated, the run's
+    time this session starts at (clock_start_s)."""
     if sim is False:
         yield _Devices(cfg)
         return
     from gonio.simulate import simulation, visit  # only --sim touches sim
 
     with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
-                    [visit(row, cfg.axes) for row in stored]) as s:
-        yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,))
+                    [visit(row, cfg.axes) for row in stored], clock_start_s) as s:
+        yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,), s.clock)
 
 
 def operator_prompts(plan: Plan, readings: np.ndarray, todo: Sequence[int]) -> dict[int, str]:
@@ -98,7 +102,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
          control: PauseControl | None, t0_epoch: float, stored: Sequence[dict] = (),
          check: DetectorCheck | None = None, session: dict[str, Any] | None = None,
          channel: bool = False, started: Started | None = None,
-         created: Callable[[Path], None] | None = None) -> ScanResult:
+         created: Callable[[Path], None] | None = None, clock_start_s: float = 0.0
+         ) -> ScanResult:
     """Open the devices, set the detector's wavelength and averaging and check it (`check`),
     then open the run (so a device that cannot be opened, a setting it refuses, such as a
     wavelength its sensor head cannot take, or a failed check leaves no new run behind), and
@@ -110,10 +115,11 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
     --watch`); created: told the run directory as soon as it exists, before any reading is
     measured (the queue records it there). The run's signal handling (`control`) starts
     before the run directory is made: a signal in the first milliseconds of a run ends it as
-    one at any other moment does."""
+    one at any other moment does. clock_start_s: the run's time this session starts at on an
+    all-emulated bench's virtual clock (resume_clock_s)."""
     control = control or PauseControl()
     done = sched.readings[[row["index"] for row in stored]]
-    with _devices(cfg, sim, plan, t0_epoch, done) as dev, \
+    with _devices(cfg, sim, plan, t0_epoch, done, clock_start_s) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
         configure_detector(inst, plan, None)
         if check is not None:
@@ -132,6 +138,7 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                                 inst.record_lines])
                 engine = Engine(inst, plan, sched.readings, todo, bus, stored=writer.stored,
                                 control=control, t0_epoch=writer.meta["t0_epoch"],
+                                clock=dev.clock,
                                 prompts=operator_prompts(plan, sched.readings, todo),
                                 watch=Watch(plan.suspend, stored) if plan.suspend else None,
                                 session={"sim": list(dev.emulated),
@@ -292,7 +299,15 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
         return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
                 run.meta["t0_epoch"], stored=lines.rows, session=session, channel=channel,
-                started=started)
+                started=started, clock_start_s=resume_clock_s(run.meta, lines.rows))
+
+
+def resume_clock_s(meta: dict[str, Any], stored: Sequence[dict]) -> float:
+    """Where a resumed run's virtual clock goes on from: the latest of its sessions' recorded
+    ends (`clock_end_s`) and its last stored reading's t_s (a session killed outright records
+    no end)."""
+    ends = [float(s["clock_end_s"]) for s in meta.get("sessions", []) if "clock_end_s" in s]
+    return max([*ends, *(float(row["t_s"]) for row in stored[-1:])], default=0.0)
 
 
 _MISSING = object()

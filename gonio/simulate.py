@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import math
+import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
 from gonio.events import Moved, ReadingDiscarded, Stopping
 from gonio.plan import AUTO_RANGE
+from gonio.run_clock import RunClock
 from sim.devices.pty_server import LOOPBACK
 from sim.emulate import EmulatedBench, Visit, start, time_scale_of
 
@@ -29,7 +31,9 @@ class Simulation:
     """A running emulation: the config pointed at it, its time scale, what is emulated.
 
     positions: the dict the emulated detector reads real stages' positions from (the
-    hardware-in-the-loop feed, `telemetry`, keeps it current).
+    hardware-in-the-loop feed, `telemetry`, keeps it current); clock: the run's clock when
+    every device is emulated (the bench's virtual clock), None with real devices in the loop
+    (the wall clock).
     """
 
     config: InstrumentConfig
@@ -37,12 +41,13 @@ class Simulation:
     devices: list[str]
     positions: dict[str, float]
     bench: EmulatedBench
-
+    clock: RunClock | None = None
 
     def telemetry(self, event: Any) -> None:
         """The emulation's subscriber to the engine's events: where the (real) stages are
         before each reading, the readings thrown away (no visits: sim.emulate), and what the
-        emulators did in the session (faults injected, requests served)."""
+        emulators did in the session (faults injected, requests served, and on the virtual
+        clock the run's time at the end, `clock_end_s`, where a resume goes on from)."""
         if isinstance(event, Moved):
             self.positions.update(event.positions)
         elif isinstance(event, ReadingDiscarded):
@@ -50,6 +55,8 @@ class Simulation:
         elif isinstance(event, Stopping):
             event.session.update(faults_injected=self.bench.fault_counts(),
                                  requests_served=self.bench.request_counts())
+            if self.clock is not None:
+                event.session["clock_end_s"] = self.clock.now()
 
 
 def visit(row: np.void, roles: Iterable[str]) -> Visit:
@@ -92,8 +99,12 @@ def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConf
 def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float],
            sample: dict | None = None, bind: str = LOOPBACK, t0_epoch: float | None = None,
            visited: Iterable[Visit] = ()) -> EmulatedBench:
+    """The emulators of `devices`; with a real device among the config's, the source drifts
+    in wall seconds since t0_epoch (the engine's clock then), else on the bench's own."""
+    wall = None if t0_epoch is None or set(devices) == set(cfg.devices) else (
+        lambda: time.time() - t0_epoch)
     try:
-        return start(cfg.raw, devices, lambda: positions, sample, bind, t0_epoch, visited,
+        return start(cfg.raw, devices, lambda: positions, sample, bind, wall, visited,
                      line_key=port_key)
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
@@ -102,10 +113,13 @@ def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float
 @contextmanager
 def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
                sample: dict | None = None, t0_epoch: float | None = None,
-               visited: Iterable[Visit] = ()) -> Iterator[Simulation]:
+               visited: Iterable[Visit] = (), clock_start_s: float = 0.0
+               ) -> Iterator[Simulation]:
     """Run the emulators of a config for the duration of a `with` block; `sample` is the
     plan's [sample] table (the emulated sample's kind and index unless [sim] states them);
-    t0_epoch the run's start and visited its stored readings (sim.emulate.start)."""
+    t0_epoch the run's start and visited its stored readings (sim.emulate.start). With every
+    device emulated the run's clock is the bench's virtual clock, reading clock_start_s as
+    the block begins (a resume: where the run's last session ended)."""
     devices = resolve_devices(cfg, names)
     positions: dict[str, float] = {}
     bench = _start(cfg, devices, positions, sample, t0_epoch=t0_epoch, visited=visited)
@@ -113,7 +127,11 @@ def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
         pointed = point_at(cfg, {n: e.endpoint for n, e in bench.endpoints.items()})
         stages_emulated = all(ax.device in devices for ax in cfg.axes.values())
         scale = emulated_time_scale(cfg) if stages_emulated else 1.0
-        yield Simulation(pointed, scale, devices, positions, bench)
+        clock = None
+        if set(devices) == set(cfg.devices):
+            bench.begin_run(clock_start_s)
+            clock = RunClock(bench.run_time, bench.wait_s)
+        yield Simulation(pointed, scale, devices, positions, bench, clock)
     finally:
         bench.stop()
 

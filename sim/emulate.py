@@ -12,15 +12,18 @@ stages are.
 A seeded emulated run does not depend on the machine's load or on a resume: the detectors'
 noise is keyed on the seed, the device, the commanded positions (the emulated stages'
 targets), the range setting and the visit count (sim.devices.photodiode), and the source
-drifts in wall seconds since the run's own start (`t0_epoch`, the clock of a reading's
-`t_s`). A resumed run passes its stored readings as `visited` so the visit counts go on.
-A request a client re-sends after its timeout is a new measurement (docs/bench.md).
+drifts (and the faults' interlocks open) on the run's clock (`EmulatedBench.run_time`): the
+bench's VirtualClock from the run's start, on which moves, settling and readings take their
+time at every time scale (a resumed run's clock goes on from where its last session ended:
+`begin_run`), or, for a run with real devices in the loop, the caller's `run_time` (wall
+seconds since the run started). A resumed run passes its stored readings as `visited` so the
+visit counts go on. A request a client re-sends after its timeout is a new measurement
+(docs/bench.md).
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable, Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -77,6 +80,25 @@ class EmulatedBench:
     injectors: dict[str, list[FaultInjector]] = field(default_factory=dict)
     meters: list[Any] = field(default_factory=list)  # the emulated detectors' models
     _stops: list[Callable[[], None]] = field(default_factory=list)
+    _origin: float = 0.0  # the clock's reading at the run's time 0
+
+    def begin_run(self, at_s: float) -> None:
+        """The run's clock (run_time) reads at_s now: 0 for a new run, where the last session
+        ended for a resumed one."""
+        self._origin = self.clock.now() - at_s
+
+    def run_time(self) -> float:
+        """Seconds of the run on the bench's virtual clock (the clock of t_s of a run whose
+        devices are all emulated)."""
+        return self.clock.now() - self._origin
+
+    def wait_s(self, seconds: float) -> float:
+        """Real seconds a wait of `seconds` on the run's clock takes (settling, dwell, a
+        suspension's recheck); an instant clock is advanced by them here and 0 returned."""
+        if self.clock.instant:
+            self.clock.advance(seconds)
+            return 0.0
+        return self.clock.real_seconds(seconds)
 
     def fault_counts(self) -> dict[str, dict[str, int]]:
         """Faults injected so far, by device and kind (devices with faults configured)."""
@@ -182,8 +204,9 @@ class _Builder:
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
                  kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str,
-                 wall: Callable[[], float], line_key: LineKey):
-        self.config, self.sim, self.bench, self.bind, self.wall = config, sim, bench, bind, wall
+                 run_time: Callable[[], float], line_key: LineKey):
+        self.config, self.sim, self.bench, self.bind = config, sim, bench, bind
+        self.run_time = run_time
         self.line_key = line_key
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen, self.kinds = chosen, kinds
@@ -207,11 +230,11 @@ class _Builder:
         return FaultSpec.from_dict({"seed": self._seed(name), **table}, name)
 
     def _interlock(self, name: str) -> InterlockInput | None:
-        """The device's interlock input, if its faults open it (on the bench's wall clock)."""
+        """The device's interlock input, if its faults open it (on the run's clock)."""
         spec = self._faults(name)
         if spec is None or spec.interlock is None:
             return None
-        return InterlockInput(spec.interlock, self.wall)
+        return InterlockInput(spec.interlock, self.run_time)
 
     def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
         return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
@@ -276,7 +299,7 @@ class _Builder:
 def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
           positions: Callable[[], Mapping[str, float]] | None = None,
           sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK,
-          t0_epoch: float | None = None, visited: Iterable[Visit] = (),
+          run_time: Callable[[], float] | None = None, visited: Iterable[Visit] = (),
           line_key: LineKey = str) -> EmulatedBench:
     """Serve the config's devices (all, or those named) and return the running bench, ready:
     with a detector among them, the model's kernels and what a reading where the stages stand
@@ -285,8 +308,9 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     positions: where the stages that are not emulated are ({role: deg}); needed when a
     detector is emulated but some stage is real. The bench is the config's [optics] with the
     plan's [sample] table (`sample`, if a plan is known) and the [sim] truth (sim.bench.config).
-    bind: the address Modbus TCP emulators listen on (loopback by default). t0_epoch: the
-    run's start (`time.time()` seconds; default now), the origin of the source's drift;
+    bind: the address Modbus TCP emulators listen on (loopback by default). run_time: the
+    run's clock, seconds since it started, that the source drifts and the faults' interlocks
+    open on (default: the bench's own, `EmulatedBench.run_time`, 0 when the bench is ready);
     visited: the readings the run took before this bench (a resume), see Visit. line_key:
     what a port or resource is known by, so that a chain's or a bus's port written two ways
     (a device file and a symlink to it) is one line (gonio hands it its ports' hold's key);
@@ -301,11 +325,10 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             raise SimConfigError(f"no device {name!r} to emulate (devices: "
                                  f"{', '.join(all_devices)})")
     bench = EmulatedBench(VirtualClock(time_scale_of(sim)))
-    # the source drifts (and the faults' interlocks open) in wall time since the run started
-    # (a lamp does not follow the motion's virtual clock), as the run store's t_s does: drift
-    # normalisation needs both
-    t0 = time.time() if t0_epoch is None else t0_epoch
-    build = _Builder(config, sim, chosen, kinds, bench, bind, lambda: time.time() - t0, line_key)
+    # the source drifts (and the faults' interlocks open) on the clock of the run store's t_s:
+    # drift normalisation needs both
+    build = _Builder(config, sim, chosen, kinds, bench, bind, run_time or bench.run_time,
+                     line_key)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)
@@ -320,7 +343,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             return {role: stages[role]() if role in stages else float(real.get(role, 0.0))
                     for role in ROLES}
 
-        source = build_power_source(sim, lambda: read(build.readers), build.wall,
+        source = build_power_source(sim, lambda: read(build.readers), build.run_time,
                                     optics=config.get("optics"), sample=sample)
         if detectors:  # the first reading must not stall past a driver's timeout: the model
             # compiled and what a reading where the stages stand needs built, before serving
@@ -328,6 +351,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
         build.detectors(source, lambda: _place(read(build.targets)),
                         [(_place(where), range_w) for where, range_w in visited])
         build.serve_modbus()
+        bench.begin_run(0.0)
     except BaseException:
         bench.stop()
         raise

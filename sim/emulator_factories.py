@@ -160,12 +160,12 @@ def _chain_product(chain: tuple[EmulatedDevice, ...], address: str) -> Mapping[s
 
 def meter_on_pty(emulator: type) -> DetectorFactory:
     """A meter served on a pty of its own, built as `emulator(source, faults=, seed=,
-    detector=, light_wavelength_nm=, place=, **its [sim.devices.<name>] settings)` (the
+    detector=, light_wavelength_nm=, place=, clock=, **its [sim.devices.<name>] settings)` (the
     PM100's console `model` and `sensor` head) with its model at `.photodiode`."""
     def start(device: EmulatedDevice, light: Light) -> PhotodiodeModel:
         emu = emulator(light.source, faults=device.faults, seed=device.seed,
                        detector=light.detector, light_wavelength_nm=light.wavelength_nm,
-                       place=light.place, **device.settings)
+                       place=light.place, clock=device.clock, **device.settings)
         device.serve(emu)
         return emu.photodiode
     return start
@@ -187,6 +187,6 @@ def modbus_detector_unit(device: EmulatedDevice, light: Light) -> PhotodiodeMode
     unit = ModbusDetectorEmulator(light.source, device.table["register_map"], device.faults,
                                   device.seed, light.detector, light.wavelength_nm,
                                   serial=device.serial, place=light.place,
-                                  interlock=device.interlock)
+                                  interlock=device.interlock, clock=device.clock)
     device.join_bus(unit)
     return unit.model

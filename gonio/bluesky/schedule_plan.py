@@ -25,6 +25,7 @@ from ophyd_async.plan_stubs import ensure_connected
 
 from gonio.bluesky.ophyd_devices import GonioDevices
 from gonio.engine import schedule_tags
+from gonio.instrument import real_seconds
 from gonio.plan import Plan, build_schedule, load_plan
 from gonio.row_step import row_step
 
@@ -84,8 +85,9 @@ def plan(gonio_plan: str | Path | Plan, devices: GonioDevices, md: dict[str, Any
                 yield from bps.mv(*itertools.chain.from_iterable(
                     (devices.axes[role], step.targets[role]) for role in step.moved))
                 commanded.update({role: step.targets[role] for role in step.moved})
-            if step.pause_s > 0:
-                yield from bps.sleep(step.pause_s)
+            pause_s = real_seconds(inst, step.hold_s)
+            if pause_s > 0:
+                yield from bps.sleep(pause_s)
             yield from bps.mv(row_device, row)
             yield from bps.trigger_and_read(detectors)
 

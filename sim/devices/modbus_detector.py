@@ -2,7 +2,8 @@
 
 Each read of the `reading` registers asks the PowerSource for the true optical power now
 and passes it through the PhotodiodeModel (gain ranges from the map, autorange, averaging,
-saturation, noise); status, range in use and fault code describe that measurement.
+saturation, noise); status, range in use and fault code describe that measurement, which
+takes the map's `sample_s` per averaged sample on the bench's clock.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 
 from sim.devices.faults import FaultSpec, InterlockInput
 from sim.devices.modbus_server import EmulatedUnit
+from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import PhotodiodeModel, PowerSource
 from sim.devices.register_map import ILLEGAL_VALUE, DeviceLayout, Field, LayoutError, Rejected
 
@@ -31,7 +33,9 @@ class ModbusDetectorEmulator(EmulatedUnit):
     a perfectly corrected meter); place: the commanded stage positions now (deg), which key
     the noise (None: the range and the visit count only); serial, device_identification: as
     for EmulatedUnit; interlock: the amplifier's interlock input (while it is open a reading
-    measures nothing: NaN with the map's `interlock` status bit set).
+    measures nothing: NaN with the map's `interlock` status bit set); clock: the bench's
+    VirtualClock a reading takes its time on (the map's `sample_s` per averaged sample; None:
+    no time).
     """
 
     def __init__(self, source: PowerSource, register_map_path: str | Path,
@@ -39,7 +43,7 @@ class ModbusDetectorEmulator(EmulatedUnit):
                  detector: Mapping | None = None, light_wavelength_nm: float | None = None, *,
                  serial: str | None = None, device_identification: bool = True,
                  place: Callable[[], Sequence[float]] | None = None,
-                 interlock: InterlockInput | None = None):
+                 interlock: InterlockInput | None = None, clock: VirtualClock | None = None):
         layout = DeviceLayout.read(register_map_path)
         layout.need(_FIELDS, _COMMANDS, _BITS, _FAULTS)
         if not layout.ranges_w:
@@ -61,6 +65,7 @@ class ModbusDetectorEmulator(EmulatedUnit):
         self.saturated = False
         self.range_index = len(layout.ranges_w) - 1
         self.interlock, self.interlocked = interlock, False
+        self.clock = clock
 
     def check(self, field: Field, value: float) -> None:
         super().check(field, value)
@@ -73,6 +78,8 @@ class ModbusDetectorEmulator(EmulatedUnit):
             self.interlocked = self.interlock.poll()[1]
         if "reading" in names:
             self.registers.set("reading", math.nan if self.interlocked else self._measure())
+            if self.clock is not None and not self.interlocked:
+                self.clock.spend(self.registers.get("averaging") * self.layout.sample_s)
         bits = {"saturated": self.saturated, "fault": self.fault is not None,
                 "interlock": self.interlocked}
         self.registers.set("status", sum(1 << self.layout.bits[b] for b, on in bits.items()

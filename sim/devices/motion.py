@@ -77,6 +77,15 @@ class VirtualClock:
                 self._offset = t if now == self._offset else self._offset + t - now
             return self._now_locked()
 
+    def spend(self, virtual_s: float) -> None:
+        """A device is busy for virtual_s virtual seconds (a reading it averages): an instant
+        clock advances by it, a running one is waited on for the real seconds it takes, a
+        frozen one not at all."""
+        if self.instant:
+            self.advance(virtual_s)
+        elif self.time_scale > 0.0 and virtual_s > 0.0:
+            time.sleep(self.real_seconds(virtual_s))
+
     def real_seconds(self, virtual_s: float) -> float:
         """Real seconds that virtual_s virtual seconds take (0 if instant, inf if frozen)."""
         if self.instant:

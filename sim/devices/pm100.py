@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 
 from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import PhotodiodeModel, PowerSource
 from sim.devices.pm100_models import DEFAULT_HEAD, SensorHead, console, head
 from sim.devices.pm100_panel import Panel
@@ -75,6 +76,7 @@ QUES_POW = 0x0008  # questionable power measurement (over range, or no valid rea
 RESPONSE_LIMITS = (1e-5, 10.0)  # settable photodiode responsivity, A/W
 ATTENUATION_LIMITS = Limits(-60.0, 60.0, 0.0)  # SENS:CORR:LOSS:INP:MAGN, dB
 AVERAGING_LIMITS = Limits(1, 10000, 1)
+SAMPLE_S = 3e-3  # the manual's SENS:AVER:COUN: "1 sample takes approx. 3ms"
 
 
 class Pm100Emulator(PtyDevice):
@@ -86,7 +88,9 @@ class Pm100Emulator(PtyDevice):
     PhotodiodeModel; seed: noise and fault seed; sensor: the head (a SensorHead or its name,
     pm100_models.HEADS); model: the console (PM100D, PM100A, PM100USB, PM400); place: the
     commanded stage positions now (deg), which key the noise (None: the noise keys on the
-    range and the visit count only); wall: the clock SYST:DATE / TIME run on (epoch seconds).
+    range and the visit count only); wall: the clock SYST:DATE / TIME run on (epoch seconds);
+    clock: the bench's VirtualClock a reading takes its time on (SAMPLE_S per averaged sample;
+    None: no time).
     """
 
     protocol = "pm100"
@@ -103,8 +107,10 @@ class Pm100Emulator(PtyDevice):
         model: str = "PM100D",
         place: Callable[[], Sequence[float]] | None = None,
         wall: Callable[[], float] = time.time,
+        clock: VirtualClock | None = None,
     ):
         self._place = place or tuple
+        self.clock = clock
         self._power = source.power_w if hasattr(source, "power_w") else source
         if not callable(self._power):
             raise TypeError("pm100: source must be a PowerSource or a callable returning W")
@@ -282,8 +288,17 @@ class Pm100Emulator(PtyDevice):
     # -- measuring ------------------------------------------------------------------
     def _measure(self) -> float:
         """Take one averaged reading of the source's power now (autoranging if on), in the
-        configured quantity and unit; SCPI_NAN when the invalid-reading fault strikes."""
+        configured quantity and unit; SCPI_NAN when the invalid-reading fault strikes. The
+        light is the source's as the reading begins; the reading then takes its time."""
         self.operation.pulse(OPER_MEAS)
+        try:
+            return self._sampled()
+        finally:
+            if self.clock is not None:
+                self.clock.spend(self.averaging * SAMPLE_S)
+
+    def _sampled(self) -> float:
+        """The averaged samples of _measure, as the reply gives them."""
         if self._server.faults.invalid_reading():
             self._stored(SCPI_NAN, questionable=True)
             return SCPI_NAN

@@ -6,6 +6,7 @@ table and answers reads and writes the way a device does: a Modbus exception cod
 address outside the map or a write to a read-only register. A map's optional `interlock` status
 bit is the one an emulated unit sets while its interlock fault holds. The map's `[identity]` strings
 are read-only registers of ASCII, two characters each (first in the high byte), NUL padded.
+A detector map's `sample_s` is how long one averaged sample takes (a reading: averaging x it).
 """
 
 from __future__ import annotations
@@ -73,6 +74,7 @@ class DeviceLayout:
     identity: dict[str, Field] = field(default_factory=dict)
     model: str = ""
     vendor: str = ""
+    sample_s: float = 0.0  # seconds one averaged sample takes (the map's `sample_s`)
 
     @classmethod
     def read(cls, path: str | Path) -> DeviceLayout:
@@ -94,14 +96,17 @@ class DeviceLayout:
             commands = {str(n): int(v) for n, v in doc.get("commands", {}).items()}
             bits = {str(n): int(v) for n, v in doc.get("status_bits", {}).items()}
             identity = {n: _text_field(n, spec) for n, spec in doc.get("identity", {}).items()}
+            sample_s = float(doc.get("sample_s", 0.0))
         except (AttributeError, KeyError, TypeError, ValueError) as exc:
             raise LayoutError(f"{src}: bad register map entry: {exc!r}") from None
         if "interlock" in bits and (not 0 <= bits["interlock"] <= 15 or list(
                 bits.values()).count(bits["interlock"]) > 1):
             raise LayoutError(f"{src}: status bit interlock {bits['interlock']} is not a bit of "
                               f"its own in the 16-bit status register")
+        if not 0.0 <= sample_s < math.inf:
+            raise LayoutError(f"{src}: sample_s must be a number of seconds >= 0, got {sample_s!r}")
         return cls(src, order == "little", fields, commands, bits, faults, ranges, identity,
-                   str(doc.get("name", "")), str(doc.get("vendor", "")))
+                   str(doc.get("name", "")), str(doc.get("vendor", "")), sample_s)
 
     def need(self, fields: tuple[str, ...], commands: tuple[str, ...],
              bits: tuple[str, ...], faults: tuple[str, ...]) -> None:
