@@ -32,8 +32,9 @@ class LimitError(MotionError):
 class VirtualClock:
     """Virtual seconds = offset + real seconds * time_scale (0 = only `advance` moves it).
 
-    With time_scale = math.inf, real time does not count; moves jump the clock to their
-    end instead (`advance_to`), so a move "takes" its full duration at once.
+    With time_scale = math.inf, real time does not count; a moving axis jumps the clock to
+    its move's end (`advance_to`) when it is next looked at, so a move "takes" its full
+    duration at once and axes started together end together, at the later end.
     """
 
     def __init__(self, time_scale: float = 1.0):
@@ -228,6 +229,13 @@ class TrapezoidAxis:
         return sum(profile_times(distance, self._speed, self._accel, self._decel))
 
     # -- state ------------------------------------------------------------------
+    def _now(self) -> float:
+        """The clock's time as the axis is looked at: an instant clock first jumps to the end
+        of the axis's motion (moves started at one instant overlap, as on a running clock)."""
+        if self.clock.instant and self._segments:
+            self.clock.advance_to(self._segments[-1].t_end)
+        return self.clock.now()
+
     def _state(self, t: float) -> tuple[float, float]:
         """Position and velocity at time t; drops finished segments."""
         while self._segments and self._segments[0].t_end <= t:
@@ -244,19 +252,19 @@ class TrapezoidAxis:
     def position(self) -> float:
         """Actual position at clock.now()."""
         with self._lock:
-            t = self.clock.now()
+            t = self._now()
             self._settle_homing(t)
             return self._state(t)[0]
 
     def velocity(self) -> float:
         """Actual velocity at clock.now()."""
         with self._lock:
-            return self._state(self.clock.now())[1]
+            return self._state(self._now())[1]
 
     def target(self) -> float:
         """Where the current motion ends (the position when at rest)."""
         with self._lock:
-            self._state(self.clock.now())
+            self._state(self._now())
             if not self._segments:
                 return self._rest
             last = self._segments[-1]
@@ -265,7 +273,7 @@ class TrapezoidAxis:
     def is_moving(self) -> bool:
         """True while a move, stop or home is still under way."""
         with self._lock:
-            t = self.clock.now()
+            t = self._now()
             self._settle_homing(t)
             self._state(t)
             return bool(self._segments)
@@ -274,7 +282,7 @@ class TrapezoidAxis:
     def homed(self) -> bool:
         """True once a home() has completed (and no abort interrupted it)."""
         with self._lock:
-            self._settle_homing(self.clock.now())
+            self._settle_homing(self._now())
             return self._homed
 
     # -- commands ---------------------------------------------------------------
@@ -303,7 +311,7 @@ class TrapezoidAxis:
         return self.move_to(self.target() + float(delta))
 
     def _plan(self, target: float) -> float:
-        self._segments, self._rest = self._profile(self.clock.now(), target)
+        self._segments, self._rest = self._profile(self._now(), target)
         return self._finish()
 
     def _profile(self, t: float, target: float) -> tuple[list[_Segment], float]:
@@ -345,7 +353,7 @@ class TrapezoidAxis:
         """
         target = self._reachable(target)
         with self._lock:
-            t = self.clock.now()
+            t = self._now()
             segments, _ = self._profile(t, target)
             return segments[-1].t_end if segments else t
 
@@ -354,24 +362,22 @@ class TrapezoidAxis:
         return self.move_end(self._home_target())
 
     def _finish(self) -> float:
-        """End time of the planned motion; an instant clock jumps straight to it."""
-        t_end = self._segments[-1].t_end if self._segments else self.clock.now()
-        if self.clock.instant:
-            self.clock.advance_to(t_end)
-        return t_end
+        """End time of the planned motion (an instant clock reaches it when the axis is next
+        looked at)."""
+        return self._segments[-1].t_end if self._segments else self.clock.now()
 
     def stop(self) -> None:
         """Decelerate to rest at the current acceleration (no-op at rest); cancels homing."""
         with self._lock:
             self._homing_done_at = None
-            self._decelerate(self.clock.now())
+            self._decelerate(self._now())
             self._finish()
 
     def abort(self) -> None:
         """Stop at once where the axis is now (no deceleration); cancels homing."""
         with self._lock:
             self._homing_done_at = None
-            p, _ = self._state(self.clock.now())
+            p, _ = self._state(self._now())
             self._segments = []
             self._rest = p
 
@@ -400,5 +406,5 @@ class TrapezoidAxis:
             self._homed = False
             t_end = self._plan(self._reachable(self._home_target()))
             self._homing_done_at = t_end
-            self._settle_homing(self.clock.now())
+            self._settle_homing(self._now())
             return t_end

@@ -1,8 +1,10 @@
 """SIGKILL a scan at random moments, resume it (again and again): every completed point is
 kept, none is duplicated, and the finished run has exactly the points of an uninterrupted
 run of the same plan and seed, and its readings bit for bit, a stall mid-session included
-(the emulated noise is keyed on the reading, not on call order or time). A drifting source
-drifts on from the run's own start across a resume, at a finite time scale."""
+(the emulated noise is keyed on the reading, not on call order or time), and its t_s go on
+across each resume from where the last session stopped (the emulated bench's virtual clock).
+A drifting source drifts on from the run's own start across a resume, at a finite and at the
+instant time scale."""
 
 import os
 import signal
@@ -52,8 +54,8 @@ def start_and_kill(args, run_root, kill_after, late_polls, pause_after=None):
         if pause_after is not None:
             wait_for_lines(run_root, pause_after, proc)
             proc.send_signal(signal.SIGSTOP)
-            # the stall in wall time is the scenario: the source drifts and t_s runs on the
-            # wall clock (no virtual clock covers a stopped process)
+            # the stall in wall time is the scenario: a running virtual clock goes on through
+            # it (the source drifts, t_s runs on), an instant one does not
             time.sleep(PAUSE_S)
             proc.send_signal(signal.SIGCONT)
         wait_for_lines(run_root, kill_after, proc)
@@ -107,14 +109,26 @@ def test_sigkill_and_resume_keeps_every_point_once(reference, tmp_path, chain_se
     for field in POSITION_FIELDS + READING_FIELDS:  # before keyed noise: powers up to 3.3 % off
         np.testing.assert_array_equal(got[field], ref[field], err_msg=field)
     assert (got["t_s"][1:] >= got["t_s"][:-1]).all()
+    # each session's clock goes on from the last stored reading of the one before (killed:
+    # no end recorded), and the last one records where it ended
+    sessions = run.meta["sessions"]
+    for before, after in zip(sessions, sessions[1:], strict=False):
+        first = after["first_index"]
+        assert got["t_s"][first] > got["t_s"][first - 1] and "clock_end_s" not in before
+    assert sessions[-1]["clock_end_s"] >= got["t_s"][-1]
 
 
-def test_a_drifting_source_drifts_on_across_a_resume(reference, tmp_path):
-    """At a finite time scale, with a stall and a kill: each reading is the uninterrupted
-    undrifted run's times the drift at its own t_s (the same noise draws)."""
+@pytest.mark.parametrize(("time_scale", "lag_scale"), [(1000.0, 1000.0), ("inf", 1.0)])
+def test_a_drifting_source_drifts_on_across_a_resume(reference, tmp_path, time_scale,
+                                                     lag_scale):
+    """With a stall and a kill: each reading is the uninterrupted undrifted run's times the
+    drift at its own t_s (the same noise draws). The drift runs on the run's virtual clock:
+    at time scale 1000 its period is a minute of real time, as is the lag allowed between the
+    emulator's reading and the engine's t_s stamp (lag_scale virtual seconds per real one; on
+    the instant clock a real lag takes no virtual time)."""
     root, ref = reference
-    drift = Source(drift_fraction=0.05, drift_period_s=60.0)
-    cfg = config(time_scale=1000.0)
+    drift = Source(drift_fraction=0.05, drift_period_s=60.0 * lag_scale)
+    cfg = config(time_scale=time_scale)
     cfg["sim"]["source"] = {**cfg["sim"]["source"], "drift_fraction": drift.drift_fraction,
                             "drift_period_s": drift.drift_period_s}
     write_toml(tmp_path / "instrument.toml", cfg)
@@ -135,7 +149,7 @@ def test_a_drifting_source_drifts_on_across_a_resume(reference, tmp_path):
     expected = np.array([drift.power_at(t) / drift.power_w for t in got["t_s"][lit]])
     rate = 2.0 * np.pi * drift.drift_fraction / drift.drift_period_s  # at most, per second
     np.testing.assert_allclose(got["power_w"][lit] / ref["power_w"][lit], expected,
-                               rtol=2e-4 + rate * (PAUSE_S + 0.3))
+                               rtol=2e-4 + rate * (PAUSE_S + 0.3) * lag_scale)
 
 
 def test_resume_of_a_completed_run_is_refused(reference):

@@ -2,18 +2,16 @@
 stop each hold the run and resume it when they clear, and the run stores exactly the rows of
 an undisturbed one (index, kind, positions, and at an instant time scale the values: a reading
 thrown away does not count as a visit of the emulated detector); a condition that outlasts the
-timeout fails the run with its reason. The prompted signature pass is the moment the test
-holds the run while the fault begins (the readings before it are all taken by then)."""
+timeout fails the run with its reason. The faults begin on the run's (virtual) clock at the
+prompted signature pass: when the undisturbed run reached it, the readings before it all
+taken; the holds and the timeout count on that clock too."""
 
-import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from gonio_testkit import ROOT, fast_config, write_plan
-from waiting import wait_until
 
 from gonio.errors import PlanError
 from gonio.plan import parse_plan
@@ -45,29 +43,14 @@ def start(folder, name: str, sim: dict, suspend=SUSPEND) -> subprocess.Popen:
                             stderr=subprocess.PIPE, env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
-def run_seconds(out: Path) -> float:
-    """Seconds since the run under `out` started, on the clock its faults follow (wall time
-    since meta.json's t0_epoch, sim.emulate)."""
-    return time.time() - json.loads(next(out.glob("*/meta.json")).read_text())["t0_epoch"]
-
-
-def at_the_prompt(proc: subprocess.Popen, out: Path) -> float:
-    """Wait for the signature pass's prompt; returns when it came (run seconds)."""
+def answered(proc: subprocess.Popen) -> tuple[Path, int]:
+    """Wait for the signature pass's prompt and answer it; the run directory and the exit
+    status."""
     seen = b""
     while PROMPT not in seen:
         chunk = os.read(proc.stderr.fileno(), 4096)
         assert chunk, (seen + proc.communicate()[1]).decode()
         seen += chunk
-    return run_seconds(out)
-
-
-def answer(proc: subprocess.Popen, runs: Path, prompted_s: float, at_s: float | None = None
-           ) -> tuple[Path, int]:
-    """Answer the prompt (once the run's clock has passed `at_s`: its faults have begun); the
-    run directory and the exit status."""
-    if at_s is not None:
-        assert prompted_s < at_s, "the run reached the prompt too late"
-        wait_until(lambda: run_seconds(runs) >= at_s, what=f"run second {at_s:g}", poll_s=0.01)
     out, _ = proc.communicate(b"c\n", timeout=120)
     return Path(out.decode().split()[-1]), proc.returncode
 
@@ -77,35 +60,33 @@ def rows(run_dir):
 
 
 def test_suspended_runs_store_the_undisturbed_rows_or_fail_past_the_timeout(tmp_path):
-    calm = start(tmp_path, "calm", {})
-    calm_prompt = at_the_prompt(calm, tmp_path / "calm")
-    calm_dir, code = answer(calm, tmp_path / "calm", calm_prompt)
+    calm_dir, code = answered(start(tmp_path, "calm", {}))
     assert code == 0
-    # a fault may begin once a scan that starts like the calm one has surely reached its
-    # prompt, however loaded the machine (two scans at once now)
-    begin = 2.0 * calm_prompt + 3.0
-    faults = {"source": {"dip": {"start_s": begin, "duration_s": 1.5, "depth": 0.5}},
+    calm_rows = open_run(calm_dir).rows()
+    first_after_prompt = next(r["index"] for r in calm_rows if r["kind"] == "signature")
+    # the faults begin where the run's clock stands at the prompt (an instant clock: the end of
+    # the reading before it); the dip outlasts the rest of the run by 1.5 s
+    begin = calm_rows[first_after_prompt - 1]["t_s"]
+    dip_s = calm_rows[-1]["t_s"] - begin + 1.5
+    faults = {"source": {"dip": {"start_s": begin, "duration_s": dip_s, "depth": 0.5}},
               "faults": {"esp": {"interlock": {"start_s": begin, "duration_s": 0.5}}}}
-    held = start(tmp_path, "held", faults)
-    long = start(tmp_path, "long", {"source": {"dip": {"start_s": begin, "duration_s": 600.0,
-                                                       "depth": 0.5}}},
-                 suspend={**SUSPEND, "timeout_s": 0.5})
-    prompts = [at_the_prompt(held, tmp_path / "held"), at_the_prompt(long, tmp_path / "long")]
-    held_dir, held_code = answer(held, tmp_path / "held", prompts[0], begin + 0.05)
-    long_dir, long_code = answer(long, tmp_path / "long", prompts[1], begin + 0.05)
+    held_dir, held_code = answered(start(tmp_path, "held", faults))
+    long_dir, long_code = answered(start(
+        tmp_path, "long", {"source": {"dip": {"start_s": begin, "duration_s": 600.0,
+                                              "depth": 0.5}}},
+        suspend={**SUSPEND, "timeout_s": 0.5}))
 
     # the emergency stop holds the first reading after the prompt, the dip the closing beam
     # reading; released, each is measured as if nothing had happened
     assert held_code == 0
     assert rows(held_dir) == rows(calm_dir)
     estop, dip = open_run(held_dir).meta["suspensions"]
-    first_after_prompt = next(r["index"] for r in rows(calm_dir) if r["kind"] == "signature")
     assert estop["index"] == first_after_prompt and "EMERGENCY STOP ACTIVATED" in estop["reason"]
     assert begin <= estop["t_s"] < estop["resumed_t_s"] and estop["resumed_t_s"] >= begin + 0.5
     assert dip["index"] == len(rows(calm_dir)) - 1
     assert dip["reason"].startswith("source drift: beam reading at 0.5")
     assert estop["resumed_t_s"] <= dip["t_s"] < dip["resumed_t_s"]
-    assert dip["resumed_t_s"] >= begin + 1.5
+    assert dip["resumed_t_s"] >= begin + dip_s
     assert open_run(held_dir).meta["status"] == "completed"
 
     # a dip that outlasts the timeout fails the run with its reason, all but the held reading
