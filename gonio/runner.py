@@ -145,6 +145,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                                          "endpoints": {n: d.endpoint
                                                        for n, d in dev.config.devices.items()},
                                          "devices": inst.devices,
+                                **({"clock": "virtual", "clock_start_s": clock_start_s}
+                                   if dev.clock is not None else {}),
                                          **({"identity_changes": swapped} if swapped else {}),
                                          **(session or {})})
                 with serving(writer.path, control, status) if channel \

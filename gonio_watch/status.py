@@ -46,9 +46,21 @@ def _epoch(utc: str) -> float:
     return datetime.fromisoformat(utc).timestamp()
 
 
+def real_per_t_s(meta: dict[str, Any]) -> float | None:
+    """Real seconds per second of the run's `t_s`: 1 on the wall clock; on an all-emulated
+    bench's virtual clock (a session's `clock` "virtual") 1 / time_scale, None when instant
+    (its t_s says nothing of real time)."""
+    sessions = meta.get("sessions", [])
+    if not sessions or sessions[-1].get("clock") != "virtual":
+        return 1.0
+    scale = meta.get("time_scale", 1.0)
+    return None if scale == "inf" else 1.0 / float(scale)
+
+
 def elapsed_s(meta: dict[str, Any], running: bool, now: float, last_t_s: float | None) -> float:
     """Seconds the run's sessions have lasted: each from its start to its recorded stop; the
-    last one, unstopped, until now while it runs, else until its last reading."""
+    last one, unstopped, until now while it runs, else until its last reading (on the wall
+    clock; on a virtual one such a session's end is unknown)."""
     total, sessions = 0.0, meta.get("sessions", [])
     for k, session in enumerate(sessions):
         start = _epoch(session["start_utc"])
@@ -56,7 +68,7 @@ def elapsed_s(meta: dict[str, Any], running: bool, now: float, last_t_s: float |
             stop = _epoch(session["stop_utc"])
         elif running and k == len(sessions) - 1:
             stop = now
-        elif last_t_s is not None:
+        elif last_t_s is not None and session.get("clock") != "virtual":
             stop = float(meta.get("t0_epoch", start)) + last_t_s
         else:
             stop = start
@@ -64,22 +76,33 @@ def elapsed_s(meta: dict[str, Any], running: bool, now: float, last_t_s: float |
     return total
 
 
+def session_start_t_s(meta: dict[str, Any]) -> float:
+    """The t_s the last session started at: on the wall clock its start less t0_epoch, on a
+    virtual one its recorded `clock_start_s`."""
+    sessions = meta.get("sessions", [])
+    if not sessions:
+        return 0.0
+    if sessions[-1].get("clock") == "virtual":
+        return float(sessions[-1].get("clock_start_s", 0.0))
+    return _epoch(sessions[-1]["start_utc"]) - float(meta.get("t0_epoch", 0.0))
+
+
 def eta_s(meta: dict[str, Any], rows: list[dict[str, Any]], planned: int
           ) -> tuple[float | None, str]:
     """(seconds still to go, how it was estimated): the median time per reading over this
     session's last readings times the readings left, or the plan's estimate pro rata before
-    two readings of this session are in; (None, why) when nothing says."""
+    two readings of this session are in (or on an instant virtual clock); (None, why) when
+    nothing says."""
     left = max(planned - len(rows), 0)
     if left == 0:
         return 0.0, "all readings stored"
-    sessions = meta.get("sessions", [])
-    since = (_epoch(sessions[-1]["start_utc"]) - float(meta.get("t0_epoch", 0.0))
-             if sessions else 0.0)
+    rate, since = real_per_t_s(meta), session_start_t_s(meta)
     times = [r["t_s"] for r in rows[-RATE_READINGS - 1:] if r.get("t_s") is not None
-             and r["t_s"] >= since]
+             and r["t_s"] >= since] if rate is not None else []
     steps = [b - a for a, b in zip(times, times[1:], strict=False)]
     if steps:
-        return left * statistics.median(steps), f"median of the last {len(steps) + 1} readings"
+        return (left * statistics.median(steps) * rate,
+                f"median of the last {len(steps) + 1} readings")
     if meta.get("estimate_s") and planned:
         return left * float(meta["estimate_s"]) / planned, "the plan's estimate"
     return None, "no estimate yet"

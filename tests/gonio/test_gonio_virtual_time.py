@@ -1,7 +1,8 @@
 """An all-emulated run's times are the emulated bench's virtual clock: under `--time-scale inf`
 two runs of one plan and seed store the same t_s and readings, a drifting source included, and
 `gonio calibrate build` gives them the same offsets; an instant run's t_s is the virtual
-duration of its moves (axes together), settling, dwell and readings (the PM100's 3 ms a sample).
+duration of its moves (axes together), settling, dwell and readings (the PM100's 3 ms a sample);
+the live view's ETA reads such t_s as virtual seconds.
 """
 
 import json
@@ -12,6 +13,7 @@ from gonio_testkit import EXAMPLES, fast_config, gonio_cli, run_dir_of, write_pl
 
 from gonio.plan import MOTION_ROLES, profile_seconds
 from gonio.store import open_run
+from gonio_watch.status import eta_s
 
 PLAN = {"name": "timed", "averaging": 7, "dwell_s": 0.25, "dark": {"every": 6},
         "beam": {"every": 6}, "grid": [{"side": "reflection", "theta_i_deg": [10.0, 30.0],
@@ -87,3 +89,12 @@ def test_an_instant_runs_times_are_its_virtual_duration(tmp_path):
     got = scan(tmp_path, PLAN, cfg, "timed").readings()
     assert len(got) > 10 and {"dark", "beam"} <= set(got["kind"])
     np.testing.assert_allclose(got["t_s"], virtual_duration(got, cfg, PLAN), rtol=1e-9)
+
+
+def test_the_live_views_eta_reads_virtual_seconds_at_the_runs_time_scale():
+    session = {"start_utc": "2026-01-01T00:00:00+00:00", "clock": "virtual",
+               "clock_start_s": 100.0}
+    rows = [{"t_s": 100.0 + 2.0 * k} for k in range(5)]  # 2 virtual s a reading
+    meta = {"sessions": [session], "t0_epoch": 0.0, "estimate_s": 30.0, "time_scale": 10.0}
+    assert eta_s(meta, rows, 15) == (10 * 0.2, "median of the last 5 readings")
+    assert eta_s({**meta, "time_scale": "inf"}, rows, 15) == (20.0, "the plan's estimate")
