@@ -197,7 +197,7 @@ class Engine:
         step = row_step(self.inst, row, self._commanded, self.plan.dwell_s)
         self._use_range(step.range_w)
         self._move(row, step)
-        pause_s = self.clock.wait_s(step.hold_s)
+        pause_s = self.clock.device_wait_s(step.hold_s)
         if pause_s > 0:  # instant time: no sleep(0), which only yields the core away
             time.sleep(pause_s)
         self._doing = f"reading the detector ({self.inst.detector.name})"

@@ -17,14 +17,21 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class RunClock:
     """now(): seconds since the run's first start; wait_s(seconds): the real seconds a wait of
-    `seconds` on this clock takes (an instant virtual clock is advanced by it and says 0)."""
+    `seconds` on this clock takes (an instant virtual clock is advanced by it and says 0);
+    run_s_per_device_s: seconds of this clock a second of the devices' time lasts."""
 
     now: Callable[[], float]
     wait_s: Callable[[float], float]
+    run_s_per_device_s: float = 1.0
+
+    def device_wait_s(self, device_s: float) -> float:
+        """Real seconds a wait of device_s seconds of the devices' time (settling, dwell)
+        takes."""
+        return self.wait_s(device_s * self.run_s_per_device_s)
 
 
 def wall_clock(t0_epoch: float, time_scale: float = 1.0) -> RunClock:
-    """Wall seconds since t0_epoch (`time.time()` seconds); waits of device seconds last
-    1/time_scale as long (the devices' time scale: 1 on a real bench, 0 s when instant)."""
-    return RunClock(lambda: time.time() - t0_epoch,
-                    lambda seconds: 0.0 if math.isinf(time_scale) else seconds / time_scale)
+    """Wall seconds since t0_epoch (`time.time()` seconds), on which a second of devices that
+    run time_scale times faster (1 on a real bench; inf: instant) lasts 1/time_scale."""
+    return RunClock(lambda: time.time() - t0_epoch, lambda seconds: seconds,
+                    0.0 if math.isinf(time_scale) else 1.0 / time_scale)
