@@ -44,8 +44,8 @@ def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
     """The example config with `[detector]` updated, `[optics]` from the sim tables' geometry
     (OPTICS_FROM_SIM) and `optics` (which wins), and `[sim]`
     replaced by `sim` tables (the bench's defaults otherwise: multiple scattering "auto", so on
-    for Walter's ground and etched glass). A drifting source drifts in wall seconds since the
-    run started, the clock of the run's t_s, at any time_scale."""
+    for Walter's ground and etched glass). A drifting source drifts on the run's virtual clock,
+    the clock of its t_s, at any time_scale."""
     text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
     if detector:
         for key, value in detector.items():
