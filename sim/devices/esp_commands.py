@@ -114,15 +114,15 @@ class EspCommands:
         return None
 
     # -- error buffer -------------------------------------------------------------
-    def _ticks(self) -> int:
-        return int(self.clock.now() / SERVO_TICK_S)
+    def _ticks(self, at_s: float | None = None) -> int:
+        return int((self.clock.now() if at_s is None else at_s) / SERVO_TICK_S)
 
     def _log_error(self, code: int) -> None:
         self.errors.append((code, self._ticks()))
 
-    def _pop_error(self) -> tuple[int, int]:
-        """The oldest buffered (code, timestamp), removed; (0, now) when there is none."""
-        return self.errors.popleft() if self.errors else (0, self._ticks())
+    def _pop_error(self) -> tuple[int, int | None]:
+        """The oldest buffered (code, timestamp), removed; (0, None) when there is none."""
+        return self.errors.popleft() if self.errors else (0, None)
 
     @staticmethod
     def _error_text(code: int) -> str:
@@ -331,6 +331,10 @@ class EspCommands:
     def _cmd_tb(self, axis: None, query: bool, param: str) -> str:
         """TB?: oldest error as "code, timestamp (servo ticks), MESSAGE"; reading removes it."""
         code, stamp = self._pop_error()
+        if stamp is None:  # no error: the time the command came, without ending the motions
+            # begun on an instant clock (which a reading of it does: a TB? after each move
+            # would run the axes one after the other)
+            stamp = self._ticks(self.clock.start_time())
         return f"{code}, {stamp}, {self._error_text(code)}"
 
     def _cmd_ve(self, axis: None, query: bool, param: str) -> str:

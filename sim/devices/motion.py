@@ -32,9 +32,9 @@ class LimitError(MotionError):
 class VirtualClock:
     """Virtual seconds = offset + real seconds * time_scale (0 = only `advance` moves it).
 
-    With time_scale = math.inf, real time does not count; a moving axis jumps the clock to
-    its move's end (`advance_to`) when it is next looked at, so a move "takes" its full
-    duration at once and axes started together end together, at the later end.
+    With time_scale = math.inf, real time does not count; a move is over at once, and the
+    clock reaches its end (`due`) when it is next read, so a move "takes" its full duration
+    and moves started together (at `start_time`) end together, at the later end.
     """
 
     def __init__(self, time_scale: float = 1.0):
@@ -44,6 +44,7 @@ class VirtualClock:
         self._lock = threading.Lock()
         self._real0 = time.monotonic()
         self._offset = 0.0
+        self._due = 0.0  # instant: the latest end of the motions begun, reached when read
 
     @property
     def instant(self) -> bool:
@@ -51,9 +52,25 @@ class VirtualClock:
         return math.isinf(self.time_scale)
 
     def now(self) -> float:
-        """Virtual time in seconds since the clock was made."""
+        """Virtual time in seconds since the clock was made (an instant clock first reaches
+        the ends of the motions begun)."""
+        with self._lock:
+            self._reach_due()
+            return self._now_locked()
+
+    def start_time(self) -> float:
+        """When a device acting now starts: now, except that on an instant clock the motions
+        begun and not yet read have not taken their time (axes started together overlap)."""
         with self._lock:
             return self._now_locked()
+
+    def due(self, t: float) -> None:
+        """A motion begun on an instant clock ends at t: the clock reaches it when next read."""
+        with self._lock:
+            self._due = max(self._due, t)
+
+    def _reach_due(self) -> None:
+        self._offset = max(self._offset, self._due)
 
     def _now_locked(self) -> float:
         if self.instant or self.time_scale == 0.0:
@@ -65,12 +82,14 @@ class VirtualClock:
         if not (dt >= 0.0 and math.isfinite(dt)):
             raise ValueError(f"clock can only advance by a finite dt >= 0, got {dt!r}")
         with self._lock:
+            self._reach_due()
             self._offset += dt
             return self._now_locked()
 
     def advance_to(self, t: float) -> float:
         """Jump the clock forward to virtual time t if it is still earlier; returns now."""
         with self._lock:
+            self._reach_due()
             now = self._now_locked()
             if t > now:
                 # exactly t when only advances move the clock: an end time reached must not
@@ -174,6 +193,7 @@ class TrapezoidAxis:
         self._homing_done_at: float | None = None
         self._homed = False
         self._home_position = home_position
+        self._free_at = 0.0  # on an instant clock: when its last motion ends
 
     # -- parameters -------------------------------------------------------------
     @property
@@ -230,10 +250,10 @@ class TrapezoidAxis:
 
     # -- state ------------------------------------------------------------------
     def _now(self) -> float:
-        """The clock's time as the axis is looked at: an instant clock first jumps to the end
-        of the axis's motion (moves started at one instant overlap, as on a running clock)."""
-        if self.clock.instant and self._segments:
-            self.clock.advance_to(self._segments[-1].t_end)
+        """The time the axis is at: on an instant clock, once its own motions are over (their
+        ends are the clock's `due`), so moves of axes started together overlap."""
+        if self.clock.instant:
+            return max(self.clock.start_time(), self._free_at)
         return self.clock.now()
 
     def _state(self, t: float) -> tuple[float, float]:
@@ -362,9 +382,13 @@ class TrapezoidAxis:
         return self.move_end(self._home_target())
 
     def _finish(self) -> float:
-        """End time of the planned motion (an instant clock reaches it when the axis is next
-        looked at)."""
-        return self._segments[-1].t_end if self._segments else self.clock.now()
+        """End time of the planned motion (on an instant clock the axis is free then, and the
+        clock reaches it when next read)."""
+        t_end = self._segments[-1].t_end if self._segments else self._now()
+        if self.clock.instant:
+            self._free_at = t_end
+            self.clock.due(t_end)
+        return t_end
 
     def stop(self) -> None:
         """Decelerate to rest at the current acceleration (no-op at rest); cancels homing."""

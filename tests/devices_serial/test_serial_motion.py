@@ -148,20 +148,21 @@ def test_infinite_time_scale_completes_at_once_but_counts_duration():
     # a second axis moving "at the same time" does not add its duration twice
     other = TrapezoidAxis(clock, speed=10.0, accel=40.0, position=0.0)
     other.move_to(-1.0)
-    assert not other.is_moving()  # the clock reaches a move's end when the axis is looked at
     assert clock.now() - t0 == pytest.approx(5.25 + other.duration(1.0))
 
 
 def test_axes_started_together_on_an_instant_clock_end_at_the_later_end():
-    """As on a running clock, moves started at one instant overlap: the clock advances by the
-    longest, not the sum, once the axes are looked at."""
+    """As on a running clock, moves started at one instant overlap, however often the axes
+    are looked at in between: the clock advances by the longest, not the sum; an axis's next
+    move starts once its last one is over."""
     clock = VirtualClock(math.inf)
     first, second = (TrapezoidAxis(clock, speed=10.0, accel=40.0) for _ in range(2))
-    ends = [first.move_to(50.0), second.move_to(20.0)]
-    assert ends == [pytest.approx(5.25), pytest.approx(2.25)]
-    assert second.position() == 20.0 and clock.now() == ends[1]
-    assert first.position() == 50.0 and clock.now() == ends[0]
-    assert not second.is_moving() and clock.now() == ends[0]
+    assert first.move_to(50.0) == pytest.approx(5.25)
+    assert not first.is_moving() and first.position() == 50.0
+    assert second.move_to(20.0) == pytest.approx(2.25)
+    assert not second.is_moving() and second.position() == 20.0
+    assert clock.now() == pytest.approx(5.25)
+    assert second.move_to(0.0) == pytest.approx(5.25 + 2.25)
 
 
 def test_accelerated_time_scale_runs_in_real_time():

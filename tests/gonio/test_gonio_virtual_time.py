@@ -1,14 +1,15 @@
 """An all-emulated run's times are the emulated bench's virtual clock: under `--time-scale inf`
 two runs of one plan and seed store the same t_s and readings, a drifting source included, and
 `gonio calibrate build` gives them the same offsets; an instant run's t_s is the virtual
-duration of its moves (axes together), settling, dwell and readings (the PM100's 3 ms a sample);
-the live view's ETA reads such t_s as virtual seconds.
+duration of its moves (axes together), settling, dwell and readings (the PM100's 3 ms a sample,
+the Modbus photodiode's map's 1 ms); the live view's ETA reads such t_s as virtual seconds.
 """
 
 import json
 import tomllib
 
 import numpy as np
+import pytest
 from gonio_testkit import EXAMPLES, fast_config, gonio_cli, run_dir_of, write_plan
 
 from gonio.plan import MOTION_ROLES, profile_seconds
@@ -21,6 +22,7 @@ PLAN = {"name": "timed", "averaging": 7, "dwell_s": 0.25, "dark": {"every": 6},
                                                         "step": 20.0},
                                         "skip_forbidden": True}]}
 PM100_SAMPLE_S = 3e-3  # the PM100 manual: "1 sample takes approx. 3ms"
+PHOTODIODE_SAMPLE_S = 1e-3  # examples/registermaps/photodiode-adc.toml's sample_s
 
 
 def config() -> dict:
@@ -63,10 +65,11 @@ def test_two_instant_runs_store_the_same_times_and_readings_and_calibrate_alike(
     assert offsets[0] == offsets[1]
 
 
-def virtual_duration(readings: np.ndarray, cfg: dict, plan: dict) -> np.ndarray:
+def virtual_duration(readings: np.ndarray, cfg: dict, plan: dict, sample_s: float
+                     ) -> np.ndarray:
     """When each reading ends on the virtual clock: from the stages' power-up positions, each
     row's moves (the axes together: the slowest), the moved axes' longest settling, the
-    plan's dwell and the reading's averaged samples."""
+    plan's dwell and the reading's averaged samples (sample_s each)."""
     axes = cfg["axes"]
     where = {role: min(max(0.0, ax["limits_deg"][0]), ax["limits_deg"][1])
              for role, ax in axes.items()}
@@ -77,18 +80,21 @@ def virtual_duration(readings: np.ndarray, cfg: dict, plan: dict) -> np.ndarray:
         t += max((profile_seconds(abs(row[f"{r}_deg"] - where[r]), axes[r]["speed_deg_s"],
                                   axes[r]["accel_deg_s2"]) for r in moved), default=0.0)
         t += max((axes[r]["settle_s"] for r in moved), default=0.0) + plan["dwell_s"]
-        t += plan["averaging"] * PM100_SAMPLE_S
+        t += plan["averaging"] * sample_s
         for r in moved:
             where[r] = commanded[r] = float(row[f"{r}_deg"])
         ends.append(t)
     return np.array(ends)
 
 
-def test_an_instant_runs_times_are_its_virtual_duration(tmp_path):
-    cfg = config()
+@pytest.mark.parametrize(("name", "sample_s"), [("sim-serial", PM100_SAMPLE_S),
+                                                ("sim-modbus", PHOTODIODE_SAMPLE_S)])
+def test_an_instant_runs_times_are_its_virtual_duration(tmp_path, name, sample_s):
+    cfg = config() if name == "sim-serial" else fast_config(name)
     got = scan(tmp_path, PLAN, cfg, "timed").readings()
     assert len(got) > 10 and {"dark", "beam"} <= set(got["kind"])
-    np.testing.assert_allclose(got["t_s"], virtual_duration(got, cfg, PLAN), rtol=1e-9)
+    np.testing.assert_allclose(got["t_s"], virtual_duration(got, cfg, PLAN, sample_s),
+                               rtol=1e-9)
 
 
 def test_the_live_views_eta_reads_virtual_seconds_at_the_runs_time_scale():
