@@ -92,6 +92,12 @@ class EmulatedBench:
         devices are all emulated)."""
         return self.clock.now() - self._origin
 
+    def command_time(self) -> float:
+        """run_time as a device handles a command: on an instant clock the motions begun are
+        still under way (VirtualClock.start_time), so a device that looks at the time (an
+        interlock input) does not run axes started together one after the other."""
+        return self.clock.start_time() - self._origin
+
     def wait_s(self, seconds: float) -> float:
         """Real seconds a wait of `seconds` on the run's clock takes (settling, dwell, a
         suspension's recheck); an instant clock is advanced by them here and 0 returned."""
@@ -204,9 +210,10 @@ class _Builder:
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
                  kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str,
-                 run_time: Callable[[], float], line_key: LineKey):
+                 run_time: Callable[[], float], command_time: Callable[[], float],
+                 line_key: LineKey):
         self.config, self.sim, self.bench, self.bind = config, sim, bench, bind
-        self.run_time = run_time
+        self.run_time, self.command_time = run_time, command_time
         self.line_key = line_key
         self.devices: Mapping[str, Mapping[str, Any]] = config["devices"]
         self.chosen, self.kinds = chosen, kinds
@@ -234,7 +241,7 @@ class _Builder:
         spec = self._faults(name)
         if spec is None or spec.interlock is None:
             return None
-        return InterlockInput(spec.interlock, self.run_time)
+        return InterlockInput(spec.interlock, self.command_time)
 
     def _roles(self, name: str) -> dict[str, Mapping[str, Any]]:
         return {role: ax for role, ax in self.config["axes"].items() if ax["device"] == name}
@@ -328,7 +335,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     # the source drifts (and the faults' interlocks open) on the clock of the run store's t_s:
     # drift normalisation needs both
     build = _Builder(config, sim, chosen, kinds, bench, bind, run_time or bench.run_time,
-                     line_key)
+                     run_time or bench.command_time, line_key)
     try:
         build.stages()
         missing = set(config["axes"]) - set(build.readers)
