@@ -11,7 +11,9 @@ Failures: a device that reports an error (DeviceError) is not retried; a timeout
 or lost connection is retried (absolute moves and reads are safe to repeat) up to `retries`
 times, after which the run stops cleanly with the reason recorded. An invalid reading
 (InvalidReading) is retried the same way and, if every try gives one, recorded with power NaN
-and the flag "invalid", and the run goes on. Pause, resume and abort come from the terminal and
+and the flag "invalid", and the run goes on until more readings are invalid than the plan's
+`max_invalid_share` allows, or ends without one valid reading (gonio.invalid_readings):
+then it fails, naming the detector. Pause, resume and abort come from the terminal and
 the control channel (gonio.run_control); suspenders (gonio.suspenders) hold the run while a
 condition lasts and measure the interrupted point again. However a run ends short of
 completion (abort, signal, failure, an exception, a full disk), every axis that can be reached
@@ -48,6 +50,7 @@ from gonio.events import (
 )
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
+from gonio.invalid_readings import InvalidReadings
 from gonio.plan import (
     AUTO_RANGE,
     MOTION_ROLES,
@@ -131,13 +134,14 @@ class Engine:
     """Runs the readings `todo` (indices into the schedule `readings`) on an instrument and
     publishes what happens on `bus`; `session` is what the RunStarted event carries for the
     session record, `prompts` the operator prompts by reading index, `watch` the suspenders
-    (None: none)."""
+    (None: none), `invalid` the count of invalid readings (with those stored before this
+    session; gonio.invalid_readings)."""
 
     def __init__(self, instrument: Instrument, plan: Plan, readings: np.ndarray,
                  todo: list[int], bus: EventBus, *, stored: int = 0, retries: int = 2,
                  control: PauseControl | None = None, t0_epoch: float | None = None,
                  session: dict[str, Any] | None = None, prompts: dict[int, str] | None = None,
-                 watch: Watch | None = None):
+                 watch: Watch | None = None, invalid: InvalidReadings | None = None):
         self.inst, self.plan, self.readings, self.todo = instrument, plan, readings, todo
         self.bus, self.stored, self.retries = bus, stored, retries
         self.control = control or PauseControl()
@@ -145,6 +149,8 @@ class Engine:
         self.session = session or {}
         self.prompts = prompts or {}
         self.watch = watch
+        self.invalid = invalid or InvalidReadings(instrument.detector.name, len(readings),
+                                                  plan.max_invalid_share)
         self._tags = schedule_tags(readings)
         self._doing = "starting"
         self._sent: Stopping | None = None  # the last Stopping published
@@ -346,6 +352,9 @@ class Engine:
                     self.stored += 1
                     if self.watch:
                         self.watch.accept(record)
+                    self._count_invalid(record)
+                if self.invalid.none_valid():
+                    raise StopRun(self.invalid.none_valid())
                 self._stopping("completed", "")  # the last fsync: a refused one fails the run
             except (StopRun, StoreError) as exc:
                 status, reason = "failed", str(exc)
@@ -361,6 +370,14 @@ class Engine:
             self.control.hold()
             reason = self._finish(status, reason)
         return Outcome(status, reason, self.stored, signum)
+
+    def _count_invalid(self, record: dict[str, Any]) -> None:
+        """Count a stored reading; StopRun once the plan's share of invalid readings can no
+        longer be met."""
+        self.invalid.count(record)
+        too_many = self.invalid.too_many()
+        if too_many:
+            raise StopRun(too_many)
 
     def _paused(self, index: int) -> None:
         self.bus.publish(Paused(index, self.control.pause_reason()))

@@ -25,6 +25,7 @@ from gonio.engine import Engine, Outcome, configure_detector
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.events import EventBus, Subscriber
 from gonio.instrument import build_instrument
+from gonio.invalid_readings import InvalidReadings
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
 from gonio.recorder import RunRecorder
@@ -133,6 +134,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                 engine = Engine(inst, plan, sched.readings, todo, bus, stored=writer.stored,
                                 control=control, t0_epoch=writer.meta["t0_epoch"],
                                 prompts=operator_prompts(plan, sched.readings, todo),
+                                invalid=InvalidReadings(inst.detector.name, len(sched),
+                                                        plan.max_invalid_share, stored),
                                 watch=Watch(plan.suspend, stored) if plan.suspend else None,
                                 session={"sim": list(dev.emulated),
                                          "endpoints": {n: d.endpoint

@@ -24,6 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions.required = True
     b = actions.add_parser("build", help="calibration file from calibration runs")
     b.add_argument("runs", nargs="+", metavar="RUN", help="calibration run directories")
+    b.set_defaults(reads_run="runs")
     b.add_argument("--out", required=True, metavar="FILE", help="calibration file (.json)")
     b.add_argument("--eta", type=float, help="sample eta: also find the angle zero offsets "
                    "from the transmitted and specular peaks in the runs (default: the [sample] "
@@ -76,6 +77,7 @@ def _build(args: argparse.Namespace) -> int:
     from calibration import calfile
     from calibration.calibrate import build
     from gonio.store import open_run, utc_now
+    from gonio_cli.incomplete import incomplete_notes
 
     runs = [open_run(r) for r in args.runs]
     divergence = args.divergence_deg
@@ -87,6 +89,7 @@ def _build(args: argparse.Namespace) -> int:
                 eta=eta, aperture=_aperture(args, runs), divergence_deg=divergence)
     for note in cal.notes:
         print(f"gonio calibrate: {note}", file=sys.stderr)
+    cal.notes += incomplete_notes(runs)  # said on stderr before the build (gonio_cli.incomplete)
     print(calfile.save(cal, args.out))
     return 0
 
