@@ -182,7 +182,8 @@ def chi2_lines(out: dict) -> list[str]:
     times (calibration.fit), so the refit is the figure the fit line gives."""
     ms = out.get("multiple_scattering")
     held = out["chi2_dof_heldout"]
-    walked = f", multiple scattering by {ms['fitted_walks']} walks" if ms else ""
+    walked = (f", multiple scattering by {ms.get('fitted_walks', ms['walks'])} walks"
+              if ms else "")
     fitted = (f"  chi2/dof fitted {out['chi2_dof_fit']:.3g} ({out['n_fit']} points{walked}); "
               "held out " + ("n/a" if held is None else f"{held:.3g} ({out['n_heldout']} points)"))
     others = ", ".join(f"{c['distribution']}/{c['masking']} {c['chi2_dof_fit']:.3g}"
