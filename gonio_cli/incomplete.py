@@ -28,16 +28,18 @@ def runs_read(args: argparse.Namespace) -> list[str]:
 def warn_incomplete(verb: str, args: argparse.Namespace) -> None:
     """Print `VERB: warning: RUN: incomplete run: N of M readings stored, status S (reason)`
     for each incomplete run the verb reads; a run a scan is still writing is in progress, not
-    incomplete, and a directory that is no run is left to the verb's own error."""
+    incomplete, and a directory that is no run, or a damaged run, is left to the verb's own
+    error (one line)."""
     from gonio.completeness import being_written, completeness_of
     from gonio.store import open_run
 
     for path in runs_read(args):
         try:
             run = open_run(path)
-            if being_written(run):
+            lines = run.lines()
+            if lines.damaged or being_written(run):
                 continue
-            found = completeness_of(run)
+            found = completeness_of(run, len(lines.rows))
         except (GonioError, OSError):
             continue
         if not found.complete:
