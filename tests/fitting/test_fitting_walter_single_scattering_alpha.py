@@ -7,9 +7,10 @@ the fit's sigma.
 Two economies keep it to seconds on a cold cache, neither of which moves the figure beyond a
 few % of its uncertainty (bench/walter_single_scattering.py measures both):
 - the bench's multiple-scattering tables walk TEST_WALKS walks, not the configs' 2^24
-  (minutes per table): the fitted alpha moves by at most 1.3e-4 between 2^14 and 2^24 walks;
+  (minutes per table): the fitted alpha moves by at most 1.2e-4 between 2^14 and 2^24 walks
+  (1.3 % of the acid-etched glass's uncertainty);
 - only the sample's own distribution is fitted: the default fit prefers it for every sample
-  (by a chi-square difference of 1e5 or more) with the same alpha, and the GGX candidate of the
+  (by a chi-square difference of 1e3 or more) with the same alpha, and the GGX candidate of the
   narrow anti-glare lobe alone costs 10 s.
 """
 
