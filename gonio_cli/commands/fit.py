@@ -231,4 +231,10 @@ def summary(out: dict) -> str:
         t = out["emulator_truth"]
         lines.append(f"  emulator truth ([sim.sample]): {t['distribution']} alpha {t['alpha']}, "
                      f"eta {t['eta']:g}, {t['masking']} masking")
+        if "single_scattering_alpha" in t:
+            u = t.get("single_scattering_alpha_u")
+            lines.append(f"  alpha {t['alpha']} is the microsurface's, under multiple scattering; "
+                         "the default single-scattering fit (normal incidence) of this bench "
+                         f"returns {t['single_scattering_alpha']:g}"
+                         + ("" if u is None else f" +- {u:g}"))
     return "\n".join(lines)

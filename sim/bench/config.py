@@ -131,6 +131,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "correlation_length_um": (None, _optional(_number(0.0, 1e6, open_low=True))),
         "psd_exponent": (2.0, _number(1.0, 10.0, open_low=True)),
         "ms_walks": (1 << 16, _walks),
+        # informational (INFORMATIONAL): what a single-scattering fit of this bench returns
+        "single_scattering_alpha": (None, _optional(_number(*ALPHA_RANGE))),
+        "single_scattering_alpha_u": (None, _optional(_number(0.0, open_low=True))),
     },
     "aperture": {
         "diameter_mm": (10.0, _number(0.0, open_low=True)),
@@ -152,6 +155,13 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "arm_variation": (0.0, _number(0.0, 1.0)),
     },
 }
+
+
+#: [sim.sample] keys that document the emulator's truth and change nothing it does: the alpha a
+#: single-scattering fit (Walter's: normal incidence, `gonio fit RUN`) returns on this bench,
+#: where multiple scattering widens the lobe beyond the microsurface alpha, and its standard
+#: uncertainty (docs/bench.md, "Walter's samples").
+INFORMATIONAL = ("single_scattering_alpha", "single_scattering_alpha_u")
 
 
 #: [sim.<table>] key <- the key of the experimenter's description ([optics] or [sample]) that
@@ -210,6 +220,7 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
     sample_table = read_table(sim_config, "sample", sample)
     aperture = read_table(sim_config, "aperture", optics)
     retracted = sample_table.pop("retracted_beyond_deg")
+    informational(sample_table)
     spec = SampleSpec(**sample_table)
     if spec.kind != "hemisphere" and spec.lit_from != "air":
         raise SimConfigError(f'[sim.sample] lit_from: "hemisphere" needs kind = "hemisphere", '
@@ -231,6 +242,17 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
         retracted_beyond_deg=retracted,
         stray=InstrumentScatter(**read_table(sim_config, "stray")),
     )
+
+
+def informational(sample_table: dict[str, object]) -> dict[str, object]:
+    """Take the INFORMATIONAL keys out of a read [sim.sample] table (in place): those stated
+    (None: not stated); the uncertainty needs the value it belongs to."""
+    stated = {key: sample_table.pop(key) for key in INFORMATIONAL}
+    value, u = (stated[key] for key in INFORMATIONAL)
+    if u is not None and value is None:
+        raise SimConfigError("[sim.sample] single_scattering_alpha_u: needs "
+                             "single_scattering_alpha (the value it is the uncertainty of)")
+    return {key: value for key, value in stated.items() if value is not None}
 
 
 def _check_switches(spec: SampleSpec) -> None:
