@@ -102,7 +102,13 @@ def configure_detector(instrument: Instrument, plan: Plan, range_w: float | None
 
 
 class StopRun(Exception):
-    """The run cannot go on; the message is the reason recorded in meta.json."""
+    """The run cannot go on; the message is the reason recorded in meta.json. `resumable`:
+    whether `gonio scan --resume` can finish the run once the cause is fixed (not when the
+    readings already stored are what stopped it)."""
+
+    def __init__(self, reason: str, resumable: bool = True):
+        super().__init__(reason)
+        self.resumable = resumable
 
 
 @dataclass
@@ -113,6 +119,7 @@ class Outcome:
     reason: str
     done: int  # readings stored in total
     signum: int | None = None  # the signal that ended it (SIGTERM, SIGHUP)
+    resumable: bool = True  # whether `gonio scan --resume` can finish it (StopRun.resumable)
 
 
 def _plain(value: Any) -> Any:
@@ -332,7 +339,7 @@ class Engine:
     def run(self) -> Outcome:
         """Start the session, measure every reading of `todo`; always stops the axes and ends
         with a Stopped event carrying the outcome."""
-        status, reason, signum = "completed", "", None
+        status, reason, signum, resumable = "completed", "", None, True
         with self.control:
             try:
                 self.bus.publish(RunStarted(len(self.readings), self.stored, tuple(self.todo),
@@ -354,10 +361,11 @@ class Engine:
                         self.watch.accept(record)
                     self._count_invalid(record)
                 if self.invalid.none_valid():
-                    raise StopRun(self.invalid.none_valid())
+                    raise StopRun(self.invalid.none_valid(), resumable=False)
                 self._stopping("completed", "")  # the last fsync: a refused one fails the run
             except (StopRun, StoreError) as exc:
                 status, reason = "failed", str(exc)
+                resumable = getattr(exc, "resumable", True)
             except Terminated as exc:
                 status, reason, signum = "aborted", str(exc), exc.signum
             except (Aborted, KeyboardInterrupt) as exc:
@@ -369,7 +377,7 @@ class Engine:
                 raise
             self.control.hold()
             reason = self._finish(status, reason)
-        return Outcome(status, reason, self.stored, signum)
+        return Outcome(status, reason, self.stored, signum, resumable)
 
     def _count_invalid(self, record: dict[str, Any]) -> None:
         """Count a stored reading; StopRun once the plan's share of invalid readings can no
@@ -377,7 +385,7 @@ class Engine:
         self.invalid.count(record)
         too_many = self.invalid.too_many()
         if too_many:
-            raise StopRun(too_many)
+            raise StopRun(too_many, resumable=False)
 
     def _paused(self, index: int) -> None:
         self.bus.publish(Paused(index, self.control.pause_reason()))

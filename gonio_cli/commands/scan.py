@@ -158,8 +158,10 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
         except KeyboardInterrupt:
             print(f"{verb}: warning: no plot: interrupted", file=sys.stderr)
     if outcome.status != "completed":
-        again = (f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
-                 if outcome.status == "failed" else "")
+        again = ("" if outcome.status != "failed"
+                 else f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
+                 if outcome.resumable else " (the readings stored stopped it: once that is "
+                 "fixed, start a new scan)")
         print(f"{verb}: run {outcome.status} after {outcome.done} readings: "
               f"{outcome.reason}{again}", file=sys.stderr)
     else:

@@ -217,5 +217,6 @@ def test_a_detector_without_one_valid_reading_fails_the_scan(tmp_path, share, st
     assert flagged(run.readings(), INVALID).all() and len(run.readings()) == stored
     assert f"gonio scan: run failed after {stored} readings: detector 'pm100' gave no valid " \
            "reading" in proc.stderr
+    assert "start a new scan" in proc.stderr and "--resume" not in proc.stderr
     assert Completeness.from_json(completeness_of(run).to_json()).text().startswith(
         f"incomplete run: {stored} of 25 readings stored, status failed")
