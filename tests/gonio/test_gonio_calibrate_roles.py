@@ -99,16 +99,12 @@ def test_the_readme_line_builds_from_the_three_shipped_runs(tmp_path):
 
 
 def angle_plan(tmp_path, sample_id: str, reference: bool) -> str:
-    """calib-angles with fewer points (its grids' steps doubled), mounting `sample_id`, its
-    [sample] naming it an angle reference or not, on sim-serial whose cabinet also holds a
-    ground glass without multiple scattering ("rough": no tables to walk)."""
+    """calib-angles with fewer points (its grids' steps doubled), mounting `sample_id` of
+    sim-serial's cabinet, its [sample] naming it an angle reference or not."""
     import tomllib
 
-    config = load_example("sim-serial")
-    config["sim"]["samples"]["rough"] = {"distribution": "ggx", "alpha": 0.394,
-                                         "multiple_scattering": False}
     plan = tomllib.loads((PLANS / "calib-angles.toml").read_text())
-    plan["instrument"] = str(write_toml(tmp_path / "sim-serial.toml", config))
+    plan["instrument"] = str(EXAMPLES / "instruments" / "sim-serial.toml")
     plan["repeats"] = 2
     for grid in plan["grid"]:
         grid["theta_o_deg"]["step"] *= 2
@@ -118,10 +114,11 @@ def angle_plan(tmp_path, sample_id: str, reference: bool) -> str:
     return write_toml(tmp_path / f"{sample_id}-{reference}.toml", plan)
 
 
-def test_an_angle_fit_on_a_ground_glass_is_refused_unless_forced(tmp_path):
-    # the plan mounts a ground glass and does not name it an angle reference: its peaks are no
-    # smooth sample's, the fit misses them by far more than their noise
-    run = scanned(angle_plan(tmp_path, "rough", reference=False), tmp_path)
+def test_an_angle_fit_on_the_ground_glass_is_refused_unless_forced(tmp_path):
+    # the plan mounts sim-serial's diffuse reference and does not name it an angle reference:
+    # its peaks hold the multiple scattering the fit's single-scattering model lacks, and the
+    # fit misses them by far more than their noise
+    run = scanned(angle_plan(tmp_path, "reference-ground-glass", reference=False), tmp_path)
     cal_path = tmp_path / "cal.json"
     line = refused(gonio_cli("calibrate", "build", run, "--out", cal_path),
                    "gonio calibrate: error: angles: the zero-offset fit has chi2/dof ",
