@@ -44,8 +44,8 @@ from sim.devices.pty_server import LOOPBACK
 from sim.emulator_factories import EmulatedDevice, Light
 from sim.served_resources import serve_resource
 
-SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
-            "faults", "devices")
+SIM_KEYS = ("time_scale", "seed", "source", "sample", "samples", "aperture", "alignment", "stray",
+            "detector", "faults", "devices")
 ROLES = ("sample", "arm", "azimuth", "elevation")
 #: A reading taken before this bench started: its commanded positions ({role: deg}) and its
 #: range setting (full scale in W; None = autorange).

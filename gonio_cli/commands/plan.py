@@ -36,6 +36,7 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
     sample, optics = plan.sample, cfg.optics
     lines = [f"  sample: {sample.id!r}, {sample.kind}, eta {sample.eta:g}"
              + (f", k {sample.k:g}" if sample.k else "") + f", lit from {sample.lit_from}"
+             + (f", a reference for the {sample.reference}" if sample.reference else "")
              if sample else "  sample: none (add a [sample] table to the plan: id, kind, eta)"]
     if optics:
         lines.append(f"  optics: {optics.wavelength_nm:g} nm ({optics.bandwidth_nm:g} nm FWHM), "
