@@ -83,7 +83,7 @@ def test_a_cold_run_killed_and_resumed_cold_is_the_uninterrupted_run_bit_for_bit
     stored = open_run(run_dir).lines().rows
     assert 9 <= len(stored) < whole.meta["planned"]
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache-second"))  # cold again
-    resumed = gonio_cli("scan", "--resume", run_dir, "--time-scale", "inf", timeout=600)
+    resumed = gonio_cli("scan", "--resume", run_dir, timeout=600)
     assert run_dir_of(resumed) == run_dir
     run = completed_unretried(resumed)
     second = tables_of(run)  # the killed session ended without its record
