@@ -303,8 +303,9 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     what a port or resource is known by, so that a chain's or a bus's port written two ways
     (a device file and a symlink to it) is one line (gonio hands it its ports' hold's key);
     by default as written. upcoming: the commanded positions ({role: deg}) of the readings
-    to come (a plan's schedule): the multiple-scattering tables they need are built before
-    serving instead (sim.bench.scene.Bench.prepare, walks told to `progress`).
+    to come (a plan's schedule): with a sample whose multiple scattering is tabulated, the
+    tables they need are built before serving instead (sim.bench.scene.Bench.prepare, walks
+    told to `progress`).
     """
     kinds = _kinds(config)
     sim = _sim_table(config, kinds)
@@ -336,7 +337,8 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
 
         source = build_power_source(sim, lambda: read(build.readers), build.wall,
                                     optics=config.get("optics"), sample=sample)
-        if detectors and upcoming is not None:  # no reading walks a table inside its reply
+        if detectors and upcoming is not None and source.bench.sample.tabulated:
+            # no reading walks a table inside its reply (its evaluation compiles the kernels)
             bench.tables = source.bench.prepare(upcoming, progress)
             since = tables.built(source.bench)
             bench._planes_since = lambda: tables.built(source.bench) - since

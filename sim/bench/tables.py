@@ -91,7 +91,7 @@ def prepare(bench, positions: Iterable[Mapping[str, float]],
     will ask for: read from the store where it holds them, else walked (told to `progress`)."""
     start = time.perf_counter()
     report = TablesPrepared(walks=bench.sample.spec.ms_walks)
-    pending = places(bench, positions) if bench.sample.tabulated else []
+    pending = places(bench, positions) if bench.sample.tabulated else []  # no tables
     to_walk: list[tuple[object, tuple]] = []
     while pending:
         wanted, pending = _missed(bench, pending)
