@@ -68,16 +68,18 @@ class _Devices:
 
 @contextmanager
 def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch: float,
-             stored: np.ndarray) -> Iterator[_Devices]:
+             stored: np.ndarray, upcoming: np.ndarray, progress: bool | None
+             ) -> Iterator[_Devices]:
     """The devices to open; under --sim the emulators, told the `stored` schedule rows (what
-    an emulated detector of a resumed run has measured already)."""
+    an emulated detector of a resumed run has measured already) and the `upcoming` ones (whose
+    tables they build before serving, with a progress line unless progress is False)."""
     if sim is False:
         yield _Devices(cfg)
         return
     from gonio.simulate import simulation, visit  # only --sim touches sim
 
     with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
-                    [visit(row, cfg.axes) for row in stored]) as s:
+                    [visit(row, cfg.axes) for row in stored], upcoming, progress) as s:
         yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,))
 
 
@@ -113,8 +115,9 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
     before the run directory is made: a signal in the first milliseconds of a run ends it as
     one at any other moment does."""
     control = control or PauseControl()
-    done = sched.readings[[row["index"] for row in stored]]
-    with _devices(cfg, sim, plan, t0_epoch, done) as dev, \
+    stored_at = [row["index"] for row in stored]
+    done, upcoming = sched.readings[stored_at], np.delete(sched.readings, stored_at)
+    with _devices(cfg, sim, plan, t0_epoch, done, upcoming, progress) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
         configure_detector(inst, plan, None)
         if check is not None:

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from gonio.config import InstrumentConfig
     from gonio.plan import Plan
+    from gonio.simulate import TablesEstimate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,6 +53,19 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
     return "\n".join(lines)
 
 
+def tables_line(tables: TablesEstimate, estimate_s: float) -> str:
+    """The emulated bench's table building before the first move, and the duration with it:
+    cached (as the estimate above) and cold (this machine, now)."""
+    from gonio.plan import format_duration
+
+    if not tables.planes:
+        return "  multiple-scattering tables: none to walk (cached, or none needed)"
+    return (f"  multiple-scattering tables: {tables.planes} planes to walk before the first move "
+            f"({tables.walks} walks each), about {format_duration(tables.seconds)} on this "
+            f"machine now; duration with the tables cached {format_duration(estimate_s)}, "
+            f"cold {format_duration(estimate_s + tables.seconds)}")
+
+
 def _state(polarisation: str | float) -> str:
     """A polarisation state as text: its name, or a linear polariser's angle in degrees."""
     return polarisation if isinstance(polarisation, str) else f"linear at {polarisation:g} deg"
@@ -72,6 +86,10 @@ def run(args: argparse.Namespace) -> int:
         time_scale = emulated_time_scale(cfg)
     sched = build_schedule(plan, cfg, time_scale)
     print(summary(plan, cfg, sched))
+    if args.sim:
+        from gonio.simulate import tables_estimate
+
+        print(tables_line(tables_estimate(cfg, plan, sched), sched.estimate_s))
     print(description(plan, cfg))
     if args.list:
         print(listing(sched))
