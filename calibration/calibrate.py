@@ -24,6 +24,7 @@ from calibration.beam import beam_power
 from calibration.calfile import Calibration
 from calibration.detector import (
     correct_power,
+    correction_sigma_w,
     dark_for,
     dark_offsets,
     gain_ratios,
@@ -31,6 +32,7 @@ from calibration.detector import (
     range_key,
     ranges_read_together,
 )
+from calibration.routing import holds_specular_scan
 from calibration.values import CalibrationError, Measured
 from gonio.reading_flags import INVALID, flagged
 
@@ -41,47 +43,64 @@ STAGES = ("sample", "arm", "elevation", "azimuth")  # PeakScan's stage order
 # the readings (a peak outside its scan, source drift, a nonlinear range, noise underestimated);
 # the fits scale their sigmas by sqrt(chi2/dof), which does not cover a biased value.
 CHI2_DOF_WARN = 3.0
+#: The parts of a calibration made by a fit with a chi2/dof, and what each fit is called.
+FITS = {"gains": "gain", "angles": "zero-offset"}
 
 
-def averaged_points(rows: np.ndarray, side: str) -> angle_cal.PeakScan:
+def averaged_points(rows: np.ndarray, side: str, common_w: np.ndarray | None = None
+                    ) -> angle_cal.PeakScan:
     """Average the repeats of each plan point (at least two each) of one scan; their standard
     errors from the noise law pooled over the scan (detector.pooled_sem, with each point's
-    range: an autoranged scan's read noise follows the range)."""
-    groups, where, full_scale = [], [], []
+    range: an autoranged scan's read noise follows the range), with the errors the repeats
+    share (`common_w`, per row: the dark offset's and gain's, beam_normalised) added."""
+    groups, where, full_scale, common = [], [], [], []
     for p in np.unique(rows["point"]):
-        sel = rows[rows["point"] == p]
+        at = rows["point"] == p
+        sel = rows[at]
         if len(sel) < 2:
             raise CalibrationError(f"point {int(p)}: angle calibration needs repeated readings "
                                    "(set repeats >= 2 in the plan) to know their noise")
         groups.append(np.asarray(sel["power_w"], dtype=np.float64))
         where.append([float(sel[f"{role}_deg"].mean()) for role in STAGES])
         full_scale.append(float(sel["range_w"].max()))
+        common.append(0.0 if common_w is None else float(common_w[at].mean()))
     stages = np.array(where).T
+    sem = pooled_sem(groups, np.array(full_scale))
     return angle_cal.PeakScan(side, *stages, np.array([g.mean() for g in groups]),
-                              pooled_sem(groups, np.array(full_scale)))
+                              np.hypot(sem, common))
 
 
-def peak_scans(readings: np.ndarray) -> list[angle_cal.PeakScan]:
+def peak_scans(readings: np.ndarray, common_w: np.ndarray | None = None
+               ) -> list[angle_cal.PeakScan]:
     """The transmitted scan at normal incidence and each specular scan (one per reported sample
-    angle) in the sample readings, their repeats averaged."""
-    rows = readings[readings["kind"] == "sample"]
-    trans = rows[(rows["side"] == "transmission") & (np.abs(rows["sample_deg"]) < 0.5)]
-    refl = rows[rows["side"] == "reflection"]
-    if len(trans) == 0 or len(refl) == 0:
+    angle) in the sample readings, their repeats averaged (common_w: as averaged_points, one
+    per reading)."""
+    sample = readings["kind"] == "sample"
+    rows = readings[sample]
+    common = None if common_w is None else common_w[sample]
+    trans = (rows["side"] == "transmission") & (np.abs(rows["sample_deg"]) < 0.5)
+    refl = rows["side"] == "reflection"
+    if not trans.any() or not refl.any():
         raise CalibrationError("angle calibration needs a transmission scan at normal incidence "
                                "and a reflection scan across the specular peak")
-    scans = [averaged_points(trans, "transmission")]
-    for s in np.unique(np.round(refl["sample_deg"], 3)):
-        scans.append(averaged_points(refl[np.abs(refl["sample_deg"] - s) < 1e-3], "reflection"))
+
+    def scan(select: np.ndarray, side: str) -> angle_cal.PeakScan:
+        return averaged_points(rows[select], side, None if common is None else common[select])
+
+    scans = [scan(trans, "transmission")]
+    for s in np.unique(np.round(rows["sample_deg"][refl], 3)):
+        scans.append(scan(refl & (np.abs(rows["sample_deg"] - s) < 1e-3), "reflection"))
     return scans
 
 
 def angle_offsets(readings: np.ndarray, eta: float, aperture_half_angle_deg: float = 0.0,
-                  divergence_deg: float = 0.0) -> angle_cal.OffsetFit:
+                  divergence_deg: float = 0.0, common_w: np.ndarray | None = None
+                  ) -> angle_cal.OffsetFit:
     """Sample and arm offsets (degrees) from the transmitted peak at normal incidence and the
     specular peak(s) in the readings (sample readings; powers already dark-corrected and
-    beam-normalised), by the model fit of calibration.angles."""
-    return angle_cal.fit_offsets(peak_scans(readings), eta, aperture_half_angle_deg,
+    beam-normalised, common_w their shared errors as beam_normalised gives them), by the
+    model fit of calibration.angles."""
+    return angle_cal.fit_offsets(peak_scans(readings, common_w), eta, aperture_half_angle_deg,
                                  divergence_deg)
 
 
@@ -96,18 +115,23 @@ def covering(gains: dict[str, Measured] | None,
 
 
 def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
-                    gains: dict[str, Measured] | None) -> np.ndarray:
+                    gains: dict[str, Measured] | None) -> tuple[np.ndarray, np.ndarray]:
     """Readings with dark- and gain-corrected power (gain 1 on ranges the gains do not cover),
     divided by the beam power at each reading's time (BeamPower.smooth_at) when the run has beam
-    readings (a drift during a peak scan would otherwise skew the peak and bias its centre)."""
+    readings (a drift during a peak scan would otherwise skew the peak and bias its centre);
+    and each normalised power's sigma from the dark offset and gain of its range
+    (detector.correction_sigma_w, normalised alike)."""
     out = readings.copy()
-    out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks,
-                                   covering(gains, readings))
+    gains = covering(gains, readings)
+    out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks, gains)
+    common = correction_sigma_w(out["power_w"], readings["range_w"], darks, gains)
     beam = out["kind"] == "beam"
     if beam.any():
         model = beam_power(out["t_s"][beam], out["power_w"][beam])
-        out["power_w"] = out["power_w"] / model.smooth_at(out["t_s"])[0]
-    return out
+        level = model.smooth_at(out["t_s"])[0]
+        out["power_w"] = out["power_w"] / level
+        common = common / level
+    return out, common
 
 
 def drift_free(run: np.ndarray, darks: dict[str, Measured]) -> np.ndarray:
@@ -161,13 +185,25 @@ def detector_notes(readings: np.ndarray, darks: dict[str, Measured],
     return notes
 
 
-def fit_warning(part: str, fit: str, chi2_dof: float) -> list[str]:
+def fit_chi2_dof(cal: Calibration) -> dict[str, float]:
+    """{part: chi2/dof} of the calibration's fits (FITS) that were made."""
+    fits = {"gains": cal.linearity, "angles": cal.angle_fit}
+    return {part: float(fit["chi2_dof"]) for part, fit in fits.items() if fit is not None}
+
+
+def bad_fits(cal: Calibration) -> dict[str, float]:
+    """{part: chi2/dof} of the fits whose chi2/dof exceeds CHI2_DOF_WARN: the model misses the
+    readings, and the values may be biased (`gonio calibrate build` refuses them)."""
+    return {part: chi2 for part, chi2 in fit_chi2_dof(cal).items() if chi2 > CHI2_DOF_WARN}
+
+
+def fit_warning(part: str, chi2_dof: float) -> list[str]:
     """A warning line if a fit's chi2/dof exceeds CHI2_DOF_WARN, else none."""
     if chi2_dof <= CHI2_DOF_WARN:
         return []
-    return [f"{part}: warning: the {fit} fit has chi2/dof {chi2_dof:.3g} > {CHI2_DOF_WARN:g}: "
-            "the model misses the readings by more than their noise (its sigmas are scaled by "
-            "sqrt(chi2/dof), but its values may be biased)"]
+    return [f"{part}: warning: the {FITS[part]} fit has chi2/dof {chi2_dof:.3g} > "
+            f"{CHI2_DOF_WARN:g}: the model misses the readings by more than their noise (its "
+            "sigmas are scaled by sqrt(chi2/dof), but its values may be biased)"]
 
 
 def _ranges_text(keys: list[str]) -> str:
@@ -176,13 +212,14 @@ def _ranges_text(keys: list[str]) -> str:
 
 def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
           eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
-          divergence_deg: float = 0.0) -> Calibration:
+          divergence_deg: float = 0.0, angle_runs: list[bool] | None = None) -> Calibration:
     """Everything the runs' readings (one array per run) can determine: darks always; gains
     from the runs that read stage positions on several ranges, or on one fixed range each
     (an autoranged run reads a position on one range only);
-    angle offsets, when eta is given, from the runs holding a specular scan (each normalised by
-    its own beam readings: times restart with every run), modelled with the aperture (if given)
-    and the beam's divergence half-angle; a beam summary per run. `notes` says what could not
+    angle offsets, when eta is given, from the runs angle_runs flags (default: those holding a
+    specular scan, routing.holds_specular_scan), each normalised by its own beam readings
+    (times restart with every run), modelled with the aperture (if given) and the beam's
+    divergence half-angle; a beam summary per run. `notes` says what could not
     be calibrated and why, and which fit fits badly; a CalibrationError for what eta asks.
     Readings flagged invalid (the detector had none) are left out."""
     runs = [run[~flagged(run, INVALID)] for run in runs]
@@ -199,12 +236,14 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
                          "exponents": {k: v.to_json() for k, v in gains.exponents.items()}}
     cal.notes += detector_notes(readings, darks, cal.gains)
     if cal.linearity is not None:
-        cal.notes += fit_warning("gains", "gain", cal.linearity["chi2_dof"])
+        cal.notes += fit_warning("gains", cal.linearity["chi2_dof"])
     if eta is None:
         cal.notes.append("angles: not calibrated: no eta of a reference sample (--eta, or the "
                          "[sample] of a run with a specular scan)")
     else:
-        _angles(cal, runs, eta, aperture, divergence_deg)
+        chosen = [holds_specular_scan(run) for run in runs] if angle_runs is None else angle_runs
+        _angles(cal, [run for run, take in zip(runs, chosen, strict=True) if take], eta,
+                aperture, divergence_deg)
     if aperture is None:
         cal.notes.append("aperture: not calibrated: no geometry (--aperture-geometry or the "
                          "runs' [optics]) and no beam scan (--aperture-scan) given")
@@ -218,20 +257,21 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
 
 def _angles(cal: Calibration, runs: list[np.ndarray], eta: float,
             aperture: tuple[Measured, Measured, str] | None, divergence_deg: float) -> None:
-    """The angle zero offsets into cal, from the runs holding a specular scan."""
-    peak_runs = []
+    """The angle zero offsets into cal, from the runs given (each holding a specular scan)."""
+    peak_runs, common = [], []
     for k, run in enumerate(runs):
-        if np.any((run["kind"] == "sample") & (run["side"] == "reflection")):
-            normalised = beam_normalised(run, cal.dark_offsets_w, cal.gains)
-            normalised["point"] += k * 10_000_000  # plan points are per run
-            peak_runs.append(normalised)
+        normalised, shared = beam_normalised(run, cal.dark_offsets_w, cal.gains)
+        normalised["point"] += k * 10_000_000  # plan points are per run
+        peak_runs.append(normalised)
+        common.append(shared)
     if not peak_runs:
         raise CalibrationError("angle calibration (--eta) needs a run with a specular "
                                "scan (examples/plans/calib-angles.toml)")
     half_angle = 0.0 if aperture is None else aperture[1].value
-    offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle, divergence_deg)
+    offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle, divergence_deg,
+                            np.concatenate(common))
     cal.sample_offset_deg, cal.arm_offset_deg = offsets.sample_offset, offsets.arm_offset
     cal.angle_fit = {"distribution": offsets.distribution, "alpha": offsets.alpha.to_json(),
                      "chi2_dof": offsets.chi2_dof, "points": offsets.n_points,
                      "aperture_half_angle_deg": half_angle, "divergence_deg": divergence_deg}
-    cal.notes += fit_warning("angles", "zero-offset", offsets.chi2_dof)
+    cal.notes += fit_warning("angles", offsets.chi2_dof)

@@ -93,7 +93,7 @@ def _aperture(readings: np.ndarray, fig: Any) -> None:
 
 
 def _angles(readings: np.ndarray, fig: Any) -> None:
-    scans = peak_scans(beam_normalised(readings, dark_offsets(readings), None))
+    scans = peak_scans(beam_normalised(readings, dark_offsets(readings), None)[0])
     axes = _panels(fig, len(scans))
     for ax, scan in zip(axes, scans, strict=True):
         s = float(np.mean(scan.sample_deg))

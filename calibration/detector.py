@@ -226,6 +226,20 @@ def dark_for(darks: dict[str, Measured], range_w: float) -> Measured:
     return darks[nearest]
 
 
+def correction_sigma_w(power_w: np.ndarray, range_w: np.ndarray, darks: dict[str, Measured],
+                       gains: dict[str, Measured] | None) -> np.ndarray:
+    """Per corrected power (correct_power's output), its sigma from the calibration's own
+    errors, the dark offset and gain of its range: common to every reading on that range, so
+    the scatter of repeats does not show them."""
+    out = np.empty(len(power_w))
+    for r in np.unique(range_w):
+        sel = range_w == r
+        gain = Measured(1.0, 0.0) if gains is None else gains[range_key(r)]
+        out[sel] = np.hypot(dark_for(darks, r).sigma / gain.value,
+                            power_w[sel] * gain.sigma / gain.value)
+    return out
+
+
 def correct_power(power_w: np.ndarray, range_w: np.ndarray, darks: dict[str, Measured],
                   gains: dict[str, Measured] | None) -> np.ndarray:
     """Readings -> power on the reference range's scale: (m - d_r) / g_r per reading."""

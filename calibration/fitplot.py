@@ -23,10 +23,22 @@ def model_curve(result: FitResult, theta_i_deg: float, transmission: bool,
     return theta_deg, result.predict(wi, wo)
 
 
+def fit_warning(result: FitResult) -> str:
+    """The warning a fit that does not describe its data carries (chi2/dof, fitted or held out,
+    above calibration.exports.model.MAX_CHI2_DOF, which model exports refuse), else ""."""
+    from calibration.exports.model import MAX_CHI2_DOF, worst_chi2_dof
+
+    worst, which = worst_chi2_dof(result.chi2_dof_fit, result.chi2_dof_heldout)
+    if worst <= MAX_CHI2_DOF:
+        return ""
+    return (f"WARNING: {which} χ²/dof {worst:.3g} > {MAX_CHI2_DOF:g}: the model does not "
+            "describe the data within their uncertainties")
+
+
 def fit_title(data: ReducedData, result: FitResult, title: str = "") -> str:
     """The overlay's title: the run's (title: its name, sample and nominal eta), then the fitted
     parameters, eta only where it tells something new (fitted, or held at another value),
-    then chi2/dof on the fitted and held-out points."""
+    then chi2/dof on the fitted and held-out points, and fit_warning's line for a bad fit."""
     a = np.atleast_1d(result.alpha)
     eta = ""
     if "eta" in result.names:
@@ -38,7 +50,8 @@ def fit_title(data: ReducedData, result: FitResult, title: str = "") -> str:
     lines = [title] if title else []
     lines += [f"{result.distribution} fit α = {', '.join(f'{v:.4g}' for v in a)}{eta}",
               f"χ²/dof fitted {result.chi2_dof_fit:.4g}, held out {held}"]
-    return "\n".join(lines)
+    warning = fit_warning(result)
+    return "\n".join([*lines, warning] if warning else lines)
 
 
 def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
@@ -87,7 +100,8 @@ def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
                 bottom.set_ylabel("(data − model)/σ", fontsize=8)  # σ: data ⊕ model
             if sel.any():
                 top.legend(fontsize=7)
-    fig.suptitle(fit_title(data, result, title), fontsize=9)
+    fig.suptitle(fit_title(data, result, title), fontsize=9,
+                 color="C3" if fit_warning(result) else "k")
     fig.tight_layout()
     out_png = Path(out_png)
     fig.savefig(out_png, dpi=110)

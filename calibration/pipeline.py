@@ -35,18 +35,23 @@ def reduce_run(run: str | Path | Run, calibration_file: str | Path | None = None
     """Calibrated ReducedData of a run (its directory, or the Run already open, whose readings
     are then read once; the calibration's name goes into meta["calibration"],
     the [optics] beam divergence into meta["beam_divergence_deg"] for the fit; an all-emulated
-    run's [sim] table is meta["sim"], calibration.reduce). shot_noise_w: the --shot-noise-w
+    run's [sim] table is meta["sim"], calibration.reduce; whether the run is complete is
+    meta["completeness"], gonio.completeness). shot_noise_w: the --shot-noise-w
     flag (calibration.reduce.optics_of); subtract_signature: subtract the bench's own scatter
     that the run's signature readings measured, signature_share: the share of the net signal
     above which a point is flagged (calibration.signature; None: its default);
     slope_options: the fit whose model carries the angle errors into the budget
     (`reduce_stored`)."""
+    from gonio.completeness import completeness_of
     from gonio.store import Run, open_run
 
     if not isinstance(run, Run):
         run = open_run(run)
-    return reduce_stored(run, run.readings(), calibration_file, shot_noise_w,
-                         subtract_signature, signature_share, slope_options)
+    readings = run.readings()
+    data = reduce_stored(run, readings, calibration_file, shot_noise_w, subtract_signature,
+                         signature_share, slope_options)
+    data.meta["completeness"] = completeness_of(run, len(readings)).to_json()
+    return data
 
 
 def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path | None = None,

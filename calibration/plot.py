@@ -120,9 +120,20 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
 
 
 def plot_title(name: str, meta: dict) -> str:
-    """The run's name and what was measured: the [sample] id and nominal eta."""
+    """The run's name and what was measured: the [sample] id and nominal eta; a second line
+    for an incomplete run (meta["completeness"], completeness_line)."""
     sample = meta.get("sample") or {}
-    return f"{name}: sample {sample.get('id', '?')}, eta {meta.get('eta', float('nan')):g}"
+    return (f"{name}: sample {sample.get('id', '?')}, eta {meta.get('eta', float('nan')):g}"
+            + completeness_line(meta.get("completeness")))
+
+
+def completeness_line(completeness: dict | None) -> str:
+    """"\n" and gonio.completeness's line for an incomplete run, else ""."""
+    if not completeness or completeness["complete"]:
+        return ""
+    from gonio.completeness import Completeness
+
+    return "\n" + Completeness.from_json(completeness).text()
 
 
 def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
@@ -133,6 +144,7 @@ def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool =
     subtract_signature as calibration.pipeline.reduce_run. A calibration run (its record's
     `calibrates`) gets the plot of what it measures instead (calibration.calplot)."""
     from calibration.pipeline import reduce_run
+    from gonio.completeness import completeness_of
     from gonio.record import run_record
     from gonio.store import open_run
 
@@ -145,9 +157,10 @@ def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool =
         if fit:
             raise CalibrationError(f"{run_dir} calibrates the {kind}: no BSDF to fit (gonio "
                                    f"calibrate build {run_dir} --out CAL.json uses it)")
-        title = f"{run_dir.name}: {kind} calibration"
+        title = (f"{run_dir.name}: {kind} calibration"
+                 + completeness_line(completeness_of(run).to_json()))
         return plot_calibration(run.readings(), kind, out_png or run_dir / "plot.png", title)
-    data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature)
+    data = reduce_run(run, calibration_file, shot_noise_w, subtract_signature)
     title = plot_title(run_dir.name, data.meta)
     if fit:
         from calibration.fit import fit as fit_model

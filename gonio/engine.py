@@ -11,7 +11,9 @@ Failures: a device that reports an error (DeviceError) is not retried; a timeout
 or lost connection is retried (absolute moves and reads are safe to repeat) up to `retries`
 times, after which the run stops cleanly with the reason recorded. An invalid reading
 (InvalidReading) is retried the same way and, if every try gives one, recorded with power NaN
-and the flag "invalid", and the run goes on. A reading's t_s and the waits (settling, dwell, a
+and the flag "invalid", and the run goes on until more readings are invalid than the plan's
+`max_invalid_share` allows, or ends without one valid reading (gonio.invalid_readings):
+then it fails, naming the detector. A reading's t_s and the waits (settling, dwell, a
 suspension's recheck and timeout) are on the run's clock (gonio.run_clock: the wall clock, or
 an all-emulated bench's virtual one). Pause, resume and abort come from the terminal and
 the control channel (gonio.run_control); suspenders (gonio.suspenders) hold the run while a
@@ -50,6 +52,7 @@ from gonio.events import (
 )
 from gonio.geometry import sample_angles
 from gonio.instrument import Instrument, real_seconds
+from gonio.invalid_readings import InvalidReadings
 from gonio.plan import (
     AUTO_RANGE,
     MOTION_ROLES,
@@ -102,7 +105,13 @@ def configure_detector(instrument: Instrument, plan: Plan, range_w: float | None
 
 
 class StopRun(Exception):
-    """The run cannot go on; the message is the reason recorded in meta.json."""
+    """The run cannot go on; the message is the reason recorded in meta.json. `resumable`:
+    whether `gonio scan --resume` can finish the run once the cause is fixed (not when the
+    readings already stored are what stopped it)."""
+
+    def __init__(self, reason: str, resumable: bool = True):
+        super().__init__(reason)
+        self.resumable = resumable
 
 
 @dataclass
@@ -113,6 +122,7 @@ class Outcome:
     reason: str
     done: int  # readings stored in total
     signum: int | None = None  # the signal that ended it (SIGTERM, SIGHUP)
+    resumable: bool = True  # whether `gonio scan --resume` can finish it (StopRun.resumable)
 
 
 def _plain(value: Any) -> Any:
@@ -134,13 +144,16 @@ class Engine:
     """Runs the readings `todo` (indices into the schedule `readings`) on an instrument and
     publishes what happens on `bus`; `session` is what the RunStarted event carries for the
     session record, `prompts` the operator prompts by reading index, `watch` the suspenders
-    (None: none), `clock` the run's clock (None: the wall clock since t0_epoch)."""
+    (None: none), `invalid` the count of invalid readings (with those stored before this
+    session; gonio.invalid_readings), `clock` the run's clock (None: the wall clock since
+    t0_epoch)."""
 
     def __init__(self, instrument: Instrument, plan: Plan, readings: np.ndarray,
                  todo: list[int], bus: EventBus, *, stored: int = 0, retries: int = 2,
                  control: PauseControl | None = None, t0_epoch: float | None = None,
                  session: dict[str, Any] | None = None, prompts: dict[int, str] | None = None,
-                 watch: Watch | None = None, clock: RunClock | None = None):
+                 watch: Watch | None = None, invalid: InvalidReadings | None = None,
+                 clock: RunClock | None = None):
         self.inst, self.plan, self.readings, self.todo = instrument, plan, readings, todo
         self.bus, self.stored, self.retries = bus, stored, retries
         self.control = control or PauseControl()
@@ -149,6 +162,8 @@ class Engine:
         self.session = session or {}
         self.prompts = prompts or {}
         self.watch = watch
+        self.invalid = invalid or InvalidReadings(instrument.detector.name, len(readings),
+                                                  plan.max_invalid_share)
         self._tags = schedule_tags(readings)
         self._doing = "starting"
         self._sent: Stopping | None = None  # the last Stopping published
@@ -331,7 +346,7 @@ class Engine:
     def run(self) -> Outcome:
         """Start the session, measure every reading of `todo`; always stops the axes and ends
         with a Stopped event carrying the outcome."""
-        status, reason, signum = "completed", "", None
+        status, reason, signum, resumable = "completed", "", None, True
         with self.control:
             try:
                 self.bus.publish(RunStarted(len(self.readings), self.stored, tuple(self.todo),
@@ -351,9 +366,13 @@ class Engine:
                     self.stored += 1
                     if self.watch:
                         self.watch.accept(record)
+                    self._count_invalid(record)
+                if self.invalid.none_valid():
+                    raise StopRun(self.invalid.none_valid(), resumable=False)
                 self._stopping("completed", "")  # the last fsync: a refused one fails the run
             except (StopRun, StoreError) as exc:
                 status, reason = "failed", str(exc)
+                resumable = getattr(exc, "resumable", True)
             except Terminated as exc:
                 status, reason, signum = "aborted", str(exc), exc.signum
             except (Aborted, KeyboardInterrupt) as exc:
@@ -365,7 +384,15 @@ class Engine:
                 raise
             self.control.hold()
             reason = self._finish(status, reason)
-        return Outcome(status, reason, self.stored, signum)
+        return Outcome(status, reason, self.stored, signum, resumable)
+
+    def _count_invalid(self, record: dict[str, Any]) -> None:
+        """Count a stored reading; StopRun once the plan's share of invalid readings can no
+        longer be met."""
+        self.invalid.count(record)
+        too_many = self.invalid.too_many()
+        if too_many:
+            raise StopRun(too_many, resumable=False)
 
     def _paused(self, index: int) -> None:
         self.bus.publish(Paused(index, self.control.pause_reason()))

@@ -1,8 +1,10 @@
 """Checking a run directory (`gonio check`) and writing a repaired copy of a damaged one.
 
 A check reads every line of readings.jsonl (see `gonio.store.scan_lines`), compares plan.json,
-config.json and the register maps with the digests meta.json recorded at the start, and
-checks that the sessions' first/last indices agree with the lines. A repaired copy is a new
+config.json and the register maps with the digests meta.json recorded at the start, checks
+that the sessions' first/last indices agree with the lines, and reports whether the run holds
+what it planned (gonio.completeness: an intact run short of its plan is "intact but
+incomplete", not "clean"). A repaired copy is a new
 run directory with every valid reading under its own index; the indices it lacks are listed
 in meta.json's `repair.dropped`, and `gonio scan --resume COPY` measures exactly those (then
 whatever the run had not reached).
@@ -16,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gonio.completeness import Completeness, completeness_of
 from gonio.errors import RunError
 from gonio.store import (
     CRC,
@@ -36,12 +39,14 @@ COPIED = ("plan.toml", "instrument.toml", "plan.json", "config.json")
 
 @dataclass
 class Report:
-    """What a check found: the lines, other problems (digests, sessions), and notes."""
+    """What a check found: the lines, other problems (digests, sessions), notes, and whether
+    the run holds what it planned (gonio.completeness)."""
 
     run: Run
     lines: Lines
     problems: list[str]
     notes: list[str]
+    completeness: Completeness
 
     @property
     def damaged(self) -> bool:
@@ -56,8 +61,19 @@ class Report:
         out += [f"  {READINGS} line {d.line}: {d.problem}" for d in lines.damaged]
         out += [f"  {p}" for p in self.problems]
         out += [f"  note: {n}" for n in self.notes]
-        out.append("damaged" if self.damaged else "clean")
+        out.append(f"  {self.completeness.text()}")
+        out.append(self.verdict())
         return "\n".join(out)
+
+    def verdict(self) -> str:
+        """The last line: damaged; intact but incomplete (with the counts and status); or
+        clean (intact and complete)."""
+        if self.damaged:
+            return "damaged"
+        found = self.completeness
+        if not found.complete:
+            return f"intact but incomplete: {found.counts()} stored, status {found.status}"
+        return "clean"
 
 
 def session_problems(meta: dict[str, Any], lines: Lines) -> list[str]:
@@ -101,7 +117,7 @@ def check(run: Run) -> Report:
     if lines.missing() and pending:
         notes.append(f"repaired copy: {describe_indices(lines.missing())} still to measure "
                      f"(gonio scan --resume {run.path})")
-    return Report(run, lines, problems, notes)
+    return Report(run, lines, problems, notes, completeness_of(run, len(lines.rows)))
 
 
 def repair(report: Report, out: Path) -> Path:

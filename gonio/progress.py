@@ -38,3 +38,25 @@ class Progress:
     def close(self) -> None:
         """Finish the bar."""
         self._bar.close()
+
+
+class TablesProgress:
+    """The emulated bench's table building before a scan's first move (sim.bench.tables): a
+    tqdm bar of planes walked of planes to walk, with the time left, made at the first call
+    (so nothing shows when every plane is cached)."""
+
+    def __init__(self, walks: int, disable: bool | None = None):
+        """walks: walks per plane (for the label); disable: as Progress's."""
+        self._walks, self._disable = walks, disable
+        self._bar: tqdm | None = None
+
+    def __call__(self, walked: int, to_walk: int) -> None:
+        """Show `walked` planes of `to_walk`; close the bar when they are all walked."""
+        if self._bar is None:
+            self._bar = tqdm(total=to_walk, desc=f"multiple-scattering tables ({self._walks} "
+                             f"walks a plane)", unit="plane", file=sys.stderr,
+                             dynamic_ncols=True, disable=self._disable, smoothing=0.3)
+        self._bar.total = to_walk
+        self._bar.update(walked - self._bar.n)
+        if walked == to_walk:
+            self._bar.close()

@@ -16,6 +16,7 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
+from gonio.completeness import completeness_of
 from gonio.optics import optics_of_config
 from gonio.sample import sample_of_plan
 from gonio.store import Run
@@ -48,7 +49,8 @@ def _sessions(meta: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 def run_record(run: Run) -> dict[str, Any]:
     """The run's record, flat and ordered: run facts (`calibrates`: what a calibration run
-    measures, None for a BSDF run), the optics, the sample, the calibration and the devices
+    measures, None for a BSDF run; status, reason and gonio.completeness's facts: complete,
+    stored_readings, planned_readings), the optics, the sample, the calibration and the devices
     per session (None where the run does not know a value)."""
     meta = run.meta
     optics = meta.get("optics")
@@ -62,8 +64,8 @@ def run_record(run: Run) -> dict[str, Any]:
     return {
         "run": run.path.name, "plan": meta.get("plan_name"),
         "calibrates": meta.get("calibrates"),
-        "instrument": meta.get("instrument_name"), "status": meta.get("status"),
-        "reason": meta.get("reason"), "started_utc": meta.get("started_utc"),
+        "instrument": meta.get("instrument_name"), **completeness_of(run).to_json(),
+        "started_utc": meta.get("started_utc"),
         "stopped_utc": meta.get("stopped_utc"), "emulated": meta.get("sim"),
         "seeds": meta.get("seeds", {}),
         "wavelength_nm": wavelength, "bandwidth_nm": o.get("bandwidth_nm"),

@@ -25,6 +25,7 @@ from gonio.engine import Engine, Outcome, configure_detector
 from gonio.errors import ConfigError, PlanError, RunError
 from gonio.events import EventBus, Subscriber
 from gonio.instrument import build_instrument
+from gonio.invalid_readings import InvalidReadings
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
 from gonio.recorder import RunRecorder
@@ -70,17 +71,20 @@ class _Devices:
 
 @contextmanager
 def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch: float,
-             stored: np.ndarray, clock_start_s: float) -> Iterator[_Devices]:
+             stored: np.ndarray, upcoming: np.ndarray, progress: bool | None,
+             clock_start_s: float) -> Iterator[_Devices]:
     """The devices to open; under --sim the emulators, told the `stored` schedule rows (what
-    an emulated detector of a resumed run has measured already) and, all emulated, the run's
-    time this session starts at (clock_start_s)."""
+    an emulated detector of a resumed run has measured already), the `upcoming` ones (whose
+    tables they build before serving, with a progress line unless progress is False) and,
+    all emulated, the run's time this session starts at (clock_start_s)."""
     if sim is False:
         yield _Devices(cfg)
         return
     from gonio.simulate import simulation, visit  # only --sim touches sim
 
     with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
-                    [visit(row, cfg.axes) for row in stored], clock_start_s) as s:
+                    [visit(row, cfg.axes) for row in stored], upcoming, progress,
+                    clock_start_s) as s:
         yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,), s.clock)
 
 
@@ -118,8 +122,9 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
     one at any other moment does. clock_start_s: the run's time this session starts at on an
     all-emulated bench's virtual clock (resume_clock_s)."""
     control = control or PauseControl()
-    done = sched.readings[[row["index"] for row in stored]]
-    with _devices(cfg, sim, plan, t0_epoch, done, clock_start_s) as dev, \
+    stored_at = [row["index"] for row in stored]
+    done, upcoming = sched.readings[stored_at], np.delete(sched.readings, stored_at)
+    with _devices(cfg, sim, plan, t0_epoch, done, upcoming, progress, clock_start_s) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
         configure_detector(inst, plan, None)
         if check is not None:
@@ -140,6 +145,8 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                                 control=control, t0_epoch=writer.meta["t0_epoch"],
                                 clock=dev.clock,
                                 prompts=operator_prompts(plan, sched.readings, todo),
+                                invalid=InvalidReadings(inst.detector.name, len(sched),
+                                                        plan.max_invalid_share, stored),
                                 watch=Watch(plan.suspend, stored) if plan.suspend else None,
                                 session={"sim": list(dev.emulated),
                                          "endpoints": {n: d.endpoint

@@ -1,4 +1,5 @@
-"""What is measured: the plan's [sample] table (id, kind, nominal index, lit side, notes).
+"""What is measured: the plan's [sample] table (id, kind, nominal index, lit side, the
+calibration it is a reference for, notes).
 
 Reduction takes the sample's kind, index and lit side from here (never from the emulator's
 [sim]); every run's record carries the whole block, as the standards ask.
@@ -16,6 +17,10 @@ from gonio.fields import Fields, stored_table
 KINDS = ("hemisphere", "slab", "conductor")
 #: Which side the light comes from: the rough face's air side, or through the hemisphere.
 LIT_FROM = ("air", "hemisphere")
+#: What a reference sample is for: "angles", a smooth or mirror sample whose microfacet model
+#: the angle-offset fit uses (calibration.angles); "detector", a diffuse sample whose lobe links
+#: the detector's ranges. `gonio calibrate build` fits angle offsets only from an "angles" one.
+REFERENCES = ("angles", "detector")
 #: Nominal indices gonio reduces and fits (glasses, and a conductor's real part).
 ETA_RANGE = (0.01, 10.0)
 
@@ -23,7 +28,8 @@ ETA_RANGE = (0.01, 10.0)
 @dataclass(frozen=True)
 class SampleInfo:
     """[sample]: `eta` is the glass index (a conductor's real part, with `k` its extinction);
-    `azimuth_reference` says what the sample azimuth 0 is lined up with."""
+    `azimuth_reference` says what the sample azimuth 0 is lined up with; `reference` what
+    calibration the sample is a reference for (REFERENCES), empty for a sample measured."""
 
     id: str
     kind: str
@@ -31,6 +37,7 @@ class SampleInfo:
     k: float = 0.0
     lit_from: str = "air"
     description: str = ""
+    reference: str = ""
     azimuth_reference: str = ""
     operator: str = ""
     notes: str = ""
@@ -52,6 +59,7 @@ def parse_sample(f: Fields) -> SampleInfo:
         k=f.number("k", 0.0, low=0.0, high=20.0),
         lit_from=f.string("lit_from", "air", choices=LIT_FROM),
         description=f.string("description", ""),
+        reference=f.string("reference", "", choices=REFERENCES),
         azimuth_reference=f.string("azimuth_reference", ""),
         operator=f.string("operator", ""),
         notes=f.string("notes", ""),

@@ -20,8 +20,12 @@ from drivers.port_identity import port_key
 from gonio.config import InstrumentConfig, parse_config
 from gonio.errors import ConfigError
 from gonio.events import Moved, ReadingDiscarded, Stopping
-from gonio.plan import AUTO_RANGE
+from gonio.plan import AUTO_RANGE, Plan, Schedule
+from gonio.progress import TablesProgress
 from gonio.run_clock import RunClock
+from sim.bench import build_bench, tables
+from sim.bench.sample import SampleSpec
+from sim.bench.tables import TablesEstimate
 from sim.devices.pty_server import LOOPBACK
 from sim.emulate import EmulatedBench, Visit, start, time_scale_of
 
@@ -57,6 +61,9 @@ class Simulation:
                                  requests_served=self.bench.request_counts())
             if self.clock is not None:
                 event.session["clock_end_s"] = self.clock.now()
+            tables = self.bench.tables_record()
+            if tables is not None:
+                event.session["ms_tables"] = tables
 
 
 def visit(row: np.void, roles: Iterable[str]) -> Visit:
@@ -98,31 +105,49 @@ def point_at(cfg: InstrumentConfig, endpoints: dict[str, str]) -> InstrumentConf
 
 def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float],
            sample: dict | None = None, bind: str = LOOPBACK, t0_epoch: float | None = None,
-           visited: Iterable[Visit] = ()) -> EmulatedBench:
+           visited: Iterable[Visit] = (), upcoming: np.ndarray | None = None,
+           progress: bool | None = None) -> EmulatedBench:
     """The emulators of `devices`; with a real device among the config's, the source drifts
     in wall seconds since t0_epoch (the engine's clock then), else on the bench's own."""
     wall = None if t0_epoch is None or set(devices) == set(cfg.devices) else (
         lambda: time.time() - t0_epoch)
     try:
         return start(cfg.raw, devices, lambda: positions, sample, bind, wall, visited,
-                     line_key=port_key)
+                     line_key=port_key, upcoming=_positions(upcoming, cfg.axes),
+                     progress=_tables_progress(cfg, progress))
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
+
+
+def _positions(rows: np.ndarray | None, roles: Iterable[str]) -> list[dict[str, float]] | None:
+    """Schedule rows' commanded positions by role (None: no schedule)."""
+    return None if rows is None else [visit(row, roles)[0] for row in rows]
+
+
+def _tables_progress(cfg: InstrumentConfig, progress: bool | None) -> TablesProgress:
+    """The table building's progress line: shown unless progress is False (--no-progress), on
+    a terminal or not (minutes of silence before a scan's first move read as a hang)."""
+    walks = cfg.sim.get("sample", {}).get("ms_walks", SampleSpec.ms_walks)
+    return TablesProgress(walks, disable=progress is False)
 
 
 @contextmanager
 def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
                sample: dict | None = None, t0_epoch: float | None = None,
-               visited: Iterable[Visit] = (), clock_start_s: float = 0.0
+               visited: Iterable[Visit] = (), upcoming: np.ndarray | None = None,
+               progress: bool | None = None, clock_start_s: float = 0.0
                ) -> Iterator[Simulation]:
     """Run the emulators of a config for the duration of a `with` block; `sample` is the
     plan's [sample] table (the emulated sample's kind and index unless [sim] states them);
-    t0_epoch the run's start and visited its stored readings (sim.emulate.start). With every
-    device emulated the run's clock is the bench's virtual clock, reading clock_start_s as
-    the block begins (a resume: where the run's last session ended)."""
+    t0_epoch the run's start and visited its stored readings (sim.emulate.start); upcoming
+    the schedule rows still to measure, whose multiple-scattering tables are built first
+    (progress: as the scan's bar, False hides it). With every device emulated the run's
+    clock is the bench's virtual clock, reading clock_start_s as the block begins (a
+    resume: where the run's last session ended)."""
     devices = resolve_devices(cfg, names)
     positions: dict[str, float] = {}
-    bench = _start(cfg, devices, positions, sample, t0_epoch=t0_epoch, visited=visited)
+    bench = _start(cfg, devices, positions, sample, t0_epoch=t0_epoch, visited=visited,
+                   upcoming=upcoming, progress=progress)
     try:
         pointed = point_at(cfg, {n: e.endpoint for n, e in bench.endpoints.items()})
         stages_emulated = all(ax.device in devices for ax in cfg.axes.values())
@@ -134,6 +159,17 @@ def simulation(cfg: InstrumentConfig, names: list[str] | None = None,
         yield Simulation(pointed, scale, devices, positions, bench, clock)
     finally:
         bench.stop()
+
+
+def tables_estimate(cfg: InstrumentConfig, plan: Plan, sched: Schedule) -> TablesEstimate:
+    """The multiple-scattering table planes a scan of `sched` on the config's emulated bench
+    would walk before its first move (those the cache does not hold), and the time that takes
+    on this machine now (sim.bench.tables.estimate)."""
+    try:
+        bench = build_bench(cfg.sim, cfg.raw.get("optics"), plan.raw.get("sample"))
+    except ValueError as exc:
+        raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
+    return tables.estimate(bench, _positions(sched.readings, cfg.axes))
 
 
 def emulated_time_scale(cfg: InstrumentConfig) -> float:

@@ -27,6 +27,7 @@ import os  # noqa: E402
 from drivers.base import DriverError  # noqa: E402
 from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
 from gonio_cli import emulator_truth  # noqa: E402
+from gonio_cli.incomplete import warn_incomplete  # noqa: E402
 
 # Module names under gonio_cli.commands, in the order `gonio --help` lists them.
 COMMANDS = [
@@ -82,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         args = build_parser().parse_args(argv)
         verb = f"gonio {args.command}"
+        warn_incomplete(verb, args)
         return int(args.func(args) or 0)
     except (GonioError, DriverError) as exc:
         print(f"{verb}: error: {exc}", file=sys.stderr)

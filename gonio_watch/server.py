@@ -2,8 +2,9 @@
 scripts from the package's assets, and JSON built from the run directory, nothing else.
 
     GET  /                the page (assets: /watch.js, /plot.js, /watch.css)
-    GET  /status.json     status, readings stored, planned, elapsed_s, eta_s, positions,
-                          suspensions, the control channel's state (gonio_watch.status)
+    GET  /status.json     status, readings stored, planned, incomplete (an ended run's
+                          line, else null), elapsed_s, eta_s, positions, suspensions, the
+                          control channel's state (gonio_watch.status)
     GET  /data.json?since=N&version=V
                           the raw readings stored after the first N, and the reduced BSDF
                           points changed since reduction version V (gonio_watch.reduction)

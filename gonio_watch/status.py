@@ -1,6 +1,7 @@
 """The live view's status of a run, from what the run directory holds (meta.json, the readings
 so far) and, when the scan answers on its control channel, its live state: status, readings
-stored of planned, elapsed time and ETA, the stages' last positions, suspensions."""
+stored of planned, elapsed time and ETA, the stages' last positions, suspensions; and, once
+the run has ended, whether it is incomplete (gonio.completeness)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
+from gonio.completeness import Completeness
 from gonio.plan import MOTION_ROLES
 
 ENDED = ("completed", "aborted", "failed")  # meta.json's statuses of a run that has ended
@@ -125,6 +127,8 @@ def status_of(name: str, config: dict[str, Any], meta: dict[str, Any],
     planned = int(meta.get("planned") or 0)
     last = rows[-1] if rows else None
     eta, eta_from = eta_s(meta, rows, planned) if running else (None, f"run {status}")
+    found = Completeness(meta.get("status", "unknown"), meta.get("reason", ""), len(rows),
+                         planned or None)
     sample = meta.get("sample") or {}
     return {
         "run": name, "plan": meta.get("plan_name"), "instrument": meta.get("instrument_name"),
@@ -132,6 +136,7 @@ def status_of(name: str, config: dict[str, Any], meta: dict[str, Any],
         "status": status, "meta_status": meta.get("status"), "reason": meta.get("reason", ""),
         "live": live.reply, "control": {"enabled": live.state is not None, "why": live.why},
         "readings": len(rows), "planned": planned,
+        "incomplete": None if running or found.complete else found.text(),
         "elapsed_s": elapsed_s(meta, running, now, last["t_s"] if last else None),
         "eta_s": eta, "eta_from": eta_from,
         "positions": positions(config, last),

@@ -28,7 +28,8 @@ from collections.abc import Callable, Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.bench import build_power_source
+from sim.bench import build_power_source, tables
+from sim.bench.tables import Progress, TablesPrepared
 from sim.device_kinds import (
     DetectorEmulator,
     EmulatorKind,
@@ -47,8 +48,8 @@ from sim.devices.pty_server import LOOPBACK
 from sim.emulator_factories import EmulatedDevice, Light
 from sim.served_resources import serve_resource
 
-SIM_KEYS = ("time_scale", "seed", "source", "sample", "aperture", "alignment", "stray", "detector",
-            "faults", "devices")
+SIM_KEYS = ("time_scale", "seed", "source", "sample", "samples", "aperture", "alignment", "stray",
+            "detector", "faults", "devices")
 ROLES = ("sample", "arm", "azimuth", "elevation")
 #: A reading taken before this bench started: its commanded positions ({role: deg}) and its
 #: range setting (full scale in W; None = autorange).
@@ -79,6 +80,9 @@ class EmulatedBench:
     emulators: dict[str, Any] = field(default_factory=dict)
     injectors: dict[str, list[FaultInjector]] = field(default_factory=dict)
     meters: list[Any] = field(default_factory=list)  # the emulated detectors' models
+    #: what start's prepare built (None: no schedule given), and the bench's planes built since
+    tables: TablesPrepared | None = None
+    _planes_since: Callable[[], int] = lambda: 0
     _stops: list[Callable[[], None]] = field(default_factory=list)
     _origin: float = 0.0  # the clock's reading at the run's time 0
 
@@ -105,6 +109,13 @@ class EmulatedBench:
             self.clock.advance(seconds)
             return 0.0
         return self.clock.real_seconds(seconds)
+
+    def tables_record(self) -> dict[str, float] | None:
+        """The tables prepared before the first reading, with the planes built inside readings
+        since (a position the schedule did not foresee), for the session's record."""
+        if self.tables is None:
+            return None
+        return {**self.tables.to_json(), "in_readings": self._planes_since()}
 
     def fault_counts(self) -> dict[str, dict[str, int]]:
         """Faults injected so far, by device and kind (devices with faults configured)."""
@@ -307,7 +318,8 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
           positions: Callable[[], Mapping[str, float]] | None = None,
           sample: Mapping[str, Any] | None = None, bind: str = LOOPBACK,
           run_time: Callable[[], float] | None = None, visited: Iterable[Visit] = (),
-          line_key: LineKey = str) -> EmulatedBench:
+          line_key: LineKey = str, upcoming: Iterable[Mapping[str, float]] | None = None,
+          progress: Progress | None = None) -> EmulatedBench:
     """Serve the config's devices (all, or those named) and return the running bench, ready:
     with a detector among them, the model's kernels and what a reading where the stages stand
     needs (sim.bench.scene.Bench.warm_up) are built before it is served.
@@ -321,7 +333,10 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
     visited: the readings the run took before this bench (a resume), see Visit. line_key:
     what a port or resource is known by, so that a chain's or a bus's port written two ways
     (a device file and a symlink to it) is one line (gonio hands it its ports' hold's key);
-    by default as written.
+    by default as written. upcoming: the commanded positions ({role: deg}) of the readings
+    to come (a plan's schedule): with a sample whose multiple scattering is tabulated, the
+    tables they need are built before serving instead (sim.bench.scene.Bench.prepare, walks
+    told to `progress`).
     """
     kinds = _kinds(config)
     sim = _sim_table(config, kinds)
@@ -352,7 +367,12 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
 
         source = build_power_source(sim, lambda: read(build.readers), build.run_time,
                                     optics=config.get("optics"), sample=sample)
-        if detectors:  # the first reading must not stall past a driver's timeout: the model
+        if detectors and upcoming is not None and source.bench.sample.tabulated:
+            # no reading walks a table inside its reply (its evaluation compiles the kernels)
+            bench.tables = source.bench.prepare(upcoming, progress)
+            since = tables.built(source.bench)
+            bench._planes_since = lambda: tables.built(source.bench) - since
+        elif detectors:  # the first reading must not stall past a driver's timeout: the model
             # compiled and what a reading where the stages stand needs built, before serving
             source.bench.warm_up(read(build.readers))
         build.detectors(source, lambda: _place(read(build.targets)),

@@ -14,7 +14,7 @@ from model.optics.aperture import order_for
 from model.optics.directions import in_plane_directions
 from model.optics.quadrature import cap_rule
 from sim.bench import build_bench
-from sim.bench.config import read_table
+from sim.bench.config import informational, read_table
 from sim.bench.sample import Sample
 from sim.devices.photodiode import ELEMENTARY_CHARGE_C, PhotodiodeModel
 
@@ -34,10 +34,13 @@ class EmulatorTruth:
         self.sim_config, self.optics, self.described_sample = sim_config, optics, sample
         table = read_table(sim_config, "sample", sample)
         alpha = table["alpha"]
-        #: The emulated sample: distribution, alpha (one value or (x, y)), eta, masking.
+        #: The emulated sample: distribution, alpha (one value or (x, y)), eta, masking, and
+        #: the single-scattering-equivalent alpha and its uncertainty where [sim.sample]
+        #: states them (sim.bench.config.INFORMATIONAL).
         self.sample = {"distribution": table["distribution"],
                        "alpha": alpha[0] if alpha[0] == alpha[1] else list(alpha),
-                       "eta": table["eta"], "masking": table["masking"]}
+                       "eta": table["eta"], "masking": table["masking"],
+                       **informational(table)}
 
     def shot_noise_w(self, wavelength_nm: float) -> float:
         """Shot-noise variance of one sample of the emulated meter per watt of signal, W^2/W:

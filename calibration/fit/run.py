@@ -1,5 +1,8 @@
 """fit(): every candidate (distribution x masking) solved on the chosen subset, the preferred one
-chosen, refined and scored on the held-out points, as a FitResult."""
+chosen, refined and scored on the held-out points, as a FitResult. Each candidate's
+`chi2_dof_fit` is the one it was ranked by; with multiple scattering the chosen one is refitted
+with its term walked MS_CENTRE_WALKS times over, and its `chi2_dof_refit` is the result's
+chi2_dof_fit."""
 
 from __future__ import annotations
 
@@ -76,8 +79,10 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         raise FitError("; ".join(failures))
     problem, best = _preferred(scored, options.distributions)
     chi2_ranked = best.chi2  # the candidates were ranked with their tables as first walked
+    refit = {}
     if problem.orders is not None:
         best = refine(problem, best)
+        refit = {"chi2_dof_refit": best.chi2_dof}  # the chosen one's, as the result gives it
     if best.at_bound:
         raise FitError(f"fit {problem.distribution}: {', '.join(best.at_bound)} ended at its "
                        "bound; the data do not support this model (check eta, the subset "
@@ -95,7 +100,8 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         preferred_by=None if runner_up is None else runner_up - chi2_ranked,
         candidates=[{"distribution": p.distribution, "masking": p.masking,
                      "chi2_dof_fit": s.chi2_dof,
-                     "parameters": dict(zip(p.names, map(float, s.values), strict=True))}
+                     "parameters": dict(zip(p.names, map(float, s.values), strict=True)),
+                     **(refit if p is problem else {})}
                     for p, s in sorted(scored, key=lambda item: item[1].chi2)]
         + [{"failed": msg} for msg in failures],
         optics=optics,

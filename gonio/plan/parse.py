@@ -21,6 +21,7 @@ import numpy as np
 
 from gonio.errors import PlanError
 from gonio.fields import Fields, read_toml
+from gonio.invalid_readings import DEFAULT_MAX_INVALID_SHARE
 from gonio.sample import SampleInfo, parse_sample
 from gonio.suspenders import SuspendSpec, parse_suspend
 
@@ -76,6 +77,8 @@ class Plan:
     signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
     calibrates: str | None = None  # one of CALIBRATES for a calibration run; None: a BSDF
     suspend: SuspendSpec | None = None  # [suspend]: conditions that hold the scan (suspenders)
+    # the share of the planned readings that may be invalid before the run fails
+    max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
 
 
 def load_plan(path: str | Path) -> Plan:
@@ -116,6 +119,8 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         signature=_signature(top),
         calibrates=top.string("calibrates", None, choices=CALIBRATES),
         suspend=parse_suspend(top.table_of("suspend"), beam_every) if top.has("suspend") else None,
+        max_invalid_share=top.number("max_invalid_share", DEFAULT_MAX_INVALID_SHARE, low=0.0,
+                                     high=1.0),
     )
     top.done()
     return plan

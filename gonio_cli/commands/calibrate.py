@@ -1,8 +1,9 @@
 """`gonio calibrate`: build a calibration file from calibration runs, record one in a run, show
 one. `build RUN [RUN...] --out CAL.json [--eta N] [--aperture-geometry D_MM DIST_MM |
---aperture-scan RUN]`; `use RUN CAL.json`; `show CAL.json`. The aperture, the beam and its
-divergence come from the runs' [optics] where no option gives them; build says on stderr, one
-line each, what it could not calibrate and which fit fits badly."""
+--aperture-scan RUN] [--force]`; `use RUN CAL.json`; `show CAL.json`. Each RUN serves what its
+plan's `calibrates` says (calibration.routing); the aperture, the beam and its divergence come
+from the runs' [optics] where no option gives them; build says on stderr, one line each, what
+it could not calibrate, and refuses a fit the model does not describe unless --force."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import sys
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from calibration.calfile import Calibration
     from calibration.values import Measured
     from gonio.store import Run
 
@@ -23,17 +25,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True
     b = actions.add_parser("build", help="calibration file from calibration runs")
-    b.add_argument("runs", nargs="+", metavar="RUN", help="calibration run directories")
+    b.add_argument("runs", nargs="+", metavar="RUN", help="calibration run directories, each "
+                   "used for what its plan calibrates (angles, aperture, detector; darks from "
+                   "all)")
+    b.set_defaults(reads_run="runs")
     b.add_argument("--out", required=True, metavar="FILE", help="calibration file (.json)")
     b.add_argument("--eta", type=float, help="sample eta: also find the angle zero offsets "
-                   "from the transmitted and specular peaks in the runs (default: the [sample] "
-                   "eta of the runs with a specular scan)")
+                   "from the transmitted and specular peaks in the angle runs (default: their "
+                   "[sample] eta)")
     group = b.add_mutually_exclusive_group()
     group.add_argument("--aperture-geometry", nargs=2, type=float, metavar=("D_MM", "DIST_MM"),
                        help="aperture diameter and distance from the sample, mm (default: "
                        "the runs' [optics] aperture_diameter_mm and aperture_distance_mm)")
     group.add_argument("--aperture-scan", metavar="RUN",
-                       help="run with an arm scan across the straight beam (sample retracted)")
+                       help="run with an arm scan across the straight beam (sample retracted; "
+                       "a RUN whose plan calibrates the aperture is one)")
     b.add_argument("--beam-diameter-mm", type=float,
                    help="beam diameter at the aperture for --aperture-scan (default: the "
                    "run's [optics] beam_diameter_mm widened by divergence_deg over "
@@ -41,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--divergence-deg", type=_half_angle_deg, metavar="DEG",
                    help="beam divergence half-angle for the angle-offset fit (default: the "
                    "runs' [optics] divergence_deg, else 0)")
+    b.add_argument("--force", action="store_true",
+                   help="write a fit with chi2/dof above 3, or angle offsets from a sample "
+                   "its plan does not name a reference for them, with a warning")
     u = actions.add_parser("use", help="record in a run which calibration applies to it")
     u.add_argument("run", help="run directory")
     u.add_argument("calibration", help="calibration file")
@@ -75,41 +84,69 @@ def run(args: argparse.Namespace) -> int:
 def _build(args: argparse.Namespace) -> int:
     from calibration import calfile
     from calibration.calibrate import build
+    from calibration.routing import route
     from gonio.store import open_run, utc_now
+    from gonio_cli.incomplete import incomplete_notes
 
     runs = [open_run(r) for r in args.runs]
     divergence = args.divergence_deg
     if divergence is None:
         divergence = _optics(runs, "divergence_deg") or 0.0
     readings = [r.readings() for r in runs]
-    eta = args.eta if args.eta is not None else _sample_eta(runs, readings)
+    routes = route(runs, readings, open_run(args.aperture_scan) if args.aperture_scan else None,
+                   args.aperture_geometry is not None)
+    angle_runs = [run for run, take in zip(runs, routes.angles, strict=True) if take]
+    eta = args.eta if args.eta is not None else _sample_eta(angle_runs)
     cal = build(readings, utc_now(), [str(r.path) for r in runs],
-                eta=eta, aperture=_aperture(args, runs), divergence_deg=divergence)
+                eta=eta, aperture=_aperture(args, runs, routes.aperture_scan),
+                divergence_deg=divergence, angle_runs=routes.angles)
+    _refuse_or_warn(cal, angle_runs, args.force)
     for note in cal.notes:
         print(f"gonio calibrate: {note}", file=sys.stderr)
+    cal.notes += incomplete_notes(runs)  # said on stderr before the build (gonio_cli.incomplete)
     print(calfile.save(cal, args.out))
     return 0
 
 
-#: Incidence beyond which the sample is edge-on (retracted): no specular scan there.
-RETRACTED_DEG = 89.0
+def _refuse_or_warn(cal: Calibration, angle_runs: list[Run], force: bool) -> None:
+    """Refuse (one CalibrationError line) a part whose fit has chi2/dof above CHI2_DOF_WARN,
+    or angle offsets from a sample its plan does not name a reference for the angles; with
+    --force add a warning note for the second (the first has its note already)."""
+    from calibration.calibrate import CHI2_DOF_WARN, FITS, bad_fits
+    from calibration.values import CalibrationError
+
+    problems = [f"{part}: the {FITS[part]} fit has chi2/dof {chi2:.3g} > {CHI2_DOF_WARN:g} "
+                "(the model misses the readings by more than their noise)"
+                for part, chi2 in bad_fits(cal).items()]
+    if cal.angle_fit is not None and (unnamed := _not_angle_references(angle_runs)):
+        text = (f"angles: the [sample] of {unnamed} is not named a reference for them "
+                '([sample] reference = "angles": a smooth or mirror sample whose model fits '
+                "the peaks)")
+        problems.append(text)
+        if force:
+            cal.notes.append(text.replace("angles: ", "angles: warning: ", 1))
+    if problems and not force:
+        raise CalibrationError("; ".join(problems) + ": nothing written (--force writes it)")
 
 
-def _sample_eta(runs: list[Run], readings: list) -> float | None:
+def _not_angle_references(angle_runs: list[Run]) -> str:
+    """The angle runs whose plan's [sample] is not named an angle reference, listed ('' if
+    none)."""
+    from gonio.sample import sample_of_plan
+
+    return ", ".join(str(run.path) for run in angle_runs
+                     if getattr(sample_of_plan(run.plan, str(run.path)), "reference", "")
+                     != "angles")
+
+
+def _sample_eta(angle_runs: list[Run]) -> float | None:
     """The reference sample's index for the angle offsets when --eta is not given: the [sample]
-    eta of the runs holding a specular scan, if they have one and agree (else None)."""
-    import numpy as np
-
+    eta of the angle runs, if they have one and agree (else None)."""
     from calibration.values import CalibrationError
     from gonio.sample import sample_of_plan
 
-    etas = {}
-    for run, r in zip(runs, readings, strict=True):
-        sample = sample_of_plan(run.plan, str(run.path))
-        specular = ((r["kind"] == "sample") & (r["side"] == "reflection")
-                    & (np.abs(r["plan_theta_i_deg"]) < RETRACTED_DEG))
-        if sample is not None and specular.any():
-            etas[str(run.path)] = sample.eta
+    etas = {str(run.path): sample.eta for run in angle_runs
+            if (sample := sample_of_plan(run.plan, str(run.path))) is not None}
     if len(set(etas.values())) > 1:
         raise CalibrationError("the specular scans' [sample] eta differ ("
                                + ", ".join(f"{v:g} in {p}" for p, v in etas.items())
@@ -131,20 +168,20 @@ def _optics(runs: list[Run], key: str) -> float | None:
     return None if value is None else float(value)
 
 
-def _aperture(args: argparse.Namespace, runs: list[Run]
+def _aperture(args: argparse.Namespace, runs: list[Run], scan: Run | None
               ) -> tuple[Measured, Measured, str] | None:
-    """(solid angle, half-angle, method): measured by --aperture-scan, else from
-    --aperture-geometry or the runs' [optics] aperture_diameter_mm and aperture_distance_mm;
-    None without any of them."""
+    """(solid angle, half-angle, method): measured from the aperture scan (--aperture-scan, or
+    a RUN whose plan calibrates the aperture), else from --aperture-geometry or the runs'
+    [optics] aperture_diameter_mm and aperture_distance_mm; None without any of them."""
     import math
 
     from calibration import aperture
     from calibration.values import Measured
-    from gonio.store import open_run
 
-    if args.aperture_scan:
-        return (*_aperture_from_scan(open_run(args.aperture_scan), args.beam_diameter_mm,
-                                     args.divergence_deg), "beam-scan")
+    if scan is not None:
+        named = "--aperture-scan" if args.aperture_scan else "aperture scan"
+        return (*_aperture_from_scan(scan, named, args.beam_diameter_mm, args.divergence_deg),
+                "beam-scan")
     diameter_mm, distance_mm = args.aperture_geometry or (
         _optics(runs, "aperture_diameter_mm"), _optics(runs, "aperture_distance_mm"))
     if diameter_mm is None or distance_mm is None:
@@ -154,7 +191,7 @@ def _aperture(args: argparse.Namespace, runs: list[Run]
     return Measured(omega, 0.0), Measured(half, 0.0), "geometry"
 
 
-def _aperture_from_scan(scan_run: Run, beam_diameter_mm: float | None,
+def _aperture_from_scan(scan_run: Run, named: str, beam_diameter_mm: float | None,
                         divergence_deg: float | None) -> tuple[Measured, Measured]:
     """(solid angle, half-angle) from the sample readings of a scan across the beam; the beam's
     diameter at the aperture is --beam-diameter-mm, else the scan run's [optics] beam diameter
@@ -166,9 +203,10 @@ def _aperture_from_scan(scan_run: Run, beam_diameter_mm: float | None,
 
     from calibration import aperture
     from calibration.detector import correct_power, dark_offsets
+    from calibration.routing import role_hint
     from calibration.values import CalibrationError
 
-    where = f"--aperture-scan {scan_run.path}"
+    where = f"{named} {scan_run.path}"
     distance_mm = _optics([scan_run], "aperture_distance_mm")
     if beam_diameter_mm is None:
         beam_mm = _optics([scan_run], "beam_diameter_mm")
@@ -199,7 +237,7 @@ def _aperture_from_scan(scan_run: Run, beam_diameter_mm: float | None,
         return aperture.from_beam_scan(sample["arm_deg"], power, sigma,
                                        beam_radius_rad=beam_rad)
     except CalibrationError as exc:
-        raise CalibrationError(f"{where}: {exc}") from None
+        raise CalibrationError(f"{where}: {exc}{role_hint(scan_run)}") from None
 
 
 def _use(args: argparse.Namespace) -> int:

@@ -1,6 +1,10 @@
 """`gonio check RUN [--repair OUT_DIR]`: verify a run (every line of readings.jsonl, plan.json,
 config.json and the register maps against the digests recorded at the start, the sessions)
-and print what is wrong. Exit 0 when clean (a torn last line is not damage), 1 when damaged.
+and print what is wrong, and how many readings of how many planned it holds, with its status.
+The last line says `clean` (intact and complete), `intact but incomplete: N of M readings
+stored, status S` (stopped short of its plan: `gonio scan --resume RUN` continues it), or
+`damaged`. The exit status answers whether the run's files are intact: 0 intact, complete or
+not (a torn last line is not damage), 1 damaged.
 `--repair OUT_DIR` then writes a repaired copy there: every valid reading under its own
 index, the dropped ones listed in its meta.json, and `gonio scan --resume OUT_DIR` measures
 exactly those; the copy's path is the last line printed."""
@@ -22,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the report (and repair); 0 clean, 1 damaged."""
+    """Print the report (and repair); 0 intact (complete or not), 1 damaged."""
     from gonio.integrity import check, repair
     from gonio.store import DamagedRunError, open_run
 

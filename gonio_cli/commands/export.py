@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="export a fit whose chi2/dof says it does not describe the data "
                         "(refused otherwise)")
     add_fit_options(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, reads_run="run")
 
 
 def run(args: argparse.Namespace) -> int:

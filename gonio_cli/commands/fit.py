@@ -109,12 +109,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_run_or_import(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     add_fit_options(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, reads_run="run")
 
 
 def run(args: argparse.Namespace) -> int:
     """Fit and print the result (a summary, or one JSON object with --json: the fit, the data's
-    facts, their uncertainty budget (calibration.budget.summary) and the warnings)."""
+    facts, their uncertainty budget (calibration.budget.summary), the run's completeness
+    (gonio.completeness; None for an imported file) and the warnings)."""
     from calibration.budget import summary as budget_summary
     from calibration.fit import fit
     from calibration.pipeline import fit_run
@@ -132,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
     out["sample"] = data.meta.get("sample")
     out["calibration"] = data.meta.get("calibration")
     out["noise_model"] = data.meta.get("noise_model")
+    out["completeness"] = data.meta.get("completeness")  # a run's (gonio.completeness)
     out["budget"] = budget_summary(data)
     if data.meta.get("emulator_truth"):
         out["emulator_truth"] = data.meta["emulator_truth"]
@@ -173,24 +175,41 @@ def _to_stderr(line: str) -> None:
 ROUGH_ALPHA = 0.1
 
 
+def chi2_lines(out: dict) -> list[str]:
+    """The chosen fit's chi2/dof (fitted, held out) and every candidate's as it was ranked,
+    the chosen one's refit beside it: with multiple scattering the candidates are ranked with
+    their term walked ms_walks times and the chosen one refitted with it walked fitted_walks
+    times (calibration.fit), so the refit is the figure the fit line gives."""
+    ms = out.get("multiple_scattering")
+    held = out["chi2_dof_heldout"]
+    walked = (f", multiple scattering by {ms.get('fitted_walks', ms['walks'])} walks"
+              if ms else "")
+    fitted = (f"  chi2/dof fitted {out['chi2_dof_fit']:.3g} ({out['n_fit']} points{walked}); "
+              "held out " + ("n/a" if held is None else f"{held:.3g} ({out['n_heldout']} points)"))
+    others = ", ".join(f"{c['distribution']}/{c['masking']} {c['chi2_dof_fit']:.3g}"
+                       + (f" (refit {c['chi2_dof_refit']:.3g})" if "chi2_dof_refit" in c else "")
+                       for c in out["candidates"] if "distribution" in c)
+    ranked = f" fitted as ranked (multiple scattering by {ms['walks']} walks)" if ms else " fitted"
+    verdict = ("clearly preferred" if out["clearly_preferred"]
+               else "not distinguishable from the runner-up")
+    return [fitted, f"  candidates chi2/dof{ranked}: {others} -> {verdict}"]
+
+
 def summary(out: dict) -> str:
     """Human-readable lines of a fit result dict."""
     sample = out.get("sample")
     measured = (f" sample {sample['id']} ({sample['kind']}, eta {sample['eta']:g}):"
                 if sample else "")
     lines = [f"run {out['run']}:{measured} {out['distribution']} ({out['masking']} masking)"]
+    if out.get("completeness") and not out["completeness"]["complete"]:
+        from gonio.completeness import Completeness
+
+        lines.append(f"  {Completeness.from_json(out['completeness']).text()}")
     for name, p in out["parameters"].items():
         fixed = " (fixed)" if p.get("fixed") else ""
         sigma = f" +- {p['sigma']:.3g}" if "sigma" in p and not p.get("fixed") else ""
         lines.append(f"  {name:<15} {p['value']:.6g}{sigma}{fixed}")
-    held = out["chi2_dof_heldout"]
-    lines.append(f"  chi2/dof fitted {out['chi2_dof_fit']:.3f} ({out['n_fit']} points); held out "
-                 + ("n/a" if held is None else f"{held:.3f} ({out['n_heldout']} points)"))
-    others = ", ".join(f"{c['distribution']}/{c['masking']} {c['chi2_dof_fit']:.3g}"
-                       for c in out["candidates"] if "distribution" in c)
-    verdict = ("clearly preferred" if out["clearly_preferred"]
-               else "not distinguishable from the runner-up")
-    lines.append(f"  candidates chi2/dof: {others} -> {verdict}")
+    lines += chi2_lines(out)
     lines += [f"  skipped: {c['failed']}" for c in out["candidates"] if "failed" in c]
     lines += [f"  {line}" for line in out.get("warnings", [])]
     if out.get("multiple_scattering"):
@@ -212,4 +231,10 @@ def summary(out: dict) -> str:
         t = out["emulator_truth"]
         lines.append(f"  emulator truth ([sim.sample]): {t['distribution']} alpha {t['alpha']}, "
                      f"eta {t['eta']:g}, {t['masking']} masking")
+        if "single_scattering_alpha" in t:
+            u = t.get("single_scattering_alpha_u")
+            lines.append(f"  alpha {t['alpha']} is the microsurface's, under multiple scattering; "
+                         "the default single-scattering fit (normal incidence) of this bench "
+                         f"returns {t['single_scattering_alpha']:g}"
+                         + ("" if u is None else f" +- {u:g}"))
     return "\n".join(lines)

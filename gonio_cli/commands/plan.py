@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from gonio.config import InstrumentConfig
     from gonio.plan import Plan
+    from gonio.simulate import TablesEstimate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -36,6 +37,7 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
     sample, optics = plan.sample, cfg.optics
     lines = [f"  sample: {sample.id!r}, {sample.kind}, eta {sample.eta:g}"
              + (f", k {sample.k:g}" if sample.k else "") + f", lit from {sample.lit_from}"
+             + (f", a reference for the {sample.reference}" if sample.reference else "")
              if sample else "  sample: none (add a [sample] table to the plan: id, kind, eta)"]
     if optics:
         lines.append(f"  optics: {optics.wavelength_nm:g} nm ({optics.bandwidth_nm:g} nm FWHM), "
@@ -49,6 +51,19 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
         lines.append("  optics: none (add an [optics] table to the instrument config, or "
                      "reduce with a calibration that measured the aperture)")
     return "\n".join(lines)
+
+
+def tables_line(tables: TablesEstimate, estimate_s: float) -> str:
+    """The emulated bench's table building before the first move, and the duration with it:
+    cached (as the estimate above) and cold (this machine, now)."""
+    from gonio.plan import format_duration
+
+    if not tables.planes:
+        return "  multiple-scattering tables: none to walk (cached, or none needed)"
+    return (f"  multiple-scattering tables: {tables.planes} planes to walk before the first move "
+            f"({tables.walks} walks each), about {format_duration(tables.seconds)} on this "
+            f"machine now; duration with the tables cached {format_duration(estimate_s)}, "
+            f"cold {format_duration(estimate_s + tables.seconds)}")
 
 
 def _state(polarisation: str | float) -> str:
@@ -71,6 +86,10 @@ def run(args: argparse.Namespace) -> int:
         time_scale = emulated_time_scale(cfg)
     sched = build_schedule(plan, cfg, time_scale)
     print(summary(plan, cfg, sched))
+    if args.sim:
+        from gonio.simulate import tables_estimate
+
+        print(tables_line(tables_estimate(cfg, plan, sched), sched.estimate_s))
     print(description(plan, cfg))
     if args.list:
         print(listing(sched))

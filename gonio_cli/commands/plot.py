@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fit", action="store_true",
                    help="fit the model (gonio fit's options) and overlay it with residuals")
     add_fit_options(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, reads_run="run")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -35,7 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--coverage-k", type=float, default=COVERAGE_K, metavar="K",
                    help=f"coverage factor of the expanded uncertainty U = k u (default "
                         f"{COVERAGE_K:g}: about 95 %% for a normal distribution)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, reads_run="run")
 
 
 def add_run_or_import(p: argparse.ArgumentParser) -> None:

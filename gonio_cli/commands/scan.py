@@ -20,6 +20,9 @@ from typing import TYPE_CHECKING
 from gonio.errors import GonioError, os_error_text
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from drivers.base import Detector
     from gonio.runner import DetectorCheck, ScanResult
 
 
@@ -59,7 +62,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="where run directories go (default: ./runs)")
     p.add_argument("--resume", metavar="RUN", help="continue an interrupted run")
     p.add_argument("--calibration", metavar="FILE",
-                   help="calibration file to record in the run (used by reduce and fit)")
+                   help="calibration file to record in the run (used by reduce and fit); "
+                   "what it applies is printed before any motion")
     p.add_argument("--sample-id", metavar="ID",
                    help="the measured sample's id, instead of the plan's [sample] id")
     p.add_argument("--no-plot", action="store_true", help="do not write plot.png")
@@ -98,12 +102,19 @@ def _watch(run_dir: Path, token: str | None) -> subprocess.Popen | None:
 
 def _covers(path: str) -> DetectorCheck:
     """The check, once the detector is open and before any motion, that the calibration file
-    covers every range the schedule can read on (calibration.coverage)."""
+    covers every range the schedule can read on (calibration.coverage); once it does, what the
+    file applies is printed (stderr, calibration.calsummary)."""
     from calibration import calfile, coverage
+    from calibration.calsummary import applied
 
     cal = calfile.load(path)
-    return lambda readings, detector: coverage.require(cal, path, readings,
-                                                       detector.full_scales_w())
+
+    def check(readings: np.ndarray, detector: Detector) -> None:
+        coverage.require(cal, path, readings, detector.full_scales_w())
+        for line in applied(cal, str(Path(path).resolve())):
+            print(f"gonio scan: {line}", file=sys.stderr)
+
+    return check
 
 
 def run(args: argparse.Namespace) -> int:
@@ -158,8 +169,10 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
         except KeyboardInterrupt:
             print(f"{verb}: warning: no plot: interrupted", file=sys.stderr)
     if outcome.status != "completed":
-        again = (f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
-                 if outcome.status == "failed" else "")
+        again = ("" if outcome.status != "failed"
+                 else f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
+                 if outcome.resumable else " (the readings stored stopped it: once that is "
+                 "fixed, start a new scan)")
         print(f"{verb}: run {outcome.status} after {outcome.done} readings: "
               f"{outcome.reason}{again}", file=sys.stderr)
     else:

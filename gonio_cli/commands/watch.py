@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "run's end (at most a few seconds): how `gonio scan --watch` ties its "
                         "viewer to the scan")
     add_reduce_options(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, reads_run="run")
 
 
 def _token(value: str | None) -> str | None:

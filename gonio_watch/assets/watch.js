@@ -69,6 +69,7 @@ function renderControls(s) {
 function renderAlerts(s) {
   const out = [];
   if (s.damage) out.push(`<div class="damage">damaged run: ${escapeHtml(s.damage)}</div>`);
+  if (s.incomplete) out.push(`<div class="damage">${escapeHtml(s.incomplete)}</div>`);
   for (const sus of s.suspensions || []) {
     const until = sus.resumed_t_s === null || sus.resumed_t_s === undefined ? "not resumed yet" : `resumed at ${hms(sus.resumed_t_s)}`;
     out.push(`<div>suspended at reading ${sus.index} (${hms(sus.t_s)} into the run): ${escapeHtml(sus.reason)}; ${until}</div>`);

@@ -1,6 +1,7 @@
 """The [sim] section of an instrument config -> the emulated bench and its PowerSource.
 
-Reads the tables this package owns, [sim.source], [sim.sample], [sim.aperture],
+Reads the tables this package owns, [sim.source], [sim.sample] and the cabinet of samples
+[sim.samples.<id>] (a plan mounts the one named by its [sample] id), [sim.aperture],
 [sim.alignment] and [sim.stray] (docs/bench.md has the schema); every bad field raises one
 SimConfigError naming it. [sim.detector] belongs to sim.devices.photodiode, the other keys to
 the emulators.
@@ -131,6 +132,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "correlation_length_um": (None, _optional(_number(0.0, 1e6, open_low=True))),
         "psd_exponent": (2.0, _number(1.0, 10.0, open_low=True)),
         "ms_walks": (1 << 16, _walks),
+        # informational (INFORMATIONAL): what a single-scattering fit of this bench returns
+        "single_scattering_alpha": (None, _optional(_number(*ALPHA_RANGE))),
+        "single_scattering_alpha_u": (None, _optional(_number(0.0, open_low=True))),
     },
     "aperture": {
         "diameter_mm": (10.0, _number(0.0, open_low=True)),
@@ -154,6 +158,13 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
 }
 
 
+#: [sim.sample] keys that document the emulator's truth and change nothing it does: the alpha a
+#: single-scattering fit (Walter's: normal incidence, `gonio fit RUN`) returns on this bench,
+#: where multiple scattering widens the lobe beyond the microsurface alpha, and its standard
+#: uncertainty (docs/bench.md, "Walter's samples").
+INFORMATIONAL = ("single_scattering_alpha", "single_scattering_alpha_u")
+
+
 #: [sim.<table>] key <- the key of the experimenter's description ([optics] or [sample]) that
 #: gives it when [sim] does not state it.
 DESCRIBED: dict[str, tuple[str, dict[str, str]]] = {
@@ -166,26 +177,52 @@ DESCRIBED: dict[str, tuple[str, dict[str, str]]] = {
 }
 
 
+def mounted_sample(sim_config: Mapping, described: Mapping | None = None
+                   ) -> tuple[str, Mapping]:
+    """(where, table) of the emulated sample on the bench: the cabinet's [sim.samples.<id>]
+    whose key is the described [sample] id, else [sim.sample]. Every table of the cabinet is
+    checked here, so a bad one is named whichever sample a plan mounts."""
+    cabinet = sim_config.get("samples", {})
+    if not isinstance(cabinet, Mapping):
+        raise SimConfigError(f"[sim.samples]: must be a table of sample tables, got {cabinet!r}")
+    for sample_id, table in cabinet.items():
+        _validated(table, f"sim.samples.{sample_id}", "sample")
+    sample_id = (described or {}).get("id")
+    if isinstance(sample_id, str) and sample_id in cabinet:
+        return f"sim.samples.{sample_id}", cabinet[sample_id]
+    return "sim.sample", sim_config.get("sample", {})
+
+
 def read_table(sim_config: Mapping, name: str, described: Mapping | None = None
                ) -> dict[str, object]:
-    """Validated [sim.<name>] table: its own keys, else the description's (`described`: the
-    [optics] or [sample] table DESCRIBED maps it from), else the defaults."""
-    table = sim_config.get(name, {})
+    """Validated [sim.<name>] table (for "sample", the mounted one: mounted_sample): its own
+    keys, else the description's (`described`: the [optics] or [sample] table DESCRIBED maps it
+    from), else the defaults."""
+    if name == "sample":
+        where, table = mounted_sample(sim_config, described)
+    else:
+        where, table = f"sim.{name}", sim_config.get(name, {})
+    return _validated(table, where, name, described)
+
+
+def _validated(table: object, where: str, name: str, described: Mapping | None = None
+               ) -> dict[str, object]:
+    """The table [<where>] checked against SCHEMA[name], filled as read_table says."""
     if not isinstance(table, Mapping):
-        raise SimConfigError(f"[sim.{name}]: must be a table, got {table!r}")
+        raise SimConfigError(f"[{where}]: must be a table, got {table!r}")
     fields = SCHEMA[name]
     unknown = sorted(set(table) - set(fields))
     if unknown:
         raise SimConfigError(
-            f"[sim.{name}]: unknown key {unknown[0]!r}; known: {', '.join(fields)}")
+            f"[{where}]: unknown key {unknown[0]!r}; known: {', '.join(fields)}")
     source, keys = DESCRIBED.get(name, ("", {}))
     base = {key: described[theirs] for key, theirs in keys.items()
             if described is not None and theirs in described}
     out = {}
     for key, (default, check) in fields.items():
-        where = f"[sim.{name}] {key}" if key in table or key not in base \
+        field = f"[{where}] {key}" if key in table or key not in base \
             else f"[{source}] {keys[key]}"
-        out[key] = check(where, table.get(key, base.get(key, default)))
+        out[key] = check(field, table.get(key, base.get(key, default)))
     return out
 
 
@@ -207,19 +244,21 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
     defaults."""
     _warn_polarisation(optics)
     source = Source(**read_table(sim_config, "source", optics))
+    where = mounted_sample(sim_config, sample)[0]
     sample_table = read_table(sim_config, "sample", sample)
     aperture = read_table(sim_config, "aperture", optics)
     retracted = sample_table.pop("retracted_beyond_deg")
+    informational(sample_table, where)
     spec = SampleSpec(**sample_table)
     if spec.kind != "hemisphere" and spec.lit_from != "air":
-        raise SimConfigError(f'[sim.sample] lit_from: "hemisphere" needs kind = "hemisphere", '
+        raise SimConfigError(f'[{where}] lit_from: "hemisphere" needs kind = "hemisphere", '
                              f"not {spec.kind!r}")
     if spec.kind != "conductor" and spec.k != 0.0:
-        raise SimConfigError(f"[sim.sample] k: the extinction applies to kind = \"conductor\" "
+        raise SimConfigError(f"[{where}] k: the extinction applies to kind = \"conductor\" "
                              f"only, not {spec.kind!r}")
     if aperture["diameter_mm"] >= aperture["distance_mm"]:
         raise SimConfigError("[sim.aperture] diameter_mm: must be smaller than distance_mm")
-    _check_switches(spec)
+    _check_switches(spec, where)
     sample = Sample(spec, source.wavelength_nm, _visible_fraction(sim_config, source, aperture),
                     seed=int(sim_config.get("seed", 0) or 0))
     return Bench(
@@ -233,21 +272,33 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
     )
 
 
-def _check_switches(spec: SampleSpec) -> None:
+def informational(sample_table: dict[str, object], where: str = "sim.sample"
+                  ) -> dict[str, object]:
+    """Take the INFORMATIONAL keys out of a read sample table (in place; `where` names it in
+    errors): those stated (None: not stated); the uncertainty needs the value it belongs to."""
+    stated = {key: sample_table.pop(key) for key in INFORMATIONAL}
+    value, u = (stated[key] for key in INFORMATIONAL)
+    if u is not None and value is None:
+        raise SimConfigError(f"[{where}] single_scattering_alpha_u: needs "
+                             "single_scattering_alpha (the value it is the uncertainty of)")
+    return {key: value for key, value in stated.items() if value is not None}
+
+
+def _check_switches(spec: SampleSpec, where: str) -> None:
     """What multiple_scattering = true and diffraction = true need from the rest of the table."""
     if spec.multiple_scattering is True and spec.distribution not in WALKABLE:
         walkable = " or ".join(f'"{name}"' for name in WALKABLE)
-        raise SimConfigError(f"[sim.sample] multiple_scattering: true needs distribution "
+        raise SimConfigError(f"[{where}] multiple_scattering: true needs distribution "
                              f"{walkable} (the random walk has no {spec.distribution} "
                              f"microsurface)")
     surface = {"rms_height_nm": spec.rms_height_nm,
                "correlation_length_um": spec.correlation_length_um}
     missing = [key for key, value in surface.items() if value is None]
     if len(missing) == 1:
-        raise SimConfigError(f"[sim.sample] {missing[0]}: needed with "
+        raise SimConfigError(f"[{where}] {missing[0]}: needed with "
                              f"{({*surface} - {missing[0]}).pop()} (the nano-roughness PSD)")
     if spec.diffraction is True and missing:
-        raise SimConfigError("[sim.sample] rms_height_nm: needed, with correlation_length_um, "
+        raise SimConfigError(f"[{where}] rms_height_nm: needed, with correlation_length_um, "
                              "by diffraction = true (the nano-roughness PSD)")
 
 

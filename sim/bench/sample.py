@@ -14,6 +14,8 @@ their share of the light exceeds `visible_fraction` (the detector's noise floor)
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -157,6 +159,8 @@ class Sample:
         self._models: dict[tuple, object] = {}
         self.evaluations = {"reflection": 0, "transmission": 0, "random_walk": 0,
                             "diffraction": 0}
+        #: while collecting (tabulated_planes): the table planes evaluations missed, by lobe
+        self._missed: dict[object, set] | None = None
 
     def model(self, lobe: str, masking: str | None = None):
         """The single-scattering model.bsdf model of one lobe ("reflection" or "transmission")
@@ -247,7 +251,36 @@ class Sample:
         """Orders >= 2 at each pair: interpolated from the lobe's tables (isotropic), or
         walked per pair (anisotropic)."""
         self.evaluations["random_walk"] += len(wi)
-        return self._extra("random_walk", lobe).eval(wi, wo)
+        model = self._extra("random_walk", lobe)
+        if self._missed is None:
+            return model.eval(wi, wo)
+        return model.eval(wi, wo, missing=self._missed.setdefault(model, set()))
+
+    @property
+    def tabulated(self) -> bool:
+        """Whether orders >= 2 can come from tables (HigherOrderLobe): switched on or "auto",
+        on an isotropic microsurface."""
+        s = self.spec
+        return s.multiple_scattering is not False and s.alpha[0] == s.alpha[1]
+
+    def table_lobes(self) -> list:
+        """The HigherOrderLobes (tables) the sample has made so far, each once."""
+        from model.bsdf.multiple_scattering import HigherOrderLobe
+
+        lobes = [m for m in self._models.values() if isinstance(m, HigherOrderLobe)]
+        return list({id(lobe): lobe for lobe in lobes}.values())
+
+    @contextmanager
+    def collecting(self) -> Iterator[dict[object, set]]:
+        """Within the block, evaluations build no table plane: each lobe's missing planes
+        (HigherOrderLobe.build_at's addresses) are added to the dict it yields, by lobe, and
+        their share is left out of the values (so an evaluation's value is a lower bound)."""
+        missed: dict[object, set] = {}
+        self._missed = missed
+        try:
+            yield missed
+        finally:
+            self._missed = None
 
     def bsdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """The BSDF the bench uses at sample-frame pairs (..., 3), with the multiple scattering

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from model.optics.aperture import ApertureIntegral, LobeScales
 from model.optics.exit_face import exit_view
+from sim.bench import tables
 from sim.bench.geometry import angle_from_beam_rad, sample_frame_directions
 from sim.bench.sample import Sample
 from sim.bench.source import Source
@@ -52,6 +53,13 @@ class Alignment:
         true["arm"] = (positions["arm"] + self.arm_offset_deg
                        + self._scatter("arm", positions["arm"], self.arm_repeatability_deg))
         return true
+
+    def placed(self, positions: Mapping[str, float]) -> dict[str, float]:
+        """Stage positions with the offsets alone (no move's scatter drawn): where a reading
+        at reported `positions` is expected to look."""
+        return {"azimuth": 0.0, "elevation": 0.0, **positions,
+                "sample": positions["sample"] + self.sample_offset_deg,
+                "arm": positions["arm"] + self.arm_offset_deg}
 
     def _scatter(self, role: str, reported: float, sigma: float) -> float:
         """This move's scatter of a stage: kept while its reported angle stays put."""
@@ -166,11 +174,16 @@ class Bench:
         if at is None or self.retracted(at["sample"]):
             place: Mapping[str, float] = WARM_UP_PLACE
         else:
-            offsets = self.alignment
-            place = {**at, "sample": at["sample"] + offsets.sample_offset_deg,
-                     "arm": at["arm"] + offsets.arm_offset_deg}
+            place = self.alignment.placed(at)
         for turn in (0.0, 180.0):
             self.scattered_fraction({**place, "arm": place["arm"] + turn})
+
+    def prepare(self, positions: Iterable[Mapping[str, float]],
+                progress: tables.Progress | None = None) -> tables.TablesPrepared:
+        """Build, before an emulated device has to answer, the multiple-scattering tables the
+        readings at `positions` (reported stage positions by role: a plan's schedule) will
+        need, and no other (sim.bench.tables.prepare); `progress` is told the planes walked."""
+        return tables.prepare(self, positions, progress)
 
     def power_w(self, positions: Mapping[str, float], t_s: float = 0.0) -> float:
         """True optical power at the detector for reported stage positions at time t_s."""

@@ -1,10 +1,12 @@
 """The fit overlay's title names eta once: the sample's nominal value in the run's line, the
-fit's only when it says something new (fitted, or held at another value)."""
+fit's only when it says something new (fitted, or held at another value); it warns of a fit
+whose chi2/dof says it does not describe the data, and names an incomplete run."""
 
 from __future__ import annotations
 
+from calibration.exports.model import MAX_CHI2_DOF
 from calibration.fit import FitOptions, fit
-from calibration.fitplot import fit_title
+from calibration.fitplot import fit_title, fit_warning
 from calibration.plot import plot_title
 from calibration.synthetic import synthesize
 
@@ -27,3 +29,26 @@ def test_a_fitted_or_other_eta_is_shown():
     assert "(fitted)" in fitted.splitlines()[1] and "η = 1.5" in fitted
     held = title_of(FitOptions(distributions=("ggx",), eta=1.45))
     assert held.splitlines()[1].endswith("η = 1.45 (held)")
+
+
+def test_a_fit_that_does_not_describe_the_data_says_so_in_its_title():
+    good = title_of(ONE)
+    assert "WARNING" not in good and fit_warning(fit(DATA, ONE)) == ""
+    bad_fit = fit(DATA, FitOptions(distributions=("ggx",), eta=1.3))
+    title = fit_title(DATA, bad_fit, "run")
+    assert bad_fit.chi2_dof_fit > MAX_CHI2_DOF
+    assert title.splitlines()[-1] == (
+        f"WARNING: fitted χ²/dof {bad_fit.chi2_dof_fit:.3g} > {MAX_CHI2_DOF:g}: the model does "
+        "not describe the data within their uncertainties")
+
+
+def test_an_incomplete_run_says_so_under_the_run_line():
+    facts = {"status": "aborted", "reason": "aborted by the user", "complete": False,
+             "stored_readings": 51, "planned_readings": 588}
+    title = plot_title("run", {**DATA.meta, "sample": {}, "completeness": facts})
+    assert title.splitlines() == ["run: sample ?, eta 1.51", "incomplete run: 51 of 588 "
+                                  "readings stored, status aborted (aborted by the user)"]
+    whole = {**facts, "status": "completed", "reason": "", "complete": True,
+             "stored_readings": 588}
+    assert plot_title("run", {**DATA.meta, "sample": {}, "completeness": whole}) == \
+        "run: sample ?, eta 1.51"

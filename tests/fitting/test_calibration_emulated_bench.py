@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from fitting_bench_runs import ROOT, instrument, plan, scan
+from fitting_bench_runs import GLASS, ROOT, instrument, plan, scan
 
 from calibration import aperture, calfile
 from calibration.beam import beam_power
@@ -56,7 +56,8 @@ def angle_run(tmp_path_factory):
          "theta_o_deg": {"start": -2.5, "stop": 2.5, "step": 0.25}},
         {"side": "reflection", "theta_i_deg": 10.0,
          "theta_o_deg": {"start": 2.0, "stop": 18.0, "step": 0.5}},
-    ], repeats=2, dark_every=12, beam_every=6, dwell_s=0.02)
+    ], repeats=2, dark_every=12, beam_every=6, dwell_s=0.02,
+        sample={**GLASS, "reference": "angles"})  # the smooth reference `build` fits angles on
     return open_run(scan(p, cfg, tmp / "runs"))
 
 
@@ -134,10 +135,19 @@ def test_calibrate_cli_build_show_use(angle_run, tmp_path, capsys):
     assert shown["aperture"]["half_angle_deg"]["value"] == pytest.approx(0.5729, abs=1e-3)
     assert shown["angles"]["fit"]["aperture_half_angle_deg"] == pytest.approx(0.5729, abs=1e-3)
     assert shown["notes"] == err.replace("gonio calibrate: ", "").splitlines()
-    # an option wins over [optics]; without --eta the angle run's [sample] eta serves
-    assert main(["calibrate", "build", str(angle_run.path), "--out", str(tmp_path / "c2.json"),
-                 "--aperture-geometry", "8", "500"]) == 0
-    assert "angles: not calibrated" not in capsys.readouterr().err
+    # an option wins over [optics]; without --eta the angle run's [sample] eta serves. The
+    # bench's aperture is 10 mm: modelled as 8 mm the peaks do not fit, so the build refuses
+    # (exit 2, nothing written) unless --force, which writes it with the warning
+    wrong_aperture = ["calibrate", "build", str(angle_run.path), "--out",
+                      str(tmp_path / "c2.json"), "--aperture-geometry", "8", "500"]
+    assert main(wrong_aperture) == 2
+    refused = capsys.readouterr().err
+    assert refused.startswith("gonio calibrate: error: angles: the zero-offset fit has chi2/dof")
+    assert len(refused.splitlines()) == 1 and not (tmp_path / "c2.json").exists()
+    assert main([*wrong_aperture, "--force"]) == 0
+    forced = capsys.readouterr().err
+    assert "angles: not calibrated" not in forced
+    assert "angles: warning: the zero-offset fit has chi2/dof" in forced
     c2 = calfile.load(tmp_path / "c2.json")
     assert c2.aperture_half_angle_deg.value == pytest.approx(math.degrees(math.atan(4.0 / 500.0)))
     assert abs(c2.arm_offset_deg.value - ARM_OFFSET) < 0.03

@@ -16,12 +16,14 @@ from calibration.fit import (
     MS_REWALK_WALKS,
     FitError,
     FitOptions,
+    FitResult,
     build_model,
     fit,
     refit_orders,
     walked_orders,
 )
 from calibration.reduced import ReducedData
+from gonio_cli.commands.fit import chi2_lines
 from sim.bench import build_bench
 
 ALPHA = 0.553  # Walter's acid-etched glass
@@ -62,9 +64,14 @@ def data() -> ReducedData:
     return emulated_run()
 
 
-def test_fit_with_multiple_scattering_recovers_alpha(data):
+@pytest.fixture(scope="module")
+def multiple(data) -> FitResult:
+    """The fit of `data` with the multiple-scattering term."""
+    return fit(data, options(True))
+
+
+def test_fit_with_multiple_scattering_recovers_alpha(data, multiple):
     single = fit(data, options(False))
-    multiple = fit(data, options(True))
     value, sigma = multiple.param("alpha")
     print(f"alpha {ALPHA}: single scattering {single.alpha:.5f} (chi2/dof "
           f"{single.chi2_dof_fit:.3g}), with multiple scattering {value:.5f} +- {sigma:.5f} "
@@ -81,6 +88,24 @@ def test_fit_with_multiple_scattering_recovers_alpha(data):
         "walks": FitOptions().ms_walks, "seed": 0,
         "fitted_walks": FitOptions().ms_walks * MS_CENTRE_WALKS}
     assert single.to_dict()["multiple_scattering"] is None
+
+
+def test_the_summary_gives_the_chosen_fits_refit_chi2_in_both_of_its_lines(multiple):
+    """The candidates are ranked with the term as first walked, the chosen one refitted with
+    it walked MS_CENTRE_WALKS times over: its refit chi2/dof is the fit's, in the fit line and
+    beside its ranked figure in the candidates line, each labelled."""
+    out = multiple.to_dict()
+    chosen = out["candidates"][0]
+    assert chosen["chi2_dof_refit"] == out["chi2_dof_fit"]
+    assert not any("chi2_dof_refit" in c for c in out["candidates"][1:])
+    fitted, candidates = chi2_lines(out)
+    refit = f"{out['chi2_dof_fit']:.3g}"
+    walks = out["multiple_scattering"]
+    assert fitted.startswith(f"  chi2/dof fitted {refit} (") and \
+        f"multiple scattering by {walks['fitted_walks']} walks" in fitted
+    assert candidates.startswith(f"  candidates chi2/dof fitted as ranked (multiple scattering "
+                                 f"by {walks['walks']} walks): ggx/correlated "
+                                 f"{chosen['chi2_dof_fit']:.3g} (refit {refit})")
 
 
 @pytest.mark.slow

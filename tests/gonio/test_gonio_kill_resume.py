@@ -31,9 +31,8 @@ LATE_POLLS = 20  # at most this many more looks at the run before a kill: a mome
 
 
 def config(**kw) -> dict:
-    """The fast sim-serial config with a PM100 timeout no emulator reply misses under load (the
-    first reading at a new incidence walks a multiple-scattering column: 0.2-0.5 s at load
-    8): a query re-sent after a timeout is a new measurement, the next visit's noise, as on
+    """The fast sim-serial config with a PM100 timeout no emulator reply misses under load:
+    a query re-sent after a timeout is a new measurement, the next visit's noise, as on
     a real meter."""
     return fast_config(pm100={"timeout_s": 10.0}, **kw)
 

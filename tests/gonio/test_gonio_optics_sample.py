@@ -79,6 +79,8 @@ PLAN = {"name": "p", "grid": [{"theta_i_deg": 0.0, "theta_o_deg": 20.0}]}
     ({"id": "a", "kind": "slab", "eta": 1.5, "lit_from": "hemisphere"}, "needs kind"),
     ({"id": "a", "kind": "slab", "eta": 1.5, "k": 2.0}, "applies to kind = \"conductor\""),
     ({"id": "a", "kind": "slab", "eta": 1e-9}, "plan: \\[sample\\] eta: must be in"),
+    ({"id": "a", "kind": "slab", "eta": 1.5, "reference": "mirror"},
+     "plan: \\[sample\\] reference: must be one of angles, detector; got 'mirror'"),
 ])
 def test_bad_sample_is_one_error_naming_the_field(sample, message):
     with pytest.raises(PlanError, match=message):

@@ -12,6 +12,7 @@ microsurfaces only (the lobe then depends on theta_i, theta_o and phi_o - phi_i)
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 
 import numpy as np
@@ -48,6 +49,9 @@ PILOT_SHARE, PILOT_MIN_WALKS = 16, 1 << 12
 #: function of the target count only, so one seed walks the same paths for the same count).
 WALK_BATCH = 2048
 BATCH_PRODUCTS = 1 << 20
+#: HigherOrderLobe.walk_seconds times a plane's walks at this many and twice as many (both
+#: past the pilot's floor, PILOT_SHARE * PILOT_MIN_WALKS, so the cost grows linearly between).
+CALIBRATION_WALKS = 1 << 16
 
 
 def walk_to_targets(walk, wi: np.ndarray, targets: np.ndarray, walks: int,
@@ -245,23 +249,27 @@ class HigherOrderLobe:
         self._f2, self._d2, self._f3, self._d3, self._e3 = (np.zeros(shape) for _ in range(5))
         self._built = np.zeros((2, len(INCIDENCE_NODES_DEG), last // 2 + 1, 2), dtype=np.bool_)
         self._column_cos = -np.cos(np.radians(self.phi_deg))
+        self.walked = 0  #: planes walked by this lobe (not read from the store)
 
-    def build(self, side: int, node: int, plane: int, lower: bool) -> None:
+    def build(self, side: int, node: int, plane: int, lower: bool, walk: bool = True) -> bool:
         """Walk and integrate one hemisphere of wo (lower: below the horizon) in one plane
         through the normal, i.e. columns plane and last - plane (column 0 alone at normal
         incidence, where the lobe does not depend on the azimuth), for light arriving from the
         side's hemisphere (+1 above, -1 below) at INCIDENCE_NODES_DEG[node]: one walk set
         scoring every target and one second_order call for all of them; read from the store
-        instead where it holds the build."""
-        last = len(self.phi_deg) - 1
-        columns = [plane] if node == 0 or plane == last - plane else [plane, last - plane]
+        instead where it holds the build. walk False: only read it from the store. Returns
+        whether the plane is built."""
+        columns = self._columns(node, plane)
         half = self._hemisphere(lower)
         s = 0 if side > 0 else 1
         address = (s, node, plane, int(lower))
         shape = (5, len(columns), len(self.polar_deg[half]))
         built = None if self.store is None else self.store.load(address, shape)
+        if built is None and not walk:
+            return False
         if built is None:
             built = self._walk_plane(side, node, plane, lower, columns)
+            self.walked += 1
             if self.store is not None:
                 self.store.save(address, built)
         for m, j in enumerate(columns):
@@ -269,16 +277,43 @@ class HigherOrderLobe:
                                    strict=True):
                 table[s, node, j, half] = part[m]
         self._built[address] = True
+        return True
+
+    def build_at(self, address: tuple[int, int, int, int], walk: bool = True) -> bool:
+        """build by a plane's address (side index 0 above / 1 below, node, plane, lower), as
+        parts reports the planes it misses."""
+        s, node, plane, lower = address
+        return self.build(1 if s == 0 else -1, node, plane, bool(lower), walk)
+
+    def _columns(self, node: int, plane: int) -> list[int]:
+        """The columns a plane holds: plane and last - plane (one at normal incidence)."""
+        last = len(self.phi_deg) - 1
+        return [plane] if node == 0 or plane == last - plane else [plane, last - plane]
+
+    def walk_seconds(self, address: tuple[int, int, int, int]) -> float:
+        """Seconds walking one plane (build_at's address) with this lobe's walks takes on this
+        machine now, timed from CALIBRATION_WALKS walks and twice as many (their difference
+        leaves out the plane's fixed cost: order 2's quadrature), without building it."""
+        s, node, plane, lower = address
+        side, columns = 1 if s == 0 else -1, self._columns(node, plane)
+        seconds = []
+        for walks in (2, CALIBRATION_WALKS, 2 * CALIBRATION_WALKS):  # 2: compile the kernels
+            start = time.perf_counter()
+            self._walk_plane(side, node, plane, bool(lower), columns, walks)
+            seconds.append(time.perf_counter() - start)
+        per_walk = max(seconds[2] - seconds[1], 0.0) / CALIBRATION_WALKS
+        return max(seconds[1] - per_walk * CALIBRATION_WALKS, 0.0) + per_walk * self.walks
 
     def _hemisphere(self, lower: bool) -> slice:
         """The polar nodes (of polar_deg) above the horizon, or below it."""
         split = len(self.upper_deg)
         return slice(split, None) if lower else slice(0, split)
 
-    def _walk_plane(self, side: int, node: int, plane: int, lower: bool, columns: list[int]
-                    ) -> np.ndarray:
-        """build's walks: (order 2, its theta_o slope, orders >= 3, their slope, their standard
-        error) of f over the hemisphere's polar nodes, per column: (5, columns, nodes)."""
+    def _walk_plane(self, side: int, node: int, plane: int, lower: bool, columns: list[int],
+                    walks: int | None = None) -> np.ndarray:
+        """build's walks (the lobe's, unless `walks` says how many): (order 2, its theta_o
+        slope, orders >= 3, their slope, their standard error) of f over the hemisphere's
+        polar nodes, per column: (5, columns, nodes)."""
         from model.bsdf.multiple_scattering.second_order import second_order
 
         theta = np.radians(INCIDENCE_NODES_DEG[node])
@@ -295,7 +330,7 @@ class HigherOrderLobe:
                             np.cos(t)], axis=-1)
         rng = np.random.default_rng(
             np.random.SeedSequence([self.seed, side + 1, node, plane, int(lower)]))
-        mean, err, _ = walk_both_ways(self.walk, wi, targets, self.walks, rng,
+        mean, err, _ = walk_both_ways(self.walk, wi, targets, walks or self.walks, rng,
                                       min_order=3 if self.exact_second else 2,
                                       covariance=False)
         second = second_order(self.walk.walker, wi, targets) if self.exact_second else 0.0 * mean
@@ -327,37 +362,43 @@ class HigherOrderLobe:
         """How many hemispheres of a plane have been built so far (each `walks` walks)."""
         return int(self._built.sum())
 
-    def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    def eval(self, wi: np.ndarray, wo: np.ndarray, missing: set | None = None) -> np.ndarray:
         """Orders >= 2 of f(wi, wo) in 1/sr, no cosine; wi, wo (..., 3) broadcast."""
-        return self.estimate(wi, wo)[0]
+        return self.estimate(wi, wo, missing)[0]
 
-    def estimate(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def estimate(self, wi: np.ndarray, wo: np.ndarray, missing: set | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
         """(f, its Monte Carlo standard error) of orders >= 2, interpolated from the tables."""
-        second, higher, err = self.parts(wi, wo)
+        second, higher, err = self.parts(wi, wo, missing)
         return second + higher, err
 
-    def parts(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
+    def parts(self, wi: np.ndarray, wo: np.ndarray, missing: set | None = None
+              ) -> tuple[np.ndarray, ...]:
         """(order 2, orders >= 3, the standard error of orders >= 3) of f at wi, wo (..., 3);
         without exact_second order 2 is 0 and walked with the rest. Both parts cubic (PCHIP) in
         theta_o, the error linearly, all linear in cos(phi_o - phi_i)
         (f is even in the azimuth about the plane of incidence, so smooth in its cosine) and
         between incidence nodes; within one polar step of a pole between the columns 0 and 180
         deg only (f = f_pole + theta g cos(dphi) + O(theta^2) there). Only the planes a pair's
-        weights need are built."""
+        weights need are built; with a `missing` set, none: their addresses (as build_at takes
+        them) are added to it and their share is left out of the values."""
         wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
         shape = np.broadcast_shapes(wi.shape, wo.shape)
         flat_i, flat_o = (np.ascontiguousarray(np.broadcast_to(w, shape)).reshape(-1, 3)
                           for w in (wi, wo))
         shape = shape[:-1]
         out = np.empty((3, len(flat_i)))
-        missing = np.empty((4 * len(flat_i), 4), dtype=np.int64)
+        rows = np.empty((4 * len(flat_i), 4), dtype=np.int64)
         while True:
             found = lookup(flat_i, flat_o, INCIDENCE_NODES_DEG, INCIDENCE_SNAP, self._column_cos,
                            PHI_SNAP, self.theta_step, self.upper_deg, self.lower_deg, self._f2,
                            self._d2, self._f3, self._d3, self._e3, self._built, self._plane_of,
-                           out[0], out[1], out[2], missing)
-            if not found:
+                           out[0], out[1], out[2], rows)
+            needed = set(map(tuple, rows[:found].tolist()))
+            if missing is not None:
+                missing |= needed
+            if not found or missing is not None:
                 break
-            for s, node, plane, lower in sorted(set(map(tuple, missing[:found].tolist()))):
-                self.build(1 if s == 0 else -1, node, plane, bool(lower))
+            for address in sorted(needed):
+                self.build_at(address)
         return out[0].reshape(shape), out[1].reshape(shape), np.sqrt(out[2]).reshape(shape)

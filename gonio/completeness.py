@@ -1,0 +1,86 @@
+"""Whether a run holds what it planned: an incomplete run is one whose status is not
+`completed` or whose stored readings are fewer than planned. Every reader of a run says so in
+one line (`Completeness.text`) and records the facts in its outputs (gonio.record carries
+them); `gonio check` reports them beside the run's integrity."""
+
+from __future__ import annotations
+
+import fcntl
+from dataclasses import dataclass
+from typing import Any
+
+from gonio.errors import GonioError
+from gonio.store import READINGS, Run
+
+
+@dataclass(frozen=True)
+class Completeness:
+    """A run's status (and its reason), the readings it stores and the readings it planned
+    (None: unknown, a run that recorded no count and whose plan no longer schedules)."""
+
+    status: str
+    reason: str
+    stored: int
+    planned: int | None
+
+    @property
+    def complete(self) -> bool:
+        """Status `completed` and no fewer readings stored than planned."""
+        return self.status == "completed" and (self.planned is None
+                                               or self.stored >= self.planned)
+
+    def counts(self) -> str:
+        """"N of M readings" (stored of planned)."""
+        return f"{self.stored} of {'?' if self.planned is None else self.planned} readings"
+
+    def text(self) -> str:
+        """One line: complete or incomplete, N of M readings, the status and its reason."""
+        why = f" ({self.reason})" if self.reason else ""
+        return (f"{'complete' if self.complete else 'incomplete'} run: {self.counts()} stored, "
+                f"status {self.status}{why}")
+
+    def to_json(self) -> dict[str, Any]:
+        """The facts an output's header carries: status, reason, complete, stored_readings,
+        planned_readings."""
+        return {"status": self.status, "reason": self.reason, "complete": self.complete,
+                "stored_readings": self.stored, "planned_readings": self.planned}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Completeness:
+        """The completeness `to_json` gave."""
+        return cls(data["status"], data["reason"], data["stored_readings"],
+                   data["planned_readings"])
+
+
+def planned_readings(run: Run) -> int | None:
+    """The readings the run planned: meta.json's `planned`, else the stored plan scheduled on
+    the stored config (runs that recorded no count); None if neither says."""
+    if isinstance(run.meta.get("planned"), int):
+        return run.meta["planned"]
+    from gonio.config import parse_config
+    from gonio.plan import build_schedule, parse_plan
+
+    try:
+        return len(build_schedule(parse_plan(run.plan, run.path / "plan.toml"),
+                                  parse_config(run.config, run.path / "instrument.toml")))
+    except GonioError:
+        return None
+
+
+def completeness_of(run: Run, stored: int | None = None) -> Completeness:
+    """The run's completeness; `stored`: its valid readings if the caller has counted them
+    (else its lines are read)."""
+    if stored is None:
+        stored = len(run.lines().rows)
+    return Completeness(run.status, run.meta.get("reason", ""), stored, planned_readings(run))
+
+
+def being_written(run: Run) -> bool:
+    """Whether a scan holds the run open to append to it (its readings file is locked)."""
+    with open(run.path / READINGS, "rb") as fh:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+    return False
