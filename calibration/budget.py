@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.type_b import repeatability_figures
+
 #: The coverage factor of the expanded uncertainty U = k u unless meta["coverage_k"] says other.
 COVERAGE_K = 2.0
 #: Stage step of the central differences that give the model's slope, degrees: 1/100 of the
@@ -72,26 +74,28 @@ class Budget:
 @dataclass(frozen=True)
 class AngleInputs:
     """What the angle terms propagate, degrees (1-sigma) per stage role: each move's own
-    scatter ([axes.NAME] repeatability_deg) and the calibration's zero-offset uncertainty,
-    common to every reading."""
+    scatter (the config's [axes.NAME] repeatability_deg, else the stage kind's declared
+    figure: calibration.type_b) and the calibration's zero-offset uncertainty, common to every
+    reading; `sources`: where each role's repeatability comes from."""
 
     repeatability_deg: dict[str, float] = field(default_factory=dict)
     offset_sigma_deg: dict[str, float] = field(default_factory=dict)
+    sources: dict[str, str] = field(default_factory=dict)
 
     @classmethod
     def of_run(cls, config: dict, cal=None) -> AngleInputs:
         """From a run's stored instrument config and the calibration applied (if any)."""
-        axes = config.get("axes", {}) if isinstance(config, dict) else {}
-        repeat = {role: float(axes[role].get("repeatability_deg", 0.0))
-                  for role in STAGE_ROLES if isinstance(axes.get(role), dict)}
+        repeat = repeatability_figures(config, STAGE_ROLES)
         offsets = {}
         if cal is not None:
             for role in OFFSET_ROLES:
                 value = getattr(cal, f"{role}_offset_deg")
                 if value is not None:
                     offsets[role] = float(value.sigma)
-        return cls({r: v for r, v in repeat.items() if v > 0},
-                   {r: v for r, v in offsets.items() if v > 0})
+        used = {r: f for r, f in repeat.items() if f.sigma > 0}
+        return cls({r: f.sigma for r, f in used.items()},
+                   {r: v for r, v in offsets.items() if v > 0},
+                   {r: f.source for r, f in used.items()})
 
     @property
     def any(self) -> bool:
