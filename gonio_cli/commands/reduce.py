@@ -10,6 +10,7 @@ reduced CSV (calibration.exports.measured)."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--eta", type=float, help="the sample's index, for an imported file that "
                                              "does not give it")
     add_reduce_options(p)
+    add_angle_option(p)
     p.add_argument("--signature-share", type=float, default=DEFAULT_SHARE, metavar="FRACTION",
                    help="flag points whose signature exceeds this share of the net signal "
                         f"(default {DEFAULT_SHARE:g})")
@@ -76,6 +78,21 @@ def add_reduce_options(p: argparse.ArgumentParser) -> None:
                    help="subtract the bench's own scatter, which the run's signature readings "
                         "measured, with its uncertainty (default: flag the points it biases "
                         "and leave them out)")
+
+
+def add_angle_option(p: argparse.ArgumentParser) -> None:
+    """--no-angle-terms, of the verbs that reduce a run with its budget's angle terms."""
+    p.add_argument("--no-angle-terms", action="store_true",
+                   help="reduce without the budget's angle terms (the stages' repeatability "
+                        "and the calibration's angle offsets through the fitted model's slope) "
+                        "where they cannot be estimated; every output says U excludes them")
+
+
+def say_angle_terms(args: argparse.Namespace) -> None:
+    """The stderr line of a run reduced with --no-angle-terms."""
+    if getattr(args, "no_angle_terms", False) and getattr(args, "run", None) is not None:
+        print(f"gonio {args.command}: U excludes the budget's angle terms (--no-angle-terms)",
+              file=sys.stderr)
 
 
 def summary(data) -> list[str]:
@@ -129,7 +146,8 @@ def run(args: argparse.Namespace) -> int:
         return _write_imported(args)  # imported(): one error for both a run and --import
     stored = open_run(args.run)
     data = reduce_run(stored, args.calibration, args.shot_noise_w, args.subtract_signature,
-                      args.signature_share)
+                      args.signature_share, angle_terms=not args.no_angle_terms)
+    say_angle_terms(args)
     data.meta["coverage_k"] = args.coverage_k
     out = write_reduced_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv",
                             record_lines(run_record(stored)))
