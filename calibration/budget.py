@@ -167,12 +167,14 @@ def expanded(data) -> tuple[float, np.ndarray]:
 def summary(data) -> dict:
     """The budget of a ReducedData per component, over its valid points with u > 0 and f != 0:
     `kind` (own or shared; None where the data do not say, as for an imported file), the median
-    and largest share u_c / u and the median u_c / |f|; then k, the median U / |f|, the number
+    and largest share u_c / u, the median u_c / |f| and the `source` of a type-B figure (None
+    for the ones the run's readings give); then k, the median U / |f|, the number
     of points summarised and the budget's notes. What `gonio reduce` prints and `gonio fit
     --json` gives as "budget" (None for a statistic of no points)."""
     good = data.valid & (data.sigma > 0) & (data.bsdf != 0) & np.isfinite(data.bsdf)
     budget = data.meta.get("budget")
     shared = set((budget or {}).get("shared", ()))
+    sources = (budget or {}).get("sources", {})
 
     def median(x: np.ndarray) -> float | None:
         return float(np.median(x)) if len(x) else None
@@ -184,7 +186,8 @@ def summary(data) -> dict:
             "kind": None if budget is None else "shared" if name in shared else "own",
             "median_share": median(share),
             "max_share": float(share.max()) if len(share) else None,
-            "median_relative": median(np.asarray(u)[good] / np.abs(data.bsdf[good]))}
+            "median_relative": median(np.asarray(u)[good] / np.abs(data.bsdf[good])),
+            "source": sources.get(name)}
     k, big_u = expanded(data)
     return {"components": components, "coverage_k": k,
             "median_expanded_relative": median(big_u[good] / np.abs(data.bsdf[good])),

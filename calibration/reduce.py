@@ -235,6 +235,9 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     elif angle.any:
         angle_terms(budget, readings, rows, angle, slope_model, sample, flipped)
         sources.update(angle_sources(angle))
+        if not angle.offset_sigma_deg:
+            notes.append("angle_offset: no calibration of the stage zeros applied (the "
+                         "config's zeros taken as exact)")
     sigma = budget.sigma
     # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
     # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept
@@ -315,9 +318,12 @@ def range_columns(range_w: np.ndarray, beam_range_w: np.ndarray) -> np.ndarray:
 def angle_sources(angle: AngleInputs) -> dict[str, str]:
     """Where the angle terms' inputs come from, by component (meta["budget"]["sources"])."""
     out = {}
-    if angle.repeatability_deg:
-        out["angle_repeatability"] = "; ".join(
-            f"{role}: {angle.sources.get(role, 'stated')}" for role in angle.repeatability_deg)
+    roles_of: dict[str, list[str]] = {}
+    for role in angle.repeatability_deg:
+        roles_of.setdefault(angle.sources.get(role, "stated"), []).append(role)
+    if roles_of:
+        out["angle_repeatability"] = "; ".join(f"{', '.join(roles)}: {source}"
+                                               for source, roles in roles_of.items())
     if angle.offset_sigma_deg:
         out["angle_offset"] = "the calibration's angle offsets"
     return out
