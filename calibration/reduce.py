@@ -13,9 +13,10 @@ propagated, and the beam curve's, which all points share, both into sigma and as
 ReducedData.shared_rel (the fit's covariance). Signature readings (the bench without the sample)
 flag, and on request subtract, what the bench adds (calibration.signature). Every such term is
 a named component of the value's GUM budget (ReducedData.components, calibration.budget), with
-the calibration's (range gains, solid angle), the detector's stated non-linearity and the angle
-errors through a fitted model's slope (docs/fitting.md, "Uncertainty budget").
-"""
+the type-B ones (the calibration's range gains and solid angle, else the config's or the device
+kinds' declared figures and the aperture's tolerance: calibration.type_b; the detector's
+non-linearity) and the angle errors through a fitted model's slope (docs/fitting.md,
+"Uncertainty budget")."""
 
 from __future__ import annotations
 
