@@ -116,8 +116,8 @@ def summary(data) -> list[str]:
 
 def budget_summary(data) -> list[str]:
     """Lines per component of calibration.budget.summary: own or shared, its median and largest
-    share u_c / u over the valid points, its median u_c / f; then k and the median U / f, and
-    the budget's notes."""
+    share u_c / u over the valid points, its median u_c / f; then k and the median U / f, where
+    each type-B figure comes from, and the budget's notes."""
     from calibration.budget import summary as budget_of
 
     budget = budget_of(data)
@@ -129,6 +129,8 @@ def budget_summary(data) -> list[str]:
     if budget["points"]:
         lines.append(f"u combined; k = {budget['coverage_k']:g}, U = k u: median U/f "
                      f"{budget['median_expanded_relative']:.3g}")
+    lines += [f"source of {name}: {c['source']}"
+              for name, c in budget["components"].items() if c["source"]]
     return lines + [f"budget: {note}" for note in budget["notes"]]
 
 

@@ -180,18 +180,15 @@ REPEATABILITY_DEG = 0.01
 def jittery_run(tmp_path_factory):
     """A scan across Beckmann 0.05's transmitted lobe on the emulated stack (ESP and PM100 on
     ptys) whose stages end each move N(0, 0.01 deg) off ([sim.alignment]), as the config's
-    [axes] repeatability_deg says; the config states the emulated meter's and aperture's
-    figures too (exact gains, no non-linearity, the nominal aperture: the kinds' declared
-    ones would cover errors this bench does not make)."""
+    [axes] repeatability_deg says (and, as instrument() writes it, the emulated meter's and
+    aperture's exact figures)."""
     tmp = tmp_path_factory.mktemp("budget")
     cfg = instrument(tmp, {"source": {"power_w": 1e-3}, "aperture": {"rtol": 1e-5},
                            "sample": {"kind": "hemisphere", "distribution": "beckmann",
                                       "alpha": 0.05, "eta": 1.51,
                                       "multiple_scattering": False},
                            "alignment": {"sample_repeatability_deg": REPEATABILITY_DEG,
-                                         "arm_repeatability_deg": REPEATABILITY_DEG}}, seed=3,
-                     detector={"linearity_rel": 0.0, "range_gain_rel": 0.0},
-                     optics={"aperture_diameter_tolerance_mm": 0.0})
+                                         "arm_repeatability_deg": REPEATABILITY_DEG}}, seed=3)
     text = cfg.read_text()
     for axis in ("[axes.sample]", "[axes.arm]"):
         text = text.replace(axis, f"{axis}\nrepeatability_deg = {REPEATABILITY_DEG}")
