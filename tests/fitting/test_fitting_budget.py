@@ -189,10 +189,6 @@ def jittery_run(tmp_path_factory):
                                       "multiple_scattering": False},
                            "alignment": {"sample_repeatability_deg": REPEATABILITY_DEG,
                                          "arm_repeatability_deg": REPEATABILITY_DEG}}, seed=3)
-    text = cfg.read_text()
-    for axis in ("[axes.sample]", "[axes.arm]"):
-        text = text.replace(axis, f"{axis}\nrepeatability_deg = {REPEATABILITY_DEG}")
-    cfg.write_text(text)
     grids = [{"side": "transmission", "theta_i_deg": 0.0,
               "theta_o_deg": {"start": -4.0, "stop": 4.0, "step": 0.2}}]
     return scan(plan(tmp, "jitter", grids, dark_every=8, beam_every=8), cfg, tmp / "runs")
@@ -356,10 +352,12 @@ def test_coverage_of_U_at_the_declared_specifications():
 @pytest.fixture(scope="module")
 def dark_limited_run(tmp_path_factory):
     """A run on the emulated stack whose sample readings are all below the dark limit (a
-    nanowatt source on Walter's ground glass, far from the lobes): no fit, so no slope."""
+    nanowatt source on Walter's ground glass, far from the lobes) and whose stages scatter as
+    its config says: no fit, so no slope for their angle terms."""
     tmp = tmp_path_factory.mktemp("dark-limited")
     cfg = instrument(tmp, {"source": {"power_w": 1e-9},
-                           "sample": {"multiple_scattering": False}})
+                           "sample": {"multiple_scattering": False},
+                           "alignment": {"sample_repeatability_deg": REPEATABILITY_DEG}})
     grids = [{"side": "reflection", "theta_i_deg": 30.0,
               "theta_o_deg": {"start": -70.0, "stop": -40.0, "step": 10.0}}]
     return scan(plan(tmp, "dark", grids, dark_every=4, beam_every=4), cfg, tmp / "runs")
