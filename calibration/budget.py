@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calibration.type_b import repeatability_figures
+
 #: The coverage factor of the expanded uncertainty U = k u unless meta["coverage_k"] says other.
 COVERAGE_K = 2.0
 #: Stage step of the central differences that give the model's slope, degrees: 1/100 of the
@@ -72,26 +74,28 @@ class Budget:
 @dataclass(frozen=True)
 class AngleInputs:
     """What the angle terms propagate, degrees (1-sigma) per stage role: each move's own
-    scatter ([axes.NAME] repeatability_deg) and the calibration's zero-offset uncertainty,
-    common to every reading."""
+    scatter (the config's [axes.NAME] repeatability_deg, else the stage kind's declared
+    figure: calibration.type_b) and the calibration's zero-offset uncertainty, common to every
+    reading; `sources`: where each role's repeatability comes from."""
 
     repeatability_deg: dict[str, float] = field(default_factory=dict)
     offset_sigma_deg: dict[str, float] = field(default_factory=dict)
+    sources: dict[str, str] = field(default_factory=dict)
 
     @classmethod
     def of_run(cls, config: dict, cal=None) -> AngleInputs:
         """From a run's stored instrument config and the calibration applied (if any)."""
-        axes = config.get("axes", {}) if isinstance(config, dict) else {}
-        repeat = {role: float(axes[role].get("repeatability_deg", 0.0))
-                  for role in STAGE_ROLES if isinstance(axes.get(role), dict)}
+        repeat = repeatability_figures(config, STAGE_ROLES)
         offsets = {}
         if cal is not None:
             for role in OFFSET_ROLES:
                 value = getattr(cal, f"{role}_offset_deg")
                 if value is not None:
                     offsets[role] = float(value.sigma)
-        return cls({r: v for r, v in repeat.items() if v > 0},
-                   {r: v for r, v in offsets.items() if v > 0})
+        used = {r: f for r, f in repeat.items() if f.sigma > 0}
+        return cls({r: f.sigma for r, f in used.items()},
+                   {r: v for r, v in offsets.items() if v > 0},
+                   {r: f.source for r, f in used.items()})
 
     @property
     def any(self) -> bool:
@@ -163,12 +167,14 @@ def expanded(data) -> tuple[float, np.ndarray]:
 def summary(data) -> dict:
     """The budget of a ReducedData per component, over its valid points with u > 0 and f != 0:
     `kind` (own or shared; None where the data do not say, as for an imported file), the median
-    and largest share u_c / u and the median u_c / |f|; then k, the median U / |f|, the number
+    and largest share u_c / u, the median u_c / |f| and the `source` of a type-B figure (None
+    for the ones the run's readings give); then k, the median U / |f|, the number
     of points summarised and the budget's notes. What `gonio reduce` prints and `gonio fit
     --json` gives as "budget" (None for a statistic of no points)."""
     good = data.valid & (data.sigma > 0) & (data.bsdf != 0) & np.isfinite(data.bsdf)
     budget = data.meta.get("budget")
     shared = set((budget or {}).get("shared", ()))
+    sources = (budget or {}).get("sources", {})
 
     def median(x: np.ndarray) -> float | None:
         return float(np.median(x)) if len(x) else None
@@ -180,7 +186,8 @@ def summary(data) -> dict:
             "kind": None if budget is None else "shared" if name in shared else "own",
             "median_share": median(share),
             "max_share": float(share.max()) if len(share) else None,
-            "median_relative": median(np.asarray(u)[good] / np.abs(data.bsdf[good]))}
+            "median_relative": median(np.asarray(u)[good] / np.abs(data.bsdf[good])),
+            "source": sources.get(name)}
     k, big_u = expanded(data)
     return {"components": components, "coverage_k": k,
             "median_expanded_relative": median(big_u[good] / np.abs(data.bsdf[good])),

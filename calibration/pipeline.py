@@ -5,6 +5,7 @@ and `gonio export --format zemax|mitsuba` share."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,12 +14,17 @@ import numpy as np
 from calibration import calfile
 from calibration.fit import FitError, FitOptions, FitResult, fit
 from calibration.reduced import ReducedData
+from calibration.values import CalibrationError
 
 if TYPE_CHECKING:
     from gonio.store import Run
 
-#: The fit whose model gives `reduce_run` the BSDF's slope: the default one.
-DEFAULT_SLOPE_FIT = FitOptions()
+#: The fit whose model gives `reduce_run` the BSDF's slope: the default one, over every
+#: valid point (each incidence the run has: a run without normal incidence has its slope too).
+DEFAULT_SLOPE_FIT = FitOptions(fit_incidence_deg=None)
+#: meta["budget"]["angle_terms"] and the note of a reduction asked to leave them out.
+ANGLE_TERMS_EXCLUDED = ("angle: excluded (--no-angle-terms): U excludes the stages' "
+                        "repeatability and the calibration's angle offsets")
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:
@@ -31,7 +37,8 @@ def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.
 def reduce_run(run: str | Path | Run, calibration_file: str | Path | None = None,
                shot_noise_w: float | None = None, subtract_signature: bool = False,
                signature_share: float | None = None,
-               slope_options: FitOptions | None = DEFAULT_SLOPE_FIT) -> ReducedData:
+               slope_options: FitOptions | None = DEFAULT_SLOPE_FIT,
+               angle_terms: bool = True) -> ReducedData:
     """Calibrated ReducedData of a run (its directory, or the Run already open, whose readings
     are then read once; the calibration's name goes into meta["calibration"],
     the [optics] beam divergence into meta["beam_divergence_deg"] for the fit; an all-emulated
@@ -40,8 +47,8 @@ def reduce_run(run: str | Path | Run, calibration_file: str | Path | None = None
     flag (calibration.reduce.optics_of); subtract_signature: subtract the bench's own scatter
     that the run's signature readings measured, signature_share: the share of the net signal
     above which a point is flagged (calibration.signature; None: its default);
-    slope_options: the fit whose model carries the angle errors into the budget
-    (`reduce_stored`)."""
+    slope_options, angle_terms: the fit whose model carries the angle errors into the budget,
+    and whether to (`reduce_stored`)."""
     from gonio.completeness import completeness_of
     from gonio.store import Run, open_run
 
@@ -49,21 +56,23 @@ def reduce_run(run: str | Path | Run, calibration_file: str | Path | None = None
         run = open_run(run)
     readings = run.readings()
     data = reduce_stored(run, readings, calibration_file, shot_noise_w, subtract_signature,
-                         signature_share, slope_options)
+                         signature_share, slope_options, angle_terms)
     data.meta["completeness"] = completeness_of(run, len(readings)).to_json()
     return data
 
 
 def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path | None = None,
                   shot_noise_w: float | None = None, subtract_signature: bool = False,
-                  signature_share: float | None = None, slope_options: FitOptions | None = None
-                  ) -> ReducedData:
+                  signature_share: float | None = None, slope_options: FitOptions | None = None,
+                  angle_terms: bool = True) -> ReducedData:
     """`reduce_run` of some of a run's stored readings (READING_DTYPE): those stored so far,
-    for the live view of a run in progress. When the run states angle uncertainties (the
+    for the live view of a run in progress. When the run has angle uncertainties (the
     stages' repeatability, the calibration's offsets) and slope_options are given, the data
-    are fitted with them and reduced again with the fitted model's slope in the budget
-    (meta["budget"]["slope"] names the fit; a failed fit leaves the angle terms out and says
-    why in meta["budget"]["notes"]); None: no fit, no angle terms."""
+    are fitted with them over every valid point (each incidence) and reduced again with the
+    fitted model's slope in the budget (meta["budget"]["slope"] names the fit); a failed fit
+    raises CalibrationError, unless angle_terms is False (--no-angle-terms: no fit, and
+    meta["budget"]["angle_terms"] and its notes say that U excludes them). slope_options
+    None (the live view): no fit, no angle terms, a note says so."""
     from calibration.budget import AngleInputs
     from calibration.reduce import optics_of, reduce_readings
     from gonio.record import emulator_config
@@ -89,13 +98,18 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
     data = reduced()
     if not angle.any or slope_options is None:
         return data
-    try:
-        result = fit(data, slope_options)
-    except FitError as exc:
-        notes = data.meta["budget"]["notes"]
-        notes[:] = [n for n in notes if not n.startswith("angle:")]
-        notes.append(f"angle: not propagated (the fit failed: {exc})")
+    if not angle_terms:
+        budget = data.meta["budget"]
+        budget["notes"] = [n for n in budget["notes"] if not n.startswith("angle:")]
+        budget["notes"].append(ANGLE_TERMS_EXCLUDED)
+        budget["angle_terms"] = "excluded"
         return data
+    try:
+        result = fit(data, replace(slope_options, fit_incidence_deg=None))
+    except FitError as exc:
+        raise CalibrationError(f"cannot estimate the budget's angle terms: the fit of the "
+                               f"model's slope failed ({exc}); --no-angle-terms reduces "
+                               f"with U excluding them") from None
     data = reduced(result.predict)
     data.meta["budget"]["slope"] = {"distribution": result.distribution,
                                     "parameters": result.to_dict()["parameters"]}
@@ -105,11 +119,13 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,
             calibration_file: str | Path | None = None, shot_noise_w: float | None = None,
             subtract_signature: bool = False,
-            progress: Callable[[str], None] | None = None) -> tuple[ReducedData, FitResult]:
-    """Reduce and fit a run (fitted twice when the angle terms need the model's slope:
-    `reduce_stored`; progress: calibration.fit.fit's progress lines)."""
+            progress: Callable[[str], None] | None = None,
+            angle_terms: bool = True) -> tuple[ReducedData, FitResult]:
+    """Reduce and fit a run (fitted twice when the angle terms need the model's slope, the
+    same options over every incidence: `reduce_stored`; progress: calibration.fit.fit's
+    progress lines; angle_terms: False for --no-angle-terms)."""
     options = options or FitOptions()
     data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature,
-                      slope_options=options)
+                      slope_options=options, angle_terms=angle_terms)
     return data, fit(data, options, progress)
 

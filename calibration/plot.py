@@ -138,11 +138,12 @@ def completeness_line(completeness: dict | None) -> str:
 
 def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
              calibration_file: str | Path | None = None, fit_options=None,
-             shot_noise_w: float | None = None, subtract_signature: bool = False) -> Path:
+             shot_noise_w: float | None = None, subtract_signature: bool = False,
+             angle_terms: bool = True) -> Path:
     """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
     (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png);
-    subtract_signature as calibration.pipeline.reduce_run. A calibration run (its record's
-    `calibrates`) gets the plot of what it measures instead (calibration.calplot)."""
+    subtract_signature, angle_terms as calibration.pipeline.reduce_run. A calibration run
+    (its record's `calibrates`) gets the plot of what it measures instead (calibration.calplot)."""
     from calibration.pipeline import reduce_run
     from gonio.completeness import completeness_of
     from gonio.record import run_record
@@ -160,7 +161,8 @@ def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool =
         title = (f"{run_dir.name}: {kind} calibration"
                  + completeness_line(completeness_of(run).to_json()))
         return plot_calibration(run.readings(), kind, out_png or run_dir / "plot.png", title)
-    data = reduce_run(run, calibration_file, shot_noise_w, subtract_signature)
+    data = reduce_run(run, calibration_file, shot_noise_w, subtract_signature,
+                      angle_terms=angle_terms)
     title = plot_title(run_dir.name, data.meta)
     if fit:
         from calibration.fit import fit as fit_model

@@ -13,15 +13,16 @@ propagated, and the beam curve's, which all points share, both into sigma and as
 ReducedData.shared_rel (the fit's covariance). Signature readings (the bench without the sample)
 flag, and on request subtract, what the bench adds (calibration.signature). Every such term is
 a named component of the value's GUM budget (ReducedData.components, calibration.budget), with
-the calibration's (range gains, solid angle), the detector's stated non-linearity and the angle
-errors through a fitted model's slope (docs/fitting.md, "Uncertainty budget").
-"""
+the type-B ones (the calibration's range gains and solid angle, else the config's or the device
+kinds' declared figures and the aperture's tolerance: calibration.type_b; the detector's
+non-linearity) and the angle errors through a fitted model's slope (docs/fitting.md,
+"Uncertainty budget")."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,6 +42,7 @@ from calibration.detector import range_key
 from calibration.emulator_truth import EmulatorTruth, run_config_errors, truth_of
 from calibration.reduced import ReducedData
 from calibration.signature import DEFAULT_SHARE, apply_signature
+from calibration.type_b import detector_figures, solid_angle_figure
 from calibration.values import CalibrationError
 from gonio.errors import GonioError
 from gonio.geometry import sample_angles
@@ -72,8 +74,10 @@ class ReductionOptics:
     """What reduction takes from a run's description: the sample ([sample]), the aperture's
     half-angle (a calibration's, else [optics]) and where it came from, the wavelength, the
     shot noise of one reading per watt of net signal and the noise model in words, the
-    detector's relative non-linearity ([detector] linearity_rel, 0: not stated); `sim` and
-    `truth` are the emulator's [sim] table and its sample of an all-emulated run (for plots)."""
+    detector's relative 1-sigma non-linearity and range-gain error, the aperture solid angle's
+    relative 1-sigma from its tolerance (calibration.type_b; 0: not stated) and `sources`,
+    where each of those comes from; `sim` and `truth` are the emulator's [sim] table and its
+    sample of an all-emulated run (for plots)."""
 
     sample: SampleInfo
     aperture_half_angle_deg: float
@@ -85,6 +89,9 @@ class ReductionOptics:
     linearity_rel: float = 0.0
     sim: dict | None = None
     truth: dict | None = None
+    range_gain_rel: float = 0.0
+    solid_angle_rel: float = 0.0
+    sources: dict[str, str] = field(default_factory=dict)
 
     @property
     def aperture_sr(self) -> float:
@@ -125,9 +132,15 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     averaging = int((plan or {}).get("averaging") or detector.get("averaging", 1))
     truth = truth_of(sim, None, (plan or {}).get("sample"))
     variance, noise_model = _shot_noise(detector, truth, shot_noise_w, wavelength, averaging)
+    figures = detector_figures(config)
+    if optics is not None and not measured_aperture:
+        figures["solid_angle"] = solid_angle_figure(optics)
+    value = {name: f.sigma for name, f in figures.items()}
     return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
-                           noise_model, float(detector.get("linearity_rel") or 0.0), sim,
-                           truth.sample if truth is not None else None)
+                           noise_model, value.get("linearity_rel", 0.0), sim,
+                           truth.sample if truth is not None else None,
+                           value.get("range_gain_rel", 0.0), value.get("solid_angle", 0.0),
+                           {name.removesuffix("_rel"): f.source for name, f in figures.items()})
 
 
 def _shot_noise(detector: dict, truth: EmulatorTruth | None, shot_noise_w: float | None,
@@ -215,11 +228,17 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
                        * per_w)
     budget.add_shared("dark", per_range(rows["range_w"], level_sigma * per_w))
     budget.add_shared("beam_normalisation", np.abs(bsdf)[:, None] * phi_shared / phi[:, None])
-    notes = calibration_terms(budget, cal, rows["range_w"], optics)
+    sources: dict[str, str] = {}
+    notes = calibration_terms(budget, cal, rows["range_w"], beam_rows["range_w"], optics,
+                              sources)
     if angle.any and slope_model is None:
         notes.append("angle: not propagated (no fitted model gave the BSDF's slope)")
     elif angle.any:
         angle_terms(budget, readings, rows, angle, slope_model, sample, flipped)
+        sources.update(angle_sources(angle))
+        if not angle.offset_sigma_deg:
+            notes.append("angle_offset: no calibration of the stage zeros applied (the "
+                         "config's zeros taken as exact)")
     sigma = budget.sigma
     # an aperture across the sample's horizon, or a sample edge-on to the beam, measures no
     # BSDF (|cos o| -> 0 makes any stray power a huge value): flagged, and the planned side kept
@@ -247,7 +266,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
         "index": rows["index"].tolist(),  # the reading each point comes from
         "coverage_k": COVERAGE_K,
         "budget": {"own": sorted(budget.own), "shared": sorted(budget.shared),
-                   "angle_inputs": angle.to_json(), "notes": notes},
+                   "angle_inputs": angle.to_json(), "sources": sources, "notes": notes},
     }
     if signature.meta is not None:
         meta["signature"] = signature.meta
@@ -287,29 +306,62 @@ def per_range(range_w: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.where(range_w[:, None] == ranges[None, :], values[:, None], 0.0)
 
 
-def calibration_terms(budget: Budget, cal, range_w: np.ndarray, optics: ReductionOptics
-                      ) -> list[str]:
-    """The components of the calibration and the detector's description: range_gain (shared
-    per range: the gain's relative sigma), solid_angle (shared by all points: the measured
-    aperture's relative sigma) and linearity (own: [detector] linearity_rel, GUM type B);
+def range_columns(range_w: np.ndarray, beam_range_w: np.ndarray) -> np.ndarray:
+    """(N, ranges) coefficients of each range's own gain error in a value: +1 on the range it
+    was read on, minus the share of the beam readings taken on each range (the value is a
+    ratio to the beam's; a range both share cancels)."""
+    ranges = np.union1d(range_w, beam_range_w)
+    share = np.array([np.mean(beam_range_w == r) for r in ranges])
+    columns = (range_w[:, None] == ranges[None, :]) - share[None, :]
+    return columns[:, np.any(columns != 0, axis=0)]
+
+
+def angle_sources(angle: AngleInputs) -> dict[str, str]:
+    """Where the angle terms' inputs come from, by component (meta["budget"]["sources"])."""
+    out = {}
+    roles_of: dict[str, list[str]] = {}
+    for role in angle.repeatability_deg:
+        roles_of.setdefault(angle.sources.get(role, "stated"), []).append(role)
+    if roles_of:
+        out["angle_repeatability"] = "; ".join(f"{', '.join(roles)}: {source}"
+                                               for source, roles in roles_of.items())
+    if angle.offset_sigma_deg:
+        out["angle_offset"] = "the calibration's angle offsets"
+    return out
+
+
+def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np.ndarray,
+                      optics: ReductionOptics, sources: dict[str, str]) -> list[str]:
+    """The type-B components: linearity (own: the detector's relative non-linearity),
+    range_gain (shared: the calibration's gains relative to its reference range, one column
+    per range; else each range's stated gain error, on the sample's and the beam's range,
+    `range_columns`) and solid_angle (shared by all points: the calibration's measured
+    aperture, else the aperture's tolerance); fills `sources` with where each comes from and
     returns notes on what the budget lacks."""
     value = np.abs(budget.bsdf)
     notes = []
     if optics.linearity_rel > 0:
         budget.add_own("linearity", value * optics.linearity_rel)
+        sources["linearity"] = optics.sources.get("linearity", "stated")
     else:
         notes.append("linearity: not stated ([detector] linearity_rel)")
-    if cal is None:
-        return notes + ["range_gain: no calibration applied",
-                        f"solid_angle: the {optics.aperture_from} aperture states no "
-                        "uncertainty"]
-    if cal.gains is not None:
+    if cal is not None and cal.gains is not None:
         rel = np.array([_relative(cal.gains.get(range_key(r))) for r in range_w])
         budget.add_shared("range_gain", per_range(range_w, value * rel))
+        sources["range_gain"] = "the calibration's range gains"
+    elif optics.range_gain_rel > 0:
+        budget.add_shared("range_gain", value[:, None] * optics.range_gain_rel
+                          * range_columns(range_w, beam_range_w))
+        sources["range_gain"] = optics.sources.get("range_gain", "stated")
     else:
-        notes.append("range_gain: the calibration has no gains")
-    if optics.aperture_from == "calibration":
+        notes.append("range_gain: no calibration applied" if cal is None
+                     else "range_gain: the calibration has no gains")
+    if cal is not None and optics.aperture_from == "calibration":
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
+        sources["solid_angle"] = "the calibration's measured aperture"
+    elif optics.solid_angle_rel > 0:
+        budget.add_shared("solid_angle", value * optics.solid_angle_rel)
+        sources["solid_angle"] = optics.sources.get("solid_angle", "stated")
     else:
         notes.append(f"solid_angle: the {optics.aperture_from} aperture states no uncertainty")
     return notes

@@ -31,8 +31,9 @@ class DetectorConfig:
     """The detector, its correction wavelength, averaging and range policy (None = auto);
     `shot_noise_w`: the shot-noise variance of one sample per watt of signal, W (2 q B / R for
     a photodiode of responsivity R and noise bandwidth B), None when not known;
-    `linearity_rel`: the relative 1-sigma non-linearity of a reading (the uncertainty budget's,
-    a datasheet's or a linearity test's figure), None when not stated."""
+    `linearity_rel`: the relative 1-sigma non-linearity of a reading and `range_gain_rel` the
+    relative 1-sigma gain error of each range (the uncertainty budget's, a datasheet's or a
+    test's figures), None when not stated (the detector kind's declared ones then apply)."""
 
     device: str
     wavelength_nm: float
@@ -40,6 +41,7 @@ class DetectorConfig:
     range_w: float | None = None
     shot_noise_w: float | None = None
     linearity_rel: float | None = None
+    range_gain_rel: float | None = None
 
 
 @dataclass(frozen=True)
@@ -201,6 +203,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
         range_w=range_w,
         shot_noise_w=f.number("shot_noise_w", None, low=0.0, high=1.0),
         linearity_rel=f.number("linearity_rel", None, low=0.0, high=0.5),
+        range_gain_rel=f.number("range_gain_rel", None, low=0.0, high=0.5),
     )
     f.done()
     return det

@@ -22,7 +22,9 @@ POLARISATIONS = ("unpolarised", "s", "p")
 @dataclass(frozen=True)
 class Optics:
     """[optics]: lengths in mm, angles in degrees (divergence is the half-angle); a polarisation
-    is "unpolarised", "s", "p" or a linear polariser's angle in degrees."""
+    is "unpolarised", "s", "p" or a linear polariser's angle in degrees;
+    aperture_diameter_tolerance_mm: the aperture diameter's +-tolerance, None when not stated
+    (the uncertainty budget then takes a machined part's tolerance class, calibration.type_b)."""
 
     wavelength_nm: float
     bandwidth_nm: float
@@ -32,6 +34,7 @@ class Optics:
     aperture_distance_mm: float
     source_polarisation: str | float
     analyser_polarisation: str | float
+    aperture_diameter_tolerance_mm: float | None = None
 
     @property
     def aperture_half_angle_deg(self) -> float:
@@ -73,6 +76,8 @@ def parse_optics(f: Fields) -> Optics:
                                       low_open=True),
         source_polarisation=_polarisation(f, "source_polarisation"),
         analyser_polarisation=_polarisation(f, "analyser_polarisation"),
+        aperture_diameter_tolerance_mm=f.number("aperture_diameter_tolerance_mm", None,
+                                                low=0.0, high=100.0),
     )
     f.done()
     if optics.aperture_diameter_mm >= optics.aperture_distance_mm:

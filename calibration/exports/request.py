@@ -21,3 +21,4 @@ class ExportRequest:
     calibration: str | Path | None = None
     shot_noise_w: float | None = None
     subtract_signature: bool = False
+    angle_terms: bool = True  # False: reduce without the budget's angle terms (U says so)

@@ -27,7 +27,7 @@ def write_run(run_dir: str | Path, fmt: str, what: str, out: Path, request: Expo
     if what != "raw":
         try:
             data = reduce_run(run, request.calibration, request.shot_noise_w,
-                              request.subtract_signature)
+                              request.subtract_signature, angle_terms=request.angle_terms)
         except GonioError as exc:
             if not fallback:
                 raise

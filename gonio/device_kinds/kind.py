@@ -16,6 +16,7 @@ from drivers.base import Axis, Detector
 from drivers.port_identity import port_key
 from gonio.device_kinds.endpoints import LINK_TYPES, socket_resource
 from gonio.device_kinds.settings import Setting
+from gonio.device_kinds.specs import DeviceSpec, SpecOf, fixed
 
 
 class StageController(Protocol):
@@ -65,12 +66,14 @@ class _Kind:
     """What every kind declares: its name (a config's `protocol`), its settings, its check,
     and `bus`: the setting that tells its devices apart on a line they share (a Zaber chain's
     address, a Modbus RTU unit id); devices whose kinds name the same bus setting may share a
-    port when their values of it differ (gonio.device_kinds.line_checks), no others."""
+    port when their values of it differ (gonio.device_kinds.line_checks), no others; `spec`:
+    a device's declared type-B figures from its settings (gonio.device_kinds.specs)."""
 
     name: str
     settings: tuple[Setting, ...]
     check: Check | None = None
     bus: str = ""
+    spec: SpecOf = fixed(DeviceSpec())
 
 
 @dataclass(frozen=True, kw_only=True)

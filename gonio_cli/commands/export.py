@@ -11,6 +11,7 @@ from pathlib import Path
 from calibration.exports import ExportRequest, write
 from calibration.formats import FORMATS, WHATS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
+from gonio_cli.commands.reduce import say_angle_terms
 
 #: The module's docstring with FORMAT spelled out as the names of calibration.formats.
 DESCRIPTION = __doc__.replace("--format FORMAT", f"--format {'|'.join(FORMATS)}")
@@ -47,8 +48,11 @@ def run(args: argparse.Namespace) -> int:
     """Write the file(s), print each path and any note (on stderr)."""
     sim = emulator_sim(args.run) if args.diffraction else None
     request = ExportRequest(args.what, options_from(args, sim), args.fit, args.force,
-                            args.calibration, args.shot_noise_w, args.subtract_signature)
+                            args.calibration, args.shot_noise_w, args.subtract_signature,
+                            not args.no_angle_terms)
     paths, notes = write(args.run, args.format, Path(args.out), request)
+    if request.what != "raw":
+        say_angle_terms(args)
     for note in notes:
         print(note, file=sys.stderr)
     for path in paths:

@@ -10,7 +10,13 @@ import json
 import sys
 
 from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
-from gonio_cli.commands.reduce import add_reduce_options, add_run_or_import, imported
+from gonio_cli.commands.reduce import (
+    add_angle_option,
+    add_reduce_options,
+    add_run_or_import,
+    imported,
+    say_angle_terms,
+)
 
 
 def _list(text: str) -> tuple[str, ...]:
@@ -61,6 +67,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="K-correlation PSD exponent for --diffraction (default 2, or an "
                         "all-emulated run's [sim.sample] psd_exponent)")
     add_reduce_options(p)
+    add_angle_option(p)
 
 
 def nano_roughness(sim: dict | None, rms_height_nm: float | None,
@@ -124,7 +131,9 @@ def run(args: argparse.Namespace) -> int:
     if data is None:
         sim = emulator_sim(args.run) if args.diffraction else None
         data, result = fit_run(args.run, options_from(args, sim), args.calibration,
-                               args.shot_noise_w, args.subtract_signature, progress=_to_stderr)
+                               args.shot_noise_w, args.subtract_signature, progress=_to_stderr,
+                               angle_terms=not args.no_angle_terms)
+        say_angle_terms(args)
     else:
         result = fit(data, options_from(args), _to_stderr)
     out = result.to_dict()

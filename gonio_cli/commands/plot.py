@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
+from gonio_cli.commands.reduce import say_angle_terms
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -28,6 +29,8 @@ def run(args: argparse.Namespace) -> int:
     sim = emulator_sim(args.run) if args.fit and args.diffraction else None
     out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
                    fit_options=options_from(args, sim) if args.fit else None,
-                   shot_noise_w=args.shot_noise_w, subtract_signature=args.subtract_signature)
+                   shot_noise_w=args.shot_noise_w, subtract_signature=args.subtract_signature,
+                   angle_terms=not args.no_angle_terms)
+    say_angle_terms(args)
     print(out)
     return 0

@@ -10,6 +10,7 @@ reduced CSV (calibration.exports.measured)."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--eta", type=float, help="the sample's index, for an imported file that "
                                              "does not give it")
     add_reduce_options(p)
+    add_angle_option(p)
     p.add_argument("--signature-share", type=float, default=DEFAULT_SHARE, metavar="FRACTION",
                    help="flag points whose signature exceeds this share of the net signal "
                         f"(default {DEFAULT_SHARE:g})")
@@ -78,6 +80,21 @@ def add_reduce_options(p: argparse.ArgumentParser) -> None:
                         "and leave them out)")
 
 
+def add_angle_option(p: argparse.ArgumentParser) -> None:
+    """--no-angle-terms, of the verbs that reduce a run with its budget's angle terms."""
+    p.add_argument("--no-angle-terms", action="store_true",
+                   help="reduce without the budget's angle terms (the stages' repeatability "
+                        "and the calibration's angle offsets through the fitted model's slope) "
+                        "where they cannot be estimated; every output says U excludes them")
+
+
+def say_angle_terms(args: argparse.Namespace) -> None:
+    """The stderr line of a run reduced with --no-angle-terms."""
+    if getattr(args, "no_angle_terms", False) and getattr(args, "run", None) is not None:
+        print(f"gonio {args.command}: U excludes the budget's angle terms (--no-angle-terms)",
+              file=sys.stderr)
+
+
 def summary(data) -> list[str]:
     """Lines per (incidence, side): points, valid points, peak BSDF, median relative sigma."""
     lines = [f"{'theta_i':>8} {'side':<12} {'points':>6} {'valid':>6} {'peak 1/sr':>11} "
@@ -99,8 +116,8 @@ def summary(data) -> list[str]:
 
 def budget_summary(data) -> list[str]:
     """Lines per component of calibration.budget.summary: own or shared, its median and largest
-    share u_c / u over the valid points, its median u_c / f; then k and the median U / f, and
-    the budget's notes."""
+    share u_c / u over the valid points, its median u_c / f; then k and the median U / f, where
+    each type-B figure comes from, and the budget's notes."""
     from calibration.budget import summary as budget_of
 
     budget = budget_of(data)
@@ -112,6 +129,8 @@ def budget_summary(data) -> list[str]:
     if budget["points"]:
         lines.append(f"u combined; k = {budget['coverage_k']:g}, U = k u: median U/f "
                      f"{budget['median_expanded_relative']:.3g}")
+    lines += [f"source of {name}: {c['source']}"
+              for name, c in budget["components"].items() if c["source"]]
     return lines + [f"budget: {note}" for note in budget["notes"]]
 
 
@@ -129,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
         return _write_imported(args)  # imported(): one error for both a run and --import
     stored = open_run(args.run)
     data = reduce_run(stored, args.calibration, args.shot_noise_w, args.subtract_signature,
-                      args.signature_share)
+                      args.signature_share, angle_terms=not args.no_angle_terms)
+    say_angle_terms(args)
     data.meta["coverage_k"] = args.coverage_k
     out = write_reduced_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv",
                             record_lines(run_record(stored)))

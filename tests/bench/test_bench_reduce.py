@@ -18,9 +18,11 @@ from sim.bench.sample import higher_order_lobe
 from sim.devices.photodiode import PhotodiodeModel
 
 WL = 632.8
-#: The bench as its config's [optics] describes it (the [sim] defaults' geometry).
+#: The bench as its config's [optics] describes it (the [sim] defaults' geometry; the emulated
+#: aperture is its nominal size exactly, so no tolerance: these tests weigh the noise).
 OPTICS = {"wavelength_nm": WL, "bandwidth_nm": 0.002, "beam_diameter_mm": 2.0,
-          "divergence_deg": 0.0, "aperture_diameter_mm": 10.0, "aperture_distance_mm": 500.0}
+          "divergence_deg": 0.0, "aperture_diameter_mm": 10.0, "aperture_distance_mm": 500.0,
+          "aperture_diameter_tolerance_mm": 0.0}
 
 
 def described_sample(sim):

@@ -7,6 +7,7 @@ model at the reported positions, what the reduced values estimate."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -49,6 +50,8 @@ class Scan:
     repeatability_deg: tuple[float, float] = (5e-3, 5e-3)  # sample, arm: each move's
     darks_per_range: int = 30
     beam_every: int = 8
+    reference_gain_error: bool = False  # the beam's range has a gain error too (no calibration)
+    rectangular: bool = False  # gains, stage scatter, aperture: uniform laws of the same sigma
 
     def calibration(self) -> Calibration:
         """What the calibration says: offsets and gains 0 and 1 with their sigmas."""
@@ -91,6 +94,14 @@ class Scan:
         f = aperture_average(self.model(), wi, w_eval, half_angle_deg, 12)
         return f * factor * np.abs(wo[:, 2]), factor * np.abs(wo[:, 2])
 
+    def error(self, rng: np.random.Generator, sigma, size=None) -> np.ndarray:
+        """Errors of standard deviation `sigma`: normal, or uniform +-sigma sqrt(3) when
+        `rectangular` (a datasheet's +-a read as GUM's rectangular law)."""
+        if self.rectangular:
+            half = np.sqrt(3.0) * np.asarray(sigma, dtype=np.float64)
+            return rng.uniform(-half, half, size if size is not None else np.shape(half))
+        return rng.normal(0.0, sigma, size)
+
     def draw(self, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """(readings in READING_DTYPE, truth: the BSDF at each sample reading's reported
         position). In time order: the dark readings, then blocks of beam_every sample
@@ -103,9 +114,9 @@ class Scan:
         block = np.arange(n) // self.beam_every
         offsets = rng.normal(0.0, self.offset_sigma_deg)
         sample_true = (st.sample_deg + offsets[0]
-                       + rng.normal(0, self.repeatability_deg[0], block[-1] + 1)[block])
-        arm_true = st.arm_deg + offsets[1] + rng.normal(0, self.repeatability_deg[1], n)
-        half_true = self.half_angle_deg + rng.normal(0.0, self.half_angle_sigma_deg)
+                       + self.error(rng, self.repeatability_deg[0], block[-1] + 1)[block])
+        arm_true = st.arm_deg + offsets[1] + self.error(rng, self.repeatability_deg[1], n)
+        half_true = self.half_angle_deg + self.error(rng, self.half_angle_sigma_deg)
         omega_true = solid_angle_sr(math.radians(half_true))
         power_per_w, _ = self.reading_model(sample_true, arm_true, self.half_angle_deg)
         nominal, cos_factor = self.reading_model(st.sample_deg, st.arm_deg, self.half_angle_deg)
@@ -114,8 +125,8 @@ class Scan:
         t_sample = np.arange(n) + block + 2.0  # a beam reading before each block
         t_beam = np.arange(block[-1] + 2) * (self.beam_every + 1) + 1.0
         source = lambda t: self.beam_w * (1.0 + self.drift * np.sin(2 * np.pi * t / 400.0 + 1.0))  # noqa: E731
-        gain_err = {r: (0.0 if r == RANGES_W[-1] else rng.normal(0.0, self.gain_sigma))
-                    for r in RANGES_W}
+        gain_err = {r: (0.0 if r == RANGES_W[-1] and not self.reference_gain_error
+                        else self.error(rng, self.gain_sigma)) for r in RANGES_W}
         dark = {r: self.dark_fs * r for r in RANGES_W}
 
         net = source(t_sample) * omega_true * power_per_w
@@ -127,8 +138,8 @@ class Scan:
         measured += rng.normal(0.0, self.read_noise_fs * fs)
 
         beam_fs = RANGES_W[-1]
-        beam = source(t_beam) + dark[beam_fs] + rng.normal(0.0, self.read_noise_fs * beam_fs,
-                                                             len(t_beam))
+        beam = (source(t_beam) * (1.0 + gain_err[beam_fs]) + dark[beam_fs]
+                + rng.normal(0.0, self.read_noise_fs * beam_fs, len(t_beam)))
         used = sorted(set(fs.tolist()) | {beam_fs})
         dark_range = np.repeat(used, self.darks_per_range)
         dark_power = (np.array([dark[r] for r in dark_range])
@@ -149,6 +160,56 @@ class Scan:
         for name in a._fields:
             out[name][:n] = getattr(a, name)
         return out, truth
+
+
+#: The bench of the coverage at the declared specifications: an ESP301 driving both stages, a
+#: PM100 reading the detector, a 3.5 mm aperture at 500 mm (its tolerance class gives the
+#: solid angle's uncertainty when no calibration measures it).
+APERTURE_MM = (3.5, 500.0)
+
+
+def spec_config(scan: Scan) -> dict:
+    """The stored config of a bench of the declared kinds (gonio.device_kinds.specs), stating
+    none of the type-B figures itself, and the shot noise the scan draws."""
+    return {"devices": {"esp": {"protocol": "esp"}, "pm100": {"protocol": "pm100"}},
+            "axes": {"sample": {"device": "esp", "axis": 1}, "arm": {"device": "esp", "axis": 2}},
+            "detector": {"device": "pm100", "shot_noise_w": scan.shot_per_w},
+            "optics": {"wavelength_nm": 633.0, "bandwidth_nm": 0.0, "beam_diameter_mm": 1.0,
+                       "divergence_deg": 0.0, "aperture_diameter_mm": APERTURE_MM[0],
+                       "aperture_distance_mm": APERTURE_MM[1]}}
+
+
+def spec_scan(theta_i_deg: float, calibrated: bool, rectangular: bool = False) -> Scan:
+    """A scan whose every type-B error is drawn at the declared specifications: the PM100's
+    non-linearity and (uncalibrated) range gains, every range's, the beam's included; the
+    ESP stages' repeatability; (uncalibrated) the aperture diameter's ISO 2768-f tolerance,
+    else the calibration's gains, aperture and stage zeros, as Scan draws them."""
+    from calibration.type_b import solid_angle_figure
+    from gonio.device_kinds.specs import ESP, PM100
+    from gonio.optics import optics_of_config
+
+    optics = optics_of_config(spec_config(Scan()))
+    half = optics.aperture_half_angle_deg
+    stage = ESP.repeatability_deg.sigma
+    changes = {"theta_i_deg": theta_i_deg, "half_angle_deg": half, "rectangular": rectangular,
+               "linearity": PM100.linearity_rel.sigma * math.sqrt(3.0),
+               "repeatability_deg": (stage, stage)}
+    if not calibrated:
+        # the half-angle's sigma that gives the solid angle's (dOmega / Omega per dbeta)
+        omega_per_deg = (math.sin(math.radians(half)) * math.radians(1.0)
+                         / (1.0 - math.cos(math.radians(half))))
+        changes.update(gain_sigma=PM100.range_gain_rel.sigma, reference_gain_error=True,
+                       offset_sigma_deg=(0.0, 0.0),
+                       half_angle_sigma_deg=solid_angle_figure(optics).sigma / omega_per_deg)
+    return dataclasses.replace(Scan(), **changes)
+
+
+def spec_run(scan: Scan) -> SimpleNamespace:
+    """What reduce_readings reads from a run of the declared bench (spec_config) and a plan
+    whose [sample] is the scan's."""
+    sample = {"id": "synthetic", "kind": "hemisphere", "eta": scan.eta}
+    return SimpleNamespace(config=spec_config(scan), plan={"sample": sample}, path="synthetic",
+                           meta={})
 
 
 def run_of(scan: Scan) -> SimpleNamespace:

@@ -24,7 +24,11 @@ def toml_value(value: object) -> str:
 
 #: The example's [optics], and the [sim] geometry keys a test's tables give that move there.
 OPTICS = {"wavelength_nm": 632.8, "bandwidth_nm": 0.002, "beam_diameter_mm": 2.0,
-          "divergence_deg": 0.03, "aperture_diameter_mm": 10.0, "aperture_distance_mm": 500.0}
+          "divergence_deg": 0.03, "aperture_diameter_mm": 10.0, "aperture_distance_mm": 500.0,
+          "aperture_diameter_tolerance_mm": 0.0}
+#: The emulated meter's figures ([sim.detector] has no gain errors or non-linearity unless a
+#: test gives them): what the configs state, so that a budget weighs what this bench does.
+EXACT_METER = {"linearity_rel": 0.0, "range_gain_rel": 0.0}
 OPTICS_FROM_SIM = {"source": {"wavelength_nm": "wavelength_nm",
                               "beam_diameter_mm": "beam_diameter_mm",
                               "divergence_deg": "divergence_deg"},
@@ -38,24 +42,32 @@ def table(name: str, values: dict) -> str:
     return f"[{name}]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in values.items())
 
 
+def set_keys(text: str, name: str, values: dict) -> str:
+    """TOML text with the keys of its table `name` set to `values` (replaced or added)."""
+    lines = text.split("\n")
+    start = next(i for i, ln in enumerate(lines) if ln.split("#")[0].strip() == f"[{name}]")
+    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
+    lines = [ln for i, ln in enumerate(lines)
+             if not (start < i < end and ln.split("=")[0].strip() in values)]
+    lines[start + 1:start + 1] = [f"{key} = {toml_value(v)}" for key, v in values.items()]
+    return "\n".join(lines)
+
+
 def instrument(tmp: Path, sim: dict[str, dict], detector: dict | None = None,
                seed: int = 1, time_scale: float | str = "inf", optics: dict | None = None
                ) -> Path:
-    """The example config with `[detector]` updated, `[optics]` from the sim tables' geometry
-    (OPTICS_FROM_SIM) and `optics` (which wins), and `[sim]`
+    """The example config with `[detector]` stating EXACT_METER and updated by `detector`, the
+    stages' repeatability_deg that of [sim.alignment] (0 unless given), `[optics]` from the sim
+    tables' geometry (OPTICS_FROM_SIM) and `optics` (which wins), and `[sim]`
     replaced by `sim` tables (the bench's defaults otherwise: multiple scattering "auto", so on
     for Walter's ground and etched glass). A drifting source drifts on the run's virtual clock,
     the clock of its t_s, at any time_scale."""
     text = EXAMPLE.read_text().split("\n[sim]")[0].replace("timeout_s = 1.0", "timeout_s = 20.0")
-    if detector:
-        for key, value in detector.items():
-            lines = text.split("\n")
-            start = lines.index("[detector]")
-            end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
-            lines = [ln for i, ln in enumerate(lines)
-                     if not (start < i < end and ln.split("=")[0].strip() == key)]
-            lines.insert(start + 1, f"{key} = {toml_value(value)}")
-            text = "\n".join(lines)
+    text = set_keys(text, "detector", {**EXACT_METER, **(detector or {})})
+    alignment = sim.get("alignment", {})
+    for role in ("sample", "arm"):  # the stages scatter as [sim.alignment] makes them
+        text = set_keys(text, f"axes.{role}", {
+            "repeatability_deg": alignment.get(f"{role}_repeatability_deg", 0.0)})
     described = dict(OPTICS)
     for name, keys in OPTICS_FROM_SIM.items():  # the geometry is the bench's description
         for key, theirs in keys.items():

@@ -1,0 +1,103 @@
+"""The type-B specification each device kind declares for the uncertainty budget: a meter's
+range-to-range gain accuracy and non-linearity, a stage's bidirectional repeatability, each a
+1-sigma figure with the document it comes from (docs/fitting.md, "Uncertainty budget").
+
+A datasheet's uniform +-a becomes a / sqrt(3) (GUM 4.3.7). The Modbus kinds read theirs from
+the device's register-map file ([specification]), else take a stated conservative default.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+#: What a specification may state, the unit of its +-a half-width.
+FIGURES = ("range_gain_rel", "linearity_rel", "repeatability_deg")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One 1-sigma figure and where it comes from (a document and its table, or a config key)."""
+
+    sigma: float
+    source: str
+
+
+def uniform(half_width: float, source: str) -> Figure:
+    """The 1-sigma figure of a uniform +-half_width specification, its source saying so."""
+    return Figure(half_width / math.sqrt(3.0), f"{source}: +-{half_width:g}, / sqrt(3)")
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    """A device's declared type-B figures (None: the kind states none)."""
+
+    range_gain_rel: Figure | None = None
+    linearity_rel: Figure | None = None
+    repeatability_deg: Figure | None = None
+
+
+#: A kind's specification of one device, from the device's settings (a register map's file).
+SpecOf = Callable[[Mapping[str, Any]], DeviceSpec]
+
+
+def fixed(spec: DeviceSpec) -> SpecOf:
+    """The specification of a kind whose devices all have the same one."""
+    return lambda settings: spec
+
+
+_PM100_SPEC = ("Thorlabs PM100USB / PM100D / PM100A specifications (Specs tab and manual, "
+               "photodiode input: current accuracy of the 50 nA ... 5 mA ranges, the lowest "
+               "ranges' +-0.5 % of full scale for every range)")
+_C_SERIES_SPEC = ("Thorlabs C-series photodiode sensor heads S120C / S121C specifications "
+                  "(linearity)")
+PM100 = DeviceSpec(range_gain_rel=uniform(0.005, _PM100_SPEC),
+                   linearity_rel=uniform(0.005, _C_SERIES_SPEC))
+ESP = DeviceSpec(repeatability_deg=uniform(
+    0.002, "Newport URS75BPP / URS100BPP rotation stages (the ESP301's stepper rotation "
+    "stages) data sheet, bidirectional repeatability (guaranteed)"))
+ZABER = DeviceSpec(repeatability_deg=uniform(
+    0.02, "Zaber X-RSW60A rotary stage (X-series) specifications, repeatability < 0.02 deg"))
+
+#: The Modbus kinds' default when the register map states no [specification]: conservative
+#: figures for an unnamed drive or amplifier (a 1 % gain-resistor tolerance per range, 1 %
+#: non-linearity; a stepper rotation stage's 0.05 deg).
+MODBUS_DEFAULT = DeviceSpec(
+    range_gain_rel=uniform(0.01, "the Modbus kinds' conservative default (a 1 % gain "
+                                 "resistor per range; the register map states none)"),
+    linearity_rel=uniform(0.01, "the Modbus kinds' conservative default (the register map "
+                                "states none)"),
+    repeatability_deg=uniform(0.05, "the Modbus kinds' conservative default (a stepper "
+                                    "rotation stage; the register map states none)"))
+
+
+def register_map_spec(settings: Mapping[str, Any]) -> DeviceSpec:
+    """A Modbus device's figures from its register map's [specification] table (half-widths
+    of uniform specifications and their `source`), each missing one the default's; the default
+    alone when the file cannot be read (its source says so)."""
+    path = Path(str(settings.get("register_map", "")))
+    try:
+        table = tomllib.loads(path.read_text()).get("specification", {})
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        return _with_note(MODBUS_DEFAULT, f"register map {path} unreadable: {exc}")
+    if not isinstance(table, Mapping):
+        return _with_note(MODBUS_DEFAULT, f"{path}: [specification] is not a table")
+    source = f"{path.name} [specification]: {table.get('source', 'no source named')}"
+    figures = {}
+    for key in FIGURES:
+        value = table.get(key)
+        ok = (isinstance(value, int | float) and not isinstance(value, bool)
+              and math.isfinite(value) and value >= 0)
+        figures[key] = uniform(float(value), f"{source} ({key})") if ok \
+            else getattr(MODBUS_DEFAULT, key)
+    return DeviceSpec(**figures)
+
+
+def _with_note(spec: DeviceSpec, note: str) -> DeviceSpec:
+    """`spec` with `note` appended to each figure's source."""
+    return DeviceSpec(**{key: Figure(f.sigma, f"{f.source}; {note}")
+                         for key in FIGURES if (f := getattr(spec, key)) is not None})
