@@ -14,11 +14,14 @@ from gonio.device_kinds import device_spec
 from gonio.device_kinds.specs import Figure, uniform
 from gonio.optics import Optics
 
-#: ISO 2768-1 tolerance class "f" (fine) for linear dimensions: (largest nominal size in mm,
-#: +- permissible deviation in mm); the class a drawing of a machined aperture calls out when
-#: it names no tolerance of its own.
+#: ISO 2768-1 table 1 (linear dimensions), tolerance class "f" (fine): (largest nominal size in
+#: mm, +- permissible deviation in mm); the class a drawing of a machined aperture calls out when
+#: it names no tolerance of its own. The table covers 0.5 mm to 2000 mm (0.5-3 and 3-6 mm both
+#: +-0.05; class f has no row above 2000 mm, and sizes below 0.5 mm are to be toleranced on the
+#: drawing itself).
 ISO_2768_FINE_MM = ((6.0, 0.05), (30.0, 0.1), (120.0, 0.15), (400.0, 0.2), (1000.0, 0.3),
                     (2000.0, 0.5))
+ISO_2768_SMALLEST_MM = 0.5
 
 
 def stated(table: Any, key: str, where: str) -> Figure | None:
@@ -61,7 +64,7 @@ def repeatability_figures(config: Mapping[str, Any], roles: tuple[str, ...]
 
 
 def tolerance_class_mm(diameter_mm: float) -> float:
-    """The ISO 2768-f +- deviation of a nominal size (the largest class's beyond its range)."""
+    """The ISO 2768-f +- deviation of a nominal size (the nearest row outside the table)."""
     return next((dev for top, dev in ISO_2768_FINE_MM if diameter_mm <= top),
                 ISO_2768_FINE_MM[-1][1])
 
@@ -75,8 +78,11 @@ def solid_angle_figure(optics: Optics) -> Figure:
         t, source = (optics.aperture_diameter_tolerance_mm,
                      "the config's [optics] aperture_diameter_tolerance_mm")
     else:
-        t, source = (tolerance_class_mm(d), f"ISO 2768-1 class f (fine) tolerance of a "
-                                            f"machined {d:g} mm aperture")
+        low, high = ISO_2768_SMALLEST_MM, ISO_2768_FINE_MM[-1][0]
+        outside = "" if low <= d <= high else f" (outside the table's {low:g}-{high:g} mm: its " \
+                                              "nearest row)"
+        t, source = (tolerance_class_mm(d), f"ISO 2768-1 table 1, class f (fine) tolerance of a "
+                                            f"machined {d:g} mm aperture{outside}")
     sigma_d = uniform(t, source)
     beta = math.atan(0.5 * d / length)
     omega = 2.0 * math.pi * (1.0 - math.cos(beta))

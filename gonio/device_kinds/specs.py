@@ -50,18 +50,31 @@ def fixed(spec: DeviceSpec) -> SpecOf:
     return lambda settings: spec
 
 
-_PM100_SPEC = ("Thorlabs PM100USB / PM100D / PM100A specifications (Specs tab and manual, "
-               "photodiode input: current accuracy of the 50 nA ... 5 mA ranges, the lowest "
-               "ranges' +-0.5 % of full scale for every range)")
-_C_SERIES_SPEC = ("Thorlabs C-series photodiode sensor heads S120C / S121C specifications "
-                  "(linearity)")
+def unverified(source: str, found: str) -> str:
+    """A source whose figure has not been checked against the vendor's datasheet, saying what
+    the search for it found."""
+    return f"{source} (not verified against the datasheet: {found})"
+
+
+_PM100_SPEC = unverified(
+    "Thorlabs PM100USB / PM100D / PM100A operation manuals, technical data, photodiode input "
+    "accuracy in % of full scale per current range: its largest figure as every range's own, "
+    "independent gain error (a reading and the beam reading it is divided by, on different "
+    "ranges, carry both)",
+    "the stored copies of the manuals searched give their SCPI chapters, not the table")
+_C_SERIES_SPEC = unverified(
+    "Thorlabs C-series photodiode sensor heads S120C / S121C specifications, linearity",
+    "no Thorlabs sheet reachable; one public third-party uncertainty model of the S121C "
+    "states the same +-0.5 %")
 PM100 = DeviceSpec(range_gain_rel=uniform(0.005, _PM100_SPEC),
                    linearity_rel=uniform(0.005, _C_SERIES_SPEC))
-ESP = DeviceSpec(repeatability_deg=uniform(
-    0.002, "Newport URS75BPP / URS100BPP rotation stages (the ESP301's stepper rotation "
-    "stages) data sheet, bidirectional repeatability (guaranteed)"))
-ZABER = DeviceSpec(repeatability_deg=uniform(
-    0.02, "Zaber X-RSW60A rotary stage (X-series) specifications, repeatability < 0.02 deg"))
+ESP = DeviceSpec(repeatability_deg=uniform(0.002, unverified(
+    "Newport URS75BPP / URS100BPP rotation stages (the ESP301's stepper rotation stages) data "
+    "sheet, bidirectional repeatability (guaranteed)",
+    "no Newport URS data sheet reachable in the stored sources")))
+ZABER = DeviceSpec(repeatability_deg=uniform(0.02, unverified(
+    "Zaber X-RSW60A rotary stage (X-series) specifications, repeatability < 0.02 deg",
+    "no Zaber X-RSW specification page reachable in the stored sources")))
 
 #: The Modbus kinds' default when the register map states no [specification]: conservative
 #: figures for an unnamed drive or amplifier (a 1 % gain-resistor tolerance per range, 1 %

@@ -22,6 +22,7 @@ from calibration.values import CalibrationError
 from gonio.config import parse_config
 from gonio.device_kinds.specs import ESP, PM100, ZABER
 from gonio.errors import ConfigError
+from gonio.optics import Optics
 
 SCAN = Scan()
 
@@ -302,6 +303,21 @@ def test_the_configs_own_figures_win_over_the_kinds():
     assert optics.solid_angle_rel == pytest.approx(2 * 0.005 / math.sqrt(3) / 3.5, rel=1e-3)
     inputs = AngleInputs.of_run(config)
     assert inputs.repeatability_deg == {"sample": ESP.repeatability_deg.sigma}
+
+
+def test_an_unstated_aperture_tolerance_is_iso_2768_fine_and_says_where_the_table_ends():
+    from calibration.type_b import solid_angle_figure, tolerance_class_mm
+
+    # ISO 2768-1 table 1, class f: 0.5-6 mm +-0.05, over 6-30 mm +-0.1, over 30-120 mm +-0.15
+    assert [tolerance_class_mm(d) for d in (0.5, 6.0, 6.5, 30.0, 31.0, 120.0)] == [
+        0.05, 0.05, 0.1, 0.1, 0.15, 0.15]
+    optics = dict(wavelength_nm=632.8, bandwidth_nm=0.002, beam_diameter_mm=1.0,
+                  divergence_deg=0.0, aperture_distance_mm=500.0, source_polarisation="unpolarised",
+                  analyser_polarisation="unpolarised")
+    inside = solid_angle_figure(Optics(aperture_diameter_mm=3.5, **optics)).source
+    pinhole = solid_angle_figure(Optics(aperture_diameter_mm=0.3, **optics)).source
+    assert "ISO 2768-1 table 1" in inside and "outside the table" not in inside
+    assert "outside the table's 0.5-2000 mm" in pinhole
 
 
 def test_each_kind_declares_its_figures_and_a_register_map_may_state_its_own(tmp_path):
