@@ -302,10 +302,18 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
     sched = build_schedule(plan, cfg)
     if sim is None:
         sim = run.meta.get("sim", False)
+    invalid = InvalidReadings(cfg.detector.device, len(sched), plan.max_invalid_share,
+                              lines.rows)
+    if invalid.too_many():  # a resume would stop at its first reading, after moving
+        raise RunError(f"{run.path}: cannot resume: its stored readings end it: "
+                       f"{invalid.too_many()}; once that is fixed, start a new scan")
     if len(lines.rows) >= len(sched):  # killed after its last reading
+        status, reason = ("failed", invalid.none_valid()) if invalid.none_valid() else (
+            "completed", "")
         with contextlib.closing(RunWriter.resume(run.path)) as writer:
-            writer.set_status("completed", "")
-        return ScanResult(run.path, Outcome("completed", "", len(lines.rows)))
+            writer.set_status(status, reason)
+        return ScanResult(run.path, Outcome(status, reason, len(lines.rows),
+                                            resumable=not reason))
     return _run(lambda: RunWriter.resume(run.path), plan, cfg, sched, sim, progress, control,
                 run.meta["t0_epoch"], stored=lines.rows, session=session, channel=channel,
                 started=started, clock_start_s=resume_clock_s(run.meta, lines.rows))
@@ -313,10 +321,10 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
 
 def resume_clock_s(meta: dict[str, Any], stored: Sequence[dict]) -> float:
     """Where a resumed run's virtual clock goes on from: the latest of its sessions' recorded
-    ends (`clock_end_s`) and its last stored reading's t_s (a session killed outright records
-    no end)."""
+    ends (`clock_end_s`) and its stored readings' latest t_s (a session killed outright records
+    no end; a repaired run's refilled readings come last in time, not in index)."""
     ends = [float(s["clock_end_s"]) for s in meta.get("sessions", []) if "clock_end_s" in s]
-    return max([*ends, *(float(row["t_s"]) for row in stored[-1:])], default=0.0)
+    return max([*ends, *(float(row["t_s"]) for row in stored)], default=0.0)
 
 
 _MISSING = object()

@@ -218,5 +218,10 @@ def test_a_detector_without_one_valid_reading_fails_the_scan(tmp_path, share, st
     assert f"gonio scan: run failed after {stored} readings: detector 'pm100' gave no valid " \
            "reading" in proc.stderr
     assert "start a new scan" in proc.stderr and "--resume" not in proc.stderr
+    again = gonio_cli("scan", "--resume", run.path, "--sim", "--no-plot", "--no-progress")
+    assert again.returncode == (2 if share is None else 1), again.stderr  # refused | failed
+    assert "start a new scan" in again.stderr, again.stderr
+    resumed = open_run(run.path)  # refused, or failed again: nothing measured, never completed
+    assert resumed.status == "failed" and len(resumed.readings()) == stored
     assert Completeness.from_json(completeness_of(run).to_json()).text().startswith(
         f"incomplete run: {stored} of 25 readings stored, status failed")
