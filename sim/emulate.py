@@ -89,26 +89,23 @@ class EmulatedBench:
     def begin_run(self, at_s: float) -> None:
         """The run's clock (run_time) reads at_s now: 0 for a new run, where the last session
         ended for a resumed one."""
-        self._origin = self.clock.now() - at_s
+        self._origin = self.clock.run_time() - at_s
 
     def run_time(self) -> float:
-        """Seconds of the run on the bench's virtual clock (the clock of t_s of a run whose
-        devices are all emulated)."""
-        return self.clock.now() - self._origin
+        """Seconds of the run in the devices' modelled time (VirtualClock.run_time: the clock
+        of t_s of a run whose devices are all emulated, the same at any load)."""
+        return self.clock.run_time() - self._origin
 
     def command_time(self) -> float:
         """run_time as a device handles a command: on an instant clock the motions begun are
         still under way (VirtualClock.start_time), so a device that looks at the time (an
         interlock input) does not run axes started together one after the other."""
-        return self.clock.start_time() - self._origin
+        return self.clock.run_start_time() - self._origin
 
     def wait_s(self, seconds: float) -> float:
         """Real seconds a wait of `seconds` on the run's clock takes (settling, dwell, a
-        suspension's recheck); an instant clock is advanced by them here and 0 returned."""
-        if self.clock.instant:
-            self.clock.advance(seconds)
-            return 0.0
-        return self.clock.real_seconds(seconds)
+        suspension's recheck; VirtualClock.wait)."""
+        return self.clock.wait(seconds)
 
     def tables_record(self) -> dict[str, float] | None:
         """The tables prepared before the first reading, with the planes built inside readings

@@ -141,10 +141,10 @@ class EspCommands:
 
     def _pause(self, delay_s: float) -> None:
         """Let `delay_s` virtual seconds pass before the next command runs."""
-        real = self.clock.real_seconds(delay_s)
+        real = self.clock.wait(delay_s)  # an instant clock advanced by it, 0
         if 0.0 < real < math.inf:
             self._stopping.wait(min(real, threading.TIMEOUT_MAX))
-        else:  # an instant or a frozen clock: only advances move it
+        elif real == math.inf:  # a frozen clock: only advances move it
             self.clock.advance(delay_s)
 
     def _move(self, axis: EmulatedAxis, target_deg: float) -> None:

@@ -35,6 +35,12 @@ class VirtualClock:
     With time_scale = math.inf, real time does not count; a move is over at once, and the
     clock reaches its end (`due`) when it is next read, so a move "takes" its full duration
     and moves started together (at `start_time`) end together, at the later end.
+
+    `run_time` counts the devices' modelled time: what the motions, waits and readings asked
+    of them last (`busy`, `wait`, `spend`), counted as the instant clock counts them, so that
+    at any time scale the same commands give the same times whatever the machine's load (the
+    real-time pacing between commands does not count); on an instant or frozen clock it is
+    `now`.
     """
 
     def __init__(self, time_scale: float = 1.0):
@@ -45,6 +51,8 @@ class VirtualClock:
         self._real0 = time.monotonic()
         self._offset = 0.0
         self._due = 0.0  # instant: the latest end of the motions begun, reached when read
+        self._run = 0.0  # a running clock's run_time, and the latest end of what is begun
+        self._run_due = 0.0
 
     @property
     def instant(self) -> bool:
@@ -71,6 +79,50 @@ class VirtualClock:
 
     def _reach_due(self) -> None:
         self._offset = max(self._offset, self._due)
+
+    @property
+    def _counted(self) -> bool:
+        """Whether run_time is counted apart from now (a running clock)."""
+        return not self.instant and self.time_scale > 0.0
+
+    def run_time(self) -> float:
+        """The devices' modelled seconds (the class doc): the ends of what was begun reached."""
+        if not self._counted:
+            return self.now()
+        with self._lock:
+            self._run = max(self._run, self._run_due)
+            return self._run
+
+    def run_start_time(self) -> float:
+        """run_time as a device acting now starts: what is begun and not yet read has not
+        taken its time (as start_time)."""
+        if not self._counted:
+            return self.start_time()
+        with self._lock:
+            return self._run
+
+    def busy(self, duration_s: float) -> None:
+        """A device begins something that lasts duration_s (a motion): run_time reaches its
+        end when next read (on an instant clock the motion's `due` does that)."""
+        if self._counted:
+            with self._lock:
+                self._run_due = max(self._run_due, self._run + duration_s)
+
+    def _pass(self, seconds: float) -> None:
+        """run_time passes by seconds after the ends of what was begun."""
+        with self._lock:
+            self._run = max(self._run, self._run_due) + seconds
+
+    def wait(self, seconds: float) -> float:
+        """Real seconds a wait of `seconds` of the devices' time takes (settling, dwell, a
+        recheck): an instant clock is advanced by it and says 0, a running one counts it in
+        run_time."""
+        if self.instant:
+            self.advance(seconds)
+            return 0.0
+        if self._counted:
+            self._pass(seconds)
+        return self.real_seconds(seconds)
 
     def _now_locked(self) -> float:
         if self.instant or self.time_scale == 0.0:
@@ -103,7 +155,8 @@ class VirtualClock:
         frozen one not at all."""
         if self.instant:
             self.advance(virtual_s)
-        elif self.time_scale > 0.0 and virtual_s > 0.0:
+        elif self._counted and virtual_s > 0.0:
+            self._pass(virtual_s)
             time.sleep(self.real_seconds(virtual_s))
 
     def real_seconds(self, virtual_s: float) -> float:
@@ -331,8 +384,11 @@ class TrapezoidAxis:
         return self.move_to(self.target() + float(delta))
 
     def _plan(self, target: float) -> float:
-        self._segments, self._rest = self._profile(self._now(), target)
-        return self._finish()
+        t = self._now()
+        self._segments, self._rest = self._profile(t, target)
+        t_end = self._finish()
+        self.clock.busy(t_end - t)
+        return t_end
 
     def _profile(self, t: float, target: float) -> tuple[list[_Segment], float]:
         """Segments of a move to `target` begun at time t (any motion first decelerated to
