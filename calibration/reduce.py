@@ -103,11 +103,11 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
               shot_noise_w: float | None = None) -> ReductionOptics:
     """What reduction needs, from what the experimenter describes: the run config's [optics]
     (aperture, wavelength) and [detector] (averaging, shot noise), the plan's [sample] (kind,
-    eta, k, lit side), a calibration (its measured aperture wins over the geometry) and the
-    --shot-noise-w flag. `sim`: the [sim] table of an all-emulated run
-    (gonio.record.emulator_config), the only way the emulator's truth comes in (by
-    calibration.emulator_truth): its meter's shot noise when nothing else states one, and its
-    sample for plots."""
+    eta, k, lit side), a calibration (its aperture wins over [optics]; a measured one's sigma
+    over the tolerance, `measured_aperture`) and the --shot-noise-w flag. `sim`: the [sim]
+    table of an all-emulated run (gonio.record.emulator_config), the only way the emulator's
+    truth comes in (by calibration.emulator_truth): its meter's shot noise when nothing else
+    states one, and its sample for plots."""
     try:
         optics = optics_of_config(config, "run config")
         sample = sample_of_plan(plan or {}, "run plan")
@@ -116,15 +116,15 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     missing = []
     if sample is None:
         missing.append("the plan's [sample] table (id, kind, eta: what was measured)")
-    measured_aperture = cal is not None and cal.aperture_half_angle_deg is not None
-    if optics is None and not measured_aperture:
+    calibrated_aperture = cal is not None and cal.aperture_half_angle_deg is not None
+    if optics is None and not calibrated_aperture:
         missing.append("the instrument config's [optics] table (aperture_diameter_mm, "
                        "aperture_distance_mm, wavelength_nm, ...) or a calibration with the "
                        "aperture (gonio calibrate build --aperture-geometry | --aperture-scan)")
     if missing:
         raise CalibrationError(f"cannot reduce: the run lacks {' and '.join(missing)}")
     half_angle, aperture_from = ((cal.aperture_half_angle_deg.value, "calibration")
-                                 if measured_aperture
+                                 if calibrated_aperture
                                  else (optics.aperture_half_angle_deg, "[optics]"))
     detector = config.get("detector", {})
     wavelength = (optics.wavelength_nm if optics is not None
@@ -133,7 +133,7 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     truth = truth_of(sim, None, (plan or {}).get("sample"))
     variance, noise_model = _shot_noise(detector, truth, shot_noise_w, wavelength, averaging)
     figures = detector_figures(config)
-    if optics is not None and not measured_aperture:
+    if optics is not None and not measured_aperture(cal):
         figures["solid_angle"] = solid_angle_figure(optics)
     value = {name: f.sigma for name, f in figures.items()}
     return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
@@ -356,7 +356,7 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
     else:
         notes.append("range_gain: no calibration applied" if cal is None
                      else "range_gain: the calibration has no gains")
-    if cal is not None and optics.aperture_from == "calibration":
+    if measured_aperture(cal):
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
         sources["solid_angle"] = "the calibration's measured aperture"
     elif optics.solid_angle_rel > 0:
@@ -365,6 +365,13 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
     else:
         notes.append(f"solid_angle: the {optics.aperture_from} aperture states no uncertainty")
     return notes
+
+
+def measured_aperture(cal) -> bool:
+    """Whether a calibration measured the aperture (a scan across the beam, with a sigma); one
+    taken from the geometry is the nominal aperture, whose uncertainty is its tolerance."""
+    return (cal is not None and cal.aperture_half_angle_deg is not None
+            and cal.aperture_method != "geometry" and _solid_angle_rel(cal) > 0)
 
 
 def _relative(m) -> float:

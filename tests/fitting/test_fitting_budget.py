@@ -18,7 +18,7 @@ from calibration.budget import AngleInputs, Budget, expanded
 from calibration.fit import FitOptions, fit
 from calibration.pipeline import DEFAULT_SLOPE_FIT
 from calibration.reduce import optics_of, range_columns, reduce_readings
-from calibration.values import CalibrationError
+from calibration.values import CalibrationError, Measured
 from gonio.config import parse_config
 from gonio.device_kinds.specs import ESP, PM100, ZABER
 from gonio.errors import ConfigError
@@ -287,6 +287,27 @@ def test_type_b_terms_come_from_the_declared_specifications_with_their_sources()
     assert sources["range_gain"] == "the calibration's range gains"
     assert sources["solid_angle"] == "the calibration's measured aperture"
     assert sources["linearity"] == data.meta["budget"]["sources"]["linearity"]
+
+
+def test_a_geometry_aperture_in_a_calibration_keeps_the_tolerance_term():
+    """A calibration whose aperture is the nominal geometry (gonio calibrate build without an
+    aperture scan: sigma 0) did not measure it: its uncertainty stays the tolerance."""
+    scan = spec_scan(30.0, calibrated=True)
+    readings, _ = scan.draw(0)
+    run = spec_run(scan)
+    half = scan.half_angle_deg
+    for cal in (dataclasses.replace(scan.calibration(), aperture_method="geometry",
+                                    aperture_half_angle_deg=Measured(half, 0.0)),
+                dataclasses.replace(scan.calibration(), aperture_method="beam-scan",
+                                    aperture_half_angle_deg=Measured(half, 0.0))):
+        optics = optics_of(run.config, cal, run.plan)
+        data = reduce_readings(run, readings, cal, optics)
+        assert optics.aperture_from == "calibration"
+        assert "ISO 2768-1 table 1" in data.meta["budget"]["sources"]["solid_angle"]
+        ok = data.valid
+        np.testing.assert_allclose(data.components["solid_angle"][ok],
+                                   np.abs(data.bsdf[ok]) * optics.solid_angle_rel)
+        assert optics.solid_angle_rel > 0
 
 
 def test_the_configs_own_figures_win_over_the_kinds():
