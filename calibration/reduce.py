@@ -306,13 +306,16 @@ def per_range(range_w: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.where(range_w[:, None] == ranges[None, :], values[:, None], 0.0)
 
 
-def range_columns(range_w: np.ndarray, beam_range_w: np.ndarray) -> np.ndarray:
+def range_columns(range_w: np.ndarray, beam_range_w: np.ndarray,
+                  gain_rel: Callable[[float], float] | None = None) -> np.ndarray:
     """(N, ranges) coefficients of each range's own gain error in a value: +1 on the range it
     was read on, minus the share of the beam readings taken on each range (the value is a
-    ratio to the beam's; a range both share cancels)."""
+    ratio to the beam's; a range both share cancels), times the range's relative 1-sigma gain
+    error gain_rel(full scale) (None: 1); columns that are 0 everywhere are left out."""
     ranges = np.union1d(range_w, beam_range_w)
     share = np.array([np.mean(beam_range_w == r) for r in ranges])
-    columns = (range_w[:, None] == ranges[None, :]) - share[None, :]
+    scale = np.ones(len(ranges)) if gain_rel is None else np.array([gain_rel(r) for r in ranges])
+    columns = ((range_w[:, None] == ranges[None, :]) - share[None, :]) * scale[None, :]
     return columns[:, np.any(columns != 0, axis=0)]
 
 
@@ -333,11 +336,11 @@ def angle_sources(angle: AngleInputs) -> dict[str, str]:
 def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np.ndarray,
                       optics: ReductionOptics, sources: dict[str, str]) -> list[str]:
     """The type-B components: linearity (own: the detector's relative non-linearity),
-    range_gain (shared: the calibration's gains relative to its reference range, one column
-    per range; else each range's stated gain error, on the sample's and the beam's range,
-    `range_columns`) and solid_angle (shared by all points: the calibration's measured
-    aperture, else the aperture's tolerance); fills `sources` with where each comes from and
-    returns notes on what the budget lacks."""
+    range_gain (shared, a column per range on the sample's and the beam's range,
+    `range_columns`: each range's sigma_g / g from the calibration's gains, 0 on its reference
+    range, else each range's stated gain error) and solid_angle (shared by all points: the
+    calibration's measured aperture, else the aperture's tolerance); fills `sources` with where
+    each comes from and returns notes on what the budget lacks."""
     value = np.abs(budget.bsdf)
     notes = []
     if optics.linearity_rel > 0:
@@ -345,14 +348,14 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
         sources["linearity"] = optics.sources.get("linearity", "stated")
     else:
         notes.append("linearity: not stated ([detector] linearity_rel)")
-    if cal is not None and cal.gains is not None:
-        rel = np.array([_relative(cal.gains.get(range_key(r))) for r in range_w])
-        budget.add_shared("range_gain", per_range(range_w, value * rel))
-        sources["range_gain"] = "the calibration's range gains"
-    elif optics.range_gain_rel > 0:
-        budget.add_shared("range_gain", value[:, None] * optics.range_gain_rel
-                          * range_columns(range_w, beam_range_w))
-        sources["range_gain"] = optics.sources.get("range_gain", "stated")
+    gains = cal.gains if cal is not None else None
+    if gains is not None or optics.range_gain_rel > 0:
+        gain_rel = ((lambda r: _relative(gains.get(range_key(r)))) if gains is not None
+                    else (lambda r: optics.range_gain_rel))
+        budget.add_shared("range_gain", value[:, None]
+                          * range_columns(range_w, beam_range_w, gain_rel))
+        sources["range_gain"] = ("the calibration's range gains" if gains is not None
+                                 else optics.sources.get("range_gain", "stated"))
     else:
         notes.append("range_gain: no calibration applied" if cal is None
                      else "range_gain: the calibration has no gains")

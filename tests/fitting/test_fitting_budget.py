@@ -367,6 +367,26 @@ def test_a_range_gain_cancels_where_the_beam_was_read_on_the_same_range():
     np.testing.assert_array_equal(np.abs(columns).sum(axis=1), [2.0, 0.0, 2.0])
 
 
+def test_a_calibrated_range_gain_counts_the_beams_range_too():
+    """A calibration whose reference range is not the beam's: every value is a ratio to the
+    beam readings, so the beam range's gain error enters each value read on another range
+    (sigma_g / g of both, in quadrature; the reference range's is 0) and cancels on the
+    beam's own range."""
+    readings, _ = SCAN.draw(0)
+    cal = SCAN.calibration()
+    cal = dataclasses.replace(cal, gain_reference="1e-05",
+                              gains={**cal.gains, "0.01": Measured(1.0, 2e-3),
+                                     "1e-05": Measured(1.0, 0.0)})
+    data = reduce_readings(run_of(SCAN), readings, cal, SCAN.optics())
+    sample = readings[readings["kind"] == "sample"]
+    assert set(readings["range_w"][readings["kind"] == "beam"]) == {1e-2}
+    rel = np.array([0.0 if r == 1e-5 else SCAN.gain_sigma for r in sample["range_w"]])
+    expected = np.where(sample["range_w"] == 1e-2, 0.0, np.hypot(rel, 2e-3))
+    assert 1e-5 in set(sample["range_w"]) and len(set(sample["range_w"])) > 2
+    np.testing.assert_allclose(data.components["range_gain"],
+                               np.abs(data.bsdf) * expected, rtol=1e-12)
+
+
 def test_coverage_of_U_at_the_declared_specifications_quick():
     """20 seeds per case of docs/fitting.md's coverage table. The shared components (the
     solid angle above all, uncalibrated) move a scan's values together: a seed's share
