@@ -112,8 +112,24 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
                                f"with U excluding them") from None
     data = reduced(result.predict)
     data.meta["budget"]["slope"] = {"distribution": result.distribution,
-                                    "parameters": result.to_dict()["parameters"]}
+                                    "parameters": result.to_dict()["parameters"],
+                                    "chi2_dof": result.chi2_dof_fit}
+    data.meta["budget"]["notes"] += slope_fit_notes(result)
     return data
+
+
+def slope_fit_notes(result: FitResult) -> list[str]:
+    """A note when the fit that gave the angle terms' slope does not describe the data
+    (chi2/dof above calibration.exports.model.MAX_CHI2_DOF): its slope is not the data's, so
+    the angle terms may be too small or too large; the reduction goes on (a single-scattering
+    fit of a multiply scattering sample is such a fit)."""
+    from calibration.exports.model import MAX_CHI2_DOF
+
+    if not result.chi2_dof_fit > MAX_CHI2_DOF:
+        return []
+    return [f"angle: the slope fit ({result.distribution}) has chi2/dof "
+            f"{result.chi2_dof_fit:.3g} > {MAX_CHI2_DOF:g}: the angle terms come from a model "
+            "that does not describe the data"]
 
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,

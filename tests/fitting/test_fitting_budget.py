@@ -367,6 +367,29 @@ def test_a_range_gain_cancels_where_the_beam_was_read_on_the_same_range():
     np.testing.assert_array_equal(np.abs(columns).sum(axis=1), [2.0, 0.0, 2.0])
 
 
+def test_a_slope_fit_that_does_not_describe_the_data_is_noted_not_refused():
+    """The angle terms' slope from a GGX fit of Beckmann data (chi2/dof far above 3): the
+    reduction goes on, its budget saying the model does not describe the data; the
+    Beckmann fit adds no such note."""
+    from calibration.pipeline import reduce_stored
+
+    scan = spec_scan(30.0, calibrated=False)
+    readings, _ = scan.draw(0)
+    notes = {}
+    for distribution in ("ggx", "beckmann"):
+        data = reduce_stored(spec_run(scan), readings,
+                             slope_options=FitOptions(distributions=(distribution,)))
+        budget = data.meta["budget"]
+        notes[distribution] = [n for n in budget["notes"] if n.startswith("angle: the slope")]
+        assert "angle_repeatability" in data.components
+    chi2 = data.meta["budget"]["slope"]["chi2_dof"]
+    assert chi2 < 3.0
+    assert len(notes["ggx"]) == 1 and not notes["beckmann"]
+    assert notes["ggx"][0].startswith("angle: the slope fit (ggx) has chi2/dof ")
+    assert notes["ggx"][0].endswith(" > 3: the angle terms come from a model that does not "
+                                    "describe the data")
+
+
 def test_a_calibrated_range_gain_counts_the_beams_range_too():
     """A calibration whose reference range is not the beam's: every value is a ratio to the
     beam readings, so the beam range's gain error enters each value read on another range
