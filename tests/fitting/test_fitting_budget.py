@@ -253,10 +253,19 @@ def at_specs(scan: Scan, seed: int, calibrated: bool):
 CASES = ((0.0, True), (0.0, False), (30.0, True), (30.0, False))
 
 
-def coverage(seeds: range) -> dict[tuple[float, bool], np.ndarray]:
+#: A seed's share of values within U scatters about the mean by this much (the standard
+#: deviation over 400 seeds per case): the shared components (uncalibrated, the aperture's
+#: tolerance above all) move a scan's ~80 values together, so the error of a mean share is this
+#: over sqrt(seeds), far above the binomial sqrt(p (1 - p) / values) (~0.06 % at 400 seeds).
+SEED_SCATTER = {True: 0.085, False: 0.155}  # calibrated, uncalibrated
+#: The share the issue asks for: 95 % +- 1.5 %.
+COVERAGE_BAND = (0.935, 0.965)
+
+
+def coverage(seeds: range, cases=CASES) -> dict[tuple[float, bool], np.ndarray]:
     """Per case, each seed's share of values within U = 2 u of the truth."""
     out = {}
-    for theta_i, calibrated in CASES:
+    for theta_i, calibrated in cases:
         scan = spec_scan(theta_i, calibrated)
         shares = []
         for seed in seeds:
@@ -390,6 +399,21 @@ def test_a_slope_fit_that_does_not_describe_the_data_is_noted_not_refused():
                                     "describe the data")
 
 
+def test_a_plot_of_values_without_the_angle_terms_says_so_in_its_title():
+    from calibration.pipeline import reduce_stored
+    from calibration.plot import plot_title
+
+    scan = spec_scan(30.0, calibrated=False)
+    readings, _ = scan.draw(0)
+    titles = [plot_title("run", reduce_stored(spec_run(scan), readings,
+                                              slope_options=DEFAULT_SLOPE_FIT,
+                                              angle_terms=terms).meta)
+              for terms in (False, True)]
+    assert titles[0].splitlines()[-1] == ("U excludes the angle terms (--no-angle-terms): the "
+                                          "stages' repeatability and angle offsets")
+    assert "angle terms" not in titles[1]
+
+
 def test_a_calibrated_range_gain_counts_the_beams_range_too():
     """A calibration whose reference range is not the beam's: every value is a ratio to the
     beam readings, so the beam range's gain error enters each value read on another range
@@ -411,22 +435,31 @@ def test_a_calibrated_range_gain_counts_the_beams_range_too():
 
 
 def test_coverage_of_U_at_the_declared_specifications_quick():
-    """20 seeds per case of docs/fitting.md's coverage table. The shared components (the
-    solid angle above all, uncalibrated) move a scan's values together: a seed's share
-    scatters by ~0.23, so the bounds are 4 sigma of that scatter over the seeds."""
+    """20 seeds per case of docs/fitting.md's coverage table: each case's mean share within
+    95 % +- 1.5 % widened by 3 errors of a 20-seed mean (SEED_SCATTER / sqrt(20): 1.9 %
+    calibrated, 3.5 % uncalibrated, so >= 0.878 and >= 0.831), and the pooled 80 seeds' by 3 of
+    theirs (sqrt(mean of the squared scatters) / sqrt(80) = 1.4 %: >= 0.893; the top bound
+    0.995, as 0.965 + 4.2 % is above 1)."""
     shares = coverage(range(20))
     for case, share in shares.items():
-        assert share.mean() >= 0.75, case
-    pooled = np.mean(np.concatenate(list(shares.values())))
-    assert 0.85 <= pooled <= 0.995, pooled
+        error = SEED_SCATTER[case[1]] / math.sqrt(len(share))
+        assert share.mean() >= COVERAGE_BAND[0] - 3.0 * error, (case, share.mean())
+    pooled = np.concatenate(list(shares.values()))
+    error = math.sqrt(np.mean([SEED_SCATTER[c[1]] ** 2 for c in shares])) / math.sqrt(
+        len(pooled))
+    assert COVERAGE_BAND[0] - 3.0 * error <= pooled.mean() <= 0.995, pooled.mean()
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)  # 4000 scans: ~4 min at load 4 on 2 cores
 def test_coverage_of_U_at_the_declared_specifications():
-    """400 seeds per case (~2 min): each case within 95 % +- 4 %, 3.5 sigma of its seeds'
-    scatter (docs/fitting.md's table: 3000 seeds)."""
-    for case, share in coverage(range(400)).items():
-        assert 0.91 <= share.mean() <= 0.99, (case, share.mean())
+    """Each case within 95 % +- 1.5 % (docs/fitting.md's table: 3000 seeds): 500 seeds per
+    calibrated case and 1500 per uncalibrated one (~4 min), so that each mean's error
+    (SEED_SCATTER / sqrt(seeds): 0.38 % and 0.40 %) is a quarter of the band's half-width."""
+    for calibrated, seeds in ((True, 500), (False, 1500)):
+        cases = [case for case in CASES if case[1] == calibrated]
+        for case, share in coverage(range(seeds), cases).items():
+            assert COVERAGE_BAND[0] <= share.mean() <= COVERAGE_BAND[1], (case, share.mean())
 
 
 @pytest.fixture(scope="module")
