@@ -347,7 +347,8 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
         budget.add_own("linearity", value * optics.linearity_rel)
         sources["linearity"] = optics.sources.get("linearity", "stated")
     else:
-        notes.append("linearity: not stated ([detector] linearity_rel)")
+        notes.append(_zero_note("linearity", optics,
+                                "linearity: not stated ([detector] linearity_rel)"))
     gains = cal.gains if cal is not None else None
     if gains is not None or optics.range_gain_rel > 0:
         gain_rel = ((lambda r: _relative(gains.get(range_key(r)))) if gains is not None
@@ -357,8 +358,8 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
         sources["range_gain"] = ("the calibration's range gains" if gains is not None
                                  else optics.sources.get("range_gain", "stated"))
     else:
-        notes.append("range_gain: no calibration applied" if cal is None
-                     else "range_gain: the calibration has no gains")
+        notes.append(_zero_note("range_gain", optics, "range_gain: no calibration applied"
+                                if cal is None else "range_gain: the calibration has no gains"))
     if measured_aperture(cal):
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
         sources["solid_angle"] = "the calibration's measured aperture"
@@ -366,8 +367,16 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
         budget.add_shared("solid_angle", value * optics.solid_angle_rel)
         sources["solid_angle"] = optics.sources.get("solid_angle", "stated")
     else:
-        notes.append(f"solid_angle: the {optics.aperture_from} aperture states no uncertainty")
+        notes.append(_zero_note("solid_angle", optics, f"solid_angle: the "
+                                f"{optics.aperture_from} aperture states no uncertainty"))
     return notes
+
+
+def _zero_note(name: str, optics: ReductionOptics, unstated: str) -> str:
+    """The budget's note on a type-B term it lacks: its figure stated as 0 (with where), else
+    `unstated`."""
+    source = optics.sources.get(name)
+    return f"{name}: stated as 0 ({source})" if source is not None else unstated
 
 
 def measured_aperture(cal) -> bool:

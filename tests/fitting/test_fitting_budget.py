@@ -335,6 +335,22 @@ def test_the_configs_own_figures_win_over_the_kinds():
     assert inputs.repeatability_deg == {"sample": ESP.repeatability_deg.sigma}
 
 
+def test_a_figure_stated_as_0_is_said_so_not_called_unstated():
+    scan = spec_scan(30.0, calibrated=False)
+    run = spec_run(scan)
+    run.config["detector"].update(linearity_rel=0.0, range_gain_rel=0.0)
+    run.config["optics"]["aperture_diameter_tolerance_mm"] = 0.0
+    readings, _ = scan.draw(0)
+    data = reduce_readings(run, readings, None, optics_of(run.config, None, run.plan))
+    assert not {"linearity", "range_gain", "solid_angle"} & set(data.components)
+    notes = [n for n in data.meta["budget"]["notes"] if not n.startswith("angle")]
+    assert notes == [
+        "linearity: stated as 0 (the config's [detector] linearity_rel)",
+        "range_gain: stated as 0 (the config's [detector] range_gain_rel)",
+        "solid_angle: stated as 0 (the config's [optics] aperture_diameter_tolerance_mm: +-0, "
+        "/ sqrt(3) mm on the diameter)"]
+
+
 def test_an_unstated_aperture_tolerance_is_iso_2768_fine_and_says_where_the_table_ends():
     from calibration.type_b import solid_angle_figure, tolerance_class_mm
 
