@@ -54,11 +54,13 @@ def test_a_modbus_detector_map_that_does_not_load_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize(("device", "line", "says"), [
-    ("photodiode", 'range_gain_rel = "0.25 %"',
-     r"\[specification\] range_gain_rel: must be a number in \[0, 1\) .*got '0\.25 %'"),
-    ("photodiode", "linearity_rell = 0.002", r"\[specification\]: unknown key 'linearity_rell'"),
-    ("sample_drive", "repeatability_deg = -0.01",
-     r"\[specification\] repeatability_deg: must be a number in \[0, 180\)"),
+    ("photodiode", 'range_gain_half_width_rel = "0.25 %"',
+     r"\[specification\] range_gain_half_width_rel: must be a number in \[0, 1\) .*got "
+     r"'0\.25 %'"),
+    # a [detector]-style 1-sigma name is not a half-width: refused, not taken as one
+    ("photodiode", "linearity_rel = 0.002", r"\[specification\]: unknown key 'linearity_rel'"),
+    ("sample_drive", "repeatability_half_width_deg = -0.01",
+     r"\[specification\] repeatability_half_width_deg: must be a number in \[0, 180\)"),
     ("sample_drive", "source = 3", r"\[specification\] source: must be a string")])
 def test_a_register_map_specification_that_is_not_valid_is_refused(tmp_path, device, line, says):
     """A bad [specification] figure would otherwise give way to the default unseen: the
