@@ -19,12 +19,18 @@ from calibration.values import CalibrationError
 if TYPE_CHECKING:
     from gonio.store import Run
 
-#: The fit whose model gives `reduce_run` the BSDF's slope: the default one, over every
-#: valid point (each incidence the run has: a run without normal incidence has its slope too).
-DEFAULT_SLOPE_FIT = FitOptions(fit_incidence_deg=None)
+#: The fit whose model gives `reduce_run` the BSDF's slope: the default one, made over every
+#: valid point by `slope_fit_options`.
+DEFAULT_SLOPE_FIT = FitOptions()
 #: meta["budget"]["angle_terms"] and the note of a reduction asked to leave them out.
 ANGLE_TERMS_EXCLUDED = ("angle: excluded (--no-angle-terms): U excludes the stages' "
                         "repeatability and the calibration's angle offsets")
+
+
+def slope_fit_options(options: FitOptions) -> FitOptions:
+    """A fit's options as the slope fit takes them: over every valid point, each incidence
+    the run has (a run without normal incidence has its slope too)."""
+    return replace(options, fit_incidence_deg=None)
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:
@@ -105,7 +111,7 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
         budget["angle_terms"] = "excluded"
         return data
     try:
-        result = fit(data, replace(slope_options, fit_incidence_deg=None))
+        result = fit(data, slope_fit_options(slope_options))
     except FitError as exc:
         raise CalibrationError(f"cannot estimate the budget's angle terms: the fit of the "
                                f"model's slope failed ({exc}); --no-angle-terms reduces "

@@ -16,7 +16,7 @@ from fitting_bench_runs import EXAMPLE, instrument, plan, scan
 
 from calibration.budget import AngleInputs, Budget, expanded
 from calibration.fit import FitOptions, fit
-from calibration.pipeline import DEFAULT_SLOPE_FIT
+from calibration.pipeline import DEFAULT_SLOPE_FIT, slope_fit_options
 from calibration.reduce import optics_of, range_columns, reduce_readings
 from calibration.values import CalibrationError, Measured
 from gonio.config import parse_config
@@ -238,14 +238,15 @@ def test_gonio_reduce_reports_u_k_and_U(jittery_run, capsys):
 def at_specs(scan: Scan, seed: int, calibrated: bool):
     """(ReducedData, truth) of a synthetic scan of the declared bench (budget_kit.spec_run):
     reduced with the kinds' type-B figures, fitted over every incidence as the pipeline's
-    slope fit is (DEFAULT_SLOPE_FIT, one distribution), reduced again with its slope."""
+    slope fit is (slope_fit_options of DEFAULT_SLOPE_FIT, one distribution), reduced again
+    with its slope."""
     readings, truth = scan.draw(seed)
     run = spec_run(scan)
     cal = scan.calibration() if calibrated else None
     optics = optics_of(run.config, cal, run.plan)
     data = reduce_readings(run, readings, cal, optics)
-    result = fit(data, dataclasses.replace(DEFAULT_SLOPE_FIT,
-                                           distributions=(scan.distribution,)))
+    result = fit(data, slope_fit_options(dataclasses.replace(
+        DEFAULT_SLOPE_FIT, distributions=(scan.distribution,))))
     return reduce_readings(run, readings, cal, optics, slope_model=result.predict), truth
 
 
