@@ -117,15 +117,15 @@ def covering(gains: dict[str, Measured] | None,
 def beam_normalised(readings: np.ndarray, darks: dict[str, Measured],
                     gains: dict[str, Measured] | None) -> tuple[np.ndarray, np.ndarray]:
     """Readings with dark- and gain-corrected power (gain 1 on ranges the gains do not cover),
-    divided by the beam power at each reading's time (BeamPower.smooth_at) when the run has beam
-    readings (a drift during a peak scan would otherwise skew the peak and bias its centre);
-    and each normalised power's sigma from the dark offset and gain of its range
-    (detector.correction_sigma_w, normalised alike)."""
+    divided by the beam power at each reading's time (BeamPower.smooth_at) when the run has
+    unsaturated beam readings (a drift during a peak scan would otherwise skew the peak and
+    bias its centre; an over-range reading is clipped); and each normalised power's sigma from
+    the dark offset and gain of its range (detector.correction_sigma_w, normalised alike)."""
     out = readings.copy()
     gains = covering(gains, readings)
     out["power_w"] = correct_power(readings["power_w"], readings["range_w"], darks, gains)
     common = correction_sigma_w(out["power_w"], readings["range_w"], darks, gains)
-    beam = out["kind"] == "beam"
+    beam = (out["kind"] == "beam") & ~out["saturated"]
     if beam.any():
         model = beam_power(out["t_s"][beam], out["power_w"][beam])
         level = model.smooth_at(out["t_s"])[0]
@@ -252,7 +252,21 @@ def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
     summaries = [dict(run=name, **summary) for name, run in zip(source_runs, runs, strict=True)
                  if (summary := beam_summary(run, darks, cal.gains)) is not None]
     cal.beam = summaries or None
+    cal.notes += [saturated_beam_note(name) for name, run in zip(source_runs, runs, strict=True)
+                  if all_beam_saturated(run)]
     return cal
+
+
+def all_beam_saturated(run: np.ndarray) -> bool:
+    """Whether a run has beam readings and every one of them read over range."""
+    beam = run["kind"] == "beam"
+    return bool(beam.any() and run["saturated"][beam].all())
+
+
+def saturated_beam_note(run_name: str) -> str:
+    """The note on a run none of whose beam readings is below its range's full scale."""
+    return (f"beam: every beam reading of {run_name} is saturated (over range), so none "
+            "normalises it: give the plan's [beam] a range above the beam's power")
 
 
 def _angles(cal: Calibration, runs: list[np.ndarray], eta: float,

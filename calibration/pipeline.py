@@ -19,12 +19,18 @@ from calibration.values import CalibrationError
 if TYPE_CHECKING:
     from gonio.store import Run
 
-#: The fit whose model gives `reduce_run` the BSDF's slope: the default one, over every
-#: valid point (each incidence the run has: a run without normal incidence has its slope too).
-DEFAULT_SLOPE_FIT = FitOptions(fit_incidence_deg=None)
+#: The fit whose model gives `reduce_run` the BSDF's slope: the default one, made over every
+#: valid point by `slope_fit_options`.
+DEFAULT_SLOPE_FIT = FitOptions()
 #: meta["budget"]["angle_terms"] and the note of a reduction asked to leave them out.
 ANGLE_TERMS_EXCLUDED = ("angle: excluded (--no-angle-terms): U excludes the stages' "
                         "repeatability and the calibration's angle offsets")
+
+
+def slope_fit_options(options: FitOptions) -> FitOptions:
+    """A fit's options as the slope fit takes them: over every valid point, each incidence
+    the run has (a run without normal incidence has its slope too)."""
+    return replace(options, fit_incidence_deg=None)
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:
@@ -105,15 +111,31 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
         budget["angle_terms"] = "excluded"
         return data
     try:
-        result = fit(data, replace(slope_options, fit_incidence_deg=None))
+        result = fit(data, slope_fit_options(slope_options))
     except FitError as exc:
         raise CalibrationError(f"cannot estimate the budget's angle terms: the fit of the "
                                f"model's slope failed ({exc}); --no-angle-terms reduces "
                                f"with U excluding them") from None
     data = reduced(result.predict)
     data.meta["budget"]["slope"] = {"distribution": result.distribution,
-                                    "parameters": result.to_dict()["parameters"]}
+                                    "parameters": result.to_dict()["parameters"],
+                                    "chi2_dof": result.chi2_dof_fit}
+    data.meta["budget"]["notes"] += slope_fit_notes(result)
     return data
+
+
+def slope_fit_notes(result: FitResult) -> list[str]:
+    """A note when the fit that gave the angle terms' slope does not describe the data
+    (chi2/dof above calibration.exports.model.MAX_CHI2_DOF): its slope is not the data's, so
+    the angle terms may be too small or too large; the reduction goes on (a single-scattering
+    fit of a multiply scattering sample is such a fit)."""
+    from calibration.exports.model import MAX_CHI2_DOF
+
+    if not result.chi2_dof_fit > MAX_CHI2_DOF:
+        return []
+    return [f"angle: the slope fit ({result.distribution}) has chi2/dof "
+            f"{result.chi2_dof_fit:.3g} > {MAX_CHI2_DOF:g}: the angle terms come from a model "
+            "that does not describe the data"]
 
 
 def fit_run(run_dir: str | Path, options: FitOptions | None = None,

@@ -119,12 +119,20 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
     return out_png
 
 
+#: The plot title's line of a reduction whose U leaves the angle terms out.
+ANGLE_TERMS_LEFT_OUT = ("U excludes the angle terms (--no-angle-terms): the stages' "
+                        "repeatability and angle offsets")
+
+
 def plot_title(name: str, meta: dict) -> str:
-    """The run's name and what was measured: the [sample] id and nominal eta; a second line
-    for an incomplete run (meta["completeness"], completeness_line)."""
+    """The run's name and what was measured: the [sample] id and nominal eta; a line for an
+    incomplete run (meta["completeness"], completeness_line) and one when U excludes the
+    angle terms (meta["budget"]["angle_terms"], calibration.pipeline)."""
     sample = meta.get("sample") or {}
+    excluded = (meta.get("budget") or {}).get("angle_terms") == "excluded"
     return (f"{name}: sample {sample.get('id', '?')}, eta {meta.get('eta', float('nan')):g}"
-            + completeness_line(meta.get("completeness")))
+            + completeness_line(meta.get("completeness"))
+            + ("\n" + ANGLE_TERMS_LEFT_OUT if excluded else ""))
 
 
 def completeness_line(completeness: dict | None) -> str:

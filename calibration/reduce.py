@@ -103,11 +103,11 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
               shot_noise_w: float | None = None) -> ReductionOptics:
     """What reduction needs, from what the experimenter describes: the run config's [optics]
     (aperture, wavelength) and [detector] (averaging, shot noise), the plan's [sample] (kind,
-    eta, k, lit side), a calibration (its measured aperture wins over the geometry) and the
-    --shot-noise-w flag. `sim`: the [sim] table of an all-emulated run
-    (gonio.record.emulator_config), the only way the emulator's truth comes in (by
-    calibration.emulator_truth): its meter's shot noise when nothing else states one, and its
-    sample for plots."""
+    eta, k, lit side), a calibration (its aperture wins over [optics]; a measured one's sigma
+    over the tolerance, `measured_aperture`) and the --shot-noise-w flag. `sim`: the [sim]
+    table of an all-emulated run (gonio.record.emulator_config), the only way the emulator's
+    truth comes in (by calibration.emulator_truth): its meter's shot noise when nothing else
+    states one, and its sample for plots."""
     try:
         optics = optics_of_config(config, "run config")
         sample = sample_of_plan(plan or {}, "run plan")
@@ -116,15 +116,15 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     missing = []
     if sample is None:
         missing.append("the plan's [sample] table (id, kind, eta: what was measured)")
-    measured_aperture = cal is not None and cal.aperture_half_angle_deg is not None
-    if optics is None and not measured_aperture:
+    calibrated_aperture = cal is not None and cal.aperture_half_angle_deg is not None
+    if optics is None and not calibrated_aperture:
         missing.append("the instrument config's [optics] table (aperture_diameter_mm, "
                        "aperture_distance_mm, wavelength_nm, ...) or a calibration with the "
                        "aperture (gonio calibrate build --aperture-geometry | --aperture-scan)")
     if missing:
         raise CalibrationError(f"cannot reduce: the run lacks {' and '.join(missing)}")
     half_angle, aperture_from = ((cal.aperture_half_angle_deg.value, "calibration")
-                                 if measured_aperture
+                                 if calibrated_aperture
                                  else (optics.aperture_half_angle_deg, "[optics]"))
     detector = config.get("detector", {})
     wavelength = (optics.wavelength_nm if optics is not None
@@ -133,7 +133,7 @@ def optics_of(config: dict, cal=None, plan: dict | None = None, sim: dict | None
     truth = truth_of(sim, None, (plan or {}).get("sample"))
     variance, noise_model = _shot_noise(detector, truth, shot_noise_w, wavelength, averaging)
     figures = detector_figures(config)
-    if optics is not None and not measured_aperture:
+    if optics is not None and not measured_aperture(cal):
         figures["solid_angle"] = solid_angle_figure(optics)
     value = {name: f.sigma for name, f in figures.items()}
     return ReductionOptics(sample, half_angle, aperture_from, wavelength, optics, variance,
@@ -306,13 +306,16 @@ def per_range(range_w: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.where(range_w[:, None] == ranges[None, :], values[:, None], 0.0)
 
 
-def range_columns(range_w: np.ndarray, beam_range_w: np.ndarray) -> np.ndarray:
+def range_columns(range_w: np.ndarray, beam_range_w: np.ndarray,
+                  gain_rel: Callable[[float], float] | None = None) -> np.ndarray:
     """(N, ranges) coefficients of each range's own gain error in a value: +1 on the range it
     was read on, minus the share of the beam readings taken on each range (the value is a
-    ratio to the beam's; a range both share cancels)."""
+    ratio to the beam's; a range both share cancels), times the range's relative 1-sigma gain
+    error gain_rel(full scale) (None: 1); columns that are 0 everywhere are left out."""
     ranges = np.union1d(range_w, beam_range_w)
     share = np.array([np.mean(beam_range_w == r) for r in ranges])
-    columns = (range_w[:, None] == ranges[None, :]) - share[None, :]
+    scale = np.ones(len(ranges)) if gain_rel is None else np.array([gain_rel(r) for r in ranges])
+    columns = ((range_w[:, None] == ranges[None, :]) - share[None, :]) * scale[None, :]
     return columns[:, np.any(columns != 0, axis=0)]
 
 
@@ -333,38 +336,54 @@ def angle_sources(angle: AngleInputs) -> dict[str, str]:
 def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np.ndarray,
                       optics: ReductionOptics, sources: dict[str, str]) -> list[str]:
     """The type-B components: linearity (own: the detector's relative non-linearity),
-    range_gain (shared: the calibration's gains relative to its reference range, one column
-    per range; else each range's stated gain error, on the sample's and the beam's range,
-    `range_columns`) and solid_angle (shared by all points: the calibration's measured
-    aperture, else the aperture's tolerance); fills `sources` with where each comes from and
-    returns notes on what the budget lacks."""
+    range_gain (shared, a column per range on the sample's and the beam's range,
+    `range_columns`: each range's sigma_g / g from the calibration's gains, 0 on its reference
+    range, else each range's stated gain error) and solid_angle (shared by all points: the
+    calibration's measured aperture, else the aperture's tolerance); fills `sources` with where
+    each comes from and returns notes on what the budget lacks."""
     value = np.abs(budget.bsdf)
     notes = []
     if optics.linearity_rel > 0:
         budget.add_own("linearity", value * optics.linearity_rel)
         sources["linearity"] = optics.sources.get("linearity", "stated")
     else:
-        notes.append("linearity: not stated ([detector] linearity_rel)")
-    if cal is not None and cal.gains is not None:
-        rel = np.array([_relative(cal.gains.get(range_key(r))) for r in range_w])
-        budget.add_shared("range_gain", per_range(range_w, value * rel))
-        sources["range_gain"] = "the calibration's range gains"
-    elif optics.range_gain_rel > 0:
-        budget.add_shared("range_gain", value[:, None] * optics.range_gain_rel
-                          * range_columns(range_w, beam_range_w))
-        sources["range_gain"] = optics.sources.get("range_gain", "stated")
+        notes.append(_zero_note("linearity", optics,
+                                "linearity: not stated ([detector] linearity_rel)"))
+    gains = cal.gains if cal is not None else None
+    if gains is not None or optics.range_gain_rel > 0:
+        gain_rel = ((lambda r: _relative(gains.get(range_key(r)))) if gains is not None
+                    else (lambda r: optics.range_gain_rel))
+        budget.add_shared("range_gain", value[:, None]
+                          * range_columns(range_w, beam_range_w, gain_rel))
+        sources["range_gain"] = ("the calibration's range gains" if gains is not None
+                                 else optics.sources.get("range_gain", "stated"))
     else:
-        notes.append("range_gain: no calibration applied" if cal is None
-                     else "range_gain: the calibration has no gains")
-    if cal is not None and optics.aperture_from == "calibration":
+        notes.append(_zero_note("range_gain", optics, "range_gain: no calibration applied"
+                                if cal is None else "range_gain: the calibration has no gains"))
+    if measured_aperture(cal):
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
         sources["solid_angle"] = "the calibration's measured aperture"
     elif optics.solid_angle_rel > 0:
         budget.add_shared("solid_angle", value * optics.solid_angle_rel)
         sources["solid_angle"] = optics.sources.get("solid_angle", "stated")
     else:
-        notes.append(f"solid_angle: the {optics.aperture_from} aperture states no uncertainty")
+        notes.append(_zero_note("solid_angle", optics, f"solid_angle: the "
+                                f"{optics.aperture_from} aperture states no uncertainty"))
     return notes
+
+
+def _zero_note(name: str, optics: ReductionOptics, unstated: str) -> str:
+    """The budget's note on a type-B term it lacks: its figure stated as 0 (with where), else
+    `unstated`."""
+    source = optics.sources.get(name)
+    return f"{name}: stated as 0 ({source})" if source is not None else unstated
+
+
+def measured_aperture(cal) -> bool:
+    """Whether a calibration measured the aperture (a scan across the beam, with a sigma); one
+    taken from the geometry is the nominal aperture, whose uncertainty is its tolerance."""
+    return (cal is not None and cal.aperture_half_angle_deg is not None
+            and cal.aperture_method != "geometry" and _solid_angle_rel(cal) > 0)
 
 
 def _relative(m) -> float:

@@ -16,8 +16,8 @@ if TYPE_CHECKING:
 
 #: Incidence beyond which the sample is edge-on (retracted): no specular scan there.
 RETRACTED_DEG = 89.0
-#: The plan that makes each kind of calibration run.
-PLANS = {role: f"examples/plans/calib-{role}.toml" for role in ("angles", "aperture", "detector")}
+#: The plan that makes an aperture scan.
+APERTURE_PLAN = "examples/plans/calib-aperture.toml"
 
 
 def holds_specular_scan(readings: np.ndarray) -> bool:
@@ -42,7 +42,7 @@ def role_hint(run: Run) -> str:
     if role in (None, "aperture"):
         return ""
     return (f"; the run calibrates the {role} (its plan's calibrates = {role!r}): give it as a "
-            f"RUN, and as --aperture-scan a run of {PLANS['aperture']}")
+            f"RUN, and as --aperture-scan a run of {APERTURE_PLAN}")
 
 
 @dataclass

@@ -83,6 +83,10 @@ def parse_optics(f: Fields) -> Optics:
     if optics.aperture_diameter_mm >= optics.aperture_distance_mm:
         raise f.fail("aperture_diameter_mm", f"{optics.aperture_diameter_mm:g} mm must be "
                      f"smaller than aperture_distance_mm {optics.aperture_distance_mm:g} mm")
+    tolerance = optics.aperture_diameter_tolerance_mm
+    if tolerance is not None and tolerance >= optics.aperture_diameter_mm:
+        raise f.fail("aperture_diameter_tolerance_mm", f"+-{tolerance:g} mm must be smaller "
+                     f"than aperture_diameter_mm {optics.aperture_diameter_mm:g} mm")
     return optics
 
 

@@ -23,7 +23,7 @@ from gonio.events import Moved, ReadingDiscarded, Stopping
 from gonio.plan import AUTO_RANGE, Plan, Schedule
 from gonio.progress import TablesProgress
 from gonio.run_clock import RunClock
-from sim.bench import build_bench, tables
+from sim.bench import Bench, build_bench, tables
 from sim.bench.sample import SampleSpec
 from sim.bench.tables import TablesEstimate
 from sim.devices.pty_server import LOOPBACK
@@ -165,11 +165,29 @@ def tables_estimate(cfg: InstrumentConfig, plan: Plan, sched: Schedule) -> Table
     """The multiple-scattering table planes a scan of `sched` on the config's emulated bench
     would walk before its first move (those the cache does not hold), and the time that takes
     on this machine now (sim.bench.tables.estimate)."""
+    return tables.estimate(_bench(cfg, plan), _positions(sched.readings, cfg.axes))
+
+
+def beam_over_range(cfg: InstrumentConfig, plan: Plan, sched: Schedule) -> float | None:
+    """The fixed range (W) the schedule's beam readings are taken on if the emulated bench's
+    beam, at the start, reaches its full scale (each reading over range: flagged saturated,
+    normalising nothing), else None."""
+    beam = sched.readings[(sched.readings["kind"] == "beam")
+                          & (sched.readings["range_w"] != AUTO_RANGE)]
+    if len(beam) == 0:
+        return None
+    power = _bench(cfg, plan).power_w(_positions(beam[:1], cfg.axes)[0])
+    full_scale = float(beam["range_w"].min())
+    return full_scale if power >= full_scale else None
+
+
+def _bench(cfg: InstrumentConfig, plan: Plan) -> Bench:
+    """The config's emulated bench with the plan's sample mounted; a ConfigError names a bad
+    [sim] table."""
     try:
-        bench = build_bench(cfg.sim, cfg.raw.get("optics"), plan.raw.get("sample"))
+        return build_bench(cfg.sim, cfg.raw.get("optics"), plan.raw.get("sample"))
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
-    return tables.estimate(bench, _positions(sched.readings, cfg.axes))
 
 
 def emulated_time_scale(cfg: InstrumentConfig) -> float:

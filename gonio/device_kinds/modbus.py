@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from drivers.byte_link import LineSettings
@@ -23,6 +24,7 @@ from gonio.device_kinds.settings import (
     Setting,
     only_when,
 )
+from gonio.device_kinds.specs import specification_table
 from gonio.errors import ConfigError
 from gonio.fields import location
 
@@ -57,9 +59,12 @@ def modbus_unit(driver: str) -> Callable[[DeviceConfig], Any]:
 
 
 def register_map(dev: DeviceConfig, where: str) -> RegisterMap:
-    """The device's register map, or a ConfigError naming its register_map field."""
+    """The device's register map with its [specification] checked (specs.specification_table),
+    or a ConfigError naming its register_map field and the map's file and key."""
     try:
-        return RegisterMap.load(dev.settings["register_map"])
+        registers = RegisterMap.load(dev.settings["register_map"])
+        specification_table(Path(dev.settings["register_map"]))
+        return registers
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{location(where, f'devices.{dev.name}', 'register_map')}: "
                           f"{exc}") from None

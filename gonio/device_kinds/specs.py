@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-#: What a specification may state, the unit of its +-a half-width.
+#: The figures a DeviceSpec holds, each 1-sigma in the unit its name ends with.
 FIGURES = ("range_gain_rel", "linearity_rel", "repeatability_deg")
 
 
@@ -88,26 +88,53 @@ MODBUS_DEFAULT = DeviceSpec(
                                     "rotation stage; the register map states none)"))
 
 
+#: A register map's [specification] key of each figure: the half-width a of a uniform +-a (the
+#: 1-sigma figure is a / sqrt(3)), and the largest it may be (a relative one is a fraction,
+#: 0.0025 for +-0.25 %; a stage's repeatability in degrees).
+MAP_KEYS = {"range_gain_rel": ("range_gain_half_width_rel", 1.0),
+            "linearity_rel": ("linearity_half_width_rel", 1.0),
+            "repeatability_deg": ("repeatability_half_width_deg", 180.0)}
+
+
+def specification_table(path: Path) -> Mapping[str, Any]:
+    """A register-map file's [specification] table ({} without one), checked: `source` a
+    string, each figure's key of MAP_KEYS a number in [0, its limit), no other key; a
+    ValueError names the file and the key (OSError, TOMLDecodeError: the file unreadable)."""
+    table = tomllib.loads(path.read_text()).get("specification", {})
+    where = f"{path} [specification]"
+    if not isinstance(table, Mapping):
+        raise ValueError(f"{where}: must be a table")
+    limits = dict(MAP_KEYS.values())
+    for key, value in table.items():
+        if key == "source":
+            if not isinstance(value, str):
+                raise ValueError(f"{where} source: must be a string, got {value!r}")
+        elif key not in limits:
+            raise ValueError(f"{where}: unknown key {key!r} (known: source, "
+                             f"{', '.join(limits)})")
+        elif not (isinstance(value, int | float) and not isinstance(value, bool)
+                  and math.isfinite(value) and 0 <= value < limits[key]):
+            raise ValueError(f"{where} {key}: must be a number in [0, {limits[key]:g}) (the "
+                             f"half-width a of a uniform +-a), got {value!r}")
+    return table
+
+
 def register_map_spec(settings: Mapping[str, Any]) -> DeviceSpec:
     """A Modbus device's figures from its register map's [specification] table (half-widths
-    of uniform specifications and their `source`), each missing one the default's; the default
-    alone when the file cannot be read (its source says so)."""
+    of uniform specifications and their `source`, specification_table), each missing one the
+    default's; the default alone when the file cannot be read or its table is not valid
+    (its source says so: the config check refuses such a map before a run)."""
     path = Path(str(settings.get("register_map", "")))
     try:
-        table = tomllib.loads(path.read_text()).get("specification", {})
+        table = specification_table(path)
     except (OSError, tomllib.TOMLDecodeError) as exc:
         return _with_note(MODBUS_DEFAULT, f"register map {path} unreadable: {exc}")
-    if not isinstance(table, Mapping):
-        return _with_note(MODBUS_DEFAULT, f"{path}: [specification] is not a table")
+    except ValueError as exc:
+        return _with_note(MODBUS_DEFAULT, str(exc))
     source = f"{path.name} [specification]: {table.get('source', 'no source named')}"
-    figures = {}
-    for key in FIGURES:
-        value = table.get(key)
-        ok = (isinstance(value, int | float) and not isinstance(value, bool)
-              and math.isfinite(value) and value >= 0)
-        figures[key] = uniform(float(value), f"{source} ({key})") if ok \
-            else getattr(MODBUS_DEFAULT, key)
-    return DeviceSpec(**figures)
+    return DeviceSpec(**{figure: uniform(float(table[key]), f"{source} ({key})") if key in table
+                         else getattr(MODBUS_DEFAULT, figure)
+                         for figure, (key, _) in MAP_KEYS.items()})
 
 
 def _with_note(spec: DeviceSpec, note: str) -> DeviceSpec:

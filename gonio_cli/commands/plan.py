@@ -87,9 +87,13 @@ def run(args: argparse.Namespace) -> int:
     sched = build_schedule(plan, cfg, time_scale)
     print(summary(plan, cfg, sched))
     if args.sim:
-        from gonio.simulate import tables_estimate
+        from gonio.simulate import beam_over_range, tables_estimate
 
         print(tables_line(tables_estimate(cfg, plan, sched), sched.estimate_s))
+        if (full_scale := beam_over_range(cfg, plan, sched)) is not None:
+            print(f"  beam: the emulated beam reaches its [beam] range's full scale "
+                  f"({full_scale:g} W): its beam readings would read over range (flagged "
+                  "saturated) and normalise nothing; give [beam] a larger range")
     print(description(plan, cfg))
     if args.list:
         print(listing(sched))

@@ -244,8 +244,8 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
     defaults."""
     _warn_polarisation(optics)
     source = Source(**read_table(sim_config, "source", optics))
-    where = mounted_sample(sim_config, sample)[0]
-    sample_table = read_table(sim_config, "sample", sample)
+    where, mounted = mounted_sample(sim_config, sample)
+    sample_table = _validated(mounted, where, "sample", sample)
     aperture = read_table(sim_config, "aperture", optics)
     retracted = sample_table.pop("retracted_beyond_deg")
     informational(sample_table, where)

@@ -42,3 +42,22 @@ def test_time_scale_overrides_the_configs_and_needs_sim(capsys):
     assert main(["plan", str(DEMO), "--time-scale", "2"]) == 2
     assert "--time-scale applies to emulated devices: use it with --sim" in \
         capsys.readouterr().err
+
+
+def test_a_beam_range_the_emulated_beam_reaches_is_said(capsys, tmp_path):
+    """calib-angles reads its 1 mW beam on the 1e-2 W range; on 1e-3 W, the beam's own power,
+    the meter would flag its readings over range: `gonio plan --sim` says so in one line."""
+    shipped = DEMO.parent / "calib-angles.toml"
+    text = shipped.read_text().replace('"../instruments/', f'"{DEMO.parents[1]}/instruments/')
+    lines = {}
+    for range_w in ("1e-2", "1e-3"):
+        plan = tmp_path / f"beam-{range_w}.toml"
+        plan.write_text(text.replace("range = 1e-2 ", f"range = {range_w} "))
+        assert main(["plan", str(plan), "--sim"]) == 0
+        lines[range_w] = [ln for ln in capsys.readouterr().out.splitlines()
+                          if ln.startswith("  beam:")]
+    assert lines["1e-2"] == []
+    assert lines["1e-3"] == [
+        "  beam: the emulated beam reaches its [beam] range's full scale (0.001 W): its beam "
+        "readings would read over range (flagged saturated) and normalise nothing; give [beam] "
+        "a larger range"]

@@ -11,7 +11,7 @@ import pytest
 from calibration import aperture, calfile, detector
 from calibration.angles import PeakScan, fit_offsets, symmetric_estimate
 from calibration.beam import beam_power
-from calibration.calibrate import angle_offsets, build
+from calibration.calibrate import angle_offsets, beam_normalised, build
 from calibration.values import CalibrationError, Measured
 from gonio.geometry import sample_angles
 from gonio.store import READING_DTYPE
@@ -174,6 +174,35 @@ def test_beam_drift_interpolated_within_its_uncertainty():
     assert model.noise_w == pytest.approx(2e-7, rel=0.35)
     true_drift = truth(t_beam)
     assert model.drift_rms == pytest.approx(true_drift.std() / true_drift.mean(), rel=0.05)
+
+
+def test_saturated_beam_readings_do_not_normalise_the_peaks():
+    """A beam read on a range at its own power reads over range half the time (clipped at
+    1.1 full scale, flagged saturated): those readings are left out of the normalisation, and
+    a run whose every beam reading is saturated says so."""
+    rng = np.random.default_rng(8)
+    t = np.arange(40.0)
+    sample = readings(30, kind="sample", side="reflection", point=np.arange(30), t_s=t[10:],
+                      power_w=1e-6, range_w=1e-5)
+    good = readings(10, kind="beam", t_s=t[:10], range_w=1e-2,
+                    power_w=1e-3 * (1.0 + 1e-4 * rng.standard_normal(10)))
+    clipped = good.copy()
+    clipped["power_w"][::2], clipped["saturated"][::2] = 1.1e-2, True
+    darks = {"1e-05": Measured(0.0, 0.0), "0.01": Measured(0.0, 0.0)}
+    kept, _ = beam_normalised(np.concatenate([good[1::2], sample]), darks, None)
+    both, _ = beam_normalised(np.concatenate([clipped, sample]), darks, None)
+    np.testing.assert_allclose(both["power_w"][both["kind"] == "sample"],
+                               kept["power_w"][kept["kind"] == "sample"], rtol=1e-12)
+    all_clipped = good.copy()
+    all_clipped["saturated"] = True
+    dark = readings(4, kind="dark", range_w=[1e-5, 1e-5, 1e-2, 1e-2],
+                    power_w=1e-9 * rng.standard_normal(4))
+    notes = build([np.concatenate([dark, all_clipped, sample])], "", ["RUN"]).notes
+    assert [n for n in notes if n.startswith("beam:")] == [
+        "beam: every beam reading of RUN is saturated (over range), so none normalises it: "
+        "give the plan's [beam] a range above the beam's power"]
+    assert not [n for n in build([np.concatenate([dark, clipped, sample])], "", ["RUN"]).notes
+                if n.startswith("beam:")]
 
 
 def overlap_scan_monte_carlo(rng, a: float, b: float, offsets: np.ndarray) -> np.ndarray:

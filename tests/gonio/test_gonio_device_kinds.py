@@ -1,6 +1,8 @@
 """Devices read through their kinds' settings: endpoints both ways, what a session records,
 and the Modbus kinds' own register-map checks, each one line naming the field."""
 
+from pathlib import Path
+
 import pytest
 from gonio_testkit import fast_config
 
@@ -48,6 +50,29 @@ def test_a_modbus_detector_map_that_does_not_load_is_refused(tmp_path):
     cfg["devices"]["photodiode"]["register_map"] = str(broken)
     with pytest.raises(ConfigError, match=rf"^config: \[devices\.photodiode\] register_map: "
                                           rf"{broken}"):
+        parse_config(cfg)
+
+
+@pytest.mark.parametrize(("device", "line", "says"), [
+    ("photodiode", 'range_gain_half_width_rel = "0.25 %"',
+     r"\[specification\] range_gain_half_width_rel: must be a number in \[0, 1\) .*got "
+     r"'0\.25 %'"),
+    # a [detector]-style 1-sigma name is not a half-width: refused, not taken as one
+    ("photodiode", "linearity_rel = 0.002", r"\[specification\]: unknown key 'linearity_rel'"),
+    ("sample_drive", "repeatability_half_width_deg = -0.01",
+     r"\[specification\] repeatability_half_width_deg: must be a number in \[0, 180\)"),
+    ("sample_drive", "source = 3", r"\[specification\] source: must be a string")])
+def test_a_register_map_specification_that_is_not_valid_is_refused(tmp_path, device, line, says):
+    """A bad [specification] figure would otherwise give way to the default unseen: the
+    config is refused when it loads, naming the map's file and the key."""
+    cfg = fast_config("sim-modbus")
+    shipped = Path(cfg["devices"][device]["register_map"])
+    registers = shipped.read_text().split("[specification]")[0]  # the table ends the file
+    bad = tmp_path / shipped.name
+    bad.write_text(f"{registers}[specification]\n{line}\n")
+    cfg["devices"][device]["register_map"] = str(bad)
+    with pytest.raises(ConfigError, match=rf"^config: \[devices\.{device}\] register_map: "
+                                          rf"{bad} {says}"):
         parse_config(cfg)
 
 

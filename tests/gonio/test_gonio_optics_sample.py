@@ -43,6 +43,8 @@ def test_receiver_solid_angle_from_the_aperture():
                                           "\"p\" or a linear polariser's angle in degrees"),
     ({"wavelength_nm": "red"}, "wavelength_nm: must be a number"),
     ({"apperture_mm": 1.0}, "unknown key 'apperture_mm'"),
+    ({"aperture_diameter_tolerance_mm": 10.0},
+     r"aperture_diameter_tolerance_mm: \+-10 mm must be smaller than aperture_diameter_mm 10 mm"),
 ])
 def test_bad_optics_is_one_error_naming_the_field(change, message):
     cfg = fast_config()
