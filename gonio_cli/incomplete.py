@@ -16,13 +16,16 @@ if TYPE_CHECKING:
 
 
 def runs_read(args: argparse.Namespace) -> list[str]:
-    """The run directories the verb reads: the argument its parser names in `reads_run` (one
-    directory or a list; none where it is not given, as with --import)."""
-    dest = getattr(args, "reads_run", None)
-    value = getattr(args, dest, None) if dest else None
-    if value is None:
-        return []
-    return [value] if isinstance(value, str) else list(value)
+    """The run directories the verb reads: the arguments its parser names in `reads_run` (a
+    destination or a tuple of them, each one directory or a list; none where it is not given,
+    as with --import)."""
+    dests = getattr(args, "reads_run", None) or ()
+    out: list[str] = []
+    for dest in (dests,) if isinstance(dests, str) else dests:
+        value = getattr(args, dest, None)
+        if value is not None:
+            out += [value] if isinstance(value, str) else list(value)
+    return out
 
 
 def warn_incomplete(verb: str, args: argparse.Namespace) -> None:

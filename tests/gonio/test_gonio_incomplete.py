@@ -178,20 +178,39 @@ def test_the_watch_status_names_no_run_in_progress_and_no_complete_run():
         "incomplete run: 1 of 3 readings stored, status completed"
 
 
-def test_calibrate_build_names_an_incomplete_run_and_records_it(tmp_path):
-    plan = tomllib.loads((EXAMPLES / "plans" / "calib-detector.toml").read_text())
+def aborted_calibration(tmp_path: Path, plan_name: str, stop_at: int, **changes) -> tuple:
+    """(run, what an incomplete-run line says of it): a shipped calibration plan on the fast
+    bench, aborted after stop_at readings."""
+    plan = tomllib.loads((EXAMPLES / "plans" / f"{plan_name}.toml").read_text())
     plan.pop("instrument")
-    plan["repeats"] = 1
-    result = new_scan(write_plan(tmp_path, plan, fast_config()), sim=True,
-                      out=tmp_path / "runs", progress=False, control=AbortAfter(190))
-    run = result.path
-    planned = open_run(run).meta["planned"]
+    plan.update(changes)
+    result = new_scan(write_plan(tmp_path, plan, fast_config(), name=plan_name), sim=True,
+                      out=tmp_path / "runs", progress=False, control=AbortAfter(stop_at))
+    planned = open_run(result.path).meta["planned"]
+    return result.path, (f"incomplete run: {stop_at} of {planned} readings stored, status "
+                         "aborted (aborted by the user)")
+
+
+def test_calibrate_build_names_an_incomplete_run_and_records_it(tmp_path):
+    run, said = aborted_calibration(tmp_path, "calib-detector", 190, repeats=1)
     proc = gonio_cli("calibrate", "build", run, "--out", tmp_path / "cal.json")
-    said = f"incomplete run: 190 of {planned} readings stored, status aborted"
     assert [ln for ln in proc.stderr.splitlines() if "incomplete run" in ln] == [
-        f"gonio calibrate: warning: {run}: {said} (aborted by the user)"], proc.stderr
+        f"gonio calibrate: warning: {run}: {said}"], proc.stderr
     assert proc.returncode == 0, proc.stderr
-    assert f"{run}: {said} (aborted by the user)" in calfile.load(tmp_path / "cal.json").notes
+    assert f"{run}: {said}" in calfile.load(tmp_path / "cal.json").notes
+
+
+def test_calibrate_build_names_an_incomplete_aperture_scan_too(tmp_path):
+    run, said = aborted_calibration(tmp_path, "calib-detector", 190, repeats=1)
+    scan, scan_said = aborted_calibration(tmp_path, "calib-aperture", 95)
+    proc = gonio_cli("calibrate", "build", run, "--aperture-scan", scan, "--out",
+                     tmp_path / "cal.json")
+    assert [ln for ln in proc.stderr.splitlines() if "incomplete run" in ln] == [
+        f"gonio calibrate: warning: {run}: {said}",
+        f"gonio calibrate: warning: {scan}: {scan_said}"], proc.stderr
+    assert proc.returncode == 0, proc.stderr
+    notes = calfile.load(tmp_path / "cal.json").notes
+    assert f"{run}: {said}" in notes and f"{scan}: {scan_said}" in notes
 
 
 DEAD = {"name": "dead", "grid": [
