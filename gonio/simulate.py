@@ -47,11 +47,18 @@ class Simulation:
     bench: EmulatedBench
     clock: RunClock | None = None
 
+    def session_start(self) -> dict[str, Any]:
+        """What the session's record starts with: the multiple-scattering tables built before
+        the first move (`ms_tables`, known then, so a session killed outright keeps it)."""
+        tables = self.bench.tables_record()
+        return {} if tables is None else {"ms_tables": tables}
+
     def telemetry(self, event: Any) -> None:
         """The emulation's subscriber to the engine's events: where the (real) stages are
         before each reading, the readings thrown away (no visits: sim.emulate), and what the
-        emulators did in the session (faults injected, requests served, and on the virtual
-        clock the run's time at the end, `clock_end_s`, where a resume goes on from)."""
+        emulators did in the session (faults injected, requests served, the tables record's
+        planes built inside readings, and on the virtual clock the run's time at the end,
+        `clock_end_s`, where a resume goes on from)."""
         if isinstance(event, Moved):
             self.positions.update(event.positions)
         elif isinstance(event, ReadingDiscarded):

@@ -80,13 +80,15 @@ def test_a_cold_run_killed_and_resumed_cold_is_the_uninterrupted_run_bit_for_bit
         proc.kill()
         proc.communicate()
     run_dir = next(runs.iterdir())
+    killed = open_run(run_dir).meta["sessions"][0]["ms_tables"]  # recorded before any move
+    assert killed["walked"] == killed["planes"] > 0 and killed["in_readings"] == 0
     stored = open_run(run_dir).lines().rows
     assert 9 <= len(stored) < whole.meta["planned"]
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache-second"))  # cold again
     resumed = gonio_cli("scan", "--resume", run_dir, timeout=600)
     assert run_dir_of(resumed) == run_dir
     run = completed_unretried(resumed)
-    second = tables_of(run)  # the killed session ended without its record
+    second = tables_of(run)
     assert second["walked"] > 0 and second["in_readings"] == 0
     a, b = whole.readings(), run.readings()
     for name in ("index", "kind", "sample_deg", "arm_deg", "power_w", "range_w", "flags"):
