@@ -1,6 +1,8 @@
 """The one stderr line every reader of a run prints for an incomplete run (gonio.completeness):
-a verb that reads runs names the argument holding them (`reads_run`, set by its parser), and
-the command line says it once, before the verb runs, whatever the verb then does."""
+a verb that reads runs names the arguments holding them (`reads_run`, set by its parser), and
+the command line says it once, after the verb's argument checks that need no run
+(`check_args`, set by its parser: bad input gives its one error line alone) and before the
+verb runs."""
 
 from __future__ import annotations
 

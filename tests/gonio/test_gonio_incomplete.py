@@ -127,6 +127,18 @@ def test_every_export_format_carries_the_facts(aborted, tmp_path, capsys):
     assert stop["num_events"] == {"primary": STOPPED_AT}
 
 
+def test_bad_arguments_give_their_error_alone_without_the_incomplete_warning(aborted,
+                                                                             tmp_path, capsys):
+    assert main(["export", str(aborted), "--format", "csv", "--out", str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"gonio export: error: export: --out {tmp_path / 'x'} has no suffix; --format csv "
+        "writes .csv"]
+    assert main(["reduce", str(aborted), "--coverage-k", "0"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "gonio reduce: error: --coverage-k must be a finite number > 0, got 0.0"]
+    assert not (tmp_path / "x").exists()
+
+
 def test_check_reports_completeness_and_exits_0_for_an_intact_incomplete_run(aborted, tmp_path):
     proc = gonio_cli("check", aborted)
     assert proc.returncode == 0, proc.stderr
