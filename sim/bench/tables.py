@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 #: prepare's progress: told (planes walked, planes to walk) before the first walk and after
 #: each (planes to walk grows when a second evaluation finds more).
@@ -26,21 +27,26 @@ TIMED_PLANES = 4
 
 @dataclass
 class TablesPrepared:
-    """What prepare did: planes the readings need that were not in memory, how many of them
-    the store held (read) and how many were walked (walks each), in `seconds`;
-    in_readings: planes built later, inside a reading (a position the plan did not foresee,
-    such as a stage's repeatability scatter crossing into another plane), set by the caller."""
+    """What prepare did on `bench`: planes the readings need that were not in memory, how many
+    of them the store held (read) and how many were walked (walks each), in `seconds`; `held`,
+    the planes the bench's sample held as prepare ended, from which record() counts those
+    built later."""
 
     planes: int = 0
     read: int = 0
     walked: int = 0
     walks: int = 0
     seconds: float = 0.0
-    in_readings: int = 0
+    bench: Any = field(default=None, repr=False)
+    held: int = 0
 
-    def to_json(self) -> dict[str, float]:
-        """The record for a session's meta.json."""
-        return asdict(self)
+    def record(self) -> dict[str, float]:
+        """The record for a session's meta.json: what prepare did, and `in_readings`, the
+        planes built since inside a reading (a position the plan did not foresee, such as a
+        stage's repeatability scatter crossing into another plane)."""
+        return {"planes": self.planes, "read": self.read, "walked": self.walked,
+                "walks": self.walks, "seconds": self.seconds,
+                "in_readings": built(self.bench) - self.held}
 
 
 @dataclass(frozen=True)
@@ -90,7 +96,7 @@ def prepare(bench, positions: Iterable[Mapping[str, float]],
     """Build every table plane the readings at `positions` (reported stage positions by role)
     will ask for: read from the store where it holds them, else walked (told to `progress`)."""
     start = time.perf_counter()
-    report = TablesPrepared(walks=bench.sample.spec.ms_walks)
+    report = TablesPrepared(walks=bench.sample.spec.ms_walks, bench=bench)
     pending = places(bench, positions) if bench.sample.tabulated else []  # no tables
     to_walk: list[tuple[object, tuple]] = []
     while pending:
@@ -111,6 +117,7 @@ def prepare(bench, positions: Iterable[Mapping[str, float]],
             if progress is not None:
                 progress(report.walked, report.walked + len(to_walk))
     report.seconds = time.perf_counter() - start
+    report.held = built(bench)
     return report
 
 
