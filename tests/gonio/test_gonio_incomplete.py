@@ -180,14 +180,26 @@ def test_watch_names_an_ended_incomplete_run_on_stderr_and_its_page(aborted):
     assert status["incomplete"] == f"{SAID} (aborted by the user)"
 
 
-def test_the_watch_status_names_no_run_in_progress_and_no_complete_run():
+def test_the_watch_status_names_no_run_in_progress_and_no_complete_run(aborted):
+    run = open_run(aborted)
     meta = {"status": "running", "reason": "", "planned": 3, "sessions": []}
     rows = [{"index": 0, "t_s": 0.0}]
-    assert status_of("r", {}, meta, rows, Live(True), 0.0)["incomplete"] is None
+    assert status_of(run, meta, rows, Live(True), 0.0)["incomplete"] is None
     done = {**meta, "status": "completed"}
-    assert status_of("r", {}, done, rows * 3, Live(False), 0.0)["incomplete"] is None
-    assert status_of("r", {}, done, rows, Live(False), 0.0)["incomplete"] == \
+    assert status_of(run, done, rows * 3, Live(False), 0.0)["incomplete"] is None
+    assert status_of(run, done, rows, Live(False), 0.0)["incomplete"] == \
         "incomplete run: 1 of 3 readings stored, status completed"
+
+
+def test_the_watch_status_of_an_older_run_takes_its_planned_count_from_its_plan(aborted,
+                                                                                tmp_path):
+    old = Path(shutil.copytree(aborted, tmp_path / "old"))
+    meta = json.loads((old / META).read_text())
+    del meta["planned"]
+    (old / META).write_text(json.dumps(meta))
+    run = open_run(old)
+    out = status_of(run, run.meta, run.rows(), Live(False), 0.0)
+    assert out["planned"] == PLANNED and out["incomplete"] == f"{SAID} (aborted by the user)"
 
 
 def aborted_calibration(tmp_path: Path, plan_name: str, stop_at: int, **changes) -> tuple:
