@@ -1,5 +1,6 @@
 """The multiple-scattering table planes a bench's readings need: built before the first reading
-(Bench.prepare, with progress), or counted and timed for `gonio plan --sim` (estimate).
+(Bench.prepare, with progress), or counted and timed for `gonio plan --sim` (estimate, with
+the time evaluating every reading once takes, which prepare spends on a warm cache too).
 
 A reading's power is the aperture integral of the sample's integrand, whose multiple-scattering
 term interpolates HigherOrderLobe's tables and walks a plane the first time a pair needs it:
@@ -51,12 +52,14 @@ class TablesPrepared:
 
 @dataclass(frozen=True)
 class TablesEstimate:
-    """Planes the readings need that the cache does not hold, walks each, and the seconds
-    walking them takes on this machine now (0 with none to walk)."""
+    """Planes the readings need that the cache does not hold, walks each, the seconds walking
+    them takes on this machine now (0 with none to walk), and `evaluate_s`, the seconds
+    evaluating every reading once took here: what prepare spends even on a warm cache."""
 
     planes: int
     walks: int
     seconds: float
+    evaluate_s: float = 0.0
 
 
 def places(bench, positions: Iterable[Mapping[str, float]]) -> list[dict[str, float]]:
@@ -129,11 +132,14 @@ def estimate(bench, positions: Iterable[Mapping[str, float]]) -> TablesEstimate:
     walks = bench.sample.spec.ms_walks
     if not bench.sample.tabulated:
         return TablesEstimate(0, walks, 0.0)
-    wanted, _ = _missed(bench, places(bench, positions))
+    start = time.perf_counter()
+    wanted, _ = _missed(bench, places(bench, positions))  # prepare's first evaluation
+    evaluate_s = time.perf_counter() - start
     to_walk = [(lobe, address) for lobe, addresses in wanted.items()
                for address in sorted(addresses) if not lobe.build_at(address, walk=False)]
     if not to_walk:
-        return TablesEstimate(0, walks, 0.0)
+        return TablesEstimate(0, walks, 0.0, evaluate_s)
     step = max(1, len(to_walk) // TIMED_PLANES)
     timed = [lobe.walk_seconds(address) for lobe, address in to_walk[::step][:TIMED_PLANES]]
-    return TablesEstimate(len(to_walk), walks, len(to_walk) * sum(timed) / len(timed))
+    return TablesEstimate(len(to_walk), walks, len(to_walk) * sum(timed) / len(timed),
+                          evaluate_s)
