@@ -6,7 +6,9 @@ has no truth curve. `--fit` hands over to calibration.fitplot's overlay."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -147,11 +149,12 @@ def completeness_line(completeness: dict | None) -> str:
 def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
              calibration_file: str | Path | None = None, fit_options=None,
              shot_noise_w: float | None = None, subtract_signature: bool = False,
-             angle_terms: bool = True) -> Path:
+             angle_terms: bool = True, fitted: Callable[[Any], None] | None = None) -> Path:
     """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
-    (calibration.fit) and draw the fitting area's overlay with residuals (RUN/plot-fit.png);
-    subtract_signature, angle_terms as calibration.pipeline.reduce_run. A calibration run
-    (its record's `calibrates`) gets the plot of what it measures instead (calibration.calplot)."""
+    (calibration.fit), tell `fitted` the result (a FitResult) and draw the fitting area's
+    overlay with residuals (RUN/plot-fit.png); subtract_signature, angle_terms as
+    calibration.pipeline.reduce_run. A calibration run (its record's `calibrates`) gets the plot
+    of what it measures instead (calibration.calplot)."""
     from calibration.pipeline import reduce_run
     from gonio.completeness import completeness_of
     from gonio.record import run_record
@@ -177,6 +180,8 @@ def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool =
         from calibration.fitplot import plot_fit
 
         result = fit_model(data, fit_options)
+        if fitted is not None:
+            fitted(result)
         return plot_fit(data, result, out_png or run_dir / "plot-fit.png", fit_options,
                         title=title)
     return plot_reduced(data, out_png or run_dir / "plot.png", title=title)

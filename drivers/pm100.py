@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import asdict, dataclass
 from typing import Any, Unpack
 
@@ -46,6 +47,9 @@ SCPI_NAN = 9.91e37  # SCPI-99's not-a-number: the meter has no valid reading
 MAX_RANGES = 32  # more ranges than any sensor has: range stepping that runs on is garbled
 ERROR_QUEUE_DEPTH = 32
 ZERO_POLL_S = 0.05  # how often zero() asks whether the adjustment is still running
+#: the PM100 manual's SENS:AVER:COUN: "1 sample takes approx. 3ms"; a reading's reply comes
+#: that much later per averaged sample beyond the first, which its timeout adds to timeout_s
+SAMPLE_S = 3e-3
 
 
 def nr3_parser(decimals: int = NR3_DECIMALS) -> StrictNumber:
@@ -152,6 +156,7 @@ class Pm100(StatusLineDevice):
                  nr3_decimals: int = NR3_DECIMALS, **link: Unpack[LinkOptions]):
         self.zero_timeout_s = zero_timeout_s
         self._full_scales: tuple[float, ...] | None = None
+        self._samples = 1  # the averaging the meter holds (read on opening, kept on writes)
         self.number = nr3_parser(nr3_decimals)
         super().__init__(name, SerialLineTransport(
             port, name=name, baudrate=baudrate, write_eol=b"\n", read_eol=b"\n",
@@ -161,6 +166,7 @@ class Pm100(StatusLineDevice):
             self.errors()  # start from an empty error queue
             self.idn = self.query("*IDN?")[0]
             self.query(":CONF:POW")
+            self._samples = int(self.averaging)
         except BaseException:  # a Ctrl-C too: a long-lived process must not keep the port
             self.close()
             raise
@@ -228,18 +234,31 @@ class Pm100(StatusLineDevice):
             self._full_scales = tuple(found)
         return self._full_scales
 
+    def write_setting(self, setting: Setting, value: Any, address: str = "") -> None:
+        """As StatusLineDevice's, keeping the averaging written (a reading's time)."""
+        super().write_setting(setting, value, address)
+        if setting is Pm100.averaging:
+            self._samples = int(value)
+
+    def _sampling(self) -> AbstractContextManager[None]:
+        """The transport waiting for a reading's reply the time its averaged samples beyond
+        the first take (SAMPLE_S each) longer: timeout_s is a one-sample reading's."""
+        return self.transport.longer_replies((self._samples - 1) * SAMPLE_S)
+
     def read(self) -> Reading:
         """READ?: a new (averaged) reading, with the range it was taken on.
 
         saturated: the reading is above the range's full scale (over range).
         InvalidReading if the meter answers SCPI's not-a-number (9.91E+37).
         """
-        power, upper = self.query(":READ?;:SENS:POW:RANG?", self.number, self.number)
+        with self._sampling():
+            power, upper = self.query(":READ?;:SENS:POW:RANG?", self.number, self.number)
         return Reading(power_w=self._valid(power, upper), range_w=upper, saturated=power > upper)
 
     def measure(self) -> float:
         """MEAS:POW?: configure for power and take one reading, W (InvalidReading as read)."""
-        power, upper = self.query(":MEAS:POW?;:SENS:POW:RANG?", self.number, self.number)
+        with self._sampling():
+            power, upper = self.query(":MEAS:POW?;:SENS:POW:RANG?", self.number, self.number)
         return self._valid(power, upper)
 
     def _valid(self, power: float, range_w: float) -> float:

@@ -269,6 +269,19 @@ class SerialLineTransport:
                                    exc) from exc.cause
 
     @contextmanager
+    def longer_replies(self, extra_s: float) -> Iterator[None]:
+        """Replies to the exchanges in the block are waited for extra_s longer than
+        timeout_s (a reply the device takes that long over: an averaged reading); other
+        threads' exchanges wait for the block, as they wait for any exchange."""
+        with self.lock:
+            base = self.timeout_s
+            self.timeout_s = base + extra_s
+            try:
+                yield
+            finally:
+                self.timeout_s = base
+
+    @contextmanager
     def _for(self, device: str | None) -> Iterator[None]:
         """Under the lock: the errors of an exchange name `device` (None: whoever the
         enclosing exchange names, else the transport's own name) until it ends."""

@@ -6,6 +6,7 @@ them); `gonio check` reports them beside the run's integrity."""
 from __future__ import annotations
 
 import fcntl
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,11 +53,13 @@ class Completeness:
                    data["planned_readings"])
 
 
-def planned_readings(run: Run) -> int | None:
-    """The readings the run planned: meta.json's `planned`, else the stored plan scheduled on
-    the stored config (runs that recorded no count); None if neither says."""
-    if isinstance(run.meta.get("planned"), int):
-        return run.meta["planned"]
+def planned_readings(run: Run, meta: Mapping[str, Any] | None = None) -> int | None:
+    """The readings the run planned: meta.json's `planned` (`meta`, else the run's), else the
+    stored plan scheduled on the stored config (runs that recorded no count); None if neither
+    says."""
+    meta = run.meta if meta is None else meta
+    if isinstance(meta.get("planned"), int):
+        return meta["planned"]
     from gonio.config import parse_config
     from gonio.plan import build_schedule, parse_plan
 
@@ -67,12 +70,16 @@ def planned_readings(run: Run) -> int | None:
         return None
 
 
-def completeness_of(run: Run, stored: int | None = None) -> Completeness:
+def completeness_of(run: Run, stored: int | None = None,
+                    meta: Mapping[str, Any] | None = None) -> Completeness:
     """The run's completeness; `stored`: its valid readings if the caller has counted them
-    (else its lines are read)."""
+    (else its lines are read); `meta`: its meta.json as read since the run was opened (a
+    watcher's snapshot), else the run's."""
     if stored is None:
         stored = len(run.lines().rows)
-    return Completeness(run.status, run.meta.get("reason", ""), stored, planned_readings(run))
+    meta = run.meta if meta is None else meta
+    return Completeness(meta.get("status", "unknown"), meta.get("reason", ""), stored,
+                        planned_readings(run, meta))
 
 
 def being_written(run: Run) -> bool:

@@ -30,6 +30,12 @@ def all_emulated(meta: Mapping[str, Any]) -> bool:
                for s in meta.get("sessions", []))
 
 
+def on_virtual_clock(meta: Mapping[str, Any]) -> bool:
+    """True when a session of the run counted its readings' `t_s` on the emulated bench's
+    virtual clock (session `clock` "virtual"): run time, not seconds since `t0_epoch`."""
+    return any(s.get("clock") == "virtual" for s in meta.get("sessions", []))
+
+
 def emulator_config(run: Run) -> dict[str, Any] | None:
     """The run config's [sim] table if every device was emulated, else None."""
     return (run.config.get("sim") or None) if all_emulated(run.meta) else None

@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -59,14 +59,15 @@ def instrument_path(plan: Plan, instrument: str | Path | None) -> Path:
 @dataclass
 class _Devices:
     """What to open: the config (pointed at emulators under --sim), its time scale, the
-    emulated devices, the emulation's subscribers to the engine's events and the run's clock
-    (None: the wall clock)."""
+    emulated devices, the emulation's subscribers to the engine's events, the run's clock
+    (None: the wall clock) and what the emulation records in the session as it starts."""
 
     config: InstrumentConfig
     time_scale: float = 1.0
     emulated: tuple[str, ...] = ()
     subscribers: tuple[Subscriber, ...] = ()
     clock: RunClock | None = None
+    session: dict[str, Any] = field(default_factory=dict)
 
 
 @contextmanager
@@ -85,7 +86,8 @@ def _devices(cfg: InstrumentConfig, sim: list[str] | bool, plan: Plan, t0_epoch:
     with simulation(cfg, None if sim is True else sim, plan.raw.get("sample"), t0_epoch,
                     [visit(row, cfg.axes) for row in stored], upcoming, progress,
                     clock_start_s) as s:
-        yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,), s.clock)
+        yield _Devices(s.config, s.time_scale, tuple(s.devices), (s.telemetry,), s.clock,
+                       s.session_start())
 
 
 def operator_prompts(plan: Plan, readings: np.ndarray, todo: Sequence[int]) -> dict[int, str]:
@@ -151,7 +153,7 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                                 session={"sim": list(dev.emulated),
                                          "endpoints": {n: d.endpoint
                                                        for n, d in dev.config.devices.items()},
-                                         "devices": inst.devices,
+                                         "devices": inst.devices, **dev.session,
                                 **({"clock": "virtual", "clock_start_s": clock_start_s}
                                    if dev.clock is not None else {}),
                                          **({"identity_changes": swapped} if swapped else {}),

@@ -24,7 +24,7 @@ from gonio.plan import AUTO_RANGE, Plan, Schedule
 from gonio.progress import TablesProgress
 from gonio.run_clock import RunClock
 from sim.bench import Bench, build_bench, tables
-from sim.bench.sample import SampleSpec
+from sim.bench.config import read_table
 from sim.bench.tables import TablesEstimate
 from sim.devices.pty_server import LOOPBACK
 from sim.emulate import EmulatedBench, Visit, start, time_scale_of
@@ -47,11 +47,18 @@ class Simulation:
     bench: EmulatedBench
     clock: RunClock | None = None
 
+    def session_start(self) -> dict[str, Any]:
+        """What the session's record starts with: the multiple-scattering tables built before
+        the first move (`ms_tables`, known then, so a session killed outright keeps it)."""
+        tables = self.bench.tables_record()
+        return {} if tables is None else {"ms_tables": tables}
+
     def telemetry(self, event: Any) -> None:
         """The emulation's subscriber to the engine's events: where the (real) stages are
         before each reading, the readings thrown away (no visits: sim.emulate), and what the
-        emulators did in the session (faults injected, requests served, and on the virtual
-        clock the run's time at the end, `clock_end_s`, where a resume goes on from)."""
+        emulators did in the session (faults injected, requests served, the tables record's
+        planes built inside readings, and on the virtual clock the run's time at the end,
+        `clock_end_s`, where a resume goes on from)."""
         if isinstance(event, Moved):
             self.positions.update(event.positions)
         elif isinstance(event, ReadingDiscarded):
@@ -114,7 +121,7 @@ def _start(cfg: InstrumentConfig, devices: list[str], positions: dict[str, float
     try:
         return start(cfg.raw, devices, lambda: positions, sample, bind, wall, visited,
                      line_key=port_key, upcoming=_positions(upcoming, cfg.axes),
-                     progress=_tables_progress(cfg, progress))
+                     progress=_tables_progress(cfg, sample, progress))
     except ValueError as exc:
         raise ConfigError(f"{cfg.path or 'config'}: {exc}") from None
 
@@ -124,11 +131,14 @@ def _positions(rows: np.ndarray | None, roles: Iterable[str]) -> list[dict[str, 
     return None if rows is None else [visit(row, roles)[0] for row in rows]
 
 
-def _tables_progress(cfg: InstrumentConfig, progress: bool | None) -> TablesProgress:
-    """The table building's progress line: shown unless progress is False (--no-progress), on
-    a terminal or not (minutes of silence before a scan's first move read as a hang)."""
-    walks = cfg.sim.get("sample", {}).get("ms_walks", SampleSpec.ms_walks)
-    return TablesProgress(walks, disable=progress is False)
+def _tables_progress(cfg: InstrumentConfig, sample: dict | None, progress: bool | None
+                     ) -> TablesProgress:
+    """The table building's progress line, labelled with the walks of the sample the plan's
+    [sample] mounts (its validated [sim.samples.<id>] or [sim.sample]: SimConfigError if
+    bad): shown unless progress is False (--no-progress), on a terminal or not (minutes of
+    silence before a scan's first move read as a hang)."""
+    walks = read_table(cfg.sim, "sample", sample)["ms_walks"]
+    return TablesProgress(int(walks), disable=progress is False)
 
 
 @contextmanager

@@ -1,6 +1,8 @@
 """The one stderr line every reader of a run prints for an incomplete run (gonio.completeness):
-a verb that reads runs names the argument holding them (`reads_run`, set by its parser), and
-the command line says it once, before the verb runs, whatever the verb then does."""
+a verb that reads runs names the arguments holding them (`reads_run`, set by its parser), and
+the command line says it once, after the verb's argument checks that need no run
+(`check_args`, set by its parser: bad input gives its one error line alone) and before the
+verb runs."""
 
 from __future__ import annotations
 
@@ -16,13 +18,16 @@ if TYPE_CHECKING:
 
 
 def runs_read(args: argparse.Namespace) -> list[str]:
-    """The run directories the verb reads: the argument its parser names in `reads_run` (one
-    directory or a list; none where it is not given, as with --import)."""
-    dest = getattr(args, "reads_run", None)
-    value = getattr(args, dest, None) if dest else None
-    if value is None:
-        return []
-    return [value] if isinstance(value, str) else list(value)
+    """The run directories the verb reads: the arguments its parser names in `reads_run` (a
+    destination or a tuple of them, each one directory or a list; none where it is not given,
+    as with --import)."""
+    dests = getattr(args, "reads_run", None) or ()
+    out: list[str] = []
+    for dest in (dests,) if isinstance(dests, str) else dests:
+        value = getattr(args, dest, None)
+        if value is not None:
+            out += [value] if isinstance(value, str) else list(value)
+    return out
 
 
 def warn_incomplete(verb: str, args: argparse.Namespace) -> None:

@@ -83,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         args = build_parser().parse_args(argv)
         verb = f"gonio {args.command}"
+        if getattr(args, "check_args", None):  # the verb's argument checks that need no run
+            args.check_args(args)
         warn_incomplete(verb, args)
         return int(args.func(args) or 0)
     except (GonioError, DriverError) as exc:

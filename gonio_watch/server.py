@@ -111,8 +111,7 @@ class WatchApp:
     def status(self) -> dict[str, Any]:
         """The /status.json document."""
         snap = self.follower.snapshot()
-        out = status_of(self.run.path.name, self.run.config, snap.meta, snap.rows, self.live(),
-                        time.time())
+        out = status_of(self.run, snap.meta, snap.rows, self.live(), time.time())
         out.update(damage=snap.damage, torn=snap.torn)
         with self.served:
             self.last_status = out["status"]

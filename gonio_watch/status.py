@@ -10,8 +10,9 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from gonio.completeness import Completeness
+from gonio.completeness import completeness_of
 from gonio.plan import MOTION_ROLES
+from gonio.store import Run
 
 ENDED = ("completed", "aborted", "failed")  # meta.json's statuses of a run that has ended
 RATE_READINGS = 20  # the ETA takes the median time per reading over the last ones
@@ -119,19 +120,20 @@ def positions(config: dict[str, Any], last: dict[str, Any] | None) -> dict[str, 
             if role in axes and last.get(f"{role}_deg") is not None}
 
 
-def status_of(name: str, config: dict[str, Any], meta: dict[str, Any],
-              rows: list[dict[str, Any]], live: Live, now: float) -> dict[str, Any]:
-    """The /status.json document (see gonio_watch.server)."""
+def status_of(run: Run, meta: dict[str, Any], rows: list[dict[str, Any]], live: Live,
+              now: float) -> dict[str, Any]:
+    """The /status.json document (see gonio_watch.server) of `run` as its meta.json and
+    readings read now (`meta`, `rows`) say."""
     status = combined_status(meta.get("status", "unknown"), live)
     running = status not in ENDED and status != "not running"
-    planned = int(meta.get("planned") or 0)
+    found = completeness_of(run, len(rows), meta)
+    planned = found.planned or 0
     last = rows[-1] if rows else None
     eta, eta_from = eta_s(meta, rows, planned) if running else (None, f"run {status}")
-    found = Completeness(meta.get("status", "unknown"), meta.get("reason", ""), len(rows),
-                         planned or None)
     sample = meta.get("sample") or {}
     return {
-        "run": name, "plan": meta.get("plan_name"), "instrument": meta.get("instrument_name"),
+        "run": run.path.name, "plan": meta.get("plan_name"),
+        "instrument": meta.get("instrument_name"),
         "sample": sample.get("id"), "emulated": meta.get("sim"),
         "status": status, "meta_status": meta.get("status"), "reason": meta.get("reason", ""),
         "live": live.reply, "control": {"enabled": live.state is not None, "why": live.why},
@@ -139,7 +141,7 @@ def status_of(name: str, config: dict[str, Any], meta: dict[str, Any],
         "incomplete": None if running or found.complete else found.text(),
         "elapsed_s": elapsed_s(meta, running, now, last["t_s"] if last else None),
         "eta_s": eta, "eta_from": eta_from,
-        "positions": positions(config, last),
+        "positions": positions(run.config, last),
         "last": None if last is None else {k: last.get(k) for k in (
             "index", "kind", "side", "plan_theta_i_deg", "plan_theta_o_deg", "power_w")},
         "suspensions": meta.get("suspensions", []),

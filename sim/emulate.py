@@ -28,7 +28,7 @@ from collections.abc import Callable, Hashable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.bench import build_power_source, tables
+from sim.bench import build_power_source
 from sim.bench.tables import Progress, TablesPrepared
 from sim.device_kinds import (
     DetectorEmulator,
@@ -80,9 +80,8 @@ class EmulatedBench:
     emulators: dict[str, Any] = field(default_factory=dict)
     injectors: dict[str, list[FaultInjector]] = field(default_factory=dict)
     meters: list[Any] = field(default_factory=list)  # the emulated detectors' models
-    #: what start's prepare built (None: no schedule given), and the bench's planes built since
+    #: what start's prepare built (None: no schedule given)
     tables: TablesPrepared | None = None
-    _planes_since: Callable[[], int] = lambda: 0
     _stops: list[Callable[[], None]] = field(default_factory=list)
     _origin: float = 0.0  # the clock's reading at the run's time 0
 
@@ -110,9 +109,7 @@ class EmulatedBench:
     def tables_record(self) -> dict[str, float] | None:
         """The tables prepared before the first reading, with the planes built inside readings
         since (a position the schedule did not foresee), for the session's record."""
-        if self.tables is None:
-            return None
-        return {**self.tables.to_json(), "in_readings": self._planes_since()}
+        return None if self.tables is None else self.tables.record()
 
     def fault_counts(self) -> dict[str, dict[str, int]]:
         """Faults injected so far, by device and kind (devices with faults configured)."""
@@ -367,8 +364,6 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
         if detectors and upcoming is not None and source.bench.sample.tabulated:
             # no reading walks a table inside its reply (its evaluation compiles the kernels)
             bench.tables = source.bench.prepare(upcoming, progress)
-            since = tables.built(source.bench)
-            bench._planes_since = lambda: tables.built(source.bench) - since
         elif detectors:  # the first reading must not stall past a driver's timeout: the model
             # compiled and what a reading where the stages stand needs built, before serving
             source.bench.warm_up(read(build.readers))

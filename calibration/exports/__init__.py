@@ -26,15 +26,8 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
     was measured), the other beside it as <stem>-BRDF<suffix>. out_path must end in one of the
     format's suffixes (checked before any work)."""
     request = request or ExportRequest()
-    if fmt not in FORMATS:
-        raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got "
-                               f"{fmt!r}")
+    what = checked_what(fmt, request.what, Path(out_path))
     file_format = FORMATS[fmt]
-    what = request.what or file_format.default_what
-    if what not in file_format.whats:
-        raise CalibrationError(f"export: --what {what} is not written as {fmt} (it takes "
-                               f"{' or '.join(file_format.whats)})")
-    check_suffix(fmt, Path(out_path))
     # The writers load on use: the CLI reads the formats when it starts, and the reduction and
     # the fit bring in scipy.
     from calibration.exports.run_files import write_run
@@ -43,6 +36,22 @@ def write(run_dir: str | Path, fmt: str, out_path: str | Path,
                        or request.shot_noise_w is not None or request.subtract_signature)
     return write_run(run_dir, fmt, what, Path(out_path), request,
                      fallback=not asked_to_reduce and file_format.raw_fallback)
+
+
+def checked_what(fmt: str, what: str | None, out_path: Path) -> str:
+    """What an export of `fmt` writes (`what`, else the format's default), once the format,
+    what and out_path's suffix are checked (CalibrationError naming the first wrong one): the
+    checks an export makes before reading the run."""
+    if fmt not in FORMATS:
+        raise CalibrationError(f"export: format must be one of {', '.join(FORMATS)}, got "
+                               f"{fmt!r}")
+    file_format = FORMATS[fmt]
+    what = what or file_format.default_what
+    if what not in file_format.whats:
+        raise CalibrationError(f"export: --what {what} is not written as {fmt} (it takes "
+                               f"{' or '.join(file_format.whats)})")
+    check_suffix(fmt, out_path)
+    return what
 
 
 def check_suffix(fmt: str, out_path: Path) -> None:

@@ -4,7 +4,9 @@ descriptor, one event per stored reading in index order and, once the run has en
 
 Every document is built and validated by event-model's composers (its JSON schemas). The
 events' data keys are the readings' fields (gonio.store.READING_DTYPE); a NaN (an invalid
-reading's power, a dark reading's plan angles) is written as null, as JSON has no NaN. uids are
+reading's power, a dark reading's plan angles) is written as null, as JSON has no NaN. An
+event's `time` is wall time: t0_epoch + t_s, or for a run on the emulated bench's virtual clock
+(whose t_s is run time) one placed from its session's wall stamps, t_s staying in the data. uids are
 derived from the run's start, so exporting a run twice gives the same file.
 """
 
@@ -19,7 +21,7 @@ from typing import Any
 
 from calibration.exports.cf import reading_unit
 from gonio.errors import GonioError
-from gonio.record import run_record
+from gonio.record import on_virtual_clock, run_record
 from gonio.store import READING_DTYPE, READINGS, Run
 
 EXIT_STATUS = {"completed": "success", "aborted": "abort", "failed": "fail"}
@@ -43,6 +45,34 @@ def _plain(value: Any) -> Any:
     return None if isinstance(value, float) and math.isnan(value) else value
 
 
+def _wall(stamp: str) -> float:
+    """An ISO 8601 stamp of meta.json (gonio.store.utc_now) as epoch seconds."""
+    return datetime.fromisoformat(stamp).timestamp()
+
+
+def _session_wall_time(session: dict[str, Any], t_s: float) -> float:
+    """When, in wall time, a reading at run time `t_s` of a virtual-clock session was taken:
+    its place in the session's virtual span laid over the session's wall span (start_utc to
+    stop_utc); the session's start for one killed outright (it recorded no end)."""
+    start = _wall(session["start_utc"])
+    if "stop_utc" not in session or "clock_end_s" not in session:
+        return start
+    begin, end = float(session.get("clock_start_s", 0.0)), float(session["clock_end_s"])
+    share = min(max((t_s - begin) / (end - begin), 0.0), 1.0) if end > begin else 0.0
+    return start + share * (_wall(session["stop_utc"]) - start)
+
+
+def event_time(meta: dict[str, Any], t_s: float) -> float:
+    """A reading's event time, epoch seconds: `t0_epoch` + `t_s` for a run on the wall clock;
+    for one on the emulated bench's virtual clock (whose `t_s` is run time, never wall time),
+    from the wall stamps of the session it belongs to (the last to start at or before t_s)."""
+    if not on_virtual_clock(meta):
+        return float(meta["t0_epoch"]) + t_s
+    sessions = meta["sessions"]
+    own = [s for s in sessions if float(s.get("clock_start_s", 0.0)) <= t_s] or sessions[:1]
+    return _session_wall_time(own[-1], t_s)
+
+
 def documents(run: Run) -> list[tuple[str, dict[str, Any]]]:
     """The run's documents in order: start, descriptor, events, and stop once it has ended."""
     try:
@@ -63,7 +93,7 @@ def documents(run: Run) -> list[tuple[str, dict[str, Any]]]:
                                               ("descriptor", descriptor.descriptor_doc)]
     readings = run.readings()
     for seq, row in enumerate(readings, start=1):
-        when = t0 + float(row["t_s"])
+        when = event_time(meta, float(row["t_s"]))
         data = {name: _plain(row[name]) for name in READING_DTYPE.names}
         docs.append(("event", descriptor.compose_event(
             data=data, timestamps=dict.fromkeys(data, when), seq_num=seq, time=when,
@@ -71,8 +101,8 @@ def documents(run: Run) -> list[tuple[str, dict[str, Any]]]:
     status = meta.get("status")
     if status in EXIT_STATUS:
         stopped = meta.get("stopped_utc")
-        end = datetime.fromisoformat(stopped).timestamp() if stopped else \
-            t0 + float(readings["t_s"].max(initial=0.0))
+        end = _wall(stopped) if stopped else \
+            event_time(meta, float(readings["t_s"].max(initial=0.0)))
         docs.append(("stop", bundle.compose_stop(
             exit_status=EXIT_STATUS[status], reason=meta.get("reason") or "", time=end,
             uid=str(uuid.uuid5(uuid.UUID(start_uid), "stop")))))

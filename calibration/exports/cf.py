@@ -139,10 +139,26 @@ def epoch_units(t0_epoch: float | None) -> str:
     return f"seconds since {start.strftime('%Y-%m-%d %H:%M:%S.%f')}"
 
 
+VIRTUAL_CLOCK = "run time on the emulated bench's virtual clock, not wall-clock time"
+
+
+def _run_time(var: Any, t0_epoch: float | None, virtual_clock: bool) -> None:
+    """`t_s`'s attributes: a CF time since `t0_epoch`, or plain seconds of run time (no
+    `t0_epoch`, or counted on the emulated bench's virtual clock, which says so)."""
+    if virtual_clock:
+        var.units = "s"
+        var.comment = VIRTUAL_CLOCK
+        return
+    var.standard_name = "time"
+    var.units = epoch_units(t0_epoch)
+    var.calendar = "standard"
+
+
 def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path,
-                     t0_epoch: float | None = None) -> Path:
+                     t0_epoch: float | None = None, virtual_clock: bool = False) -> Path:
     """A run's readings (READING_DTYPE) as CF-1.8 NetCDF4, dimension `reading`; `t_s` as time
-    since `t0_epoch` (without it, plain seconds)."""
+    since `t0_epoch` (without it, plain seconds; with `virtual_clock`, a run counted on the
+    emulated bench's virtual clock, plain seconds of run time)."""
     netCDF4 = _netcdf4()
     with netCDF4.Dataset(out, "w", format="NETCDF4") as ds:
         ds.createDimension("reading", len(readings))
@@ -163,9 +179,7 @@ def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path,
                 var[:] = col
                 var.long_name = long_name
                 if name == "t_s":
-                    var.standard_name = "time"
-                    var.units = epoch_units(t0_epoch)
-                    var.calendar = "standard"
+                    _run_time(var, t0_epoch, virtual_clock)
                 else:
                     var.units = reading_unit(name) or "1"
         _globals(ds, f"gonio run {record.get('run')}: raw readings", record, {})

@@ -8,7 +8,7 @@ import csv
 from pathlib import Path
 
 from calibration.exports.measured import angle_text
-from gonio.record import record_lines, run_record
+from gonio.record import on_virtual_clock, record_lines, run_record
 from gonio.store import READING_DTYPE, Run
 
 
@@ -34,4 +34,5 @@ def write_netcdf(run: Run, out: Path) -> Path:
     """CF-1.8 NetCDF4 file of the readings, dimension `reading` (calibration.exports.cf)."""
     from calibration.exports.cf import write_raw_netcdf
 
-    return write_raw_netcdf(run.readings(), run_record(run), out, run.meta.get("t0_epoch"))
+    return write_raw_netcdf(run.readings(), run_record(run), out, run.meta.get("t0_epoch"),
+                            virtual_clock=on_virtual_clock(run.meta))

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from bluesky.protocols import Location
 from bluesky.run_engine import call_in_bluesky_event_loop, get_bluesky_event_loop
@@ -30,8 +31,12 @@ from drivers.base import Axis, Detector
 from gonio.config import InstrumentConfig, load_config
 from gonio.engine import TRANSIENT, home_axes, motion_timeout_s
 from gonio.instrument import Instrument, build_instrument
-from gonio.plan import AUTO_RANGE, describe_range, sweeps_source
+from gonio.plan import AUTO_RANGE, Plan, build_schedule, describe_range, load_plan, sweeps_source
 from gonio.row_step import PositionMismatch, arrival
+from gonio.run_clock import RunClock, wall_clock
+
+if TYPE_CHECKING:
+    from gonio.simulate import Simulation
 
 T = TypeVar("T")
 FAILURES = (*TRANSIENT, ValueError)  # a driver's ValueError: a value the device cannot take
@@ -191,12 +196,16 @@ class GonioDetector(StandardReadable):
 class GonioDevices:
     """The devices of one opened config: `axes` by role (also as attributes: `d.arm`), the
     `detector`, and the config and instrument they drive (under sim=True the config points at
-    the emulators)."""
+    the emulators); `clock`, the run's clock a plan settles and dwells on (the emulated
+    bench's virtual clock with every device emulated, else the wall clock); `emulation`, the
+    running emulators under sim=True (gonio.simulate.Simulation), else None."""
 
     config: InstrumentConfig
     instrument: Instrument
     axes: dict[str, GonioAxis]
     detector: GonioDetector
+    clock: RunClock
+    emulation: Simulation | None = None
 
     def __getattr__(self, role: str) -> GonioAxis:
         axes = self.__dict__.get("axes", {})
@@ -231,20 +240,30 @@ async def _connect(devs: GonioDevices) -> None:
 
 @contextlib.contextmanager
 def devices(config: str | Path | InstrumentConfig, sim: bool = False,
-            sample: dict | None = None) -> Iterator[GonioDevices]:
+            sample: dict | None = None, plan: str | Path | Plan | None = None
+            ) -> Iterator[GonioDevices]:
     """Open an instrument config's devices for Bluesky (make the RunEngine first); on leaving,
     every axis is told to stop and every connection closed. sim=True starts the emulators
-    first, as `gonio scan --sim` does; `sample` is then a plan's [sample] table (the emulated
-    sample's kind and index unless [sim] states them)."""
+    first, as `gonio scan --sim` does: `sample` is then a plan's [sample] table (the emulated
+    sample's kind and index unless [sim] states them); `plan`, the gonio plan to be run, whose
+    schedule's multiple-scattering tables are built before the first move (its [sample] is
+    the sample unless `sample` is given)."""
     _bluesky_loop_running()
     cfg = config if isinstance(config, InstrumentConfig) else load_config(config)
     with contextlib.ExitStack() as stack:
-        scale = 1.0
+        scale, emulation = 1.0, None
         if sim:
             from gonio.simulate import simulation
 
-            emulation = stack.enter_context(simulation(cfg, sample=sample))
+            upcoming = None
+            if plan is not None:
+                plan = plan if isinstance(plan, Plan) else load_plan(plan)
+                upcoming = build_schedule(plan, cfg).readings
+                sample = plan.raw.get("sample") if sample is None else sample
+            emulation = stack.enter_context(simulation(cfg, sample=sample, upcoming=upcoming))
             cfg, scale = emulation.config, emulation.time_scale
+        clock = emulation.clock if emulation is not None and emulation.clock is not None \
+            else wall_clock(time.time(), scale)
         inst = stack.enter_context(build_instrument(cfg, scale))
         stack.callback(inst.stop_all)
         try:
@@ -253,6 +272,6 @@ def devices(config: str | Path | InstrumentConfig, sim: bool = False,
             raise DeviceFailure(cfg.name, "preparing the instrument", exc) from exc
         devs = GonioDevices(cfg, inst, {role: GonioAxis(role, axis, inst)
                                         for role, axis in inst.axes.items()},
-                            GonioDetector(inst.detector, inst))
+                            GonioDetector(inst.detector, inst), clock, emulation)
         call_in_bluesky_event_loop(_connect(devs))
         yield devs

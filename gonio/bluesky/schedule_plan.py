@@ -25,7 +25,6 @@ from ophyd_async.plan_stubs import ensure_connected
 
 from gonio.bluesky.ophyd_devices import GonioDevices
 from gonio.engine import schedule_tags
-from gonio.instrument import real_seconds
 from gonio.plan import Plan, build_schedule, load_plan
 from gonio.row_step import row_step
 
@@ -85,7 +84,7 @@ def plan(gonio_plan: str | Path | Plan, devices: GonioDevices, md: dict[str, Any
                 yield from bps.mv(*itertools.chain.from_iterable(
                     (devices.axes[role], step.targets[role]) for role in step.moved))
                 commanded.update({role: step.targets[role] for role in step.moved})
-            pause_s = real_seconds(inst, step.hold_s)
+            pause_s = devices.clock.device_wait_s(step.hold_s)
             if pause_s > 0:
                 yield from bps.sleep(pause_s)
             yield from bps.mv(row_device, row)

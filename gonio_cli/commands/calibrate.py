@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("runs", nargs="+", metavar="RUN", help="calibration run directories, each "
                    "used for what its plan calibrates (angles, aperture, detector; darks from "
                    "all)")
-    b.set_defaults(reads_run="runs")
+    b.set_defaults(reads_run=("runs", "aperture_scan"))
     b.add_argument("--out", required=True, metavar="FILE", help="calibration file (.json)")
     b.add_argument("--eta", type=float, help="sample eta: also find the angle zero offsets "
                    "from the transmitted and specular peaks in the angle runs (default: their "
@@ -93,8 +93,8 @@ def _build(args: argparse.Namespace) -> int:
     if divergence is None:
         divergence = _optics(runs, "divergence_deg") or 0.0
     readings = [r.readings() for r in runs]
-    routes = route(runs, readings, open_run(args.aperture_scan) if args.aperture_scan else None,
-                   args.aperture_geometry is not None)
+    aperture_run = open_run(args.aperture_scan) if args.aperture_scan else None
+    routes = route(runs, readings, aperture_run, args.aperture_geometry is not None)
     angle_runs = [run for run, take in zip(runs, routes.angles, strict=True) if take]
     eta = args.eta if args.eta is not None else _sample_eta(angle_runs)
     cal = build(readings, utc_now(), [str(r.path) for r in runs],
@@ -103,7 +103,8 @@ def _build(args: argparse.Namespace) -> int:
     _refuse_or_warn(cal, angle_runs, args.force)
     for note in cal.notes:
         print(f"gonio calibrate: {note}", file=sys.stderr)
-    cal.notes += incomplete_notes(runs)  # said on stderr before the build (gonio_cli.incomplete)
+    # said on stderr before the build (gonio_cli.incomplete)
+    cal.notes += incomplete_notes([*runs, *([aperture_run] if aperture_run else [])])
     print(calfile.save(cal, args.out))
     return 0
 

@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from calibration.exports import ExportRequest, write
+from calibration.exports import ExportRequest, checked_what, write
 from calibration.formats import FORMATS, WHATS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 from gonio_cli.commands.reduce import say_angle_terms
@@ -41,7 +41,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="export a fit whose chi2/dof says it does not describe the data "
                         "(refused otherwise)")
     add_fit_options(p)
-    p.set_defaults(func=run, reads_run="run")
+    p.set_defaults(func=run, check_args=check_args, reads_run="run")
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """The arguments' checks that need no run (format, --what, --out's suffix), made before
+    the run is read."""
+    checked_what(args.format, args.what, Path(args.out))
 
 
 def run(args: argparse.Namespace) -> int:

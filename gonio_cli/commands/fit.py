@@ -156,15 +156,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def fit_warnings(out: dict, imported_from: str | None = None) -> list[str]:
+def fit_warnings(out: dict, imported_from: str | None = None, plotted: bool = False
+                 ) -> list[str]:
     """Warnings of a fit result dict: a chi2/dof (fitted or held out) above the limit model
-    exports refuse at (calibration.exports.model.MAX_CHI2_DOF), and the likely cause."""
+    exports refuse at (calibration.exports.model.MAX_CHI2_DOF), and the likely cause; they
+    point to `gonio plot RUN --fit` unless the fit is of an imported file or being plotted."""
     from calibration.exports.model import MAX_CHI2_DOF, worst_chi2_dof
 
     worst, _ = worst_chi2_dof(out["chi2_dof_fit"], out["chi2_dof_heldout"])
     if worst <= MAX_CHI2_DOF:
         return []
-    look = "" if imported_from else f" (see gonio plot {out['run']} --fit)"
+    look = "" if imported_from or plotted else f" (see gonio plot {out['run']} --fit)"
     lines = [f"warning: chi2/dof {worst:.3g} is well above 1: the model does not describe the "
              f"points within their uncertainties{look}; model exports refuse this fit"]
     alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))

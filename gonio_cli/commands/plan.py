@@ -54,16 +54,25 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
 
 
 def tables_line(tables: TablesEstimate, estimate_s: float) -> str:
-    """The emulated bench's table building before the first move, and the duration with it:
-    cached (as the estimate above) and cold (this machine, now)."""
+    """The emulated bench's table preparation before the first move (every reading evaluated
+    once, and the planes the cache lacks walked; this machine, now), and the duration with it:
+    the tables cached and cold."""
     from gonio.plan import format_duration
 
+    if tables.evaluate_s:
+        evaluating = (f"; evaluating every reading once before the first move about "
+                      f"{format_duration(tables.evaluate_s)}")
+        cached_s = estimate_s + tables.evaluate_s
+    else:
+        evaluating, cached_s = "", estimate_s
     if not tables.planes:
-        return "  multiple-scattering tables: none to walk (cached, or none needed)"
+        cached = f", duration with it {format_duration(cached_s)}" if evaluating else ""
+        return ("  multiple-scattering tables: none to walk (cached, or none needed)"
+                + evaluating + cached)
     return (f"  multiple-scattering tables: {tables.planes} planes to walk before the first move "
             f"({tables.walks} walks each), about {format_duration(tables.seconds)} on this "
-            f"machine now; duration with the tables cached {format_duration(estimate_s)}, "
-            f"cold {format_duration(estimate_s + tables.seconds)}")
+            f"machine now{evaluating}; duration with the tables cached "
+            f"{format_duration(cached_s)}, cold {format_duration(cached_s + tables.seconds)}")
 
 
 def _state(polarisation: str | float) -> str:

@@ -5,8 +5,9 @@ and its residuals."""
 from __future__ import annotations
 
 import argparse
+import sys
 
-from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
+from gonio_cli.commands.fit import add_fit_options, emulator_sim, fit_warnings, options_from
 from gonio_cli.commands.reduce import say_angle_terms
 
 
@@ -27,10 +28,14 @@ def run(args: argparse.Namespace) -> int:
     from calibration.plot import plot_run
 
     sim = emulator_sim(args.run) if args.fit and args.diffraction else None
+    results: list = []
     out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
                    fit_options=options_from(args, sim) if args.fit else None,
                    shot_noise_w=args.shot_noise_w, subtract_signature=args.subtract_signature,
-                   angle_terms=not args.no_angle_terms)
+                   angle_terms=not args.no_angle_terms, fitted=results.append)
+    for result in results:  # gonio fit's warnings of the fit drawn, on stderr as it says them
+        for line in fit_warnings({**result.to_dict(), "run": args.run}, plotted=True):
+            print(f"gonio plot: {line}", file=sys.stderr)
     say_angle_terms(args)
     print(out)
     return 0

@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--coverage-k", type=float, default=COVERAGE_K, metavar="K",
                    help=f"coverage factor of the expanded uncertainty U = k u (default "
                         f"{COVERAGE_K:g}: about 95 %% for a normal distribution)")
-    p.set_defaults(func=run, reads_run="run")
+    p.set_defaults(func=run, check_args=check_args, reads_run="run")
 
 
 def add_run_or_import(p: argparse.ArgumentParser) -> None:
@@ -134,6 +134,12 @@ def budget_summary(data) -> list[str]:
     return lines + [f"budget: {note}" for note in budget["notes"]]
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """The arguments' checks that need no run (--coverage-k), made before the run is read."""
+    if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
+        raise GonioError(f"--coverage-k must be a finite number > 0, got {args.coverage_k!r}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Reduce, write the CSV, print the summary and the CSV's path last."""
     from calibration.exports.measured import write_reduced_csv
@@ -142,8 +148,6 @@ def run(args: argparse.Namespace) -> int:
     from gonio.record import record_lines, run_record
     from gonio.store import open_run
 
-    if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
-        raise GonioError(f"--coverage-k must be a finite number > 0, got {args.coverage_k!r}")
     if args.import_file is not None or args.run is None:
         return _write_imported(args)  # imported(): one error for both a run and --import
     stored = open_run(args.run)

@@ -1,5 +1,6 @@
 """The multiple-scattering table planes a bench's readings need: built before the first reading
-(Bench.prepare, with progress), or counted and timed for `gonio plan --sim` (estimate).
+(Bench.prepare, with progress), or counted and timed for `gonio plan --sim` (estimate, with
+the time evaluating every reading once takes, which prepare spends on a warm cache too).
 
 A reading's power is the aperture integral of the sample's integrand, whose multiple-scattering
 term interpolates HigherOrderLobe's tables and walks a plane the first time a pair needs it:
@@ -15,7 +16,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 #: prepare's progress: told (planes walked, planes to walk) before the first walk and after
 #: each (planes to walk grows when a second evaluation finds more).
@@ -26,31 +28,38 @@ TIMED_PLANES = 4
 
 @dataclass
 class TablesPrepared:
-    """What prepare did: planes the readings need that were not in memory, how many of them
-    the store held (read) and how many were walked (walks each), in `seconds`;
-    in_readings: planes built later, inside a reading (a position the plan did not foresee,
-    such as a stage's repeatability scatter crossing into another plane), set by the caller."""
+    """What prepare did on `bench`: planes the readings need that were not in memory, how many
+    of them the store held (read) and how many were walked (walks each), in `seconds`; `held`,
+    the planes the bench's sample held as prepare ended, from which record() counts those
+    built later."""
 
     planes: int = 0
     read: int = 0
     walked: int = 0
     walks: int = 0
     seconds: float = 0.0
-    in_readings: int = 0
+    bench: Any = field(default=None, repr=False)
+    held: int = 0
 
-    def to_json(self) -> dict[str, float]:
-        """The record for a session's meta.json."""
-        return asdict(self)
+    def record(self) -> dict[str, float]:
+        """The record for a session's meta.json: what prepare did, and `in_readings`, the
+        planes built since inside a reading (a position the plan did not foresee, such as a
+        stage's repeatability scatter crossing into another plane)."""
+        return {"planes": self.planes, "read": self.read, "walked": self.walked,
+                "walks": self.walks, "seconds": self.seconds,
+                "in_readings": built(self.bench) - self.held}
 
 
 @dataclass(frozen=True)
 class TablesEstimate:
-    """Planes the readings need that the cache does not hold, walks each, and the seconds
-    walking them takes on this machine now (0 with none to walk)."""
+    """Planes the readings need that the cache does not hold, walks each, the seconds walking
+    them takes on this machine now (0 with none to walk), and `evaluate_s`, the seconds
+    evaluating every reading once took here: what prepare spends even on a warm cache."""
 
     planes: int
     walks: int
     seconds: float
+    evaluate_s: float = 0.0
 
 
 def places(bench, positions: Iterable[Mapping[str, float]]) -> list[dict[str, float]]:
@@ -90,7 +99,7 @@ def prepare(bench, positions: Iterable[Mapping[str, float]],
     """Build every table plane the readings at `positions` (reported stage positions by role)
     will ask for: read from the store where it holds them, else walked (told to `progress`)."""
     start = time.perf_counter()
-    report = TablesPrepared(walks=bench.sample.spec.ms_walks)
+    report = TablesPrepared(walks=bench.sample.spec.ms_walks, bench=bench)
     pending = places(bench, positions) if bench.sample.tabulated else []  # no tables
     to_walk: list[tuple[object, tuple]] = []
     while pending:
@@ -111,6 +120,7 @@ def prepare(bench, positions: Iterable[Mapping[str, float]],
             if progress is not None:
                 progress(report.walked, report.walked + len(to_walk))
     report.seconds = time.perf_counter() - start
+    report.held = built(bench)
     return report
 
 
@@ -122,11 +132,14 @@ def estimate(bench, positions: Iterable[Mapping[str, float]]) -> TablesEstimate:
     walks = bench.sample.spec.ms_walks
     if not bench.sample.tabulated:
         return TablesEstimate(0, walks, 0.0)
-    wanted, _ = _missed(bench, places(bench, positions))
+    start = time.perf_counter()
+    wanted, _ = _missed(bench, places(bench, positions))  # prepare's first evaluation
+    evaluate_s = time.perf_counter() - start
     to_walk = [(lobe, address) for lobe, addresses in wanted.items()
                for address in sorted(addresses) if not lobe.build_at(address, walk=False)]
     if not to_walk:
-        return TablesEstimate(0, walks, 0.0)
+        return TablesEstimate(0, walks, 0.0, evaluate_s)
     step = max(1, len(to_walk) // TIMED_PLANES)
     timed = [lobe.walk_seconds(address) for lobe, address in to_walk[::step][:TIMED_PLANES]]
-    return TablesEstimate(len(to_walk), walks, len(to_walk) * sum(timed) / len(timed))
+    return TablesEstimate(len(to_walk), walks, len(to_walk) * sum(timed) / len(timed),
+                          evaluate_s)

@@ -44,6 +44,7 @@ def test_prepare_builds_what_the_readings_ask_for_and_no_more(monkeypatch, tmp_p
     higher_order_lobe.cache_clear()  # a new lobe, its planes in the store the lazy one filled
     estimate = tables.estimate(bench(), READINGS)
     assert estimate.planes == 0 and estimate.seconds == 0.0  # all in the store
+    assert estimate.evaluate_s > 0.0  # what preparing a warm cache still spends
     higher_order_lobe.cache_clear()
     prepared = bench()
     report = prepared.prepare(READINGS)
@@ -55,6 +56,9 @@ def test_prepare_builds_what_the_readings_ask_for_and_no_more(monkeypatch, tmp_p
     for where in READINGS:
         prepared.power_w(where)
     assert tables.built(prepared) == built
+    assert report.record()["in_readings"] == 0
+    prepared.power_w({"sample": 60.0, "arm": 100.0})  # a reading the schedule did not foresee
+    assert report.record()["in_readings"] == tables.built(prepared) - built > 0
 
 
 def test_the_estimate_counts_the_planes_prepare_walks_and_times_them(monkeypatch, tmp_path):

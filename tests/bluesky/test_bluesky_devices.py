@@ -16,7 +16,7 @@ import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
 from bluesky import RunEngine  # noqa: E402
 from bluesky_testkit import small_plan, validated  # noqa: E402
-from gonio_testkit import fast_config, write_toml  # noqa: E402
+from gonio_testkit import fast_config, write_plan, write_toml  # noqa: E402
 
 from gonio.bluesky import DeviceFailure, devices, plan  # noqa: E402
 from gonio.config import load_config  # noqa: E402
@@ -150,3 +150,33 @@ def test_a_pause_mid_plan_replays_the_row_from_its_checkpoint(bench):
     rows = build_schedule(load_plan(plan_path), d.config).readings
     assert paused and 3 <= before < len(rows)
     assert [e["data"]["schedule-index"] for e in got] == rows["index"].tolist()
+
+
+def test_a_plan_given_to_devices_has_its_tables_built_before_the_first_move(tmp_path,
+                                                                            monkeypatch):
+    # as gonio scan --sim: the schedule's multiple-scattering tables are walked before the
+    # RunEngine moves anything, none inside a detector's reply
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    cfg = fast_config(pm100={"timeout_s": 10.0})
+    cfg["sim"]["sample"] = {"distribution": "ggx", "alpha": 0.3319, "ms_walks": 1024,
+                            "multiple_scattering": True}
+    plan_path = write_plan(tmp_path, {"name": "tabulated", "grid": [
+        {"theta_i_deg": [35.0], "theta_o_deg": [-50.0, 20.0, 50.0]}]}, cfg)
+    RE = RunEngine()
+    with devices(tmp_path / "plan-instrument.toml", sim=True, plan=plan_path) as d:
+        before = d.emulation.bench.tables_record()
+        assert before["walked"] == before["planes"] > 0
+        RE(plan(plan_path, d))
+        assert d.emulation.bench.tables_record()["in_readings"] == 0
+
+
+def test_a_plans_dwell_passes_on_the_emulated_benchs_virtual_clock(tmp_path):
+    # under --time-scale inf a dwell takes no real time but is counted on the run's clock
+    plan_path = write_plan(tmp_path, {"name": "dwell", "dwell_s": 60.0, "grid": [
+        {"theta_i_deg": [10.0], "theta_o_deg": [30.0, 50.0]}]}, fast_config())
+    RE = RunEngine()
+    with devices(tmp_path / "plan-instrument.toml", sim=True) as d:
+        start = d.clock.now()
+        RE(plan(plan_path, d))
+        rows = len(build_schedule(load_plan(plan_path), d.config).readings)
+        assert d.clock.now() - start >= 60.0 * rows

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+from datetime import datetime
 
 import numpy as np
 import pytest
@@ -53,7 +54,21 @@ def test_the_export_is_valid_event_model_documents_one_event_a_reading(scanned, 
                 assert value is None
             elif stored is not None:
                 assert value == stored, key
-        assert event["time"] == pytest.approx(start["time"] + row["t_s"])
+        assert event["data"]["t_s"] == row["t_s"]
+
+
+def test_event_times_are_wall_times_within_the_session_on_a_virtual_clock(scanned, tmp_path):
+    # an all-emulated run counts t_s on the bench's virtual clock (run time, faster than the
+    # wall under --time-scale inf): its events are stamped within its session's wall span
+    _, run_dir = scanned
+    session = open_run(run_dir).meta["sessions"][0]
+    assert session["clock"] == "virtual"
+    docs = exported(run_dir, tmp_path / "run.jsonl")
+    times = [doc["time"] for name, doc in docs if name == "event"]
+    begin = datetime.fromisoformat(session["start_utc"]).timestamp()
+    end = datetime.fromisoformat(session["stop_utc"]).timestamp()
+    assert times == sorted(times) and begin <= times[0] and times[-1] <= end
+    assert docs[-1][1]["time"] == end
 
 
 def test_exporting_twice_gives_the_same_file(scanned, tmp_path):

@@ -16,8 +16,11 @@ from drivers.base import (
     ProtocolError,
     Reading,
 )
-from drivers.pm100 import WavelengthOutsideHead
+from drivers.pm100 import Pm100, WavelengthOutsideHead
 from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.motion import VirtualClock
+from sim.devices.photodiode import ConstantPower
+from sim.devices.pm100 import Pm100Emulator
 
 QUIET = {"read_noise_fraction": 1e-3, "dark_current_a": 0.0, "bandwidth_hz": 0.0}
 
@@ -306,3 +309,14 @@ def test_latency_and_disconnect(pm_pair):
     with pytest.raises(DriverError, match=r"pm100: serial port /dev/\S+ went away"):
         for _ in range(3):
             pm.read()
+
+
+def test_a_reading_averaging_many_samples_is_waited_for_as_long_as_they_take(start_pair):
+    # the manual: 1 sample takes approx. 3 ms; 200 of them (0.6 s) outlast the 0.3 s
+    # timeout_s, which a reading's reply is given on top of that time, never re-asked
+    emu = Pm100Emulator(ConstantPower(2e-6), seed=3, clock=VirtualClock(1.0))
+    emu, pm = start_pair(emu, Pm100, timeout_s=0.3, retries=0, name="pm100")
+    pm.configure(wavelength_nm=632.8, averaging=200, range_w=None)
+    assert pm.read().power_w == pytest.approx(2e-6, rel=0.05)
+    assert pm.measure() == pytest.approx(2e-6, rel=0.05)
+    assert pm.transport.timeout_s == 0.3 and pm.transport.resyncs == 0

@@ -185,6 +185,20 @@ def test_raw_netcdf_is_cf_with_an_epoch(tmp_path):
         assert ds["power_w"].attrs["units"] == "W"
 
 
+def test_raw_netcdf_on_a_virtual_clock_is_run_time_not_an_epoch(tmp_path):
+    # a run counted on the emulated bench's virtual clock: t_s is run time, so it must not
+    # decode as dates after t0 (under --time-scale inf they would land in the future)
+    r = np.zeros(3, READING_DTYPE)
+    r["kind"], r["t_s"] = ["dark", "beam", "sample"], [0.0, 40.0, 3600.0]
+    path = write_raw_netcdf(r, RECORD, tmp_path / "raw.nc", t0_epoch=1.7e9, virtual_clock=True)
+    checked = cf_counts(path)
+    assert checked["said"] == [] and checked["counts"]["ERROR"] == 0
+    with xarray.open_dataset(path, decode_timedelta=False) as ds:
+        np.testing.assert_array_equal(ds["t_s"].values, r["t_s"])
+        assert ds["t_s"].attrs["units"] == "s" and "virtual clock" in ds["t_s"].attrs["comment"]
+        assert "since" not in ds["t_s"].attrs["units"]
+
+
 def libbsdf_parse(path: Path) -> tuple[list[str], int, list[list[float]]]:
     """What libbsdf's AstmReader::read takes from a file (its steps, in Python): header tokens
     skipped until `NUM_POINTS n` and `VARS a,b,...` (the rest of that line); then every

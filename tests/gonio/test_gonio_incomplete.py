@@ -127,6 +127,18 @@ def test_every_export_format_carries_the_facts(aborted, tmp_path, capsys):
     assert stop["num_events"] == {"primary": STOPPED_AT}
 
 
+def test_bad_arguments_give_their_error_alone_without_the_incomplete_warning(aborted,
+                                                                             tmp_path, capsys):
+    assert main(["export", str(aborted), "--format", "csv", "--out", str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"gonio export: error: export: --out {tmp_path / 'x'} has no suffix; --format csv "
+        "writes .csv"]
+    assert main(["reduce", str(aborted), "--coverage-k", "0"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "gonio reduce: error: --coverage-k must be a finite number > 0, got 0.0"]
+    assert not (tmp_path / "x").exists()
+
+
 def test_check_reports_completeness_and_exits_0_for_an_intact_incomplete_run(aborted, tmp_path):
     proc = gonio_cli("check", aborted)
     assert proc.returncode == 0, proc.stderr
@@ -168,30 +180,61 @@ def test_watch_names_an_ended_incomplete_run_on_stderr_and_its_page(aborted):
     assert status["incomplete"] == f"{SAID} (aborted by the user)"
 
 
-def test_the_watch_status_names_no_run_in_progress_and_no_complete_run():
+def test_the_watch_status_names_no_run_in_progress_and_no_complete_run(aborted):
+    run = open_run(aborted)
     meta = {"status": "running", "reason": "", "planned": 3, "sessions": []}
     rows = [{"index": 0, "t_s": 0.0}]
-    assert status_of("r", {}, meta, rows, Live(True), 0.0)["incomplete"] is None
+    assert status_of(run, meta, rows, Live(True), 0.0)["incomplete"] is None
     done = {**meta, "status": "completed"}
-    assert status_of("r", {}, done, rows * 3, Live(False), 0.0)["incomplete"] is None
-    assert status_of("r", {}, done, rows, Live(False), 0.0)["incomplete"] == \
+    assert status_of(run, done, rows * 3, Live(False), 0.0)["incomplete"] is None
+    assert status_of(run, done, rows, Live(False), 0.0)["incomplete"] == \
         "incomplete run: 1 of 3 readings stored, status completed"
 
 
-def test_calibrate_build_names_an_incomplete_run_and_records_it(tmp_path):
-    plan = tomllib.loads((EXAMPLES / "plans" / "calib-detector.toml").read_text())
+def test_the_watch_status_of_an_older_run_takes_its_planned_count_from_its_plan(aborted,
+                                                                                tmp_path):
+    old = Path(shutil.copytree(aborted, tmp_path / "old"))
+    meta = json.loads((old / META).read_text())
+    del meta["planned"]
+    (old / META).write_text(json.dumps(meta))
+    run = open_run(old)
+    out = status_of(run, run.meta, run.rows(), Live(False), 0.0)
+    assert out["planned"] == PLANNED and out["incomplete"] == f"{SAID} (aborted by the user)"
+
+
+def aborted_calibration(tmp_path: Path, plan_name: str, stop_at: int, **changes) -> tuple:
+    """(run, what an incomplete-run line says of it): a shipped calibration plan on the fast
+    bench, aborted after stop_at readings."""
+    plan = tomllib.loads((EXAMPLES / "plans" / f"{plan_name}.toml").read_text())
     plan.pop("instrument")
-    plan["repeats"] = 1
-    result = new_scan(write_plan(tmp_path, plan, fast_config()), sim=True,
-                      out=tmp_path / "runs", progress=False, control=AbortAfter(190))
-    run = result.path
-    planned = open_run(run).meta["planned"]
+    plan.update(changes)
+    result = new_scan(write_plan(tmp_path, plan, fast_config(), name=plan_name), sim=True,
+                      out=tmp_path / "runs", progress=False, control=AbortAfter(stop_at))
+    planned = open_run(result.path).meta["planned"]
+    return result.path, (f"incomplete run: {stop_at} of {planned} readings stored, status "
+                         "aborted (aborted by the user)")
+
+
+def test_calibrate_build_names_an_incomplete_run_and_records_it(tmp_path):
+    run, said = aborted_calibration(tmp_path, "calib-detector", 190, repeats=1)
     proc = gonio_cli("calibrate", "build", run, "--out", tmp_path / "cal.json")
-    said = f"incomplete run: 190 of {planned} readings stored, status aborted"
     assert [ln for ln in proc.stderr.splitlines() if "incomplete run" in ln] == [
-        f"gonio calibrate: warning: {run}: {said} (aborted by the user)"], proc.stderr
+        f"gonio calibrate: warning: {run}: {said}"], proc.stderr
     assert proc.returncode == 0, proc.stderr
-    assert f"{run}: {said} (aborted by the user)" in calfile.load(tmp_path / "cal.json").notes
+    assert f"{run}: {said}" in calfile.load(tmp_path / "cal.json").notes
+
+
+def test_calibrate_build_names_an_incomplete_aperture_scan_too(tmp_path):
+    run, said = aborted_calibration(tmp_path, "calib-detector", 190, repeats=1)
+    scan, scan_said = aborted_calibration(tmp_path, "calib-aperture", 95)
+    proc = gonio_cli("calibrate", "build", run, "--aperture-scan", scan, "--out",
+                     tmp_path / "cal.json")
+    assert [ln for ln in proc.stderr.splitlines() if "incomplete run" in ln] == [
+        f"gonio calibrate: warning: {run}: {said}",
+        f"gonio calibrate: warning: {scan}: {scan_said}"], proc.stderr
+    assert proc.returncode == 0, proc.stderr
+    notes = calfile.load(tmp_path / "cal.json").notes
+    assert f"{run}: {said}" in notes and f"{scan}: {scan_said}" in notes
 
 
 DEAD = {"name": "dead", "grid": [

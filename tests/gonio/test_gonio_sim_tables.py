@@ -63,7 +63,10 @@ def test_a_cold_scan_walks_its_tables_first_as_estimated_and_a_warm_one_none(tmp
     assert again["read"] == again["planes"] == tables["planes"] and again["walked"] == 0
     assert again["in_readings"] == 0
     assert BAR not in warm.stderr
-    assert f"{BAR}: none to walk" in gonio_cli("plan", plan, "--sim").stdout
+    warm_estimate = gonio_cli("plan", plan, "--sim").stdout
+    assert f"{BAR}: none to walk" in warm_estimate
+    # preparation still evaluates every reading once (ms_tables seconds of a warm scan)
+    assert "; evaluating every reading once before the first move about " in warm_estimate
 
 
 def test_a_cold_run_killed_and_resumed_cold_is_the_uninterrupted_run_bit_for_bit(tmp_path,
@@ -80,14 +83,40 @@ def test_a_cold_run_killed_and_resumed_cold_is_the_uninterrupted_run_bit_for_bit
         proc.kill()
         proc.communicate()
     run_dir = next(runs.iterdir())
+    killed = open_run(run_dir).meta["sessions"][0]["ms_tables"]  # recorded before any move
+    assert killed["walked"] == killed["planes"] > 0 and killed["in_readings"] == 0
     stored = open_run(run_dir).lines().rows
     assert 9 <= len(stored) < whole.meta["planned"]
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache-second"))  # cold again
     resumed = gonio_cli("scan", "--resume", run_dir, timeout=600)
     assert run_dir_of(resumed) == run_dir
     run = completed_unretried(resumed)
-    second = tables_of(run)  # the killed session ended without its record
+    second = tables_of(run)
     assert second["walked"] > 0 and second["in_readings"] == 0
     a, b = whole.readings(), run.readings()
     for name in ("index", "kind", "sample_deg", "arm_deg", "power_w", "range_w", "flags"):
         assert np.array_equal(a[name], b[name]), name
+
+
+def test_the_bar_counts_the_walks_of_the_cabinet_sample_the_plan_mounts(tmp_path, monkeypatch):
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    cfg = fast_config(pm100={"timeout_s": 10.0})
+    cfg["sim"]["sample"] = {"ms_walks": 4 * WALKS}  # not the mounted one
+    cfg["sim"]["samples"] = {"cabinet-glass": {
+        "distribution": "ggx", "alpha": 0.3317, "ms_walks": WALKS, "multiple_scattering": True}}
+    plan = write_plan(tmp_path, {
+        "name": "cabinet", "sample": {"id": "cabinet-glass", "kind": "hemisphere", "eta": 1.51},
+        "grid": [{"theta_i_deg": [35.0], "theta_o_deg": [-50.0, 30.0]}]}, cfg)
+    proc = scan(plan, tmp_path / "runs")
+    assert tables_of(completed_unretried(proc))["walks"] == WALKS
+    assert f"{BAR} ({WALKS} walks a plane)" in proc.stderr
+
+
+def test_a_sim_sample_that_is_no_table_is_one_error_line_and_no_run(tmp_path):
+    cfg = fast_config()
+    cfg["sim"]["sample"] = 3
+    proc = scan(write_plan(tmp_path, PLAN, cfg), tmp_path / "runs")
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert [line for line in proc.stderr.splitlines() if line.strip()] == [
+        line for line in proc.stderr.splitlines() if "[sim.sample]: must be a table, got 3" in line]
+    assert not any((tmp_path / "runs").glob("*"))

@@ -109,7 +109,7 @@ def test_status_counts_positions_elapsed_and_eta(source):
     from datetime import datetime
     now = datetime.fromisoformat(start).timestamp() + 12.5
     live = Live(True, {"ok": True, "state": "paused", "readings": 10, "planned": 99})
-    out = status_of("r", source.config, meta, rows[:10], live, now)
+    out = status_of(source, meta, rows[:10], live, now)
     assert out["status"] == "paused" and out["readings"] == 10
     assert out["planned"] == source.meta["planned"] == len(rows)
     assert out["positions"] == {"sample": rows[9]["sample_deg"], "arm": rows[9]["arm_deg"]}

@@ -249,7 +249,6 @@ class HigherOrderLobe:
         self._f2, self._d2, self._f3, self._d3, self._e3 = (np.zeros(shape) for _ in range(5))
         self._built = np.zeros((2, len(INCIDENCE_NODES_DEG), last // 2 + 1, 2), dtype=np.bool_)
         self._column_cos = -np.cos(np.radians(self.phi_deg))
-        self.walked = 0  #: planes walked by this lobe (not read from the store)
 
     def build(self, side: int, node: int, plane: int, lower: bool, walk: bool = True) -> bool:
         """Walk and integrate one hemisphere of wo (lower: below the horizon) in one plane
@@ -269,7 +268,6 @@ class HigherOrderLobe:
             return False
         if built is None:
             built = self._walk_plane(side, node, plane, lower, columns)
-            self.walked += 1
             if self.store is not None:
                 self.store.save(address, built)
         for m, j in enumerate(columns):
