@@ -151,6 +151,24 @@ def test_symmetry_centres_are_biased_and_the_model_fit_is_not():
     assert abs(fit.arm_offset.value - da_true) < 1e-6
 
 
+def test_offsets_at_zero_get_the_covariance_of_offsets_away_from_it():
+    # A bench aligned exactly (both offsets 0, as the emulated bench without [sim.alignment]):
+    # the fit's Jacobian steps are absolute, so its covariance there is that of a misaligned
+    # bench's (the geometry differs by a few tenths of a degree only), not singular or
+    # quantised by the float spacing of the stage angles.
+    def noise_free_fit(ds: float, da: float):
+        scans = [PeakScan(side, np.full(len(arm), s), arm, np.zeros(len(arm)),
+                          np.zeros(len(arm)), power, 1e-4 * power + 1e-4 * power.max())
+                 for side, s, arm, power in peak_scan_power(ds, da)]
+        return fit_offsets(scans, 1.51, HALF_ANGLE_DEG, 0.03)
+
+    aligned, misaligned = noise_free_fit(0.0, 0.0), noise_free_fit(0.3, -0.2)
+    assert abs(aligned.sample_offset.value) < 1e-6 and abs(aligned.arm_offset.value) < 1e-6
+    for part in ("sample_offset", "arm_offset"):
+        ratio = getattr(aligned, part).sigma / getattr(misaligned, part).sigma
+        assert abs(ratio - 1.0) < 0.05, (part, ratio)
+
+
 def test_angle_calibration_without_repeats_is_refused():
     data = peak_scan_readings(np.random.default_rng(5), 0.3, -0.2, repeats=1)
     with pytest.raises(CalibrationError, match="repeated readings"):
