@@ -31,10 +31,10 @@ ALPHA_BOUNDS = (1e-3, 1.0)  # reference samples for angle calibration are smooth
 # anti-glare peaks fit at chi2/dof 10, with both caps at 0.6).
 GRID_CAP_ORDER = 3
 # Absolute central-difference steps of the fit's Jacobian: degrees for the two offsets, ln alpha
-# for alpha. scipy's diff_step is relative to each parameter, so an offset near zero (a bench
-# aligned well) got a step below the float spacing of the stage angles it is added to: a zero
+# for alpha. scipy's diff_step is relative to each parameter, so it gives an offset near zero (a
+# bench aligned well) a step below the float spacing of the stage angles it is added to: a zero
 # Jacobian column, or one quantised to a few ulps, and with it a wrong covariance. 1e-5 deg is
-# 1e-5 of the narrowest peak's width (truncation error ~1e-10) and 1e8 ulps of 180 deg.
+# 2e-5 of the narrowest peak's width (0.45 deg; truncation error ~1e-10) and 3e8 ulps of 180 deg.
 JACOBIAN_STEPS = np.array([1e-5, 1e-5, 1e-5])
 
 
