@@ -14,6 +14,7 @@ symmetry centre too; together 1-3e-4 deg on an anti-glare reference, several sig
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,12 @@ ALPHA_BOUNDS = (1e-3, 1.0)  # reference samples for angle calibration are smooth
 # itself averages over both caps at the orders calibration.fit uses (with the folded cap the
 # anti-glare peaks fit at chi2/dof 10, with both caps at 0.6).
 GRID_CAP_ORDER = 3
+# Absolute central-difference steps of the fit's Jacobian: degrees for the two offsets, ln alpha
+# for alpha. scipy's diff_step is relative to each parameter, so it gives an offset near zero (a
+# bench aligned well) a step below the float spacing of the stage angles it is added to: a zero
+# Jacobian column, or one quantised to a few ulps, and with it a wrong covariance. 1e-5 deg is
+# 2e-5 of the narrowest peak's width (0.45 deg; truncation error ~1e-10) and 3e8 ulps of 180 deg.
+JACOBIAN_STEPS = np.array([1e-5, 1e-5, 1e-5])
 
 
 @dataclass
@@ -166,6 +173,17 @@ def _start(scans: list[PeakScan], eta: float, aperture_deg: float, divergence_de
     return best[1], best[2]
 
 
+def _central_jacobian(residuals: Callable[[np.ndarray], np.ndarray], x: np.ndarray
+                      ) -> np.ndarray:
+    """d residuals / dx by central differences with the absolute JACOBIAN_STEPS."""
+    columns = []
+    for k, h in enumerate(JACOBIAN_STEPS):
+        step = np.zeros_like(x)
+        step[k] = h
+        columns.append((residuals(x + step) - residuals(x - step)) / (2.0 * h))
+    return np.column_stack(columns)
+
+
 def fit_offsets(scans: list[PeakScan], eta: float, aperture_half_angle_deg: float = 0.0,
                 divergence_deg: float = 0.0) -> OffsetFit:
     """Sample and arm zero offsets (degrees) from peak scans of a smooth reference sample of
@@ -188,7 +206,8 @@ def fit_offsets(scans: list[PeakScan], eta: float, aperture_half_angle_deg: floa
     bounds = ([-np.inf, -np.inf, math.log(ALPHA_BOUNDS[0])],
               [np.inf, np.inf, math.log(ALPHA_BOUNDS[1])])
     sol = least_squares(residuals, np.array([*start, math.log(alpha0)]), bounds=bounds,
-                        x_scale="jac", xtol=1e-10, ftol=1e-10, diff_step=1e-7)
+                        jac=lambda x: _central_jacobian(residuals, x), x_scale="jac",
+                        xtol=1e-10, ftol=1e-10)
     jtj = sol.jac.T @ sol.jac
     if np.linalg.matrix_rank(jtj) < 3:
         raise CalibrationError("the peak scans do not determine both offsets (is every peak "

@@ -82,6 +82,28 @@ def test_nonlinear_detector_is_flagged_by_the_linearity_check():
     assert not [n for n in linear.notes if "warning" in n]
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_pooled_noise_law_holds_the_meters_read_and_shot_noise(seed):
+    # Powers from 1e-10 W to 0.8 mW autoranged, as across a peak scan, three repeats of four
+    # averaged samples each on the emulated meter: its noise is read noise in proportion to the
+    # range, shot noise in proportion to the signal (dominant in the lowest range's upper part)
+    # and quantisation. The law pooled from the repeats gives every point's error within
+    # 25 % of what the meter's physics predicts.
+    from sim.devices.photodiode import PhotodiodeModel
+
+    meter = PhotodiodeModel(seed=seed)
+    meter.zero(632.8)
+    groups, full_scale, truth = [], [], []
+    for k, power in enumerate(np.geomspace(1e-10, 8e-4, 90)):
+        range_w = meter.autorange(power, 632.8)
+        groups.append(np.array([meter.measure(power, range_w, 4, 632.8, (k,)).reading_w
+                                for _ in range(3)]))
+        full_scale.append(range_w)
+        truth.append(meter.expected_sigma_w(power, range_w, 4, 632.8) / math.sqrt(3))
+    ratio = detector.pooled_sem(groups, np.array(full_scale)) / np.array(truth)
+    assert 0.75 < ratio.min() and ratio.max() < 1.4, (ratio.min(), ratio.max())
+
+
 def test_one_range_only_gives_a_clear_error():
     data = detector_runs(np.random.default_rng(3))
     data = data[data["range_w"] == 1e-6]
@@ -149,6 +171,24 @@ def test_symmetry_centres_are_biased_and_the_model_fit_is_not():
     fit = fit_offsets(scans, 1.51, HALF_ANGLE_DEG, 0.03)
     assert abs(fit.sample_offset.value - ds_true) < 1e-6
     assert abs(fit.arm_offset.value - da_true) < 1e-6
+
+
+def test_offsets_at_zero_get_the_covariance_of_offsets_away_from_it():
+    # A bench aligned exactly (both offsets 0, as the emulated bench without [sim.alignment]):
+    # the fit's Jacobian steps are absolute, so its covariance there is that of a misaligned
+    # bench's (the geometry differs by a few tenths of a degree only), not singular or
+    # quantised by the float spacing of the stage angles.
+    def noise_free_fit(ds: float, da: float):
+        scans = [PeakScan(side, np.full(len(arm), s), arm, np.zeros(len(arm)),
+                          np.zeros(len(arm)), power, 1e-4 * power + 1e-4 * power.max())
+                 for side, s, arm, power in peak_scan_power(ds, da)]
+        return fit_offsets(scans, 1.51, HALF_ANGLE_DEG, 0.03)
+
+    aligned, misaligned = noise_free_fit(0.0, 0.0), noise_free_fit(0.3, -0.2)
+    assert abs(aligned.sample_offset.value) < 1e-6 and abs(aligned.arm_offset.value) < 1e-6
+    for part in ("sample_offset", "arm_offset"):
+        ratio = getattr(aligned, part).sigma / getattr(misaligned, part).sigma
+        assert abs(ratio - 1.0) < 0.05, (part, ratio)
 
 
 def test_angle_calibration_without_repeats_is_refused():

@@ -173,7 +173,7 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
     cal = build([calib_run.readings()], "2026-11-23T13:00:00Z", [str(calib_run.path)],
                 eta=1.51, aperture=(Measured(0.0, 0.0), Measured(half_angle, 0.0), "geometry"),
                 divergence_deg=SOURCE["divergence_deg"])
-    # the angle fit's pulls spread 1.16-1.28 over 21 runs: test_calibration_emulated_bench.py's
+    # the angle fit's pulls over bench seeds: test_calibration_emulated_bench.py's
     # PULL_TOLERANCE
     for measured, truth in ((cal.sample_offset_deg, 0.4), (cal.arm_offset_deg, -0.3)):
         assert abs(measured.pull(truth)) < 4.0 and measured.sigma < 1e-4
