@@ -35,7 +35,7 @@ GRID_CAP_ORDER = 3
 # bench aligned well) a step below the float spacing of the stage angles it is added to: a zero
 # Jacobian column, or one quantised to a few ulps, and with it a wrong covariance. 1e-5 deg is
 # 2e-5 of the narrowest peak's width (0.45 deg; truncation error ~1e-10) and 3e8 ulps of 180 deg.
-JACOBIAN_STEPS = np.array([1e-5, 1e-5, 1e-5])
+JACOBIAN_STEPS = np.array([1e-5, 1e-5, 1e-5, 1e-5])  # the last: the aperture's half-angle, deg
 
 
 @dataclass
@@ -62,6 +62,7 @@ class OffsetFit:
     alpha: Measured
     chi2_dof: float
     n_points: int
+    aperture_half_angle: Measured | None = None  # fitted within its prior (fit_offsets)
 
 
 def _asymmetry(centre: float, x: np.ndarray, p: np.ndarray, core: np.ndarray) -> float:
@@ -122,8 +123,18 @@ class _PeakModel:
 
     def resolve(self, alpha: float) -> None:
         """Average over the aperture and the divergence cone at orders resolving alpha."""
-        self.optics = Smearing(self.aperture_deg, smearing_order(self.aperture_deg, alpha),
-                               self.divergence_deg, smearing_order(self.divergence_deg, alpha))
+        self.orders = (smearing_order(self.aperture_deg, alpha),
+                       smearing_order(self.divergence_deg, alpha))
+        self.optics = Smearing(self.aperture_deg, self.orders[0], self.divergence_deg,
+                               self.orders[1])
+
+    def widen(self, aperture_deg: float) -> None:
+        """The aperture's half-angle set to aperture_deg, at the orders `resolve` chose (so
+        that the model is smooth in it)."""
+        if aperture_deg != self.aperture_deg:
+            self.aperture_deg = aperture_deg
+            self.optics = Smearing(aperture_deg, self.orders[0], self.divergence_deg,
+                                   self.orders[1])
 
     def shapes(self, ds: float, da: float, alpha: float) -> list[np.ndarray]:
         """Per scan, the model's <f |cos o|> at its reported stage angles plus the offsets."""
@@ -177,7 +188,7 @@ def _central_jacobian(residuals: Callable[[np.ndarray], np.ndarray], x: np.ndarr
                       ) -> np.ndarray:
     """d residuals / dx by central differences with the absolute JACOBIAN_STEPS."""
     columns = []
-    for k, h in enumerate(JACOBIAN_STEPS):
+    for k, h in enumerate(JACOBIAN_STEPS[:len(x)]):
         step = np.zeros_like(x)
         step[k] = h
         columns.append((residuals(x + step) - residuals(x - step)) / (2.0 * h))
@@ -185,11 +196,15 @@ def _central_jacobian(residuals: Callable[[np.ndarray], np.ndarray], x: np.ndarr
 
 
 def fit_offsets(scans: list[PeakScan], eta: float, aperture_half_angle_deg: float = 0.0,
-                divergence_deg: float = 0.0) -> OffsetFit:
+                divergence_deg: float = 0.0, aperture_sigma_deg: float = 0.0) -> OffsetFit:
     """Sample and arm zero offsets (degrees) from peak scans of a smooth reference sample of
     index eta, by the model fit of the module docstring (the scans' scales solved linearly
     inside: variable projection, so the Jacobian gives the offsets' covariance with the scales
-    marginalised); sigmas scaled by chi-square per degree of freedom when that exceeds 1."""
+    marginalised); sigmas scaled by chi-square per degree of freedom when that exceeds 1.
+    With aperture_sigma_deg > 0 the aperture's half-angle is fitted too, within that prior
+    about aperture_half_angle_deg (a residual (beta - beta0) / sigma): a peak as narrow as an
+    anti-glare reference's is so sensitive to the aperture's width that its measured or
+    nominal value's own error (a beam scan's 3e-4 deg) would bias the offsets and the fit."""
     start = symmetric_estimate(scans, eta)
     n = sum(len(scan.power_w) for scan in scans)
     dof = n - 3 - len(scans)  # offsets, alpha and a scale per scan
@@ -198,23 +213,35 @@ def fit_offsets(scans: list[PeakScan], eta: float, aperture_half_angle_deg: floa
                                f"{len(scans)} scales")
     model, alpha0 = _start(scans, eta, aperture_half_angle_deg, divergence_deg, start)
     model.resolve(alpha0)
+    free_aperture = aperture_sigma_deg > 0 and aperture_half_angle_deg > 0
 
     def residuals(x: np.ndarray) -> np.ndarray:
+        prior = []
+        if free_aperture:
+            model.widen(x[3])
+            prior = [(x[3] - aperture_half_angle_deg) / aperture_sigma_deg]
         shapes = model.shapes(x[0], x[1], math.exp(x[2]))
-        return _residuals(shapes, _best_scales(shapes, scans), scans)
+        return np.append(_residuals(shapes, _best_scales(shapes, scans), scans), prior)
 
-    bounds = ([-np.inf, -np.inf, math.log(ALPHA_BOUNDS[0])],
-              [np.inf, np.inf, math.log(ALPHA_BOUNDS[1])])
-    sol = least_squares(residuals, np.array([*start, math.log(alpha0)]), bounds=bounds,
+    x0 = [*start, math.log(alpha0)]
+    low, high = [-np.inf, -np.inf, math.log(ALPHA_BOUNDS[0])], [np.inf, np.inf,
+                                                                  math.log(ALPHA_BOUNDS[1])]
+    if free_aperture:  # within 10 sigma of its prior, and open
+        x0.append(aperture_half_angle_deg)
+        low.append(max(aperture_half_angle_deg - 10.0 * aperture_sigma_deg,
+                       1e-3 * aperture_half_angle_deg))
+        high.append(aperture_half_angle_deg + 10.0 * aperture_sigma_deg)
+    sol = least_squares(residuals, np.array(x0), bounds=(low, high),
                         jac=lambda x: _central_jacobian(residuals, x), x_scale="jac",
                         xtol=1e-10, ftol=1e-10)
     jtj = sol.jac.T @ sol.jac
-    if np.linalg.matrix_rank(jtj) < 3:
+    if np.linalg.matrix_rank(jtj) < len(x0):
         raise CalibrationError("the peak scans do not determine both offsets (is every peak "
                                "inside its scan?)")
     chi2 = float(np.sum(sol.fun ** 2))
     cov = np.linalg.inv(jtj) * max(1.0, chi2 / dof)
     alpha = math.exp(sol.x[2])
+    aperture = (Measured(float(sol.x[3]), math.sqrt(cov[3, 3])) if free_aperture else None)
     return OffsetFit(Measured(float(sol.x[0]), math.sqrt(cov[0, 0])),
                      Measured(float(sol.x[1]), math.sqrt(cov[1, 1])), model.distribution,
-                     Measured(alpha, alpha * math.sqrt(cov[2, 2])), chi2 / dof, n)
+                     Measured(alpha, alpha * math.sqrt(cov[2, 2])), chi2 / dof, n, aperture)

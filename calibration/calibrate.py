@@ -94,14 +94,15 @@ def peak_scans(readings: np.ndarray, common_w: np.ndarray | None = None
 
 
 def angle_offsets(readings: np.ndarray, eta: float, aperture_half_angle_deg: float = 0.0,
-                  divergence_deg: float = 0.0, common_w: np.ndarray | None = None
-                  ) -> angle_cal.OffsetFit:
+                  divergence_deg: float = 0.0, common_w: np.ndarray | None = None,
+                  aperture_sigma_deg: float = 0.0) -> angle_cal.OffsetFit:
     """Sample and arm offsets (degrees) from the transmitted peak at normal incidence and the
     specular peak(s) in the readings (sample readings; powers already dark-corrected and
     beam-normalised, common_w their shared errors as beam_normalised gives them), by the
-    model fit of calibration.angles."""
+    model fit of calibration.angles (the aperture's half-angle fitted within
+    aperture_sigma_deg when that is > 0)."""
     return angle_cal.fit_offsets(peak_scans(readings, common_w), eta, aperture_half_angle_deg,
-                                 divergence_deg)
+                                 divergence_deg, aperture_sigma_deg)
 
 
 def covering(gains: dict[str, Measured] | None,
@@ -281,11 +282,14 @@ def _angles(cal: Calibration, runs: list[np.ndarray], eta: float,
     if not peak_runs:
         raise CalibrationError("angle calibration (--eta) needs a run with a specular "
                                "scan (examples/plans/calib-angles.toml)")
-    half_angle = 0.0 if aperture is None else aperture[1].value
-    offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle, divergence_deg,
-                            np.concatenate(common))
+    half_angle = Measured(0.0, 0.0) if aperture is None else aperture[1]
+    offsets = angle_offsets(np.concatenate(peak_runs), eta, half_angle.value, divergence_deg,
+                            np.concatenate(common), half_angle.sigma)
     cal.sample_offset_deg, cal.arm_offset_deg = offsets.sample_offset, offsets.arm_offset
     cal.angle_fit = {"distribution": offsets.distribution, "alpha": offsets.alpha.to_json(),
                      "chi2_dof": offsets.chi2_dof, "points": offsets.n_points,
-                     "aperture_half_angle_deg": half_angle, "divergence_deg": divergence_deg}
+                     "aperture_half_angle_deg": half_angle.value, "divergence_deg": divergence_deg}
+    if offsets.aperture_half_angle is not None:  # the aperture the peaks say, within its prior
+        cal.angle_fit["aperture_prior_deg"] = half_angle.to_json()
+        cal.angle_fit["aperture_fitted_deg"] = offsets.aperture_half_angle.to_json()
     cal.notes += fit_warning("angles", offsets.chi2_dof)

@@ -69,23 +69,40 @@ def tolerance_class_mm(diameter_mm: float) -> float:
                 ISO_2768_FINE_MM[-1][1])
 
 
+def diameter_figure(diameter_mm: float, tolerance_mm: float | None = None) -> Figure:
+    """The 1-sigma of an aperture's diameter, mm: a uniform +-t, t the stated tolerance, else
+    ISO 2768-f's for the nominal diameter."""
+    if tolerance_mm is not None:
+        return uniform(tolerance_mm, "the config's [optics] aperture_diameter_tolerance_mm")
+    low, high = ISO_2768_SMALLEST_MM, ISO_2768_FINE_MM[-1][0]
+    outside = "" if low <= diameter_mm <= high else f" (outside the table's {low:g}-{high:g} " \
+                                                    "mm: its nearest row)"
+    return uniform(tolerance_class_mm(diameter_mm), f"ISO 2768-1 table 1, class f (fine) "
+                   f"tolerance of a machined {diameter_mm:g} mm aperture{outside}")
+
+
+def _half_angle_per_mm(diameter_mm: float, distance_mm: float) -> tuple[float, float]:
+    """(beta, dbeta/dd per mm of diameter), tan beta = d / (2 L)."""
+    beta = math.atan(0.5 * diameter_mm / distance_mm)
+    return beta, (0.5 / distance_mm) * math.cos(beta) ** 2
+
+
+def half_angle_sigma_deg(diameter_mm: float, distance_mm: float,
+                         tolerance_mm: float | None = None) -> float:
+    """The 1-sigma of a nominal aperture's half-angle, degrees, from its diameter's tolerance
+    (diameter_figure; the distance taken as exact)."""
+    _, dbeta_dd = _half_angle_per_mm(diameter_mm, distance_mm)
+    return math.degrees(dbeta_dd * diameter_figure(diameter_mm, tolerance_mm).sigma)
+
+
 def solid_angle_figure(optics: Optics) -> Figure:
-    """The relative 1-sigma of the aperture's solid angle from its diameter's tolerance, a
-    uniform +-t ([optics] aperture_diameter_tolerance_mm, else ISO 2768-f): dOmega/dd = 2 pi
-    sin beta dbeta/dd, tan beta = d / (2 L)."""
-    d, length = optics.aperture_diameter_mm, optics.aperture_distance_mm
-    if optics.aperture_diameter_tolerance_mm is not None:
-        t, source = (optics.aperture_diameter_tolerance_mm,
-                     "the config's [optics] aperture_diameter_tolerance_mm")
-    else:
-        low, high = ISO_2768_SMALLEST_MM, ISO_2768_FINE_MM[-1][0]
-        outside = "" if low <= d <= high else f" (outside the table's {low:g}-{high:g} mm: its " \
-                                              "nearest row)"
-        t, source = (tolerance_class_mm(d), f"ISO 2768-1 table 1, class f (fine) tolerance of a "
-                                            f"machined {d:g} mm aperture{outside}")
-    sigma_d = uniform(t, source)
-    beta = math.atan(0.5 * d / length)
+    """The relative 1-sigma of the aperture's solid angle from its diameter's tolerance
+    (diameter_figure, [optics] aperture_diameter_tolerance_mm): dOmega/dd = 2 pi sin beta
+    dbeta/dd, tan beta = d / (2 L)."""
+    sigma_d = diameter_figure(optics.aperture_diameter_mm,
+                              optics.aperture_diameter_tolerance_mm)
+    beta, dbeta_dd = _half_angle_per_mm(optics.aperture_diameter_mm,
+                                        optics.aperture_distance_mm)
     omega = 2.0 * math.pi * (1.0 - math.cos(beta))
-    dbeta_dd = (0.5 / length) * math.cos(beta) ** 2
     rel = 2.0 * math.pi * math.sin(beta) * dbeta_dd * sigma_d.sigma / omega
     return Figure(rel, f"{sigma_d.source} mm on the diameter")

@@ -173,10 +173,12 @@ def _aperture(args: argparse.Namespace, runs: list[Run], scan: Run | None
               ) -> tuple[Measured, Measured, str] | None:
     """(solid angle, half-angle, method): measured from the aperture scan (--aperture-scan, or
     a RUN whose plan calibrates the aperture), else from --aperture-geometry or the runs'
-    [optics] aperture_diameter_mm and aperture_distance_mm; None without any of them."""
+    [optics] aperture_diameter_mm and aperture_distance_mm, the half-angle's sigma from the
+    diameter's tolerance (calibration.type_b); None without any of them."""
     import math
 
     from calibration import aperture
+    from calibration.type_b import half_angle_sigma_deg
     from calibration.values import Measured
 
     if scan is not None:
@@ -189,7 +191,10 @@ def _aperture(args: argparse.Namespace, runs: list[Run], scan: Run | None
         return None
     omega = aperture.from_geometry(0.5e-3 * diameter_mm, 1e-3 * distance_mm)
     half = math.degrees(math.atan2(0.5 * diameter_mm, distance_mm))
-    return Measured(omega, 0.0), Measured(half, 0.0), "geometry"
+    tolerance = None if args.aperture_geometry else _optics(runs, "aperture_diameter_tolerance_mm")
+    return (Measured(omega, 0.0),  # a nominal aperture: reduction counts its tolerance itself
+            Measured(half, half_angle_sigma_deg(diameter_mm, distance_mm, tolerance)),
+            "geometry")
 
 
 def _aperture_from_scan(scan_run: Run, named: str, beam_diameter_mm: float | None,

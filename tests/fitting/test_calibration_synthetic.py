@@ -157,6 +157,23 @@ def test_angle_offsets_recovered_within_uncertainty():
     assert 0.3 < fit.chi2_dof < 2.0
 
 
+def test_an_aperture_known_to_its_error_is_fitted_within_it_and_the_offsets_stay_right():
+    """A beam scan's aperture (0.0003 deg high: its 1.2 sigma, as one measured on the emulated
+    bench) taken as exact misfits the anti-glare peaks at chi2/dof ~ 60; fitted within that
+    prior the peaks fit at ~1, the half-angle comes back to the bench's, the offsets right."""
+    rng = np.random.default_rng(4)
+    ds_true, da_true = 0.3, -0.2
+    data = peak_scan_readings(rng, ds_true, da_true)
+    measured = HALF_ANGLE_DEG + 3.6e-4
+    fixed = angle_offsets(data, 1.51, measured, 0.03)
+    free = angle_offsets(data, 1.51, measured, 0.03, aperture_sigma_deg=2.9e-4)
+    assert fixed.chi2_dof > 10.0 and fixed.aperture_half_angle is None
+    assert 0.3 < free.chi2_dof < 2.0
+    assert abs(free.aperture_half_angle.pull(HALF_ANGLE_DEG)) < 3.0
+    assert free.aperture_half_angle.sigma < 1e-4  # the peaks know it better than the scan
+    assert abs(free.sample_offset.pull(ds_true)) < 3.0 and abs(free.arm_offset.pull(da_true)) < 3.0
+
+
 def test_symmetry_centres_are_biased_and_the_model_fit_is_not():
     # Noise-free peaks: the mirror-symmetry estimate (the former method) is off by 1-2e-4 deg,
     # several sigma of a real run, because a reflected lobe is not symmetric about the specular
