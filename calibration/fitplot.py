@@ -26,7 +26,7 @@ def model_curve(result: FitResult, theta_i_deg: float, transmission: bool,
 def fit_warning(result: FitResult) -> str:
     """The warning a fit that does not describe its data carries (chi2/dof, fitted or held out,
     above calibration.exports.model.MAX_CHI2_DOF, which model exports refuse), else ""."""
-    from calibration.exports.model import MAX_CHI2_DOF, worst_chi2_dof
+    from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
 
     worst, which = worst_chi2_dof(result.chi2_dof_fit, result.chi2_dof_heldout)
     if worst <= MAX_CHI2_DOF:

@@ -126,10 +126,10 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
 
 def slope_fit_notes(result: FitResult) -> list[str]:
     """A note when the fit that gave the angle terms' slope does not describe the data
-    (chi2/dof above calibration.exports.model.MAX_CHI2_DOF): its slope is not the data's, so
+    (chi2/dof above calibration.fit.result.MAX_CHI2_DOF): its slope is not the data's, so
     the angle terms may be too small or too large; the reduction goes on (a single-scattering
     fit of a multiply scattering sample is such a fit)."""
-    from calibration.exports.model import MAX_CHI2_DOF
+    from calibration.fit.result import MAX_CHI2_DOF
 
     if not result.chi2_dof_fit > MAX_CHI2_DOF:
         return []

@@ -24,13 +24,10 @@ from calibration.exports.astm import side_paths, sides_of
 from calibration.exports.mitsuba import material_parameters, write_mitsuba
 from calibration.exports.zemax import tabulate, write_zemax
 from calibration.fit import FitOptions, FitResult, fit
+from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
 from calibration.reduced import ReducedData
 from calibration.smearing import Smearing, smearing_order
 from calibration.values import CalibrationError
-
-# A fit whose chi2/dof (fitted or held out) exceeds this does not describe the data within
-# their uncertainties (gonio fit's summary warns at the same figure).
-MAX_CHI2_DOF = 3.0
 
 
 def fit_notes(result: FitResult, source: str, record: Sequence[str]) -> list[str]:
@@ -169,14 +166,6 @@ def load_fit(path: str | Path) -> FitResult:
     except (ValueError, IndexError):
         raise CalibrationError(f"{path}: not the JSON of `gonio fit --json`") from None
     return result_from_json(fitted, str(path))
-
-
-def worst_chi2_dof(fitted: float, held_out: float | None) -> tuple[float, str]:
-    """(the larger of a fit's fitted and held-out chi2/dof, "fitted" or "held-out"): what
-    MAX_CHI2_DOF is held against, by exports and by `gonio fit`'s warning alike."""
-    if held_out is not None and held_out > fitted:
-        return held_out, "held-out"
-    return fitted, "fitted"
 
 
 def check_describes(result: FitResult, force: bool, from_file: bool = False) -> list[str]:

@@ -17,6 +17,19 @@ from calibration.smearing import Smearing
 PREFERENCE_DELTA_CHI2 = 4.0
 
 
+
+# A fit whose chi2/dof (fitted or held out) exceeds this does not describe the data within
+# their uncertainties: exports refuse it, gonio fit and plot warn, reduction notes a slope from it.
+MAX_CHI2_DOF = 3.0
+
+
+def worst_chi2_dof(fitted: float, held_out: float | None) -> tuple[float, str]:
+    """(the larger of a fit's fitted and held-out chi2/dof, "fitted" or "held-out"): what
+    MAX_CHI2_DOF is held against, by exports and by `gonio fit`'s warning alike."""
+    if held_out is not None and held_out > fitted:
+        return held_out, "held-out"
+    return fitted, "fitted"
+
 @dataclass
 class FitResult:
     """The preferred fit: parameters with 1-sigma uncertainties, chi-square per degree of

@@ -161,7 +161,7 @@ def fit_warnings(out: dict, imported_from: str | None = None, plotted: bool = Fa
     """Warnings of a fit result dict: a chi2/dof (fitted or held out) above the limit model
     exports refuse at (calibration.exports.model.MAX_CHI2_DOF), and the likely cause; they
     point to `gonio plot RUN --fit` unless the fit is of an imported file or being plotted."""
-    from calibration.exports.model import MAX_CHI2_DOF, worst_chi2_dof
+    from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
 
     worst, _ = worst_chi2_dof(out["chi2_dof_fit"], out["chi2_dof_heldout"])
     if worst <= MAX_CHI2_DOF:

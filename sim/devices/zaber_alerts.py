@@ -69,4 +69,7 @@ class AlertingPtyServer(PtyServer):
                 return
             with self._io:
                 if not self.disconnected:
-                    self._send(self._call(self.unsolicited))
+                    try:
+                        self._send(self._call(self.unsolicited))
+                    except OSError:  # the line closed under it: the emulator is stopping
+                        return

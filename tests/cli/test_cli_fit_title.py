@@ -4,8 +4,8 @@ whose chi2/dof says it does not describe the data, and names an incomplete run."
 
 from __future__ import annotations
 
-from calibration.exports.model import MAX_CHI2_DOF
 from calibration.fit import FitOptions, fit
+from calibration.fit.result import MAX_CHI2_DOF
 from calibration.fitplot import fit_title, fit_warning
 from calibration.plot import plot_title
 from calibration.synthetic import synthesize
