@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.budget import Budget
 from calibration.fit import FitOptions, FitResult, fit
+from calibration.reduce import calibration_terms, optics_of
 from calibration.reduced import ReducedData
 from gonio.config import parse_config
 from gonio.plan.parse import load_plan
@@ -74,13 +76,20 @@ def normal_incidence_expectation(sample: str, ms_walks: int | None = None) -> Re
 
     beam_w = bench.source.power_w * bench.direct_beam_fraction(float(beam_rows["arm_deg"][0]))
     beam_rel = noise_w(beam_w) / beam_w / math.sqrt(len(beam_rows))
-    own = np.array([noise_w(p) for p in bsdf * scale]) / scale
+    budget = Budget(bsdf)
+    budget.add_own("noise", np.array([noise_w(p) for p in bsdf * scale]) / scale)
+    budget.add_shared("beam_normalisation", beam_rel * bsdf)
+    # the type-B terms reduction adds by default, as it adds them (calibration.reduce)
+    range_w = np.array([meter.autorange(p, wavelength) for p in bsdf * scale])
+    calibration_terms(budget, None, range_w, np.full(len(bsdf), meter.autorange(beam_w,
+                                                                                wavelength)),
+                      optics_of(raw, None, plan.raw), {})
     meta = {"eta": bench.sample.spec.eta,
             "aperture_half_angle_deg": math.degrees(bench.integral.aperture_rad),
             "beam_divergence_deg": math.degrees(bench.integral.divergence_rad)}
-    return ReducedData(wi, w_eval, bsdf, np.hypot(own, beam_rel * bsdf),
-                       np.ones(len(bsdf), bool), (wo[:, 2] > 0) != (wi[:, 2] > 0), meta,
-                       shared_rel=np.full((len(bsdf), 1), beam_rel))
+    return ReducedData(wi, w_eval, bsdf, budget.sigma, np.ones(len(bsdf), bool),
+                       (wo[:, 2] > 0) != (wi[:, 2] > 0), meta, budget.shared_rel,
+                       components=budget.components)
 
 
 def single_scattering_fit(sample: str, ms_walks: int | None = None,
