@@ -101,8 +101,9 @@ def run(args: argparse.Namespace) -> int:
         print(tables_line(tables_estimate(cfg, plan, sched), sched.estimate_s))
         if (full_scale := beam_over_range(cfg, plan, sched)) is not None:
             print(f"  beam: the emulated beam reaches its [beam] range's full scale "
-                  f"({full_scale:g} W): its beam readings would read over range (flagged "
-                  "saturated) and normalise nothing; give [beam] a larger range")
+                  f"({full_scale:g} W): its beam readings over it are flagged saturated and "
+                  "left out of the normalisation (a larger [beam] range keeps them all, at a "
+                  "smaller share of its full scale)")
     print(description(plan, cfg))
     if args.list:
         print(listing(sched))

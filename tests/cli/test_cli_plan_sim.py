@@ -45,19 +45,19 @@ def test_time_scale_overrides_the_configs_and_needs_sim(capsys):
 
 
 def test_a_beam_range_the_emulated_beam_reaches_is_said(capsys, tmp_path):
-    """calib-angles reads its 1 mW beam on the 1e-2 W range; on 1e-3 W, the beam's own power,
-    the meter would flag its readings over range: `gonio plan --sim` says so in one line."""
+    """calib-angles reads its 1 mW beam on 1e-3 W, the beam's own power, where the meter flags
+    the readings over it: `gonio plan --sim` says so in one line; on 1e-2 W it says nothing."""
     shipped = DEMO.parent / "calib-angles.toml"
     text = shipped.read_text().replace('"../instruments/', f'"{DEMO.parents[1]}/instruments/')
     lines = {}
     for range_w in ("1e-2", "1e-3"):
         plan = tmp_path / f"beam-{range_w}.toml"
-        plan.write_text(text.replace("range = 1e-2 ", f"range = {range_w} "))
+        plan.write_text(re.sub(r"^range = \S+", f"range = {range_w}", text, flags=re.M))
         assert main(["plan", str(plan), "--sim"]) == 0
         lines[range_w] = [ln for ln in capsys.readouterr().out.splitlines()
                           if ln.startswith("  beam:")]
     assert lines["1e-2"] == []
     assert lines["1e-3"] == [
         "  beam: the emulated beam reaches its [beam] range's full scale (0.001 W): its beam "
-        "readings would read over range (flagged saturated) and normalise nothing; give [beam] "
-        "a larger range"]
+        "readings over it are flagged saturated and left out of the normalisation (a larger "
+        "[beam] range keeps them all, at a smaller share of its full scale)"]
