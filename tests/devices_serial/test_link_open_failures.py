@@ -14,7 +14,7 @@ from drivers.pm100 import Pm100
 from drivers.serial_transport import SerialPortError
 
 NOBODY = 65534
-USB_METER = "USB0::0x1313::0x8072::P2000000::INSTR"
+USB_METER = "USB0::0x1313::0x8072::P0000404::INSTR"  # served and held by no other test
 
 
 def opening(**link) -> SerialPortError:

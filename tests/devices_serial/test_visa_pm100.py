@@ -23,7 +23,7 @@ pytestmark = pytest.mark.thirdparty
 QUIET = {"read_noise_fraction": 1e-3, "dark_current_a": 0.0, "bandwidth_hz": 0.0}
 #: what a config names, and the shape of the resource the emulator serves for it
 LINKS = {
-    "usb-as-asrl": ("USB0::0x1313::0x8072::P2000000::INSTR", r"ASRL/dev/pts/\d+::INSTR"),
+    "usb-as-asrl": ("USB0::0x1313::0x8072::P2000001::INSTR", r"ASRL/dev/pts/\d+::INSTR"),
     "tcpip-socket": ("TCPIP0::192.0.2.7::5025::SOCKET", r"TCPIP0::127\.0\.0\.1::\d+::SOCKET"),
 }
 
