@@ -200,11 +200,10 @@ def run_dirs(out) -> set:
     return {p.name for p in out.iterdir() if (p / "meta.json").exists()}
 
 
-def test_deleting_a_finished_entry_while_the_queue_runs_completes_no_unmeasured_plan(bench):
-    """The attack: entry 1 done, the queue running entry 2, entry 1 deleted from queue.toml
-    (the runner stopped by SIGSTOP meanwhile). Entry 2 is recorded on itself, not on entry 3,
-    which the queue then measures into a run of its own."""
-    root, out = bench
+def edited_while_running(root, out, change) -> tuple[str, int, int, str]:
+    """Entry 1 (short) run; long and short queued after it; `gonio queue run` stopped
+    (SIGSTOP) once entry 2 stored 3 readings, queue.toml edited by change, the runner let go
+    to its end: (entry 1's run, long's and short's planned readings, the runner's stderr)."""
     assert queue("add", root / "short.toml", "--sim", "--out", out).returncode == 0
     assert queue("run", "--out", out, "--no-plot", "--no-progress").returncode == 0
     first_run = entries(out)[0]["run"]
@@ -220,18 +219,42 @@ def test_deleting_a_finished_entry_while_the_queue_runs_completes_no_unmeasured_
 
         wait_until(second_run_measuring, 60, "the second entry's readings")
         runner.send_signal(signal.SIGSTOP)
-        edit_by_hand(out, lambda blocks: blocks[1:])
+        edit_by_hand(out, change)
         runner.send_signal(signal.SIGCONT)
-        stdout, stderr = runner.communicate(timeout=120)
+        _, stderr = runner.communicate(timeout=120)
     finally:
         runner.kill()
     assert runner.returncode == 0, stderr
+    return first_run, long_n, short_n, stderr
+
+
+def test_deleting_a_finished_entry_while_the_queue_runs_completes_no_unmeasured_plan(bench):
+    """The attack: entry 1 done, the queue running entry 2, entry 1 deleted from queue.toml.
+    Entry 2 is recorded on itself, not on entry 3, which the queue then measures into a run
+    of its own."""
+    root, out = bench
+    first_run, long_n, short_n, _ = edited_while_running(root, out, lambda b: b[1:])
     long_entry, short_entry = entries(out)
     assert (long_entry["state"], short_entry["state"]) == ("completed", "completed")
     assert len({first_run, long_entry["run"], short_entry["run"]}) == 3
     assert_complete(out / long_entry["run"], long_n)
     assert_complete(out / short_entry["run"], short_n)
     assert open_run(out / short_entry["run"]).meta["plan_name"] == "short"
+
+
+def test_deleting_the_running_entry_records_its_outcome_nowhere_else(bench):
+    """The running entry itself deleted: its run ends completed in its directory, one line
+    says the queue recorded it nowhere, and the other entries are as they were, then run."""
+    root, out = bench
+    first_run, long_n, short_n, stderr = edited_while_running(
+        root, out, lambda b: [b[0], *b[2:]])
+    first, short_entry = entries(out)
+    assert first["run"] == first_run and short_entry["state"] == "completed"
+    (long_run,) = run_dirs(out) - {first_run, short_entry["run"]}
+    assert_complete(out / long_run, long_n)
+    assert_complete(out / short_entry["run"], short_n)
+    told = [line for line in stderr.splitlines() if "while it ran" in line]
+    assert len(told) == 1 and f"is recorded in {out / long_run} only" in told[0]
 
 
 @pytest.mark.parametrize("other", ["another entry's run", "a run of another plan"])
