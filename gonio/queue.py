@@ -1,12 +1,19 @@
 """The plan queue of an output folder: OUT/queue.toml lists queued plans in order (each with
-its plan's copy, instrument, --sim, state and run directory); `run_entry` starts or resumes
-one through the scan runner and records where it goes and how it ends.
+a stable id, its plan's copy, instrument, --sim, state and run directory); `run_entry` starts
+or resumes one through the scan runner and records where it goes and how it ends.
 
 queue.toml is only ever replaced whole (temporary file, fsync, rename) while holding
 OUT/queue/state.lock, so `gonio queue add` may append while a queue runs; OUT/queue/run.lock
 is held by the one `gonio queue run` working the folder. The plans are copied in at add time
 (OUT/queue/NN/NAME.toml): a queued run measures what was validated, whatever becomes of the
 original file. The verb itself is gonio_cli/commands/queue.py.
+
+queue.toml may be edited by hand, even while its queue runs: every change the runner records
+re-reads the file under the state lock and finds its entry by id, never by position (a file
+written without ids gets them at its first change, `queue add` or `queue run`). A run
+directory counts for an entry only while the plan digest its meta.json recorded is that of
+the entry's plan copy and no other entry names it, so no edit marks an unmeasured plan
+completed; an entry deleted while it ran has its outcome in its run directory only.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ import dataclasses
 import fcntl
 import json
 import os
+import secrets
 import shutil
 import tomllib
 from collections.abc import Callable, Collection, Iterator, Sequence
@@ -30,7 +38,7 @@ from gonio.errors import GonioError, QueueError, RunError, Terminated, os_error_
 from gonio.fields import Fields
 from gonio.plan import load_plan
 from gonio.runner import ScanResult, instrument_path, new_scan, resume_scan, schedule_for
-from gonio.store import open_run, utc_now, write_text_atomic
+from gonio.store import digest, open_run, utc_now, write_text_atomic
 
 QUEUE_FILE = "queue.toml"
 QUEUE_DIR = "queue"  # the plan copies and the two lock files
@@ -38,7 +46,8 @@ STATES = ("pending", "running", "completed", "failed", "aborted")
 HEADER = """\
 # The plan queue of this folder: `gonio queue add` appends entries, `gonio queue run` runs them
 # in order and records each one's run directory (a folder here) and state
-# (pending | running | completed | failed | aborted). Rewritten whole at every change.
+# (pending | running | completed | failed | aborted), finding each entry by its id.
+# Rewritten whole at every change.
 """
 
 
@@ -55,6 +64,7 @@ class Entry:
     state: str = "pending"
     run: str = ""  # its run directory's name in the folder, once that exists
     reason: str = ""  # why it failed or was aborted
+    id: str = ""  # stable, unique in the file ("" until the file's first change gives it one)
 
     @property
     def sim_arg(self) -> list[str] | bool:
@@ -70,6 +80,16 @@ def queue_path(out: Path) -> Path:
 def load(out: Path) -> list[Entry]:
     """The folder's entries in order ([] when it has no queue file); QueueError naming the
     entry and the field for anything queue.toml should not say."""
+    entries = survey(out)
+    for entry in entries:
+        if isinstance(entry, QueueError):
+            raise entry
+    return entries
+
+
+def survey(out: Path) -> list[Entry | QueueError]:
+    """Each entry of the folder's queue file, or the QueueError naming what is wrong with it;
+    QueueError itself when the file as a whole cannot be read."""
     path = queue_path(out)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -83,8 +103,22 @@ def load(out: Path) -> list[Entry]:
     tables = data.get("entry", [])
     if not isinstance(tables, list):
         raise top.fail("entry", "must be an array of tables ([[entry]])")
-    return [_entry(Fields(t, str(path), QueueError, f"entry[{n}]"))
-            for n, t in enumerate(tables, 1)]
+    out_entries: list[Entry | QueueError] = []
+    seen: dict[str, int] = {}
+    for n, table in enumerate(tables, 1):
+        try:
+            entry = _entry(Fields(table, str(path), QueueError, f"entry[{n}]"))
+        except QueueError as exc:
+            out_entries.append(exc)
+            continue
+        if entry.id in seen:
+            out_entries.append(QueueError(f"{path}: [entry[{n}]] id: {entry.id!r} is also "
+                                          f"entry[{seen[entry.id]}]'s; ids are unique"))
+            continue
+        if entry.id:
+            seen[entry.id] = n
+        out_entries.append(entry)
+    return out_entries
 
 
 def _entry(f: Fields) -> Entry:
@@ -100,7 +134,8 @@ def _entry(f: Fields) -> Entry:
                   sim=sim if isinstance(sim, bool) else tuple(sim),
                   planned=f.number("planned", low=0, integer=True),
                   added_utc=f.string("added_utc"), state=f.string("state", choices=STATES),
-                  run=f.string("run", default=""), reason=f.string("reason", default=""))
+                  run=f.string("run", default=""), reason=f.string("reason", default=""),
+                  id=f.string("id", default=""))
     f.done()
     if entry.run and (Path(entry.run).name != entry.run or entry.run in (".", "..")):
         raise f.fail("run", f"must be the name of a run directory in the folder, "
@@ -122,10 +157,10 @@ def _toml(value: Any) -> str:
 
 
 def render(entries: Sequence[Entry]) -> str:
-    """queue.toml's text for these entries."""
+    """queue.toml's text for these entries, each one's id first."""
     return HEADER + "".join(
-        "\n[[entry]]\n" + "".join(f"{k} = {_toml(v)}\n"
-                                  for k, v in dataclasses.asdict(e).items())
+        f"\n[[entry]]\nid = {_toml(e.id)}\n" + "".join(
+            f"{k} = {_toml(v)}\n" for k, v in dataclasses.asdict(e).items() if k != "id")
         for e in entries)
 
 
@@ -139,13 +174,31 @@ def _lock_file(out: Path, name: str) -> Any:
 
 @contextmanager
 def _editing(out: Path) -> Iterator[list[Entry]]:
-    """The entries, to change in place; written back whole on success, all under the state
-    lock (a failure inside changes nothing)."""
+    """The entries as the file says now, each with an id (one given to any without), to
+    change in place; written back whole on success, all under the state lock (a failure
+    inside changes nothing)."""
     with _lock_file(out, "state.lock") as fh:
         fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
         entries = load(out)
+        for n, entry in enumerate(entries):
+            if not entry.id:
+                entries[n] = replace(entry, id=new_id(entries))
         yield entries
         write_text_atomic(queue_path(out), render(entries))
+
+
+def new_id(entries: Sequence[Entry]) -> str:
+    """An entry id none of `entries` has."""
+    taken = {e.id for e in entries}
+    while (made := secrets.token_hex(4)) in taken:
+        pass
+    return made
+
+
+def identify(out: Path) -> list[Entry]:
+    """The folder's entries, after giving an id to each that had none (written back)."""
+    with _editing(out) as entries:
+        return list(entries)
 
 
 def existing(out: Path) -> list[Entry]:
@@ -188,16 +241,27 @@ def add(out: Path, plans: Sequence[str | Path], instrument: str | Path | None,
         with _editing(out) as entries:
             first = len(entries) + 1
             for source in map(Path, plans):
-                folder = out / QUEUE_DIR / f"{len(entries) + 1:02d}"
+                folder = _free_folder(out, entries)
                 shutil.rmtree(folder, ignore_errors=True)  # left by an add that was killed
                 made.append(folder)
-                entries.append(_copied(source, folder, out, instrument, sim))
+                entries.append(replace(_copied(source, folder, out, instrument, sim),
+                                       id=new_id(entries)))
             added = list(enumerate(entries[first - 1:], first))
     except BaseException:
         for folder in made:
             shutil.rmtree(folder, ignore_errors=True)
         raise
     return added
+
+
+def _free_folder(out: Path, entries: Sequence[Entry]) -> Path:
+    """The plan-copy folder for a new entry: OUT/queue/NN, NN from the entry's position up to
+    the first no entry's plan copy is in (a hand edit may have deleted an earlier entry)."""
+    taken = {Path(e.plan).parent for e in entries}
+    n = len(entries) + 1
+    while Path(QUEUE_DIR, f"{n:02d}") in taken:
+        n += 1
+    return out / QUEUE_DIR / f"{n:02d}"
 
 
 def _copied(source: Path, folder: Path, out: Path, instrument: str | Path | None,
@@ -223,21 +287,57 @@ def next_position(entries: Sequence[Entry], passed: Collection[int] = ()) -> int
                  if e.state != "completed" and n not in passed), None)
 
 
-def readings_of(out: Path, entry: Entry) -> tuple[int | None, int]:
-    """(stored, planned) readings of an entry: from its run directory once it has one
-    (stored None if that cannot be read), else (0, planned at add time)."""
+def readings_of(out: Path, entry: Entry) -> tuple[int | None, int, str]:
+    """(stored, planned, problem) for an entry: from its run directory once it has one
+    (stored None and the problem named if that cannot be read), else (0, planned at add
+    time, "")."""
     if not entry.run:
-        return 0, entry.planned
+        return 0, entry.planned, ""
     try:
         run = open_run(Path(out) / entry.run)
-        return len(run.lines().rows), int(run.meta.get("planned", entry.planned))
-    except (RunError, OSError):
-        return None, entry.planned
+        return len(run.lines().rows), int(run.meta.get("planned", entry.planned)), ""
+    except (RunError, OSError) as exc:
+        return None, entry.planned, str(exc) if isinstance(exc, RunError) else os_error_text(exc)
+    except Exception as exc:  # noqa: BLE001 - whatever a hand-made folder holds is named
+        return None, entry.planned, f"{Path(out) / entry.run}: unreadable run directory ({exc})"
 
 
-def _set(out: Path, position: int, **changes: Any) -> None:
+def run_problem(out: Path, entry: Entry, run: str, entries: Sequence[Entry]) -> str | None:
+    """Why run directory `run` cannot be the entry's (another entry names it, it or the
+    entry's plan copy cannot be read, or its recorded plan digest is not the copy's), or
+    None when it can."""
+    others = [e for e in entries
+              if e.run == run and (e.id, e.plan) != (entry.id, entry.plan)]
+    if others:
+        return f"run {run} is also the run of entry {others[0].id or others[0].plan}"
+    try:
+        recorded = open_run(Path(out) / run).meta.get("digests", {})
+        recorded = recorded.get("plan.json") if isinstance(recorded, dict) else None
+        planned = digest(load_plan(Path(out) / entry.plan).raw)
+    except (GonioError, OSError, AttributeError) as exc:
+        text = os_error_text(exc) if isinstance(exc, OSError) else str(exc)
+        return f"run {run} cannot be checked against the entry's plan ({text})"
+    if recorded != planned:
+        return (f"run {run} was not measured from the entry's plan {entry.plan} "
+                f"(the plan digest its meta.json records differs)")
+    return None
+
+
+def _record(out: Path, entry_id: str, **changes: Any) -> Entry | None:
+    """Apply changes to the entry with this id as queue.toml says it now (under the state
+    lock); None, changing nothing, when no entry has the id any more. A change to
+    `completed` is recorded only for a run that run_problem accepts, else as failed."""
     with _editing(out) as entries:
-        entries[position - 1] = replace(entries[position - 1], **changes)
+        position = next((n for n, e in enumerate(entries) if e.id == entry_id), None)
+        if position is None:
+            return None
+        entry = replace(entries[position], **changes)
+        problem = run_problem(out, entry, entry.run, entries) \
+            if entry.state == "completed" else None
+        if problem is not None:
+            entry = replace(entry, state="failed", reason=problem)
+        entries[position] = entry
+        return entry
 
 
 def reason_of(exc: BaseException) -> str:
@@ -262,32 +362,47 @@ def _resume(path: Path, control: PauseControl, progress: bool | None) -> ScanRes
     return resume_scan(path, control=control, progress=progress)
 
 
-def run_entry(out: Path, position: int, control: PauseControl, progress: bool | None = None,
+def run_entry(out: Path, entry_id: str, control: PauseControl, progress: bool | None = None,
               warn: Callable[[str], None] | None = None) -> ScanResult:
-    """Run the entry at `position`: resume its run when it has a run directory (a crash, a
-    failure, an abort), else start one, whose directory goes into queue.toml as soon as it
-    exists; record the state it ends in. An exception or signal that ends it before the
-    engine's outcome is recorded (failed / aborted) and propagates."""
+    """Run the entry with this id: resume its run when it has a run directory (a crash, a
+    failure, an abort) that run_problem accepts, else start one, whose directory goes into
+    queue.toml as soon as it exists; record the state it ends in. An exception or signal that
+    ends it before the engine's outcome is recorded (failed / aborted) and propagates, as
+    does a QueueError for a run not accepted; an entry deleted meanwhile is told to `warn`."""
     out = Path(out)
-    entry = load(out)[position - 1]
+    entries = load(out)
+    entry = next((e for e in entries if e.id == entry_id), None)
+    if entry is None:
+        raise QueueError(f"{queue_path(out)}: no entry has id {entry_id!r} any more")
     run = entry.run
 
     def created(path: Path) -> None:
         nonlocal run
         run = path.name
-        _set(out, position, run=run)
+        _record(out, entry_id, run=run)
 
-    _set(out, position, state="running", reason="")
+    _record(out, entry_id, state="running", reason="")
     try:
         if run:
+            problem = run_problem(out, entry, run, entries)
+            if problem is not None:
+                raise QueueError(f"{queue_path(out)}: entry {entry_id}: {problem}; "
+                                 f"clear its `run` to measure it afresh")
             result = _resume(out / run, control, progress)
         else:
             result = new_scan(out / entry.plan, entry.instrument, entry.sim_arg, out,
                               progress=progress, control=control, warn=warn, created=created)
     except BaseException as exc:
         aborted = isinstance(exc, KeyboardInterrupt | Terminated)
-        _set(out, position, state="aborted" if aborted else "failed", run=run,
-             reason=reason_of(exc))
+        _record(out, entry_id, state="aborted" if aborted else "failed", run=run,
+                reason=reason_of(exc))
         raise
-    _set(out, position, state=result.outcome.status, reason=result.outcome.reason)
+    status = result.outcome.status
+    recorded = _record(out, entry_id, state=status, reason=result.outcome.reason, run=run)
+    if recorded is None:
+        if warn is not None:
+            warn(f"entry {entry_id} left {queue_path(out)} while it ran: its outcome "
+                 f"({status}) is recorded in {result.path} only")
+    elif recorded.state != status:
+        raise QueueError(f"{queue_path(out)}: entry {entry_id}: {recorded.reason}")
     return result

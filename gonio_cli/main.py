@@ -4,7 +4,7 @@ Each command module defines `register(subparsers)`, which adds its parser and se
 `func(args) -> int`. Errors meant for the user are one line and a non-zero exit; so are a
 Ctrl-C at any moment (even while the modules load), a file the system refuses (a full disk,
 a missing folder) and a signal that ends a command; a closed pipe on stdout (`| head`) ends
-the command quietly, as it does any Unix filter.
+the command quietly, as it does any Unix filter. A warning is one line too.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ signal.signal(signal.SIGINT, _interrupted_loading)  # until main() runs: no impo
 import argparse  # noqa: E402
 import importlib  # noqa: E402
 import os  # noqa: E402
+import warnings  # noqa: E402
 
 from drivers.base import DriverError  # noqa: E402
 from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
@@ -69,6 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                      lineno: int, line: str | None = None) -> str:
+    """A warning as the command line shows it: one line, as its errors are."""
+    return f"gonio: warning: {message}\n"
+
+
 def _quiet_stdout() -> None:
     """Point stdout at /dev/null, so that flushing it at exit raises nothing more."""
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -79,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     verb = "gonio"
     emulator_truth.install()
+    warnings.formatwarning = _one_line_warning
     try:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         args = build_parser().parse_args(argv)

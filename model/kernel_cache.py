@@ -11,7 +11,11 @@ while such a process compiles needs a second `import model` after it ends.
 
 `compiled` is how model/ asks numba for a cached kernel: a cache file the disk refuses (full,
 read-only, a file-size limit) is one warning per cache folder and the kernel stays in memory;
-numba's own cache lets the write's OSError end the call that compiled it.
+numba's own cache lets the write's OSError end the call that compiled it. A cache outside
+the sources (NUMBA_CACHE_DIR, numba's user-wide one) in a folder another user could write into
+(model.cache_folder's rule: numba's index files are pickles) is neither read nor written, with
+one warning: kernels are compiled in memory. The sources' own __pycache__ is the install's:
+whoever can write there can replace the bytecode Python imports from it.
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ import warnings
 from collections.abc import Callable
 from functools import cache
 from pathlib import Path
+
+from model.cache_folder import untrusted, warn_untrusted
 
 ROOT = Path(__file__).resolve().parent
 #: Where the sources' digest lives, beside numba's own cache files of this package.
@@ -78,16 +84,36 @@ def compiled(**options: object) -> Callable[[Callable], Callable]:
 @cache
 def _tolerant_cache() -> type:
     """numba's FunctionCache, but a save the disk refuses warns instead of raising."""
-    from numba.core.caching import FunctionCache
+    from numba.core.caching import FunctionCache, InTreeCacheLocator
 
     class TolerantCache(FunctionCache):
-        """A kernel's cache whose refused write leaves the kernel in memory only."""
+        """A kernel's cache whose refused write leaves the kernel in memory only, and which
+        reads and writes nothing in a folder another user could write into."""
+
+        def load_overload(self, sig, target_context) -> object:
+            return super().load_overload(sig, target_context) if self._trusted() else None
 
         def save_overload(self, sig, data) -> None:
+            if not self._trusted():
+                return
             try:
                 super().save_overload(sig, data)
             except OSError as exc:
                 _warn_refused(self.cache_path, exc.strerror or str(exc))
+
+        def _trusted(self) -> bool:
+            """Whether the cache folder and the cache directory numba made it in are this
+            user's alone; the source folder's own __pycache__ is the install's (whoever can
+            write there can replace the bytecode Python imports from it)."""
+            if isinstance(self._impl.locator, InTreeCacheLocator):
+                return True
+            folder = Path(self.cache_path)
+            for path in (folder, folder.parent):
+                reason = untrusted(path)
+                if reason is not None:
+                    warn_untrusted("numba's kernel cache", str(path), reason)
+                    return False
+            return True
 
     return TolerantCache
 

@@ -1,11 +1,11 @@
 """`gonio queue add|list|run`: plans run one after another, unattended, into one output folder.
 
 `add` validates each plan as `gonio plan` does and queues a copy of it (OUT/queue.toml);
-`list` prints one line per entry; `run` works through the entries not completed, in order,
-each as `gonio scan` would run it, and after a crash resumes the one that was running. A run
-that fails stops the queue (unless --keep-going); one aborted (Ctrl-C twice, SIGTERM) always
-does. The exit status: 0 all completed, 1 a run failed, 130 aborted by Ctrl-C, 128 + N ended
-by signal N.
+`list` prints one line per entry, naming what it cannot read (an entry, a run directory; exit
+1 then); `run` works through the entries not completed, in order, each as `gonio scan` would
+run it, and after a crash resumes the one that was running. A run that fails stops the queue
+(unless --keep-going); one aborted (Ctrl-C twice, SIGTERM) always does. The exit status: 0
+all completed, 1 a run failed, 130 aborted by Ctrl-C, 128 + N ended by signal N.
 """
 
 from __future__ import annotations
@@ -40,7 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.set_defaults(func=add)
 
     ls = actions.add_parser("list", help="one line per entry: position, plan, instrument, "
-                                         "sim, state, run directory, readings stored/planned")
+                                         "sim, state, run directory, readings stored/planned "
+                                         "(and what cannot be read)")
     ls.add_argument("--out", default="runs", metavar="DIR", help=out_help)
     ls.set_defaults(func=list_entries)
 
@@ -54,15 +55,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def line(out: Path, position: int, entry: Entry) -> str:
-    """An entry as `gonio queue list` prints it."""
-    from gonio.queue import readings_of
+    """An entry as `gonio queue add` and `list` print it."""
+    return described(out, position, entry)[0]
 
-    stored, planned = readings_of(out, entry)
+
+def described(out: Path, position: int, entry: Entry, entries: list[Entry] | None = None
+              ) -> tuple[str, bool]:
+    """(line, whether it names a problem): an entry's line, ending with why its run directory
+    cannot be read or, given the queue's `entries`, cannot be this entry's."""
+    from gonio.queue import readings_of, run_problem
+
+    stored, planned, unreadable = readings_of(out, entry)
+    refused = run_problem(out, entry, entry.run, entries) \
+        if entries is not None and entry.run and not unreadable else None
     sim = ("sim" if entry.sim else "real") if isinstance(entry.sim, bool) \
         else "sim:" + ",".join(entry.sim)
     run_dir = out / entry.run if entry.run else "-"
-    return (f"{position}  {entry.source}  {entry.instrument}  {sim}  {entry.state}  {run_dir}  "
-            f"{'?' if stored is None else stored}/{planned}")
+    text = (f"{position}  {entry.source}  {entry.instrument}  {sim}  {entry.state}  {run_dir}  "
+            f"{'?' if stored is None else stored}/{planned}"
+            + (f"  (cannot read: {unreadable})" if unreadable else "")
+            + (f"  (not this entry's run: {refused})" if refused else ""))
+    return text, bool(unreadable or refused)
 
 
 def add(args: argparse.Namespace) -> int:
@@ -81,13 +94,21 @@ def add(args: argparse.Namespace) -> int:
 
 
 def list_entries(args: argparse.Namespace) -> int:
-    """Print the queue, one line per entry."""
-    from gonio.queue import existing
+    """Print the queue, one line per entry, an entry it cannot read as the line naming why;
+    1 if any entry or run directory could not be read."""
+    from gonio.errors import QueueError
+    from gonio.queue import existing, survey
 
     out = Path(args.out)
-    for position, entry in enumerate(existing(out), 1):
-        print(line(out, position, entry))
-    return 0
+    surveyed = survey(out)
+    if not surveyed:
+        existing(out)  # its error: no queue here
+    readable = [e for e in surveyed if not isinstance(e, QueueError)]
+    printed = [(f"{position}  cannot read: {entry}", True) if isinstance(entry, QueueError)
+               else described(out, position, entry, readable)
+               for position, entry in enumerate(surveyed, 1)]
+    print("\n".join(text for text, _ in printed))
+    return 1 if any(named for _, named in printed) else 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -95,14 +116,17 @@ def run(args: argparse.Namespace) -> int:
     from drivers.base import DriverError
     from gonio.engine import PauseControl
     from gonio.errors import GonioError
-    from gonio.queue import load, next_position, reason_of, run_entry, run_lock
+    from gonio.queue import identify, load, next_position, reason_of, run_entry, run_lock
 
     out, progress = Path(args.out), False if args.no_progress else None
-    failed: list[int] = []
+    failed: list[int] = []  # positions, as printed when each failed
+    passed: set[str] = set()  # ids of the entries that failed
     with run_lock(out), PauseControl() as control:
+        identify(out)
         while True:
             entries = load(out)
-            position = next_position(entries, failed)
+            position = next_position(entries, {n for n, e in enumerate(entries, 1)
+                                                if e.id in passed})
             if position is None:
                 break
             entry = entries[position - 1]
@@ -110,18 +134,20 @@ def run(args: argparse.Namespace) -> int:
             print(f"{VERB}: entry {position} of {len(entries)}: {what} {entry.source}",
                   file=sys.stderr)
             try:
-                result = run_entry(out, position, control, progress, warn=warner(VERB))
+                result = run_entry(out, entry.id, control, progress, warn=warner(VERB))
             except (GonioError, DriverError, OSError) as exc:
                 if not args.keep_going:
                     raise
                 print(f"{VERB}: entry {position} failed: {reason_of(exc)}", file=sys.stderr)
                 failed.append(position)
+                passed.add(entry.id)
                 continue
             code = report(result, not args.no_plot, VERB)
             if code and (result.outcome.status == "aborted" or not args.keep_going):
                 return code
             if code:
                 failed.append(position)
+                passed.add(entry.id)
     if failed:
         print(f"{VERB}: {len(failed)} of {len(entries)} entries failed: "
               f"{', '.join(map(str, failed))}", file=sys.stderr)

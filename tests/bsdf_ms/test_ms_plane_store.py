@@ -1,13 +1,15 @@
 """HigherOrderLobe's planes on disk (plane_store): read back bit for bit by a later lobe, named
-by everything the walk depends on, walked again where a file is torn or of another shape, and
-a disk that refuses the file (a real file-size limit) leaves the build whole in memory."""
+by everything the walk depends on, walked again (one warning) where a file does not match its
+digest (altered, torn, another shape), and a disk that refuses the file (a real file-size
+limit) or a cache folder another user could write into leaves the build whole in memory."""
 
-import io
 import json
 import os
 import resource
+import stat
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -36,15 +38,34 @@ def lobe(cached: bool = True, **kwargs):
                            cache_as=PARENT if cached else None)
 
 
+def address_of(path: Path) -> tuple[int, ...]:
+    """A plane file's address, from its name (KEY-side-node-plane-hemisphere.npz)."""
+    return tuple(int(part) for part in path.stem.split("-")[1:])
+
+
+def stored(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(plane, digest) as a plane file holds them."""
+    with np.load(path) as archive:
+        return archive["plane"], archive["digest"]
+
+
+def cache_warnings(action) -> tuple[object, list[str]]:
+    """What action() returns and the cache's warnings it gave, each one counted."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = action()
+    return result, [str(w.message) for w in caught if "cache" in str(w.message)]
+
+
 def test_a_later_lobe_reads_the_planes_back(cache):
     first = lobe().estimate(WI, WO)
-    files = sorted(cache.glob("*.npy"))
+    files = sorted(cache.glob("*.npz"))
     assert len(files) == 2 and not list(cache.glob("*.partial"))  # both hemispheres
     np.testing.assert_array_equal(lobe(cached=False).estimate(WI, WO), first)  # as walked
     np.testing.assert_array_equal(lobe().estimate(WI, WO), first)
-    # it is the file that is read: a changed file changes what a new lobe gives
-    plane = np.load(files[0])
-    np.save(files[0], 2.0 * plane)
+    # it is the file that is read: a changed file (with its digest) changes what a lobe gives
+    plane, _ = stored(files[0])
+    assert lobe().store.save(address_of(files[0]), 2.0 * plane)
     assert not np.array_equal(lobe().estimate(WI, WO)[0], first[0])
 
 
@@ -72,24 +93,115 @@ def test_other_code_names_other_files(cache, monkeypatch):
 
 
 @pytest.mark.parametrize("damage", ["truncated", "other shape", "not finite", "not numpy",
-                                    "a zip archive"])
+                                    "no digest", "a bare array"])
 def test_a_damaged_file_is_walked_again_and_replaced(cache, damage):
     expected = lobe().estimate(WI, WO)
-    path = sorted(cache.glob("*.npy"))[0]
+    path = sorted(cache.glob("*.npz"))[0]
     good = path.read_bytes()
+    plane, digest = stored(path)
     if damage == "truncated":
         path.write_bytes(good[: len(good) // 2])
-    elif damage == "other shape":
-        np.save(path, np.zeros((5, 3)))
+    elif damage == "other shape":  # a file whose digest matches its plane, of another shape
+        lobe().store.save(address_of(path), np.zeros((5, 3)))
     elif damage == "not finite":
-        np.save(path, np.full(np.load(path).shape, np.nan))
+        with path.open("wb") as handle:
+            np.savez(handle, plane=np.full(plane.shape, np.nan), digest=digest)
     elif damage == "not numpy":
         path.write_text("not a plane")
+    elif damage == "no digest":
+        with path.open("wb") as handle:
+            np.savez(handle, plane=plane)
     else:
         with path.open("wb") as handle:
-            np.savez(handle, plane=np.load(io.BytesIO(good)))
-    np.testing.assert_array_equal(lobe().estimate(WI, WO), expected)
+            np.save(handle, plane)
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, expected)
     assert path.read_bytes() == good
+    assert len(said) == 1 and "does not match its digest" in said[0]
+
+
+def test_tables_multiplied_by_100_on_disk_are_walked_again_with_one_warning(cache):
+    """The attack: every plane file's values times 100, its digest kept. A later lobe gives
+    the clean cache's values, says so once, and the files hold the clean planes again."""
+    clean = lobe().estimate(WI, WO)
+    files = sorted(cache.glob("*.npz"))
+    good = [path.read_bytes() for path in files]
+    for path in files:
+        plane, digest = stored(path)
+        with path.open("wb") as handle:
+            np.savez(handle, plane=100.0 * plane, digest=digest)
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, clean)
+    assert len(said) == 1 and str(cache) in said[0], said
+    assert [path.read_bytes() for path in files] == good
+
+
+def test_a_plane_copied_from_another_address_is_walked_again(cache):
+    """A file's digest covers what it was built from: another plane's whole file, put in
+    this one's place, does not pass."""
+    clean = lobe().estimate(WI, WO)
+    first, second = sorted(cache.glob("*.npz"))
+    good = second.read_bytes()
+    second.write_bytes(first.read_bytes())
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, clean)
+    assert len(said) == 1 and second.read_bytes() == good
+
+
+def test_a_world_writable_cache_directory_is_not_used(tmp_path, monkeypatch):
+    """A cache directory of mode 0777: one warning naming it, the lobe's values those of a
+    lobe without a store, and nothing written there; a planted file is not read."""
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o777)
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(shared))
+    values, said = cache_warnings(lambda: [lobe().estimate(WI, WO) for _ in range(2)])
+    np.testing.assert_array_equal(values[0], lobe(cached=False).estimate(WI, WO))
+    assert len(said) == 1 and f"{shared} is not used: world-writable (mode 0777)" in said[0]
+    assert list(shared.iterdir()) == []
+
+
+def test_a_group_writable_planes_folder_is_not_used(cache):
+    """The rule covers the folders gonio makes under the cache directory too."""
+    lobe().estimate(WI, WO)
+    cache.chmod(0o770)
+    files = {path: path.read_bytes() for path in cache.iterdir()}
+    for path in files:
+        plane, digest = stored(path)
+        with path.open("wb") as handle:
+            np.savez(handle, plane=100.0 * plane, digest=digest)
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, lobe(cached=False).estimate(WI, WO))
+    assert len(said) == 1 and "group-writable (mode 0770)" in said[0]
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="giving a folder to another user takes root")
+def test_a_cache_directory_owned_by_another_user_is_not_used(tmp_path, monkeypatch):
+    """The attack: a cache directory owned by `nobody` (uid 65534), mode 0755 so nobody
+    else may write there, is still nobody's to fill: not read, not written."""
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    os.chown(theirs, 65534, 65534)
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(theirs))
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, lobe(cached=False).estimate(WI, WO))
+    assert len(said) == 1 and f"owned by uid 65534, not {os.geteuid()}" in said[0]
+    assert list(theirs.iterdir()) == []
+
+
+def test_a_cache_under_a_sticky_world_writable_folder_is_used(tmp_path, monkeypatch):
+    """Only the cache directory and the folders gonio makes are checked, not their parents:
+    a cache under a /tmp-like folder (mode 1777) is made 0700 and read back."""
+    sticky = tmp_path / "tmp"
+    sticky.mkdir()
+    sticky.chmod(0o1777)
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(sticky / "gonio-cache"))
+    first, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    planes = sticky / "gonio-cache" / "ms-planes"
+    assert said == [] and len(list(planes.glob("*.npz"))) == 2
+    for folder in (sticky / "gonio-cache", planes):
+        assert stat.S_IMODE(folder.stat().st_mode) == 0o700
+    np.testing.assert_array_equal(lobe().estimate(WI, WO), first)
 
 
 SCRIPT = """
@@ -156,5 +268,5 @@ def test_the_bench_keeps_its_tables_in_the_cache_directory(tmp_path, monkeypatch
         values = bench_lobe.estimate(WI, WO)
     finally:
         higher_order_lobe.cache_clear()
-    assert len(list((tmp_path / "ms-planes").glob("*.npy"))) == 2
+    assert len(list((tmp_path / "ms-planes").glob("*.npz"))) == 2
     np.testing.assert_array_equal(values, lobe(cached=False).estimate(WI, WO))

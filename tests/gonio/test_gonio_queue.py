@@ -1,14 +1,18 @@
 """`gonio queue` in real processes: queued plans run one after another into complete runs; a
 SIGKILL of `gonio queue run` mid-run is resumed by the next one (every reading once) while a
 second runner is refused; SIGTERM aborts the entry and stops the queue; a failed run stops it
-unless --keep-going; a bad plan is refused whole at add. Then queue.toml's own checks, in
-process."""
+unless --keep-going; a bad plan is refused whole at add. Hand edits of queue.toml, even while
+its queue runs, mark no unmeasured plan completed (entries are found by id; a run counts only
+for the plan it measured); `queue list` names what it cannot read. Then queue.toml's own
+checks, in process."""
 
+import fcntl
 import signal
 import tomllib
 
 import pytest
 from gonio_testkit import (
+    completed_unretried,
     fast_config,
     gonio_cli,
     one_line_error,
@@ -16,9 +20,10 @@ from gonio_testkit import (
     wait_for_lines,
     write_toml,
 )
+from waiting import wait_until
 
 from gonio.errors import QueueError
-from gonio.queue import Entry, load, next_position, queue_path, render
+from gonio.queue import Entry, identify, load, next_position, queue_path, render
 from gonio.store import open_run
 
 SHORT = {"name": "short", "grid": [{"side": "transmission", "theta_i_deg": [0.0],
@@ -179,6 +184,161 @@ def test_a_damaged_queue_file_is_one_error_naming_the_entry_and_field(bench):
         f"gonio queue: error: {queue_path(out)}: [entry[2]] state: must be one of pending, "
         f"running, completed, failed, aborted; got 'done'")
     assert [e["state"] for e in entries(out)] == ["pending", "done"]  # nothing ran
+
+
+def edit_by_hand(out, change) -> None:
+    """Rewrite queue.toml's text as change(blocks) says (blocks: its [[entry]] tables' text,
+    in order), holding the queue's state lock as `gonio queue add` would: never while the
+    runner writes."""
+    with (out / "queue" / "state.lock").open("a+") as lock:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        head, *blocks = queue_path(out).read_text().split("\n[[entry]]\n")
+        queue_path(out).write_text("\n[[entry]]\n".join([head, *change(blocks)]))
+
+
+def run_dirs(out) -> set:
+    return {p.name for p in out.iterdir() if (p / "meta.json").exists()}
+
+
+def edited_while_running(root, out, change) -> tuple[str, int, int, str]:
+    """Entry 1 (short) run; long and short queued after it; `gonio queue run` stopped
+    (SIGSTOP) once entry 2 stored 3 readings, queue.toml edited by change, the runner let go
+    to its end: (entry 1's run, long's and short's planned readings, the runner's stderr)."""
+    assert queue("add", root / "short.toml", "--sim", "--out", out).returncode == 0
+    assert queue("run", "--out", out, "--no-plot", "--no-progress").returncode == 0
+    first_run = entries(out)[0]["run"]
+    assert queue("add", root / "long.toml", root / "short.toml", "--sim",
+                 "--out", out).returncode == 0
+    long_n, short_n = (e["planned"] for e in entries(out)[1:])
+    runner = start_gonio("queue", "run", "--out", out, "--no-plot", "--no-progress")
+    try:
+        def second_run_measuring():
+            found = [out / name / "readings.jsonl" for name in run_dirs(out) - {first_run}]
+            return runner.poll() is not None or any(
+                p.read_bytes().count(b"\n") >= 3 for p in found)
+
+        wait_until(second_run_measuring, 60, "the second entry's readings")
+        runner.send_signal(signal.SIGSTOP)
+        edit_by_hand(out, change)
+        runner.send_signal(signal.SIGCONT)
+        _, stderr = runner.communicate(timeout=120)
+    finally:
+        runner.kill()
+    assert runner.returncode == 0, stderr
+    return first_run, long_n, short_n, stderr
+
+
+def test_deleting_a_finished_entry_while_the_queue_runs_completes_no_unmeasured_plan(bench):
+    """The attack: entry 1 done, the queue running entry 2, entry 1 deleted from queue.toml.
+    Entry 2 is recorded on itself, not on entry 3, which the queue then measures into a run
+    of its own."""
+    root, out = bench
+    first_run, long_n, short_n, _ = edited_while_running(root, out, lambda b: b[1:])
+    long_entry, short_entry = entries(out)
+    assert (long_entry["state"], short_entry["state"]) == ("completed", "completed")
+    assert len({first_run, long_entry["run"], short_entry["run"]}) == 3
+    assert_complete(out / long_entry["run"], long_n)
+    assert_complete(out / short_entry["run"], short_n)
+    assert open_run(out / short_entry["run"]).meta["plan_name"] == "short"
+
+
+def test_deleting_the_running_entry_records_its_outcome_nowhere_else(bench):
+    """The running entry itself deleted: its run ends completed in its directory, one line
+    says the queue recorded it nowhere, and the other entries are as they were, then run."""
+    root, out = bench
+    first_run, long_n, short_n, stderr = edited_while_running(
+        root, out, lambda b: [b[0], *b[2:]])
+    first, short_entry = entries(out)
+    assert first["run"] == first_run and short_entry["state"] == "completed"
+    (long_run,) = run_dirs(out) - {first_run, short_entry["run"]}
+    assert_complete(out / long_run, long_n)
+    assert_complete(out / short_entry["run"], short_n)
+    told = [line for line in stderr.splitlines() if "while it ran" in line]
+    assert len(told) == 1 and f"is recorded in {out / long_run} only" in told[0]
+
+
+@pytest.mark.parametrize("other", ["another entry's run", "a run of another plan"])
+def test_an_entry_pointed_at_another_run_is_not_completed(bench, other):
+    """The attack: a pending entry's `run` set by hand to a completed run that is not its own
+    (another entry's, of the same plan; or one `gonio scan` made of another plan). The queue
+    refuses it (one error line naming why) and measures nothing; the run is untouched, and
+    `queue list` says it is not the entry's."""
+    root, out = bench
+    if other == "another entry's run":
+        assert queue("add", root / "short.toml", "--sim", "--out", out).returncode == 0
+        assert queue("run", "--out", out, "--no-plot", "--no-progress").returncode == 0
+        taken = entries(out)[0]["run"]
+        second, reason = root / "short.toml", f"run {taken} is also the run of entry "
+    else:
+        made = gonio_cli("scan", root / "short.toml", "--sim", "--out", out, "--no-plot")
+        taken = completed_unretried(made).path.name
+        second = root / "long.toml"
+        reason = f"run {taken} was not measured from the entry's plan"
+    assert queue("add", second, "--sim", "--out", out).returncode == 0
+    before = (out / taken / "readings.jsonl").read_bytes()
+    edit_by_hand(out, lambda blocks: [*blocks[:-1], blocks[-1].replace(
+        'run = ""', f'run = "{taken}"')])
+    proc = queue("run", "--out", out, "--no-plot", "--no-progress")
+    assert proc.returncode == 2
+    assert reason in one_line_error(proc.stderr.split("\n", 1)[1])  # after "...: resuming"
+    recorded = entries(out)[-1]
+    assert recorded["state"] == "failed" and reason in recorded["reason"]
+    assert run_dirs(out) == {taken}
+    assert (out / taken / "readings.jsonl").read_bytes() == before
+    listed = queue("list", "--out", out)
+    assert listed.returncode == 1 and listed.stderr == ""
+    assert f"  (not this entry's run: {reason}" in listed.stdout.splitlines()[-1]
+
+
+def test_queue_list_names_what_it_cannot_read(bench):
+    """An entry missing a field, a run directory whose meta.json is no object, one whose
+    meta.json is not JSON: each is its line's note, the rest is listed, exit 1; a queue file
+    that is not TOML is one error line."""
+    root, out = bench
+    assert queue("add", root / "short.toml", root / "short.toml", root / "short.toml",
+                 root / "short.toml", "--sim", "--out", out).returncode == 0
+    for name, meta in (("run-a", "[1]"), ("run-b", "{not json")):
+        (out / name).mkdir()
+        for file in ("meta.json", "plan.json", "config.json"):
+            (out / name / file).write_text("{}")
+        (out / name / "readings.jsonl").write_text("")
+        (out / name / "meta.json").write_text(meta)
+    edit_by_hand(out, lambda blocks: [
+        blocks[0].replace('run = ""', 'run = "run-a"'),
+        blocks[1].replace("sim = true\n", ""),
+        blocks[2].replace('run = ""', 'run = "run-b"'), blocks[3]])
+    listed = queue("list", "--out", out)
+    assert listed.returncode == 1 and listed.stderr == ""
+    lines = listed.stdout.splitlines()
+    assert len(lines) == 4
+    assert lines[0].startswith("1  ") and "(cannot read: " in lines[0] and "run-a" in lines[0]
+    assert lines[1] == f"2  cannot read: {queue_path(out)}: [entry[2]]: missing required key " \
+                       f"'sim'"
+    assert lines[2].startswith("3  ") and "damaged run directory" in lines[2]
+    assert lines[3].startswith("4  ") and lines[3].endswith("  pending  -  0/3")
+    queue_path(out).write_text("[[entry]\n")
+    broken = queue("list", "--out", out)
+    assert broken.returncode == 2
+    assert "not a valid queue file" in one_line_error(broken.stderr)
+
+
+def test_a_queue_file_without_ids_gets_them_at_its_first_change(tmp_path):
+    """A queue.toml written without ids (as by an earlier gonio) reads as it is, and its
+    first change gives every entry an id of its own, kept from then on."""
+    written = [ENTRY, Entry(**{**ENTRY.__dict__, "plan": "queue/02/b.toml"})]
+    queue_path(tmp_path).write_text(render(written).replace('id = ""\n', ""))
+    assert [e.id for e in load(tmp_path)] == ["", ""]
+    given = identify(tmp_path)
+    assert all(e.id for e in given) and len({e.id for e in given}) == 2
+    assert load(tmp_path) == given == identify(tmp_path)
+    assert [Entry(**{**e.__dict__, "id": ""}) for e in given] == written
+
+
+def test_two_entries_with_one_id_are_one_error(tmp_path):
+    twice = [Entry(**{**ENTRY.__dict__, "id": "ab12"})] * 2
+    queue_path(tmp_path).write_text(render(twice))
+    with pytest.raises(QueueError, match=r"\[entry\[2\]\] id: 'ab12' is also entry\[1\]'s"):
+        load(tmp_path)
 
 
 ENTRY = Entry(plan="queue/01/a.toml", source="/p/a.toml", instrument="/p/i.toml", sim=True,

@@ -1,9 +1,10 @@
 """An emulated scan builds the multiple-scattering tables its plan needs before the first move,
 never inside the meter's reply: on a cold cache with a progress line and none on a warm one,
 no plane built while the readings are taken (the session's ms_tables record), the plan's
-estimate naming the planes it walks, and a cold run killed and resumed on another cold cache
-bit for bit the uninterrupted run. Real ptys, `gonio scan --sim --time-scale inf`, tables of
-few walks in a cache directory of the test's own."""
+estimate naming the planes it walks, a cold run killed and resumed on another cold cache
+bit for bit the uninterrupted run, and tables altered on disk walked again (one warning).
+Real ptys, `gonio scan --sim --time-scale inf`, tables of few walks in a cache directory of
+the test's own."""
 
 import numpy as np
 from gonio_testkit import (
@@ -120,3 +121,29 @@ def test_a_sim_sample_that_is_no_table_is_one_error_line_and_no_run(tmp_path):
     assert [line for line in proc.stderr.splitlines() if line.strip()] == [
         line for line in proc.stderr.splitlines() if "[sim.sample]: must be a table, got 3" in line]
     assert not any((tmp_path / "runs").glob("*"))
+
+
+def test_tables_altered_on_disk_are_walked_again_and_the_readings_are_the_clean_ones(
+        tmp_path, monkeypatch):
+    """The attack: every table file's values times 100 (its digest kept) between two scans.
+    The second scan says so in one warning line, walks the planes again and measures what
+    the first one did."""
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    plan = plan_file(tmp_path, 0.3319)
+    clean = completed_unretried(scan(plan, tmp_path / "clean"))
+    files = sorted((tmp_path / "cache" / "ms-planes").glob("*.npz"))
+    assert len(files) == tables_of(clean)["planes"] > 1
+    for path in files:
+        with np.load(path) as archive:
+            plane, digest = archive["plane"], archive["digest"]
+        with path.open("wb") as handle:
+            np.savez(handle, plane=100.0 * plane, digest=digest)
+    proc = scan(plan, tmp_path / "altered")
+    run = completed_unretried(proc)
+    warned = [line for line in proc.stderr.splitlines() if "cache" in line]
+    assert len(warned) == 1 and warned[0].startswith("gonio: warning: gonio's table cache in ")
+    assert "does not match its digest" in warned[0]
+    assert tables_of(run)["walked"] == tables_of(run)["planes"] == len(files)
+    a, b = clean.readings(), run.readings()
+    for name in ("index", "kind", "sample_deg", "arm_deg", "power_w", "range_w", "flags"):
+        assert np.array_equal(a[name], b[name]), name

@@ -4,8 +4,12 @@ A plane's build is a fixed function of the lobe's parameters, its walks and seed
 that walks it, so a file named by a digest of all of these holds it for every later process:
 an emulated bench with 2^24 walks per table pays minutes once, then milliseconds. Where:
 $GONIO_CACHE_DIR, else $XDG_CACHE_HOME/gonio, else ~/.cache/gonio (GONIO_CACHE_DIR=off: none).
-A file that cannot be read back whole (truncated, corrupt, another shape) is walked again and
-replaced; one that cannot be written (read-only, disk full) leaves the build in memory only.
+Each file carries a digest of its plane and of what the plane was built from (the lobe's
+description, the code digest and the plane's address): a file that does not match it
+(altered, truncated, corrupt, another shape) is walked again and replaced, with one warning
+per folder. A cache folder another user could write into (model.cache_folder) is not used,
+with one warning; neither is one that refuses the file (read-only, disk full): the build
+stays in memory only.
 """
 
 from __future__ import annotations
@@ -14,11 +18,14 @@ import hashlib
 import json
 import os
 import tempfile
+import warnings
 from collections.abc import Mapping
-from functools import lru_cache
+from functools import cache, lru_cache
 from pathlib import Path
 
 import numpy as np
+
+from model.cache_folder import made_private, untrusted, warn_untrusted
 
 #: The subdirectory of the cache directory that holds the planes.
 SUBDIR = "ms-planes"
@@ -67,38 +74,70 @@ class PlaneStore:
     plane)."""
 
     def __init__(self, description: Mapping[str, object], root: Path):
-        text = json.dumps({**description, "code": code_digest()}, sort_keys=True)
-        self.key = hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
+        self.built_from = json.dumps({**description, "code": code_digest()}, sort_keys=True)
+        self.key = hashlib.blake2b(self.built_from.encode(), digest_size=16).hexdigest()
+        self.root = root
         self.folder = root / SUBDIR
+        self._private = False  # root and folder exist and are this user's alone
+        self._refused = False  # one of them is not: the store is not used
 
     def path(self, address: tuple[int, ...]) -> Path:
         """The file of one plane: side, incidence node, plane, hemisphere."""
-        return self.folder / f"{self.key}-{'-'.join(map(str, address))}.npy"
+        return self.folder / f"{self.key}-{'-'.join(map(str, address))}.npz"
+
+    def digest(self, address: tuple[int, ...], plane: np.ndarray) -> str:
+        """What a plane's file carries: a digest of what the plane was built from (the lobe's
+        description, the code digest, its address and shape) and of its values."""
+        digest = hashlib.blake2b(digest_size=32)
+        digest.update(json.dumps([self.built_from, address, plane.shape]).encode())
+        digest.update(np.ascontiguousarray(plane, dtype=np.float64).tobytes())
+        return digest.hexdigest()
 
     def load(self, address: tuple[int, ...], shape: tuple[int, ...]) -> np.ndarray | None:
-        """The stored plane if it is whole (a float64 array of this shape, finite), else None:
-        whatever a damaged file makes numpy raise or return is a miss."""
+        """The stored plane if its file matches its digest and shape, else None (a missing
+        file silently, a damaged or altered one with one warning per folder): whatever a
+        damaged file makes numpy raise or return is a miss."""
+        if not self._usable(create=False):
+            return None
+        path = self.path(address)
         try:
-            stored = np.load(self.path(address), allow_pickle=False)
+            stored = self._read(path, address)
+        except FileNotFoundError:
+            return None
         except Exception:  # noqa: BLE001 - any unreadable file is a miss; the plane is walked
-            return None
-        if not isinstance(stored, np.ndarray):  # a zip archive (np.load gives an NpzFile)
-            stored.close()
-            return None
-        if stored.dtype != np.float64 or stored.shape != shape or not np.all(np.isfinite(stored)):
+            stored = None
+        if stored is None or stored.shape != shape:
+            _warn_mismatch(str(self.folder))
             return None
         return stored
 
+    def _read(self, path: Path, address: tuple[int, ...]) -> np.ndarray | None:
+        """The plane in a file if the file holds a plane and its matching digest, else None."""
+        archive = np.load(path, allow_pickle=False)
+        if not isinstance(archive, np.lib.npyio.NpzFile):  # a bare array: no digest
+            return None
+        with archive:
+            if sorted(archive.files) != ["digest", "plane"]:
+                return None
+            plane, digest = archive["plane"], archive["digest"]
+        if plane.dtype != np.float64 or digest.shape != () \
+                or str(digest) != self.digest(address, plane):
+            return None
+        return plane
+
     def save(self, address: tuple[int, ...], plane: np.ndarray) -> bool:
-        """Write a plane (a temporary file renamed into place, so a reader sees the whole file
-        or none); False, leaving nothing behind, when the disk refuses it."""
+        """Write a plane and its digest (a temporary file renamed into place, so a reader sees
+        the whole file or none); False, leaving nothing behind, when the folder is not this
+        user's alone or the disk refuses the file."""
         partial = None
+        plane = np.ascontiguousarray(plane, dtype=np.float64)
         try:
-            self.folder.mkdir(parents=True, exist_ok=True)
+            if not self._usable(create=True):
+                return False
             with tempfile.NamedTemporaryFile(dir=self.folder, suffix=".partial",
                                              delete=False) as handle:
                 partial = Path(handle.name)
-                np.save(handle, np.ascontiguousarray(plane, dtype=np.float64))
+                np.savez(handle, plane=plane, digest=np.array(self.digest(address, plane)))
             os.replace(partial, self.path(address))
             return True
         except OSError:
@@ -106,6 +145,33 @@ class PlaneStore:
         finally:  # also on an interrupt: no partial file is left (after the rename there is none)
             if partial is not None:
                 partial.unlink(missing_ok=True)
+
+    def _usable(self, create: bool) -> bool:
+        """Whether root and its planes' folder are this user's alone (created 0700 first when
+        `create`; missing ones are fine to read from: they hold nothing). The first folder
+        found wanting is warned about once and the store is not used again."""
+        if self._private:
+            return True
+        if self._refused:
+            return False
+        if create:
+            self.root.parent.mkdir(parents=True, exist_ok=True)
+        for folder in (self.root, self.folder):
+            reason = made_private(folder) if create else untrusted(folder)
+            if reason is not None:
+                warn_untrusted("gonio's table cache", str(folder), reason)
+                self._refused = True
+                return False
+        self._private = self.folder.is_dir()
+        return True
+
+
+@cache
+def _warn_mismatch(folder: str) -> None:
+    """One warning per folder, however many of its planes do not match their digests."""
+    warnings.warn(f"gonio's table cache in {folder}: a plane does not match its digest "
+                  "(altered or damaged): walked again and replaced, as is any other such plane "
+                  "there", RuntimeWarning, stacklevel=3)
 
 
 def plane_store(description: Mapping[str, object]) -> PlaneStore | None:
