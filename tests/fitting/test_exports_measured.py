@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray
+from cf_kit import cf_counts
 from zemax_cells import assert_measured_cells, table_tis
 
 from calibration.exports import ExportRequest
@@ -34,7 +35,6 @@ from gonio.record import record_lines
 from gonio.store import READING_DTYPE
 from gonio_cli.main import main
 
-TABLES = Path(__file__).parent / "cf_tables"
 RECORD = {"run": "synthetic", "started_utc": "2026-12-02T00:20:05.757+00:00",
           "wavelength_nm": 632.8, "sample": {"id": "GG-7", "eta": 1.51}}
 ALPHA = 0.394
@@ -117,21 +117,6 @@ def test_plain_csv_columns_assumptions_and_errors(glass, tmp_path, capsys):
     path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,bsdf,sigma\n0,0,10,0,x,1\n")
     with pytest.raises(CalibrationError, match=r"plain.csv: data row 1: column bsdf"):
         read_measured(path, ImportOptions(eta=1.5))
-
-
-def cf_counts(path: Path) -> dict:
-    """The CF checker's error and warning counts for a file, offline."""
-    from cfchecker.cfchecks import CFChecker
-
-    checker = CFChecker(cfStandardNamesXML=str(TABLES / "cf-standard-name-table.xml"),
-                        cfAreaTypesXML=str(TABLES / "area-type-table.xml"),
-                        cfRegionNamesXML=str(TABLES / "standardized-region-list.xml"),
-                        silent=True, version="1.8")
-    results = checker.checker(str(path))
-    said = [(name, r[c]) for name, r in [("global", results["global"]),
-                                         *results["variables"].items()]
-            for c in ("FATAL", "ERROR", "WARN") if r[c]]
-    return {"counts": checker.get_total_counts(), "said": said}
 
 
 def test_reduced_netcdf_is_cf_and_reads_back(glass, tmp_path):
