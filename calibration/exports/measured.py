@@ -87,10 +87,10 @@ def fact_lines(data: ReducedData, eta: float | None = None) -> list[str]:
 
 def shared_error_lines(data: ReducedData) -> list[str]:
     """Comment lines that state the errors the points share (ReducedData.shared_rel): which
-    budget components they are, and per shared error the points it is common to and its size
-    relative to the values; no line for data without shared errors. Plain text (not `key:
-    JSON`), so `--import` passes over them."""
-    shared = data.shared_rel
+    budget components they come from, and per shared error the points it is common to and its
+    size relative to the values; none for data whose points share no error. Plain text (not
+    `key: JSON`), so `--import` passes over them."""
+    shared = data.shared_rel[:, np.any(data.shared_rel != 0, axis=0)]
     if shared.shape[1] == 0:
         return []
     names = (data.meta.get("budget") or {}).get("shared") or ["(unnamed)"]
@@ -100,11 +100,10 @@ def shared_error_lines(data: ReducedData) -> list[str]:
              "NetCDF export holds S's correlation between points "
              "(bsdf_shared_error_correlation)"]
     for j, column in enumerate(shared.T, start=1):
-        at = np.flatnonzero(column)
-        size = np.abs(column[at]) if len(at) else np.zeros(1)
+        size = np.abs(column[column != 0])
         low, high = float(size.min()), float(size.max())
         span = f"{high:.3g}" if high - low <= 1e-12 * high else f"{low:.3g} to {high:.3g}"
-        lines.append(f"shared error {j}: common to {len(at)} of {len(column)} points, "
+        lines.append(f"shared error {j}: common to {len(size)} of {len(column)} points, "
                      f"relative size {span}")
     return lines
 

@@ -44,10 +44,13 @@ def reduced_netcdf(data: ReducedData, out: Path, record: Mapping[str, Any],
 
 def reduced_astm(data: ReducedData, out: Path, record: Mapping[str, Any],
                  request: ExportRequest, source: str = "") -> Written:
-    """The reduced data as ASTM E1392, one file per side; its header states the shared errors
-    (measured.shared_error_lines) after the record and the facts."""
-    lines = [*record_lines(record), *fact_lines(data), *shared_error_lines(data)]
-    return _astm_files(astm_tables(data, lines), out), []
+    """The reduced data as ASTM E1392, one file per side (the BTDF first); each header states
+    its points' shared errors (measured.shared_error_lines) after the record and the facts."""
+    lines = [*record_lines(record), *fact_lines(data)]
+    good = data.subset(data.valid)
+    sides = [good.subset(good.transmission == btdf) for btdf in (True, False)]
+    tables = [t for side in sides for t in astm_tables(side, [*lines, *shared_error_lines(side)])]
+    return _astm_files(tables, out), []
 
 
 def _with_fit(write: Callable[[ReducedData, FitResult, Path, str, list[str]], list[Path]]

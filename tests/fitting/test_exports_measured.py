@@ -143,6 +143,67 @@ def test_reduced_netcdf_is_cf_and_reads_back(glass, tmp_path):
     assert back.meta["eta"] == 1.51 and back.meta["quantity"].startswith("BSDF")
 
 
+def with_shared_errors(data):
+    """The data with two shared errors (a 1 % one common to all points, a signed one on the
+    transmission side), sigma holding them, and the budget naming them."""
+    n = len(data.bsdf)
+    shared = np.stack([np.full(n, 0.01), np.where(data.transmission, 0.02 * data.wo[:, 0], 0.0)],
+                      axis=1)
+    sigma = np.hypot(data.sigma, np.abs(data.bsdf) * np.linalg.norm(shared, axis=1))
+    meta = dict(data.meta, budget={"own": ["read"], "shared": ["beam", "angle_offset"]})
+    return replace(data, sigma=sigma, shared_rel=shared, meta=meta)
+
+
+def test_reduced_netcdf_splits_u_into_random_and_shared_and_reads_the_covariance_back(
+        glass, tmp_path):
+    data = with_shared_errors(glass[0])
+    path = write_reduced_netcdf(data, RECORD, tmp_path / "r.nc")
+    assert cf_counts(path)["said"] == []
+    with xarray.open_dataset(path) as ds:
+        random, shared = ds["bsdf_random_uncertainty"].values, ds["bsdf_shared_uncertainty"].values
+        corr = ds["bsdf_shared_error_correlation"].values
+        assert ds["bsdf"].attrs["unc_comps"] == ["bsdf_random_uncertainty",
+                                                 "bsdf_shared_uncertainty"]
+        assert ds["bsdf_shared_uncertainty"].attrs["err_corr_1_form"] == "err_corr_matrix"
+        assert ds["bsdf_standard_uncertainty"].attrs["coverage_probability"] == \
+            pytest.approx(0.6827, abs=1e-4)
+    np.testing.assert_allclose(np.hypot(random, shared), data.sigma, rtol=1e-12)
+    errors = np.abs(data.bsdf)[:, None] * data.shared_rel
+    np.testing.assert_allclose(corr * np.outer(shared, shared), errors @ errors.T, atol=1e-15)
+    # one point on each side: the transmission side's signed error makes them correlate less
+    # than the common 1 % alone would
+    back = read_reduced_netcdf(path)
+    got = np.abs(back.bsdf)[:, None] * back.shared_rel
+    np.testing.assert_allclose(got @ got.T, errors @ errors.T, rtol=1e-9, atol=1e-18)
+    plain = write_reduced_netcdf(glass[0], RECORD, tmp_path / "plain.nc")
+    with xarray.open_dataset(plain) as ds:
+        assert "bsdf_shared_error_correlation" not in ds.variables
+        np.testing.assert_array_equal(ds["bsdf_random_uncertainty"].values, glass[0].sigma)
+    assert read_reduced_netcdf(plain).shared_rel.shape == (len(glass[0].bsdf), 0)
+
+
+def test_csv_and_astm_headers_state_the_shared_errors(glass, tmp_path):
+    data = with_shared_errors(glass[0])
+    request = ExportRequest()
+    for fmt in ("csv", "astm"):
+        paths, _ = write_data(data, fmt, "reduced", tmp_path / f"s.{fmt}", RECORD, request)
+        for path in paths:
+            header = [ln for ln in path.read_text().splitlines() if ln.startswith("#")]
+            # the BRDF file's points share the common error only
+            count = 1 if path.name == "s-BRDF.astm" else 2
+            assert any(f"shared errors: {count}, from the components beam, angle_offset" in ln
+                       for ln in header), path.name
+            first = next(ln for ln in header if "shared error 1:" in ln)
+            # the ASTM files: one per side, the BTDF first (s.astm, s-BRDF.astm)
+            side = data.valid & (data.transmission == (path.name == "s.astm")) \
+                if fmt == "astm" else np.ones(len(data.bsdf), bool)
+            assert f"common to {int(side.sum())} of {int(side.sum())} points, relative size " \
+                   "0.01" in first, path.name
+    back = read_measured(tmp_path / "s.csv")
+    assert set(back.components) == {"read", "beam"} and back.meta["budget"]["shared"] == [
+        "beam", "angle_offset"]
+
+
 def test_raw_netcdf_is_cf_with_an_epoch(tmp_path):
     r = np.zeros(4, READING_DTYPE)
     r["index"] = np.arange(4)
