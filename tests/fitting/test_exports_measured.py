@@ -170,8 +170,7 @@ def test_reduced_netcdf_splits_u_into_random_and_shared_and_reads_the_covariance
     np.testing.assert_allclose(np.hypot(random, shared), data.sigma, rtol=1e-12)
     errors = np.abs(data.bsdf)[:, None] * data.shared_rel
     np.testing.assert_allclose(corr * np.outer(shared, shared), errors @ errors.T, atol=1e-15)
-    # one point on each side: the transmission side's signed error makes them correlate less
-    # than the common 1 % alone would
+    # read back as factors of the same shared covariance
     back = read_reduced_netcdf(path)
     got = np.abs(back.bsdf)[:, None] * back.shared_rel
     np.testing.assert_allclose(got @ got.T, errors @ errors.T, rtol=1e-9, atol=1e-18)
