@@ -4,16 +4,18 @@ descriptor, one event per stored reading in index order and, once the run has en
 
 Every document is built and validated by event-model's composers (its JSON schemas). The
 events' data keys are the readings' fields (gonio.store.READING_DTYPE); a NaN (an invalid
-reading's power, a dark reading's plan angles) is written as null, as JSON has no NaN. An
+reading's power, a dark reading's plan angles) is written as NaN, as the RunEngine's own
+documents carry it (Python's json), so that a reader that infers a column's type from the
+values (Tiled's TiledWriter) keeps a numeric field numeric. An
 event's `time` is wall time: t0_epoch + t_s, or for a run on the emulated bench's virtual clock
 (whose t_s is run time) one placed from its session's wall stamps, t_s staying in the data. uids are
-derived from the run's start, so exporting a run twice gives the same file.
+derived from the run's start, so exporting a run twice gives the same file, and a catalog that
+holds the run already refuses it a second time (Tiled: HTTP 409 Conflict).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import uuid
 from datetime import datetime
 from pathlib import Path
@@ -40,9 +42,8 @@ def data_keys() -> dict[str, dict[str, Any]]:
 
 
 def _plain(value: Any) -> Any:
-    """A readings value as JSON has it: a numpy scalar's Python value, NaN as None."""
-    value = value.item() if hasattr(value, "item") else value
-    return None if isinstance(value, float) and math.isnan(value) else value
+    """A readings value as Python has it: a numpy scalar's Python value (NaN stays NaN)."""
+    return value.item() if hasattr(value, "item") else value
 
 
 def _wall(stamp: str) -> float:
@@ -110,8 +111,9 @@ def documents(run: Run) -> list[tuple[str, dict[str, Any]]]:
 
 
 def write_jsonl(run: Run, out: Path) -> Path:
-    """The run's documents as JSON lines, one `["name", {document}]` pair a line."""
+    """The run's documents as JSON lines, one `["name", {document}]` pair a line; NaN as
+    Python's json writes it (`NaN`), which json.loads, suitcase-jsonl and Tiled read back."""
     with open(out, "w") as fh:
         for name, doc in documents(run):
-            fh.write(json.dumps([name, doc], allow_nan=False) + "\n")
+            fh.write(json.dumps([name, doc], allow_nan=True) + "\n")
     return out

@@ -3,6 +3,7 @@
 and `long_name`, text fields as flag variables (`flag_values` or `flag_masks` with
 `flag_meanings`), times in seconds since the run's start, and the global `title`, `history`,
 `source`, `Conventions`; the run's record (gonio.record.run_record) as further attributes.
+The reduced BSDF's uncertainty and error correlation follow calibration.exports.cf_uncertainty.
 `read_reduced_netcdf` reads the reduced file back."""
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.exports.cf_uncertainty import mark_interval, read_shared_rel, write_error_structure
 from calibration.exports.measured import columns, coverage_k, meta_facts, unit_vectors
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
@@ -154,6 +156,15 @@ def _run_time(var: Any, t0_epoch: float | None, virtual_clock: bool) -> None:
     var.calendar = "standard"
 
 
+def _stored_dtype(col: np.ndarray) -> np.dtype:
+    """The type a numeric field is written as: int32 for integers that fit (CF's strict
+    checkers take 64-bit integers as outside the classic data model), else its own."""
+    info = np.iinfo(np.int32)
+    if col.dtype.kind == "i" and (len(col) == 0 or info.min <= col.min() <= col.max() <= info.max):
+        return np.dtype(np.int32)
+    return col.dtype
+
+
 def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path,
                      t0_epoch: float | None = None, virtual_clock: bool = False) -> Path:
     """A run's readings (READING_DTYPE) as CF-1.8 NetCDF4, dimension `reading`; `t_s` as time
@@ -175,7 +186,7 @@ def write_raw_netcdf(readings: np.ndarray, record: Mapping[str, Any], out: Path,
                 var.flag_values = np.array([0, 1], dtype=np.int8)
                 var.flag_meanings = "no yes"
             else:
-                var = ds.createVariable(name, col.dtype, ("reading",))
+                var = ds.createVariable(name, _stored_dtype(col), ("reading",))
                 var[:] = col
                 var.long_name = long_name
                 if name == "t_s":
@@ -197,7 +208,8 @@ def write_reduced_netcdf(data: ReducedData, record: Mapping[str, Any], out: Path
             var[:] = cols[column]
             var.long_name = REDUCED_LONG_NAMES[column]
             var.units = "degree" if column.endswith("_deg") else "sr-1"
-        ds[REDUCED_NAMES["U"]].coverage_factor = coverage_k(data)
+        mark_interval(ds[REDUCED_NAMES["sigma"]], 1.0)
+        mark_interval(ds[REDUCED_NAMES["U"]], coverage_k(data))
         components = [c for c in cols if c.startswith("u_")]
         for name in components:
             var = ds.createVariable(name, "f8", ("point",))
@@ -221,9 +233,11 @@ def write_reduced_netcdf(data: ReducedData, record: Mapping[str, Any], out: Path
         solid_angle.assignValue(data.meta.get("aperture_sr") or math.nan)
         bsdf = ds["bsdf"]
         bsdf.coordinates = "theta_i phi_i theta_o phi_o wavelength"
-        uncertainties = [REDUCED_NAMES["sigma"], REDUCED_NAMES["U"], *components]
-        bsdf.ancillary_variables = " ".join([*uncertainties, "valid", "side", "flags",
-                                             "receiver_solid_angle"])
+        intervals = [REDUCED_NAMES["sigma"], REDUCED_NAMES["U"]]
+        bsdf.uncertainty_variables = " ".join(intervals)
+        structure = write_error_structure(ds, data, "bsdf")
+        bsdf.ancillary_variables = " ".join([*intervals, *components, *structure, "valid",
+                                             "side", "flags", "receiver_solid_angle"])
         _globals(ds, f"gonio run {record.get('run')}: reduced BSDF", record,
                  {f"gonio_{key}": value for key, value in meta_facts(data).items()})
     return out
@@ -265,6 +279,7 @@ def read_reduced_netcdf(path: str | Path) -> ReducedData:
             meta["wavelength_nm"] = wavelength
         components = {n[2:]: np.asarray(ds[n][:], dtype=np.float64) for n in ds.variables
                       if n.startswith("u_")}
+        shared_rel = read_shared_rel(ds, get["bsdf"])
         valid = _decoded(ds, "valid", "valid") if "valid" in ds.variables else None
         flags = _flag_words(ds["flags"]) if "flags" in ds.variables else None
     wi = unit_vectors(get["theta_i"], get["phi_i"])
@@ -272,7 +287,7 @@ def read_reduced_netcdf(path: str | Path) -> ReducedData:
     n = len(wi)
     return ReducedData(wi, wo, get["bsdf"], get["bsdf_standard_uncertainty"],
                        np.ones(n, bool) if valid is None else valid, wo[:, 2] < 0, meta,
-                       flags=flags, components=components)
+                       shared_rel, flags=flags, components=components)
 
 
 def _decoded(ds: Any, name: str, meaning: str) -> np.ndarray:

@@ -85,14 +85,38 @@ def fact_lines(data: ReducedData, eta: float | None = None) -> list[str]:
     return record_lines(facts)
 
 
+def shared_error_lines(data: ReducedData) -> list[str]:
+    """Comment lines that state the errors the points share (ReducedData.shared_rel): which
+    budget components they come from, and per shared error the points it is common to and its
+    size relative to the values; none for data whose points share no error. Plain text (not
+    `key: JSON`), so `--import` passes over them."""
+    shared = data.shared_rel[:, np.any(data.shared_rel != 0, axis=0)]
+    if shared.shape[1] == 0:
+        return []
+    names = (data.meta.get("budget") or {}).get("shared") or ["(unnamed)"]
+    lines = [f"shared errors: {shared.shape[1]}, from the components {', '.join(names)}; "
+             "each is one error common to several points (the values carry S z, z ~ "
+             "N(0, 1) each), the rest of u (sigma) is each point's own and independent; the "
+             "NetCDF export holds S's correlation between points "
+             "(bsdf_shared_error_correlation)"]
+    for j, column in enumerate(shared.T, start=1):
+        size = np.abs(column[column != 0])
+        low, high = float(size.min()), float(size.max())
+        span = f"{high:.3g}" if high - low <= 1e-12 * high else f"{low:.3g} to {high:.3g}"
+        lines.append(f"shared error {j}: common to {len(size)} of {len(column)} points, "
+                     f"relative size {span}")
+    return lines
+
+
 def write_reduced_csv(data: ReducedData, out: Path, record: Sequence[str] = ()) -> Path:
     """CSV of columns(data) under `# key: JSON` lines: the run's record, then the reduction's
     facts (fact_lines), so that `--import` finds the record, the index and the noise model
-    again. Angles are written by angle_text, the rest by repr (every digit)."""
+    again; then the shared errors (shared_error_lines). Angles are written by angle_text, the
+    rest by repr (every digit)."""
     cols = columns(data)
     angle = [name in ANGLE_COLUMNS for name in cols]
     with open(out, "w", newline="") as fh:
-        for line in [*record, *fact_lines(data)]:
+        for line in [*record, *fact_lines(data), *shared_error_lines(data)]:
             fh.write(f"# {line}\n")
         writer = csv.writer(fh)
         writer.writerow(cols)

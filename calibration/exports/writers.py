@@ -12,7 +12,7 @@ from typing import Any
 
 from calibration.exports.astm import AstmTable, astm_tables, side_paths, write_astm
 from calibration.exports.cf import write_reduced_netcdf
-from calibration.exports.measured import fact_lines, write_reduced_csv
+from calibration.exports.measured import fact_lines, shared_error_lines, write_reduced_csv
 from calibration.exports.model import (
     astm_model_tables,
     fit_for_export,
@@ -44,8 +44,13 @@ def reduced_netcdf(data: ReducedData, out: Path, record: Mapping[str, Any],
 
 def reduced_astm(data: ReducedData, out: Path, record: Mapping[str, Any],
                  request: ExportRequest, source: str = "") -> Written:
-    """The reduced data as ASTM E1392, one file per side."""
-    return _astm_files(astm_tables(data, [*record_lines(record), *fact_lines(data)]), out), []
+    """The reduced data as ASTM E1392, one file per side (the BTDF first); each header states
+    its points' shared errors (measured.shared_error_lines) after the record and the facts."""
+    lines = [*record_lines(record), *fact_lines(data)]
+    good = data.subset(data.valid)
+    sides = [good.subset(good.transmission == btdf) for btdf in (True, False)]
+    tables = [t for side in sides for t in astm_tables(side, [*lines, *shared_error_lines(side)])]
+    return _astm_files(tables, out), []
 
 
 def _with_fit(write: Callable[[ReducedData, FitResult, Path, str, list[str]], list[Path]]

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray
+from cf_kit import cf_counts
 from zemax_cells import assert_measured_cells, table_tis
 
 from calibration.exports import ExportRequest
@@ -34,7 +35,6 @@ from gonio.record import record_lines
 from gonio.store import READING_DTYPE
 from gonio_cli.main import main
 
-TABLES = Path(__file__).parent / "cf_tables"
 RECORD = {"run": "synthetic", "started_utc": "2026-12-02T00:20:05.757+00:00",
           "wavelength_nm": 632.8, "sample": {"id": "GG-7", "eta": 1.51}}
 ALPHA = 0.394
@@ -119,21 +119,6 @@ def test_plain_csv_columns_assumptions_and_errors(glass, tmp_path, capsys):
         read_measured(path, ImportOptions(eta=1.5))
 
 
-def cf_counts(path: Path) -> dict:
-    """The CF checker's error and warning counts for a file, offline."""
-    from cfchecker.cfchecks import CFChecker
-
-    checker = CFChecker(cfStandardNamesXML=str(TABLES / "cf-standard-name-table.xml"),
-                        cfAreaTypesXML=str(TABLES / "area-type-table.xml"),
-                        cfRegionNamesXML=str(TABLES / "standardized-region-list.xml"),
-                        silent=True, version="1.8")
-    results = checker.checker(str(path))
-    said = [(name, r[c]) for name, r in [("global", results["global"]),
-                                         *results["variables"].items()]
-            for c in ("FATAL", "ERROR", "WARN") if r[c]]
-    return {"counts": checker.get_total_counts(), "said": said}
-
-
 def test_reduced_netcdf_is_cf_and_reads_back(glass, tmp_path):
     data, _ = glass
     data = replace(data, shared_rel=np.full((len(data.bsdf), 1), 1e-3))
@@ -156,6 +141,66 @@ def test_reduced_netcdf_is_cf_and_reads_back(glass, tmp_path):
     np.testing.assert_array_equal(back.valid, data.valid)
     np.testing.assert_array_equal(back.flags, data.flags)
     assert back.meta["eta"] == 1.51 and back.meta["quantity"].startswith("BSDF")
+
+
+def with_shared_errors(data):
+    """The data with two shared errors (a 1 % one common to all points, a signed one on the
+    transmission side), sigma holding them, and the budget naming them."""
+    n = len(data.bsdf)
+    shared = np.stack([np.full(n, 0.01), np.where(data.transmission, 0.02 * data.wo[:, 0], 0.0)],
+                      axis=1)
+    sigma = np.hypot(data.sigma, np.abs(data.bsdf) * np.linalg.norm(shared, axis=1))
+    meta = dict(data.meta, budget={"own": ["read"], "shared": ["beam", "angle_offset"]})
+    return replace(data, sigma=sigma, shared_rel=shared, meta=meta)
+
+
+def test_reduced_netcdf_splits_u_into_random_and_shared_and_reads_the_covariance_back(
+        glass, tmp_path):
+    data = with_shared_errors(glass[0])
+    path = write_reduced_netcdf(data, RECORD, tmp_path / "r.nc")
+    assert cf_counts(path)["said"] == []
+    with xarray.open_dataset(path) as ds:
+        random, shared = ds["bsdf_random_uncertainty"].values, ds["bsdf_shared_uncertainty"].values
+        corr = ds["bsdf_shared_error_correlation"].values
+        assert ds["bsdf"].attrs["unc_comps"] == ["bsdf_random_uncertainty",
+                                                 "bsdf_shared_uncertainty"]
+        assert ds["bsdf_shared_uncertainty"].attrs["err_corr_1_form"] == "err_corr_matrix"
+        assert ds["bsdf_standard_uncertainty"].attrs["coverage_probability"] == \
+            pytest.approx(0.6827, abs=1e-4)
+    np.testing.assert_allclose(np.hypot(random, shared), data.sigma, rtol=1e-12)
+    errors = np.abs(data.bsdf)[:, None] * data.shared_rel
+    np.testing.assert_allclose(corr * np.outer(shared, shared), errors @ errors.T, atol=1e-15)
+    # read back as factors of the same shared covariance
+    back = read_reduced_netcdf(path)
+    got = np.abs(back.bsdf)[:, None] * back.shared_rel
+    np.testing.assert_allclose(got @ got.T, errors @ errors.T, rtol=1e-9, atol=1e-18)
+    plain = write_reduced_netcdf(glass[0], RECORD, tmp_path / "plain.nc")
+    with xarray.open_dataset(plain) as ds:
+        assert "bsdf_shared_error_correlation" not in ds.variables
+        np.testing.assert_array_equal(ds["bsdf_random_uncertainty"].values, glass[0].sigma)
+    assert read_reduced_netcdf(plain).shared_rel.shape == (len(glass[0].bsdf), 0)
+
+
+def test_csv_and_astm_headers_state_the_shared_errors(glass, tmp_path):
+    data = with_shared_errors(glass[0])
+    request = ExportRequest()
+    for fmt in ("csv", "astm"):
+        paths, _ = write_data(data, fmt, "reduced", tmp_path / f"s.{fmt}", RECORD, request)
+        for path in paths:
+            header = [ln for ln in path.read_text().splitlines() if ln.startswith("#")]
+            # the BRDF file's points share the common error only
+            count = 1 if path.name == "s-BRDF.astm" else 2
+            assert any(f"shared errors: {count}, from the components beam, angle_offset" in ln
+                       for ln in header), path.name
+            first = next(ln for ln in header if "shared error 1:" in ln)
+            # the ASTM files: one per side, the BTDF first (s.astm, s-BRDF.astm)
+            side = data.valid & (data.transmission == (path.name == "s.astm")) \
+                if fmt == "astm" else np.ones(len(data.bsdf), bool)
+            assert f"common to {int(side.sum())} of {int(side.sum())} points, relative size " \
+                   "0.01" in first, path.name
+    back = read_measured(tmp_path / "s.csv")
+    assert set(back.components) == {"read", "beam"} and back.meta["budget"]["shared"] == [
+        "beam", "angle_offset"]
 
 
 def test_raw_netcdf_is_cf_with_an_epoch(tmp_path):
