@@ -21,7 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.astm import side_paths, sides_of
-from calibration.exports.mitsuba import material_parameters, write_mitsuba
+from calibration.exports.mitsuba import (
+    PLUGIN_TABLES,
+    PLUGIN_TYPE,
+    PLUGIN_USE,
+    material_parameters,
+    plugin_material,
+    write_mitsuba,
+    write_plugin_beside,
+)
 from calibration.exports.zemax import tabulate, write_zemax
 from calibration.fit import FitOptions, FitResult, fit
 from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
@@ -98,10 +106,17 @@ def measured_zemax_files(data: ReducedData, result: FitResult, out_path: str | P
             for side, path in zip(sides, side_paths(out_path, sides), strict=True)]
 
 
-def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
-                 record: Sequence[str] = ()) -> Path:
+def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
+                  record: Sequence[str] = (), single_scattering: bool = False
+                  ) -> tuple[list[Path], list[str]]:
     """The fitted material as a Mitsuba 3 scene fragment (`record`: the run's record lines, as
-    comments)."""
+    comments), and the notes to say: a fit with multiple scattering as the gonio_multiscatter
+    plugin (calibration.exports.mitsuba_energy's tables; the plugin file beside the XML), or
+    with `single_scattering` as the single-scattering material with a line saying what it
+    drops; refused when the plugin's tables cannot give the model's R + T within
+    MAX_ALBEDO_ERROR (an anisotropic surface, or the material over the model at some angle)."""
+    from calibration.exports import mitsuba_energy as energy
+
     notes = fit_notes(result, source, record)
     if result.distribution == "phong":
         notes.append("Mitsuba 3 has no Phong distribution: written as Beckmann of the same alpha "
@@ -115,7 +130,32 @@ def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
                      "across the index change)")
     material = material_parameters(result.distribution, result.alpha, result.eta, result.scale,
                                    result.k)
-    return write_mitsuba(material, out_path, notes)
+    if result.walks is None:
+        return [write_mitsuba(material, out_path, notes)], []
+    if single_scattering:
+        said = energy.dropped_energy_line(result)
+        return [write_mitsuba(material, out_path, [*notes, said])], [said]
+    refusal = ("mitsuba: the fit has multiple scattering, which the material carries only as "
+               "the gonio_multiscatter plugin's tables of incidence angle")
+    advice = ("; pass --single-scattering to write the single-scattering material, which "
+              "drops it (the export says how much)")
+    alpha = np.atleast_1d(result.alpha)
+    if alpha[0] != alpha[-1]:
+        raise CalibrationError(f"{refusal}, which cannot hold an anisotropic surface{advice}")
+    added = energy.compensation(result)
+    if added.worst_error > energy.MAX_ALBEDO_ERROR:
+        raise CalibrationError(
+            f"{refusal}, and with them R + T is {100 * added.worst_error:.2g} % from the model's "
+            f"at {added.worst_at_deg:g} deg (more than {100 * energy.MAX_ALBEDO_ERROR:g} %)"
+            f"{advice}")
+    tables = dict(zip(PLUGIN_TABLES, (*added.added.outside, *added.added.inside), strict=True))
+    notes += [f"multiple scattering: the {PLUGIN_TYPE} plugin adds the fit's orders >= 2 (and "
+              "what Mitsuba's single scattering lacks of the fit's) as cosine lobes of tabulated albedo; R + T is within "
+              f"{100 * added.worst_error:.2g} % of the model's at every incidence (worst at "
+              f"{added.worst_at_deg:g} deg)", PLUGIN_USE]
+    path = write_mitsuba(plugin_material(material, result.eta, added.added.theta_deg, tables),
+                         out_path, notes)
+    return [path, write_plugin_beside(path)], []
 
 
 def result_from_json(fitted: dict, where: str) -> FitResult:
