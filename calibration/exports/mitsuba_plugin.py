@@ -31,11 +31,12 @@ def _numbers(props, name: str) -> list[float]:
     return [float(x) for x in str(props[name]).split(",")]
 
 
-class MultipleScatteringBSDF(mi.BSDF):
-    """The nested BSDF plus the tabulated cosine lobes (see the module docstring)."""
+class MultipleScatteringMethods:
+    """The nested BSDF plus the tabulated cosine lobes (see the module docstring): the methods
+    register() gives a mitsuba.BSDF subclass of the variant in use (nanobind takes one base)."""
 
     def __init__(self, props):
-        super().__init__(props)
+        mi.BSDF.__init__(self, props)
         if mi.is_polarized:
             raise RuntimeError(f"{PLUGIN_NAME}: polarized variants are not supported")
         nested = [props[k] for k in props.keys() if isinstance(props[k], mi.BSDF)]
@@ -129,7 +130,7 @@ class MultipleScatteringBSDF(mi.BSDF):
         bs, single_weight = self.single.sample(ctx, si, rescaled, sample2, active)
         # a sample the nested BSDF fails (weight 0, though its pdf may be positive) stays
         # failed: counting it at eval() / pdf() would add energy its sampler never reaches
-        single_ok = (bs.pdf > 0) & ~dr.all(single_weight == 0)
+        single_ok = (bs.pdf > 0) & dr.any(single_weight != 0)
         wo = dr.select(use_lobe, lobe_wo, bs.wo)
         value, pdf = self.eval_pdf(ctx, si, wo, active)
         transmitted = mi.Frame3f.cos_theta(si.wi) * mi.Frame3f.cos_theta(wo) < 0
@@ -149,5 +150,9 @@ class MultipleScatteringBSDF(mi.BSDF):
 
 
 def register() -> None:
-    """Make `gonio_multiscatter` known to Mitsuba's loader (after mitsuba.set_variant)."""
-    mi.register_bsdf(PLUGIN_NAME, lambda props: MultipleScatteringBSDF(props))
+    """Make `gonio_multiscatter` known to Mitsuba's loader in the variant in use (call it after
+    mitsuba.set_variant, once per variant)."""
+    methods = {name: value for name, value in vars(MultipleScatteringMethods).items()
+               if name == "__init__" or not name.startswith("__")}
+    bsdf = type("MultipleScatteringBSDF", (mi.BSDF,), methods)
+    mi.register_bsdf(PLUGIN_NAME, lambda props: bsdf(props))
