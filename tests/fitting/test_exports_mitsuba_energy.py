@@ -8,14 +8,13 @@ plugin cannot match the model the export refuses."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
-import math
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from mitsuba_albedo import VARIANT, load_material, mitsuba_albedo
 
 from calibration.exports import mitsuba_energy
 from calibration.exports.mitsuba import PLUGIN_TABLES
@@ -24,8 +23,6 @@ from calibration.fit import FitResult
 from calibration.values import CalibrationError
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is the `mitsuba` extra (in `test`)")
-dr = pytest.importorskip("drjit")
-VARIANT = "llvm_ad_rgb"
 #: Dr.Jit's LLVM backend aborts the process with too old an LLVM (docs/performance.md): tried
 #: in a child process first.
 LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); "
@@ -54,41 +51,6 @@ def llvm_mitsuba():
                     f"{probe.stderr.strip()[-200:]}")
 
 
-def load_plugin(directory):
-    """The plugin file the export wrote, imported and registered in VARIANT."""
-    spec = importlib.util.spec_from_file_location("gonio_mitsuba_plugin",
-                                                  directory / "gonio_mitsuba_plugin.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    mi.set_variant(VARIANT)
-    module.register()
-    return module
-
-
-def load_material(path):
-    """The exported BSDF as Mitsuba's own parser loads it."""
-    bsdf = ET.parse(path).getroot().find("bsdf")
-    bsdf.set("version", "3.0.0")
-    return mi.load_string(ET.tostring(bsdf, encoding="unicode"))
-
-
-def mitsuba_albedo(bsdf, theta_deg: float) -> tuple[float, float, float]:
-    """(R, T, standard error of R + T) of light arriving at theta_deg from outside, from
-    Mitsuba's bsdf.sample in importance mode (si.wi toward the light)."""
-    rng = np.random.default_rng(7)
-    u = rng.random((3, SAMPLES)).astype(np.float32)
-    t = math.radians(theta_deg)
-    si = dr.zeros(mi.SurfaceInteraction3f, SAMPLES)
-    si.wi = mi.Vector3f(math.sin(t), 0.0, math.cos(t))
-    si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
-    sample, weight = bsdf.sample(mi.BSDFContext(mi.TransportMode.Importance), si,
-                                 mi.Float(u[0]), mi.Point2f(mi.Float(u[1]), mi.Float(u[2])))
-    w = np.array(weight.x)
-    up = np.array(sample.wo)[2] > 0
-    return (float(np.mean(np.where(up, w, 0.0))), float(np.mean(np.where(up, 0.0, w))),
-            float(np.std(w) / math.sqrt(SAMPLES)))
-
-
 @pytest.fixture(scope="module", params=[(0.394, "separable"), (0.553, "correlated")],
                 ids=["ground-glass-separable", "acid-etched-correlated"])
 def exported(request, tmp_path_factory):
@@ -115,10 +77,9 @@ def test_export_writes_the_plugin_beside_the_xml(exported):
 @pytest.mark.conformance
 def test_mitsuba_albedo_of_the_export_matches_the_model(exported):
     result, paths, _, model = exported
-    load_plugin(paths[0].parent)
     bsdf = load_material(paths[0])
     for k, theta in enumerate(ANGLES):
-        r, t, err = mitsuba_albedo(bsdf, theta)
+        r, t, err = mitsuba_albedo(bsdf, theta, SAMPLES)
         r_model, t_model = model.outside[0][k], model.outside[1][k]
         total = r_model + t_model
         assert abs(r + t - total) + 4 * err < mitsuba_energy.MAX_ALBEDO_ERROR * total, theta
@@ -134,10 +95,9 @@ def test_single_scattering_export_states_what_it_drops(exported, tmp_path):
     assert [p.name for p in paths] == ["single.xml"] and len(notes) == 1
     assert notes[0] in paths[0].read_text()
     kept = [float(x) for x in notes[0].split("keeps ")[1].split(" of")[0].split(" / ")]
-    mi.set_variant(VARIANT)
     bsdf = load_material(paths[0])
     for k, theta in enumerate(ANGLES):
-        r, t, err = mitsuba_albedo(bsdf, theta)
+        r, t, err = mitsuba_albedo(bsdf, theta, SAMPLES)
         total = model.outside[0][k] + model.outside[1][k]
         assert (r + t) / total == pytest.approx(kept[k], abs=4 * err + 1e-3)
     assert kept[2] < 0.95  # the 60 deg light the plugin restores is not negligible
@@ -182,7 +142,7 @@ def test_a_material_the_plugin_cannot_match_is_refused(tmp_path, monkeypatch):
 @pytest.mark.conformance
 def test_mitsuba_renders_a_scene_with_the_export(exported):
     _, paths, _, _ = exported
-    load_plugin(paths[0].parent)
+    load_material(paths[0])  # sets the variant and registers the plugin
     scene = paths[0].with_name("scene.xml")
     scene.write_text(f"""<scene version="3.0.0">
   <include filename="{paths[0].name}"/>
