@@ -110,12 +110,10 @@ def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
                   record: Sequence[str] = (), single_scattering: bool = False
                   ) -> tuple[list[Path], list[str]]:
     """The fitted material as a Mitsuba 3 scene fragment (`record`: the run's record lines, as
-    comments), and the notes to say: a fit with multiple scattering as the gonio_multiscatter
-    plugin (calibration.exports.mitsuba_energy's tables; the plugin file beside the XML), or
-    with `single_scattering` as the single-scattering material with a line saying what it
-    drops; refused when the plugin's tables cannot give the model's R + T within
-    MAX_ALBEDO_ERROR (an anisotropic surface, or the material over the model at some angle)."""
-    from calibration.exports import mitsuba_energy as energy
+    comments) and the notes to say: a fit with multiple scattering as the gonio_multiscatter
+    plugin (the plugin file beside the XML; refused where it cannot match the model), or with
+    `single_scattering` as the single-scattering material with a line saying what it drops."""
+    from calibration.exports.mitsuba_energy import dropped_energy_line
 
     notes = fit_notes(result, source, record)
     if result.distribution == "phong":
@@ -133,8 +131,19 @@ def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
     if result.walks is None:
         return [write_mitsuba(material, out_path, notes)], []
     if single_scattering:
-        said = energy.dropped_energy_line(result)
+        said = dropped_energy_line(result)
         return [write_mitsuba(material, out_path, [*notes, said])], [said]
+    material, said = _multiple_scattering_material(result, material)
+    path = write_mitsuba(material, out_path, [*notes, *said])
+    return [path, write_plugin_beside(path)], []
+
+
+def _multiple_scattering_material(result: FitResult, single: dict
+                                  ) -> tuple[dict, list[str]]:
+    """The gonio_multiscatter material around `single` and the notes that say so; a
+    CalibrationError where its tables cannot hold the model's R + T within MAX_ALBEDO_ERROR."""
+    from calibration.exports import mitsuba_energy as energy
+
     refusal = ("mitsuba: the fit has multiple scattering, which the material carries only as "
                "the gonio_multiscatter plugin's tables of incidence angle")
     advice = ("; pass --single-scattering to write the single-scattering material, which "
@@ -142,20 +151,18 @@ def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
     alpha = np.atleast_1d(result.alpha)
     if alpha[0] != alpha[-1]:
         raise CalibrationError(f"{refusal}, which cannot hold an anisotropic surface{advice}")
-    added = energy.compensation(result)
-    if added.worst_error > energy.MAX_ALBEDO_ERROR:
+    comp = energy.compensation(result)
+    if comp.worst_error > energy.MAX_ALBEDO_ERROR:
         raise CalibrationError(
-            f"{refusal}, and with them R + T is {100 * added.worst_error:.2g} % from the model's "
-            f"at {added.worst_at_deg:g} deg (more than {100 * energy.MAX_ALBEDO_ERROR:g} %)"
-            f"{advice}")
-    tables = dict(zip(PLUGIN_TABLES, (*added.added.outside, *added.added.inside), strict=True))
-    notes += [f"multiple scattering: the {PLUGIN_TYPE} plugin adds the fit's orders >= 2 (and "
-              "what Mitsuba's single scattering lacks of the fit's) as cosine lobes of tabulated albedo; R + T is within "
-              f"{100 * added.worst_error:.2g} % of the model's at every incidence (worst at "
-              f"{added.worst_at_deg:g} deg)", PLUGIN_USE]
-    path = write_mitsuba(plugin_material(material, result.eta, added.added.theta_deg, tables),
-                         out_path, notes)
-    return [path, write_plugin_beside(path)], []
+            f"{refusal}, and with them R + T is {100 * comp.worst_error:.2g} % from the "
+            f"model's at {comp.worst_at_deg:g} deg (more than "
+            f"{100 * energy.MAX_ALBEDO_ERROR:g} %){advice}")
+    tables = dict(zip(PLUGIN_TABLES, (*comp.added.outside, *comp.added.inside), strict=True))
+    return (plugin_material(single, result.eta, comp.added.theta_deg, tables),
+            [f"multiple scattering: the {PLUGIN_TYPE} plugin adds the fit's orders >= 2 (and "
+             "what Mitsuba's single scattering lacks of the fit's) as cosine lobes of "
+             f"tabulated albedo; R + T is within {100 * comp.worst_error:.2g} % of the model's "
+             f"at every incidence (worst at {comp.worst_at_deg:g} deg)", PLUGIN_USE])
 
 
 def result_from_json(fitted: dict, where: str) -> FitResult:

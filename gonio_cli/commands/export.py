@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "material, which drops the multiple scattering (the share of R + T it "
                         "keeps is printed and noted in the file); without it such a fit is "
                         "written as the gonio_multiscatter plugin, or refused where that cannot "
-                        "match the model's R + T within 1 %")
+                        "match the model's R + T within 1 %%")
     add_fit_options(p)
     p.set_defaults(func=run, check_args=check_args, reads_run="run")
 
