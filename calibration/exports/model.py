@@ -21,7 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.astm import side_paths, sides_of
-from calibration.exports.mitsuba import material_parameters, write_mitsuba
+from calibration.exports.mitsuba import (
+    PLUGIN_TABLES,
+    PLUGIN_TYPE,
+    PLUGIN_USE,
+    material_parameters,
+    plugin_material,
+    write_mitsuba,
+    write_plugin_beside,
+)
 from calibration.exports.zemax import tabulate, write_zemax
 from calibration.fit import FitOptions, FitResult, fit
 from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
@@ -98,10 +106,15 @@ def measured_zemax_files(data: ReducedData, result: FitResult, out_path: str | P
             for side, path in zip(sides, side_paths(out_path, sides), strict=True)]
 
 
-def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
-                 record: Sequence[str] = ()) -> Path:
+def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
+                  record: Sequence[str] = (), single_scattering: bool = False
+                  ) -> tuple[list[Path], list[str]]:
     """The fitted material as a Mitsuba 3 scene fragment (`record`: the run's record lines, as
-    comments)."""
+    comments) and the notes to say: a fit with multiple scattering as the gonio_multiscatter
+    plugin (the plugin file beside the XML; refused where it cannot match the model), or with
+    `single_scattering` as the single-scattering material with a line saying what it drops."""
+    from calibration.exports.mitsuba_energy import dropped_energy_line
+
     notes = fit_notes(result, source, record)
     if result.distribution == "phong":
         notes.append("Mitsuba 3 has no Phong distribution: written as Beckmann of the same alpha "
@@ -115,7 +128,41 @@ def mitsuba_file(result: FitResult, out_path: str | Path, source: str = "",
                      "across the index change)")
     material = material_parameters(result.distribution, result.alpha, result.eta, result.scale,
                                    result.k)
-    return write_mitsuba(material, out_path, notes)
+    if result.walks is None:
+        return [write_mitsuba(material, out_path, notes)], []
+    if single_scattering:
+        said = dropped_energy_line(result)
+        return [write_mitsuba(material, out_path, [*notes, said])], [said]
+    material, said = _multiple_scattering_material(result, material)
+    path = write_mitsuba(material, out_path, [*notes, *said])
+    return [path, write_plugin_beside(path)], []
+
+
+def _multiple_scattering_material(result: FitResult, single: dict
+                                  ) -> tuple[dict, list[str]]:
+    """The gonio_multiscatter material around `single` and the notes that say so; a
+    CalibrationError where its tables cannot hold the model's R + T within MAX_ALBEDO_ERROR."""
+    from calibration.exports import mitsuba_energy as energy
+
+    refusal = ("mitsuba: the fit has multiple scattering, which the material carries only as "
+               "the gonio_multiscatter plugin's tables of incidence angle")
+    advice = ("; pass --single-scattering to write the single-scattering material, which "
+              "drops it (the export says how much)")
+    alpha = np.atleast_1d(result.alpha)
+    if alpha[0] != alpha[-1]:
+        raise CalibrationError(f"{refusal}, which cannot hold an anisotropic surface{advice}")
+    comp = energy.compensation(result)
+    if comp.worst_error > energy.MAX_ALBEDO_ERROR:
+        raise CalibrationError(
+            f"{refusal}, and with them R + T is {100 * comp.worst_error:.2g} % from the "
+            f"model's at {comp.worst_at_deg:g} deg (more than "
+            f"{100 * energy.MAX_ALBEDO_ERROR:g} %){advice}")
+    tables = dict(zip(PLUGIN_TABLES, (*comp.added.outside, *comp.added.inside), strict=True))
+    return (plugin_material(single, result.eta, comp.added.theta_deg, tables),
+            [f"multiple scattering: the {PLUGIN_TYPE} plugin adds the fit's orders >= 2 (and "
+             "what Mitsuba's single scattering lacks of the fit's) as cosine lobes of "
+             f"tabulated albedo; R + T is within {100 * comp.worst_error:.2g} % of the model's "
+             f"at every incidence (worst at {comp.worst_at_deg:g} deg)", PLUGIN_USE])
 
 
 def result_from_json(fitted: dict, where: str) -> FitResult:

@@ -22,3 +22,4 @@ class ExportRequest:
     shot_noise_w: float | None = None
     subtract_signature: bool = False
     angle_terms: bool = True  # False: reduce without the budget's angle terms (U says so)
+    single_scattering: bool = False  # Mitsuba: drop a fit's multiple scattering (and say so)

@@ -18,7 +18,7 @@ from calibration.exports.model import (
     fit_for_export,
     fit_notes,
     measured_zemax_files,
-    mitsuba_file,
+    mitsuba_files,
     zemax_files,
 )
 from calibration.exports.request import ExportRequest
@@ -60,11 +60,17 @@ def _with_fit(write: Callable[[ReducedData, FitResult, Path, str, list[str]], li
     out path, the source and the file's lines (the record, the facts, the fit's warnings)."""
     def write_fitted(data: ReducedData, out: Path, record: Mapping[str, Any],
                      request: ExportRequest, source: str = "") -> Written:
-        result, warnings = fit_for_export(data, request.fit_options, request.fit_file,
-                                          request.force)
-        lines = [*record_lines(record), *fact_lines(data, result.eta), *warnings]
+        result, warnings, lines = _fitted(data, record, request)
         return write(data, result, out, source, lines), warnings
     return write_fitted
+
+
+def _fitted(data: ReducedData, record: Mapping[str, Any], request: ExportRequest
+            ) -> tuple[FitResult, list[str], list[str]]:
+    """The fit to export (model.fit_for_export), its warnings and the file's lines (the record,
+    the facts, the warnings)."""
+    result, warnings = fit_for_export(data, request.fit_options, request.fit_file, request.force)
+    return result, warnings, [*record_lines(record), *fact_lines(data, result.eta), *warnings]
 
 
 def _astm_files(tables: Sequence[AstmTable], out: Path) -> list[Path]:
@@ -79,10 +85,13 @@ def _model_astm_files(data: ReducedData, result: FitResult, out: Path, source: s
     return _astm_files(astm_model_tables(data, result, fit_notes(result, source, lines)), out)
 
 
-def _mitsuba_files(data: ReducedData, result: FitResult, out: Path, source: str,
-                   lines: list[str]) -> list[Path]:
-    """The Mitsuba 3 material of the fitted model (model.mitsuba_file)."""
-    return [mitsuba_file(result, out, source, lines)]
+def model_mitsuba(data: ReducedData, out: Path, record: Mapping[str, Any],
+                  request: ExportRequest, source: str = "") -> Written:
+    """The Mitsuba 3 material of the fitted model (model.mitsuba_files; single-scattering only
+    with request.single_scattering, the line saying what it drops among the notes)."""
+    result, warnings, lines = _fitted(data, record, request)
+    paths, said = mitsuba_files(result, out, source, lines, request.single_scattering)
+    return paths, [*warnings, *said]
 
 
 #: Zemax of the data, with the model filling where there is none (model.measured_zemax_files).
@@ -90,4 +99,3 @@ reduced_zemax = _with_fit(measured_zemax_files)
 #: Zemax of the fitted model (model.zemax_files).
 model_zemax = _with_fit(zemax_files)
 model_astm = _with_fit(_model_astm_files)
-model_mitsuba = _with_fit(_mitsuba_files)

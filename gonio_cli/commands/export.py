@@ -40,6 +40,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true",
                    help="export a fit whose chi2/dof says it does not describe the data "
                         "(refused otherwise)")
+    p.add_argument("--single-scattering", action="store_true",
+                   help="mitsuba: write a multiple-scattering fit as the single-scattering "
+                        "material, which drops the multiple scattering (the share of R + T it "
+                        "keeps is printed and noted in the file); without it such a fit is "
+                        "written as the gonio_multiscatter plugin, or refused where that cannot "
+                        "match the model's R + T within 1 %%")
     add_fit_options(p)
     p.set_defaults(func=run, check_args=check_args, reads_run="run")
 
@@ -55,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     sim = emulator_sim(args.run) if args.diffraction else None
     request = ExportRequest(args.what, options_from(args, sim), args.fit, args.force,
                             args.calibration, args.shot_noise_w, args.subtract_signature,
-                            not args.no_angle_terms)
+                            not args.no_angle_terms, args.single_scattering)
     paths, notes = write(args.run, args.format, Path(args.out), request)
     if request.what != "raw":
         say_angle_terms(args)

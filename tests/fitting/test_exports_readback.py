@@ -8,7 +8,7 @@ import pytest
 from mitsuba_reader import read_mitsuba
 from zemax_cells import table_tis
 
-from calibration.exports.model import mitsuba_file, zemax_files
+from calibration.exports.model import mitsuba_files, zemax_files
 from calibration.exports.zemax import read_zemax
 from calibration.fit import FitOptions, fit
 from calibration.synthetic import synthesize
@@ -79,7 +79,7 @@ def test_zemax_reader_names_the_bad_line(ground_glass, tmp_path):
 
 def test_mitsuba_roughdielectric_reads_back(ground_glass, tmp_path):
     _, result = ground_glass
-    back = read_mitsuba(mitsuba_file(result, tmp_path / "glass.xml"))
+    back = read_mitsuba(mitsuba_files(result, tmp_path / "glass.xml")[0][0])
     assert back["type"] == "roughdielectric" and back["version"] == "3.0.0"
     assert back["params"]["distribution"] == "ggx"
     assert back["params"]["alpha"] == pytest.approx(result.alpha, rel=1e-8)
@@ -94,7 +94,7 @@ def test_mitsuba_phong_scaled_fit_becomes_beckmann_with_a_note(tmp_path):
     data.sigma *= 0.8
     result = fit(data, FitOptions(distributions=("phong",), fit_scale=True,
                                   fit_incidence_deg=None))
-    path = mitsuba_file(result, tmp_path / "phong.xml")
+    path = mitsuba_files(result, tmp_path / "phong.xml")[0][0]
     back = read_mitsuba(path)
     assert back["params"]["distribution"] == "beckmann"
     assert back["params"]["specular_reflectance"] == pytest.approx(result.scale, rel=1e-8)
@@ -109,7 +109,7 @@ def test_anisotropic_fit_exports(tmp_path):
     table = read_zemax(zemax_files(data, result, tmp_path / "a.bsdf")[0])
     assert table.symmetry == "Asymmetrical" and table.azimuth_deg[-1] == 350.0
     assert table_tis(table, 0, 0) == pytest.approx(table.tis[0, 0], rel=0.03)
-    params = read_mitsuba(mitsuba_file(result, tmp_path / "a.xml"))["params"]
+    params = read_mitsuba(mitsuba_files(result, tmp_path / "a.xml")[0][0])["params"]
     assert (params["alpha_u"], params["alpha_v"]) == (pytest.approx(ax), pytest.approx(ay))
     assert "alpha" not in params
 
@@ -130,6 +130,6 @@ def test_conductor_fit_and_roughconductor_export(tmp_path):
     value, sigma_alpha = result.param("alpha")
     assert result.distribution == "ggx" and result.k == 3.6
     assert abs(value - 0.2) < 3 * sigma_alpha and result.chi2_dof_heldout < 1.5
-    back = read_mitsuba(mitsuba_file(result, tmp_path / "metal.xml"))
+    back = read_mitsuba(mitsuba_files(result, tmp_path / "metal.xml")[0][0])
     assert back["type"] == "roughconductor"
     assert (back["params"]["eta"], back["params"]["k"]) == (pytest.approx(0.2), 3.6)

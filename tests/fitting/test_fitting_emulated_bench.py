@@ -213,11 +213,20 @@ def test_export_and_plot_cli(quick_run, tmp_path, capsys):
     assert fitted["chi2_dof_fit"] < 3.0 and fitted["multiple_scattering"]
     assert main(["export", str(quick_run), "--format", "mitsuba", "--fit",
                  str(tmp_path / "fit.json"), "--out", str(tmp_path / "glass.xml")]) == 0
+    assert capsys.readouterr().out.split() == [str(tmp_path / "glass.xml"),
+                                               str(tmp_path / "gonio_mitsuba_plugin.py")]
     material = read_mitsuba(tmp_path / "glass.xml")
-    assert material["type"] == "roughdielectric"
-    assert material["params"]["distribution"] == fitted["distribution"] == "ggx"
-    assert material["params"]["alpha"] == pytest.approx(alpha, rel=1e-8)
-    capsys.readouterr()
+    assert material["type"] == "gonio_multiscatter"  # the multiple scattering, carried
+    single = material["nested"]["single"]
+    assert single["type"] == "roughdielectric"
+    assert single["params"]["distribution"] == fitted["distribution"] == "ggx"
+    assert single["params"]["alpha"] == pytest.approx(alpha, rel=1e-8)
+    assert main(["export", str(quick_run), "--format", "mitsuba", "--fit",
+                 str(tmp_path / "fit.json"), "--single-scattering",
+                 "--out", str(tmp_path / "single.xml")]) == 0
+    said = capsys.readouterr().err
+    assert "single scattering only: the material drops the fit's multiple scattering" in said
+    assert read_mitsuba(tmp_path / "single.xml")["type"] == "roughdielectric"
     assert main(["export", str(quick_run), "--format", "zemax", "--fit",
                  str(tmp_path / "fit.json"), "--out", str(tmp_path / "glass.bsdf")]) == 0
     assert capsys.readouterr().out.split() == [str(tmp_path / "glass.bsdf"),
