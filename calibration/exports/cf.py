@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from calibration.exports.measured import columns, coverage_k, meta_facts, unit_vectors
+from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, opened
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 from gonio.errors import GonioError
@@ -244,6 +245,7 @@ def read_reduced_netcdf(path: str | Path) -> ReducedData:
     run's record as meta["record"]: the other attributes but CF_GLOBALS)."""
     netCDF4 = _netcdf4()
     path = Path(path)
+    opened(path).close()  # a regular file within the limits, before the library reads it
     try:
         ds = netCDF4.Dataset(path)
     except OSError as exc:
@@ -253,6 +255,7 @@ def read_reduced_netcdf(path: str | Path) -> ReducedData:
         if missing:
             raise CalibrationError(f"{path}: not a gonio reduced NetCDF file: no variable "
                                    f"{', '.join(missing)}")
+        _check_declared(ds, path)
         get = {n: np.asarray(ds[n][:], dtype=np.float64) for n in REDUCED_NAMES.values()}
         meta = {key[len("gonio_"):]: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
                 if key.startswith("gonio_")}
@@ -273,6 +276,24 @@ def read_reduced_netcdf(path: str | Path) -> ReducedData:
     return ReducedData(wi, wo, get["bsdf"], get["bsdf_standard_uncertainty"],
                        np.ones(n, bool) if valid is None else valid, wo[:, 2] < 0, meta,
                        flags=flags, components=components)
+
+
+def _check_declared(ds: Any, path: Path) -> None:
+    """Refuse, before any is read, variables that declare more than an import holds
+    (calibration.formats.limits), or, in a classic (NetCDF-3) file, which stores every value
+    it declares, more bytes of data than the file has."""
+    read = [var for name, var in ds.variables.items()
+            if name in (*REDUCED_NAMES.values(), "wavelength", "valid", "flags")
+            or name.startswith("u_")]
+    check_count(path, len(read), "variables", MAX_COLUMNS)
+    for var in read:
+        check_count(path, var.size, f"values of variable {var.name}", MAX_POINTS)
+    if ds.data_model.startswith("NETCDF3"):
+        declared = sum(var.size * var.dtype.itemsize for var in ds.variables.values())
+        size = path.stat().st_size
+        if declared > size:
+            raise CalibrationError(f"{path}: declares {declared} bytes of data, the file holds "
+                                   f"{size}")
 
 
 def _decoded(ds: Any, name: str, meaning: str) -> np.ndarray:
