@@ -184,7 +184,7 @@ def read_zemax(path: str | Path) -> ZemaxTable:
         if pos >= len(body):
             raise fail(f"expected {name}, found end of file")
         parts = body[pos][1].split()
-        if parts[0] != name or len(parts) != 2:
+        if parts[0] != name or len(parts) != 2 or len(parts[1]) > 40:
             raise fail(f"expected '{name} <value>', found {body[pos][1][:60]!r}")
         pos += 1
         return parts[1]

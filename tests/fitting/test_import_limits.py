@@ -8,6 +8,7 @@ import os
 import struct
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hostile_files import gonio_measured, refused
 
@@ -54,20 +55,61 @@ def zemax_header(angles: int, azimuths: int, radials: int) -> str:
 
 
 def test_netcdf_declaring_3e8_points_is_refused_before_reading(tmp_path):
-    """The attack: an 8 KB NetCDF declaring 3e8 points (2.4 GB a variable)."""
+    """The attack: an 8 KB NetCDF-4 file declaring 3e8 points (2.4 GB a variable; its chunks,
+    never written, take no room)."""
+    import netCDF4
+
     path = tmp_path / "huge.nc"
-    path.write_bytes(classic_netcdf(300_000_000))
+    with netCDF4.Dataset(path, "w", format="NETCDF4") as ds:
+        ds.createDimension("point", 300_000_000)
+        for name in REDUCED:
+            ds.createVariable(name, "f8", ("point",), zlib=True, chunksizes=(1_000_000,))
+    assert path.stat().st_size < 16_384
     refused(gonio_measured("fit", "--import", path), path,
             f"300000000 values of variable theta_i; an import holds at most {MAX_POINTS}")
 
 
 def test_classic_netcdf_declaring_more_data_than_it_holds(tmp_path):
-    """Within the point limit, a classic file still stores each value it declares."""
+    """A classic file stores each value it declares: 3e8 points in 8 KB are refused by its
+    header, before the library reads it."""
     path = tmp_path / "short.nc"
-    path.write_bytes(classic_netcdf(MAX_POINTS))
-    with pytest.raises(CalibrationError, match=rf"short.nc: declares {7 * 8 * MAX_POINTS} bytes "
-                                               r"of data, the file holds 8192"):
-        read_measured(path)
+    path.write_bytes(classic_netcdf(300_000_000))
+    refused(gonio_measured("fit", "--import", path), path,
+            "variable theta_i declares 2400000000 bytes of data at byte 392, the file holds 8192")
+
+
+def test_classic_netcdf_header_that_crashed_the_library(tmp_path):
+    """A variable declaring 65535 dimensions in a 300-byte file: the netCDF library, which
+    trusts its header, died of a segmentation fault opening it."""
+    data = bytearray(classic_netcdf(3, 1024))
+    ndims_at = data.index(b"theta_i") + 8
+    data[ndims_at:ndims_at + 4] = struct.pack(">i", 65535)
+    path = tmp_path / "crash.nc"
+    path.write_bytes(bytes(data))
+    refused(gonio_measured("fit", "--import", path), path,
+            "damaged NetCDF header at byte 64: 65535 dimensions of a variable declared, more "
+            "than the file's 1024 bytes hold")
+
+
+@pytest.mark.parametrize("fmt", ["NETCDF3_CLASSIC", "NETCDF3_64BIT_OFFSET", "NETCDF3_64BIT_DATA"])
+def test_classic_netcdf_of_another_program_is_read(fmt, tmp_path):
+    """The header walk passes each classic variant the library writes, attributes, a record
+    dimension and a scalar included."""
+    import netCDF4
+
+    path = tmp_path / "classic.nc"
+    with netCDF4.Dataset(path, "w", format=fmt) as ds:
+        ds.title, ds.counts = "another program's", np.arange(5)
+        ds.createDimension("point", 4)
+        ds.createDimension("time", None)
+        for name in REDUCED:
+            var = ds.createVariable(name, "f8", ("point",))
+            var[:] = [10.0, 20.0, 30.0, 40.0] if name.startswith("theta") else 0.5
+            var.units = "degree"
+        ds.createVariable("when", "i2", ("time",))[:] = [1, 2, 3]
+        ds.createVariable("wavelength", "f4")[...] = 632.8
+    data = read_measured(path, ImportOptions(eta=1.5))
+    assert len(data.bsdf) == 4 and data.meta["wavelength_nm"] == pytest.approx(632.8)
 
 
 def test_zemax_header_asking_for_terabytes(tmp_path):
