@@ -162,7 +162,7 @@ def from_csv(path: Path, options: ImportOptions) -> ReducedData:
     """A plain or gonio CSV (see the module docstring), read one line at a time within
     calibration.formats.limits."""
     comments: list[str] = []
-    line_no = [0]
+    line_no = [0]  # the file's line the reader is at, for a csv.Error
 
     def data_lines() -> Iterator[str]:
         for line_no[0], line in text_lines(path):
