@@ -19,6 +19,7 @@ import numpy as np
 
 from calibration.detector import correct_power
 from calibration.values import CalibrationError, Measured
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_file, read_user_text
 
 FORMAT = "gonio-calibration/1"
 
@@ -119,10 +120,7 @@ def save(cal: Calibration, path: str | Path) -> Path:
 def load(path: str | Path) -> Calibration:
     """Read a calibration file (.json, or .toml with the same structure)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise CalibrationError(f"{path}: cannot read calibration file ({exc.strerror})") from exc
+    text = read_user_text(path, "calibration file", SETTINGS_FILE_CAP, CalibrationError)
     try:
         data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
     except (ValueError, tomllib.TOMLDecodeError) as exc:
@@ -134,8 +132,7 @@ def reference(path: str | Path) -> dict[str, str]:
     """What a run's meta.json records about the calibration file it used."""
     path = Path(path).resolve()
     cal = load(path)
-    return {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-            "created_utc": cal.created_utc}
+    return {"file": str(path), "sha256": _sha256(path), "created_utc": cal.created_utc}
 
 
 def used_by(meta: dict[str, Any]) -> Calibration | None:
@@ -146,10 +143,16 @@ def used_by(meta: dict[str, Any]) -> Calibration | None:
     path = Path(ref["file"])
     if not path.exists():
         raise CalibrationError(f"the run's calibration file {path} is missing")
-    if hashlib.sha256(path.read_bytes()).hexdigest() != ref.get("sha256"):
+    if _sha256(path) != ref.get("sha256"):
         raise CalibrationError(f"the run's calibration file {path} changed after the run "
                                "recorded it (sha256 differs)")
     return load(path)
+
+
+def _sha256(path: Path) -> str:
+    """The hex sha256 of a calibration file's contents (read bounded: drivers.user_file)."""
+    data = read_user_file(path, "calibration file", SETTINGS_FILE_CAP, CalibrationError)
+    return hashlib.sha256(data).hexdigest()
 
 
 def apply(readings: np.ndarray, cal: Calibration) -> np.ndarray:

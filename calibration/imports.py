@@ -16,9 +16,11 @@ into meta["record"], so that a file written from the import carries it on.
 
 from __future__ import annotations
 
+import array
 import csv
 import json
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +28,14 @@ import numpy as np
 from calibration.exports.measured import ANGLE_COLUMNS, META_KEYS, unit_vectors
 from calibration.formats import format_to_read
 from calibration.formats.file_format import ImportOptions
+from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, opened, text_lines
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
 # the column names of reduced.csv as `gonio reduce` wrote it before it used write_reduced_csv
 ALIASES = {"bsdf_per_sr": "bsdf", "sigma_per_sr": "sigma"}
+# the columns a CSV must have, by their bare names
+NEEDED = (*(a[:-4] for a in ANGLE_COLUMNS), "bsdf")
 
 
 class MissingInputs(CalibrationError):
@@ -49,8 +54,7 @@ def read_measured(path: str | Path, options: ImportOptions | None = None) -> Red
     keyword); a MissingInputs error names every input the file lacks."""
     path = Path(path)
     options = options or ImportOptions()
-    if not path.is_file():
-        raise CalibrationError(f"{path}: no such file")
+    opened(path).close()  # a regular file within the limits, before its format is sniffed
     data = format_to_read(path).read(path, options)
     data.meta["imported_from"] = str(path)
     return data
@@ -155,42 +159,46 @@ def _facts(path: Path, options: ImportOptions, comments: list[str], what: str,
 
 
 def from_csv(path: Path, options: ImportOptions) -> ReducedData:
-    """A plain or gonio CSV (see the module docstring)."""
+    """A plain or gonio CSV (see the module docstring), read one line at a time within
+    calibration.formats.limits."""
+    comments: list[str] = []
+    line_no = [0]  # the file's line the reader is at, for a csv.Error
+
+    def data_lines() -> Iterator[str]:
+        for line_no[0], line in text_lines(path):
+            if line.startswith("#"):
+                comments.append(line[1:])
+            elif line.strip():
+                yield line
+
+    reader = csv.reader(data_lines())
+    no_rows = CalibrationError(f"{path}: no data rows under a header of column names")
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CalibrationError(f"{path}: not a readable text file ({exc})") from None
-    lines = text.splitlines()
-    rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
-    if len(rows) < 2:
-        raise CalibrationError(f"{path}: no data rows under a header of column names")
-    names = [ALIASES.get(n.strip(), n.strip()) for n in rows[0]]
-    index = {}
-    for k, name in enumerate(names):
-        index.setdefault(name, k)
-        if name.endswith("_deg"):
-            index.setdefault(name[:-4], k)
-    needed = [a[:-4] for a in ANGLE_COLUMNS] + ["bsdf"]
-    missing = [n for n in needed if n not in index]
-    if missing:
-        raise CalibrationError(f"{path}: no column {', '.join(missing)} (columns: theta_i_deg, "
-                               "phi_i_deg, theta_o_deg, phi_o_deg, bsdf, optional sigma, "
-                               "wavelength_nm)")
-    body = rows[1:]
-    meta = _facts(path, options, [ln[1:] for ln in lines if ln.startswith("#")], "the CSV",
-                  "sigma" in index)
+        header = next(reader, None)
+        if header is None:
+            raise no_rows
+        names = [ALIASES.get(n.strip(), n.strip()) for n in header]
+        index = _column_index(path, names)
+        columns = {name: array.array("d") for name in index if _numeric(name)}
+        flags: list[str] = []
+        row_no = 0
+        for row_no, row in enumerate(reader, 1):
+            check_count(path, row_no, "data rows or more", MAX_POINTS)
+            for name, values in columns.items():
+                values.append(_cell(path, row, index[name], name, row_no))
+            if "flags" in index:
+                k = index["flags"]
+                flags.append(row[k].replace(";", ",") if k < len(row) else "")
+    except csv.Error as exc:
+        raise CalibrationError(f"{path}:{line_no[0]}: not CSV ({exc})") from None
+    if row_no == 0:
+        raise no_rows
+    meta = _facts(path, options, comments, "the CSV", "sigma" in index)
 
     def column(name: str) -> np.ndarray:
-        k = index[name]
-        try:
-            return np.array([float(r[k]) if r[k].strip() else math.nan for r in body])
-        except (ValueError, IndexError):
-            bad = next(n for n, r in enumerate(body)
-                       if len(r) <= k or not _is_number(r[k]))
-            raise CalibrationError(f"{path}: data row {bad + 1}: column {name} is not a "
-                                   "number") from None
+        return np.frombuffer(columns[name], dtype=np.float64)
 
-    ti, pi, to, po, bsdf = (column(n) for n in needed)
+    ti, pi, to, po, bsdf = (column(n) for n in NEEDED)
     sigma = column("sigma") if "sigma" in index else None
     if "wavelength_nm" in index:
         wavelengths = np.unique(column("wavelength_nm"))
@@ -199,18 +207,44 @@ def from_csv(path: Path, options: ImportOptions) -> ReducedData:
     if "valid" in index:
         meta["valid"] = column("valid") != 0
     if "flags" in index:
-        meta["flags"] = np.array([r[index["flags"]].replace(";", ",") for r in body])
+        meta["flags"] = np.array(flags)
     meta["components"] = {n[2:]: column(n) for n in names if n.startswith("u_")}
     wi, wo = unit_vectors(ti, pi), unit_vectors(to, po)
     return _reduced(path, wi, wo, bsdf, sigma, wo[:, 2] < 0, meta, options)
 
 
-def _is_number(text: str) -> bool:
+def _column_index(path: Path, names: list[str]) -> dict[str, int]:
+    """Each column name's first position (a `_deg` name also under its bare name); one error
+    for too many columns or a needed one missing."""
+    check_count(path, len(names), "columns", MAX_COLUMNS)
+    index: dict[str, int] = {}
+    for k, name in enumerate(names):
+        index.setdefault(name, k)
+        if name.endswith("_deg"):
+            index.setdefault(name[:-4], k)
+    missing = [n for n in NEEDED if n not in index]
+    if missing:
+        raise CalibrationError(f"{path}: no column {', '.join(missing)} (columns: theta_i_deg, "
+                               "phi_i_deg, theta_o_deg, phi_o_deg, bsdf, optional sigma, "
+                               "wavelength_nm)")
+    return index
+
+
+def _numeric(name: str) -> bool:
+    """True for a column read as numbers (every column the import uses but `flags`)."""
+    return name in (*NEEDED, "sigma", "wavelength_nm", "valid") or name.startswith("u_")
+
+
+def _cell(path: Path, row: list[str], k: int, name: str, row_no: int) -> float:
+    """The number in column k of a data row (NaN where empty); one error if it is not one."""
+    text = row[k] if k < len(row) else None
+    if text is not None and not text.strip():
+        return math.nan
     try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+        return float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{path}: data row {row_no}: column {name} is not a "
+                               "number") from None
 
 
 def from_astm(path: Path, options: ImportOptions) -> ReducedData:

@@ -18,6 +18,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_text
+
 _TYPES = {  # type -> (struct code of its big-endian bytes, number of registers)
     "uint16": ("H", 1),
     "int16": ("h", 1),
@@ -112,9 +114,10 @@ class RegisterMap:
     def load(cls, path: str | Path) -> RegisterMap:
         """Read and check a map file; RegisterMapError names the file and the field."""
         path = Path(path)
+        text = read_user_text(path, "register map", SETTINGS_FILE_CAP, RegisterMapError)
         try:
-            table = tomllib.loads(path.read_text())
-        except (OSError, tomllib.TOMLDecodeError) as exc:
+            table = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
             raise RegisterMapError(f"{path}: cannot read register map: {exc}") from None
         return cls(table, source=str(path))
 

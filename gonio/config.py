@@ -25,6 +25,13 @@ from gonio.optics import Optics, parse_optics
 
 ROLES = ("sample", "arm", "azimuth", "elevation")
 
+#: The largest axis limit, speed, acceleration and detector range a config may give: far above
+#: any bench, and finite, so that no motion time or range arithmetic overflows or vanishes.
+MAX_ANGLE_DEG = 1e5
+MAX_SPEED_DEG_S = 1e4
+MAX_ACCEL_DEG_S2 = 1e6
+MAX_RANGE_W = 1e3
+
 
 @dataclass(frozen=True)
 class DetectorConfig:
@@ -149,11 +156,12 @@ def _axes(f: Fields, devices: dict[str, DeviceConfig]) -> dict[str, AxisConfig]:
         if (device, axis) in used:
             raise a.fail("axis", f"{device} axis {axis} is already the {used[device, axis]!r} axis")
         used[device, axis] = role
-        limits = a.pair("limits_deg")
+        limits = a.pair("limits_deg", low=-MAX_ANGLE_DEG, high=MAX_ANGLE_DEG)
         out[role] = AxisConfig(
             role=role, device=device, axis=axis, limits_deg=limits,
-            speed_deg_s=a.number("speed_deg_s", low=0.0, low_open=True),
-            accel_deg_s2=a.number("accel_deg_s2", low=0.0, low_open=True),
+            speed_deg_s=a.number("speed_deg_s", low=0.0, high=MAX_SPEED_DEG_S, low_open=True),
+            accel_deg_s2=a.number("accel_deg_s2", low=0.0, high=MAX_ACCEL_DEG_S2,
+                                  low_open=True),
             settle_s=a.number("settle_s", 0.0, low=0.0, high=3600.0),
             tolerance_deg=a.number("tolerance_deg", 0.01, low=0.0, high=10.0, low_open=True),
             home=a.boolean("home", False),
@@ -189,7 +197,7 @@ def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None
     if rng == "auto":
         range_w = None
     else:
-        range_w = f.number("range", low=0.0, low_open=True)
+        range_w = f.number("range", low=0.0, high=MAX_RANGE_W, low_open=True)
     wavelength = f.number("wavelength_nm", optics.wavelength_nm if optics else REQUIRED,
                           low=200.0, high=2000.0)
     if optics is not None and abs(wavelength - optics.wavelength_nm) > 1e-6:
@@ -216,7 +224,8 @@ def _zones(f: Fields) -> tuple[tuple[float, float], ...]:
     out = []
     for i, zone in enumerate(zones):
         key = f"arm_forbidden_deg[{i}]"
-        out.append(Fields({key: zone}, f.source, ConfigError, f.name).pair(key))
+        out.append(Fields({key: zone}, f.source, ConfigError, f.name).pair(key, low=-360.0,
+                                                                         high=360.0))
     return tuple(out)
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_text
 from gonio.errors import GonioError
 
 REQUIRED = object()
@@ -97,14 +98,15 @@ class Fields:
             raise self.fail(key, f"must be true or false, got {_show(value)}")
         return value
 
-    def pair(self, key: str, default: Any = REQUIRED) -> Any:
-        """Two increasing finite numbers [lo, hi]."""
+    def pair(self, key: str, default: Any = REQUIRED, low: float = -math.inf,
+             high: float = math.inf) -> Any:
+        """Two increasing finite numbers [lo, hi], each in [low, high]."""
         value = self._get(key, default)
         if value is default and key not in self.table:
             return value
         if not (isinstance(value, list) and len(value) == 2):
             raise self.fail(key, f"must be a list [lo, hi] of two numbers, got {_show(value)}")
-        lo, hi = (check_number(v, self.fail, key) for v in value)
+        lo, hi = (check_number(v, self.fail, key, low, high) for v in value)
         if not lo < hi:
             raise self.fail(key, f"must have lo < hi, got [{lo:g}, {hi:g}]")
         return lo, hi
@@ -157,8 +159,8 @@ def check_number(value: Any, fail: Any, key: str, low: float = -math.inf,
 
 
 def _range(f: Fields, low: float, high: float) -> tuple[float, ...]:
-    start = f.number("start")
-    stop = f.number("stop")
+    start = f.number("start", low=low, high=high)
+    stop = f.number("stop", low=low, high=high)
     has_step, has_num = f.has("step"), f.has("num")
     if has_step == has_num:
         raise f.error(f"{f.where}: give exactly one of 'step' or 'num'")
@@ -172,9 +174,6 @@ def _range(f: Fields, low: float, high: float) -> tuple[float, ...]:
         n = f.number("num", low=1, high=100_000, integer=True)
         vals = np.linspace(start, stop, n)
     f.done()
-    for v in (vals[0], vals[-1]):
-        if not low <= v <= high:
-            raise f.error(f"{f.where}: values must be in [{low:g}, {high:g}], got {v:g}")
     return tuple(float(v) for v in vals)
 
 
@@ -185,15 +184,13 @@ def _show(value: Any) -> str:
 
 def read_toml(path: Path, what: str, error: type[GonioError]) -> dict[str, Any]:
     """The table of the TOML file `path` (a `what`: "plan", "instrument config"), or one
-    error naming the file: unreadable, not text, or not TOML."""
+    error naming the file: unreadable, not a regular file of bounded size
+    (drivers.user_file), not text, or not TOML."""
+    text = read_user_text(path, what, SETTINGS_FILE_CAP, error)
     try:
-        return tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise error(f"{path}: cannot read {what} ({exc.strerror})") from None
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise error(f"{path}: not a text file") from None
 
 
 def stored_table(raw: Mapping[str, Any], key: str, where: str, error: type[GonioError],

@@ -13,6 +13,7 @@ writer names it in a `DATA_TYPE BRDF|BTDF` line (a file without one is read as a
 
 from __future__ import annotations
 
+import array
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.measured import angle_text, spherical_deg, unit_vectors
+from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, text_lines
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -83,47 +85,39 @@ def _wavelength(name: str) -> float:
 
 
 def read_astm(path: str | Path) -> AstmTable:
-    """Parse an ASTM E1392 file; an error names the line that is wrong."""
+    """Parse an ASTM E1392 file, one line at a time within calibration.formats.limits; an
+    error names the line that is wrong."""
     path = Path(path)
-    lines = path.read_text().splitlines()
     header: dict[str, str] = {}
     comments: list[str] = []
     names: list[str] | None = None
-    start = len(lines)
-    for n, line in enumerate(lines):
+    values = array.array("d")
+    rows = 0
+    for n, line in text_lines(path):
         text = line.strip()
+        if names is not None:
+            if text:
+                rows += 1
+                check_count(path, rows, "data lines or more", MAX_POINTS)
+                values.extend(_numbers(path, n, text, len(names)))
+            continue
         if text.startswith("#"):
             comments.append(text[1:].strip())
             continue
         key, _, value = text.partition(" ")
         if key == "VARS":
             names = [v.strip() for v in value.split(",")]
-            start = n + 1
-            break
-        if key:
+            check_count(path, len(names), "columns", MAX_COLUMNS)
+            if len(names) < 5:
+                raise CalibrationError(f"{path}:{n}: VARS needs four angles and at least one "
+                                       f"value column, has {len(names)}")
+        elif key:
             header[key] = value.strip()
     if names is None:
         raise CalibrationError(f"{path}: no VARS line (ASTM E1392 names its columns in one)")
-    if len(names) < 5:
-        raise CalibrationError(f"{path}:{start}: VARS needs four angles and at least one value "
-                               f"column, has {len(names)}")
-    rows = []
-    for n in range(start, len(lines)):
-        text = lines[n].strip()
-        if not text:
-            continue
-        try:
-            row = [float(v) for v in text.split(",")]
-        except ValueError:
-            raise CalibrationError(f"{path}:{n + 1}: not comma-separated numbers: "
-                                   f"{text[:60]!r}") from None
-        if len(row) != len(names):
-            raise CalibrationError(f"{path}:{n + 1}: {len(names)} columns named in VARS, "
-                                   f"{len(row)} given")
-        rows.append(row)
     if not rows:
         raise CalibrationError(f"{path}: no data line after VARS")
-    data = np.array(rows)
+    data = np.frombuffer(values, dtype=np.float64).reshape(rows, len(names))
     data_type = header.pop("DATA_TYPE", "BRDF")
     source = header.pop("SOURCE", "MEASURED")
     if data_type not in DATA_TYPES:
@@ -131,6 +125,18 @@ def read_astm(path: str | Path) -> AstmTable:
     return AstmTable(data_type, data[:, 0], data[:, 1], data[:, 2], data[:, 3],
                      [_wavelength(nm) for nm in names[4:]], data[:, 4:], header, comments,
                      source)
+
+
+def _numbers(path: Path, n: int, text: str, columns: int) -> list[float]:
+    """The comma-separated numbers of data line n, as many as VARS names columns."""
+    try:
+        row = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise CalibrationError(f"{path}:{n}: not comma-separated numbers: "
+                               f"{text[:60]!r}") from None
+    if len(row) != columns:
+        raise CalibrationError(f"{path}:{n}: {columns} columns named in VARS, {len(row)} given")
+    return row
 
 
 def sides_of(transmission: np.ndarray) -> list[str]:

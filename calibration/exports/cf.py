@@ -18,8 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from calibration.exports.cf_uncertainty import mark_interval, read_shared_rel, write_error_structure
+from calibration.exports.cf_uncertainty import (
+    CORRELATION,
+    mark_interval,
+    read_shared_rel,
+    write_error_structure,
+)
 from calibration.exports.measured import columns, coverage_k, meta_facts, unit_vectors
+from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, opened
+from calibration.formats.netcdf_classic import check_classic_header
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 from gonio.errors import GonioError
@@ -253,41 +260,82 @@ def _attribute(value: Any) -> Any:
     return value.item() if isinstance(value, np.generic) else value
 
 
+#: What netCDF4 and numpy raise on a damaged file's contents (an undecodable name, a failed
+#: read, a variable of the wrong shape or without its attributes).
+DAMAGED = (RuntimeError, ValueError, TypeError, IndexError, KeyError, AttributeError)
+
+
 def read_reduced_netcdf(path: str | Path) -> ReducedData:
     """ReducedData of a file write_reduced_netcdf wrote (meta: its gonio_* attributes, and the
-    run's record as meta["record"]: the other attributes but CF_GLOBALS)."""
+    run's record as meta["record"]: the other attributes but CF_GLOBALS); a damaged file is one
+    CalibrationError naming it."""
     netCDF4 = _netcdf4()
     path = Path(path)
+    with opened(path) as fh:  # a regular file within the limits, before the library reads it
+        head = fh.read(4)
+        if head.startswith(b"CDF"):  # classic: its header walked first, which the library trusts
+            check_classic_header(path, head + fh.read())
     try:
         ds = netCDF4.Dataset(path)
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationError(f"{path}: not a NetCDF file ({exc})") from None
-    with ds:
-        missing = [n for n in REDUCED_NAMES.values() if n not in ds.variables]
-        if missing:
-            raise CalibrationError(f"{path}: not a gonio reduced NetCDF file: no variable "
-                                   f"{', '.join(missing)}")
-        get = {n: np.asarray(ds[n][:], dtype=np.float64) for n in REDUCED_NAMES.values()}
-        meta = {key[len("gonio_"):]: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
-                if key.startswith("gonio_")}
-        record = {key: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
-                  if not key.startswith("gonio_") and key not in CF_GLOBALS}
-        if record:
-            meta["record"] = record
-        wavelength = float(ds["wavelength"][...]) if "wavelength" in ds.variables else math.nan
-        if math.isfinite(wavelength):
-            meta["wavelength_nm"] = wavelength
-        components = {n[2:]: np.asarray(ds[n][:], dtype=np.float64) for n in ds.variables
-                      if n.startswith("u_")}
-        shared_rel = read_shared_rel(ds, get["bsdf"])
-        valid = _decoded(ds, "valid", "valid") if "valid" in ds.variables else None
-        flags = _flag_words(ds["flags"]) if "flags" in ds.variables else None
+    try:
+        with ds:
+            return _reduced_of(ds, path)
+    except DAMAGED as exc:
+        raise CalibrationError(f"{path}: damaged NetCDF file ({exc})") from None
+
+
+def _reduced_of(ds: Any, path: Path) -> ReducedData:
+    """read_reduced_netcdf of the open dataset."""
+    missing = [n for n in REDUCED_NAMES.values() if n not in ds.variables]
+    if missing:
+        raise CalibrationError(f"{path}: not a gonio reduced NetCDF file: no variable "
+                               f"{', '.join(missing)}")
+    _check_declared(ds, path)
+    get = {n: np.asarray(ds[n][:], dtype=np.float64) for n in REDUCED_NAMES.values()}
+    meta = {key[len("gonio_"):]: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
+            if key.startswith("gonio_")}
+    record = {key: _attribute(ds.getncattr(key)) for key in ds.ncattrs()
+              if not key.startswith("gonio_") and key not in CF_GLOBALS}
+    if record:
+        meta["record"] = record
+    wavelength = float(ds["wavelength"][...]) if "wavelength" in ds.variables else math.nan
+    if math.isfinite(wavelength):
+        meta["wavelength_nm"] = wavelength
+    components = {n[2:]: np.asarray(ds[n][:], dtype=np.float64) for n in ds.variables
+                  if n.startswith("u_")}
+    shared_rel = read_shared_rel(ds, get["bsdf"])
+    valid = _decoded(ds, "valid", "valid") if "valid" in ds.variables else None
+    flags = _flag_words(ds["flags"]) if "flags" in ds.variables else None
     wi = unit_vectors(get["theta_i"], get["phi_i"])
     wo = unit_vectors(get["theta_o"], get["phi_o"])
     n = len(wi)
     return ReducedData(wi, wo, get["bsdf"], get["bsdf_standard_uncertainty"],
                        np.ones(n, bool) if valid is None else valid, wo[:, 2] < 0, meta,
                        shared_rel, flags=flags, components=components)
+
+
+#: The most points whose shared-error correlation matrix an import reads (N^2 float64 values
+#: and their eigendecomposition: 128 MiB and seconds at this size).
+MAX_CORRELATED_POINTS = 4096
+
+
+def _check_declared(ds: Any, path: Path) -> None:
+    """Refuse, before any is read, variables that declare more than an import holds
+    (calibration.formats.limits)."""
+    read = [var for name, var in ds.variables.items()
+            if name in (*REDUCED_NAMES.values(), "wavelength", "valid", "flags")
+            or name.startswith("u_")]
+    check_count(path, len(read), "variables", MAX_COLUMNS)
+    for var in read:
+        check_count(path, var.size, f"values of variable {var.name}", MAX_POINTS)
+    if CORRELATION in ds.variables:  # N x N values, and an eigendecomposition of them
+        points = ds[REDUCED_NAMES["bsdf"]].size
+        if ds[CORRELATION].shape != (points, points):
+            raise CalibrationError(f"{path}: variable {CORRELATION} has shape "
+                                   f"{ds[CORRELATION].shape}, not ({points}, {points})")
+        check_count(path, points, f"points in variable {CORRELATION}", MAX_CORRELATED_POINTS)
 
 
 def _decoded(ds: Any, name: str, meaning: str) -> np.ndarray:

@@ -36,6 +36,7 @@ from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
 from calibration.reduced import ReducedData
 from calibration.smearing import Smearing, smearing_order
 from calibration.values import CalibrationError
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_text
 
 
 def fit_notes(result: FitResult, source: str, record: Sequence[str]) -> list[str]:
@@ -205,11 +206,9 @@ def result_from_json(fitted: dict, where: str) -> FitResult:
 def load_fit(path: str | Path) -> FitResult:
     """The fit a `gonio fit --json` output file holds (its last JSON line)."""
     path = Path(path)
+    text = read_user_text(path, "fit result", SETTINGS_FILE_CAP, CalibrationError)
     try:
-        lines = [ln for ln in path.read_text().splitlines() if ln.strip()]
-        fitted = json.loads(lines[-1])
-    except OSError as exc:
-        raise CalibrationError(f"{path}: {exc.strerror}") from None
+        fitted = json.loads([ln for ln in text.splitlines() if ln.strip()][-1])
     except (ValueError, IndexError):
         raise CalibrationError(f"{path}: not the JSON of `gonio fit --json`") from None
     return result_from_json(fitted, str(path))

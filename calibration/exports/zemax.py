@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.measured import angle_text
+from calibration.formats.limits import MAX_POINTS, check_count, text_lines
 from calibration.values import CalibrationError
 
 SCATTER_TYPES = ("BRDF", "BTDF")
@@ -161,11 +162,17 @@ def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
 
 
 def read_zemax(path: str | Path) -> ZemaxTable:
-    """Parse a Zemax tabular BSDF file (monochrome); errors name the line that is wrong."""
+    """Parse a Zemax tabular BSDF file (monochrome) within calibration.formats.limits (its
+    grid's size checked before it is allocated); errors name the line that is wrong."""
     path = Path(path)
-    lines = [(n + 1, ln.strip()) for n, ln in enumerate(path.read_text().splitlines())]
-    comments = [ln[1:].strip() for _, ln in lines if ln.startswith("#")]
-    body = [(n, ln) for n, ln in lines if ln and not ln.startswith("#")]
+    comments: list[str] = []
+    body: list[tuple[int, str]] = []
+    for n, line in text_lines(path):
+        text = line.strip()
+        if text.startswith("#"):
+            comments.append(text[1:].strip())
+        elif text:
+            body.append((n, text))
     pos = 0
 
     def fail(msg: str) -> CalibrationError:
@@ -177,19 +184,31 @@ def read_zemax(path: str | Path) -> ZemaxTable:
         if pos >= len(body):
             raise fail(f"expected {name}, found end of file")
         parts = body[pos][1].split()
-        if parts[0] != name or len(parts) != 2:
-            raise fail(f"expected '{name} <value>', found {body[pos][1]!r}")
+        if parts[0] != name or len(parts) != 2 or len(parts[1]) > 40:
+            raise fail(f"expected '{name} <value>', found {body[pos][1][:60]!r}")
         pos += 1
         return parts[1]
 
-    def enumeration(name: str) -> np.ndarray:
+    def numbers(what: str, count: int) -> np.ndarray:
+        """The `count` numbers of the line at pos, which then moves past it."""
         nonlocal pos
-        count = int(keyword(name))
-        values = np.array([float(v) for v in body[pos][1].split()])
+        try:
+            values = np.array([float(v) for v in body[pos][1].split()] if pos < len(body)
+                              else [])
+        except ValueError:
+            raise fail(f"{what}: not numbers: {body[pos][1][:60]!r}") from None
         if len(values) != count:
-            raise fail(f"{name}: {count} values announced, {len(values)} given")
+            raise fail(f"{what}: {count} values announced, {len(values)} given")
         pos += 1
         return values
+
+    def enumeration(name: str) -> np.ndarray:
+        count = keyword(name)
+        if not (count.isascii() and count.isdigit() and len(count) <= 15):
+            raise fail(f"{name}: the count must be a whole number (at most 15 digits), got "
+                       f"{count[:20]!r}")
+        check_count(path, int(count), f"values of {name}", MAX_POINTS)
+        return numbers(name, int(count))
 
     source = keyword("Source")
     if source not in SOURCES:
@@ -208,21 +227,28 @@ def read_zemax(path: str | Path) -> ZemaxTable:
         if pos >= len(body) or body[pos][1] != expected:
             raise fail(f"expected {expected}")
         pos += 1
-    data = np.zeros((len(rotation), len(angle), len(azimuth), len(radial)))
+    shape = (len(rotation), len(angle), len(azimuth), len(radial))
+    check_count(path, math.prod(shape), "grid values (" + " x ".join(map(str, shape)) + ")",
+                MAX_POINTS)
+    data = np.zeros(shape)
     tis = np.zeros((len(rotation), len(angle)))
     for r in range(len(rotation)):
         for a in range(len(angle)):
-            tis[r, a] = float(keyword("TIS"))
+            tis[r, a] = _number(keyword("TIS"), fail)
             for z in range(len(azimuth)):
-                row = body[pos][1].split() if pos < len(body) else []
-                if len(row) != len(radial):
-                    raise fail(f"data row needs {len(radial)} values, has {len(row)}")
-                data[r, a, z] = [float(v) for v in row]
-                pos += 1
+                data[r, a, z] = numbers("data row", len(radial))
     if pos >= len(body) or body[pos][1] != "DataEnd":
         raise fail("expected DataEnd")
     return ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data, tis, comments,
                       source)
+
+
+def _number(text: str, fail: Callable[[str], CalibrationError]) -> float:
+    """The number `text` of a keyword's value; fail's error if it is not one."""
+    try:
+        return float(text)
+    except ValueError:
+        raise fail(f"not a number: {text!r}") from None
 
 
 def tis_weights(table: ZemaxTable, angle: int) -> np.ndarray:

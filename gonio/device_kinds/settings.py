@@ -31,7 +31,7 @@ TYPES = ("string", "integer", "number", "boolean", "file", "host", "port", "reso
 @dataclass(frozen=True)
 class Setting:
     """One config field of a device kind: key, type (TYPES), default (REQUIRED: none), unit,
-    bounds (low..high, low excluded if low_open) or choices.
+    bounds (low..high, low excluded if low_open; a number's high is finite) or choices.
 
     when: (key, value) of an earlier setting this one applies under (a Modbus TCP device has
     a host, an RTU one a port); endpoint: part of where the device is reached (joined by ":"
@@ -56,6 +56,10 @@ class Setting:
     def __post_init__(self) -> None:
         if self.type not in TYPES:
             raise ValueError(f"setting {self.key!r}: type {self.type!r} is not one of {TYPES}")
+        if self.type in ("integer", "number") and not self.choices \
+                and not math.isfinite(self.high):
+            raise ValueError(f"setting {self.key!r}: a number needs a finite upper bound, so "
+                             "that no value overflows what uses it")
         if self.one_of and self.default is not None:
             raise ValueError(f"setting {self.key!r}: an alternative of {self.one_of!r} has no "
                              "default")
@@ -135,9 +139,9 @@ def _device_host(f: Fields, key: str, host: str) -> str:
     return host
 
 
-TIMEOUT_S = Setting("timeout_s", "number", 1.0, unit="s", low=0.0, low_open=True)
+TIMEOUT_S = Setting("timeout_s", "number", 1.0, unit="s", low=0.0, high=3600.0, low_open=True)
 PORT = Setting("port", "port", endpoint=True)
-BAUDRATE = Setting("baudrate", "integer", 19200, unit="baud", low=1)
+BAUDRATE = Setting("baudrate", "integer", 19200, unit="baud", low=1, high=4_000_000)
 LINK = "a serial port or a VISA resource string"
 PARITY = Setting("parity", "string", "none", choices=byte_link.PARITIES)
 STOPBITS = Setting("stopbits", "number", 1, choices=byte_link.STOPBITS)

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_text
+
 #: The figures a DeviceSpec holds, each 1-sigma in the unit its name ends with.
 FIGURES = ("range_gain_rel", "linearity_rel", "repeatability_deg")
 
@@ -99,8 +101,10 @@ MAP_KEYS = {"range_gain_rel": ("range_gain_half_width_rel", 1.0),
 def specification_table(path: Path) -> Mapping[str, Any]:
     """A register-map file's [specification] table ({} without one), checked: `source` a
     string, each figure's key of MAP_KEYS a number in [0, its limit), no other key; a
-    ValueError names the file and the key (OSError, TOMLDecodeError: the file unreadable)."""
-    table = tomllib.loads(path.read_text()).get("specification", {})
+    ValueError names the file and the key, or why the file cannot be read (a regular file of
+    bounded size: drivers.user_file; a TOMLDecodeError: not TOML)."""
+    text = read_user_text(path, "register map", SETTINGS_FILE_CAP, ValueError)
+    table = tomllib.loads(text).get("specification", {})
     where = f"{path} [specification]"
     if not isinstance(table, Mapping):
         raise ValueError(f"{where}: must be a table")

@@ -73,7 +73,7 @@ def test_a_device_has_a_port_or_a_resource_never_both_nor_neither(keys, drop, ho
     ("esp", "decimals", "5", "must be an integer, got '5'"),
     ("pm100", "nr3_decimals", 2.5, "must be an integer, got 2.5"),
     ("pm100", "nr3_decimals", 15, "must be in [1, 14], got 15"),
-    ("pm100", "baudrate", 0, "must be in [1, inf], got 0"),
+    ("pm100", "baudrate", 0, "must be in [1, 4e+06], got 0"),
     ("pm100", "resource", 5, "must be a string, got 5"),
 ])
 def test_each_bad_line_setting_is_one_error_naming_it(device, key, value, message):

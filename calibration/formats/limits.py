@@ -1,0 +1,54 @@
+"""How much a measured file that `--import` reads may hold, checked before anything is
+allocated: its size on disk, its points and numbers, its columns, and a text file's lines, so
+that a file declaring or holding more is one error naming it (never an exhausted memory)."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+from calibration.values import CalibrationError
+from drivers.user_file import open_user_file
+
+#: The most points (samples of the BSDF) an import holds: a few full hemispheres at 1 degree,
+#: and what the fit takes within the memory a workstation can spare.
+MAX_POINTS = 200_000
+#: The most columns (or variables) an import reads.
+MAX_COLUMNS = 64
+#: The largest file an import opens, and a text file's most lines and longest line.
+MAX_FILE_BYTES = 64 * 2**20
+MAX_LINES = 2 * MAX_POINTS
+MAX_LINE_CHARS = 2**20
+
+
+def check_count(path: Path, count: int, what: str, limit: int) -> None:
+    """One error naming the file if `count` of `what` ("points", "columns") is over `limit`,
+    before they are read."""
+    if count > limit:
+        raise CalibrationError(f"{path}: {count} {what}; an import holds at most {limit}")
+
+
+def opened(path: Path) -> BinaryIO:
+    """The measured file opened for reading: a regular file of at most MAX_FILE_BYTES
+    (drivers.user_file: a FIFO or a device is refused without blocking)."""
+    return open_user_file(path, "measured file", MAX_FILE_BYTES, CalibrationError)
+
+
+def text_lines(path: Path) -> Iterator[tuple[int, str]]:
+    """The lines of a measured text file, numbered from 1, without their line ends, read one
+    at a time: one error naming the file (and line) if it is not UTF-8 text, has more than
+    MAX_LINES lines or a line longer than MAX_LINE_CHARS."""
+    with opened(path) as fh:
+        text = io.TextIOWrapper(fh, encoding="utf-8", newline=None)
+        number = 0
+        try:
+            for number, line in enumerate(text, 1):
+                check_count(path, number, "lines or more", MAX_LINES)
+                if len(line) > MAX_LINE_CHARS:
+                    raise CalibrationError(f"{path}:{number}: line longer than "
+                                           f"{MAX_LINE_CHARS} characters")
+                yield number, line.rstrip("\n")
+        except UnicodeDecodeError:
+            raise CalibrationError(f"{path}:{number + 1}: not UTF-8 text") from None
