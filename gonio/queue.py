@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.base import DriverError
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_text
 from gonio.config import load_config
 from gonio.engine import Outcome, PauseControl
 from gonio.errors import GonioError, QueueError, RunError, Terminated, os_error_text
@@ -91,11 +92,12 @@ def survey(out: Path) -> list[Entry | QueueError]:
     """Each entry of the folder's queue file, or the QueueError naming what is wrong with it;
     QueueError itself when the file as a whole cannot be read."""
     path = queue_path(out)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+    if not path.exists() and not path.is_symlink():
         return []
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    text = read_user_text(path, "queue file", SETTINGS_FILE_CAP, QueueError)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
         raise QueueError(f"{path}: not a valid queue file ({exc})") from None
     top = Fields(data, str(path), QueueError)
     top.has("entry")
@@ -274,7 +276,7 @@ def _copied(source: Path, folder: Path, out: Path, instrument: str | Path | None
     sched = schedule_for(plan, load_config(cfg_path), sim)
     folder.mkdir(parents=True)
     copy = folder / source.name
-    write_text_atomic(copy, source.read_text(encoding="utf-8"))
+    write_text_atomic(copy, read_user_text(source, "plan", SETTINGS_FILE_CAP, QueueError))
     return Entry(plan=str(copy.relative_to(out)), source=str(source.resolve()),
                  instrument=str(cfg_path),
                  sim=sim if isinstance(sim, bool) else tuple(sim), planned=len(sched),
