@@ -25,7 +25,8 @@ from gonio.provenance import provenance_of_config
 from gonio.sample import sample_of_plan
 from gonio.store import Run
 
-#: The [optics] keys that describe the source, the record's `source` block.
+#: The [optics] keys that describe the source, the record's `light_source` block (`source`
+#: is a CF global attribute of the NetCDF exports, which carry the record).
 SOURCE_KEYS = ("source_name", "source_type", "source_power_mw", "u_source_power_mw")
 
 
@@ -91,7 +92,7 @@ def run_record(run: Run) -> dict[str, Any]:
         "beam_divergence_half_angle_deg": o.get("divergence_deg"),
         "source_polarisation": o.get("source_polarisation"),
         "analyser_polarisation": o.get("analyser_polarisation"),
-        "source": {key: o.get(key) for key in SOURCE_KEYS},
+        "light_source": {key: o.get(key) for key in SOURCE_KEYS},
         "detector": run.config.get("detector", {}).get("device"),
         "detector_spectral_range_nm": o.get("detector_spectral_range_nm"),
         "sample": sample, "environment": _json(environment_of_plan(run.plan, "run plan")),

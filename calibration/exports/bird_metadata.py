@@ -39,7 +39,7 @@ def missing_keys(record: Mapping[str, Any]) -> list[tuple[str, str]]:
                if not record.get(name)]
     provenance = record.get("provenance") or {}
     missing += [("config [provenance]", k) for k in PROVENANCE_KEYS if not provenance.get(k)]
-    source = record.get("source") or {}
+    source = record.get("light_source") or {}
     missing += [("config [optics]", k) for k in SOURCE_KEYS if source.get(k) in (None, "")]
     missing += [("config [optics]", key) for name, key in OPTICS_KEYS if record.get(name) is None]
     sample = record.get("sample")
@@ -126,7 +126,7 @@ def _circle(diameter_mm: float) -> dict[str, Any]:
 
 def instrumentation(record: Mapping[str, Any]) -> dict[str, Any]:
     """The instrument: its source and beam, the receiver and the detector as reported."""
-    source = record["source"]
+    source = record["light_source"]
     power = _quantity(source["source_power_mw"], "mW", source.get("u_source_power_mw"))
     source_out = {"name": source["source_name"], "type": source["source_type"],
                   "power": power, "central_wl": _quantity(record["wavelength_nm"], "nm")}
