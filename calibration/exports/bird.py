@@ -57,14 +57,14 @@ def writable(data: ReducedData) -> tuple[np.ndarray, list[str]]:
     reflection = ~data.transmission
     keep = reflection & finite & (data.bsdf >= 0)
     notes = []
-    for count, what in ((int(np.sum(data.transmission)), "transmission points (BiRD holds a "
-                         "BRDF; the CSV, NetCDF, ASTM and Zemax exports hold them)"),
-                        (int(np.sum(reflection & ~finite)), "points without a finite value "
-                         "or uncertainty"),
+    for count, what in ((int(np.sum(data.transmission)), "on the transmission side (BiRD "
+                         "holds a BRDF; the CSV, NetCDF, ASTM and Zemax exports hold them)"),
+                        (int(np.sum(reflection & ~finite)), "without a finite value or "
+                         "uncertainty"),
                         (int(np.sum(reflection & finite & (data.bsdf < 0))),
-                         "points below 0 (BiRD's BRDF is >= 0)")):
+                         "below 0 (BiRD's BRDF is >= 0)")):
         if count:
-            notes.append(f"left out {count} {what}.")
+            notes.append(f"left out {count} point{'' if count == 1 else 's'} {what}.")
     return keep, notes
 
 

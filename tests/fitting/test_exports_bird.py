@@ -79,9 +79,10 @@ def test_a_bird_file_reads_back_as_the_same_points(glass, tmp_path):
     kept = ~glass.transmission & (glass.bsdf >= 0)
     expected = glass.subset(kept)
     assert len(back.bsdf) == int(kept.sum()) > 10
-    assert notes == [f"bird: left out {int(glass.transmission.sum())} transmission points "
-                     "(BiRD holds a BRDF; the CSV, NetCDF, ASTM and Zemax exports hold them).",
-                     "bird: left out 1 points below 0 (BiRD's BRDF is >= 0)."]
+    assert notes == [f"bird: left out {int(glass.transmission.sum())} points on the "
+                     "transmission side (BiRD holds a BRDF; the CSV, NetCDF, ASTM and Zemax "
+                     "exports hold them).", "bird: left out 1 point below 0 (BiRD's BRDF is "
+                     ">= 0)."]
     want, got = columns(expected), columns(back)
     for name in ("theta_i_deg", "theta_o_deg", "bsdf", "sigma", "u_dark",
                  "u_beam_normalisation"):
