@@ -1,17 +1,18 @@
 """Measured BSDF files that gonio did not make, read into the ReducedData that `fit` and
 `reduce` use: ASTM E1392 (`.astm`), Zemax tabular BSDF (`.bsdf`, `.zmx`, `.txt` with its
-keywords), gonio's reduced NetCDF (`.nc`) and CSV, or a plain CSV with named columns
-(theta_i, phi_i, theta_o, phi_o in degrees, with or without `_deg`, theta_o above 90 for
-transmission; bsdf; optional sigma and wavelength_nm). calibration.formats names the reader
-of each format and tells which format a file is.
+keywords), a BiRD universal BRDF file (`.json`), gonio's reduced NetCDF (`.nc`) and CSV, or a
+plain CSV with named columns (theta_i, phi_i, theta_o, phi_o in degrees, with or without
+`_deg`, theta_o above 90 for transmission; bsdf; optional sigma and wavelength_nm).
+calibration.formats names the reader of each format and tells which format a file is.
 
-Uncertainties come from the file where it has them (CSV `sigma`, NetCDF); otherwise from a
-stated assumption (`sigma_relative`: u = that fraction of |bsdf|, put into meta["noise_model"]),
-and the index from the file (the `# eta: ...` line of gonio's CSV, ASTM and Zemax exports, else
-their record's sample block; the NetCDF's attributes) or from `eta`. Every input a file lacks
-and no option gives is named in one error (MissingInputs). The run's record that gonio's files
-carry (`# key: JSON` lines before the facts' `quantity`; the NetCDF's record attributes) goes
-into meta["record"], so that a file written from the import carries it on.
+Uncertainties come from the file where it has them (CSV `sigma`, NetCDF, BiRD uBRDF);
+otherwise from a stated assumption (`sigma_relative`: u = that fraction of |bsdf|, put into
+meta["noise_model"]), and the index from the file (the `# eta: ...` line of gonio's CSV, ASTM
+and Zemax exports, else their record's sample block; the NetCDF's attributes; the BiRD file's
+adhoc_section) or from `eta`. Every input a file lacks and no option gives is named in one error
+(MissingInputs). The run's record that gonio's files carry (`# key: JSON` lines before the
+facts' `quantity`; the NetCDF's record attributes; the BiRD adhoc_section) goes into
+meta["record"], so that a file written from the import carries it on.
 """
 
 from __future__ import annotations
@@ -144,10 +145,16 @@ def _header(comments: list[str]) -> tuple[dict, dict]:
 
 def _facts(path: Path, options: ImportOptions, comments: list[str], what: str,
            has_sigma: bool) -> dict:
-    """The meta of a text file's comments: its facts (META_KEYS, from the record where the
-    facts lack one, e.g. its sample block), the index (the option's, else the `eta` fact, else
-    the sample block's: _inputs) and meta["record"]."""
+    """The meta of a text file's comments (_header's record and facts, _meta)."""
     record, facts = _header(comments)
+    return _meta(path, options, record, facts, what, has_sigma)
+
+
+def _meta(path: Path, options: ImportOptions, record: dict, facts: dict, what: str,
+          has_sigma: bool) -> dict:
+    """The meta of a gonio file's record and facts: its facts (META_KEYS, from the record where
+    the facts lack one, e.g. its sample block), the index (the option's, else the `eta` fact,
+    else the sample block's: _inputs) and meta["record"]."""
     meta = {k: v for k, v in {**record, **facts}.items() if k in META_KEYS}
     sample = record.get("sample")
     if "eta" not in meta and isinstance(sample, dict) and "eta" in sample:
@@ -295,3 +302,27 @@ def from_zemax(path: Path, options: ImportOptions) -> ReducedData:
     wo_all = np.concatenate(wo)
     return _reduced(path, np.concatenate(wi), wo_all, np.concatenate(bsdf), None,
                     wo_all[:, 2] < 0, meta, options)
+
+
+def from_bird(path: Path, options: ImportOptions) -> ReducedData:
+    """A BiRD universal BRDF file (calibration.exports.bird_read): its points on the reflection
+    side, with gonio's budget, shared errors, validity, flags, facts and record where the file
+    carries them (a file gonio wrote)."""
+    from calibration.exports.bird_read import read_bird
+
+    bird = read_bird(path)
+    meta = _meta(path, options, bird.record, bird.facts, "the BiRD file", bird.sigma is not None)
+    if bird.wavelength_nm is not None:
+        meta["wavelength_nm"] = bird.wavelength_nm
+    if bird.valid is not None:
+        meta["valid"] = bird.valid
+    if bird.flags is not None:
+        meta["flags"] = bird.flags
+    meta["components"] = bird.components
+    angles = bird.angles_deg
+    wi = unit_vectors(angles["theta_i"], angles["phi_i"])
+    wo = unit_vectors(angles["theta_r"], angles["phi_r"])
+    data = _reduced(path, wi, wo, bird.brdf, bird.sigma, np.zeros(len(wo), bool), meta, options)
+    if bird.shared_rel is not None:
+        data.shared_rel = bird.shared_rel
+    return data

@@ -1,5 +1,5 @@
 """Instrument configs (TOML): devices, axes, detector, safety, beam/dark/signature positions,
-optics, [sim].
+optics, provenance, [sim].
 
 `load_config(path)` parses and validates a file into an `InstrumentConfig`; every error is a
 one-line ConfigError naming the file and the field. The raw (path-resolved) dict is kept for
@@ -22,6 +22,7 @@ from gonio.device_kinds.settings import read_settings
 from gonio.errors import ConfigError
 from gonio.fields import REQUIRED, Fields, location, read_toml
 from gonio.optics import Optics, parse_optics
+from gonio.provenance import Provenance, parse_provenance
 
 ROLES = ("sample", "arm", "azimuth", "elevation")
 
@@ -76,6 +77,7 @@ class InstrumentConfig:
     raw: dict[str, Any] = field(repr=False)
     optics: Optics | None = None
     signature: Position | None = None  # [signature]: the sample retracted (arm_deg None)
+    provenance: Provenance | None = None  # [provenance]: the lab, contact and licence
 
     @property
     def sim(self) -> dict[str, Any]:
@@ -108,6 +110,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
     beam = _position(top, "beam")
     dark = _position(top, "dark")
     signature = _position(top, "signature", arm=False)
+    provenance = parse_provenance(top.table_of("provenance")) if top.has("provenance") else None
     if top.has("sim") and not isinstance(raw["sim"], dict):
         raise ConfigError(f"{location(where, 'sim')}: must be a table")
     top.done()
@@ -116,7 +119,7 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
             if setting.type == "file" and setting.key in dev.settings:
                 raw["devices"][dev.name][setting.key] = dev.settings[setting.key]
     return InstrumentConfig(name, path, devices, axes, detector, clearance, forbidden,
-                            beam, dark, raw, optics, signature)
+                            beam, dark, raw, optics, signature, provenance)
 
 
 def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:

@@ -1,9 +1,10 @@
 """The bench's optics as the experimenter knows them: the instrument config's [optics] table.
 
-Wavelength and bandwidth of the source, the beam at the sample, the receiver aperture (so the
-receiver solid angle) and the polarisation of source and analyser. Reduction, fits, plots and
-exports read these, never the emulator's [sim] truth; the record of every run carries them
-(ASTM E2387, ISO 19986: the data hold only for this wavelength, geometry and polarisation).
+The source (what it is, its power), its wavelength and bandwidth, the beam at the sample, the
+receiver aperture (so the receiver solid angle), the detector's spectral range and the
+polarisation of source and analyser. Reduction, fits, plots and exports read these, never the
+emulator's [sim] truth; the record of every run carries them (ASTM E2387, ISO 19986: the data
+hold only for this wavelength, geometry and polarisation).
 """
 
 from __future__ import annotations
@@ -24,7 +25,10 @@ class Optics:
     """[optics]: lengths in mm, angles in degrees (divergence is the half-angle); a polarisation
     is "unpolarised", "s", "p" or a linear polariser's angle in degrees;
     aperture_diameter_tolerance_mm: the aperture diameter's +-tolerance, None when not stated
-    (the uncertainty budget then takes a machined part's tolerance class, calibration.type_b)."""
+    (the uncertainty budget then takes a machined part's tolerance class, calibration.type_b);
+    the source's name (make and model), type ("HeNe laser", "LED", ...) and power at the
+    sample in mW with its standard uncertainty, and the detector's spectral response range
+    in nm: "" or None when not stated (the BiRD export needs them)."""
 
     wavelength_nm: float
     bandwidth_nm: float
@@ -35,6 +39,11 @@ class Optics:
     source_polarisation: str | float
     analyser_polarisation: str | float
     aperture_diameter_tolerance_mm: float | None = None
+    source_name: str = ""
+    source_type: str = ""
+    source_power_mw: float | None = None
+    u_source_power_mw: float | None = None
+    detector_spectral_range_nm: tuple[float, float] | None = None
 
     @property
     def aperture_half_angle_deg(self) -> float:
@@ -64,7 +73,8 @@ def _polarisation(f: Fields, key: str) -> str | float:
 
 
 def parse_optics(f: Fields) -> Optics:
-    """Validate an [optics] table (every key but the polarisations is required)."""
+    """Validate an [optics] table (the geometry's and wavelength's keys are required; the
+    polarisations, the tolerance, the source's and the detector's range are not)."""
     optics = Optics(
         wavelength_nm=f.number("wavelength_nm", low=200.0, high=20000.0),
         bandwidth_nm=f.number("bandwidth_nm", low=0.0, high=1000.0),
@@ -78,11 +88,23 @@ def parse_optics(f: Fields) -> Optics:
         analyser_polarisation=_polarisation(f, "analyser_polarisation"),
         aperture_diameter_tolerance_mm=f.number("aperture_diameter_tolerance_mm", None,
                                                 low=0.0, high=100.0),
+        source_name=f.string("source_name", ""),
+        source_type=f.string("source_type", ""),
+        source_power_mw=f.number("source_power_mw", None, low=0.0, high=1e9, low_open=True),
+        u_source_power_mw=f.number("u_source_power_mw", None, low=0.0, high=1e9),
+        detector_spectral_range_nm=f.pair("detector_spectral_range_nm", None),
     )
     f.done()
     if optics.aperture_diameter_mm >= optics.aperture_distance_mm:
         raise f.fail("aperture_diameter_mm", f"{optics.aperture_diameter_mm:g} mm must be "
                      f"smaller than aperture_distance_mm {optics.aperture_distance_mm:g} mm")
+    spectral = optics.detector_spectral_range_nm
+    if spectral is not None and spectral[0] <= 0.0:
+        raise f.fail("detector_spectral_range_nm", f"must be wavelengths > 0 nm, got "
+                     f"[{spectral[0]:g}, {spectral[1]:g}]")
+    if optics.u_source_power_mw is not None and optics.source_power_mw is None:
+        raise f.fail("u_source_power_mw", "needs source_power_mw (the value it is the "
+                     "uncertainty of)")
     tolerance = optics.aperture_diameter_tolerance_mm
     if tolerance is not None and tolerance >= optics.aperture_diameter_mm:
         raise f.fail("aperture_diameter_tolerance_mm", f"+-{tolerance:g} mm must be smaller "

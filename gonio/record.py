@@ -2,9 +2,11 @@
 
 `run_record(run)` assembles what the standards ask to go with the data (ASTM E2387, ISO 19986,
 SEMI ME1392): wavelength and bandwidth, receiver solid angle, beam size and divergence,
-polarisation states, the sample block, the calibration used and each device's identity per
-session. It is built from meta.json (what the scan recorded), falling back on the stored
-config's [optics] and plan's [sample] for runs older than those blocks.
+polarisation states, the source, the sample block, the room's environment, who measured
+(provenance), the calibration used and each device's identity per session. It is built from
+meta.json (what the scan recorded), falling back on the stored config's [optics] and plan's
+[sample] for runs older than those blocks; the environment comes from the stored plan's
+[environment], the provenance from the stored config's [provenance].
 
 `emulator_config(run)` is the only way reduction, fits and plots reach a run's [sim] table:
 it gives it for a run whose devices were all emulated, and None for any other run.
@@ -17,9 +19,15 @@ from collections.abc import Mapping
 from typing import Any
 
 from gonio.completeness import completeness_of
+from gonio.environment import environment_of_plan
 from gonio.optics import optics_of_config
+from gonio.provenance import provenance_of_config
 from gonio.sample import sample_of_plan
 from gonio.store import Run
+
+#: The [optics] keys that describe the source, the record's `light_source` block (`source`
+#: is a CF global attribute of the NetCDF exports, which carry the record).
+SOURCE_KEYS = ("source_name", "source_type", "source_power_mw", "u_source_power_mw")
 
 
 def all_emulated(meta: Mapping[str, Any]) -> bool:
@@ -56,8 +64,9 @@ def _sessions(meta: Mapping[str, Any]) -> list[dict[str, Any]]:
 def run_record(run: Run) -> dict[str, Any]:
     """The run's record, flat and ordered: run facts (`calibrates`: what a calibration run
     measures, None for a BSDF run; status, reason and gonio.completeness's facts: complete,
-    stored_readings, planned_readings), the optics, the sample, the calibration and the devices
-    per session (None where the run does not know a value)."""
+    stored_readings, planned_readings), the optics and source, the sample, the environment,
+    the provenance, the calibration and the devices per session (None where the run does not
+    know a value)."""
     meta = run.meta
     optics = meta.get("optics")
     if optics is None and "optics" in run.config:
@@ -83,9 +92,19 @@ def run_record(run: Run) -> dict[str, Any]:
         "beam_divergence_half_angle_deg": o.get("divergence_deg"),
         "source_polarisation": o.get("source_polarisation"),
         "analyser_polarisation": o.get("analyser_polarisation"),
-        "sample": sample, "calibration": meta.get("calibration"),
+        "light_source": {key: o.get(key) for key in SOURCE_KEYS},
+        "detector": run.config.get("detector", {}).get("device"),
+        "detector_spectral_range_nm": o.get("detector_spectral_range_nm"),
+        "sample": sample, "environment": _json(environment_of_plan(run.plan, "run plan")),
+        "provenance": _json(provenance_of_config(run.config, "run config")),
+        "calibration": meta.get("calibration"),
         "sessions": _sessions(meta),
     }
+
+
+def _json(block: Any) -> dict[str, Any] | None:
+    """A block's to_json(), None for a block the run does not have."""
+    return None if block is None else block.to_json()
 
 
 def record_lines(record: Mapping[str, Any]) -> list[str]:

@@ -1,5 +1,5 @@
 """What is measured: the plan's [sample] table (id, kind, nominal index, lit side, the
-calibration it is a reference for, notes).
+calibration it is a reference for, its shape and dimensions, notes).
 
 Reduction takes the sample's kind, index and lit side from here (never from the emulator's
 [sim]); every run's record carries the whole block, as the standards ask.
@@ -21,6 +21,8 @@ LIT_FROM = ("air", "hemisphere")
 #: the angle-offset fit uses (calibration.angles); "detector", a diffuse sample whose lobe links
 #: the detector's ranges. `gonio calibrate build` fits angle offsets only from an "angles" one.
 REFERENCES = ("angles", "detector")
+#: The sample dimensions [sample] may state, each as `<name>_mm`.
+DIMENSIONS = ("diameter", "length", "width", "thickness")
 #: Nominal indices gonio reduces and fits (glasses, and a conductor's real part).
 ETA_RANGE = (0.01, 10.0)
 
@@ -41,6 +43,17 @@ class SampleInfo:
     azimuth_reference: str = ""
     operator: str = ""
     notes: str = ""
+    shape: str = ""
+    diameter_mm: float | None = None
+    length_mm: float | None = None
+    width_mm: float | None = None
+    thickness_mm: float | None = None
+
+    @property
+    def dimensions_mm(self) -> dict[str, float]:
+        """The dimensions stated, by name (diameter, length, width, thickness), in mm."""
+        return {name: value for name in DIMENSIONS
+                if (value := getattr(self, f"{name}_mm")) is not None}
 
     def to_json(self) -> dict[str, Any]:
         """The block as stored in meta.json and exports."""
@@ -63,6 +76,9 @@ def parse_sample(f: Fields) -> SampleInfo:
         azimuth_reference=f.string("azimuth_reference", ""),
         operator=f.string("operator", ""),
         notes=f.string("notes", ""),
+        shape=f.string("shape", ""),
+        **{f"{name}_mm": f.number(f"{name}_mm", None, low=0.0, high=10_000.0, low_open=True)
+           for name in DIMENSIONS},
     )
     f.done()
     if sample.lit_from == "hemisphere" and sample.kind != "hemisphere":

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from calibration.exports.astm import AstmTable, astm_tables, side_paths, write_astm
+from calibration.exports.bird import write_bird
 from calibration.exports.cf import write_reduced_netcdf
 from calibration.exports.measured import fact_lines, shared_error_lines, write_reduced_csv
 from calibration.exports.model import (
@@ -40,6 +41,14 @@ def reduced_netcdf(data: ReducedData, out: Path, record: Mapping[str, Any],
                    request: ExportRequest, source: str = "") -> Written:
     """The reduced data as CF-1.8 NetCDF (cf.write_reduced_netcdf)."""
     return [write_reduced_netcdf(data, record, out)], []
+
+
+def reduced_bird(data: ReducedData, out: Path, record: Mapping[str, Any],
+                 request: ExportRequest, source: str = "") -> Written:
+    """The reduced data's reflection points as a BiRD universal BRDF file (bird.write_bird;
+    its notes say what it leaves out)."""
+    path, notes = write_bird(data, out, record)
+    return [path], notes
 
 
 def reduced_astm(data: ReducedData, out: Path, record: Mapping[str, Any],

@@ -32,6 +32,9 @@ FORMATS: dict[str, FileFormat] = {fmt.name: fmt for fmt in (
     FileFormat(name="astm", suffixes=(".astm", ".txt"), default_what="reduced",
                writers={"reduced": f"{_WRITERS}:reduced_astm", "model": f"{_WRITERS}:model_astm"},
                reader="calibration.imports:from_astm", keyword="VARS"),
+    FileFormat(name="bird", suffixes=(".json",), default_what="reduced",
+               writers={"reduced": f"{_WRITERS}:reduced_bird"},
+               reader="calibration.imports:from_bird"),
     FileFormat(name="mitsuba", suffixes=(".xml",), default_what="model",
                writers={"model": f"{_WRITERS}:model_mitsuba"}),
 )}

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio.environment import Environment, parse_environment
 from gonio.errors import PlanError
 from gonio.fields import Fields, read_toml
 from gonio.invalid_readings import DEFAULT_MAX_INVALID_SHARE
@@ -74,6 +75,7 @@ class Plan:
     dark_range_w: float = UNSET  # UNSET: a dark reading on every range the samples use
     beam_range_w: float = UNSET  # UNSET: the plan's range
     sample: SampleInfo | None = None  # [sample]: what is measured
+    environment: Environment | None = None  # [environment]: the room's temperature, humidity
     signature: SignaturePlan | None = None  # [signature]: instrument-signature readings
     calibrates: str | None = None  # one of CALIBRATES for a calibration run; None: a BSDF
     suspend: SuspendSpec | None = None  # [suspend]: conditions that hold the scan (suspenders)
@@ -116,6 +118,8 @@ def parse_plan(raw: dict[str, Any], path: str | Path | None = None) -> Plan:
         dark_range_w=dark_range,
         beam_range_w=beam_range,
         sample=parse_sample(top.table_of("sample")) if top.has("sample") else None,
+        environment=(parse_environment(top.table_of("environment"))
+                     if top.has("environment") else None),
         signature=_signature(top),
         calibrates=top.string("calibrates", None, choices=CALIBRATES),
         suspend=parse_suspend(top.table_of("suspend"), beam_every) if top.has("suspend") else None,

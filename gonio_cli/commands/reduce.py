@@ -4,8 +4,8 @@ aperture, cos o, hemisphere exit; calibration.budget); writes RUN/reduced.csv (t
 U = k u, u_NAME per component; calibration.exports.measured) and prints a summary per incidence
 and the budget's components.
 `gonio reduce --import FILE --out CSV`: a measured file gonio did not make (ASTM E1392, Zemax
-tabular BSDF, gonio's reduced CSV or NetCDF, a plain CSV; calibration.imports) as gonio's
-reduced CSV (calibration.exports.measured)."""
+tabular BSDF, BiRD universal BRDF, gonio's reduced CSV or NetCDF, a plain CSV;
+calibration.imports) as gonio's reduced CSV (calibration.exports.measured)."""
 
 from __future__ import annotations
 
@@ -46,7 +46,8 @@ def add_run_or_import(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", nargs="?", help="run directory (or --import FILE)")
     p.add_argument("--import", dest="import_file", metavar="FILE",
                    help="a measured file instead of a run: ASTM E1392 (.astm), Zemax tabular "
-                        "BSDF (.bsdf), gonio's reduced CSV or NetCDF (.nc), or a plain CSV with "
+                        "BSDF (.bsdf), BiRD universal BRDF (.json), gonio's reduced CSV or "
+                        "NetCDF (.nc), or a plain CSV with "
                         "columns theta_i_deg, phi_i_deg, theta_o_deg, phi_o_deg (theta_o above "
                         "90 for transmission), bsdf, optional sigma, wavelength_nm")
     p.add_argument("--sigma-relative", type=float, metavar="FRACTION",

@@ -166,6 +166,8 @@ def test_every_export_carries_the_record(emulated, tmp_path):
     assert (facts["beam_diameter_mm"], facts["beam_divergence_half_angle_deg"]) == (2.0, 0.03)
     assert facts["source_polarisation"] == facts["analyser_polarisation"] == "unpolarised"
     assert facts["sample"]["id"] == "GG-7" and facts["sample"]["operator"] == "test"
+    assert facts["provenance"]["lab"] == "gonio emulated bench" and facts["environment"] is None
+    assert facts["light_source"]["source_power_mw"] == 1.0 and facts["detector"] == "pm100"
     assert "calibration" in facts and facts["emulated"] is False
     assert facts["sessions"][0]["devices"] == IDENTITY
     with open(tmp_path / "run.csv") as fh:  # the data rows still read as CSV

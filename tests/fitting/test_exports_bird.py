@@ -1,0 +1,163 @@
+"""The BiRD universal BRDF export and import (calibration.exports.bird, bird_read): a file
+written from reduced data reads back as the same points, values and uncertainties (budget,
+shared errors, validity, flags, index, wavelength); a record without what the format requires
+is refused in one line naming the plan or config keys; a bad BiRD file is one error line
+(exit 2). The validation against the BiRD schema itself is the conformance suite's
+(tests/conformance/test_conformance_bird.py)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration.exports.bird import write_bird
+from calibration.exports.measured import columns
+from calibration.formats import format_to_read
+from calibration.formats.file_format import ImportOptions
+from calibration.imports import read_measured
+from calibration.synthetic import synthesize
+from calibration.values import CalibrationError
+from gonio.config import load_config
+from gonio.plan.parse import load_plan
+from gonio_cli.main import main
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+def example_record() -> dict:
+    """The record of a run of the demo plan on the emulated serial bench (the keys the BiRD
+    export reads), from the example files as the parsers read them."""
+    cfg = load_config(EXAMPLES / "instruments" / "sim-serial.toml")
+    plan = load_plan(EXAMPLES / "plans" / "demo.toml")
+    optics = cfg.optics.to_json()
+    return {
+        "run": "20261207T120000Z-demo", "plan": plan.name, "instrument": cfg.name,
+        "started_utc": "2026-12-07T12:00:00.000+00:00",
+        "wavelength_nm": optics["wavelength_nm"], "bandwidth_nm": optics["bandwidth_nm"],
+        "receiver_solid_angle_sr": optics["receiver_solid_angle_sr"],
+        "aperture_diameter_mm": optics["aperture_diameter_mm"],
+        "aperture_distance_mm": optics["aperture_distance_mm"],
+        "beam_diameter_mm": optics["beam_diameter_mm"],
+        "beam_divergence_half_angle_deg": optics["divergence_deg"],
+        "source_polarisation": optics["source_polarisation"],
+        "analyser_polarisation": optics["analyser_polarisation"],
+        "light_source": {k: optics[k] for k in ("source_name", "source_type", "source_power_mw",
+                                          "u_source_power_mw")},
+        "detector": cfg.detector.device,
+        "detector_spectral_range_nm": list(optics["detector_spectral_range_nm"]),
+        "sample": plan.sample.to_json(), "environment": plan.environment.to_json(),
+        "provenance": cfg.provenance.to_json(), "sessions": [],
+    }
+
+
+@pytest.fixture(scope="module")
+def glass():
+    """Synthetic ground glass, both sides, with a budget of two components, a shared error,
+    an invalid point, flags and a negative value (noise around a dark level)."""
+    data = synthesize("ggx", 0.394, incidences_deg=(0.0, 30.0), n_uniform=12, n_peak=6, seed=3)
+    n = len(data.bsdf)
+    data.meta["wavelength_nm"] = 632.8
+    data.components = {"dark": 0.6 * data.sigma, "beam_normalisation": 0.8 * data.sigma}
+    flags = np.full(n, "", dtype=object)
+    flags[2], flags[5] = "signature", "retried,signature"
+    valid = np.ones(n, bool)
+    valid[4] = False
+    bsdf = data.bsdf.copy()
+    bsdf[7] = -abs(bsdf[7])
+    return replace(data, bsdf=bsdf, valid=valid, flags=flags.astype(str),
+                   shared_rel=np.full((n, 1), 0.01))
+
+
+def test_a_bird_file_reads_back_as_the_same_points(glass, tmp_path):
+    path, notes = write_bird(glass, tmp_path / "glass.json", example_record())
+    assert format_to_read(path).name == "bird"
+    back = read_measured(path)
+    kept = ~glass.transmission & (glass.bsdf >= 0)
+    expected = glass.subset(kept)
+    assert len(back.bsdf) == int(kept.sum()) > 10
+    assert notes == [f"bird: left out {int(glass.transmission.sum())} points on the "
+                     "transmission side (BiRD holds a BRDF; the CSV, NetCDF, ASTM and Zemax "
+                     "exports hold them).", "bird: left out 1 point below 0 (BiRD's BRDF is "
+                     ">= 0)."]
+    want, got = columns(expected), columns(back)
+    for name in ("theta_i_deg", "theta_o_deg", "bsdf", "sigma", "u_dark",
+                 "u_beam_normalisation"):
+        np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-9, err_msg=name)
+    np.testing.assert_allclose(np.cos(np.radians(got["phi_o_deg"] - want["phi_o_deg"])), 1.0)
+    np.testing.assert_array_equal(back.shared_rel, expected.shared_rel)
+    np.testing.assert_array_equal(back.valid, expected.valid)
+    np.testing.assert_array_equal(back.flags, expected.flags)
+    assert not back.transmission.any()
+    assert back.meta["eta"] == glass.meta["eta"] and back.meta["wavelength_nm"] == 632.8
+    assert back.meta["record"]["provenance"]["lab"] == "gonio emulated bench"
+
+
+def test_the_metadata_carries_the_plan_and_config_values(glass, tmp_path):
+    path, _ = write_bird(glass, tmp_path / "glass.json", example_record())
+    meta = json.loads(path.read_text())["metadata"]
+    assert meta["environment"]["temperature"] == {"value": 21.5, "unit": "°C",
+                                                  "uncertainty": 0.3, "uncertainty_unit": "°C"}
+    assert meta["environment"]["relative_humidity"]["value"] == pytest.approx(42.0)
+    assert meta["sample"]["shape"] == "hemisphere"
+    assert meta["sample"]["dimensions"]["diameter"] == {"value": 25.4, "unit": "mm"}
+    source = meta["instrumentation"]["illumination_system"]["source"]
+    assert source["power"] == {"value": 1.0, "unit": "mW", "uncertainty": 0.02,
+                               "uncertainty_unit": "mW"}
+    assert source["central_wl"] == {"value": 632.8, "unit": "nm"}
+    assert meta["provenance"]["contact_person"] == "gonio maintainers"
+    assert meta["license"]["type"] == "CC-BY-4.0"
+
+
+def test_a_record_without_provenance_or_environment_is_refused_in_one_line(glass, tmp_path):
+    record = example_record()
+    record["provenance"] = None
+    record["environment"] = None
+    record["light_source"]["source_power_mw"] = None
+    out = tmp_path / "glass.json"
+    with pytest.raises(CalibrationError) as caught:
+        write_bird(glass, out, record)
+    message = str(caught.value)
+    assert "\n" not in message and not out.exists()
+    assert message == ("export: --format bird needs what the run's record lacks: config "
+                       "[provenance] lab, contact, email, street, building, postal_code, city, "
+                       "country, licence; config [optics] source_power_mw; plan [environment] "
+                       "temperature_c")
+
+
+@pytest.mark.parametrize("text, said", [
+    ("{not json", "not JSON"),
+    ('{"metadata": {}}', "not a BiRD BRDF file: data: missing"),
+    ('{"data": {"BRDF": {"values": [1.0, 2.0], "unit": "1/sr"}, "theta_i": {"values": [0, 0], '
+     '"unit": "deg"}, "phi_i": {"values": [0, 0], "unit": "deg"}, "theta_r": {"values": '
+     '[10], "unit": "deg"}, "phi_r": {"values": [0, 0], "unit": "deg"}}}',
+     "data.theta_r.values: 1 values for 2 BRDF values"),
+    ('{"data": {"BRDF": {"values": [1.0, "x"], "unit": "1/sr"}}}',
+     "data.BRDF.values[1]: not a number: 'x'"),
+    ('{"data": {"BRDF": {"values": [1.0], "unit": "1/sr"}, "theta_i": {"values": [0], '
+     '"unit": "grad"}}}', "data.theta_i.unit: must be one of deg, °, rad, got 'grad'"),
+])
+def test_a_bad_bird_file_is_one_error_line(text, said, tmp_path, capsys):
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    assert main(["fit", "--import", str(path), "--eta", "1.5", "--sigma-relative", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err and str(path) in err
+
+
+def test_another_labs_file_takes_its_stated_uncertainty_and_the_given_index(tmp_path):
+    path = tmp_path / "other.json"
+    data = {"theta_i": {"values": [0.0, 0.5236], "unit": "rad"},
+            "phi_i": {"values": [0.0, 0.0], "unit": "rad"},
+            "theta_r": {"values": [10.0, 40.0], "unit": "deg"},
+            "phi_r": {"values": [0.0, 180.0], "unit": "deg"},
+            "BRDF": {"values": [0.5, 0.25], "unit": "1/sr",
+                     "uncertainty": {"value": 2.0, "unit": "%"}}}
+    path.write_text(json.dumps({"metadata": {}, "data": data}))
+    back = read_measured(path, ImportOptions(eta=1.5))
+    np.testing.assert_allclose(back.sigma, [0.01, 0.005])
+    np.testing.assert_allclose(back.theta_i_deg, [0.0, 30.0], atol=1e-3)
+    assert back.meta["eta"] == 1.5
