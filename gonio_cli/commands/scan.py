@@ -1,11 +1,12 @@
 """`gonio scan PLAN`: run a plan on an instrument (real, emulated, or mixed) into a run directory.
 
-Once a run directory exists it is the last line printed on stdout, whatever the outcome; while
-it measures, RUN_DIR/control.sock serves the control channel (its token on stderr). The
-exit status: 0 completed, 1 failed, 2 bad input or a device that cannot be used (a plan or
-config that does not load, a port another process holds, a device that cannot be opened or
-refuses a setting: before anything moves), 130 aborted by Ctrl-C, 128 + N ended by signal N
-(SIGTERM, SIGHUP).
+Once a run directory exists it is the last line printed on stdout, whatever the outcome (and
+whatever signal comes after the run has ended); while it measures, RUN_DIR/control.sock serves
+the control channel (its token on stderr). The exit status: 0 completed, 1 failed (or completed
+but the directory refused to record it: one warning line says so), 2 bad input or a device that
+cannot be used (a plan or config that does not load, a port another process holds, a device
+that cannot be opened or refuses a setting: before anything moves), 130 aborted by Ctrl-C or
+the control channel, 128 + N ended by signal N (SIGTERM, SIGHUP).
 """
 
 from __future__ import annotations
@@ -168,6 +169,11 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
             print(f"{verb}: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
         except KeyboardInterrupt:
             print(f"{verb}: warning: no plot: interrupted", file=sys.stderr)
+    if outcome.unrecorded:
+        print(f"{verb}: warning: the run's end ({outcome.status}) is not recorded: "
+              f"{outcome.unrecorded}; its {outcome.done} readings are stored in "
+              f"{result.path / 'readings.jsonl'} (once the directory takes writes, `gonio scan "
+              f"--resume {result.path}` records it)", file=sys.stderr)
     if outcome.status != "completed":
         again = ("" if outcome.status != "failed"
                  else f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
@@ -181,4 +187,6 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
     print(result.path, flush=True)
     if outcome.signum:
         return 128 + outcome.signum
+    if outcome.unrecorded and outcome.status == "completed":
+        return 1
     return {"completed": 0, "aborted": 130}.get(outcome.status, 1)
