@@ -23,7 +23,7 @@ from gonio.control import RunStatus, serving
 from gonio.device_kinds import endpoint_keys
 from gonio.engine import Engine, Outcome, configure_detector
 from gonio.errors import ConfigError, PlanError, RunError, Terminated
-from gonio.events import EventBus, Subscriber
+from gonio.events import EventBus, State, Subscriber
 from gonio.instrument import build_instrument
 from gonio.invalid_readings import InvalidReadings
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
@@ -183,6 +183,8 @@ def _ended_unstarted(writer: RunWriter, control: PauseControl,
     """The run ended by a signal or an abort once its directory existed but before the engine
     took it over (nothing has moved): recorded as aborted, with why."""
     control.hold()
+    control.enter(State.STOPPING)
+    control.enter(State.ABORTED)
     signum = exc.signum if isinstance(exc, Terminated) else None
     why = str(exc) if signum else control.abort_reason or "aborted by the user (Ctrl-C)"
     reason = f"{why} before {'this session' if writer.stored else 'the run'}'s first reading"

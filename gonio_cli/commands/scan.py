@@ -1,12 +1,13 @@
 """`gonio scan PLAN`: run a plan on an instrument (real, emulated, or mixed) into a run directory.
 
-Once a run directory exists it is the last line printed on stdout, whatever the outcome (and
-whatever signal comes after the run has ended); while it measures, RUN_DIR/control.sock serves
-the control channel (its token on stderr). The exit status: 0 completed, 1 failed (or completed
-but the directory refused to record it: one warning line says so), 2 bad input or a device that
-cannot be used (a plan or config that does not load, a port another process holds, a device
-that cannot be opened or refuses a setting: before anything moves), 130 aborted by Ctrl-C or
-the control channel, 128 + N ended by signal N (SIGTERM, SIGHUP).
+Once a run directory exists it is the last line printed on stdout, whatever the outcome; while
+it measures, RUN_DIR/control.sock serves the control channel (its token on stderr). The
+exit status: 0 completed, 1 failed, 2 bad input or a device that cannot be used (a plan or
+config that does not load, a port another process holds, a device that cannot be opened or
+refuses a setting: before anything moves), 130 aborted by Ctrl-C, 128 + N ended by signal N
+(SIGTERM, SIGHUP). A completed run whose directory refuses to record its end exits 1 too (one
+warning line says so and where its readings are); once a run has ended, no later signal
+changes its exit status.
 """
 
 from __future__ import annotations
