@@ -123,6 +123,7 @@ class Outcome:
     done: int  # readings stored in total
     signum: int | None = None  # the signal that ended it (SIGTERM, SIGHUP)
     resumable: bool = True  # whether `gonio scan --resume` can finish it (StopRun.resumable)
+    unrecorded: str = ""  # why meta.json could not record this ending ("": it did)
 
 
 def _plain(value: Any) -> Any:
@@ -383,8 +384,9 @@ class Engine:
                 self._finish("failed", f"internal error: {type(exc).__name__}: {exc}")
                 raise
             self.control.hold()
-            reason = self._finish(status, reason)
-        return Outcome(status, reason, self.stored, signum, resumable)
+            stopped = self._finish(status, reason)
+        return Outcome(status, stopped.reason, self.stored, signum, resumable,
+                       "; ".join(stopped.unrecorded))
 
     def _count_invalid(self, record: dict[str, Any]) -> None:
         """Count a stored reading; StopRun once the plan's share of invalid readings can no
@@ -404,9 +406,9 @@ class Engine:
             self._sent = Stopping(status, reason)
             self.bus.publish(self._sent)
 
-    def _finish(self, status: str, reason: str) -> str:
-        """Stop every axis unless completed, publish the end; returns the reason as recorded
-        (with the axes that could not be stopped, or what a subscriber could not do)."""
+    def _finish(self, status: str, reason: str) -> Stopped:
+        """Stop every axis unless completed, publish the end; returns it as published (its
+        reason with the axes that could not be stopped, and whether the store recorded it)."""
         unstopped = self.inst.stop_all() if status != "completed" else {}
         if unstopped:
             reason += "; could not stop: " + "; ".join(f"{role}: {why}"
@@ -419,4 +421,4 @@ class Engine:
                           self._sent.session if self._sent else {})
         self.bus.publish(stopped)
         self.control.enter(State(status))
-        return reason + "".join(f" ({note})" for note in stopped.notes)
+        return stopped

@@ -133,15 +133,15 @@ class Stopping:
 class Stopped:
     """The run has ended: `status`, `reason`, `done` readings stored in all, the axes that
     could not be stopped ({role: why}) and the session additions gathered at Stopping.
-    A subscriber that could not do its part (the store: meta.json not written) says so in
-    `notes`, which the engine adds to the reason it returns."""
+    The store's subscriber adds to `unrecorded` why meta.json could not record the end (the
+    engine's outcome carries it)."""
 
     status: str
     reason: str
     done: int
     unstopped: dict[str, str]
     session: dict[str, Any]
-    notes: list[str] = field(default_factory=list)
+    unrecorded: list[str] = field(default_factory=list)
     to_every_subscriber: ClassVar[bool] = True
 
 

@@ -3,7 +3,8 @@
 It subscribes first, so storing a reading is as durable as the writer makes it (written at
 once, fsynced before the next line) and a disk that refuses ends the run as failed: the
 StoreError propagates to the engine. meta.json follows the state: paused, suspended (each
-suspension kept under `suspensions`), running again, and the end with the session record.
+suspension kept under `suspensions`), running again, and the end with the session record (or,
+when the directory refuses it, why, for the scan to say).
 """
 
 from __future__ import annotations
@@ -55,7 +56,16 @@ class RunRecorder:
             meta["unstopped"] = event.unstopped
         if meta["sessions"]:
             meta["sessions"][-1].update(event.session)
-        try:
-            self.writer.set_status(event.status, event.reason)
-        except StoreError as exc:
-            event.notes.append(f"not recorded in meta.json: {exc}")
+        unrecorded = record_end(self.writer, event.status, event.reason)
+        if unrecorded:
+            event.unrecorded.append(unrecorded)
+
+
+def record_end(writer: RunWriter, status: str, reason: str) -> str:
+    """Record how the run ended in meta.json; "" once recorded, else why the directory
+    refused it (the readings already stored stay as they are)."""
+    try:
+        writer.set_status(status, reason)
+    except StoreError as exc:
+        return str(exc)
+    return ""

@@ -6,6 +6,9 @@ first Ctrl-C asks for a pause, answered at the terminal prompt; a Ctrl-C while a
 for or in effect aborts at once; SIGTERM and SIGHUP raise Terminated. A pause asked for on the
 channel waits on the channel (resume or abort there, or Ctrl-C: abort), never on the terminal.
 An abort from the channel interrupts the engine's thread as a second Ctrl-C does.
+While the run directory is made, signals wait (`deferring`) and act once it exists; once the
+run has ended they are ignored (`hold`) until its devices are closed (`held_until_closed`), so
+no later signal changes how the run ended.
 
 Every change of state goes through `PauseControl._move`, which checks it against
 `TRANSITIONS`, the whole table.
@@ -17,7 +20,8 @@ import _thread
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from gonio.errors import Terminated
@@ -94,6 +98,9 @@ class PauseControl:
         self._previous: dict[int, Any] = {}
         self._depth = 0
         self._engine_thread: int | None = None
+        self._deferred: list[int] | None = None  # signals waiting for `deferring` to end
+        self._holding = False  # signals ignored: the run has ended (`hold`)
+        self._closing = 0  # depth of `held_until_closed`
 
     # -- the state --------------------------------------------------------------
     @property
@@ -160,7 +167,15 @@ class PauseControl:
         return State.STOPPING
 
     # -- signals ----------------------------------------------------------------
-    def _on_sigint(self, signum: int, frame: Any) -> None:
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        if self._deferred is not None:
+            self._deferred.append(signum)
+        elif signum == signal.SIGINT:
+            self._on_sigint()
+        else:
+            self._on_terminate(signum)
+
+    def _on_sigint(self) -> None:
         with self._lock:
             aborting = (self.abort_reason is not None or self._pending is not None
                         or self._state in (State.PAUSING, State.PAUSED))
@@ -170,35 +185,73 @@ class PauseControl:
         self.request_pause(TERMINAL)
         self.notify("pausing after this point (Ctrl-C again to abort)")
 
-    def _on_terminate(self, signum: int, frame: Any) -> None:
+    def _on_terminate(self, signum: int) -> None:
         self.hold()
         raise Terminated(signum)
 
+    @contextmanager
+    def deferring(self) -> Iterator[None]:
+        """Signals that arrive inside the block act once it ends without an error: what the
+        block makes (the run directory and its writer) is whole before a signal ends the run."""
+        self._deferred = []
+        try:
+            yield
+        finally:
+            deferred, self._deferred = self._deferred, None
+        for signum in deferred:
+            self._on_signal(signum, None)
+
     def hold(self) -> None:
-        """Ignore these signals from now on (until the outermost exit): the run is ending, and
-        stopping the axes and recording why must not be interrupted."""
+        """Ignore these signals from now on (until the outermost exit, or the end of
+        `held_until_closed`): the run is ending, and stopping the axes and recording why must
+        not be interrupted."""
         if self._previous:
+            self._holding = True
             for sig in HANDLED:
                 signal.signal(sig, signal.SIG_IGN)
 
+    @contextmanager
+    def held_until_closed(self) -> Iterator[None]:
+        """A hold that starts inside the block lasts to its end (past the outermost exit): the
+        runner wraps the run's devices in it, so a signal after the run has ended cannot
+        interrupt their closing. Then the handlers in place before the run come back (this
+        control's own while an outer entry, a queue's, still holds it)."""
+        self._closing += 1
+        try:
+            yield
+        finally:
+            self._closing -= 1
+            if not self._closing and self._holding:
+                self._holding = False
+                if self._depth:
+                    self._install()
+                else:
+                    self._restore()
+
+    def _install(self) -> None:
+        for sig in HANDLED:  # one ignored on entry (nohup, a background job) stays so
+            if self._previous[sig] is not signal.SIG_IGN:
+                signal.signal(sig, self._on_signal)
+
+    def _restore(self) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+        self._previous = {}
+
     def __enter__(self) -> PauseControl:
         self._depth += 1
-        if self._depth == 1:
+        if self._depth == 1 and not self._previous:
             self._engine_thread = threading.get_ident()
             if self._engine_thread == threading.main_thread().ident:
                 self._previous = {sig: signal.getsignal(sig) or signal.SIG_DFL for sig in HANDLED}
-                for sig in HANDLED:  # one ignored on entry (nohup, a background job) stays so
-                    if self._previous[sig] is not signal.SIG_IGN:
-                        signal.signal(sig, self._on_sigint if sig == signal.SIGINT
-                                      else self._on_terminate)
+                self._install()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self._depth -= 1
-        if self._depth == 0:
-            for sig, previous in self._previous.items():
-                signal.signal(sig, previous)
-            self._previous = {}
+        if self._depth == 0 and not (self._closing and self._holding):
+            self._holding = False
+            self._restore()
 
     # -- the engine's side ------------------------------------------------------
     def check_abort(self) -> None:

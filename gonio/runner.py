@@ -22,13 +22,13 @@ from gonio.config import InstrumentConfig, load_config, parse_config
 from gonio.control import RunStatus, serving
 from gonio.device_kinds import endpoint_keys
 from gonio.engine import Engine, Outcome, configure_detector
-from gonio.errors import ConfigError, PlanError, RunError
-from gonio.events import EventBus, Subscriber
+from gonio.errors import ConfigError, PlanError, RunError, Terminated
+from gonio.events import EventBus, State, Subscriber
 from gonio.instrument import build_instrument
 from gonio.invalid_readings import InvalidReadings
 from gonio.plan import Plan, Schedule, build_schedule, load_plan, parse_plan
 from gonio.progress import Progress
-from gonio.recorder import RunRecorder
+from gonio.recorder import RunRecorder, record_end
 from gonio.run_clock import RunClock
 from gonio.run_control import PauseControl
 from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
@@ -120,20 +120,26 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
     the control channel's token (None: no channel), before the engine starts (`gonio scan
     --watch`); created: told the run directory as soon as it exists, before any reading is
     measured (the queue records it there). The run's signal handling (`control`) starts
-    before the run directory is made: a signal in the first milliseconds of a run ends it as
-    one at any other moment does. clock_start_s: the run's time this session starts at on an
-    all-emulated bench's virtual clock (resume_clock_s)."""
+    before the run directory is made; a signal while it is made acts once it exists, and one
+    that ends the run before the engine takes over is recorded there as the run's end
+    (aborted, and why), so whatever its moment a signal leaves no run without its ending.
+    Once the run has ended, signals are ignored until the devices are closed.
+    clock_start_s: the run's time this session starts at on an all-emulated bench's virtual
+    clock (resume_clock_s)."""
     control = control or PauseControl()
     stored_at = [row["index"] for row in stored]
     done, upcoming = sched.readings[stored_at], np.delete(sched.readings, stored_at)
-    with _devices(cfg, sim, plan, t0_epoch, done, upcoming, progress, clock_start_s) as dev, \
+    with control.held_until_closed(), \
+            _devices(cfg, sim, plan, t0_epoch, done, upcoming, progress, clock_start_s) as dev, \
             build_instrument(dev.config, dev.time_scale) as inst:
         configure_detector(inst, plan, None)
         if check is not None:
             check(sched.readings, inst.detector)
         with control:
-            writer = make_writer()
+            writer = None
             try:
+                with control.deferring():
+                    writer = make_writer()
                 if created is not None:
                     created(writer.path)
                 swapped = identity_changes(writer.meta["sessions"], inst.devices)
@@ -163,8 +169,27 @@ def _run(make_writer: Callable[[], RunWriter], plan: Plan, cfg: InstrumentConfig
                     if started is not None:
                         started(writer.path, server.token if server else None)
                     return ScanResult(writer.path, engine.run())
+            except (Terminated, KeyboardInterrupt) as exc:
+                if writer is None:
+                    raise
+                return ScanResult(writer.path, _ended_unstarted(writer, control, exc))
             finally:
-                writer.close()
+                if writer is not None:
+                    writer.close()
+
+
+def _ended_unstarted(writer: RunWriter, control: PauseControl,
+                     exc: Terminated | KeyboardInterrupt) -> Outcome:
+    """The run ended by a signal or an abort once its directory existed but before the engine
+    took it over (nothing has moved): recorded as aborted, with why."""
+    control.hold()
+    control.enter(State.STOPPING)
+    control.enter(State.ABORTED)
+    signum = exc.signum if isinstance(exc, Terminated) else None
+    why = str(exc) if signum else control.abort_reason or "aborted by the user (Ctrl-C)"
+    reason = f"{why} before {'this session' if writer.stored else 'the run'}'s first reading"
+    return Outcome("aborted", reason, writer.stored, signum,
+                   unrecorded=record_end(writer, "aborted", reason))
 
 
 def new_scan(plan_path: str | Path, instrument: str | Path | None = None,

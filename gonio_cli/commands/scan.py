@@ -5,7 +5,9 @@ it measures, RUN_DIR/control.sock serves the control channel (its token on stder
 exit status: 0 completed, 1 failed, 2 bad input or a device that cannot be used (a plan or
 config that does not load, a port another process holds, a device that cannot be opened or
 refuses a setting: before anything moves), 130 aborted by Ctrl-C, 128 + N ended by signal N
-(SIGTERM, SIGHUP).
+(SIGTERM, SIGHUP). A completed run whose directory refuses to record its end exits 1 too (one
+warning line says so and where its readings are); once a run has ended, no later signal
+changes its exit status.
 """
 
 from __future__ import annotations
@@ -168,6 +170,11 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
             print(f"{verb}: warning: no plot: {type(exc).__name__}: {exc}", file=sys.stderr)
         except KeyboardInterrupt:
             print(f"{verb}: warning: no plot: interrupted", file=sys.stderr)
+    if outcome.unrecorded:
+        print(f"{verb}: warning: the run's end ({outcome.status}) is not recorded: "
+              f"{outcome.unrecorded}; its {outcome.done} readings are stored in "
+              f"{result.path / 'readings.jsonl'} (once the directory takes writes, `gonio scan "
+              f"--resume {result.path}` records it)", file=sys.stderr)
     if outcome.status != "completed":
         again = ("" if outcome.status != "failed"
                  else f" (once that is fixed, `gonio scan --resume {result.path}` continues it)"
@@ -181,4 +188,6 @@ def report(result: ScanResult, plot: bool, verb: str) -> int:
     print(result.path, flush=True)
     if outcome.signum:
         return 128 + outcome.signum
+    if outcome.unrecorded and outcome.status == "completed":
+        return 1
     return {"completed": 0, "aborted": 130}.get(outcome.status, 1)
