@@ -1,8 +1,9 @@
-"""Measured BSDF values spread over one side's hemisphere, about its specular direction: the
-quadrature cells of an integral and the interpolation between measured rows (calibration.
-integrals). A row is the set of points at one azimuth about the specular direction; between two
-neighbouring rows and inside both rows' radial range a cell is covered by the data (linear in the
-radial angle along each row, linear in azimuth between the rows), elsewhere it is not."""
+"""Measured BSDF values spread over one side's hemisphere: the quadrature cells of an integral,
+about the specular direction (calibration.integrals), and the interpolation between measured
+rows. A row is the set of points at one azimuth about the side's normal (an in-plane scan has
+two: forward and backward); between two neighbouring rows and inside both rows' range of angles
+from the normal a cell is covered by the data (linear in that angle along each row, linear in
+azimuth between the rows), elsewhere it is not."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.exports.zemax import on_side, scatter_directions, specular_frame
+from calibration.exports.zemax import on_side, scatter_directions
 
 #: Edges of the radial panels, degrees about the specular direction: the standards' cone and
 #: window edges (calibration.integrals) fall on panel edges, so their regions are integrated
@@ -61,56 +62,63 @@ def cells(angle_deg: float, scatter_type: str) -> Cells:
     return Cells(azimuth_deg, radial_deg, wo, weight)
 
 
-def specular_coordinates(wo: np.ndarray, angle_deg: float, scatter_type: str
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """(azimuth, radial) in degrees of directions `wo` (N, 3) about the specular direction
-    (azimuth 0 toward the normal, 90 toward +y: calibration.exports.zemax)."""
-    c, e0, e90 = specular_frame(angle_deg, scatter_type)
-    radial = np.degrees(np.arccos(np.clip(wo @ c, -1.0, 1.0)))
-    azimuth = np.mod(np.degrees(np.arctan2(wo @ e90, wo @ e0)), 360.0)
-    return np.round(azimuth, NODE_DECIMALS), np.round(radial, NODE_DECIMALS)
+def side_coordinates(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(azimuth, radial) in degrees of directions `wo` (..., 3) about the normal of their side:
+    the angle from +z or -z, and the azimuth from +x (the forward side of an incidence from -x)
+    toward +y, in [0, 360)."""
+    radial = np.degrees(np.arccos(np.clip(np.abs(wo[..., 2]), 0.0, 1.0)))
+    azimuth = np.degrees(np.arctan2(wo[..., 1], wo[..., 0]))
+    return np.mod(np.round(azimuth, NODE_DECIMALS), 360.0), np.round(radial, NODE_DECIMALS)
 
 
 @dataclass(frozen=True)
 class RowInterpolation:
-    """Cell values from point values, linear in the points: cell (z, r) gets
-    `linear[z, r] @ values` where `covered[z, r]`, and `nearest[z, r] @ values` is the nearest
-    row's nearest node (the cruder rule whose difference from the linear one measures the
+    """Cell values from point values, linear in the points: a covered cell gets
+    `linear[cell] @ values`, and `nearest[cell] @ values` takes the nearest row's value alone
+    (the cruder rule in azimuth, whose difference from the linear one measures the azimuthal
     interpolation's error)."""
 
-    linear: np.ndarray  # (n_az, n_rad, n_points)
-    nearest: np.ndarray  # (n_az, n_rad, n_points)
-    covered: np.ndarray  # (n_az, n_rad) bool
+    linear: np.ndarray  # (..., n_points)
+    nearest: np.ndarray  # (..., n_points)
+    covered: np.ndarray  # (...) bool
 
 
-def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool
+def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: int | None
           ) -> dict[float, tuple[np.ndarray, np.ndarray]]:
     """Per row azimuth: (radial nodes, (n_nodes, n_points) coefficients averaging the points at
-    each node). Points at the specular direction itself belong to every row; `mirror` adds each
-    point to the row mirrored across the plane of incidence (an isotropic sample)."""
+    each node). Points at the normal itself belong to every row, and the opposite row's points
+    continue it through the normal at negative angles (so a cell between the normal and a row's
+    first point is covered); `mirror` adds each point to the row mirrored across the plane of
+    incidence (an isotropic sample); `thin` 0 or 1 drops the inner nodes of that parity (the
+    row's ends stay)."""
     n = len(azimuth)
     centre = np.flatnonzero(radial < 10.0 ** -NODE_DECIMALS)
     members: dict[float, list[int]] = {}
     for j in np.flatnonzero(radial >= 10.0 ** -NODE_DECIMALS):
         keys = {float(azimuth[j])}
         if mirror:
-            keys.add(float(np.round(np.mod(360.0 - azimuth[j], 360.0), NODE_DECIMALS)))
+            keys.add(float(np.mod(np.round(360.0 - azimuth[j], NODE_DECIMALS), 360.0)))
         for key in keys:
             members.setdefault(key, []).append(int(j))
     rows = {}
     for key, listed in members.items():
-        at = np.concatenate([centre, listed]).astype(int)
-        nodes, which = np.unique(radial[at], return_inverse=True)
+        across = members.get(float(np.mod(key + 180.0, 360.0)), [])
+        at = np.concatenate([centre, listed, across]).astype(int)
+        signed = np.concatenate([radial[centre], radial[listed], -radial[across]])
+        nodes, which = np.unique(signed, return_inverse=True)
         coefficient = np.zeros((len(nodes), n))
         np.add.at(coefficient, (which, at), 1.0)
-        rows[key] = (nodes, coefficient / coefficient.sum(axis=1, keepdims=True))
+        keep = np.ones(len(nodes), bool)
+        if thin is not None:
+            keep[1:-1] = np.arange(1, len(nodes) - 1) % 2 != thin
+        rows[key] = (nodes[keep], (coefficient / coefficient.sum(axis=1, keepdims=True))[keep])
     return rows
 
 
 def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(linear, nearest, inside) of one row at the cells' radial angles: (n_rad, n_points)
-    coefficients and whether each radial angle lies within the row's nodes."""
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """(linear, inside) of one row at radial angles (N,): (N, n_points) coefficients and
+    whether each radial angle lies within the row's nodes."""
     inside = (radial >= nodes[0]) & (radial <= nodes[-1])
     hi = np.clip(np.searchsorted(nodes, radial), 1, max(len(nodes) - 1, 1))
     lo = hi - 1
@@ -119,33 +127,34 @@ def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
     span = nodes[hi] - nodes[lo]
     s = np.where(span > 0, (radial - nodes[lo]) / np.where(span > 0, span, 1.0), 0.0)
     s = np.clip(s, 0.0, 1.0)[:, None]
-    linear = (1 - s) * coefficient[lo] + s * coefficient[hi]
-    nearest = np.where(s < 0.5, coefficient[lo], coefficient[hi])
-    return linear, nearest, inside
+    return (1 - s) * coefficient[lo] + s * coefficient[hi], inside
 
 
-def row_interpolation(grid: Cells, azimuth: np.ndarray, radial: np.ndarray, mirror: bool
+def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth: np.ndarray,
+                      radial: np.ndarray, mirror: bool, thin: int | None = None
                       ) -> RowInterpolation:
-    """The interpolation of point values at (azimuth, radial) (degrees, specular_coordinates)
-    onto the cells: linear along each row and between neighbouring rows (circularly) where the
-    cell lies inside both rows' radial range; no cell is covered with fewer than two rows."""
-    n_az, n_rad, n = len(grid.azimuth_deg), len(grid.radial_deg), len(azimuth)
-    linear = np.zeros((n_az, n_rad, n))
-    nearest = np.zeros((n_az, n_rad, n))
-    covered = np.zeros((n_az, n_rad), bool)
-    rows = _rows(azimuth, radial, mirror)
+    """The interpolation of point values at (azimuth, radial) (degrees, side_coordinates) onto
+    cells at (cell_azimuth, cell_radial): linear along each row and, circularly, between the
+    two rows either side of a cell where it lies inside both rows' radial range; no cell is
+    covered with fewer than two rows. `thin`: every other inner node of each row only
+    (_rows)."""
+    shape, n = cell_azimuth.shape, len(azimuth)
+    chi, theta = cell_azimuth.ravel(), cell_radial.ravel()
+    rows = _rows(azimuth, radial, mirror, thin)
     if len(rows) < 2:
-        return RowInterpolation(linear, nearest, covered)
+        return RowInterpolation(np.zeros((*shape, n)), np.zeros((*shape, n)),
+                                np.zeros(shape, bool))
     keys = sorted(rows)
-    along = {key: _along(*rows[key], grid.radial_deg) for key in keys}
+    linear_rows, inside_rows = (np.stack(a) for a in zip(
+        *(_along(*rows[key], theta) for key in keys), strict=True))
     bounds = np.array([*keys, keys[0] + 360.0])
-    for z, chi in enumerate(grid.azimuth_deg):
-        chi = chi if chi >= keys[0] else chi + 360.0
-        k = int(np.searchsorted(bounds, chi, side="right")) - 1
-        a, b = keys[k % len(keys)], keys[(k + 1) % len(keys)]
-        t = (chi - bounds[k]) / (bounds[k + 1] - bounds[k])
-        (lin_a, near_a, in_a), (lin_b, near_b, in_b) = along[a], along[b]
-        linear[z] = (1 - t) * lin_a + t * lin_b
-        nearest[z] = near_a if t < 0.5 else near_b
-        covered[z] = in_a & in_b
-    return RowInterpolation(linear, nearest, covered)
+    chi = np.where(chi >= keys[0], chi, chi + 360.0)
+    k = np.clip(np.searchsorted(bounds, chi, side="right") - 1, 0, len(keys) - 1)
+    a, b = k, (k + 1) % len(keys)
+    t = ((chi - bounds[k]) / (bounds[k + 1] - bounds[k]))[:, None]
+    cell = np.arange(len(chi))
+    linear = (1 - t) * linear_rows[a, cell] + t * linear_rows[b, cell]
+    nearest = np.where(t < 0.5, linear_rows[a, cell], linear_rows[b, cell])
+    covered = inside_rows[a, cell] & inside_rows[b, cell]
+    return RowInterpolation(linear.reshape(*shape, n), nearest.reshape(*shape, n),
+                            covered.reshape(shape))

@@ -5,11 +5,17 @@ directional-hemispherical reflectance and transmittance, the total scattering of
 
 Each is sum(W * f) over the quadrature cells of one incidence and side (calibration.hemisphere)
 for a weight W that the quantity defines. Where measured rows cover a cell, f is the fitted
-model times the data's ratio to it, interpolated between the rows; elsewhere f is the model
-alone (the fill). The uncertainty's components: the readings' own noise and their shared (type
-B) errors carried through the interpolation's weights; the interpolation (the difference from
-the nearest-node rule); the fill's model parameters (the fit's covariance) and model form (the
-model's relative misfit to the data beyond their noise, carried into the fill)."""
+model m plus the data's residual from it, interpolated between the rows relative to m + c (c:
+the median of the data, so that a residual follows the model's lobe where m is large and stays
+absolute where m vanishes; the interpolation carries only what the model misses); elsewhere f
+is the model alone (the fill).
+
+The uncertainty's components: the readings' own noise and their shared (type B) errors carried
+through the interpolation's weights; the interpolation, along the rows (the change when every
+other node is left out: the error of a grid that does not resolve the lobe, an upper estimate
+of one that does) and across them (the change when each cell takes its nearest row alone); the
+fill's model parameters (the fit's covariance) and model form (the model's relative misfit to
+the data beyond their noise, carried into the fill)."""
 
 from __future__ import annotations
 
@@ -19,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from calibration.fit.result import FitResult
-from calibration.hemisphere import Cells, cells, row_interpolation, specular_coordinates
+from calibration.hemisphere import Cells, cells, row_interpolation, side_coordinates
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 from model.bsdf.fresnel import fresnel_dielectric
@@ -36,6 +42,10 @@ GLOSS_WINDOWS_DEG = {20.0: (1.8, 3.6), 60.0: (4.4, 11.7), 85.0: (4.0, 6.0)}
 GLOSS_STANDARD_INDEX = 1.567
 #: A block's incidence matches a gloss geometry within this, degrees.
 GLOSS_INCIDENCE_TOL_DEG = 0.5
+#: The share of the change, when every other node of a row is left out, taken as the
+#: interpolation's error along the rows: 1 (Richardson's 1/3 holds for nodes that resolve the
+#: lobe, which the coverage study, bench/integral_coverage.py, shows 10 deg nodes do not).
+THINNING_SHARE = 1.0
 #: Components of an integral's standard uncertainty, in the order tables show them.
 COMPONENTS = ("noise", "shared", "interpolation", "model_parameters", "model_form")
 #: What each quantity is, for tables and files.
@@ -77,25 +87,27 @@ class Integral:
 @dataclass
 class Block:
     """The data and fitted model of one incidence and side on its cells: the model at the
-    cells and the points, the interpolated ratio of data to model, the model's change with each
-    fitted parameter (one sigma), and its relative misfit beyond the data's noise."""
+    cells and the points, the data's residual from it interpolated (linearly, from the nearest
+    row, from every other node), the model's change with each fitted parameter (one sigma),
+    and its relative misfit beyond the data's noise."""
 
     theta_i_deg: float
     grid: Cells
     points: ReducedData
     model_cells: np.ndarray  # (n_az, n_rad)
     model_points: np.ndarray  # (n,)
-    ratio_linear: np.ndarray  # (n_az, n_rad): data / model interpolated (1 where not covered)
-    ratio_nearest: np.ndarray
+    residual_linear: np.ndarray  # (n_az, n_rad): data - model interpolated (0 where not covered)
+    residual_nearest: np.ndarray  # the nearest row's alone (in azimuth)
+    residual_thinned: np.ndarray  # (2, n_az, n_rad): from every other inner node of each row
     covered: np.ndarray
-    gradient_basis: np.ndarray  # (n_az, n_rad, n): d(cell value)/d(point value) / model_cell
+    gradient_basis: np.ndarray  # (n_az, n_rad, n): d(cell value)/d(point value)
     parameter_steps: np.ndarray  # (n_params, n_az, n_rad): model change per parameter's sigma
     parameter_correlation: np.ndarray
     misfit_rel: float
     estimate: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        self.estimate = self.model_cells * self.ratio_linear
+        self.estimate = self.model_cells + self.residual_linear
 
     def value(self, weight: np.ndarray) -> float:
         """sum(weight * f) over the cells."""
@@ -104,10 +116,11 @@ class Block:
     def components(self, weight: np.ndarray) -> dict[str, float]:
         """The standard uncertainty's components of sum(weight * f) (COMPONENTS)."""
         fill = ~self.covered
-        gradient = np.tensordot(weight * self.model_cells, self.gradient_basis, 2)
+        gradient = np.tensordot(weight, self.gradient_basis, 2)
         noise, shared = self.points.linear_uncertainty(gradient)
-        interpolation = abs(float(np.sum(weight * self.model_cells
-                                         * (self.ratio_linear - self.ratio_nearest))))
+        across = float(np.sum(weight * (self.residual_linear - self.residual_nearest)))
+        along = np.sum(weight * (self.residual_thinned - self.residual_linear), axis=(1, 2))
+        interpolation = math.hypot(across, THINNING_SHARE * math.sqrt(float(np.mean(along ** 2))))
         steps = np.sum(np.where(fill, weight, 0.0) * self.parameter_steps, axis=(1, 2))
         parameters = math.sqrt(max(float(steps @ self.parameter_correlation @ steps), 0.0))
         form = self.misfit_rel * float(np.sum(np.where(fill, np.abs(weight), 0.0)
@@ -181,7 +194,6 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
     points = _aligned(data.subset(select), isotropic)
     wi, grid = incidence(theta_i_deg), block_cells(theta_i_deg, transmission,
                                                    float(data.meta["eta"]))
-    angle, scatter_type = _specular(theta_i_deg, transmission, float(data.meta["eta"]))
 
     def model_at(fitted: FitResult) -> np.ndarray:
         out = np.zeros(grid.weight.shape)
@@ -191,14 +203,18 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
 
     model_cells = model_at(result)
     model_points = result.predict(points.wi, points.wo)
-    usable = model_points > 0
-    points, model_points = points.subset(usable), model_points[usable]
-    azimuth, radial = specular_coordinates(points.wo, angle, scatter_type)
-    rows = row_interpolation(grid, azimuth, radial, isotropic)
-    ratio = points.bsdf / model_points
-    linear = np.where(rows.covered, rows.linear @ ratio, 1.0)
-    nearest = np.where(rows.covered, rows.nearest @ ratio, 1.0)
-    basis = np.where(rows.covered[..., None], rows.linear / model_points, 0.0)
+    rows = row_interpolation(*side_coordinates(grid.wo), *side_coordinates(points.wo),
+                             isotropic)
+    floor = float(np.median(np.abs(points.bsdf)))
+    relative = (points.bsdf - model_points) / (model_points + floor)
+    scale = np.where(rows.covered, model_cells + floor, 0.0)
+    linear = scale * (rows.linear @ relative)
+    nearest = scale * (rows.nearest @ relative)
+    thinned = np.stack([scale * (row_interpolation(*side_coordinates(grid.wo),
+                                                   *side_coordinates(points.wo), isotropic,
+                                                   thin).linear @ relative)
+                        for thin in (0, 1)])
+    basis = scale[..., None] * rows.linear / (model_points + floor)
     steps = []
     for k, sigma in enumerate(result.errors):
         shifted = [result.values.copy(), result.values.copy()]
@@ -206,9 +222,9 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
         shifted[1][k] -= sigma
         up, down = (model_at(replace(result, values=v)) for v in shifted)
         steps.append(0.5 * (up - down))
-    scale = np.sqrt(np.clip(np.diag(result.covariance), 1e-300, None))
-    correlation = result.covariance / np.outer(scale, scale)
-    return Block(theta_i_deg, grid, points, model_cells, model_points, linear, nearest,
+    spread = np.sqrt(np.clip(np.diag(result.covariance), 1e-300, None))
+    correlation = result.covariance / np.outer(spread, spread)
+    return Block(theta_i_deg, grid, points, model_cells, model_points, linear, nearest, thinned,
                  rows.covered, basis, np.array(steps), correlation,
                  _misfit(points, model_points) if len(points.bsdf) else 0.0)
 
@@ -293,6 +309,31 @@ def integrals(data: ReducedData, result: FitResult) -> list[Integral]:
             if b is not None:
                 out += [_integral(b, name) for name in quantities(theta_i, transmission)]
     return out
+
+
+#: What the integrals assume, for tables and files.
+ASSUMPTIONS = (
+    "an isotropic fit mirrors the points across the plane of incidence; the residual from the "
+    "fitted model is interpolated linearly in azimuth between measured rows (an in-plane scan: "
+    "its forward and backward halves), so U holds out-of-plane structure the model and the "
+    "rows miss only as far as the nearest-row term sees it",
+    "transmission is integrated inside the hemisphere's medium about the refracted direct beam "
+    "(the integrals of f |cos theta_o|, as the Zemax export's TIS); ASTM D1003 defines haze "
+    "at normal incidence",
+    "gloss: an ideal collimated source (the standard's 0.75 x 2.5 deg source aperture not "
+    "convolved), the receptor window as a rectangle of in-plane x across angles "
+    + ", ".join(f"{g:g} deg: {a:g} x {b:g} deg" for g, (a, b) in GLOSS_WINDOWS_DEG.items())
+    + f"; the black glass (n {GLOSS_STANDARD_INDEX}) reflects its Fresnel reflectance into it",
+)
+
+
+def to_json(found: list[Integral], k: float, result: FitResult) -> dict:
+    """The integrals, the fit that fills what the data do not cover, and the assumptions, as
+    a JSON object (`gonio reduce --integrals-json`)."""
+    return {"coverage_k": k, "fill_model": {"distribution": result.distribution,
+                                            "parameters": result.to_dict()["parameters"],
+                                            "chi2_dof": result.chi2_dof_fit},
+            "integrals": [i.to_json(k) for i in found], "assumptions": list(ASSUMPTIONS)}
 
 
 def table(found: list[Integral], k: float) -> list[str]:
