@@ -27,6 +27,7 @@ import numpy as np
 from calibration.fit.result import FitResult
 from calibration.hemisphere import Cells, cells, row_interpolation, side_coordinates
 from calibration.reduced import ReducedData
+from calibration.smearing import Smearing
 from calibration.values import CalibrationError
 from model.bsdf.fresnel import fresnel_dielectric
 
@@ -196,9 +197,12 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
                                                    float(data.meta["eta"]))
 
     def model_at(fitted: FitResult) -> np.ndarray:
+        """The model's point BSDF at the cells (the points' aperture average left out: the
+        integrals are of the BSDF, not of what the receiver saw)."""
         out = np.zeros(grid.weight.shape)
         side = grid.on_side
-        out[side] = fitted.predict(np.broadcast_to(wi, (int(side.sum()), 3)), grid.wo[side])
+        point = replace(fitted, optics=Smearing(0.0, 0, 0.0, 0))
+        out[side] = point.predict(np.broadcast_to(wi, (int(side.sum()), 3)), grid.wo[side])
         return out
 
     model_cells = model_at(result)
