@@ -96,8 +96,7 @@ class Block:
     grid: Cells
     points: ReducedData
     model_cells: np.ndarray  # (n_az, n_rad)
-    model_points: np.ndarray  # (n,)
-    residual_linear: np.ndarray  # (n_az, n_rad): data - model interpolated (0 where not covered)
+    residual_linear: np.ndarray  # (n_az, n_rad): the data's residual interpolated (0: not covered)
     residual_nearest: np.ndarray  # the nearest row's alone (in azimuth)
     residual_thinned: np.ndarray  # (2, n_az, n_rad): from every other inner node of each row
     covered: np.ndarray
@@ -209,7 +208,7 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
     model_points = result.predict(points.wi, points.wo)
     rows = row_interpolation(*side_coordinates(grid.wo), *side_coordinates(points.wo),
                              isotropic)
-    floor = float(np.median(np.abs(points.bsdf)))
+    floor = float(np.median(np.abs(points.bsdf))) or 1.0  # 1/sr where half the data are 0
     relative = (points.bsdf - model_points) / (model_points + floor)
     scale = np.where(rows.covered, model_cells + floor, 0.0)
     linear = scale * (rows.linear @ relative)
@@ -228,7 +227,7 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
         steps.append(0.5 * (up - down))
     spread = np.sqrt(np.clip(np.diag(result.covariance), 1e-300, None))
     correlation = result.covariance / np.outer(spread, spread)
-    return Block(theta_i_deg, grid, points, model_cells, model_points, linear, nearest, thinned,
+    return Block(theta_i_deg, grid, points, model_cells, linear, nearest, thinned,
                  rows.covered, basis, np.array(steps), correlation,
                  _misfit(points, model_points) if len(points.bsdf) else 0.0)
 
@@ -290,13 +289,15 @@ def value_of(name: str, grid: Cells, theta_i_deg: float, f: np.ndarray) -> float
     return value / float(np.sum(grid.weight * f)) if name == "haze" else value
 
 
-def _integral(b: Block, name: str) -> Integral:
+def _integral(b: Block, name: str) -> Integral | None:
     """The Integral of one quantity of a block; haze's uncertainty through the ratio's linear
-    weight (W_diffuse - h W) / T."""
+    weight (W_diffuse - h W) / T (None: no haze of a transmittance that is not positive)."""
     w = weights(name, b.grid, b.theta_i_deg)
     if name != "haze":
         return Integral(name, b.theta_i_deg, b.value(w), b.components(w), b.model_share(w))
     total = b.value(b.grid.weight)
+    if not total > 0:
+        return None
     h = b.value(w) / total
     return Integral(name, b.theta_i_deg, h, b.components((w - h * b.grid.weight) / total),
                     b.model_share(w))
@@ -311,7 +312,8 @@ def integrals(data: ReducedData, result: FitResult) -> list[Integral]:
         for transmission in (False, True):
             b = block(data, result, theta_i, transmission, isotropic)
             if b is not None:
-                out += [_integral(b, name) for name in quantities(theta_i, transmission)]
+                found = (_integral(b, name) for name in quantities(theta_i, transmission))
+                out += [i for i in found if i is not None]
     return out
 
 
