@@ -86,6 +86,13 @@ class ReducedData:
         shared = np.abs(self.bsdf) * np.linalg.norm(self.shared_rel, axis=1)
         return np.sqrt(np.maximum(sigma**2 - shared**2, 0.0))
 
+    def linear_uncertainty(self, gradient: np.ndarray) -> tuple[float, float]:
+        """(own, shared) standard uncertainty of sum(gradient * bsdf): from the points'
+        independent errors, and from the relative errors they share (shared_rel)."""
+        own = float(np.sqrt(np.sum((gradient * self.sigma_own) ** 2)))
+        shared = float(np.linalg.norm((gradient * self.bsdf) @ self.shared_rel))
+        return own, shared
+
     def whitened(self, model: np.ndarray, sigma: np.ndarray | None = None) -> np.ndarray:
         """Normalised residuals of model values against the data under the full covariance
         (independent sigma_own plus the shared relative errors, scaled by the model, so a

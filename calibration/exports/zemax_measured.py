@@ -104,7 +104,8 @@ def measured_table(data: ReducedData, scatter_type: str, eta: float,
         weights = tis_weights(ZemaxTable(scatter_type, symmetry, np.zeros(1), angle_deg,
                                          azimuth, radial, values, tis), a)
         tis[0, a] = float(np.sum(weights * cells))
-        u_tis = _tis_uncertainty(good.subset(sel), np.tensordot(weights, coefficient, 2))
+        u_tis = math.hypot(*good.subset(sel).linear_uncertainty(
+            np.tensordot(weights, coefficient, 2)))
         notes.append(
             f"block AngleOfIncidence {angle:g} (theta_i {ti:g} deg): measured at "
             f"{int(measured.sum())} cells, interpolated between them at "
@@ -115,10 +116,3 @@ def measured_table(data: ReducedData, scatter_type: str, eta: float,
     return ZemaxTable(scatter_type, symmetry, np.zeros(1), angle_deg, azimuth, radial, values, tis,
                       [*comments, *notes], "Measured")
 
-
-def _tis_uncertainty(points: ReducedData, gradient: np.ndarray) -> float:
-    """Standard uncertainty of sum(gradient * bsdf) from the points' own errors and the
-    relative errors they share (ReducedData.shared_rel)."""
-    own = np.sum((gradient * points.sigma_own) ** 2)
-    shared = np.sum(((gradient * points.bsdf) @ points.shared_rel) ** 2)
-    return float(math.sqrt(own + shared))

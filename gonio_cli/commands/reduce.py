@@ -3,6 +3,9 @@ aperture, cos o, hemisphere exit; calibration.budget); writes RUN/reduced.csv (t
 `gonio export --what reduced --format csv`: the run's record and the reduction's facts, u, k,
 U = k u, u_NAME per component; calibration.exports.measured) and prints a summary per incidence
 and the budget's components.
+`gonio reduce RUN --integrals [--integrals-json FILE]`: also the integrated quantities
+(reflectance, transmittance, ISO 13696 total scattering, ASTM D1003 haze, ISO 2813 gloss) with
+their uncertainty, the fitted model filling what the data do not cover (calibration.integrals).
 `gonio reduce --import FILE --out CSV`: a measured file gonio did not make (ASTM E1392, Zemax
 tabular BSDF, BiRD universal BRDF, gonio's reduced CSV or NetCDF, a plain CSV;
 calibration.imports) as gonio's reduced CSV (calibration.exports.measured)."""
@@ -37,6 +40,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--coverage-k", type=float, default=COVERAGE_K, metavar="K",
                    help=f"coverage factor of the expanded uncertainty U = k u (default "
                         f"{COVERAGE_K:g}: about 95 %% for a normal distribution)")
+    p.add_argument("--integrals", action="store_true",
+                   help="also print the integrated quantities with u and U: reflectance, "
+                        "transmittance, total scattering (ISO 13696), haze (ASTM D1003), "
+                        "gloss (ISO 2813), from the data and a fit over every incidence "
+                        "filling what they do not cover (docs/fitting.md)")
+    p.add_argument("--integrals-json", metavar="FILE",
+                   help="write the integrated quantities as JSON to FILE (implies --integrals)")
     p.set_defaults(func=run, check_args=check_args, reads_run="run")
 
 
@@ -135,6 +145,30 @@ def budget_summary(data) -> list[str]:
     return lines + [f"budget: {note}" for note in budget["notes"]]
 
 
+def print_integrals(args: argparse.Namespace, data) -> None:
+    """With --integrals or --integrals-json: fit over every incidence, print the integrals'
+    table (calibration.integrals) and write the JSON file if asked."""
+    if not (args.integrals or args.integrals_json):
+        return
+    import json
+
+    from calibration.fit import fit
+    from calibration.integrals import ASSUMPTIONS, integrals, table, to_json
+    from calibration.pipeline import DEFAULT_SLOPE_FIT, slope_fit_options
+
+    result = fit(data, slope_fit_options(DEFAULT_SLOPE_FIT))
+    found = integrals(data, result)
+    k = float(data.meta.get("coverage_k", args.coverage_k))
+    print(f"integrals (fill: {result.distribution} fit over every incidence, chi2/dof "
+          f"{result.chi2_dof_fit:.3g}; k = {k:g}):")
+    print("\n".join(table(found, k)))
+    print("\n".join(f"assumed: {a}" for a in ASSUMPTIONS))
+    if args.integrals_json:
+        path = Path(args.integrals_json)
+        path.write_text(json.dumps(to_json(found, k, result), indent=1) + "\n")
+        print(f"integrals: {path}")
+
+
 def check_args(args: argparse.Namespace) -> None:
     """The arguments' checks that need no run (--coverage-k), made before the run is read."""
     if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
@@ -168,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
     print("\n".join(budget_summary(data)))
     if "signature" in m:
         print("\n".join(signature_summary(m["signature"])))
+    print_integrals(args, data)
     print(out)
     return 0
 
@@ -193,5 +228,6 @@ def _write_imported(args: argparse.Namespace) -> int:
     print(f"imported {args.import_file}: eta {data.meta['eta']:g}, {len(data.bsdf)} points")
     print(f"noise: {data.meta['noise_model']}")
     print("\n".join(summary(data)))
+    print_integrals(args, data)
     print(out)
     return 0
