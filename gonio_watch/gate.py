@@ -144,8 +144,8 @@ def _close(sock: socket.socket, reply: bytes = b"") -> None:
 
 class Gate:
     """Accepts on `listener`, reads each request whole, hands it to `answer` on a worker.
-    `counts` says what it did (accepted, accept_errors, backoffs, evicted, expired, refused,
-    answered, failed)."""
+    `counts` says what it did (rounds of its loop, accepted, accept_errors, backoffs, evicted,
+    expired, refused, answered, failed)."""
 
     def __init__(self, listener: socket.socket, answer: Answer, notices: Notices,
                  limits: Limits = DEFAULT_LIMITS):
@@ -163,6 +163,8 @@ class Gate:
         self._rest_s = 0.0
         self._workers = [threading.Thread(target=self._work, name=f"watch-worker-{k}",
                                           daemon=True) for k in range(limits.workers)]
+        for worker in self._workers:
+            worker.start()
 
     def run(self) -> None:
         """Serve until `stop` (the calling thread is the one that accepts and reads)."""
@@ -170,10 +172,9 @@ class Gate:
         self.listener.setblocking(False)
         self._selector.register(self.listener, selectors.EVENT_READ)
         self._selector.register(self._wake_r, selectors.EVENT_READ)
-        for worker in self._workers:
-            worker.start()
         try:
             while not self._stop.is_set():
+                self.counts["rounds"] += 1
                 for key, _ in self._selector.select(self._wait_s()):
                     if key.fileobj is self.listener:
                         self._accept()
@@ -185,13 +186,11 @@ class Gate:
             for pending in list(self._pending.values()):
                 self._forget(pending)
                 _close(pending.sock)
-            for _ in self._workers:
-                self._queue.put(None)
             self._selector.close()
             self._done.set()
 
     def stop(self) -> None:
-        """End `run` (returns once it has, if it was running)."""
+        """End `run` (returns once it has, if it was running) and the workers."""
         self._stop.set()
         try:
             self._wake_w.send(b"x")
@@ -199,6 +198,8 @@ class Gate:
             pass
         if self._started.is_set():
             self._done.wait()
+        for _ in self._workers:
+            self._queue.put(None)
         self._wake_r.close()
         self._wake_w.close()
 
