@@ -121,6 +121,7 @@ class Pending:
     """A connection whose request is still being read."""
 
     sock: socket.socket
+    fd: int
     peer: tuple
     deadline: float
     data: bytearray = field(default_factory=bytearray)
@@ -175,19 +176,28 @@ class Gate:
         try:
             while not self._stop.is_set():
                 self.counts["rounds"] += 1
-                for key, _ in self._selector.select(self._wait_s()):
-                    if key.fileobj is self.listener:
-                        self._accept()
-                    elif key.fileobj is not self._wake_r:
-                        self._read(key.data)
-                self._expire()
-                self._listen_again()
+                try:
+                    self._round()
+                except Exception as exc:  # a bug here must not end the viewer nor print a trace
+                    self.notices.note("gate", f"the live view's connections: "
+                                              f"{type(exc).__name__}: {exc}")
         finally:
             for pending in list(self._pending.values()):
                 self._forget(pending)
                 _close(pending.sock)
             self._selector.close()
             self._done.set()
+
+    def _round(self) -> None:
+        """Wait for something to do, then do it: accept, read, expire, listen again."""
+        ready = self._selector.select(self._wait_s())
+        for key, _ in ready:  # reads first: what is already in gets in before newcomers
+            if key.data is not None and self._pending.get(key.data.fd) is key.data:
+                self._read(key.data)
+        if any(key.fileobj is self.listener for key, _ in ready):
+            self._accept()
+        self._expire()
+        self._listen_again()
 
     def stop(self) -> None:
         """End `run` (returns once it has, if it was running) and the workers."""
@@ -223,9 +233,10 @@ class Gate:
             if len(self._pending) >= self.limits.connections:
                 self._evict()
             sock.setblocking(False)
-            pending = Pending(sock, peer, time.monotonic() + self.limits.request_s)
-            self._pending[sock.fileno()] = pending
+            pending = Pending(sock, sock.fileno(), peer, time.monotonic() + self.limits.request_s)
+            self._pending[pending.fd] = pending
             self._selector.register(sock, selectors.EVENT_READ, pending)
+            self._read(pending)  # a client sends its request as it connects: often it is in
 
     def _back_off(self, exc: OSError) -> None:
         """After an accept error: close the oldest unfinished connection (a descriptor back)
@@ -247,8 +258,8 @@ class Gate:
             self._selector.register(self.listener, selectors.EVENT_READ)
 
     def _forget(self, pending: Pending) -> None:
-        self._pending.pop(pending.sock.fileno(), None)
-        self._selector.unregister(pending.sock)
+        del self._pending[pending.fd]
+        self._selector.unregister(pending.fd)
 
     def _evict(self) -> None:
         """Close the oldest connection still being read (503): the newest gets its place."""
