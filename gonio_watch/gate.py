@@ -145,8 +145,8 @@ def _close(sock: socket.socket, reply: bytes = b"") -> None:
 
 class Gate:
     """Accepts on `listener`, reads each request whole, hands it to `answer` on a worker.
-    `counts` says what it did (rounds of its loop, accepted, accept_errors, backoffs, evicted,
-    expired, refused, answered, failed)."""
+    `counts` says what it did (rounds of its loop, accepted, accept_errors (each followed by
+    a rest), evicted, expired, refused, answered, failed)."""
 
     def __init__(self, listener: socket.socket, answer: Answer, notices: Notices,
                  limits: Limits = DEFAULT_LIMITS):
@@ -181,6 +181,7 @@ class Gate:
                 except Exception as exc:  # a bug here must not end the viewer nor print a trace
                     self.notices.note("gate", f"the live view's connections: "
                                               f"{type(exc).__name__}: {exc}")
+                    self._stop.wait(self.limits.backoff_s[0])  # and must not spin either
         finally:
             for pending in list(self._pending.values()):
                 self._forget(pending)
@@ -215,7 +216,8 @@ class Gate:
 
     def _wait_s(self) -> float:
         """Seconds until the oldest pending request's deadline or the listener's rest ends."""
-        ends = [p.deadline for p in list(self._pending.values())[:1]]
+        oldest = next(iter(self._pending.values()), None)
+        ends = [oldest.deadline] if oldest is not None else []
         ends += [self._rest_until] if self._rest_until is not None else []
         return max(min(ends, default=time.monotonic() + 1.0) - time.monotonic(), 0.0)
 
@@ -242,7 +244,6 @@ class Gate:
         """After an accept error: close the oldest unfinished connection (a descriptor back)
         and rest the listener, twice as long as last time up to the longest rest."""
         self.counts["accept_errors"] += 1
-        self.counts["backoffs"] += 1
         first, longest = self.limits.backoff_s
         self._rest_s = min(max(2 * self._rest_s, first), longest)
         self._rest_until = time.monotonic() + self._rest_s

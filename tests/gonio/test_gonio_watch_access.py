@@ -191,7 +191,7 @@ with serving(sys.argv[1]) as server:
     except OSError:
         pass
     print(server.port, server.access.key, flush=True)
-    wait_until(lambda: gate.counts["backoffs"] >= 6, what="six rests after accept errors")
+    wait_until(lambda: gate.counts["accept_errors"] >= 6, what="six accept errors")
     stuck = dict(gate.counts)
     for fd in spare:
         os.close(fd)
@@ -213,8 +213,10 @@ def test_accept_errors_back_off_without_a_traceback(run_dir):
     assert status == 200 and json.loads(body)["status"] == "completed"
     assert "Traceback" not in err and len(err.splitlines()) == 1, err
     assert "cannot accept a connection (Too many open files)" in err
-    # each error rested the listener: the gate woke a few times per error, never spun
-    assert stuck["accept_errors"] == stuck["backoffs"] >= 6
+    # each error rested the listener, twice as long as the last (0.01 s up to 1 s): the
+    # script, looking every 2 ms, sees the sixth error, not the thousands a spinning loop makes
+    # by then; and the gate woke a few times per error, no more
+    assert 6 <= stuck["accept_errors"] <= 12, stuck
     assert stuck["rounds"] <= 3 * stuck["accept_errors"] + 5, stuck
 
 
