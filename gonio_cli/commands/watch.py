@@ -15,7 +15,11 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from html import escape
 from pathlib import Path
 
 from gonio.errors import GonioError, os_error_text
@@ -102,12 +106,11 @@ def run(args: argparse.Namespace) -> int:
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
-    with serving(args.run, args.bind, args.port, token, reduce) as server:
+    with ExitStack() as stack:
+        server = stack.enter_context(serving(args.run, args.bind, args.port, token, reduce))
         print(server.keyed_url, flush=True)
         if args.open:
-            import webbrowser
-
-            webbrowser.open(server.keyed_url)
+            stack.enter_context(opened_in_browser(server.keyed_url))
         if args.until_eof:
             threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
         done.wait()
@@ -115,6 +118,23 @@ def run(args: argparse.Namespace) -> int:
             server.app.follower.poll()
             until_end_shown(server.app)
     return 0
+
+
+@contextmanager
+def opened_in_browser(url: str) -> Iterator[None]:
+    """Open the page in the web browser without putting its key on a command line (a
+    browser's arguments show in ps to every user): the browser is given a file only this user
+    can read, which sends it on to the URL; the file goes when the block ends."""
+    import webbrowser
+
+    fd, name = tempfile.mkstemp(prefix="gonio-watch-", suffix=".html")  # mode 0600
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(f'<!DOCTYPE html><meta http-equiv="refresh" content="0; url={escape(url)}">')
+        webbrowser.open(Path(name).as_uri())
+        yield
+    finally:
+        os.unlink(name)
 
 
 def start_beside(run_dir: Path, token: str | None) -> subprocess.Popen:

@@ -242,3 +242,26 @@ def test_the_token_is_taken_only_from_stdin_or_a_private_file(run_dir, tmp_path)
     assert doc["control"]["why"] != "" and "--token" not in doc["control"]["why"]  # a token
     proc.stdin.close()
     assert proc.wait(timeout=30) == 0 and "t0ken" not in proc.stderr.read()
+
+
+def test_open_gives_the_browser_no_key_on_its_command_line(run_dir, tmp_path):
+    seen = tmp_path / "browser.txt"
+    browser = tmp_path / "browser.py"  # a stand-in browser: records its arguments and the page
+    browser.write_text("import pathlib, stat, sys\n"
+                       "page = pathlib.Path(sys.argv[1].removeprefix('file://'))\n"
+                       f"pathlib.Path({str(seen)!r}).write_text(' '.join(sys.argv[1:]) + '\\n'"
+                       " + oct(stat.S_IMODE(page.stat().st_mode)) + '\\n' + page.read_text())\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "BROWSER": f"{sys.executable} {browser} %s"}
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "watch", str(run_dir), "--open",
+                             "--until-eof"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True, env=env)
+    url = proc.stdout.readline().strip()
+    arguments, mode, page = wait_until(lambda: seen.exists() and seen.read_text().count("\n")
+                                       >= 2 and seen.read_text().split("\n", 2),
+                                       what="the browser's record")
+    key = urlsplit(url).query.removeprefix("key=")
+    assert key not in arguments and arguments.startswith("file://") and mode == "0o600"
+    assert f'url={url}"' in page
+    proc.stdin.close()
+    assert proc.wait(timeout=30) == 0
+    assert not os.path.exists(arguments.removeprefix("file://"))  # gone with the viewer
