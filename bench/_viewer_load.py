@@ -30,7 +30,9 @@ def _get(port: int, path: str, cookie: str | None) -> tuple[int, str | None, byt
 
 
 class Pages:
-    """`n` pages open on the viewer at `url` (its keyed URL), each polling on a thread."""
+    """`n` pages open on the viewer at `url` (its keyed URL), each polling on a thread;
+    `counts`: polls answered, refused (an HTTP status other than 200), failed (no answer),
+    gone (the viewer ended: the page stops)."""
 
     def __init__(self, url: str, n: int):
         self.url, self.counts = urlsplit(url), Counter()
@@ -63,6 +65,9 @@ class Pages:
                 status, _, _ = _get(port, "/status.json", cookie)
                 data_status, _, body = _get(port, f"/data.json?since={since}&version={version}",
                                             cookie)
+            except ConnectionRefusedError:
+                self._count("gone")  # the viewer ended with its scan: the page stops asking
+                return
             except OSError:
                 self._count("failed")
                 continue

@@ -88,8 +88,9 @@ class Tally:
     viewed_planned: int = 0  # the scans beside a loaded viewer
     viewed_lost: int = 0
     viewed_clean: int = 0
-    polls: int = 0  # the pages' polls answered, and those refused or failed
+    polls: int = 0  # the pages' polls answered, refused (not 200), failed (no answer)
     polls_refused: int = 0
+    polls_failed: int = 0
     idle_closed: int = 0  # idle connections the viewer closed (cap, deadline)
     rates: dict[str, list[float]] = field(default_factory=dict)  # readings/s by pass
     quiet_planned: int = 0
@@ -312,7 +313,8 @@ def watched(plan: Path, runs: Path, name: str, args: argparse.Namespace, tally: 
     check.communicate(timeout=120)
     tally.viewed_clean += check.returncode == 0
     tally.polls += pages.counts["polls"]
-    tally.polls_refused += pages.counts["refused"] + pages.counts["failed"]
+    tally.polls_refused += pages.counts["refused"]
+    tally.polls_failed += pages.counts["failed"]
     tally.idle_closed += idle.closed_by_viewer
     tally.rates.setdefault(name, []).append(pace.rate(run.meta["planned"], since=loaded))
     return Path(run_dir)
@@ -384,7 +386,8 @@ def main() -> None:
     print(f"  viewer: {args.pages} pages polling and {args.idle} idle connections on each "
           f"`gonio scan --watch`: readings planned {t.viewed_planned}, lost {t.viewed_lost}; "
           f"gonio check clean: {t.viewed_clean}/{args.scans + 1}; polls answered {t.polls}, "
-          f"refused or failed {t.polls_refused}; idle connections the viewer closed "
+          f"refused {t.polls_refused}, unanswered {t.polls_failed} (a page stops once the "
+          f"viewer has ended with its scan); idle connections the viewer closed "
           f"{t.idle_closed}")
     low, high = (f"{share:.0%}" for share in MIDDLE)
     print(f"  {f'readings/s ({low}-{high} of each scan, median)':<46}{'without':>9}"
