@@ -31,8 +31,8 @@ def _get(port: int, path: str, cookie: str | None) -> tuple[int, str | None, byt
 
 class Pages:
     """`n` pages open on the viewer at `url` (its keyed URL), each polling on a thread;
-    `counts`: polls answered, refused (an HTTP status other than 200), failed (no answer),
-    gone (the viewer ended: the page stops)."""
+    `counts`: polls answered, refused (an HTTP status other than 200), failed (the
+    connection closed unanswered), gone (the viewer ended with its scan: the page stops)."""
 
     def __init__(self, url: str, n: int):
         self.url, self.counts = urlsplit(url), Counter()

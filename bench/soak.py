@@ -386,9 +386,9 @@ def main() -> None:
     print(f"  viewer: {args.pages} pages polling and {args.idle} idle connections on each "
           f"`gonio scan --watch`: readings planned {t.viewed_planned}, lost {t.viewed_lost}; "
           f"gonio check clean: {t.viewed_clean}/{args.scans + 1}; polls answered {t.polls}, "
-          f"refused {t.polls_refused}, unanswered {t.polls_failed} (a page stops once the "
-          f"viewer has ended with its scan); idle connections the viewer closed "
-          f"{t.idle_closed}")
+          f"refused {t.polls_refused}, unanswered {t.polls_failed} (closed before their "
+          f"request was read: the cap's churn; asked again a second later); idle connections "
+          f"the viewer closed {t.idle_closed}")
     low, high = (f"{share:.0%}" for share in MIDDLE)
     print(f"  {f'readings/s ({low}-{high} of each scan, median)':<46}{'without':>9}"
           f"{'with viewer load':>18}")
