@@ -14,7 +14,16 @@ leaves moving are shown but not counted); that the SIGTERM endings were recorded
 with reason SIGTERM and exit 143; that the finished runs' indices and stage positions match
 the baseline's; and the time of both.
 
+The live view under load, in the same run: each scan once more uninterrupted with `gonio scan
+--watch`, its viewer polled by --pages pages (as watch.js polls, with the key's cookie) and
+held by --idle idle connections against its connection cap, from the moment it prints its
+URL (held paused until then); and a quiet scan (instant motion, no faults, ~3,000
+readings) without and with that load. It prints the readings lost under load (must be 0),
+the pages' polls answered, and each pair's readings per second over the middle of the scan
+(20 % to 90 % of its readings).
+
 Run: python bench/soak.py [--scans 6] [--seed 0] [--fault-rate 0.005] [--time-scale 20]
+                          [--pages 20] [--idle 1000]
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,18 +44,25 @@ import numpy as np
 import serial
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "gonio"))
-from gonio_testkit import fast_config, pointed, write_plan, write_toml  # noqa: E402
+sys.path[:0] = [str(ROOT / "tests" / "gonio"), str(ROOT / "tests")]  # gonio_testkit, waiting
+from _viewer_load import IdleConnections, Pages  # noqa: E402
+from gonio_testkit import fast_config, pointed, token_of, write_plan, write_toml  # noqa: E402
 
 from gonio.config import load_config  # noqa: E402
 from gonio.simulate import serve  # noqa: E402
 from gonio.store import open_run  # noqa: E402
+from gonio_watch.control import ControlChannel  # noqa: E402
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 POSITIONS = ("sample_deg", "arm_deg")
 ESP_AXES = (1, 2)  # sample, arm (sim-serial)
 MAX_SESSIONS = 30
 FAULTS = ("drop_prob", "corrupt_prob", "stall_prob")  # transient: a retry gets past them
+PACE_S = 0.05  # between two counts of a scan's stored readings
+MIDDLE = (0.2, 0.9)  # the share of a scan's readings its rate is measured between
+QUIET_PLAN = {"name": "quiet", "dark": {"every": 200}, "grid": [
+    {"side": "reflection", "theta_i_deg": [0.0, 20.0, 40.0, 60.0],
+     "theta_o_deg": {"start": -80.0, "stop": 80.0, "step": 0.2}, "skip_forbidden": True}]}
 
 
 @dataclass
@@ -68,6 +85,38 @@ class Tally:
     faults: int = 0  # injected (most the drivers get past within a request)
     seconds: float = 0.0
     baseline_seconds: float = 0.0
+    viewed_planned: int = 0  # the scans beside a loaded viewer
+    viewed_lost: int = 0
+    viewed_clean: int = 0
+    polls: int = 0  # the pages' polls answered, refused (not 200), failed (no answer)
+    polls_refused: int = 0
+    polls_failed: int = 0
+    idle_closed: int = 0  # idle connections the viewer closed (cap, deadline)
+    rates: dict[str, list[float]] = field(default_factory=dict)  # readings/s by pass
+    quiet_planned: int = 0
+
+
+class Pace:
+    """Counts a scan's stored readings every PACE_S on a thread of its own, for its rate."""
+
+    def __init__(self, runs: Path):
+        self.samples: list[tuple[float, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._count, args=(runs,), daemon=True)
+        self._thread.start()
+
+    def _count(self, runs: Path) -> None:
+        while not self._stop.wait(PACE_S):
+            self.samples.append((time.perf_counter(), lines_in(runs)[0]))
+
+    def rate(self, planned: int, since: float = 0.0) -> float:
+        """Readings per second between MIDDLE's shares of `planned` (from `since` on)."""
+        self._stop.set()
+        self._thread.join()
+        low, high = (share * planned for share in MIDDLE)
+        middle = [(t, n) for t, n in self.samples if t >= since and low <= n <= high]
+        (t0, n0), (t1, n1) = middle[0], middle[-1]
+        return (n1 - n0) / (t1 - t0)
 
 
 def gonio(*args: object) -> subprocess.Popen:
@@ -189,10 +238,7 @@ def one_scan(k: int, folder: Path, args: argparse.Namespace, tally: Tally) -> No
             runs = folder / f"{name}{k}-runs"
             t0 = time.perf_counter()
             if name == "baseline":
-                proc = gonio(*scan_args(plan_path, runs, None))
-                proc.communicate(timeout=600)
-                run_dir = lines_in(runs)[1]
-                assert open_run(run_dir).status == "completed", run_dir
+                run_dir = uninterrupted(plan_path, runs, "baseline", tally)
                 tally.baseline_seconds += time.perf_counter() - t0
             else:
                 planned = open_run(results["baseline"]).meta["planned"]
@@ -212,10 +258,85 @@ def one_scan(k: int, folder: Path, args: argparse.Namespace, tally: Tally) -> No
     check = gonio("check", results["soak"])
     check.communicate(timeout=120)
     tally.checks_clean += check.returncode == 0
-    ref, got = readings_of(results["baseline"]), readings_of(results["soak"])
-    same = len(ref) == len(got) and (ref["index"] == got["index"]).all() and all(
+    tally.mismatched += not same_readings(results["baseline"], results["soak"])
+    emu = Emulator(emulated)
+    try:
+        plan_path = write_plan(folder, plan, pointed(cfg, emu.endpoints), name=f"viewed{k}")
+        viewed = watched(plan_path, folder / f"viewed{k}-runs", "viewed", args, tally)
+    finally:
+        emu.close()
+    tally.mismatched += not same_readings(results["baseline"], viewed)
+
+
+def same_readings(reference: Path, other: Path) -> bool:
+    """Whether two runs stored the same indices at the same stage positions."""
+    ref, got = readings_of(reference), readings_of(other)
+    return len(ref) == len(got) and (ref["index"] == got["index"]).all() and all(
         np.allclose(ref[f], got[f], atol=1e-3) for f in POSITIONS)
-    tally.mismatched += not same
+
+
+def uninterrupted(plan: Path, runs: Path, name: str, tally: Tally) -> Path:
+    """Scan without a viewer; its rate goes to tally.rates[name]."""
+    pace = Pace(runs)
+    proc = gonio(*scan_args(plan, runs, None))
+    proc.communicate(timeout=600)
+    run_dir = lines_in(runs)[1]
+    run = open_run(run_dir)
+    assert run.status == "completed", run_dir
+    tally.rates.setdefault(name, []).append(pace.rate(run.meta["planned"]))
+    return run_dir
+
+
+def watched(plan: Path, runs: Path, name: str, args: argparse.Namespace, tally: Tally) -> Path:
+    """Scan with `--watch`, held paused (its control channel) until its viewer is loaded by
+    args.pages pages and args.idle idle connections; count what was lost, the polls, the
+    rate under load (tally.rates[name])."""
+    pace = Pace(runs)
+    proc = gonio(*scan_args(plan, runs, None), "--watch")
+    token, run_dir = token_of(proc)
+    channel = ControlChannel(Path(run_dir), token)
+    assert channel.request("pause")["ok"]
+    url = next(line.split()[-1] for line in proc.stderr if line.startswith("gonio scan: watch "))
+    threading.Thread(target=proc.stderr.read, daemon=True).start()
+    idle = IdleConnections(url, args.idle)
+    pages = Pages(url, args.pages)
+    loaded = time.perf_counter()
+    assert channel.request("resume")["ok"]
+    proc.stdout.read()
+    proc.wait(timeout=600)
+    pages.close()
+    idle.close()
+    run = open_run(run_dir)
+    tally.viewed_planned += run.meta["planned"]
+    tally.viewed_lost += run.meta["planned"] - len(run.lines().rows)
+    check = gonio("check", run_dir)
+    check.communicate(timeout=120)
+    tally.viewed_clean += check.returncode == 0
+    tally.polls += pages.counts["polls"]
+    tally.polls_refused += pages.counts["refused"]
+    tally.polls_failed += pages.counts["failed"]
+    tally.idle_closed += idle.closed_by_viewer
+    tally.rates.setdefault(name, []).append(pace.rate(run.meta["planned"], since=loaded))
+    return Path(run_dir)
+
+
+def quiet_pair(folder: Path, args: argparse.Namespace, tally: Tally) -> None:
+    """The quiet scan (instant motion, no faults) without the viewer and beside a loaded one."""
+    cfg = fast_config(time_scale="inf")
+    emulated = write_toml(folder / "emulated-quiet.toml", cfg)
+    for name in ("quiet", "quiet viewed"):
+        emu = Emulator(emulated)
+        try:
+            plan = write_plan(folder, QUIET_PLAN, pointed(cfg, emu.endpoints),
+                              name=name.replace(" ", "-"))
+            runs = folder / f"{name.replace(' ', '-')}-runs"
+            if name == "quiet":
+                run_dir = uninterrupted(plan, runs, name, tally)
+                tally.quiet_planned = open_run(run_dir).meta["planned"]
+            else:
+                watched(plan, runs, name, args, tally)
+        finally:
+            emu.close()
 
 
 def main() -> None:
@@ -227,14 +348,21 @@ def main() -> None:
                         help="per reply, each of: a dropped byte, a corrupted byte, a stall")
     parser.add_argument("--time-scale", type=float, default=20.0,
                         help="the emulators' virtual seconds per real second")
+    parser.add_argument("--pages", type=int, default=20,
+                        help="pages polling the live view beside a scan")
+    parser.add_argument("--idle", type=int, default=1000,
+                        help="idle connections held against the live view's cap")
     args = parser.parse_args()
-    if args.scans < 1 or not 0.0 <= args.fault_rate <= 1.0 or not args.time_scale > 0:
-        parser.error("--scans must be >= 1, --fault-rate in [0, 1], --time-scale > 0")
+    if args.scans < 1 or not 0.0 <= args.fault_rate <= 1.0 or not args.time_scale > 0 \
+            or args.pages < 1 or args.idle < 0:
+        parser.error("--scans must be >= 1, --fault-rate in [0, 1], --time-scale > 0, "
+                     "--pages >= 1, --idle >= 0")
     load = " ".join(f"{x:.2f}" for x in os.getloadavg())
     tally = Tally()
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(args.scans):
             one_scan(k, Path(tmp), args, tally)
+        quiet_pair(Path(tmp), args, tally)
     t = tally
     endings = t.endings["SIGKILL"] + t.endings["SIGTERM"]
     print(f"soak: {args.scans} scans (sim-serial, two processes, time scale {args.time_scale:g}), "
@@ -255,6 +383,21 @@ def main() -> None:
     print(f"{'':2}{'what':<46}{'seconds':>9}")
     print(f"  {'baseline: the same scans uninterrupted':<46}{t.baseline_seconds:>9.1f}")
     print(f"  {'soak: interrupted and resumed until completed':<46}{t.seconds:>9.1f}")
+    print(f"  viewer: {args.pages} pages polling and {args.idle} idle connections on each "
+          f"`gonio scan --watch`: readings planned {t.viewed_planned}, lost {t.viewed_lost}; "
+          f"gonio check clean: {t.viewed_clean}/{args.scans + 1}; polls answered {t.polls}, "
+          f"refused {t.polls_refused}, unanswered {t.polls_failed} (closed before their "
+          f"request was read: the cap's churn; asked again a second later); idle connections "
+          f"the viewer closed {t.idle_closed}")
+    low, high = (f"{share:.0%}" for share in MIDDLE)
+    print(f"  {f'readings/s ({low}-{high} of each scan, median)':<46}{'without':>9}"
+          f"{'with viewer load':>18}")
+    for what, without, with_load in (
+            (f"the soak's scans (time scale {args.time_scale:g}, faults)", "baseline", "viewed"),
+            (f"a quiet scan (instant motion, {t.quiet_planned} readings)", "quiet",
+             "quiet viewed")):
+        print(f"  {what:<46}{np.median(t.rates[without]):>9.1f}"
+              f"{np.median(t.rates[with_load]):>18.1f}")
 
 
 if __name__ == "__main__":

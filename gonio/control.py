@@ -181,7 +181,8 @@ def serving(run_dir: Path, control: PauseControl, status: RunStatus
               f"{exc.strerror or exc})", file=sys.stderr, flush=True)
         yield None
         return
-    print(f"gonio: control token {server.token} (gonio watch {run_dir} --token {server.token})",
+    print(f"gonio: control token {server.token} (gonio watch {run_dir} --token - reads it from "
+          "stdin, --token-file FILE from a file only you can read)",
           file=sys.stderr, flush=True)
     try:
         yield server

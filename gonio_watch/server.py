@@ -1,7 +1,8 @@
-"""The live view's HTTP server (the standard library's ThreadingHTTPServer): the page and its
-scripts from the package's assets, and JSON built from the run directory, nothing else.
+"""The live view's HTTP server: the page and its scripts from the package's assets, and JSON
+built from the run directory, nothing else, to whoever holds the viewer's key
+(gonio_watch.access); connections are read and answered by gonio_watch.gate.
 
-    GET  /                the page (assets: /watch.js, /plot.js, /watch.css)
+    GET  /                the page (assets, public: /watch.js, /plot.js, /watch.css)
     GET  /status.json     status, readings stored, planned, incomplete (an ended run's
                           line, else null), elapsed_s, eta_s, positions, suspensions, the
                           control channel's state (gonio_watch.status)
@@ -13,14 +14,16 @@ scripts from the package's assets, and JSON built from the run directory, nothin
     POST /control/pause | /control/resume | /control/abort
                           relayed to RUN/control.sock with the token given at start
 
-Every request must name this server in its Host header (a page elsewhere that points a name
-of its own at 127.0.0.1 gets nothing); a POST must be JSON from this server's own page (its
-Origin, when sent, is this server), so another site cannot pause or abort a scan through the
-user's browser. The token stays in this process's memory.
+Every request but the public assets' must show the key (401 without it). Every request must
+name this server in its Host header (a page elsewhere that points a name of its own at
+127.0.0.1 gets nothing); a POST must be JSON from this server's own page (its Origin, when
+sent, is this server), so another site cannot pause or abort a scan through the user's
+browser. The token stays in this process's memory. One request per connection.
 """
 
 from __future__ import annotations
 
+import io
 import ipaddress
 import json
 import math
@@ -28,14 +31,16 @@ import socket
 import threading
 import time
 from http import HTTPStatus
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler
 from importlib import resources
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from gonio.store import Run
+from gonio_watch.access import KEY_PARAM, Access
 from gonio_watch.control import ControlChannel, ControlUnavailable
 from gonio_watch.follow import RunFollower
+from gonio_watch.gate import DEFAULT_LIMITS, Gate, Limits, Notices
 from gonio_watch.model import ModelCurves
 from gonio_watch.reduction import LiveReduction
 from gonio_watch.status import Live, status_of
@@ -44,6 +49,7 @@ ASSETS = {"/": ("index.html", "text/html; charset=utf-8"),
           "/watch.js": ("watch.js", "text/javascript; charset=utf-8"),
           "/plot.js": ("plot.js", "text/javascript; charset=utf-8"),
           "/watch.css": ("watch.css", "text/css; charset=utf-8")}
+PUBLIC = ("/watch.js", "/plot.js", "/watch.css")  # served without the key: nothing of the run
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; base-uri 'none'; "
                                "form-action 'none'; frame-ancestors 'none'",
@@ -52,9 +58,12 @@ SECURITY_HEADERS = {
 }
 ACTIONS = ("pause", "resume", "abort")
 LIVE_EVERY_S = 0.5  # the scan is asked for its state at most this often
-MAX_BODY = 4096  # bytes of a control request's body
-NO_TOKEN = ("pause, resume and abort need the session's control token: start the viewer "
-            "with `gonio watch RUN --token TOKEN` (the scan prints it on stderr)")
+BACKLOG = 128  # connections the kernel holds while the gate is busy
+NO_TOKEN = ("pause, resume and abort need the session's control token (the scan prints it "
+            "on stderr): start the viewer with `gonio watch RUN --token -` and paste it, or "
+            "with `gonio watch RUN --token-file FILE`")
+NO_KEY = ("this viewer shows the run only to whoever holds its key: open the URL "
+          "`gonio watch` printed (http://HOST:PORT/?key=...)")
 
 
 def load_assets() -> dict[str, tuple[bytes, str]]:
@@ -145,18 +154,41 @@ class WatchApp:
         return HTTPStatus.OK, reply
 
 
-class WatchServer(ThreadingHTTPServer):
-    """Serves a WatchApp on (host, port); port 0 takes a free one."""
+class WatchServer:
+    """Serves a WatchApp on (host, port) (port 0 takes a free one) to whoever holds its key;
+    `serve_forever` on a thread of its own, `shutdown` from another, then `server_close`."""
 
-    daemon_threads = True
-
-    def __init__(self, host: str, port: int, app: WatchApp):
+    def __init__(self, host: str, port: int, app: WatchApp, limits: Limits = DEFAULT_LIMITS):
         family, _, _, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
-        self.address_family = family
+        self.socket = socket.socket(family, socket.SOCK_STREAM)
+        try:
+            self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.socket.bind(address[:2])
+            self.socket.listen(BACKLOG)
+        except BaseException:
+            self.socket.close()
+            raise
+        self.server_address = self.socket.getsockname()
         self.app = app
         self.assets = load_assets()
-        super().__init__(address[:2], Handler)
         self.any_host = host in ("0.0.0.0", "::", "")
+        self.access = Access(self.port)
+        self.gate = Gate(self.socket, self._answer, Notices(), limits)
+
+    def _answer(self, sock: socket.socket, request: bytes, peer: tuple) -> None:
+        Handler((sock, request), peer, self)
+
+    def serve_forever(self) -> None:
+        """Accept and answer until `shutdown`."""
+        self.gate.run()
+
+    def shutdown(self) -> None:
+        """End `serve_forever`."""
+        self.gate.stop()
+
+    def server_close(self) -> None:
+        """Close the listening socket."""
+        self.socket.close()
 
     @property
     def port(self) -> int:
@@ -168,6 +200,11 @@ class WatchServer(ThreadingHTTPServer):
         """The page's address."""
         host = self.server_address[0]
         return f"http://{f'[{host}]' if ':' in host else host}:{self.port}/"
+
+    @property
+    def keyed_url(self) -> str:
+        """The page's address with the key: what `gonio watch` prints."""
+        return f"{self.url}?{KEY_PARAM}={self.access.key}"
 
     def names_me(self, host_header: str | None) -> bool:
         """Whether a Host header is this server (its address, or localhost, and its port;
@@ -185,13 +222,21 @@ class WatchServer(ThreadingHTTPServer):
 
 
 class Handler(BaseHTTPRequestHandler):
-    """GET the page, its assets and the JSON documents; POST a control action."""
+    """GET the page, its assets and the JSON documents; POST a control action. Its request
+    is (the connection, the request's bytes as the gate read them whole)."""
 
     server: WatchServer
     protocol_version = "HTTP/1.1"
+    set_cookie = False  # the request showed the key in its query: the reply sets the cookie
+
+    def setup(self) -> None:
+        """Read the request from its bytes, write the reply to the connection."""
+        self.connection, request = self.request
+        self.rfile = io.BytesIO(request)
+        self.wfile = self.connection.makefile("wb")
 
     def log_message(self, format: str, *args: Any) -> None:
-        """Quiet: the viewer is no web server log."""
+        """Quiet: the viewer is no web server log (it may share the scan's terminal)."""
 
     def _send(self, status: HTTPStatus, body: bytes, kind: str) -> None:
         self.send_response(status)
@@ -199,6 +244,11 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Content-Length", str(len(body)))
         for name, value in SECURITY_HEADERS.items():
             self.send_header(name, value)
+        if self.set_cookie:
+            self.send_header("Set-Cookie", self.server.access.set_cookie())
+        if status == HTTPStatus.UNAUTHORIZED:
+            self.send_header("WWW-Authenticate", 'Key realm="gonio watch"')
+        self.send_header("Connection", "close")
         self.end_headers()
         if self.command != "HEAD":
             self.wfile.write(body)
@@ -216,6 +266,14 @@ class Handler(BaseHTTPRequestHandler):
         self._refuse(HTTPStatus.MISDIRECTED_REQUEST, "this viewer does not serve that host")
         return False
 
+    def _keyed(self, query: dict[str, list[str]]) -> bool:
+        shown = self.server.access.shown_by(query, self.headers.get("Cookie"))
+        if shown is None:
+            self._refuse(HTTPStatus.UNAUTHORIZED, NO_KEY)
+            return False
+        self.set_cookie = shown == "query"
+        return True
+
     def do_GET(self) -> None:  # noqa: N802 (http.server's name)
         """The page, an asset or a JSON document; 404 for anything else."""
         if not self._host_ok():
@@ -223,6 +281,8 @@ class Handler(BaseHTTPRequestHandler):
         url = urlsplit(self.path)
         query = parse_qs(url.query)
         app = self.server.app
+        if url.path not in PUBLIC and not self._keyed(query):
+            return
         if url.path in self.server.assets:
             self._send(HTTPStatus.OK, *self.server.assets[url.path])
         elif url.path == "/status.json":
@@ -244,14 +304,8 @@ class Handler(BaseHTTPRequestHandler):
 
     def do_POST(self) -> None:  # noqa: N802 (http.server's name)
         """A control action from this server's own page."""
-        if not self._host_ok():
+        if not self._host_ok() or not self._keyed(parse_qs(urlsplit(self.path).query)):
             return
-        length = int(self.headers.get("Content-Length") or 0)
-        if length > MAX_BODY:
-            self.close_connection = True  # the rest of the body is not read
-            self._refuse(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, "a control request is small")
-            return
-        self.rfile.read(length)
         origin = self.headers.get("Origin")
         action = urlsplit(self.path).path.removeprefix("/control/")
         if origin is not None and origin != f"http://{self.headers.get('Host')}":

@@ -13,6 +13,7 @@ import numpy as np
 
 from calibration.reduced import ReducedData
 from gonio.store import Run, open_run
+from gonio_watch.gate import DEFAULT_LIMITS, Limits
 from gonio_watch.reduction import LiveReduction
 from gonio_watch.server import WatchApp, WatchServer
 from gonio_watch.status import ENDED
@@ -23,17 +24,18 @@ LINGER_S = 5.0  # after its scan ended, how long a viewer waits for an open page
 @contextmanager
 def serving(run_dir: str | Path, host: str = "127.0.0.1", port: int = 0,
             token: str | None = None,
-            reduce: Callable[[Run, np.ndarray], ReducedData] | None = None
-            ) -> Iterator[WatchServer]:
+            reduce: Callable[[Run, np.ndarray], ReducedData] | None = None,
+            limits: Limits = DEFAULT_LIMITS) -> Iterator[WatchServer]:
     """Follow a run directory and serve its page on (host, port) until the block ends.
     token: the scan session's control token (None: no pause, resume or abort); reduce: how
-    to reduce the readings so far (default `gonio reduce`'s)."""
+    to reduce the readings so far (default `gonio reduce`'s); limits: what the server grants
+    its connections."""
     run = open_run(run_dir)
     app = WatchApp(run, token, LiveReduction(run, reduce))
     stop = threading.Event()
     app.follower.poll()
     follower = app.follower.follow(stop)
-    server = WatchServer(host, port, app)
+    server = WatchServer(host, port, app, limits)
     thread = threading.Thread(target=server.serve_forever, name="watch-http", daemon=True)
     thread.start()
     try:

@@ -72,7 +72,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--watch", action="store_true",
                    help="follow the run in a browser page beside the scan (gonio watch, "
-                        "given the session's control token); its URL goes to stderr")
+                        "given the session's control token); its URL with the page's key goes "
+                        "to stderr")
     p.set_defaults(func=run)
 
 

@@ -1,21 +1,28 @@
 """`gonio watch RUN`: follow a run in a browser page, while it is measured or after: status,
 readings stored of planned, elapsed time and ETA, the stages' positions, raw power against arm
 angle and the reduced BSDF per incidence as the readings arrive. The page is served on
-127.0.0.1 (a free port unless --port) and its address printed on stdout; with the scan
-session's --token its pause, resume and abort buttons act on the scan through its control
-channel (RUN/control.sock). The viewer changes nothing in the run directory."""
+127.0.0.1 (a free port unless --port) to whoever holds its key: the first line on stdout is
+its address with the key, http://127.0.0.1:PORT/?key=KEY. With the scan session's control
+token (--token - on stdin, or --token-file) its pause, resume and abort buttons act on the
+scan through its control channel (RUN/control.sock). The viewer changes nothing in the run
+directory."""
 
 from __future__ import annotations
 
 import argparse
 import functools
+import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from html import escape
 from pathlib import Path
 
-from gonio.errors import GonioError
+from gonio.errors import GonioError, os_error_text
 from gonio_cli.commands.emulate import is_loopback
 from gonio_cli.commands.reduce import add_reduce_options
 
@@ -29,13 +36,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="port to serve the page on (default: a free one)")
     p.add_argument("--bind", metavar="HOST", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only; another "
-                        "address shows the run to whoever can reach it, and with --token lets "
-                        "them pause and abort the scan)")
+                        "address lets whoever can reach it and holds the URL's key see the run, "
+                        "and with a token pause and abort the scan)")
     p.add_argument("--open", action="store_true", help="open the page in the web browser")
-    p.add_argument("--token", metavar="TOKEN",
-                   help="the scan session's control token (gonio scan prints it on stderr), "
-                        "for the pause, resume and abort buttons; '-' reads it from stdin's "
-                        "first line (a command line is visible to other users in ps)")
+    token = p.add_mutually_exclusive_group()
+    token.add_argument("--token", metavar="-", type=_stdin_only,
+                       help="'-': read the scan session's control token (gonio scan prints it "
+                            "on stderr) from stdin's first line, for the pause, resume and "
+                            "abort buttons (never on the command line: ps shows it to every "
+                            "user)")
+    token.add_argument("--token-file", metavar="FILE",
+                       help="read the control token from FILE's first line (a file only its "
+                            "owner can read)")
     p.add_argument("--until-eof", action="store_true",
                    help="serve until stdin closes, then until an open page has shown the "
                         "run's end (at most a few seconds): how `gonio scan --watch` ties its "
@@ -44,13 +56,36 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run, reads_run="run")
 
 
-def _token(value: str | None) -> str | None:
-    """--token: as given, or stdin's first line for '-' (GonioError if there is none)."""
+MAX_TOKEN = 4096  # characters read for a token
+
+
+def _stdin_only(value: str) -> str:
+    """--token's one value, '-' (the token itself would show in ps to every user)."""
     if value != "-":
-        return value
-    line = sys.stdin.readline().strip()
+        raise argparse.ArgumentTypeError(
+            "a token on the command line is visible to every user in ps: give --token - "
+            "(the token on stdin's first line) or --token-file FILE")
+    return value
+
+
+def _token(args: argparse.Namespace) -> str | None:
+    """The control token: stdin's first line for --token -, --token-file's first line, else
+    None (GonioError for no token there, or a file other users may read)."""
+    if args.token_file is not None:
+        where = f"--token-file {args.token_file}"
+        try:
+            with open(args.token_file) as fh:
+                if os.fstat(fh.fileno()).st_mode & 0o077:
+                    raise GonioError(f"{where}: other users may read it (chmod 600 it)")
+                line = fh.readline(MAX_TOKEN).strip()
+        except OSError as exc:
+            raise GonioError(f"{where}: {os_error_text(exc)}") from None
+    elif args.token == "-":
+        where, line = "--token -", sys.stdin.readline(MAX_TOKEN).strip()
+    else:
+        return None
     if not line:
-        raise GonioError("--token -: no token on stdin's first line")
+        raise GonioError(f"{where}: no token on its first line")
     return line
 
 
@@ -61,22 +96,21 @@ def run(args: argparse.Namespace) -> int:
 
     if not is_loopback(args.bind):
         print(f"gonio watch: warning: --bind {args.bind}: the page is served beyond this "
-              "machine: anyone who can reach it sees the run"
-              + (" and can pause and abort the scan" if args.token else ""),
+              "machine: anyone who can reach it and is given its URL sees the run"
+              + (" and can pause and abort the scan" if args.token or args.token_file else ""),
               file=sys.stderr, flush=True)
-    token = _token(args.token)
+    token = _token(args)
     reduce = functools.partial(reduce_stored, calibration_file=args.calibration,
                                shot_noise_w=args.shot_noise_w,
                                subtract_signature=args.subtract_signature)
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
-    with serving(args.run, args.bind, args.port, token, reduce) as server:
-        print(server.url, flush=True)
+    with ExitStack() as stack:
+        server = stack.enter_context(serving(args.run, args.bind, args.port, token, reduce))
+        print(server.keyed_url, flush=True)
         if args.open:
-            import webbrowser
-
-            webbrowser.open(server.url)
+            stack.enter_context(opened_in_browser(server.keyed_url))
         if args.until_eof:
             threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
         done.wait()
@@ -86,10 +120,28 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+@contextmanager
+def opened_in_browser(url: str) -> Iterator[None]:
+    """Open the page in the web browser without putting its key on a command line (a
+    browser's arguments show in ps to every user): the browser is given a file only this user
+    can read, which sends it on to the URL; the file goes when the block ends."""
+    import webbrowser
+
+    fd, name = tempfile.mkstemp(prefix="gonio-watch-", suffix=".html")  # mode 0600
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(f'<!DOCTYPE html><meta http-equiv="refresh" content="0; url={escape(url)}">')
+        webbrowser.open(Path(name).as_uri())
+        yield
+    finally:
+        os.unlink(name)
+
+
 def start_beside(run_dir: Path, token: str | None) -> subprocess.Popen:
     """`gonio watch RUN --until-eof` in a child process of the scan, in a session of its own
     (a Ctrl-C at the terminal is the scan's), given the token on its stdin, which stays open
-    while the scan runs; its URL goes to the scan's stderr, `gonio scan: watch URL`."""
+    while the scan runs; its URL with the key goes to the scan's stderr,
+    `gonio scan: watch URL`."""
     import gonio_cli
 
     command = [sys.executable, "-m", gonio_cli.__name__, "watch", str(run_dir), "--until-eof"]

@@ -1,6 +1,7 @@
 /* The live view's page: polls /status.json and /data.json (incrementally: the readings after
    those it has, the reduced points changed since its reduction version), fetches each
-   panel's reference curves from /model.json once, and relays pause, resume and abort. */
+   panel's reference curves from /model.json once, and relays pause, resume and abort. Its
+   requests carry the viewer's key in the cookie the keyed page visit set. */
 "use strict";
 
 const POLL_MS = 1000;
@@ -240,6 +241,8 @@ async function tick(again = true) {
   if (again) setTimeout(tick, POLL_MS);
 }
 
+// the key came in the URL; the cookie it set carries it from here: keep it off the address bar
+if (location.search) history.replaceState(null, "", location.pathname);
 for (const action of ["pause", "resume", "abort"]) $(action).addEventListener("click", () => control(action));
 window.addEventListener("resize", () => { view.rawDirty = view.bsdfDirty = true; renderRaw(); renderBsdf(); });
 tick();

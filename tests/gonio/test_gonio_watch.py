@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 from contextlib import contextmanager
+from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
@@ -225,11 +226,14 @@ def test_model_curves_only_for_an_all_emulated_run(source, tmp_path):
         "note": NO_MODEL, "curves": {}}
 
 
-def get(server, path, host=None, method="GET", body=None, headers=()):
-    """(status, parsed JSON or bytes) of one request to the viewer, path sent as is."""
+def get(server, path, host=None, method="GET", body=None, headers=(), keyed=True):
+    """(status, parsed JSON or bytes) of one request to the viewer, path sent as is; keyed:
+    with the viewer's key in its cookie."""
     conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=10)
     conn.putrequest(method, path, skip_host=True)
     conn.putheader("Host", host or f"127.0.0.1:{server.port}")
+    if keyed:
+        conn.putheader("Cookie", f"{server.access.cookie_name}={server.access.key}")
     for name, value in headers:
         conn.putheader(name, value)
     if body is not None:
@@ -365,8 +369,8 @@ def test_cli_prints_the_url_warns_on_a_wide_bind_and_ends_with_stdin(source):
     proc.stdin.flush()
     url = proc.stdout.readline().strip()
     assert url.startswith("http://0.0.0.0:")
-    conn = http.client.HTTPConnection("127.0.0.1", int(url.rsplit(":", 1)[1].rstrip("/")))
-    conn.request("GET", "/status.json")
+    conn = http.client.HTTPConnection("127.0.0.1", urlsplit(url).port)
+    conn.request("GET", f"/status.json?{urlsplit(url).query}")
     assert json.loads(conn.getresponse().read())["readings"] == len(source.rows())
     proc.stdin.close()
     assert proc.wait(timeout=20) == 0
@@ -390,8 +394,9 @@ def test_scan_watch_serves_the_run_beside_the_scan(tmp_path):
             url = line.split()[-1]
             break
     assert url and url.startswith("http://127.0.0.1:")
-    conn = http.client.HTTPConnection("127.0.0.1", int(url.rsplit(":", 1)[1].rstrip("/")))
-    conn.request("GET", "/status.json")
+    conn = http.client.HTTPConnection("127.0.0.1", urlsplit(url).port)
+    keyed = f"/status.json?{urlsplit(url).query}"
+    conn.request("GET", keyed)
     doc = json.loads(conn.getresponse().read())
     assert doc["readings"] < doc["planned"]
     rest = []  # stderr stays open while the viewer, which shares it, lingers
@@ -402,7 +407,7 @@ def test_scan_watch_serves_the_run_beside_the_scan(tmp_path):
     assert run.meta["status"] == "completed" and doc["run"] == run.path.name
     assert doc["planned"] == run.meta["planned"] == len(run.rows())
     def status() -> str:
-        conn.request("GET", "/status.json")
+        conn.request("GET", keyed)
         return json.loads(conn.getresponse().read())["status"]
 
     # the viewer saw the page ask, so it lingers until told the end

@@ -5,6 +5,7 @@ and abort buttons act on the scan through its control channel."""
 
 import json
 from functools import partial
+from urllib.parse import urlsplit
 
 import pytest
 from waiting import wait_until
@@ -68,7 +69,7 @@ def test_page_follows_the_store_while_the_scan_runs(tmp_path):
         assert curves >= 3  # the emulator's truth in each panel
         legend = driver.find_element("id", "bsdf-legend").text
         assert "emulator truth (ggx alpha 0.394" in legend
-        origin = url.rstrip("/")
+        origin = f"http://{urlsplit(url).netloc}/"
         loaded = driver.execute_script(
             "return performance.getEntriesByType('resource').map(e => e.name)")
         assert loaded and all(name.startswith(origin) for name in loaded), loaded  # no CDN
