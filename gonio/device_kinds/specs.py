@@ -98,12 +98,16 @@ MAP_KEYS = {"range_gain_rel": ("range_gain_half_width_rel", 1.0),
             "repeatability_deg": ("repeatability_half_width_deg", 180.0)}
 
 
+class UnreadableMap(ValueError):
+    """A register map that cannot be read at all (missing, not a regular file, too big)."""
+
+
 def specification_table(path: Path) -> Mapping[str, Any]:
     """A register-map file's [specification] table ({} without one), checked: `source` a
     string, each figure's key of MAP_KEYS a number in [0, its limit), no other key; a
     ValueError names the file and the key, or why the file cannot be read (a regular file of
     bounded size: drivers.user_file; a TOMLDecodeError: not TOML)."""
-    text = read_user_text(path, "register map", SETTINGS_FILE_CAP, ValueError)
+    text = read_user_text(path, "register map", SETTINGS_FILE_CAP, UnreadableMap)
     table = tomllib.loads(text).get("specification", {})
     where = f"{path} [specification]"
     if not isinstance(table, Mapping):
@@ -131,7 +135,7 @@ def register_map_spec(settings: Mapping[str, Any]) -> DeviceSpec:
     path = Path(str(settings.get("register_map", "")))
     try:
         table = specification_table(path)
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except (UnreadableMap, tomllib.TOMLDecodeError) as exc:
         return _with_note(MODBUS_DEFAULT, f"register map {path} unreadable: {exc}")
     except ValueError as exc:
         return _with_note(MODBUS_DEFAULT, str(exc))

@@ -13,6 +13,7 @@ import json
 import shutil
 import signal
 import tomllib
+import urllib.parse
 import urllib.request
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -169,8 +170,9 @@ def test_an_older_run_without_a_planned_count_takes_it_from_its_plan(aborted, tm
 def test_watch_names_an_ended_incomplete_run_on_stderr_and_its_page(aborted):
     proc = start_gonio("watch", aborted)
     try:
-        url = proc.stdout.readline().strip()
-        with urllib.request.urlopen(url.rstrip("/") + "/status.json", timeout=30) as reply:
+        page = urllib.parse.urlsplit(proc.stdout.readline().strip())  # http://...:P/?key=SECRET
+        status_url = page._replace(path="/status.json").geturl()
+        with urllib.request.urlopen(status_url, timeout=30) as reply:
             status = json.load(reply)
     finally:
         proc.send_signal(signal.SIGINT)
