@@ -14,13 +14,13 @@ run's identity, is an older one still read). A run killed at any moment keeps ev
 completed line; a torn last line (the bytes after the last newline: a half-written line, or
 the NUL padding a power loss leaves) is ignored when reading and cut off when the run is
 resumed. Any other damaged line (not JSON, a bad checksum, another run's line, a duplicated or
-out-of-order index, missing indices), and any breach of the rules gonio.run_rules adds (meta.json
-names its line checksum, the run's count and sessions agree with its lines, plan.json,
-config.json and the register maps match their digests) is an error for every reader (one line;
-`open_run(path, force=True)` reads the valid readings and names what it read past) and for
-resume: `gonio check RUN` reports it and `--repair` writes a copy that resume can complete
-(gonio.integrity). Readings a run records as stored that its file no longer holds (a cut file)
-are measured again by resume.
+out-of-order index, missing indices), and any breach of the rules gonio.integrity adds
+(meta.json names its line checksum, the run's counts and sessions agree with its lines,
+plan.json, config.json and the register maps match their digests) is an error for every reader
+(one line; `open_run(path, force=True)` reads the valid readings and names what it read past)
+and for resume: `gonio check RUN` reports it and `--repair` writes a copy that resume can
+complete. Readings a run records as stored that its file no longer holds (a cut file) are
+measured again by resume.
 
 Each reading's line is written to the file at once (so a killed process never loses it) and
 then fsynced on a helper thread while the engine goes on to the next point; the next line is
@@ -309,7 +309,7 @@ def damage_message(path: Path, lines: Lines, problems: Sequence[str] = (),
     return f"{text}; `gonio check {path}` reports the damage, --force reads past it"
 
 
-def damage_list(path: Path, lines: Lines, problems: Sequence[str], most: int = 5) -> list[str]:
+def damage_list(lines: Lines, problems: Sequence[str], most: int = 5) -> list[str]:
     """The damage, one entry each (the first `most` damaged lines, then how many more): what
     an output read with --force says it read past."""
     out = [f"{READINGS} line {d.line}: {d.problem}" for d in lines.damaged[:most]]
@@ -422,7 +422,7 @@ class Run:
         if not self.force:
             return []
         lines = self.lines()
-        return damage_list(self.path, lines, self.problems(lines))
+        return damage_list(lines, self.problems(lines))
 
     def resumable_lines(self) -> Lines:
         """The lines, once the run is found fit to resume: DamagedRunError for damage resume
