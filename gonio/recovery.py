@@ -20,18 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from gonio.completeness import planned_readings
-from gonio.store import (
-    CRC,
-    LINE_CHECKSUM,
-    META,
-    READINGS,
-    RUN_FIELD,
-    RUN_UID,
-    Run,
-    canonical_json,
-    digests,
-    utc_now,
-)
+from gonio.run_rules import CRC, LINE_CHECKSUM, RUN_UID
+from gonio.store import META, READINGS, RUN_FIELD, Run, canonical_json, digests, utc_now
 
 
 def line_uid(line: bytes) -> str | None:

@@ -14,7 +14,7 @@ run's identity, is an older one still read). A run killed at any moment keeps ev
 completed line; a torn last line (the bytes after the last newline: a half-written line, or
 the NUL padding a power loss leaves) is ignored when reading and cut off when the run is
 resumed. Any other damaged line (not JSON, a bad checksum, another run's line, a duplicated or
-out-of-order index, missing indices), and any breach of the rules gonio.integrity adds
+out-of-order index, missing indices), and any breach of the rules gonio.run_rules adds
 (meta.json names its line checksum, the run's counts and sessions agree with its lines,
 plan.json, config.json and the register maps match their digests) is an error for every reader
 (one line; `open_run(path, force=True)` reads the valid readings and names what it read past)
@@ -60,15 +60,24 @@ from typing import Any
 import numpy as np
 
 from gonio.errors import RunError
+from gonio.run_rules import (
+    CRC,
+    LINE_CHECKSUM,
+    LINE_CHECKSUMS,
+    RUN_UID,
+    describe_indices,
+    lost_and_session_problems,
+    lost_indices,
+    meta_problems,
+    recorded_top,
+    session_problems,
+)
 
 READINGS = "readings.jsonl"
 META = "meta.json"
 RESERVE, RESERVE_BYTES = ".reserve", 65536  # room kept for meta.json on a full disk
 PARTIAL = ".partial"  # under a run root: run directories being made
-CRC = "crc32"  # the line checksum's field
-RUN_FIELD, RUN_UID = "run", "run_uid"  # a line's run identity; meta.json's key for it
-LINE_CHECKSUM = "crc32+run"  # meta.json's "line_checksum" of a run gonio makes
-LINE_CHECKSUMS = {LINE_CHECKSUM: True, CRC: False}  # the schemes read: lines carry the run's uid
+RUN_FIELD = "run"  # a line's run identity (meta.json's RUN_UID)
 
 READING_DTYPE = np.dtype([
     ("index", "i8"), ("kind", object), ("side", object), ("repeat", "i4"), ("point", "i8"),
@@ -278,18 +287,6 @@ def scan_lines(data: bytes, checked: bool, refill: Collection[int] = (),
     return checker.lines(keep, len(data) - keep)
 
 
-def describe_indices(indices: list[int]) -> str:
-    """Indices as "index 4" or "indices 4-6, 9"."""
-    parts, start = [], None
-    for i, k in enumerate(indices):
-        if start is None:
-            start = k
-        if i + 1 == len(indices) or indices[i + 1] != k + 1:
-            parts.append(str(k) if start == k else f"{start}-{k}")
-            start = None
-    return ("index " if len(indices) == 1 else "indices ") + ", ".join(parts)
-
-
 def damage_message(path: Path, lines: Lines, problems: Sequence[str] = (),
                    resume: bool = False) -> str:
     """One line: the first damaged line (else the first of the run's other `problems`), how
@@ -346,7 +343,7 @@ def digests(plan: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
 def digest_problems(run: Run, config: dict[str, Any] | None = None) -> list[str]:
     """How plan.json, config.json and the register maps of `config` (default: the run's)
     differ from the digests recorded at the start ([] for a run that recorded none:
-    gonio.integrity.meta_problems names that)."""
+    gonio.run_rules.meta_problems names that)."""
     recorded = run.meta.get("digests")
     if not recorded:
         return []
@@ -401,11 +398,12 @@ class Run:
                 "run_uid": self.meta.get(RUN_UID) if LINE_CHECKSUMS.get(scheme) else None}
 
     def problems(self, lines: Lines, meta: dict[str, Any] | None = None) -> list[str]:
-        """What is wrong beyond the lines (gonio.integrity.record_problems), as meta.json
-        (`meta`: as read since the run was opened) and these lines say."""
-        from gonio.integrity import record_problems
-
-        return record_problems(self, lines, meta)
+        """Every rule of the run but its lines' own, broken (one line each), as meta.json
+        (`meta`: as read since the run was opened, else the run's) and these lines say:
+        meta.json's own (gonio.run_rules), the digests, readings lost, sessions and counts."""
+        meta = self.meta if meta is None else meta
+        return (meta_problems(meta) + digest_problems(self)
+                + lost_and_session_problems(meta, lines, self.path))
 
     def rows(self) -> list[dict[str, Any]]:
         """The readings as dicts, by index (a torn last line is ignored); DamagedRunError
@@ -429,8 +427,6 @@ class Run:
         cannot mend (all but readings its record says were stored and its file lost, which
         resume measures again, and the digests, which the resume checks against its config);
         RunError for a completed run that lost none."""
-        from gonio.integrity import lost_indices, meta_problems, session_problems
-
         lines = self.lines()
         lost = lost_indices(self.meta, lines)
         problems = meta_problems(self.meta) + ([] if lost else
@@ -598,8 +594,6 @@ class RunWriter:
             os.fsync(writer._fh.fileno())
         if not (path / RESERVE).exists():  # freed by a full disk, or an older run
             _keep_reserve(path)
-        from gonio.integrity import recorded_top
-
         top = max(lines.top, recorded_top(run.meta))
         writer.next_index = top + 1
         writer.missing = lines.missing() + list(range(lines.top + 1, top + 1))

@@ -2,7 +2,7 @@
 reads runs names the arguments holding them (`reads_run`, set by its parser), and the command
 line, after the verb's argument checks that need no run (`check_args`, set by its parser: bad
 input gives its one error line alone) and before the verb runs, refuses a damaged run (by the
-rules `gonio check` applies, gonio.integrity: one error line, exit 2) unless --force
+rules `gonio check` applies, gonio.store.Run.problems: one error line, exit 2) unless --force
 (`add_force_option`), and names each incomplete run (gonio.completeness) in one warning line,
 a run read past damage included."""
 

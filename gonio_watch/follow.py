@@ -21,8 +21,8 @@ POLL_S = 0.25  # between two stats of the run's files
 @dataclass(frozen=True)
 class Snapshot:
     """What the run holds at one moment: meta.json, the valid readings in file order, the
-    damage report (the rules every reader applies, gonio.integrity; None: none) and whether a
-    line is being written (a torn tail)."""
+    damage report (the rules every reader applies, gonio.store.Run.problems; None: none) and
+    whether a line is being written (a torn tail)."""
 
     meta: dict[str, Any]
     rows: list[dict[str, Any]]

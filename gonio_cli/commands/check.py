@@ -1,12 +1,12 @@
 """`gonio check RUN [--repair OUT_DIR]`: verify a run by the rules every reader applies
-(gonio.integrity: every line of readings.jsonl with its checksum and run identity, plan.json,
-config.json and the register maps against the digests recorded at the start, the sessions and
-the count of readings stored) and print what is wrong, and how many readings of how many
-planned it holds, with its status. The last line says `clean` (intact and complete), `intact
-but incomplete: N of M readings stored, status S` (stopped short of its plan: `gonio scan
---resume RUN` continues it), or `damaged`. The exit status answers whether the run's files are
-intact: 0 intact, complete or not (a torn last line is not damage), 1 damaged.
-`--repair OUT_DIR` then writes a repaired copy there: every valid reading under its own
+(gonio.integrity, gonio.run_rules: every line of readings.jsonl with its checksum and run
+identity, plan.json, config.json and the register maps against the digests recorded at the
+start, the sessions and the count of readings stored) and print what is wrong, and how many
+readings of how many planned it holds, with its status. The last line says `clean` (intact and
+complete), `intact but incomplete: N of M readings stored, status S` (stopped short of its
+plan: `gonio scan --resume RUN` continues it), or `damaged`. The exit status answers whether
+the run's files are intact: 0 intact, complete or not (a torn last line is not damage), 1
+damaged. `--repair OUT_DIR` then writes a repaired copy there: every valid reading under its own
 index (out of order or not), the missing ones (dropped, or lost from a cut file) listed in its
 meta.json, and `gonio scan --resume OUT_DIR` measures exactly those; a run that lost its
 meta.json gets one rebuilt from its readings, plan and config (gonio.recovery). The copy's
