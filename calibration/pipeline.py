@@ -138,7 +138,7 @@ def slope_fit_notes(result: FitResult) -> list[str]:
             "that does not describe the data"]
 
 
-def fit_run(run_dir: str | Path, options: FitOptions | None = None,
+def fit_run(run_dir: str | Path | Run, options: FitOptions | None = None,
             calibration_file: str | Path | None = None, shot_noise_w: float | None = None,
             subtract_signature: bool = False,
             progress: Callable[[str], None] | None = None,

@@ -8,13 +8,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from calibration.emulator_truth import EmulatorTruth, truth_of
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
+
+if TYPE_CHECKING:
+    from gonio.store import Run
 
 
 def signed_theta_o_deg(data: ReducedData) -> np.ndarray:
@@ -146,11 +149,12 @@ def completeness_line(completeness: dict | None) -> str:
     return "\n" + Completeness.from_json(completeness).text()
 
 
-def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool = False,
+def plot_run(run_dir: str | Path | Run, out_png: str | Path | None = None, fit: bool = False,
              calibration_file: str | Path | None = None, fit_options=None,
              shot_noise_w: float | None = None, subtract_signature: bool = False,
              angle_terms: bool = True, fitted: Callable[[Any], None] | None = None) -> Path:
-    """Reduce a run and write its plot (default RUN/plot.png); with fit=True fit the model
+    """Reduce a run (its directory, or the Run already open) and write its plot (default
+    RUN/plot.png); with fit=True fit the model
     (calibration.fit), tell `fitted` the result (a FitResult) and draw the fitting area's
     overlay with residuals (RUN/plot-fit.png); subtract_signature, angle_terms as
     calibration.pipeline.reduce_run. A calibration run (its record's `calibrates`) gets the plot
@@ -158,10 +162,10 @@ def plot_run(run_dir: str | Path, out_png: str | Path | None = None, fit: bool =
     from calibration.pipeline import reduce_run
     from gonio.completeness import completeness_of
     from gonio.record import run_record
-    from gonio.store import open_run
+    from gonio.store import Run, open_run
 
-    run_dir = Path(run_dir)
-    run = open_run(run_dir)
+    run = run_dir if isinstance(run_dir, Run) else open_run(run_dir)
+    run_dir = run.path
     kind = run_record(run)["calibrates"]
     if kind is not None:
         from calibration.calplot import plot_calibration

@@ -1,33 +1,41 @@
 """Checking a run directory (`gonio check`) and writing a repaired copy of a damaged one.
 
-A check reads every line of readings.jsonl (see `gonio.store.scan_lines`), compares plan.json,
-config.json and the register maps with the digests meta.json recorded at the start, checks
-that the sessions' first/last indices agree with the lines, and reports whether the run holds
-what it planned (gonio.completeness: an intact run short of its plan is "intact but
-incomplete", not "clean"). A repaired copy is a new
-run directory with every valid reading under its own index; the indices it lacks are listed
-in meta.json's `repair.dropped`, and `gonio scan --resume COPY` measures exactly those (then
-whatever the run had not reached).
+A check applies the rules every reader applies (gonio.store's lines: checksum, the run's
+identity, index order; gonio.run_rules: meta.json's line checksum, run uid and digests,
+readings a cut file lost, counts and sessions; the digests of plan.json, config.json and the
+register maps) and reports whether the run holds what it planned (gonio.completeness: an
+intact run short of its plan is "intact but incomplete", not "clean"). A repaired copy is a
+new run directory with every valid reading under its own index (a valid line out of order
+included); the indices it lacks are listed in meta.json's `repair.dropped`, and `gonio scan
+--resume COPY` measures exactly those (then whatever the run had not reached). A run
+directory whose meta.json is lost is repaired too: gonio.recovery rebuilds it.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from gonio.completeness import Completeness, completeness_of
 from gonio.errors import RunError
+from gonio.run_rules import (
+    LINE_CHECKSUM,
+    LINE_CHECKSUMS,
+    RUN_UID,
+    describe_indices,
+    recorded_top,
+)
 from gonio.store import (
-    CRC,
     META,
     READINGS,
     Lines,
     Run,
-    describe_indices,
     digest_problems,
+    digests,
     encode_line,
     fsync_dir,
     utc_now,
@@ -47,6 +55,7 @@ class Report:
     problems: list[str]
     notes: list[str]
     completeness: Completeness
+    repairable: bool  # damage a repaired copy mends (all but changed digests)
 
     @property
     def damaged(self) -> bool:
@@ -76,54 +85,36 @@ class Report:
         return "clean"
 
 
-def session_problems(meta: dict[str, Any], lines: Lines) -> list[str]:
-    """Where meta.json's sessions and status disagree with the readings stored."""
-    problems, prev = [], None
-    for k, s in enumerate(meta.get("sessions", []), 1):
-        first, last = s.get("first_index", 0), s.get("last_index")
-        if first > lines.top + 1:
-            problems.append(f"session {k} starts at index {first} but the readings end at "
-                            f"index {lines.top}")
-        if last is not None and last > lines.top:
-            problems.append(f"session {k} stored readings up to index {last} but the "
-                            f"readings end at index {lines.top}")
-        if prev is not None and "refill" not in s and first != prev.get(
-                "last_index", first - 1) + 1:
-            problems.append(f"session {k} starts at index {first}, not after session {k - 1} "
-                            f"(which ended at index {prev.get('last_index')})")
-        prev = s
-    planned = meta.get("planned")
-    if meta.get("status") == "completed" and planned is not None and len(lines.rows) != planned:
-        problems.append(f"meta.json says completed, {planned} readings planned, but "
-                        f"{len(lines.rows)} are stored")
-    return problems
-
-
-def check(run: Run) -> Report:
-    """Verify every line, the digests and the sessions of a run."""
+def check(run: Run, found: Sequence[str] = ()) -> Report:
+    """Verify every line, the digests, the sessions and the counts of a run; `found`: problems
+    found before it could be opened (a lost meta.json, gonio.recovery)."""
     lines = run.lines()
-    problems = digest_problems(run) + session_problems(run.meta, lines)
+    problems = [*found, *run.problems(lines)]
     notes = []
     if lines.torn_bytes:
         notes.append(f"a torn last line ({lines.torn_bytes} bytes after the last newline): "
                      f"ignored, cut when the run is resumed")
+    if run.meta.get("line_checksum") in LINE_CHECKSUMS and not LINE_CHECKSUMS[
+            run.meta["line_checksum"]]:
+        notes.append(f"line_checksum {run.meta['line_checksum']} (an older format): the lines "
+                     f"carry no run identity, so lines of another run are not told apart")
     if lines.unchecked:
-        notes.append(f"{lines.unchecked} lines carry no {CRC} (written before line checksums):"
-                     f" unchecked")
-    if not run.meta.get("digests"):
-        notes.append("no digests recorded (a run made before them): plan.json and config.json "
-                     "unchecked")
+        notes.append(f"{lines.unchecked} lines carry no checksum: unchecked")
     pending = run.meta.get("repair", {}).get("dropped", [])
     if lines.missing() and pending:
         notes.append(f"repaired copy: {describe_indices(lines.missing())} still to measure "
                      f"(gonio scan --resume {run.path})")
-    return Report(run, lines, problems, notes, completeness_of(run, len(lines.rows)))
+    repairable = bool(lines.damaged or set(problems) - set(digest_problems(run)))
+    return Report(run, lines, problems, notes, completeness_of(run, len(lines.rows)), repairable)
 
 
 def repair(report: Report, out: Path) -> Path:
     """Write a repaired copy of the checked run to the new directory `out`: the valid readings
-    under their own indices, meta.json with a `repair` record (source, dropped indices,
-    damaged lines) and, if anything was lost, status `failed` so that resume completes it."""
+    under their own indices (lines of this scheme, LINE_CHECKSUM, under the run's uid, a new
+    one for a run that had none), meta.json with the digests (those recorded: a changed
+    plan.json or config.json stays damage; the files' own where none were) and a `repair`
+    record (source, dropped indices, problems, damaged lines) and, if any reading is missing,
+    status `failed` so that resume measures it."""
     run, lines = report.run, report.lines
     if out.exists():
         raise RunError(f"{out}: already exists; --repair writes a new run directory")
@@ -136,21 +127,25 @@ def repair(report: Report, out: Path) -> Path:
     for name in COPIED:
         if (run.path / name).exists():
             shutil.copyfile(run.path / name, tmp / name)
-    checked = run.meta.get("line_checksum") == CRC
+    uid = run.meta.get(RUN_UID) if isinstance(run.meta.get(RUN_UID), str) else \
+        secrets.token_hex(8)
     with open(tmp / READINGS, "wb") as fh:
-        fh.write(b"".join(encode_line(r, checksum=checked) for r in lines.rows))
+        fh.write(b"".join(encode_line(r, run_uid=uid) for r in lines.rows))
         fh.flush()
         os.fsync(fh.fileno())
-    dropped = lines.missing()
-    meta = {**run.meta, "repair": {
-        "from": str(run.path.resolve()), "utc": utc_now(), "kept": len(lines.rows),
-        "dropped": dropped, "torn_bytes": lines.torn_bytes, "previous": run.meta.get("repair"),
-        "damaged_lines": [{"line": d.line, "problem": d.problem} for d in lines.damaged]}}
-    if lines.damaged:
-        lost = describe_indices(dropped) if dropped else "no index below the last stored one"
+    dropped = lines.missing() + list(range(lines.top + 1, recorded_top(run.meta) + 1))
+    meta = {**run.meta, "line_checksum": LINE_CHECKSUM, RUN_UID: uid,
+            "digests": run.meta.get("digests") or digests(run.plan, run.config),
+            "stored": len(lines.rows), "repair": {
+                "from": str(run.path.resolve()), "utc": utc_now(), "kept": len(lines.rows),
+                "dropped": dropped, "torn_bytes": lines.torn_bytes,
+                "previous": run.meta.get("repair"), "problems": report.problems,
+                "damaged_lines": [{"line": d.line, "problem": d.problem}
+                                  for d in lines.damaged]}}
+    if dropped:
         meta.update(status="failed", reason=f"repaired copy of {run.path.name}: "
-                    f"{len(lines.damaged)} damaged lines dropped, {lost} missing; "
-                    f"gonio scan --resume measures what is missing")
+                    f"{len(lines.damaged)} damaged lines dropped, {describe_indices(dropped)} "
+                    f"missing; gonio scan --resume measures what is missing")
     write_json_atomic(tmp / META, meta)
     os.rename(tmp, out)
     fsync_dir(out.parent)

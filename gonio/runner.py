@@ -31,7 +31,7 @@ from gonio.progress import Progress
 from gonio.recorder import RunRecorder, record_end
 from gonio.run_clock import RunClock
 from gonio.run_control import PauseControl
-from gonio.store import DamagedRunError, RunWriter, damage_message, digest_problems, open_run
+from gonio.store import RunWriter, digest_problems, open_run
 from gonio.suspenders import Watch
 
 DetectorCheck = Callable[[np.ndarray, Detector], None]  # schedule readings, open detector
@@ -300,7 +300,8 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
                 control: PauseControl | None = None,
                 plan_path: str | Path | None = None, channel: bool = False,
                 started: Started | None = None) -> ScanResult:
-    """Continue a run after its last stored reading (first measuring any a repair dropped),
+    """Continue a run after its last stored reading (first measuring any a repair dropped or
+    a cut file lost: a completed run that lost readings is finished this way),
     with the plan and config it started with, both checked against their digests.
 
     instrument: a config to use instead of the stored one, differing from it in device
@@ -309,11 +310,7 @@ def resume_scan(run_dir: str | Path, instrument: str | Path | None = None,
     channel, started: as for new_scan.
     """
     run = open_run(run_dir)
-    lines = run.lines()
-    if lines.damaged:
-        raise DamagedRunError(damage_message(run.path, lines, resume=True))
-    if run.status == "completed":
-        raise RunError(f"{run.path}: run already completed; nothing to resume")
+    lines = run.resumable_lines()
     if plan_path is not None:
         same_plan(plan_path, run.plan, run.path)
     plan = parse_plan(run.plan, run.path / "plan.toml")

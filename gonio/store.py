@@ -7,13 +7,20 @@ Layout of a run directory:
     meta.json                    versions, seeds, sim devices, calibration, sessions, status
     readings.jsonl               one JSON object per reading, appended and fsynced in order
 
-Each line carries a `crc32` field over its canonical JSON without it (runs made before line
-checksums have none and are read as unchecked). A run killed at any moment keeps every
+Each line carries the run's identity (`run`: meta.json's `run_uid`) and a `crc32` field over
+its canonical JSON without it, so a line copied from another run fails as surely as an edited
+one; meta.json's `line_checksum` names the scheme (`crc32+run`; `crc32`, lines without the
+run's identity, is an older one still read). A run killed at any moment keeps every
 completed line; a torn last line (the bytes after the last newline: a half-written line, or
 the NUL padding a power loss leaves) is ignored when reading and cut off when the run is
-resumed. Any other damaged line (not JSON, a bad checksum, a duplicated or out-of-order
-index, missing indices) is an error for every reader and for resume: `gonio check RUN`
-reports it and `--repair` writes a copy that resume can complete (gonio.integrity).
+resumed. Any other damaged line (not JSON, a bad checksum, another run's line, a duplicated or
+out-of-order index, missing indices), and any breach of the rules gonio.run_rules adds
+(meta.json names its line checksum, the run's counts and sessions agree with its lines,
+plan.json, config.json and the register maps match their digests) is an error for every reader
+(one line; `open_run(path, force=True)` reads the valid readings and names what it read past)
+and for resume: `gonio check RUN` reports it and `--repair` writes a copy that resume can
+complete. Readings a run records as stored that its file no longer holds (a cut file) are
+measured again by resume.
 
 Each reading's line is written to the file at once (so a killed process never loses it) and
 then fsynced on a helper thread while the engine goes on to the next point; the next line is
@@ -33,6 +40,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import functools
 import hashlib
 import json
 import os
@@ -42,7 +50,7 @@ import secrets
 import shutil
 import sys
 import zlib
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -52,12 +60,24 @@ from typing import Any
 import numpy as np
 
 from gonio.errors import RunError
+from gonio.run_rules import (
+    CRC,
+    LINE_CHECKSUM,
+    LINE_CHECKSUMS,
+    RUN_UID,
+    describe_indices,
+    lost_and_session_problems,
+    lost_indices,
+    meta_problems,
+    recorded_top,
+    session_problems,
+)
 
 READINGS = "readings.jsonl"
 META = "meta.json"
 RESERVE, RESERVE_BYTES = ".reserve", 65536  # room kept for meta.json on a full disk
 PARTIAL = ".partial"  # under a run root: run directories being made
-CRC = "crc32"  # the line checksum's field; meta.json's "line_checksum" says lines carry it
+RUN_FIELD = "run"  # a line's run identity (meta.json's RUN_UID)
 
 READING_DTYPE = np.dtype([
     ("index", "i8"), ("kind", object), ("side", object), ("repeat", "i4"), ("point", "i8"),
@@ -131,9 +151,12 @@ def canonical_json(data: Any) -> bytes:
                       default=_json_default).encode()
 
 
-def encode_line(row: dict[str, Any], checksum: bool = True) -> bytes:
-    """A reading's line: JSON (NaN as null, +-inf as Infinity) with its crc32, and a newline."""
+def encode_line(row: dict[str, Any], checksum: bool = True, run_uid: str | None = None) -> bytes:
+    """A reading's line: JSON (NaN as null, +-inf as Infinity) with the run's identity (if
+    `run_uid`) and its crc32 last, and a newline."""
     clean = {k: None if isinstance(v, float) and v != v else v for k, v in row.items()}
+    if run_uid is not None:
+        clean[RUN_FIELD] = run_uid
     if checksum:
         clean[CRC] = zlib.crc32(canonical_json(clean))
     return json.dumps(clean, default=_json_default).encode() + b"\n"
@@ -170,9 +193,11 @@ class Lines:
         return [i for i in range(self.top + 1) if i not in present]
 
 
-def _check_line(line: bytes, checked: bool) -> tuple[dict[str, Any] | None, str, bool]:
+def _check_line(line: bytes, checked: bool, run_uid: str | None
+                ) -> tuple[dict[str, Any] | None, str, bool]:
     """The reading of one complete line and "", or None and what is wrong with it; and
-    whether the line carried a checksum."""
+    whether the line carried a checksum. `run_uid`: the run the line must say it belongs to
+    (None: not checked)."""
     try:
         row = json.loads(line)
     except ValueError:
@@ -189,6 +214,10 @@ def _check_line(line: bytes, checked: bool) -> tuple[dict[str, Any] | None, str,
         return None, f"{CRC} checksum mismatch{at}", True
     if not isinstance(index, int) or isinstance(index, bool) or index < 0:
         return None, "no valid index", crc is not None
+    run = row.pop(RUN_FIELD, None)
+    if run_uid is not None and run != run_uid:
+        said = "no run identity" if run is None else f"a line of run {run}, not of this run"
+        return None, f"{said} ({RUN_UID} {run_uid}){at}", True
     return row, "", crc is not None
 
 
@@ -197,8 +226,8 @@ class LineChecker:
     seen: `scan_lines` feeds it a whole file, a viewer following a run another process writes
     feeds it each new stretch (the rules of `scan_lines`)."""
 
-    def __init__(self, checked: bool, refill: Collection[int] = ()):
-        self.checked, self.refill = checked, refill
+    def __init__(self, checked: bool, refill: Collection[int] = (), run_uid: str | None = None):
+        self.checked, self.refill, self.run_uid = checked, refill, run_uid
         self.rows: dict[int, dict[str, Any]] = {}  # valid readings by index
         self.damaged: list[Damage] = []
         self.count = 0  # complete lines seen
@@ -208,16 +237,17 @@ class LineChecker:
 
     def feed(self, complete: bytes) -> list[dict[str, Any]]:
         """Check the next complete lines (bytes that end with a newline, or none); returns the
-        valid readings among them, in file order."""
+        valid readings among them, in file order. A valid line out of order is damage, and
+        still a reading (a repair keeps it)."""
         new = []
         for line in complete.split(b"\n")[:-1]:
             self.count += 1
-            row, problem, has_crc = _check_line(line, self.checked)
+            row, problem, has_crc = _check_line(line, self.checked, self.run_uid)
             if row is not None:
                 index = row["index"]
                 gap = [i for i in range(self._top + 1, index) if i not in self.refill]
                 if index in self.rows:
-                    problem = f"duplicate of index {index} (line {self._where[index]})"
+                    problem, row = f"duplicate of index {index} (line {self._where[index]})", None
                 elif index < self._top and index not in self.refill:
                     problem = f"index {index} out of order (after index {self._top})"
                 elif len(gap) > self._since_valid:
@@ -227,6 +257,11 @@ class LineChecker:
             if problem:
                 self.damaged.append(Damage(self.count, problem))
                 self._since_valid += 1
+                if row is None:
+                    continue
+                self.rows[row["index"]], self._where[row["index"]] = row, self.count
+                self.unchecked += not has_crc
+                new.append(row)
                 continue
             self.rows[index], self._where[index], self._since_valid = row, self.count, 0
             self._top = max(self._top, index)
@@ -240,38 +275,44 @@ class LineChecker:
                      torn_bytes, self.unchecked, self.count)
 
 
-def scan_lines(data: bytes, checked: bool, refill: Collection[int] = ()) -> Lines:
+def scan_lines(data: bytes, checked: bool, refill: Collection[int] = (),
+               run_uid: str | None = None) -> Lines:
     """Check every complete line of readings.jsonl (JSON object, checksum if `checked` or
-    present, index neither repeated nor out of order, no indices missing unless damaged lines
-    account for them). `refill`: indices a repair dropped, which may come later, out of order."""
+    present, the run's identity if `run_uid`, index neither repeated nor out of order, no
+    indices missing unless damaged lines account for them). `refill`: indices a repair
+    dropped, which may come later, out of order."""
     keep = data.rfind(b"\n") + 1
-    checker = LineChecker(checked, refill)
+    checker = LineChecker(checked, refill, run_uid)
     checker.feed(data[:keep])
     return checker.lines(keep, len(data) - keep)
 
 
-def describe_indices(indices: list[int]) -> str:
-    """Indices as "index 4" or "indices 4-6, 9"."""
-    parts, start = [], None
-    for i, k in enumerate(indices):
-        if start is None:
-            start = k
-        if i + 1 == len(indices) or indices[i + 1] != k + 1:
-            parts.append(str(k) if start == k else f"{start}-{k}")
-            start = None
-    return ("index " if len(indices) == 1 else "indices ") + ", ".join(parts)
-
-
-def damage_message(path: Path, lines: Lines, resume: bool = False) -> str:
-    """One line: the first damaged line, how many more, and what to do about it."""
-    first = lines.damaged[0]
-    more = len(lines.damaged) - 1
-    text = (f"{path / READINGS} line {first.line}: {first.problem}"
-            + (f" (and {more} more damaged line{'s' * (more > 1)})" if more else ""))
+def damage_message(path: Path, lines: Lines, problems: Sequence[str] = (),
+                   resume: bool = False) -> str:
+    """One line: the first damaged line (else the first of the run's other `problems`), how
+    many more, and what to do about it."""
+    if lines.damaged:
+        first, more = lines.damaged[0], len(lines.damaged) - 1
+        text = (f"{path / READINGS} line {first.line}: {first.problem}"
+                + (f" (and {more} more damaged line{'s' * (more > 1)})" if more else ""))
+        others = len(problems)
+    else:
+        text, others = f"{path}: {problems[0]}", len(problems) - 1
+    if others:
+        text += f" (and {others} more problem{'s' * (others > 1)})"
     if resume:
         return (f"{text}; cannot resume: `gonio check {path} --repair OUT_DIR` writes a "
                 f"repaired copy to resume instead")
-    return f"{text}; `gonio check {path}` reports the damage"
+    return f"{text}; `gonio check {path}` reports the damage, --force reads past it"
+
+
+def damage_list(lines: Lines, problems: Sequence[str], most: int = 5) -> list[str]:
+    """The damage, one entry each (the first `most` damaged lines, then how many more): what
+    an output read with --force says it read past."""
+    out = [f"{READINGS} line {d.line}: {d.problem}" for d in lines.damaged[:most]]
+    if len(lines.damaged) > most:
+        out.append(f"{READINGS}: {len(lines.damaged) - most} more damaged lines")
+    return out + list(problems)
 
 
 def digest(data: Any) -> str:
@@ -301,15 +342,16 @@ def digests(plan: dict[str, Any], config: dict[str, Any]) -> dict[str, Any]:
 
 def digest_problems(run: Run, config: dict[str, Any] | None = None) -> list[str]:
     """How plan.json, config.json and the register maps of `config` (default: the run's)
-    differ from the digests recorded at the start ([] for a run that recorded none)."""
+    differ from the digests recorded at the start ([] for a run that recorded none:
+    gonio.run_rules.meta_problems names that)."""
     recorded = run.meta.get("digests")
     if not recorded:
         return []
     problems = [f"{name} changed since the run started (its digest differs)"
                 for name, data in (("plan.json", run.plan), ("config.json", run.config))
-                if digest(data) != recorded[name]]
+                if digest(data) != recorded.get(name)]
     now = map_digests(run.config if config is None else config)
-    for name, was in recorded["register_maps"].items():
+    for name, was in recorded.get("register_maps", {}).items():
         if now.get(name, was) is None:
             problems.append(f"the register map of device {name!r} is not found, cannot check it")
         elif now.get(name, was) != was:
@@ -332,12 +374,14 @@ def _locked(path: Path) -> Any:
 
 @dataclass
 class Run:
-    """A run directory opened for reading (see `open_run`)."""
+    """A run directory opened for reading (see `open_run`); `force`: read a damaged run's
+    valid readings (`read_past` names the damage) instead of refusing it."""
 
     path: Path
     plan: dict[str, Any]
     config: dict[str, Any]
     meta: dict[str, Any]
+    force: bool = False
 
     def lines(self) -> Lines:
         """Every line of readings.jsonl checked (see `scan_lines`)."""
@@ -348,16 +392,50 @@ class Run:
         return LineChecker(**self._line_rules())
 
     def _line_rules(self) -> dict[str, Any]:
-        return {"checked": self.meta.get("line_checksum") == CRC,
-                "refill": set(self.meta.get("repair", {}).get("dropped", ()))}
+        scheme = self.meta.get("line_checksum")
+        return {"checked": scheme in LINE_CHECKSUMS,
+                "refill": set(self.meta.get("repair", {}).get("dropped", ())),
+                "run_uid": self.meta.get(RUN_UID) if LINE_CHECKSUMS.get(scheme) else None}
+
+    def problems(self, lines: Lines, meta: dict[str, Any] | None = None) -> list[str]:
+        """Every rule of the run but its lines' own, broken (one line each), as meta.json
+        (`meta`: as read since the run was opened, else the run's) and these lines say:
+        meta.json's own (gonio.run_rules), the digests, readings lost, sessions and counts."""
+        meta = self.meta if meta is None else meta
+        return (meta_problems(meta) + digest_problems(self)
+                + lost_and_session_problems(meta, lines, self.path))
 
     def rows(self) -> list[dict[str, Any]]:
         """The readings as dicts, by index (a torn last line is ignored); DamagedRunError
-        naming the file and line if any other line is damaged."""
+        naming the first damage (a line, or a problem of `problems`) unless `force`."""
         lines = self.lines()
-        if lines.damaged:
-            raise DamagedRunError(damage_message(self.path, lines))
+        problems = self.problems(lines)
+        if (lines.damaged or problems) and not self.force:
+            raise DamagedRunError(damage_message(self.path, lines, problems))
         return lines.rows
+
+    @functools.cached_property
+    def read_past(self) -> list[str]:
+        """The damage a read with `force` goes past ([] without force), one entry each."""
+        if not self.force:
+            return []
+        lines = self.lines()
+        return damage_list(lines, self.problems(lines))
+
+    def resumable_lines(self) -> Lines:
+        """The lines, once the run is found fit to resume: DamagedRunError for damage resume
+        cannot mend (all but readings its record says were stored and its file lost, which
+        resume measures again, and the digests, which the resume checks against its config);
+        RunError for a completed run that lost none."""
+        lines = self.lines()
+        lost = lost_indices(self.meta, lines)
+        problems = meta_problems(self.meta) + ([] if lost else
+                                               session_problems(self.meta, lines))
+        if lines.damaged or problems:
+            raise DamagedRunError(damage_message(self.path, lines, problems, resume=True))
+        if self.status == "completed" and not lost:
+            raise RunError(f"{self.path}: run already completed; nothing to resume")
+        return lines
 
     def readings(self) -> np.ndarray:
         """The readings as a numpy structured array with READING_DTYPE fields."""
@@ -389,20 +467,25 @@ def _value(v: Any, dtype: np.dtype) -> Any:
     return np.nan if v is None else v
 
 
-def open_run(path: str | Path) -> Run:
-    """Open a run directory for reading; RunError if it is not one."""
+def open_run(path: str | Path, force: bool = False) -> Run:
+    """Open a run directory for reading (`force`: see `Run`); RunError if it is not one, a
+    DamagedRunError naming the way back for one that lost its meta.json."""
     path = Path(path)
     try:
-        meta = json.loads((path / META).read_text())
         plan = json.loads((path / "plan.json").read_text())
         config = json.loads((path / "config.json").read_text())
+        meta = json.loads((path / META).read_text())
     except FileNotFoundError as exc:
+        if Path(exc.filename).name == META and (path / READINGS).exists():
+            raise DamagedRunError(f"{path}: {META} is missing; `gonio check {path} --repair "
+                                  f"OUT_DIR` rebuilds it from the readings, plan and config"
+                                  ) from None
         raise RunError(f"{path}: not a run directory (missing {Path(exc.filename).name})") from None
     except (OSError, ValueError) as exc:
         raise DamagedRunError(f"{path}: damaged run directory ({exc})") from None
     if not (path / READINGS).exists():
         raise RunError(f"{path}: not a run directory (missing {READINGS})")
-    return Run(path, plan, config, meta)
+    return Run(path, plan, config, meta, force)
 
 
 def versions() -> dict[str, str]:
@@ -478,7 +561,8 @@ class RunWriter:
             (tmp / READINGS).touch()
             _keep_reserve(tmp)
             meta = {**meta, "created_utc": utc_now(), "versions": versions(), "sessions": [],
-                    "status": "created", "reason": "", "line_checksum": CRC,
+                    "status": "created", "reason": "", "line_checksum": LINE_CHECKSUM,
+                    RUN_UID: secrets.token_hex(8),
                     "digests": digests(plan, config)}
             write_json_atomic(tmp / META, meta)
             path = _move_into(tmp, root, base)
@@ -493,16 +577,14 @@ class RunWriter:
 
     @classmethod
     def resume(cls, path: Path) -> RunWriter:
-        """Reopen a run to continue it: refuse a damaged one, cut a torn last line, and go on
-        with the indices a repair dropped, then after the last reading."""
+        """Reopen a run to continue it: refuse a damaged one (`Run.resumable_lines`), cut a
+        torn last line, and go on with the indices a repair dropped and those its file lost,
+        then after the last reading."""
         run = open_run(path)
-        if run.status == "completed":
-            raise RunError(f"{path}: run already completed; nothing to resume")
+        run.resumable_lines()  # refused before taking the lock
         writer = cls(path, run.meta, 0)  # takes the lock before touching the file
         try:
-            lines = run.lines()
-            if lines.damaged:
-                raise DamagedRunError(damage_message(path, lines, resume=True))
+            lines = run.resumable_lines()
         except BaseException:
             writer._fh.close()
             raise
@@ -512,7 +594,9 @@ class RunWriter:
             os.fsync(writer._fh.fileno())
         if not (path / RESERVE).exists():  # freed by a full disk, or an older run
             _keep_reserve(path)
-        writer.next_index, writer.missing = lines.top + 1, lines.missing()
+        top = max(lines.top, recorded_top(run.meta))
+        writer.next_index = top + 1
+        writer.missing = lines.missing() + list(range(lines.top + 1, top + 1))
         return writer
 
     @property
@@ -541,7 +625,7 @@ class RunWriter:
         """Update status and reason in meta.json (atomically), once every reading is stored
         (StoreError if the disk refuses either)."""
         self.wait_stored()
-        self.meta["status"], self.meta["reason"] = status, reason
+        self.meta["status"], self.meta["reason"], self.meta["stored"] = status, reason, self.stored
         if status != "running":
             self.meta["stopped_utc"] = utc_now()
             if self.meta["sessions"]:
@@ -562,7 +646,7 @@ class RunWriter:
         if row["index"] != self.expected:
             raise RunError(f"{self.path}: reading {row['index']} out of order "
                            f"(expected {self.expected})")
-        line = encode_line(row)
+        line = encode_line(row, run_uid=self.meta.get(RUN_UID))
         self.wait_stored()
         try:  # in the kernel's hands once written: a killed process no longer loses it
             written = 0

@@ -1,8 +1,10 @@
-"""The one stderr line every reader of a run prints for an incomplete run (gonio.completeness):
-a verb that reads runs names the arguments holding them (`reads_run`, set by its parser), and
-the command line says it once, after the verb's argument checks that need no run
-(`check_args`, set by its parser: bad input gives its one error line alone) and before the
-verb runs."""
+"""The one gate every reader of a run passes and the one stderr line it prints: a verb that
+reads runs names the arguments holding them (`reads_run`, set by its parser), and the command
+line, after the verb's argument checks that need no run (`check_args`, set by its parser: bad
+input gives its one error line alone) and before the verb runs, refuses a damaged run (by the
+rules `gonio check` applies, gonio.store.Run.problems: one error line, exit 2) unless --force
+(`add_force_option`), and names each incomplete run (gonio.completeness) in one warning line,
+a run read past damage included."""
 
 from __future__ import annotations
 
@@ -15,6 +17,14 @@ from gonio.errors import GonioError
 
 if TYPE_CHECKING:
     from gonio.store import Run
+
+FORCE_HELP = ("read a damaged run (one `gonio check` calls damaged): its valid readings, "
+              "every output's header naming the damage read past (refused otherwise)")
+
+
+def add_force_option(p: argparse.ArgumentParser, also: str = "") -> None:
+    """--force of a verb that reads runs (`also`: what else it forces, said after)."""
+    p.add_argument("--force", action="store_true", help=FORCE_HELP + also)
 
 
 def runs_read(args: argparse.Namespace) -> list[str]:
@@ -30,23 +40,28 @@ def runs_read(args: argparse.Namespace) -> list[str]:
     return out
 
 
-def warn_incomplete(verb: str, args: argparse.Namespace) -> None:
-    """Print `VERB: warning: RUN: incomplete run: N of M readings stored, status S (reason)`
-    for each incomplete run the verb reads; a run a scan is still writing is in progress, not
-    incomplete, and a directory that is no run, or a damaged run, is left to the verb's own
-    error (one line)."""
+def gate_runs(verb: str, args: argparse.Namespace) -> None:
+    """Raise DamagedRunError (one line) for a damaged run the verb reads, unless --force;
+    print `VERB: warning: RUN: incomplete run: N of M readings stored, status S (reason)` for
+    each incomplete run (with what --force read past); a run a scan is still writing is in
+    progress, not incomplete, and a directory that is no run is left to the verb's own error
+    (one line)."""
     from gonio.completeness import being_written, completeness_of
-    from gonio.store import open_run
+    from gonio.store import DamagedRunError, damage_message, open_run
 
+    force = bool(getattr(args, "force", False))
     for path in runs_read(args):
         try:
-            run = open_run(path)
+            run = open_run(path, force=force)
             lines = run.lines()
-            if lines.damaged or being_written(run):
-                continue
-            found = completeness_of(run, len(lines.rows))
+            problems = run.problems(lines)
         except (GonioError, OSError):
             continue
+        if (lines.damaged or problems) and not force:
+            raise DamagedRunError(damage_message(run.path, lines, problems))
+        if being_written(run) and not run.read_past:
+            continue
+        found = completeness_of(run, len(lines.rows))
         if not found.complete:
             print(f"{verb}: warning: {path}: {found.text()}", file=sys.stderr, flush=True)
 

@@ -28,7 +28,7 @@ import warnings  # noqa: E402
 from drivers.base import DriverError  # noqa: E402
 from gonio.errors import GonioError, Terminated, os_error_text  # noqa: E402
 from gonio_cli import emulator_truth  # noqa: E402
-from gonio_cli.incomplete import warn_incomplete  # noqa: E402
+from gonio_cli.incomplete import gate_runs  # noqa: E402
 
 # Module names under gonio_cli.commands, in the order `gonio --help` lists them.
 COMMANDS = [
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         verb = f"gonio {args.command}"
         if getattr(args, "check_args", None):  # the verb's argument checks that need no run
             args.check_args(args)
-        warn_incomplete(verb, args)
+        gate_runs(verb, args)
         return int(args.func(args) or 0)
     except (GonioError, DriverError) as exc:
         print(f"{verb}: error: {exc}", file=sys.stderr)

@@ -21,7 +21,8 @@ POLL_S = 0.25  # between two stats of the run's files
 @dataclass(frozen=True)
 class Snapshot:
     """What the run holds at one moment: meta.json, the valid readings in file order, the
-    damage report (None: none) and whether a line is being written (a torn tail)."""
+    damage report (the rules every reader applies, gonio.store.Run.problems; None: none) and
+    whether a line is being written (a torn tail)."""
 
     meta: dict[str, Any]
     rows: list[dict[str, Any]]
@@ -91,8 +92,10 @@ class RunFollower:
     def snapshot(self) -> Snapshot:
         """The run as last polled."""
         with self._lock:
-            damage = (damage_message(self.run.path, self._checker.lines(self._offset, self._torn))
-                      if self._checker.damaged else None)
+            lines = self._checker.lines(self._offset, self._torn)
+            problems = self.run.problems(lines, self._meta)
+            damage = (damage_message(self.run.path, lines, problems)
+                      if lines.damaged or problems else None)
             return Snapshot(self._meta, list(self._rows), damage, self._torn > 0)
 
     def follow(self, stop: threading.Event, every_s: float = POLL_S) -> threading.Thread:

@@ -17,7 +17,8 @@ class ExportRequest:
     what: str | None = None
     fit_options: FitOptions | None = None
     fit_file: str | Path | None = None  # `gonio fit --json` output to export instead of fitting
-    force: bool = False  # export a fit whose chi2/dof says it does not describe the data
+    force: bool = False  # read a damaged run's valid readings (gonio.store.Run); export a fit
+    # whose chi2/dof says it does not describe the data
     calibration: str | Path | None = None
     shot_noise_w: float | None = None
     subtract_signature: bool = False

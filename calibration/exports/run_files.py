@@ -22,7 +22,7 @@ def write_run(run_dir: str | Path, fmt: str, what: str, out: Path, request: Expo
     from calibration.pipeline import reduce_run
     from gonio.store import open_run
 
-    run = open_run(run_dir)
+    run = open_run(run_dir, force=request.force)
     notes: list[str] = []
     if what != "raw":
         try:

@@ -12,6 +12,8 @@ import json
 import sys
 from typing import TYPE_CHECKING
 
+from gonio_cli.incomplete import add_force_option
+
 if TYPE_CHECKING:
     from calibration.calfile import Calibration
     from calibration.values import Measured
@@ -47,9 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--divergence-deg", type=_half_angle_deg, metavar="DEG",
                    help="beam divergence half-angle for the angle-offset fit (default: the "
                    "runs' [optics] divergence_deg, else 0)")
-    b.add_argument("--force", action="store_true",
-                   help="write a fit with chi2/dof above 3, or angle offsets from a sample "
-                   "its plan does not name a reference for them, with a warning")
+    add_force_option(b, also="; and write a fit with chi2/dof above 3, or angle offsets from a "
+                             "sample its plan does not name a reference for them, with a "
+                             "warning")
     u = actions.add_parser("use", help="record in a run which calibration applies to it")
     u.add_argument("run", help="run directory")
     u.add_argument("calibration", help="calibration file")
@@ -88,12 +90,13 @@ def _build(args: argparse.Namespace) -> int:
     from gonio.store import open_run, utc_now
     from gonio_cli.incomplete import incomplete_notes
 
-    runs = [open_run(r) for r in args.runs]
+    runs = [open_run(r, force=args.force) for r in args.runs]
     divergence = args.divergence_deg
     if divergence is None:
         divergence = _optics(runs, "divergence_deg") or 0.0
     readings = [r.readings() for r in runs]
-    aperture_run = open_run(args.aperture_scan) if args.aperture_scan else None
+    aperture_run = open_run(args.aperture_scan, force=args.force) if args.aperture_scan \
+        else None
     routes = route(runs, readings, aperture_run, args.aperture_geometry is not None)
     angle_runs = [run for run, take in zip(runs, routes.angles, strict=True) if take]
     eta = args.eta if args.eta is not None else _sample_eta(angle_runs)

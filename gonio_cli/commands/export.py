@@ -12,6 +12,7 @@ from calibration.exports import ExportRequest, checked_what, write
 from calibration.formats import FORMATS, WHATS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 from gonio_cli.commands.reduce import say_angle_terms
+from gonio_cli.incomplete import add_force_option
 
 #: The module's docstring with FORMAT spelled out as the names of calibration.formats.
 DESCRIPTION = __doc__.replace("--format FORMAT", f"--format {'|'.join(FORMATS)}")
@@ -37,9 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the fit to export (the output of `gonio fit RUN --json`) instead of "
                         "fitting here with the fit options below (zemax, astm --what model, "
                         "mitsuba)")
-    p.add_argument("--force", action="store_true",
-                   help="export a fit whose chi2/dof says it does not describe the data "
-                        "(refused otherwise)")
+    add_force_option(p, also="; and export a fit whose chi2/dof says it does not describe "
+                             "the data (refused otherwise)")
     p.add_argument("--single-scattering", action="store_true",
                    help="mitsuba: write a multiple-scattering fit as the single-scattering "
                         "material, which drops the multiple scattering (the share of R + T it "

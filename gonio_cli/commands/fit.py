@@ -126,11 +126,13 @@ def run(args: argparse.Namespace) -> int:
     from calibration.budget import summary as budget_summary
     from calibration.fit import fit
     from calibration.pipeline import fit_run
+    from gonio.store import open_run
 
     data = imported(args)
     if data is None:
         sim = emulator_sim(args.run) if args.diffraction else None
-        data, result = fit_run(args.run, options_from(args, sim), args.calibration,
+        data, result = fit_run(open_run(args.run, force=args.force), options_from(args, sim),
+                               args.calibration,
                                args.shot_noise_w, args.subtract_signature, progress=_to_stderr,
                                angle_terms=not args.no_angle_terms)
         say_angle_terms(args)

@@ -9,6 +9,7 @@ import sys
 
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, fit_warnings, options_from
 from gonio_cli.commands.reduce import say_angle_terms
+from gonio_cli.incomplete import add_force_option
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -20,16 +21,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fit", action="store_true",
                    help="fit the model (gonio fit's options) and overlay it with residuals")
     add_fit_options(p)
+    add_force_option(p)
     p.set_defaults(func=run, reads_run="run")
 
 
 def run(args: argparse.Namespace) -> int:
     """Reduce, (fit,) plot; print the PNG's path."""
     from calibration.plot import plot_run
+    from gonio.store import open_run
 
     sim = emulator_sim(args.run) if args.fit and args.diffraction else None
     results: list = []
-    out = plot_run(args.run, args.out, fit=args.fit, calibration_file=args.calibration,
+    out = plot_run(open_run(args.run, force=args.force), args.out, fit=args.fit,
+                   calibration_file=args.calibration,
                    fit_options=options_from(args, sim) if args.fit else None,
                    shot_noise_w=args.shot_noise_w, subtract_signature=args.subtract_signature,
                    angle_terms=not args.no_angle_terms, fitted=results.append)

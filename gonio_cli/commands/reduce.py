@@ -21,6 +21,7 @@ import numpy as np
 from calibration.budget import COVERAGE_K
 from calibration.signature import DEFAULT_SHARE
 from gonio.errors import GonioError
+from gonio_cli.incomplete import add_force_option
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -51,9 +52,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def add_run_or_import(p: argparse.ArgumentParser) -> None:
-    """The run directory, or --import FILE and the assumption a file without uncertainties
-    needs."""
+    """The run directory (and --force), or --import FILE and the assumption a file without
+    uncertainties needs."""
     p.add_argument("run", nargs="?", help="run directory (or --import FILE)")
+    add_force_option(p)
     p.add_argument("--import", dest="import_file", metavar="FILE",
                    help="a measured file instead of a run: ASTM E1392 (.astm), Zemax tabular "
                         "BSDF (.bsdf), BiRD universal BRDF (.json), gonio's reduced CSV or "
@@ -185,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.import_file is not None or args.run is None:
         return _write_imported(args)  # imported(): one error for both a run and --import
-    stored = open_run(args.run)
+    stored = open_run(args.run, force=args.force)
     data = reduce_run(stored, args.calibration, args.shot_noise_w, args.subtract_signature,
                       args.signature_share, angle_terms=not args.no_angle_terms)
     say_angle_terms(args)

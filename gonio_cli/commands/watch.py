@@ -25,6 +25,7 @@ from pathlib import Path
 from gonio.errors import GonioError, os_error_text
 from gonio_cli.commands.emulate import is_loopback
 from gonio_cli.commands.reduce import add_reduce_options
+from gonio_cli.incomplete import add_force_option
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,6 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "run's end (at most a few seconds): how `gonio scan --watch` ties its "
                         "viewer to the scan")
     add_reduce_options(p)
+    add_force_option(p)
     p.set_defaults(func=run, reads_run="run")
 
 

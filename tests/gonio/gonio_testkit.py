@@ -180,6 +180,21 @@ def one_line_error(stderr: str) -> str:
     return lines[0]
 
 
+def rewrite_run_files(run_dir: Path, plan: dict | None = None, config: dict | None = None
+                      ) -> None:
+    """Replace a run's plan.json and/or config.json and record their digests in meta.json,
+    as if the run had been made with them (a changed file is otherwise damage)."""
+    from gonio.store import META, digests
+
+    for name, data in (("plan.json", plan), ("config.json", config)):
+        if data is not None:
+            (run_dir / name).write_text(json.dumps(data))
+    meta = json.loads((run_dir / META).read_text())
+    meta["digests"] = digests(json.loads((run_dir / "plan.json").read_text()),
+                              json.loads((run_dir / "config.json").read_text()))
+    (run_dir / META).write_text(json.dumps(meta))
+
+
 def write_plan(folder: Path, plan: dict, config: dict | None = None, name: str = "plan") -> Path:
     """Write a plan dict (and its instrument config, named by the plan) into folder."""
     plan = dict(plan)

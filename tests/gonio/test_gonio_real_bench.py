@@ -12,7 +12,15 @@ import shutil
 
 import numpy as np
 import pytest
-from gonio_testkit import emulating, gonio_cli, load_example, pointed, run_dir_of, write_toml
+from gonio_testkit import (
+    emulating,
+    gonio_cli,
+    load_example,
+    pointed,
+    rewrite_run_files,
+    run_dir_of,
+    write_toml,
+)
 
 from calibration.pipeline import reduce_run
 from gonio.store import open_run
@@ -110,7 +118,7 @@ def test_a_wrong_sim_table_changes_nothing(runs, tmp_path):
     twin = tmp_path / "twin"
     shutil.copytree(bare, twin)
     config = json.loads((twin / "config.json").read_text())
-    (twin / "config.json").write_text(json.dumps({**config, "sim": WRONG_SIM}))
+    rewrite_run_files(twin, config={**config, "sim": WRONG_SIM})
     a, b = reduce_run(bare), reduce_run(twin)
     np.testing.assert_array_equal(a.bsdf, b.bsdf)
     np.testing.assert_array_equal(a.sigma, b.sigma)

@@ -10,7 +10,7 @@ import shutil
 
 import numpy as np
 import pytest
-from gonio_testkit import fast_config, gonio_cli, one_line_error, write_toml
+from gonio_testkit import fast_config, gonio_cli, one_line_error, rewrite_run_files, write_toml
 
 from calibration import calfile
 from calibration.pipeline import reduce_run
@@ -75,8 +75,7 @@ def as_real(run_dir, to, sim=None, drop=(), sessions_devices=None):
         config.pop("optics")
     if "sample" in drop:
         plan.pop("sample")
-    (to / "config.json").write_text(json.dumps(config))
-    (to / "plan.json").write_text(json.dumps(plan))
+    rewrite_run_files(to, plan, config)
     return to
 
 
@@ -103,7 +102,7 @@ def test_a_real_run_reduces_the_same_under_a_wrong_sim_and_none(emulated, tmp_pa
     described = json.loads((tmp_path / "bare" / "config.json").read_text())
     described["detector"]["shot_noise_w"] = emulator_shot_noise_w(
         config["sim"]["detector"], config["optics"]["wavelength_nm"])
-    (tmp_path / "bare" / "config.json").write_text(json.dumps(described))
+    rewrite_run_files(tmp_path / "bare", config=described)
     from_config = reduce_run(tmp_path / "bare")
     np.testing.assert_array_equal(own.sigma, from_config.sigma, strict=True)
     assert "from [detector] shot_noise_w" in from_config.meta["noise_model"]

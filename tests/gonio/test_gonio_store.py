@@ -171,23 +171,48 @@ def test_a_damaged_line_is_an_error_for_every_reader_and_for_resume(writer, kind
         RunWriter.resume(writer.path)
 
 
-def test_a_run_without_checksums_reads_as_unchecked(writer):
-    """Runs written before line checksums: lines without crc32 are read, not refused."""
+def test_a_run_whose_meta_names_no_line_checksum_is_damaged(writer):
+    """Deleting line_checksum from meta.json switches nothing off: the run is damaged for
+    every reader and for resume; --force reads its lines as they are, naming the damage."""
     for i in range(3):
         writer.append(row(i))
     writer.close()
     path = writer.path / "readings.jsonl"
-    path.write_bytes(re.sub(rb', "crc32": \d+', b"", path.read_bytes()))
+    edited = re.sub(rb', "crc32": \d+', b"", path.read_bytes(), count=1)  # line 1 unchecked
+    path.write_bytes(edited.replace(b'"power_w": ', b'"power_w": 9', 1))
     meta = json.loads((writer.path / "meta.json").read_text())
-    del meta["line_checksum"], meta["digests"]
+    del meta["line_checksum"]
     (writer.path / "meta.json").write_text(json.dumps(meta))
-    assert open_run(writer.path).lines().unchecked == 3
+    said = "meta.json names no line_checksum: the lines cannot be checked"
+    with pytest.raises(DamagedRunError, match=said):
+        open_run(writer.path).rows()
+    with pytest.raises(DamagedRunError, match=said):
+        RunWriter.resume(writer.path)
+    assert check(open_run(writer.path)).damaged
+    forced = open_run(writer.path, force=True)
+    assert len(forced.rows()) == 3 and forced.read_past == [said]
+
+
+def test_an_older_run_without_run_identity_reads_and_resumes(writer):
+    """line_checksum crc32, the older scheme: lines carry no run uid, and are still read,
+    resumed in their own format, and checked with a note saying what it cannot tell."""
+    for i in range(3):
+        writer.append(row(i))
+    writer.close()
+    old = [gonio.store.encode_line(r) for r in open_run(writer.path).rows()]
+    (writer.path / "readings.jsonl").write_bytes(b"".join(old))
+    meta = json.loads((writer.path / "meta.json").read_text())
+    del meta["run_uid"]
+    (writer.path / "meta.json").write_text(json.dumps({**meta, "line_checksum": "crc32"}))
     assert len(open_run(writer.path)) == 3
     resumed = RunWriter.resume(writer.path)
     resumed.append(row(3))
     resumed.close()
-    lines = open_run(writer.path).lines()
-    assert (len(lines.rows), lines.unchecked, lines.damaged) == (4, 3, [])
+    lines = (writer.path / "readings.jsonl").read_bytes().splitlines()
+    assert lines[3] == gonio.store.encode_line(row(3)).strip()
+    report = check(open_run(writer.path))
+    assert not report.damaged and len(report.lines.rows) == 4
+    assert any("carry no run identity" in note for note in report.notes)
 
 
 def test_a_repaired_run_measures_its_dropped_indices_first(writer, tmp_path):

@@ -56,7 +56,7 @@ def test_follower_takes_each_complete_line_and_waits_for_a_torn_one(source, tmp_
     follower = RunFollower(open_run(writer.path))
     rows = source.rows()
     path = writer.path / READINGS
-    lines = [encode_line(r) for r in rows[:3]]
+    lines = [encode_line(r, run_uid=writer.meta["run_uid"]) for r in rows[:3]]
     with open(path, "ab") as fh:
         fh.write(lines[0] + lines[1] + lines[2][:25])
     follower.poll()
@@ -74,7 +74,7 @@ def test_follower_takes_each_complete_line_and_waits_for_a_torn_one(source, tmp_
 def test_follower_reports_damage_as_the_store_does(source, tmp_path):
     writer = empty_copy(source, tmp_path)
     writer.close()
-    line = bytearray(encode_line(source.rows()[0]))
+    line = bytearray(encode_line(source.rows()[0], run_uid=writer.meta["run_uid"]))
     at = line.index(b'"index": ') + len(b'"index": ')
     line[at:at + 1] = b"7"  # another index: still JSON, its checksum no longer matches
     (writer.path / READINGS).write_bytes(bytes(line))
@@ -93,7 +93,8 @@ def test_follower_starts_again_when_the_file_is_replaced(source, tmp_path):
     follower.poll()
     assert len(follower.snapshot().rows) == 4
     tmp = writer.path / "replacement"
-    tmp.write_bytes(b"".join(encode_line(r) for r in source.rows()[:2]))
+    tmp.write_bytes(b"".join(encode_line(r, run_uid=writer.meta["run_uid"])
+                             for r in source.rows()[:2]))
     os.replace(tmp, writer.path / READINGS)  # as a repair's copy would be
     follower.poll()
     assert [r["index"] for r in follower.snapshot().rows] == [0, 1]
