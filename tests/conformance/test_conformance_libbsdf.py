@@ -1,0 +1,176 @@
+"""Conformance with libbsdf, a reader nobody here wrote: every ASTM E1392 and Zemax tabular
+BSDF export (reduced data and fitted model) of Walter's ground glass measured on the emulated
+bench (0 and 30 deg, both sides, its multiple-scattering fit) is read by libbsdf's own
+readers, and at every measured point libbsdf returns gonio's value within 1e-4 relative.
+
+Frames: libbsdf reads an isotropic file into its own frame, the source on +x (gonio's sample
+frame has it on -x: a half turn about the normal); its Zemax reader takes a BTDF block's
+AngleOfIncidence (the refracted direction's angle) as the incidence angle."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fitting.fitting_bench_runs import instrument, plan, scan
+from libbsdf_reader import ReaderUnavailable, build_probe, libbsdf_values
+
+from calibration.exports.astm import directions, read_astm
+from calibration.exports.zemax import read_zemax
+from calibration.exports.zemax_measured import measured_nodes
+from calibration.pipeline import reduce_run
+from calibration.reduced import ReducedData
+from gonio_cli.main import main
+
+pytestmark = pytest.mark.conformance
+
+RELATIVE = 1e-4  # the agreement asked of a reader at a measured point
+HALF_TURN = np.array([-1.0, -1.0, 1.0])  # gonio's sample frame -> libbsdf's
+SOURCE = {"power_w": 1e-3, "beam_diameter_mm": 2.0, "divergence_deg": 0.03}
+APERTURE = {"diameter_mm": 10.0, "distance_mm": 500.0, "rtol": 1e-5}
+GRIDS = [
+    {"side": "transmission", "theta_i_deg": 0.0,
+     "theta_o_deg": {"start": -70.0, "stop": 70.0, "step": 3.5}},
+    {"side": "reflection", "theta_i_deg": 0.0,
+     "theta_o_deg": {"start": 8.0, "stop": 80.0, "step": 6.0}},
+    {"side": "transmission", "theta_i_deg": 30.0,
+     "theta_o_deg": {"start": -63.0, "stop": 63.0, "step": 7.0}},
+    {"side": "reflection", "theta_i_deg": 30.0,
+     "theta_o_deg": {"start": -80.0, "stop": 80.0, "step": 8.0}, "skip_forbidden": True},
+]
+
+
+@pytest.fixture(scope="module")
+def probe() -> Path:
+    try:
+        return build_probe()
+    except ReaderUnavailable as why:
+        pytest.skip(f"libbsdf not available: {why}")
+
+
+@pytest.fixture(scope="module")
+def ground_glass(tmp_path_factory) -> tuple[Path, Path]:
+    """(run, fit JSON) of Walter's ground glass (GGX alpha 0.394) on the emulated bench, which
+    adds multiple scattering, and its multiple-scattering fit."""
+    tmp = tmp_path_factory.mktemp("ground-glass")
+    cfg = instrument(tmp, {"source": SOURCE, "aperture": APERTURE, "sample": {
+        "kind": "hemisphere", "distribution": "ggx", "alpha": 0.394, "eta": 1.51,
+        "ms_walks": 1 << 21}}, seed=2)
+    run = scan(plan(tmp, "ground-glass", GRIDS), cfg, tmp / "runs")
+    fit_json = tmp / "fit.json"
+    with pytest.MonkeyPatch.context() as patch:
+        lines: list[str] = []
+        patch.setattr("builtins.print", lambda *a, **k: lines.append(" ".join(map(str, a))))
+        assert main(["fit", str(run), "--json", "--distribution", "ggx",
+                     "--multiple-scattering"]) == 0
+    fit_json.write_text(lines[-1] + "\n")
+    return run, fit_json
+
+
+def export(run: Path, fit_json: Path, fmt: str, what: str, out: Path) -> list[Path]:
+    """The files `gonio export` writes (both sides: the BTDF at `out`, the BRDF beside it)."""
+    assert main(["export", str(run), "--format", fmt, "--what", what, "--fit", str(fit_json),
+                 "--out", str(out)]) == 0
+    files = [out, out.with_name(f"{out.stem}-BRDF{out.suffix}")]
+    assert all(f.is_file() for f in files)
+    return files
+
+
+def side(data: ReducedData, scatter_type: str) -> ReducedData:
+    """The valid points of one side."""
+    return data.subset(data.valid & (data.transmission == (scatter_type == "BTDF")))
+
+
+def libbsdf_frame(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Directions of gonio's sample frame in libbsdf's: a half turn about the normal (no -0
+    left, which libbsdf's atan2 would take for an azimuth of pi at normal incidence)."""
+    return wi * HALF_TURN + 0.0, wo * HALF_TURN + 0.0
+
+
+def zemax_directions(path: Path, points: ReducedData) -> tuple[np.ndarray, np.ndarray]:
+    """(wi, wo) of the points as libbsdf reads a Zemax file: in its frame, and for a BTDF the
+    incidence at the block's AngleOfIncidence."""
+    wi, wo = libbsdf_frame(points.wi, points.wo)
+    if read_zemax(path).scatter_type == "BTDF":
+        angle = np.arcsin(np.sin(np.radians(points.theta_i_deg)) / points.meta["eta"])
+        wi = np.stack([np.sin(angle), np.zeros(len(angle)), np.cos(angle)], axis=1)
+    return wi, wo
+
+
+def worst(expected: np.ndarray, got: np.ndarray) -> float:
+    """The largest relative disagreement."""
+    return float(np.max(np.abs(got - expected) / np.abs(expected)))
+
+
+def test_astm_reduced_read_by_libbsdf(ground_glass, probe, tmp_path):
+    """Every measured value of both ASTM files comes back from libbsdf."""
+    run, fit_json = ground_glass
+    data = reduce_run(run)
+    for path in export(run, fit_json, "astm", "reduced", tmp_path / "glass.astm"):
+        table = read_astm(path)
+        points = side(data, table.data_type)
+        kind, got = libbsdf_values(probe, f"astm-{table.data_type.lower()}", path,
+                                   *libbsdf_frame(points.wi, points.wo))
+        assert kind == table.data_type
+        assert worst(np.maximum(points.bsdf, 0.0), got) < RELATIVE, path.name
+
+
+def test_astm_model_read_by_libbsdf(ground_glass, probe, tmp_path):
+    """The model's ASTM grid: libbsdf returns the tabulated value at each of its nodes."""
+    run, fit_json = ground_glass
+    for path in export(run, fit_json, "astm", "model", tmp_path / "model.astm"):
+        table = read_astm(path)
+        wi, wo, _ = directions(table)
+        _, got = libbsdf_values(probe, f"astm-{table.data_type.lower()}", path,
+                                *libbsdf_frame(wi, wo))
+        keep = table.values[:, 0] > 0
+        assert worst(table.values[keep, 0], got[keep]) < RELATIVE, path.name
+
+
+def test_zemax_reduced_read_by_libbsdf(ground_glass, probe, tmp_path):
+    """The measured Zemax tables: libbsdf returns every measured value where it was
+    measured."""
+    run, fit_json = ground_glass
+    data = reduce_run(run)
+    for path in export(run, fit_json, "zemax", "reduced", tmp_path / "glass.bsdf"):
+        table = read_zemax(path)
+        points = side(data, table.scatter_type)
+        wi, wo = zemax_directions(path, points)
+        kind, got = libbsdf_values(probe, "zemax", path, wi, wo)
+        assert kind == table.scatter_type
+        assert worst(np.maximum(points.bsdf, 0.0), got) < RELATIVE, path.name
+
+
+def test_zemax_model_read_by_libbsdf(ground_glass, probe, tmp_path):
+    """The model's Zemax tables hold every measured direction as a node: there libbsdf returns
+    the value gonio tabulated."""
+    run, fit_json = ground_glass
+    data = reduce_run(run)
+    for path in export(run, fit_json, "zemax", "model", tmp_path / "model.bsdf"):
+        table = read_zemax(path)
+        points = side(data, table.scatter_type)
+        _, angle, block, azimuth, radial = measured_nodes(points, table.scatter_type,
+                                                          points.meta["eta"], True)
+        blocks = [int(np.flatnonzero(np.isclose(table.angle_deg, a))[0]) for a in angle]
+        expected = table.data[0, np.array(blocks)[block], np.searchsorted(table.azimuth_deg,
+                                                                          azimuth),
+                              np.searchsorted(table.radial_deg, radial)]
+        _, got = libbsdf_values(probe, "zemax", path, *zemax_directions(path, points))
+        assert worst(expected, got) < RELATIVE, path.name
+
+
+def test_astm_isotropic_near_normal_incidence(ground_glass, probe, tmp_path):
+    """libbsdf reads the ASTM file as isotropic: just off normal incidence on the source side
+    it returns the normal-incidence values (a file naming two incidence azimuths is read as
+    anisotropic, its gaps filled with the nearest sample)."""
+    run, fit_json = ground_glass
+    data = reduce_run(run)
+    path = export(run, fit_json, "astm", "reduced", tmp_path / "glass.astm")[0]
+    points = side(data, "BTDF")
+    normal = points.subset(points.theta_i_deg < 1e-9)
+    tilt = math.radians(1e-6)
+    wi = np.tile([-math.sin(tilt), 0.0, math.cos(tilt)], (len(normal.bsdf), 1))
+    _, got = libbsdf_values(probe, "astm-btdf", path, *libbsdf_frame(wi, normal.wo))
+    assert worst(normal.bsdf, got) < RELATIVE
