@@ -79,10 +79,10 @@ def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
     paths = []
     for side, path in zip(sides, side_paths(out_path, sides), strict=True):
         points = data.subset(data.valid & (data.transmission == (side == "BTDF")))
-        nodes = measured_nodes(points, side, result.eta, isotropic)[3:]
+        at = measured_nodes(points, side, result.eta, isotropic)
         table = tabulate(point_model(result), side, theta_i, result.eta,
                          math.degrees(float(alpha.min())), isotropic=isotropic,
-                         comments=notes, nodes=nodes)
+                         comments=notes, nodes=(at.azimuth, at.radial))
         paths.append(write_zemax(table, path))
     return paths
 

@@ -97,8 +97,10 @@ def hemisphere_integral(f: Callable[[np.ndarray], np.ndarray], scatter_type: str
 
 
 def standard_azimuth(isotropic: bool) -> np.ndarray:
-    """The format's azimuths, degrees: 0..180 by 10 (plane-symmetric) or 0..350 by 10."""
-    return np.arange(0.0, 180.1, 10.0) if isotropic else np.arange(0.0, 360.0, 10.0)
+    """The format's azimuths, degrees: 0..180 by 10 (plane-symmetric) or 0..360 by 10, the
+    row at 360 repeating 0 (a reader which does not wrap azimuths, as libbsdf, would
+    otherwise extrapolate between 350 and 360)."""
+    return np.arange(0.0, 180.1 if isotropic else 360.1, 10.0)
 
 
 def radial_grid(width_deg: float, n: int = 48) -> np.ndarray:
@@ -136,9 +138,18 @@ def tabulate(model_eval: Callable[[np.ndarray, np.ndarray], np.ndarray], scatter
         # a node on the horizon (a measured one can fall there) scatters nothing
         data[0, k] = np.where(on_side(wo, scatter_type) & (np.abs(wo[..., 2]) > HORIZON_COS),
                               f(wo), 0.0)
+        if azimuth[-1] == 360.0:  # the closing row: azimuth 0's cells, bit for bit
+            data[0, k, -1] = data[0, k, 0]
         tis[0, k] = hemisphere_integral(f, scatter_type, angle, width_deg)
     return ZemaxTable(scatter_type, "PlaneSymmetrical" if isotropic else "Asymmetrical",
                       np.zeros(1), angles, azimuth, radial, data, tis, list(comments or []))
+
+
+def turned(v: np.ndarray, angle_deg: float) -> np.ndarray:
+    """Vectors (..., 3) turned by angle_deg about z (counter-clockwise seen from +z)."""
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]],
+                    axis=-1) + 0.0
 
 
 def _angles(values: np.ndarray) -> str:
@@ -247,6 +258,8 @@ def tis_weights(table: ZemaxTable, angle: int) -> np.ndarray:
     w_r = _trapezoid_weights(r)
     if table.symmetry == "PlaneSymmetrical":
         w_phi = 2.0 * _trapezoid_weights(phi)
+    elif table.azimuth_deg[-1] == 360.0:  # closed by a row repeating azimuth 0
+        w_phi = _trapezoid_weights(phi)
     else:  # closed over 2 pi: the last interval wraps to the first azimuth
         w_phi = _trapezoid_weights(np.append(phi, 2 * math.pi))
         w_phi[0] += w_phi[-1]
