@@ -119,7 +119,7 @@ def worst(expected: np.ndarray, got: np.ndarray) -> float:
     return float(np.max(disagreement(expected, got)))
 
 
-def test_astm_reduced_read_by_libbsdf(ground_glass, probe, tmp_path):
+def test_astm_reduced_read_by_libbsdf(probe, ground_glass, tmp_path):
     """Every measured value of both ASTM files comes back from libbsdf."""
     run, fit_json = ground_glass
     data = reduce_run(run)
@@ -132,7 +132,7 @@ def test_astm_reduced_read_by_libbsdf(ground_glass, probe, tmp_path):
         assert worst(np.maximum(points.bsdf, 0.0), got) < RELATIVE, path.name
 
 
-def test_astm_model_read_by_libbsdf(ground_glass, probe, tmp_path):
+def test_astm_model_read_by_libbsdf(probe, ground_glass, tmp_path):
     """The model's ASTM grid: libbsdf returns the tabulated value at each of its nodes."""
     run, fit_json = ground_glass
     for path in export(run, fit_json, "astm", "model", tmp_path / "model.astm"):
@@ -144,7 +144,7 @@ def test_astm_model_read_by_libbsdf(ground_glass, probe, tmp_path):
         assert worst(table.values[keep, 0], got[keep]) < RELATIVE, path.name
 
 
-def test_zemax_reduced_read_by_libbsdf(ground_glass, probe, tmp_path):
+def test_zemax_reduced_read_by_libbsdf(probe, ground_glass, tmp_path):
     """The measured Zemax tables: libbsdf returns every measured value where it was
     measured."""
     run, fit_json = ground_glass
@@ -158,7 +158,7 @@ def test_zemax_reduced_read_by_libbsdf(ground_glass, probe, tmp_path):
         assert worst(np.maximum(points.bsdf, 0.0), got) < RELATIVE, path.name
 
 
-def test_zemax_model_read_by_libbsdf(ground_glass, probe, tmp_path):
+def test_zemax_model_read_by_libbsdf(probe, ground_glass, tmp_path):
     """The model's Zemax tables hold every measured direction as a node: there libbsdf returns
     the value gonio tabulated."""
     run, fit_json = ground_glass
@@ -203,7 +203,7 @@ def test_zemax_sample_rotations_read_by_libbsdf(scatter_type, probe, tmp_path):
     assert worst(expected, got) < 1e-3
 
 
-def test_astm_isotropic_near_normal_incidence(ground_glass, probe, tmp_path):
+def test_astm_isotropic_near_normal_incidence(probe, ground_glass, tmp_path):
     """libbsdf reads the ASTM file as isotropic: just off normal incidence on the source side
     it returns the normal-incidence values (a file naming two incidence azimuths is read as
     anisotropic, its gaps filled with the nearest sample)."""
