@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import array
 import csv
+import itertools
 import json
 import math
 from collections.abc import Iterator
@@ -273,13 +274,16 @@ def from_zemax(path: Path, options: ImportOptions) -> ReducedData:
     """A Zemax tabular BSDF file: every grid value on its side's hemisphere (the file does
     not say which are measured, so the fit takes all of them), at its incidence angles
     (BTDF: recovered from the direct-transmission angle with `eta`)."""
-    from calibration.exports.zemax import on_side, read_zemax, scatter_directions
+    from calibration.exports.zemax import on_side, read_zemax, scatter_directions, turned
 
     table = read_zemax(path)
     meta = _facts(path, options, table.comments, "a Zemax tabular BSDF file", False)
     eta = meta["eta"]
     wi, wo, bsdf = [], [], []
-    for a, angle in enumerate(table.angle_deg):
+    for (r, rotation), (a, angle) in itertools.product(enumerate(table.sample_rotation_deg),
+                                                       enumerate(table.angle_deg)):
+        if r and angle == 0.0:  # normal incidence: every rotation holds the same points
+            continue
         theta_i = (angle if table.scatter_type == "BRDF" else
                    math.degrees(math.asin(min(1.0, eta * math.sin(math.radians(angle))))))
         directions = scatter_directions(angle, table.scatter_type, table.azimuth_deg,
@@ -287,18 +291,20 @@ def from_zemax(path: Path, options: ImportOptions) -> ReducedData:
         keep = on_side(directions, table.scatter_type)
         keep &= np.abs(directions[..., 2]) > 1e-9
         keep[1:, table.radial_deg == 0.0] = False  # the specular direction, once
+        keep[table.azimuth_deg >= 360.0] = False  # a closing row repeats azimuth 0
         if table.symmetry == "PlaneSymmetrical":
             inside = (table.azimuth_deg > 0) & (table.azimuth_deg < 180)
             mirrored = directions[inside] * np.array([1.0, -1.0, 1.0])
             directions = np.concatenate([directions, mirrored])
-            values = np.concatenate([table.data[0, a], table.data[0, a][inside]])
+            values = np.concatenate([table.data[r, a], table.data[r, a][inside]])
             keep = np.concatenate([keep, keep[inside]])
         else:
-            values = table.data[0, a]
+            values = table.data[r, a]
         ti = math.radians(theta_i)
-        wo.append(directions[keep])
+        wo.append(turned(directions[keep], -rotation))  # the sample turned by `rotation`
         bsdf.append(values[keep])
-        wi.append(np.broadcast_to([-math.sin(ti), 0.0, math.cos(ti)], (int(keep.sum()), 3)))
+        wi.append(np.broadcast_to(turned(np.array([-math.sin(ti), 0.0, math.cos(ti)]), -rotation),
+                                  (int(keep.sum()), 3)))
     wo_all = np.concatenate(wo)
     return _reduced(path, np.concatenate(wi), wo_all, np.concatenate(bsdf), None,
                     wo_all[:, 2] < 0, meta, options)

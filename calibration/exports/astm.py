@@ -6,8 +6,14 @@ token until `NUM_POINTS n` and `VARS ...`), then `VARS theta_i,phi_i,theta_s,phi
 one value column per wavelength named like `632.8nm` (`value` where the wavelength is not
 known: libbsdf reads it as monochrome), then one comma-separated line per
 sample: the four angles in radians (theta from the normal of the side's hemisphere, phi in
-[0, 2 pi)) and the BSDF in 1/sr. No comment may follow VARS (the reader takes every later line
-as data). One file holds one side, as libbsdf reads a file as a BRDF or a BTDF: the gonio
+[0, 2 pi)) and the BSDF in 1/sr. Angles are rounded in degrees (measured.ANGLE_DECIMALS) and
+written as the exact double of that many degrees in radians, so that one angle is one text
+(no second "180 deg" node a digit apart, no 2 pi beside 0). Every sample of an isotropic run
+names the source azimuth of gonio's sample frame (phi_i = pi, the plane of incidence
+x-z), normal incidence included: libbsdf takes a file whose phi_i is one value for isotropic
+and turns its phi_s by that value, and a file with two for anisotropic, filling the missing
+incidence azimuths with the nearest sample. No comment may follow VARS (the reader takes every
+later line as data). One file holds one side, as libbsdf reads a file as a BRDF or a BTDF: the gonio
 writer names it in a `DATA_TYPE BRDF|BTDF` line (a file without one is read as a BRDF).
 """
 
@@ -21,15 +27,16 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.exports.measured import angle_text, spherical_deg, unit_vectors
+from calibration.exports.measured import ANGLE_DECIMALS, spherical_deg, unit_vectors
 from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, text_lines
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
 ANGLES = ("theta_i", "phi_i", "theta_s", "phi_s")
 DATA_TYPES = ("BRDF", "BTDF")
-#: Decimals of the angles in radians: 1e-11 rad (6e-10 deg), below the degrees' ANGLE_DECIMALS.
-RADIAN_DECIMALS = 11
+#: The source's azimuth in gonio's sample frame (the source on -x), degrees: normal incidence
+#: names it too, as its own azimuth is undefined.
+SOURCE_AZIMUTH_DEG = 180.0
 
 
 @dataclass
@@ -57,8 +64,8 @@ def _comment(text: str) -> str:
 
 
 def write_astm(table: AstmTable, path: str | Path) -> Path:
-    """Write one side's samples as ASTM E1392 ASCII: angles rounded to RADIAN_DECIMALS, values
-    with every digit (repr)."""
+    """Write one side's samples as ASTM E1392 ASCII: angles by radians_text, values with
+    every digit (repr)."""
     path = Path(path)
     if table.data_type not in DATA_TYPES:
         raise CalibrationError(f"astm: data type must be BRDF or BTDF, got {table.data_type!r}")
@@ -67,13 +74,21 @@ def write_astm(table: AstmTable, path: str | Path) -> Path:
     lines += [f"SOURCE {table.source}", f"DATA_TYPE {table.data_type}"]
     lines += [f"{key} {value}" for key, value in table.header.items()]
     lines += [f"NUM_POINTS {len(table.theta_i)}", "VARS " + ",".join([*ANGLES, *names])]
-    angles = np.stack([table.theta_i, np.mod(table.phi_i, 2 * math.pi), table.theta_s,
-                       np.mod(table.phi_s, 2 * math.pi)], axis=1)
+    angles = np.stack([radians_text(table.theta_i), radians_text(table.phi_i, True),
+                       radians_text(table.theta_s), radians_text(table.phi_s, True)], axis=1)
     for a, v in zip(angles, np.atleast_2d(table.values.T).T, strict=True):
-        lines.append(",".join([*(angle_text(x, RADIAN_DECIMALS) for x in a),
-                               *(repr(float(x)) for x in v)]))
+        lines.append(",".join([*a, *(repr(float(x)) for x in v)]))
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def radians_text(angle_rad: np.ndarray, azimuth: bool = False) -> list[str]:
+    """Angles as text: rounded to ANGLE_DECIMALS in degrees (azimuths then taken into
+    [0, 360)), written as the shortest repr of that many degrees in radians."""
+    degrees = np.round(np.degrees(np.asarray(angle_rad, dtype=np.float64)), ANGLE_DECIMALS)
+    if azimuth:
+        degrees = np.mod(degrees, 360.0)
+    return [repr(float(r) + 0.0) for r in np.radians(degrees)]
 
 
 def _wavelength(name: str) -> float:
@@ -162,6 +177,7 @@ def astm_tables(data: ReducedData, comments: Sequence[str] = ()) -> list[AstmTab
     for side in sides_of(good.transmission):
         part = good.subset(good.transmission == (side == "BTDF"))
         ti, pi = spherical_deg(part.wi)
+        pi = np.where(ti < 10.0 ** -ANGLE_DECIMALS, SOURCE_AZIMUTH_DEG, pi)
         to, po = spherical_deg(part.wo)
         theta_s = 180.0 - to if side == "BTDF" else to
         tables.append(AstmTable(side, np.radians(ti), np.radians(pi), np.radians(theta_s),

@@ -76,16 +76,22 @@ def _zemax_layout(data: ReducedData, result: FitResult, source: str, record: Seq
 def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
                 source: str = "", record: Sequence[str] = ()) -> list[Path]:
     """Tabulate the fitted model (point_model) at the data's incidence angles, `Source
-    Model`: one file per measured side, the BTDF at out_path when transmission was measured,
+    Model`, on a grid that holds every measured direction: one file per measured side, the
+    BTDF at out_path when transmission was measured,
     else the BRDF; the other side goes next to it as <stem>-BRDF<suffix>. `record`: the run's
     record lines, as header comments."""
+    from calibration.exports.zemax_measured import measured_nodes
+
     theta_i, sides, notes = _zemax_layout(data, result, source, record)
     alpha = np.atleast_1d(result.alpha)
+    isotropic = bool(alpha[0] == alpha[-1])
     paths = []
     for side, path in zip(sides, side_paths(out_path, sides), strict=True):
+        points = data.subset(data.valid & (data.transmission == (side == "BTDF")))
+        at = measured_nodes(points, side, result.eta, isotropic)
         table = tabulate(point_model(result), side, theta_i, result.eta,
-                         math.degrees(float(alpha.min())), isotropic=bool(alpha[0] == alpha[-1]),
-                         comments=notes)
+                         math.degrees(float(alpha.min())), isotropic=isotropic,
+                         comments=notes, nodes=(at.azimuth, at.radial))
         paths.append(write_zemax(table, path))
     return paths
 

@@ -32,6 +32,7 @@ from calibration.values import CalibrationError
 SCATTER_TYPES = ("BRDF", "BTDF")
 SYMMETRIES = ("PlaneSymmetrical", "Asymmetrical")
 SOURCES = ("Measured", "Model")
+HORIZON_COS = 1e-6  # |cos theta_o| below which a model table writes 0
 
 
 @dataclass
@@ -96,6 +97,13 @@ def hemisphere_integral(f: Callable[[np.ndarray], np.ndarray], scatter_type: str
     return float(np.sum(value * area[None, :]))
 
 
+def standard_azimuth(isotropic: bool) -> np.ndarray:
+    """The format's azimuths, degrees: 0..180 by 10 (plane-symmetric) or 0..360 by 10, the
+    row at 360 repeating 0 (a reader which does not wrap azimuths, as libbsdf, would
+    otherwise extrapolate between 350 and 360)."""
+    return np.arange(0.0, 180.1 if isotropic else 360.1, 10.0)
+
+
 def radial_grid(width_deg: float, n: int = 48) -> np.ndarray:
     """Radial angles from 0 to 180 deg: fine across a lobe of the given width, coarser beyond."""
     start = max(width_deg / 10.0, 1e-3)
@@ -104,8 +112,11 @@ def radial_grid(width_deg: float, n: int = 48) -> np.ndarray:
 
 def tabulate(model_eval: Callable[[np.ndarray, np.ndarray], np.ndarray], scatter_type: str,
              incidence_deg: np.ndarray, eta: float, width_deg: float,
-             isotropic: bool = True, comments: list[str] | None = None) -> ZemaxTable:
-    """Tabulate model_eval(wi, wo) (1/sr) at the given incidence angles on the format's grid."""
+             isotropic: bool = True, comments: list[str] | None = None,
+             nodes: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))) -> ZemaxTable:
+    """Tabulate model_eval(wi, wo) (1/sr) at the given incidence angles on the format's grid,
+    with `nodes` (azimuth, radial angles, degrees: the measured directions) added to it, so
+    that a reader finds the model's value at each measured direction without interpolating."""
     if scatter_type not in SCATTER_TYPES:
         raise CalibrationError(f"zemax: scatter type must be BRDF or BTDF, got {scatter_type!r}")
     incidence_deg = np.asarray(incidence_deg, dtype=np.float64)
@@ -113,22 +124,33 @@ def tabulate(model_eval: Callable[[np.ndarray, np.ndarray], np.ndarray], scatter
         angles = incidence_deg
     else:
         angles = np.degrees(np.arcsin(np.sin(np.radians(incidence_deg)) / eta))
-    azimuth = np.arange(0.0, 180.1, 10.0) if isotropic else np.arange(0.0, 360.0, 10.0)
-    radial = radial_grid(width_deg)
+    azimuth = np.unique(np.concatenate([standard_azimuth(isotropic), nodes[0]]))
+    radial = np.unique(np.concatenate([radial_grid(width_deg), nodes[1]]))
     data = np.zeros((1, len(angles), len(azimuth), len(radial)))
     tis = np.zeros((1, len(angles)))
     for k, (theta_i, angle) in enumerate(zip(incidence_deg, angles, strict=True)):
         ti = math.radians(theta_i)
-        wi = np.array([-math.sin(ti), 0.0, math.cos(ti)])
+        wi = np.array([-math.sin(ti), 0.0, math.cos(ti)]) + 0.0  # no -0 at normal incidence
 
         def f(wo: np.ndarray, wi: np.ndarray = wi) -> np.ndarray:
             return model_eval(np.broadcast_to(wi, wo.shape), wo)
 
         wo = scatter_directions(angle, scatter_type, azimuth, radial)
-        data[0, k] = np.where(on_side(wo, scatter_type), f(wo), 0.0)
+        # a node on the horizon (a measured one can fall there) scatters nothing
+        data[0, k] = np.where(on_side(wo, scatter_type) & (np.abs(wo[..., 2]) > HORIZON_COS),
+                              f(wo), 0.0)
+        if azimuth[-1] == 360.0:  # the closing row: azimuth 0's cells, bit for bit
+            data[0, k, -1] = data[0, k, 0]
         tis[0, k] = hemisphere_integral(f, scatter_type, angle, width_deg)
     return ZemaxTable(scatter_type, "PlaneSymmetrical" if isotropic else "Asymmetrical",
                       np.zeros(1), angles, azimuth, radial, data, tis, list(comments or []))
+
+
+def turned(v: np.ndarray, angle_deg: float) -> np.ndarray:
+    """Vectors (..., 3) turned by angle_deg about z (counter-clockwise seen from +z)."""
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]],
+                    axis=-1) + 0.0
 
 
 def _angles(values: np.ndarray) -> str:
@@ -262,6 +284,8 @@ def tis_weights(table: ZemaxTable, angle: int) -> np.ndarray:
     w_r = _trapezoid_weights(r)
     if table.symmetry == "PlaneSymmetrical":
         w_phi = 2.0 * _trapezoid_weights(phi)
+    elif table.azimuth_deg[-1] == 360.0:  # closed by a row repeating azimuth 0
+        w_phi = _trapezoid_weights(phi)
     else:  # closed over 2 pi: the last interval wraps to the first azimuth
         w_phi = _trapezoid_weights(np.append(phi, 2 * math.pi))
         w_phi[0] += w_phi[-1]

@@ -25,10 +25,11 @@ from calibration.exports.cf import read_reduced_netcdf, write_raw_netcdf, write_
 from calibration.exports.measured import write_reduced_csv
 from calibration.exports.model import measured_zemax_files, zemax_files
 from calibration.exports.run_files import write_data
-from calibration.exports.zemax import read_zemax
-from calibration.exports.zemax_measured import measured_table
+from calibration.exports.zemax import read_zemax, turned, write_zemax
+from calibration.exports.zemax_measured import measured_nodes, measured_table
 from calibration.fit import FitOptions, fit
 from calibration.imports import ImportOptions, read_measured
+from calibration.reduced import ReducedData
 from calibration.synthetic import synthesize
 from calibration.values import CalibrationError
 from gonio.record import record_lines
@@ -394,17 +395,40 @@ def test_model_export_takes_a_fit_json_and_refuses_a_bad_one(glass, tmp_path):
     assert notes[0].endswith("(forced)") and notes[0] in forced[0].read_text()
 
 
-def test_zemax_measured_asymmetrical_and_out_of_plane_incidence(glass):
+def test_zemax_measured_asymmetrical_and_out_of_plane_incidence(glass, tmp_path):
     data, result = glass
     side = data.subset(data.valid & ~data.transmission)
     table = measured_table(side, "BRDF", 1.51, result.model().eval, 20.0, False, [])
     assert table.symmetry == "Asymmetrical" and {0.0, 180.0} <= set(table.azimuth_deg)
-    assert table.azimuth_deg.max() < 360.0
+    assert table.azimuth_deg.max() == 360.0  # closing the circle: the row of azimuth 0 again
+    np.testing.assert_array_equal(table.data[..., -1, :], table.data[..., 0, :])
     assert_measured_cells(table, side)
-    tilted = replace(side, wi=side.wi * np.array([1.0, 0.0, 1.0]) + [0.0, 0.1, 0.0])
-    with pytest.raises(CalibrationError, match=r"zemax: a measured table needs incidence in "
-                                               r"the x-z plane"):
-        measured_table(tilted, "BRDF", 1.51, result.model().eval, 20.0, True, [])
+    # the sample turned by 30 deg about its normal: its own SampleRotation, the normal
+    # incidence's points in both rotations
+    both = ReducedData(*(np.concatenate([getattr(side, f), getattr(t, f)]) for f in (
+        "wi", "wo", "bsdf", "sigma", "valid", "transmission")), dict(side.meta)) if (
+        t := replace(side, wi=turned(side.wi, -30.0), wo=turned(side.wo, -30.0))) else None
+    table = measured_table(both, "BRDF", 1.51, result.model().eval, 20.0, False, [])
+    assert list(table.sample_rotation_deg) == [0.0, 30.0]
+    at = measured_nodes(both, "BRDF", 1.51, False)
+    assert len(at.point) == len(both.bsdf) + int(np.sum(both.theta_i_deg < 1e-9))
+    cells = table.data[at.rotation, at.block, np.searchsorted(table.azimuth_deg, at.azimuth),
+                       np.searchsorted(table.radial_deg, at.radial)]
+    np.testing.assert_allclose(cells, np.maximum(both.bsdf[at.point], 0.0), rtol=1e-12)
+    # imported again: each rotation's points where they were measured, in the sample frame
+    path = write_zemax(table, tmp_path / "turned.bsdf")
+    back = read_measured(path, ImportOptions(eta=1.51, sigma_relative=0.02))
+    for j in np.flatnonzero(both.theta_i_deg > 1.0):
+        distance = (np.linalg.norm(back.wi - both.wi[j], axis=1)
+                    + np.linalg.norm(back.wo - both.wo[j], axis=1))
+        nearest = int(np.argmin(distance))
+        assert distance[nearest] < 1e-7, distance[nearest]  # its node: within 1e-6 deg of it
+        same = ((np.linalg.norm(both.wi - both.wi[j], axis=1) < 1e-9)
+                & (np.linalg.norm(both.wo - both.wo[j], axis=1) < 1e-9))  # repeats: the mean
+        assert back.bsdf[nearest] == pytest.approx(max(np.mean(both.bsdf[same]), 0.0),
+                                                   rel=1e-6)
+    assert any(c.startswith("block SampleRotation 30 AngleOfIncidence 30 ")
+               for c in table.comments)
 
 
 def test_fit_and_reduce_import_cli(glass, tmp_path, capsys):
