@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_file
 from gonio.errors import RunError
 from gonio.run_rules import (
     CRC,
@@ -321,15 +322,19 @@ def digest(data: Any) -> str:
 
 
 def map_digests(config: dict[str, Any]) -> dict[str, str | None]:
-    """sha256 of each device's register-map file contents (None: the file is not there)."""
+    """sha256 of each device's register-map file contents (None: the file is not there, or is
+    not a regular file of bounded size: drivers.user_file, so a FIFO put in its place never
+    blocks a check)."""
     out: dict[str, str | None] = {}
     for name, dev in config.get("devices", {}).items():
         if isinstance(dev, dict) and "register_map" in dev:
             try:
-                out[name] = "sha256:" + hashlib.sha256(
-                    Path(dev["register_map"]).read_bytes()).hexdigest()
+                data = read_user_file(dev["register_map"], "register map", SETTINGS_FILE_CAP,
+                                      OSError)
             except OSError:
                 out[name] = None
+            else:
+                out[name] = "sha256:" + hashlib.sha256(data).hexdigest()
     return out
 
 
