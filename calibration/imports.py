@@ -30,7 +30,14 @@ import numpy as np
 from calibration.exports.measured import ANGLE_COLUMNS, META_KEYS, unit_vectors
 from calibration.formats import format_to_read
 from calibration.formats.file_format import ImportOptions
-from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, opened, text_lines
+from calibration.formats.limits import (
+    MAX_COLUMNS,
+    MAX_POINTS,
+    MeasuredFile,
+    check_count,
+    measured_file,
+    text_lines,
+)
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -54,20 +61,18 @@ def read_measured(path: str | Path, options: ImportOptions | None = None) -> Red
     """The file's measurements as ReducedData, read as the format calibration.formats.
     format_to_read tells (its magic, its suffix, or for a text file of another suffix its first
     keyword); a MissingInputs error names every input the file lacks."""
-    path = Path(path)
-    options = options or ImportOptions()
-    opened(path).close()  # a regular file within the limits, before its format is sniffed
-    data = format_to_read(path).read(path, options)
-    data.meta["imported_from"] = str(path)
+    file = measured_file(path)  # read once: the format is told from these bytes, read from them
+    data = format_to_read(file).read(file, options or ImportOptions())
+    data.meta["imported_from"] = str(file.path)
     return data
 
 
-def from_netcdf(path: Path, options: ImportOptions) -> ReducedData:
+def from_netcdf(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     """gonio's reduced NetCDF file (calibration.exports.cf), with the uncertainties it states."""
     from calibration.exports.cf import read_reduced_netcdf
 
-    data = read_reduced_netcdf(path)
-    data.meta["eta"] = _inputs(path, options, data.meta, "the NetCDF file", True)
+    data = read_reduced_netcdf(file)
+    data.meta["eta"] = _inputs(file.path, options, data.meta, "the NetCDF file", True)
     data.meta.setdefault("assumption", "uncertainties as the file states them")
     return data
 
@@ -166,14 +171,15 @@ def _meta(path: Path, options: ImportOptions, record: dict, facts: dict, what: s
     return meta
 
 
-def from_csv(path: Path, options: ImportOptions) -> ReducedData:
+def from_csv(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     """A plain or gonio CSV (see the module docstring), read one line at a time within
     calibration.formats.limits."""
+    path = file.path
     comments: list[str] = []
     line_no = [0]  # the file's line the reader is at, for a csv.Error
 
     def data_lines() -> Iterator[str]:
-        for line_no[0], line in text_lines(path):
+        for line_no[0], line in text_lines(file):
             if line.startswith("#"):
                 comments.append(line[1:])
             elif line.strip():
@@ -255,11 +261,11 @@ def _cell(path: Path, row: list[str], k: int, name: str, row_no: int) -> float:
                                "number") from None
 
 
-def from_astm(path: Path, options: ImportOptions) -> ReducedData:
+def from_astm(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     """An ASTM E1392 file: its first value column (one wavelength)."""
     from calibration.exports.astm import directions, read_astm
 
-    table = read_astm(path)
+    path, table = file.path, read_astm(file)
     if table.values.shape[1] != 1:
         raise CalibrationError(f"{path}: {table.values.shape[1]} value columns (one per "
                                "wavelength); the fit takes one wavelength: split the file")
@@ -270,13 +276,13 @@ def from_astm(path: Path, options: ImportOptions) -> ReducedData:
     return _reduced(path, wi, wo, table.values[:, 0], None, transmission, meta, options)
 
 
-def from_zemax(path: Path, options: ImportOptions) -> ReducedData:
+def from_zemax(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     """A Zemax tabular BSDF file: every grid value on its side's hemisphere (the file does
     not say which are measured, so the fit takes all of them), at its incidence angles
     (BTDF: recovered from the direct-transmission angle with `eta`)."""
     from calibration.exports.zemax import on_side, read_zemax, scatter_directions, turned
 
-    table = read_zemax(path)
+    path, table = file.path, read_zemax(file)
     meta = _facts(path, options, table.comments, "a Zemax tabular BSDF file", False)
     eta = meta["eta"]
     wi, wo, bsdf = [], [], []
@@ -310,13 +316,13 @@ def from_zemax(path: Path, options: ImportOptions) -> ReducedData:
                     wo_all[:, 2] < 0, meta, options)
 
 
-def from_bird(path: Path, options: ImportOptions) -> ReducedData:
+def from_bird(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     """A BiRD universal BRDF file (calibration.exports.bird_read): its points on the reflection
     side, with gonio's budget, shared errors, validity, flags, facts and record where the file
     carries them (a file gonio wrote)."""
     from calibration.exports.bird_read import read_bird
 
-    bird = read_bird(path)
+    path, bird = file.path, read_bird(file)
     meta = _meta(path, options, bird.record, bird.facts, "the BiRD file", bird.sigma is not None)
     if bird.wavelength_nm is not None:
         meta["wavelength_nm"] = bird.wavelength_nm

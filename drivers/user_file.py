@@ -19,6 +19,11 @@ KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOC
          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
 
 
+def kind_of(mode: int) -> str:
+    """What a file that is not a regular file is ("a FIFO", "a directory"), by its stat mode."""
+    return next((name for test, name in KINDS if test(mode)), "not a regular file")
+
+
 def open_user_file(path: str | Path, what: str, cap: int,
                    error: type[Exception]) -> BinaryIO:
     """The regular file `path` (a `what`: "plan", "register map") opened for reading, at most
@@ -32,8 +37,7 @@ def open_user_file(path: str | Path, what: str, cap: int,
     try:
         mode, size = (info := os.fstat(fd)).st_mode, info.st_size
         if not stat.S_ISREG(mode):
-            kind = next((name for test, name in KINDS if test(mode)), "not a regular file")
-            raise error(f"{path}: {what} must be a regular file, not {kind}")
+            raise error(f"{path}: {what} must be a regular file, not {kind_of(mode)}")
         if size > cap:
             raise error(f"{path}: {what} is {size} bytes, over the {cap}-byte limit")
         os.set_blocking(fd, True)

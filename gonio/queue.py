@@ -370,10 +370,12 @@ def run_entry(out: Path, entry_id: str, control: PauseControl, progress: bool | 
     failure, an abort) that run_problem accepts, else start one, whose directory goes into
     queue.toml as soon as it exists; record the state it ends in. An exception or signal that
     ends it before the engine's outcome is recorded (failed / aborted) and propagates, as
-    does a QueueError for a run not accepted; an entry deleted meanwhile is told to `warn`."""
+    does a QueueError for a run not accepted or for an id no entry has (then nothing is
+    measured: its start could not be recorded); an entry deleted while it runs is told to
+    `warn`."""
     out = Path(out)
     entries = load(out)
-    entry = next((e for e in entries if e.id == entry_id), None)
+    entry = next((e for e in entries if e.id == entry_id), None) if entry_id else None
     if entry is None:
         raise QueueError(f"{queue_path(out)}: no entry has id {entry_id!r} any more")
     run = entry.run
@@ -383,7 +385,8 @@ def run_entry(out: Path, entry_id: str, control: PauseControl, progress: bool | 
         run = path.name
         _record(out, entry_id, run=run)
 
-    _record(out, entry_id, state="running", reason="")
+    if _record(out, entry_id, state="running", reason="") is None:
+        raise QueueError(f"{queue_path(out)}: no entry has id {entry_id!r} any more")
     try:
         if run:
             problem = run_problem(out, entry, run, entries)

@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drivers.user_file import kind_of
+from gonio.errors import os_error_text
 from gonio.store import META, READINGS, Run, damage_message
+from gonio_watch.gate import Notices
 
 POLL_S = 0.25  # between two stats of the run's files
 
@@ -30,23 +34,43 @@ class Snapshot:
     torn: bool
 
 
-def _stamp(path: Path) -> tuple[int, int, int] | None:
-    """(inode, size, mtime ns) of a file, None if it is not there."""
+def _stamp(status: os.stat_result) -> tuple[int, int, int]:
+    """(inode, size, mtime ns) of a file: what changes when it is written or replaced."""
+    return status.st_ino, status.st_size, status.st_mtime_ns
+
+
+def _read_changed(path: Path, seen: tuple[int, int, int] | None, offset: int
+                  ) -> tuple[tuple[int, int, int], bytes] | None:
+    """The stamp of the regular file `path` and its bytes from `offset`, both from one
+    descriptor (a rename meanwhile cannot mix two files); None if it is not there or a stat
+    shows the stamp `seen` (no descriptor taken then). Opened without following a symlink
+    and without blocking (a FIFO put in its place is an OSError, not a hang); anything but a
+    regular file is an OSError naming what it is."""
     try:
-        st = os.stat(path)
+        if _stamp(os.stat(path, follow_symlinks=False)) == seen:
+            return None
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_NOCTTY)
     except FileNotFoundError:
         return None
-    return st.st_ino, st.st_size, st.st_mtime_ns
+    status = os.fstat(fd)
+    if not stat.S_ISREG(status.st_mode):
+        os.close(fd)
+        raise OSError(f"{path} is {kind_of(status.st_mode)}, not a regular file")
+    with os.fdopen(fd, "rb") as fh:
+        fh.seek(offset)
+        return _stamp(status), fh.read(max(status.st_size - offset, 0))
 
 
 class RunFollower:
     """Reads what a run directory gained since the last `poll` (thread-safe; `follow` polls
-    on a thread of its own)."""
+    on a thread of its own). A file it cannot read is told to `notices` once, then retried."""
 
-    def __init__(self, run: Run):
+    def __init__(self, run: Run, notices: Notices | None = None):
         self.run = run
+        self.notices = notices or Notices()
         self._lock = threading.Lock()
         self._meta, self._meta_stamp = run.meta, None
+        self._trouble: str | None = None  # the problem last told
         self._restart()
 
     def _restart(self) -> None:
@@ -57,32 +81,39 @@ class RunFollower:
         self._stamp: tuple[int, int, int] | None = None
 
     def poll(self) -> None:
-        """Read meta.json and the new lines of readings.jsonl if either changed."""
+        """Read meta.json and the new lines of readings.jsonl if either changed; a file that
+        cannot be read (replaced by a folder or a FIFO, say) is told once and tried again at
+        the next poll."""
         with self._lock:
-            self._poll_meta()
-            self._poll_readings()
+            try:
+                self._poll_meta()
+                self._poll_readings()
+            except OSError as exc:
+                trouble = os_error_text(exc)
+                if trouble != self._trouble:
+                    self.notices.note("follow", f"the live view cannot read the run: {trouble}")
+                self._trouble = trouble
+            else:
+                self._trouble = None
 
     def _poll_meta(self) -> None:
-        path = self.run.path / META
-        stamp = _stamp(path)
-        if stamp is None or stamp == self._meta_stamp:
+        read = _read_changed(self.run.path / META, self._meta_stamp, 0)
+        if read is None:
             return
         try:
-            self._meta = json.loads(path.read_text())
-        except (OSError, ValueError):
+            self._meta = json.loads(read[1])
+        except ValueError:
             return  # replaced atomically by the scan; a failed read is retried next poll
-        self._meta_stamp = stamp
+        self._meta_stamp = read[0]
 
     def _poll_readings(self) -> None:
-        path = self.run.path / READINGS
-        stamp = _stamp(path)
-        if stamp is None or stamp == self._stamp:
+        read = _read_changed(self.run.path / READINGS, self._stamp, self._offset)
+        if read is None:
             return
+        stamp, data = read
         if self._stamp is not None and (stamp[0] != self._stamp[0] or stamp[1] < self._offset):
             self._restart()
-        with open(path, "rb") as fh:
-            fh.seek(self._offset)
-            data = fh.read()
+            stamp, data = _read_changed(self.run.path / READINGS, None, 0) or (stamp, b"")
         keep = data.rfind(b"\n") + 1
         self._rows.extend(self._checker.feed(data[:keep]))
         self._offset += keep

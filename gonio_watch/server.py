@@ -87,7 +87,8 @@ class WatchApp:
 
     def __init__(self, run: Run, token: str | None, reduction: LiveReduction | None = None):
         self.run = run
-        self.follower = RunFollower(run)
+        self.notices = Notices()  # the viewer's stderr lines, at most one per kind of trouble
+        self.follower = RunFollower(run, self.notices)
         self.reduction = reduction or LiveReduction(run)
         self.model = ModelCurves()
         self.control = ControlChannel(run.path, token)
@@ -173,7 +174,7 @@ class WatchServer:
         self.assets = load_assets()
         self.any_host = host in ("0.0.0.0", "::", "")
         self.access = Access(self.port)
-        self.gate = Gate(self.socket, self._answer, Notices(), limits)
+        self.gate = Gate(self.socket, self._answer, app.notices, limits)
 
     def _answer(self, sock: socket.socket, request: bytes, peer: tuple) -> None:
         Handler((sock, request), peer, self)

@@ -28,7 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.measured import ANGLE_DECIMALS, spherical_deg, unit_vectors
-from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, text_lines
+from calibration.formats.limits import (
+    MAX_COLUMNS,
+    MAX_POINTS,
+    MeasuredFile,
+    check_count,
+    measured_file,
+    text_lines,
+)
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -99,16 +106,17 @@ def _wavelength(name: str) -> float:
         return math.nan
 
 
-def read_astm(path: str | Path) -> AstmTable:
+def read_astm(source: str | Path | MeasuredFile) -> AstmTable:
     """Parse an ASTM E1392 file, one line at a time within calibration.formats.limits; an
     error names the line that is wrong."""
-    path = Path(path)
+    file = measured_file(source)  # read once, within the limits
+    path = file.path
     header: dict[str, str] = {}
     comments: list[str] = []
     names: list[str] | None = None
     values = array.array("d")
     rows = 0
-    for n, line in text_lines(path):
+    for n, line in text_lines(file):
         text = line.strip()
         if names is not None:
             if text:

@@ -2,8 +2,9 @@
 arrays of a ReducedData: the four angles (deg, ° or rad), BRDF, its uncertainty (uBRDF per
 point, else BRDF's one stated uncertainty, in 1/sr or %), the wavelength, and gonio's ad-hoc
 variables (u_NAME, shared_error_J, valid, flags) and adhoc_section (the record and the
-reduction's facts) where the file has them. A file that is not one is one CalibrationError
-naming the field.
+reduction's facts) where the file has them. A file that is not one, or holds more than an
+import does (calibration.formats.limits, and the JSON caps below, checked before the file is
+parsed), is one CalibrationError naming the field or the count.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from calibration.exports.bird import FACTS_KEY, RECORD_KEY, SHARED_PREFIX
+from calibration.formats.limits import MAX_POINTS, MeasuredFile, check_count, measured_file
 from calibration.values import CalibrationError
 
 ANGLES = ("theta_i", "phi_i", "theta_r", "phi_r")
@@ -40,13 +42,27 @@ class BirdData:
     facts: dict[str, Any] = field(default_factory=dict)
 
 
-def read_bird(path: Path) -> BirdData:
-    """The points of a BiRD file (see the module docstring)."""
+#: The most JSON values (numbers, strings, true/false/null, keys, lists and objects) a BiRD
+#: file may hold, and the most strings and the most lists and objects among them: parsed, a
+#: number costs about 32 bytes, a short string about 90, a list or an object more, so that
+#: parsing any file within MAX_FILE_BYTES stays within a few hundred MB. 24 values and 4
+#: strings a point hold gonio's own export of MAX_POINTS points (flags and polarisations).
+MAX_JSON_VALUES = 24 * MAX_POINTS
+MAX_JSON_STRINGS = 4 * MAX_POINTS
+MAX_JSON_CONTAINERS = 100_000
+
+
+def read_bird(source: str | Path | MeasuredFile) -> BirdData:
+    """The points of a BiRD file (see the module docstring), its size checked against
+    calibration.formats.limits and the caps above before it is parsed."""
+    file = measured_file(source)
+    path = file.path
+    _check_json_size(file)
     try:
-        document = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
+        document = json.loads(file.data)
+    except UnicodeDecodeError as exc:
         raise CalibrationError(f"{path}: not a readable text file ({exc})") from None
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:
         raise CalibrationError(f"{path}: not JSON ({exc})") from None
     reader = _Reader(path)
     data = reader.table(document, "data", "")
@@ -72,6 +88,21 @@ def read_bird(path: Path) -> BirdData:
     out.record = adhoc.get(RECORD_KEY) or {}
     out.facts = adhoc.get(FACTS_KEY) or {}
     return out
+
+
+def _check_json_size(file: MeasuredFile) -> None:
+    """One error naming the file if it holds more JSON values, strings, or lists and objects
+    than the caps, counted from its separators, quotes and brackets (an upper bound: those
+    inside strings count too) without parsing it."""
+    data = file.data
+    containers = data.count(b"[") + data.count(b"{")
+    check_count(file.path, containers, "JSON lists and objects (counted by their brackets)",
+                MAX_JSON_CONTAINERS)
+    check_count(file.path, data.count(b'"') // 2, "JSON strings (counted by their quotes)",
+                MAX_JSON_STRINGS)
+    values = data.count(b",") + data.count(b":") + containers + 1
+    check_count(file.path, values, "JSON values (counted by their separators)",
+                MAX_JSON_VALUES)
 
 
 def _uncertainty(reader: _Reader, data: dict, brdf: np.ndarray) -> np.ndarray | None:
@@ -134,6 +165,7 @@ class _Reader:
         values = variable.get("values")
         if not isinstance(values, list):
             raise self.error(f"{where}.values", "missing, or not a list")
+        check_count(self.path, len(values), f"values of {where}", MAX_POINTS)
         if n is not None and len(values) != n:
             raise self.error(f"{where}.values", f"{len(values)} values for {n} BRDF values")
         return values

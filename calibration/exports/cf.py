@@ -25,7 +25,13 @@ from calibration.exports.cf_uncertainty import (
     write_error_structure,
 )
 from calibration.exports.measured import columns, coverage_k, meta_facts, unit_vectors
-from calibration.formats.limits import MAX_COLUMNS, MAX_POINTS, check_count, opened
+from calibration.formats.limits import (
+    MAX_COLUMNS,
+    MAX_POINTS,
+    MeasuredFile,
+    check_count,
+    measured_file,
+)
 from calibration.formats.netcdf_classic import check_classic_header
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
@@ -265,18 +271,18 @@ def _attribute(value: Any) -> Any:
 DAMAGED = (RuntimeError, ValueError, TypeError, IndexError, KeyError, AttributeError)
 
 
-def read_reduced_netcdf(path: str | Path) -> ReducedData:
+def read_reduced_netcdf(source: str | Path | MeasuredFile) -> ReducedData:
     """ReducedData of a file write_reduced_netcdf wrote (meta: its gonio_* attributes, and the
     run's record as meta["record"]: the other attributes but CF_GLOBALS); a damaged file is one
-    CalibrationError naming it."""
+    CalibrationError naming it. The library reads the bytes that were checked, from memory
+    (limits.measured_file: read once, within the limits)."""
     netCDF4 = _netcdf4()
-    path = Path(path)
-    with opened(path) as fh:  # a regular file within the limits, before the library reads it
-        head = fh.read(4)
-        if head.startswith(b"CDF"):  # classic: its header walked first, which the library trusts
-            check_classic_header(path, head + fh.read())
+    file = measured_file(source)
+    path = file.path
+    if file.data.startswith(b"CDF"):  # classic: its header walked first, which the library trusts
+        check_classic_header(path, file.data)
     try:
-        ds = netCDF4.Dataset(path)
+        ds = netCDF4.Dataset(str(path), memory=file.data)
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationError(f"{path}: not a NetCDF file ({exc})") from None
     try:

@@ -26,7 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.measured import angle_text
-from calibration.formats.limits import MAX_POINTS, check_count, text_lines
+from calibration.formats.limits import (
+    MAX_POINTS,
+    MeasuredFile,
+    check_count,
+    measured_file,
+    text_lines,
+)
 from calibration.values import CalibrationError
 
 SCATTER_TYPES = ("BRDF", "BTDF")
@@ -183,13 +189,14 @@ def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
     return path
 
 
-def read_zemax(path: str | Path) -> ZemaxTable:
+def read_zemax(source: str | Path | MeasuredFile) -> ZemaxTable:
     """Parse a Zemax tabular BSDF file (monochrome) within calibration.formats.limits (its
     grid's size checked before it is allocated); errors name the line that is wrong."""
-    path = Path(path)
+    file = measured_file(source)  # read once, within the limits
+    path = file.path
     comments: list[str] = []
     body: list[tuple[int, str]] = []
-    for n, line in text_lines(path):
+    for n, line in text_lines(file):
         text = line.strip()
         if text.startswith("#"):
             comments.append(text[1:].strip())

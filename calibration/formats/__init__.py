@@ -11,7 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from calibration.formats.file_format import WHATS, FileFormat
-from calibration.formats.sniff import first_keyword, starts_with
+from calibration.formats.limits import MeasuredFile, measured_file
+from calibration.formats.sniff import first_keyword
 
 _WRITERS = "calibration.exports.writers"
 
@@ -49,19 +50,20 @@ def formats_with_suffix(suffix: str) -> list[FileFormat]:
     return [fmt for fmt in FORMATS.values() if suffix.lower() in fmt.suffixes]
 
 
-def format_to_read(path: Path) -> FileFormat:
-    """The format to read a measured file as: the one whose magic it starts with, else the one
-    its suffix names (a suffix of one format only), else the one whose keyword a line of it
-    starts with first, else PLAIN."""
+def format_to_read(source: str | Path | MeasuredFile) -> FileFormat:
+    """The format to read a measured file as (its bytes read once, limits.measured_file): the
+    one whose magic it starts with, else the one its suffix names (a suffix of one format
+    only), else the one whose keyword a line of it starts with first, else PLAIN."""
+    file = measured_file(source)
     readable = [fmt for fmt in FORMATS.values() if fmt.reader]
-    by_magic = [fmt for fmt in readable if fmt.magic and starts_with(path, fmt.magic)]
+    by_magic = [fmt for fmt in readable if fmt.magic and file.data.startswith(fmt.magic)]
     if by_magic:
         return by_magic[0]
-    named = formats_with_suffix(path.suffix)
+    named = formats_with_suffix(file.path.suffix)
     if len(named) == 1 and named[0].reader:
         return named[0]
     keywords = {fmt.keyword: fmt for fmt in readable if fmt.keyword}
-    found = first_keyword(path, keywords)
+    found = first_keyword(file.data, keywords)
     return PLAIN if found is None else keywords[found]
 
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
+from calibration.formats.limits import MeasuredFile
 from calibration.reduced import ReducedData
 
 #: What an export may write, in this order wherever they are listed: a run's readings, its
@@ -31,9 +31,9 @@ class FileFormat:
     """One format. writers: `--what` -> "module:function"; a `raw` writer takes (Run, out
     path) and returns the file written, the others take (ReducedData, out path, the run's
     record, ExportRequest, source) and return (files written, notes). reader: "module:function"
-    taking (path, ImportOptions) to ReducedData, for a format `--import` reads. magic: the first
-    bytes of a file of it, whatever its suffix; keyword: the first word of a line of a text file
-    of it (calibration.formats.format_to_read)."""
+    taking (MeasuredFile, ImportOptions) to ReducedData, for a format `--import` reads.
+    magic: the first bytes of a file of it, whatever its suffix; keyword: the first word of a
+    line of a text file of it (calibration.formats.format_to_read)."""
 
     name: str
     suffixes: tuple[str, ...]  # the first is the usual one
@@ -58,9 +58,10 @@ class FileFormat:
         """The function writing `what` (one of `whats`) as this format."""
         return _loaded(self.writers[what])
 
-    def read(self, path: Path, options: ImportOptions) -> ReducedData:
-        """A file of this format as ReducedData (a format with a reader)."""
-        return _loaded(self.reader)(path, options)
+    def read(self, file: MeasuredFile, options: ImportOptions) -> ReducedData:
+        """A measured file (its bytes, read once) of this format as ReducedData (a format with
+        a reader)."""
+        return _loaded(self.reader)(file, options)
 
 
 def _loaded(path: str) -> Any:

@@ -1,30 +1,17 @@
-"""Telling a measured file's format from its content: its first bytes (a binary format's
-magic) or the first word of its lines (a text format's keyword)."""
+"""Telling a text measured file's format from its bytes: the first word of its lines (a text
+format's keyword)."""
 
 from __future__ import annotations
 
+import io
 from collections.abc import Collection
-from pathlib import Path
-
-from calibration.values import CalibrationError
 
 
-def starts_with(path: Path, magic: tuple[bytes, ...]) -> bool:
-    """True when the file begins with one of the magic byte strings (NetCDF 3 or 4)."""
-    with open(path, "rb") as fh:
-        head = fh.read(8)
-    return head.startswith(magic)
-
-
-def first_keyword(path: Path, keywords: Collection[str]) -> str | None:
-    """The first of `keywords` that a line of a text file starts with, in the file's order;
-    None if no line does."""
-    try:
-        with open(path, errors="replace") as fh:
-            for line in fh:
-                word = line.split(maxsplit=1)[:1]
-                if word and word[0] in keywords:
-                    return word[0]
-    except OSError as exc:
-        raise CalibrationError(f"{path}: {exc.strerror}") from None
+def first_keyword(data: bytes, keywords: Collection[str]) -> str | None:
+    """The first of `keywords` that a line of the file's bytes starts with, in the file's
+    order (lines read one at a time); None if no line does."""
+    for line in io.BytesIO(data):
+        word = line.split(maxsplit=1)[:1]
+        if word and (text := word[0].decode("utf-8", "replace")) in keywords:
+            return text
     return None

@@ -116,15 +116,14 @@ def run(args: argparse.Namespace) -> int:
     from drivers.base import DriverError
     from gonio.engine import PauseControl
     from gonio.errors import GonioError
-    from gonio.queue import identify, load, next_position, reason_of, run_entry, run_lock
+    from gonio.queue import identify, next_position, reason_of, run_entry, run_lock
 
     out, progress = Path(args.out), False if args.no_progress else None
     failed: list[int] = []  # positions, as printed when each failed
     passed: set[str] = set()  # ids of the entries that failed
     with run_lock(out), PauseControl() as control:
-        identify(out)
         while True:
-            entries = load(out)
+            entries = identify(out)  # an entry added by hand meanwhile gets its id first
             position = next_position(entries, {n for n, e in enumerate(entries, 1)
                                                 if e.id in passed})
             if position is None:

@@ -22,6 +22,7 @@ from contextlib import ExitStack, contextmanager
 from html import escape
 from pathlib import Path
 
+from drivers.user_file import open_user_file
 from gonio.errors import GonioError, os_error_text
 from gonio_cli.commands.emulate import is_loopback
 from gonio_cli.commands.reduce import add_reduce_options
@@ -75,13 +76,7 @@ def _token(args: argparse.Namespace) -> str | None:
     None (GonioError for no token there, or a file other users may read)."""
     if args.token_file is not None:
         where = f"--token-file {args.token_file}"
-        try:
-            with open(args.token_file) as fh:
-                if os.fstat(fh.fileno()).st_mode & 0o077:
-                    raise GonioError(f"{where}: other users may read it (chmod 600 it)")
-                line = fh.readline(MAX_TOKEN).strip()
-        except OSError as exc:
-            raise GonioError(f"{where}: {os_error_text(exc)}") from None
+        line = _token_file_line(args.token_file, where)
     elif args.token == "-":
         where, line = "--token -", sys.stdin.readline(MAX_TOKEN).strip()
     else:
@@ -89,6 +84,23 @@ def _token(args: argparse.Namespace) -> str | None:
     if not line:
         raise GonioError(f"{where}: no token on its first line")
     return line
+
+
+def _token_file_line(path: str, where: str) -> str:
+    """The first line of the token file: a regular file of at most MAX_TOKEN bytes (opened
+    without blocking, so a FIFO is an error, not a hang), owned by this user and readable by
+    no one else, checked on the descriptor that is read."""
+    with open_user_file(path, "token file", MAX_TOKEN, GonioError) as fh:
+        status = os.fstat(fh.fileno())
+        if status.st_uid != os.geteuid():
+            raise GonioError(f"{where}: owned by uid {status.st_uid}, not {os.geteuid()} "
+                             "(another user wrote it)")
+        if status.st_mode & 0o077:
+            raise GonioError(f"{where}: other users may read it (chmod 600 it)")
+        try:
+            return fh.read(MAX_TOKEN).decode("utf-8", "replace").split("\n", 1)[0].strip()
+        except OSError as exc:
+            raise GonioError(f"{where}: {os_error_text(exc)}") from None
 
 
 def run(args: argparse.Namespace) -> int:

@@ -189,6 +189,52 @@ def test_a_cache_directory_owned_by_another_user_is_not_used(tmp_path, monkeypat
     assert list(theirs.iterdir()) == []
 
 
+def planted(cache, path: Path) -> Path:
+    """The attack's file: `path`'s plane times 100 with a digest made for it (the digest
+    is no secret), written as another user could while the folder was 0777, which the user
+    then made 0700 again."""
+    plane, _ = stored(path)
+    store = lobe().store
+    with open(path, "wb") as handle:
+        np.savez(handle, plane=100.0 * plane,
+                 digest=np.array(store.digest(address_of(path), 100.0 * plane)))
+    path.chmod(0o666)
+    cache.chmod(0o700)
+    return path
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="giving a file to another user takes root")
+def test_a_plane_file_another_user_planted_is_walked_again(cache):
+    """A plane file owned by `nobody`, mode 0666, values x100 and a digest that matches
+    them, in a folder that passes the rule now: walked again and replaced, one warning."""
+    clean = lobe().estimate(WI, WO)
+    path = planted(cache, sorted(cache.glob("*.npz"))[0])
+    os.chown(path, 65534, 65534)
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, clean)
+    assert len(said) == 1 and f"not this user's alone (owned by uid 65534, not " \
+        f"{os.geteuid()})" in said[0], said
+    assert path.stat().st_uid == os.geteuid() and path.stat().st_mode & 0o077 == 0
+
+
+def test_a_plane_file_writable_by_others_or_a_symlink_is_walked_again(cache, tmp_path):
+    """The same planted plane, this user's but world-writable; then a symbolic link to it
+    in a plane's place (never followed): each walked again and replaced, one warning."""
+    clean = lobe().estimate(WI, WO)
+    first, second = sorted(cache.glob("*.npz"))
+    planted(cache, first)
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, clean)
+    assert len(said) == 1 and "not this user's alone (world-writable (mode 0666))" in said[0]
+    elsewhere = planted(cache, second).rename(tmp_path / "elsewhere.npz")
+    elsewhere.chmod(0o600)
+    second.symlink_to(elsewhere)
+    values, said = cache_warnings(lambda: lobe().estimate(WI, WO))
+    np.testing.assert_array_equal(values, clean)
+    assert len(said) == 1 and "not this user's alone (a symbolic link)" in said[0]
+    assert not second.is_symlink()
+
+
 def test_a_cache_under_a_sticky_world_writable_folder_is_used(tmp_path, monkeypatch):
     """Only the cache directory and the folders gonio makes are checked, not their parents:
     a cache under a /tmp-like folder (mode 1777) is made 0700 and read back."""

@@ -12,7 +12,10 @@ import numpy as np
 import pytest
 from hostile_files import gonio_measured, refused
 
-from calibration.formats.limits import MAX_FILE_BYTES, MAX_POINTS
+from calibration.exports.bird_read import MAX_JSON_STRINGS, MAX_JSON_VALUES
+from calibration.exports.cf import read_reduced_netcdf
+from calibration.formats import format_to_read
+from calibration.formats.limits import MAX_FILE_BYTES, MAX_POINTS, MeasuredFile, measured_file
 from calibration.imports import ImportOptions, read_measured
 from calibration.values import CalibrationError
 
@@ -182,3 +185,79 @@ def test_import_of_what_is_not_a_regular_file(kind, tmp_path):
     what = {"device": "a character device", "fifo": "a FIFO", "directory": "a directory"}[kind]
     refused(gonio_measured("fit", "--import", path), path,
             f"measured file must be a regular file, not {what}")
+
+
+def bird_json(path: Path, points: int, value: str = "0", size: int = 0) -> Path:
+    """A BiRD file of `points` points, each angle and BRDF `value` (its text as JSON), and a
+    comment that makes it `size` bytes long."""
+    values = ",".join([value] * points)
+    variables = ",".join(f'"{name}": {{"unit": "{unit}", "values": [{values}]}}'
+                         for name, unit in (("theta_i", "deg"), ("phi_i", "deg"),
+                                            ("theta_r", "deg"), ("phi_r", "deg"),
+                                            ("BRDF", "1/sr")))
+    text = f'{{"data": {{{variables}}}, "comment": ""}}'
+    path.write_text(text.replace('""', '"' + "x" * (size - len(text)) + '"'))
+    return path
+
+
+def test_bird_json_of_millions_of_points_is_refused_before_parsing(tmp_path):
+    """The attack: a 65 MB BiRD file of 6.5 million points (896 MB when parsed whole)."""
+    path = bird_json(tmp_path / "huge.json", 6_500_000)
+    assert 60e6 < path.stat().st_size <= MAX_FILE_BYTES
+    refused(gonio_measured("fit", "--import", path), path,
+            f"32500035 JSON values (counted by their separators); an import holds at most "
+            f"{MAX_JSON_VALUES}")
+
+
+def test_bird_json_at_the_value_cap_is_parsed_in_bounded_memory(tmp_path):
+    """As many JSON values as the cap lets in (floats, the costliest that are not strings),
+    with a string filling the file up to MAX_FILE_BYTES: parsed within the memory limit, then
+    refused by their count of points."""
+    points = (MAX_JSON_VALUES - 40) // 5
+    path = bird_json(tmp_path / "full.json", points, "1.5", MAX_FILE_BYTES)
+    assert path.stat().st_size == MAX_FILE_BYTES
+    refused(gonio_measured("fit", "--import", path), path,
+            f"{points} values of data.BRDF; an import holds at most {MAX_POINTS}")
+
+
+def test_bird_json_of_many_strings_is_refused_before_parsing(tmp_path):
+    """Short strings cost the most once parsed: a file of more than the cap of them."""
+    path = bird_json(tmp_path / "strings.json", MAX_JSON_STRINGS // 5 + 1, '"ab"')
+    refused(gonio_measured("fit", "--import", path), path,
+            f"{MAX_JSON_STRINGS + 28} JSON strings (counted by their quotes); an import holds "
+            f"at most {MAX_JSON_STRINGS}")
+
+
+def test_bird_json_of_more_points_than_an_import_holds(tmp_path):
+    path = bird_json(tmp_path / "long.json", MAX_POINTS + 1)
+    with pytest.raises(CalibrationError, match=rf"long.json: {MAX_POINTS + 1} values of "
+                                               rf"data.BRDF; an import holds at most "
+                                               rf"{MAX_POINTS}"):
+        read_measured(path)
+
+
+def test_the_netcdf_library_reads_the_bytes_that_were_checked(tmp_path):
+    """The file is read once (limits.measured_file): its header walk and the library both
+    read those bytes, never the path again, so a file put in its place after the read (here:
+    a damaged header for a good file, then a good file for a damaged header) is not read."""
+    import netCDF4
+
+    good, bad = tmp_path / "good.nc", tmp_path / "bad.nc"
+    with netCDF4.Dataset(good, "w", format="NETCDF3_64BIT_OFFSET") as ds:
+        ds.createDimension("point", 2)
+        for name in REDUCED:
+            ds.createVariable(name, "f8", ("point",))[:] = [10.0, 20.0]
+    bad.write_bytes(classic_netcdf(300_000_000))
+    checked = measured_file(good)
+    bad.replace(good)  # the path now holds the damaged header; the bytes read are the good file
+    assert len(read_reduced_netcdf(checked).bsdf) == 2
+    with pytest.raises(CalibrationError, match="declares 2400000000 bytes of data"):
+        read_reduced_netcdf(MeasuredFile(good, classic_netcdf(300_000_000)))
+
+
+def test_the_format_is_told_from_the_bytes_read(tmp_path):
+    """Sniffing reads no file: a FIFO at the path is never opened by it."""
+    fifo = tmp_path / "measured.txt"
+    os.mkfifo(fifo)
+    assert format_to_read(MeasuredFile(fifo, b"# a comment\nVARS THETAI\n")).name == "astm"
+    assert format_to_read(MeasuredFile(fifo, b"CDF\x01")).name == "netcdf"

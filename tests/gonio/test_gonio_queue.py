@@ -7,11 +7,15 @@ for the plan it measured); `queue list` names what it cannot read. Then queue.to
 checks, in process."""
 
 import fcntl
+import os
 import signal
+import subprocess
+import sys
 import tomllib
 
 import pytest
 from gonio_testkit import (
+    ROOT,
     completed_unretried,
     fast_config,
     gonio_cli,
@@ -22,8 +26,17 @@ from gonio_testkit import (
 )
 from waiting import wait_until
 
+from gonio.engine import PauseControl
 from gonio.errors import QueueError
-from gonio.queue import Entry, identify, load, next_position, queue_path, render
+from gonio.queue import (
+    Entry,
+    identify,
+    load,
+    next_position,
+    queue_path,
+    render,
+    run_entry,
+)
 from gonio.store import open_run
 
 SHORT = {"name": "short", "grid": [{"side": "transmission", "theta_i_deg": [0.0],
@@ -288,6 +301,68 @@ def test_an_entry_pointed_at_another_run_is_not_completed(bench, other):
     listed = queue("list", "--out", out)
     assert listed.returncode == 1 and listed.stderr == ""
     assert f"  (not this entry's run: {reason}" in listed.stdout.splitlines()[-1]
+
+
+def full_pipe() -> tuple[int, int]:
+    """A pipe (read end, write end) whose buffer is full: the next write to it waits until
+    the read end is read."""
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    try:
+        while True:
+            os.write(write_end, b"\n" * 4096)
+    except BlockingIOError:
+        pass
+    os.set_blocking(write_end, True)
+    return read_end, write_end
+
+
+def test_an_entry_added_by_hand_after_the_last_record_runs_once(bench):
+    """The attack: an entry appended without an id between the runner's last record of an
+    entry and its next reading of queue.toml (the runner held there by its run's path, which
+    it prints on a full stdout). Its plan is measured once, and its outcome recorded."""
+    root, out = bench
+    assert queue("add", root / "short.toml", "--sim", "--out", out).returncode == 0
+    read_end, write_end = full_pipe()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    runner = subprocess.Popen([sys.executable, "-m", "gonio_cli", "queue", "run", "--out",
+                               str(out), "--no-plot", "--no-progress"], stdin=subprocess.DEVNULL,
+                              stdout=write_end, stderr=subprocess.PIPE, text=True, env=env)
+    os.close(write_end)
+    try:
+        lines = []
+        while "completed, " not in (line := runner.stderr.readline()) and line:
+            lines.append(line)
+        assert line, "".join(lines)  # entry 1 recorded; the runner waits to print its path
+        edit_by_hand(out, lambda blocks: [*blocks, "\n".join(
+            row for row in blocks[0].splitlines() if not row.startswith("id = ")).replace(
+            'state = "completed"', 'state = "pending"').replace(
+            f'run = "{entries(out)[0]["run"]}"', 'run = ""') + "\n"])
+        with os.fdopen(read_end, "rb") as stdout:
+            stdout.read()
+        stderr = runner.stderr.read()
+        assert runner.wait(timeout=120) == 0, stderr
+    finally:
+        runner.kill()
+    first, added = entries(out)
+    assert added["id"] and added["id"] != first["id"], added
+    assert (first["state"], added["state"]) == ("completed", "completed")
+    assert run_dirs(out) == {first["run"], added["run"]}
+    assert "while it ran" not in stderr
+
+
+def test_run_entry_measures_nothing_for_an_entry_without_id(bench):
+    """An id that no entry has, or none at all (an entry queue.toml holds without one): one
+    QueueError, and no run is started."""
+    root, out = bench
+    assert queue("add", root / "short.toml", "--sim", "--out", out).returncode == 0
+    edit_by_hand(out, lambda blocks: ["\n".join(row for row in blocks[0].splitlines()
+                                                if not row.startswith("id = ")) + "\n"])
+    with PauseControl() as control:
+        for entry_id in ("", "0badc0de"):
+            with pytest.raises(QueueError, match=f"no entry has id '{entry_id}' any more"):
+                run_entry(out, entry_id, control, progress=False)
+    assert run_dirs(out) == set()
 
 
 def test_queue_list_names_what_it_cannot_read(bench):

@@ -7,6 +7,8 @@ against a socket speaking the channel's protocol, and the CLI."""
 import http.client
 import json
 import os
+import select
+import shutil
 import socket
 import subprocess
 import sys
@@ -380,6 +382,39 @@ def test_cli_prints_the_url_warns_on_a_wide_bind_and_ends_with_stdin(source):
     assert "abc" not in err  # the token is nowhere in the output
     fails = gonio_cli("watch", source.path / "nothing-here")
     assert fails.returncode == 2 and "not a run directory" in one_line_error(fails.stderr)
+
+
+@pytest.mark.parametrize("kind", ["directory", "fifo"])
+def test_a_readings_file_replaced_by_a_folder_or_fifo_is_one_warning(source, tmp_path, kind):
+    """The attack: readings.jsonl of a watched run replaced by a folder (the follower's
+    thread died with a traceback) or a FIFO (it hung holding its lock, and every request
+    with it). One warning line, and the server still answers."""
+    copy = tmp_path / "copy"
+    shutil.copytree(source.path, copy)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "gonio_cli", "watch", str(copy),
+                             "--until-eof"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        url = urlsplit(proc.stdout.readline().strip())
+        (copy / READINGS).rename(copy / "moved.jsonl")
+        os.mkdir(copy / READINGS) if kind == "directory" else os.mkfifo(copy / READINGS)
+        readable, _, _ = select.select([proc.stderr], [], [], 60)  # a hang guard only
+        assert readable, "no line on stderr: the follower hangs"
+        warning = proc.stderr.readline()
+        conn = http.client.HTTPConnection("127.0.0.1", url.port, timeout=30)
+        conn.request("GET", f"/status.json?{url.query}")
+        reply = conn.getresponse()
+        assert reply.status == 200 and json.loads(reply.read())["readings"] == len(source.rows())
+        proc.stdin.close()
+        assert proc.wait(timeout=60) == 0
+        rest = proc.stderr.read()
+    finally:
+        proc.kill()
+    what = "a directory" if kind == "directory" else "a FIFO"
+    assert warning == (f"gonio watch: warning: the live view cannot read the run: "
+                       f"{copy / READINGS} is {what}, not a regular file\n"), warning + rest
+    assert rest == ""
 
 
 def test_scan_watch_serves_the_run_beside_the_scan(tmp_path):

@@ -244,6 +244,26 @@ def test_the_token_is_taken_only_from_stdin_or_a_private_file(run_dir, tmp_path)
     assert proc.wait(timeout=30) == 0 and "t0ken" not in proc.stderr.read()
 
 
+def test_a_token_file_that_is_a_fifo_is_one_error_not_a_hang(run_dir, tmp_path):
+    """The attack: `--token-file FIFO` waited forever for a writer (the subprocess timeout
+    only guards against that hang)."""
+    fifo = tmp_path / "token"
+    os.mkfifo(fifo, 0o600)
+    done = gonio_cli("watch", run_dir, "--token-file", fifo, timeout=60)
+    assert done.returncode == 2
+    assert f"{fifo}: token file must be a regular file, not a FIFO" in one_line_error(done.stderr)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="making a file another user's needs root")
+def test_a_token_file_another_user_owns_is_refused(run_dir, tmp_path):
+    token = tmp_path / "token"
+    token.write_text("t0ken\n")
+    token.chmod(0o600)
+    os.chown(token, NOBODY, NOBODY)
+    done = gonio_cli("watch", run_dir, "--token-file", token)
+    assert done.returncode == 2 and f"owned by uid {NOBODY}" in one_line_error(done.stderr)
+
+
 def test_open_gives_the_browser_no_key_on_its_command_line(run_dir, tmp_path):
     seen = tmp_path / "browser.txt"
     browser = tmp_path / "browser.py"  # a stand-in browser: records its arguments and the page

@@ -7,9 +7,10 @@ $GONIO_CACHE_DIR, else $XDG_CACHE_HOME/gonio, else ~/.cache/gonio (GONIO_CACHE_D
 Each file carries a digest of its plane and of what the plane was built from (the lobe's
 description, the code digest and the plane's address): a file that does not match it
 (altered, truncated, corrupt, another shape) is walked again and replaced, with one warning
-per folder. A cache folder another user could write into (model.cache_folder) is not used,
-with one warning; neither is one that refuses the file (read-only, disk full): the build
-stays in memory only.
+per folder, as is a file another user could have written (model.cache_folder's rule, checked
+on the file itself: a folder that passes it now may hold what was planted before). A cache
+folder another user could write into is not used, with one warning; neither is one that
+refuses the file (read-only, disk full): the build stays in memory only.
 """
 
 from __future__ import annotations
@@ -25,7 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from model.cache_folder import made_private, untrusted, warn_untrusted
+from model.cache_folder import (
+    UntrustedFile,
+    made_private,
+    private_file,
+    untrusted,
+    warn_untrusted,
+)
 
 #: The subdirectory of the cache directory that holds the planes.
 SUBDIR = "ms-planes"
@@ -100,26 +107,31 @@ class PlaneStore:
         if not self._usable(create=False):
             return None
         path = self.path(address)
+        problem = MISMATCH
         try:
             stored = self._read(path, address)
         except FileNotFoundError:
             return None
+        except UntrustedFile as exc:
+            stored, problem = None, f"is not this user's alone ({exc})"
         except Exception:  # noqa: BLE001 - any unreadable file is a miss; the plane is walked
             stored = None
         if stored is None or stored.shape != shape:
-            _warn_mismatch(str(self.folder))
+            _warn_replaced(str(self.folder), problem)
             return None
         return stored
 
     def _read(self, path: Path, address: tuple[int, ...]) -> np.ndarray | None:
-        """The plane in a file if the file holds a plane and its matching digest, else None."""
-        archive = np.load(path, allow_pickle=False)
-        if not isinstance(archive, np.lib.npyio.NpzFile):  # a bare array: no digest
-            return None
-        with archive:
-            if sorted(archive.files) != ["digest", "plane"]:
+        """The plane in a file if the file is this user's alone (model.cache_folder) and holds
+        a plane and its matching digest, else None."""
+        with private_file(path) as handle:
+            archive = np.load(handle, allow_pickle=False)
+            if not isinstance(archive, np.lib.npyio.NpzFile):  # a bare array: no digest
                 return None
-            plane, digest = archive["plane"], archive["digest"]
+            with archive:
+                if sorted(archive.files) != ["digest", "plane"]:
+                    return None
+                plane, digest = archive["plane"], archive["digest"]
         if plane.dtype != np.float64 or digest.shape != () \
                 or str(digest) != self.digest(address, plane):
             return None
@@ -166,12 +178,15 @@ class PlaneStore:
         return True
 
 
+#: What a plane file that fails its digest (or cannot be read as one) is said to be.
+MISMATCH = "does not match its digest (altered or damaged)"
+
+
 @cache
-def _warn_mismatch(folder: str) -> None:
-    """One warning per folder, however many of its planes do not match their digests."""
-    warnings.warn(f"gonio's table cache in {folder}: a plane does not match its digest "
-                  "(altered or damaged): walked again and replaced, as is any other such plane "
-                  "there", RuntimeWarning, stacklevel=3)
+def _warn_replaced(folder: str, problem: str) -> None:
+    """One warning per folder and problem, however many of its planes have it."""
+    warnings.warn(f"gonio's table cache in {folder}: a plane {problem}: walked again and "
+                  "replaced, as is any other such plane there", RuntimeWarning, stacklevel=3)
 
 
 def plane_store(description: Mapping[str, object]) -> PlaneStore | None:
