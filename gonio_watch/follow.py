@@ -7,15 +7,12 @@ ends in complete lines and at most a torn last line, which is simply not complet
 from __future__ import annotations
 
 import json
-import os
-import stat
 import threading
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from drivers.user_file import kind_of
 from gonio.errors import os_error_text
+from gonio.file_changes import read_changed
 from gonio.store import META, READINGS, Run, damage_message
 from gonio_watch.gate import Notices
 
@@ -32,33 +29,6 @@ class Snapshot:
     rows: list[dict[str, Any]]
     damage: str | None
     torn: bool
-
-
-def _stamp(status: os.stat_result) -> tuple[int, int, int]:
-    """(inode, size, mtime ns) of a file: what changes when it is written or replaced."""
-    return status.st_ino, status.st_size, status.st_mtime_ns
-
-
-def _read_changed(path: Path, seen: tuple[int, int, int] | None, offset: int
-                  ) -> tuple[tuple[int, int, int], bytes] | None:
-    """The stamp of the regular file `path` and its bytes from `offset`, both from one
-    descriptor (a rename meanwhile cannot mix two files); None if it is not there or a stat
-    shows the stamp `seen` (no descriptor taken then). Opened without following a symlink
-    and without blocking (a FIFO put in its place is an OSError, not a hang); anything but a
-    regular file is an OSError naming what it is."""
-    try:
-        if _stamp(os.stat(path, follow_symlinks=False)) == seen:
-            return None
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_NOCTTY)
-    except FileNotFoundError:
-        return None
-    status = os.fstat(fd)
-    if not stat.S_ISREG(status.st_mode):
-        os.close(fd)
-        raise OSError(f"{path} is {kind_of(status.st_mode)}, not a regular file")
-    with os.fdopen(fd, "rb") as fh:
-        fh.seek(offset)
-        return _stamp(status), fh.read(max(status.st_size - offset, 0))
 
 
 class RunFollower:
@@ -97,7 +67,7 @@ class RunFollower:
                 self._trouble = None
 
     def _poll_meta(self) -> None:
-        read = _read_changed(self.run.path / META, self._meta_stamp, 0)
+        read = read_changed(self.run.path / META, self._meta_stamp, 0)
         if read is None:
             return
         try:
@@ -107,13 +77,13 @@ class RunFollower:
         self._meta_stamp = read[0]
 
     def _poll_readings(self) -> None:
-        read = _read_changed(self.run.path / READINGS, self._stamp, self._offset)
+        read = read_changed(self.run.path / READINGS, self._stamp, self._offset)
         if read is None:
             return
         stamp, data = read
         if self._stamp is not None and (stamp[0] != self._stamp[0] or stamp[1] < self._offset):
             self._restart()
-            stamp, data = _read_changed(self.run.path / READINGS, None, 0) or (stamp, b"")
+            stamp, data = read_changed(self.run.path / READINGS, None, 0) or (stamp, b"")
         keep = data.rfind(b"\n") + 1
         self._rows.extend(self._checker.feed(data[:keep]))
         self._offset += keep
