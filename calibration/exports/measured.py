@@ -28,6 +28,10 @@ META_KEYS = ("eta", "k", "kind", "lit_from", "wavelength_nm", "aperture_half_ang
 #: steps (about 1e-4 deg), so rounding drops float noise (29.999999999999996) and nothing
 #: measured.
 ANGLE_DECIMALS = 9
+#: The source's azimuth in gonio's sample frame (the source on -x), degrees: the files that
+#: name one incidence azimuth per point (ASTM, BiRD) write it at normal incidence too, whose
+#: own azimuth is undefined, so that an isotropic run names one source azimuth throughout.
+SOURCE_AZIMUTH_DEG = 180.0
 
 
 def angle_text(value: float, decimals: int = ANGLE_DECIMALS) -> str:
@@ -39,6 +43,23 @@ def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(theta from +z, phi = atan2(y, x) in [0, 360)) of unit vectors, degrees."""
     theta = np.degrees(np.arctan2(np.hypot(w[:, 0], w[:, 1]), w[:, 2]))
     return theta, np.mod(np.degrees(np.arctan2(w[:, 1], w[:, 0])), 360.0)
+
+
+def rounded_deg(degrees: np.ndarray, azimuth: bool = False) -> np.ndarray:
+    """Angles in degrees rounded to ANGLE_DECIMALS (float noise dropped, -0 as 0); azimuths
+    then taken into [0, 360), so that one nominal angle is one value."""
+    out = np.round(np.asarray(degrees, dtype=np.float64), ANGLE_DECIMALS) + 0.0
+    return np.mod(out, 360.0) + 0.0 if azimuth else out
+
+
+def file_angles_deg(w: np.ndarray, normal_azimuth: float) -> tuple[np.ndarray, np.ndarray]:
+    """(theta, phi) of directions as the ASTM and BiRD files write them: rounded (rounded_deg),
+    phi along the normal (theta 0 or 180, whose azimuth is undefined) `normal_azimuth`: the
+    source's, SOURCE_AZIMUTH_DEG, for incidence, 0 for the outgoing direction."""
+    theta, phi = spherical_deg(w)
+    theta = rounded_deg(theta)
+    return theta, np.where((theta == 0.0) | (theta == 180.0), normal_azimuth,
+                           rounded_deg(phi, azimuth=True))
 
 
 def unit_vectors(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
