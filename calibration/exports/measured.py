@@ -106,11 +106,17 @@ def fact_lines(data: ReducedData, eta: float | None = None) -> list[str]:
     return record_lines(facts)
 
 
+#: A shared error's part in a point below this fraction of its largest part is float noise,
+#: not a point the error is common to.
+SHARED_NOISE = 1e-12
+
+
 def shared_error_lines(data: ReducedData) -> list[str]:
     """Comment lines that state the errors the points share (ReducedData.shared_rel): which
-    budget components they come from, and per shared error the points it is common to and its
-    size relative to the values; none for data whose points share no error. Plain text (not
-    `key: JSON`), so `--import` passes over them."""
+    budget components they come from, and per shared error the points it is common to (parts
+    below SHARED_NOISE of its largest left out as float noise), the range of its relative size
+    and its signs; none for data whose points share no error. Plain text (not `key: JSON`), so
+    `--import` passes over them."""
     shared = data.shared_rel[:, np.any(data.shared_rel != 0, axis=0)]
     if shared.shape[1] == 0:
         return []
@@ -121,12 +127,24 @@ def shared_error_lines(data: ReducedData) -> list[str]:
              "NetCDF export holds S's correlation between points "
              "(bsdf_shared_error_correlation)"]
     for j, column in enumerate(shared.T, start=1):
-        size = np.abs(column[column != 0])
+        part = column[np.abs(column) > SHARED_NOISE * np.max(np.abs(column))]
+        size = np.abs(part)
         low, high = float(size.min()), float(size.max())
         span = f"{high:.3g}" if high - low <= 1e-12 * high else f"{low:.3g} to {high:.3g}"
-        lines.append(f"shared error {j}: common to {len(size)} of {len(column)} points, "
-                     f"relative size {span}")
+        lines.append(f"shared error {j}: common to {len(part)} of {len(column)} points, "
+                     f"relative size {span}, {_signs(part)}")
     return lines
+
+
+def _signs(part: np.ndarray) -> str:
+    """The signs of a shared error's parts (z's sign is arbitrary, so only whether they
+    differ says anything): one sign at every point (they move together), or how many of each
+    (the two groups move against each other)."""
+    positive, negative = int(np.sum(part > 0)), int(np.sum(part < 0))
+    if not (positive and negative):
+        return "one sign at every point"
+    return (f"positive at {positive} points and negative at {negative} (which ones: the NetCDF "
+            "export's correlation)")
 
 
 def write_reduced_csv(data: ReducedData, out: Path, record: Sequence[str] = ()) -> Path:
