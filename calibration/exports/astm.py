@@ -10,7 +10,8 @@ sample: the four angles in radians (theta from the normal of the side's hemisphe
 written as the exact double of that many degrees in radians, so that one angle is one text
 (no second "180 deg" node a digit apart, no 2 pi beside 0). Every sample of an isotropic run
 names the source azimuth of gonio's sample frame (phi_i = pi, the plane of incidence
-x-z), normal incidence included: libbsdf takes a file whose phi_i is one value for isotropic
+x-z), normal incidence included (measured.file_angles_deg; an outgoing direction along the
+normal has phi_s 0): libbsdf takes a file whose phi_i is one value for isotropic
 and turns its phi_s by that value, and a file with two for anisotropic, filling the missing
 incidence azimuths with the nearest sample. No comment may follow VARS (the reader takes every
 later line as data). One file holds one side, as libbsdf reads a file as a BRDF or a BTDF: the gonio
@@ -27,7 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.exports.measured import ANGLE_DECIMALS, spherical_deg, unit_vectors
+from calibration.exports.measured import (
+    SOURCE_AZIMUTH_DEG,
+    file_angles_deg,
+    rounded_deg,
+    unit_vectors,
+)
 from calibration.formats.limits import (
     MAX_COLUMNS,
     MAX_POINTS,
@@ -41,9 +47,6 @@ from calibration.values import CalibrationError
 
 ANGLES = ("theta_i", "phi_i", "theta_s", "phi_s")
 DATA_TYPES = ("BRDF", "BTDF")
-#: The source's azimuth in gonio's sample frame (the source on -x), degrees: normal incidence
-#: names it too, as its own azimuth is undefined.
-SOURCE_AZIMUTH_DEG = 180.0
 
 
 @dataclass
@@ -90,11 +93,9 @@ def write_astm(table: AstmTable, path: str | Path) -> Path:
 
 
 def radians_text(angle_rad: np.ndarray, azimuth: bool = False) -> list[str]:
-    """Angles as text: rounded to ANGLE_DECIMALS in degrees (azimuths then taken into
-    [0, 360)), written as the shortest repr of that many degrees in radians."""
-    degrees = np.round(np.degrees(np.asarray(angle_rad, dtype=np.float64)), ANGLE_DECIMALS)
-    if azimuth:
-        degrees = np.mod(degrees, 360.0)
+    """Angles as text: rounded in degrees (measured.rounded_deg), written as the shortest repr
+    of that many degrees in radians."""
+    degrees = rounded_deg(np.degrees(np.asarray(angle_rad, dtype=np.float64)), azimuth)
     return [repr(float(r) + 0.0) for r in np.radians(degrees)]
 
 
@@ -184,9 +185,8 @@ def astm_tables(data: ReducedData, comments: Sequence[str] = ()) -> list[AstmTab
     tables = []
     for side in sides_of(good.transmission):
         part = good.subset(good.transmission == (side == "BTDF"))
-        ti, pi = spherical_deg(part.wi)
-        pi = np.where(ti < 10.0 ** -ANGLE_DECIMALS, SOURCE_AZIMUTH_DEG, pi)
-        to, po = spherical_deg(part.wo)
+        ti, pi = file_angles_deg(part.wi, SOURCE_AZIMUTH_DEG)
+        to, po = file_angles_deg(part.wo, 0.0)
         theta_s = 180.0 - to if side == "BTDF" else to
         tables.append(AstmTable(side, np.radians(ti), np.radians(pi), np.radians(theta_s),
                                 np.radians(po), [math.nan if wavelength is None

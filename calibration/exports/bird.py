@@ -1,8 +1,10 @@
 """Reduced BRDF as a BiRD universal BRDF file (the JSON format of the EMPIR BiRD project, which
 metrology institutes exchange BRDF data in; schema v1.0): `metadata` from the run's record
 (calibration.exports.bird_metadata) and `data` with one entry per reflection point: theta_i,
-phi_i, theta_r, phi_r in degrees (sample frame), BRDF and its standard uncertainty uBRDF in
-1/sr, the wavelength and, where sp notation says them, the polarisations. What the format has
+phi_i, theta_r, phi_r in degrees (sample frame; rounded, and along the normal phi_i the
+source's azimuth and phi_r 0, as in the ASTM export: measured.file_angles_deg), BRDF and its
+standard uncertainty uBRDF in 1/sr, the wavelength and, where sp notation says them, the
+polarisations. What the format has
 no field for goes in its ad-hoc variables, one value per point: each budget component
 `u_NAME` (1/sr), each error the points share `shared_error_J` (relative), `valid` and `flags`;
 the reduction's facts and the whole record go in metadata's adhoc_section, so that `--import`
@@ -22,8 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from calibration.exports.bird_metadata import bird_metadata, polarisation
-from calibration.exports.measured import columns, coverage_k, meta_facts
+from calibration.exports.bird_metadata import bird_metadata, polarisation, require_complete
+from calibration.exports.measured import (
+    SOURCE_AZIMUTH_DEG,
+    coverage_k,
+    file_angles_deg,
+    meta_facts,
+)
 from calibration.reduced import ReducedData
 
 #: metadata.adhoc_section's keys for the run's record and the reduction's facts.
@@ -37,6 +44,7 @@ def write_bird(data: ReducedData, out: Path, record: Mapping[str, Any]) -> tuple
     """Write the data's reflection points as a BiRD file; (the path, notes on what was left
     out). Refuses (CalibrationError, one line) before writing when the record lacks a field
     the format requires."""
+    require_complete(record)
     keep, notes = writable(data)
     kept = data.subset(keep)
     comments = " ".join([f"{FRAME}.", "uBRDF is the standard uncertainty u (GUM); the "
@@ -85,12 +93,11 @@ def _variable(values: np.ndarray | list, unit: str, **more: Any) -> dict[str, An
 
 def data_section(data: ReducedData, record: Mapping[str, Any]) -> dict[str, Any]:
     """The data section of reflection points (see the module docstring)."""
-    cols = columns(data)
     n = len(data.bsdf)
-    out = {name: _variable(cols[column] % 360.0 if name.startswith("phi") else cols[column],
-                           "deg", name=name)
-           for name, column in (("theta_i", "theta_i_deg"), ("phi_i", "phi_i_deg"),
-                                ("theta_r", "theta_o_deg"), ("phi_r", "phi_o_deg"))}
+    theta_i, phi_i = file_angles_deg(data.wi, SOURCE_AZIMUTH_DEG)
+    theta_r, phi_r = file_angles_deg(data.wo, 0.0)
+    angles = {"theta_i": theta_i, "phi_i": phi_i, "theta_r": theta_r, "phi_r": phi_r}
+    out = {name: _variable(values, "deg", name=name) for name, values in angles.items()}
     out["BRDF"] = _variable(data.bsdf, "1/sr", name="BRDF")
     out["uBRDF"] = _variable(data.sigma, "1/sr", comments="standard uncertainty u (GUM, k = 1)")
     if record.get("wavelength_nm") is not None:

@@ -66,13 +66,18 @@ def missing_text(missing: list[tuple[str, str]]) -> str:
     return "; ".join(f"{where} {', '.join(keys)}" for where, keys in grouped.items())
 
 
-def bird_metadata(record: Mapping[str, Any], description: str, comments: str) -> dict[str, Any]:
-    """The metadata section of a measured BRDF data set (see the module docstring); a
-    CalibrationError naming every missing key (missing_keys) when the record lacks any."""
+def require_complete(record: Mapping[str, Any]) -> None:
+    """A CalibrationError naming every key the record lacks (missing_keys), if any."""
     missing = missing_keys(record)
     if missing:
         raise CalibrationError("export: --format bird needs what the run's record lacks: "
                                + missing_text(missing))
+
+
+def bird_metadata(record: Mapping[str, Any], description: str, comments: str) -> dict[str, Any]:
+    """The metadata section of a measured BRDF data set (see the module docstring); a
+    CalibrationError naming every missing key (missing_keys) when the record lacks any."""
+    require_complete(record)
     meta = {
         "schema": SCHEMA_URL, "id": dataset_id(record), "type": "BRDF",
         "timestamp": record["started_utc"], "provenance": provenance(record["provenance"]),

@@ -2,9 +2,10 @@
 arrays of a ReducedData: the four angles (deg, ° or rad), BRDF, its uncertainty (uBRDF per
 point, else BRDF's one stated uncertainty, in 1/sr or %), the wavelength, and gonio's ad-hoc
 variables (u_NAME, shared_error_J, valid, flags) and adhoc_section (the record and the
-reduction's facts) where the file has them. A file that is not one, or holds more than an
-import does (calibration.formats.limits, and the JSON caps below, checked before the file is
-parsed), is one CalibrationError naming the field or the count.
+reduction's facts) where the file has them. A spectral or polarised file (several wavelengths
+or polarisation states) is refused, naming them, as gonio's fit takes one. A file that is not
+one, or holds more than an import does (calibration.formats.limits, and the JSON caps below,
+checked before the file is parsed), is one CalibrationError naming the field or the count.
 """
 
 from __future__ import annotations
@@ -78,16 +79,38 @@ def read_bird(source: str | Path | MeasuredFile) -> BirdData:
         angles[name] = reader.numbers(variable, f"data.{name}", n) * TO_DEGREES[unit]
     out = BirdData(angles, brdf, _uncertainty(reader, data, brdf))
     wavelengths = data.get("wavelength_i")
-    if isinstance(wavelengths, dict):
-        values = np.unique(reader.numbers(wavelengths, "data.wavelength_i", n))
-        scale = {"nm": 1.0, "μm": 1000.0}.get(wavelengths.get("unit"))
-        if len(values) == 1 and scale is not None:
-            out.wavelength_nm = float(values[0]) * scale
+    values = (np.unique(reader.numbers(wavelengths, "data.wavelength_i", n))
+              if isinstance(wavelengths, dict) else np.empty(0))
+    _check_one_state(reader, data, n, values)
+    scale = {"nm": 1.0, "μm": 1000.0}.get(wavelengths.get("unit")) if len(values) else None
+    if scale is not None:
+        out.wavelength_nm = float(values[0]) * scale
     _adhoc(reader, data.get("adhoc_variables") or {}, n, out)
     adhoc = (document.get("metadata") or {}).get("adhoc_section") or {}
     out.record = adhoc.get(RECORD_KEY) or {}
     out.facts = adhoc.get(FACTS_KEY) or {}
     return out
+
+
+def _check_one_state(reader: _Reader, data: dict, n: int, wavelengths: np.ndarray) -> None:
+    """One error naming what a spectral or polarised file holds more than one of (the distinct
+    `wavelengths`, incident or reflected polarisations): gonio's fit takes one wavelength and
+    one polarisation state, so a file of several is refused rather than merged."""
+    several = []
+    if len(wavelengths) > 1:
+        several.append(f"{len(wavelengths)} wavelengths in data.wavelength_i "
+                       f"({', '.join(f'{v:g}' for v in wavelengths)} "
+                       f"{data['wavelength_i'].get('unit')})")
+    for name in ("polarization_i", "polarization_r"):
+        if isinstance(data.get(name), dict):
+            states = sorted({str(v) for v in reader.values(data[name], f"data.{name}", n)})
+            if len(states) > 1:
+                several.append(f"{len(states)} polarisations in data.{name} "
+                               f"({', '.join(states)})")
+    if several:
+        raise CalibrationError(f"{reader.path}: holds {' and '.join(several)}; gonio's fit "
+                               "takes one wavelength and one polarisation state: import one "
+                               "part of the file at a time")
 
 
 def _check_json_size(file: MeasuredFile) -> None:

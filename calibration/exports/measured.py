@@ -28,6 +28,10 @@ META_KEYS = ("eta", "k", "kind", "lit_from", "wavelength_nm", "aperture_half_ang
 #: steps (about 1e-4 deg), so rounding drops float noise (29.999999999999996) and nothing
 #: measured.
 ANGLE_DECIMALS = 9
+#: The source's azimuth in gonio's sample frame (the source on -x), degrees: the files that
+#: name one incidence azimuth per point (ASTM, BiRD) write it at normal incidence too, whose
+#: own azimuth is undefined, so that an isotropic run names one source azimuth throughout.
+SOURCE_AZIMUTH_DEG = 180.0
 
 
 def angle_text(value: float, decimals: int = ANGLE_DECIMALS) -> str:
@@ -39,6 +43,23 @@ def spherical_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(theta from +z, phi = atan2(y, x) in [0, 360)) of unit vectors, degrees."""
     theta = np.degrees(np.arctan2(np.hypot(w[:, 0], w[:, 1]), w[:, 2]))
     return theta, np.mod(np.degrees(np.arctan2(w[:, 1], w[:, 0])), 360.0)
+
+
+def rounded_deg(degrees: np.ndarray, azimuth: bool = False) -> np.ndarray:
+    """Angles in degrees rounded to ANGLE_DECIMALS (float noise dropped, -0 as 0); azimuths
+    then taken into [0, 360), so that one nominal angle is one value."""
+    out = np.round(np.asarray(degrees, dtype=np.float64), ANGLE_DECIMALS) + 0.0
+    return np.mod(out, 360.0) + 0.0 if azimuth else out
+
+
+def file_angles_deg(w: np.ndarray, normal_azimuth: float) -> tuple[np.ndarray, np.ndarray]:
+    """(theta, phi) of directions as the ASTM and BiRD files write them: rounded (rounded_deg),
+    phi along the normal (theta 0 or 180, whose azimuth is undefined) `normal_azimuth`: the
+    source's, SOURCE_AZIMUTH_DEG, for incidence, 0 for the outgoing direction."""
+    theta, phi = spherical_deg(w)
+    theta = rounded_deg(theta)
+    return theta, np.where((theta == 0.0) | (theta == 180.0), normal_azimuth,
+                           rounded_deg(phi, azimuth=True))
 
 
 def unit_vectors(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
@@ -85,11 +106,17 @@ def fact_lines(data: ReducedData, eta: float | None = None) -> list[str]:
     return record_lines(facts)
 
 
+#: A shared error's part in a point below this fraction of its largest part is float noise,
+#: not a point the error is common to.
+SHARED_NOISE = 1e-12
+
+
 def shared_error_lines(data: ReducedData) -> list[str]:
     """Comment lines that state the errors the points share (ReducedData.shared_rel): which
-    budget components they come from, and per shared error the points it is common to and its
-    size relative to the values; none for data whose points share no error. Plain text (not
-    `key: JSON`), so `--import` passes over them."""
+    budget components they come from, and per shared error the points it is common to (parts
+    below SHARED_NOISE of its largest left out as float noise), the range of its relative size
+    and its signs; none for data whose points share no error. Plain text (not `key: JSON`), so
+    `--import` passes over them."""
     shared = data.shared_rel[:, np.any(data.shared_rel != 0, axis=0)]
     if shared.shape[1] == 0:
         return []
@@ -100,12 +127,24 @@ def shared_error_lines(data: ReducedData) -> list[str]:
              "NetCDF export holds S's correlation between points "
              "(bsdf_shared_error_correlation)"]
     for j, column in enumerate(shared.T, start=1):
-        size = np.abs(column[column != 0])
+        part = column[np.abs(column) > SHARED_NOISE * np.max(np.abs(column))]
+        size = np.abs(part)
         low, high = float(size.min()), float(size.max())
         span = f"{high:.3g}" if high - low <= 1e-12 * high else f"{low:.3g} to {high:.3g}"
-        lines.append(f"shared error {j}: common to {len(size)} of {len(column)} points, "
-                     f"relative size {span}")
+        lines.append(f"shared error {j}: common to {len(part)} of {len(column)} points, "
+                     f"relative size {span}, {_signs(part)}")
     return lines
+
+
+def _signs(part: np.ndarray) -> str:
+    """The signs of a shared error's parts (z's sign is arbitrary, so only whether they
+    differ says anything): one sign at every point (they move together), or how many of each
+    (the two groups move against each other)."""
+    positive, negative = int(np.sum(part > 0)), int(np.sum(part < 0))
+    if not (positive and negative):
+        return "one sign at every point"
+    return (f"positive at {positive} points and negative at {negative} (which ones: the NetCDF "
+            "export's correlation)")
 
 
 def write_reduced_csv(data: ReducedData, out: Path, record: Sequence[str] = ()) -> Path:

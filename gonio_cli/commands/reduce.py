@@ -13,6 +13,7 @@ calibration.imports) as gonio's reduced CSV (calibration.exports.measured)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -172,9 +173,18 @@ def print_integrals(args: argparse.Namespace, data) -> None:
 
 
 def check_args(args: argparse.Namespace) -> None:
-    """The arguments' checks that need no run (--coverage-k), made before the run is read."""
+    """The arguments' checks that need no run (--coverage-k, --integrals-json's folder), made
+    before the run is read and anything is written."""
     if not (np.isfinite(args.coverage_k) and args.coverage_k > 0):
         raise GonioError(f"--coverage-k must be a finite number > 0, got {args.coverage_k!r}")
+    if args.integrals_json:
+        path = Path(args.integrals_json)
+        folder = path.parent
+        if path.is_dir():
+            raise GonioError(f"--integrals-json {path}: is a folder (name the JSON file)")
+        if not folder.is_dir() or not os.access(folder, os.W_OK):
+            raise GonioError(f"--integrals-json {path}: cannot write in {folder} (no such "
+                             "folder, or not writable)")
 
 
 def run(args: argparse.Namespace) -> int:

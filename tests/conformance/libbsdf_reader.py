@@ -21,7 +21,11 @@ PROBE_SOURCE = Path(__file__).with_name("libbsdf_probe.cpp")
 
 
 class ReaderUnavailable(Exception):
-    """libbsdf cannot be built here (no snapshot, no compiler, CMake or Eigen): the reason."""
+    """libbsdf cannot be built here (no snapshot, or a tool missing: ToolMissing): the reason."""
+
+
+class ToolMissing(ReaderUnavailable):
+    """A tool the build needs (a C++ compiler, CMake, make, Eigen) is not installed."""
 
 
 def snapshot_dir() -> Path:
@@ -56,16 +60,16 @@ def _run(command: list[str], log: Path) -> None:
 
 def build_probe() -> Path:
     """The probe executable, building libbsdf (library only, make -j2) and the probe first
-    where the cache lacks them; ReaderUnavailable says why it cannot be built here."""
+    where the cache lacks them; ReaderUnavailable (ToolMissing for a tool) says why it cannot
+    be built here."""
     source = snapshot_dir()
     if not (source / "CMakeLists.txt").is_file():
         raise ReaderUnavailable(f"no libbsdf snapshot at {source} (set GONIO_THIRD_PARTY)")
     for tool in ("cmake", "make", "c++"):
         if shutil.which(tool) is None:
-            raise ReaderUnavailable(f"{tool} not found (apt-get install cmake g++ "
-                                    "libeigen3-dev)")
+            raise ToolMissing(f"{tool} not found (apt-get install cmake g++ libeigen3-dev)")
     if not Path("/usr/include/eigen3/Eigen").is_dir():
-        raise ReaderUnavailable("Eigen 3 not found (apt-get install libeigen3-dev)")
+        raise ToolMissing("Eigen 3 not found (apt-get install libeigen3-dev)")
     cache = cache_dir(snapshot_commit(source))
     cache.mkdir(parents=True, exist_ok=True)
     digest = hashlib.sha256(PROBE_SOURCE.read_bytes()).hexdigest()[:12]

@@ -22,6 +22,7 @@ sys.path[:0] = [str(Path(__file__).parent), str(TESTS / "gonio"), str(TESTS)]
 
 from bird_schema import bird_validator, schema_folder  # noqa: E402
 from gonio_testkit import EXAMPLES, fast_config, write_plan  # noqa: E402
+from required_tools import require_module  # noqa: E402
 
 from calibration.imports import read_measured  # noqa: E402
 from gonio_cli.main import main  # noqa: E402
@@ -31,7 +32,7 @@ pytestmark = [
     pytest.mark.skipif(not schema_folder().is_dir(), reason=f"the BiRD schema snapshot is not at "
                        f"{schema_folder()} (set GONIO_THIRD_PARTY to the third_party folder)"),
 ]
-pytest.importorskip("jsonschema", reason="jsonschema validates the BiRD files (the test extra)")
+require_module("jsonschema", "jsonschema validates the BiRD files (the test extra)")
 
 
 @pytest.fixture(scope="module")

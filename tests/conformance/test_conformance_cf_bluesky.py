@@ -22,6 +22,7 @@ TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS / "fitting"), str(TESTS / "bluesky"), str(TESTS)]
 
 from cf_kit import cf_counts, compliance_findings  # noqa: E402
+from required_tools import require_module  # noqa: E402
 
 from calibration.exports.cf import read_reduced_netcdf, write_raw_netcdf, write_reduced_netcdf  # noqa: E402
 from calibration.exports.cf_uncertainty import shared_errors  # noqa: E402
@@ -32,7 +33,7 @@ from gonio_cli.main import main  # noqa: E402
 from model.bsdf import RoughDielectric  # noqa: E402
 
 pytestmark = pytest.mark.conformance
-pytest.importorskip("compliance_checker", reason="the strict CF checker (the test extra)")
+require_module("compliance_checker", "the strict CF checker (the test extra)")
 
 ETA = 1.51
 MODEL = RoughDielectric(distribution="ggx", alpha=0.394, eta=ETA)
@@ -183,7 +184,7 @@ def test_tiled_ingests_the_documents_with_numeric_columns_and_refuses_a_second_i
     Tiled server on 127.0.0.1: every numeric reading field reads back numeric (a dark
     reading's NaN plan angles, written as null, made them strings); the same run ingested
     again is refused with HTTP 409, as its uids are the run's own."""
-    pytest.importorskip("tiled.server", reason="a Tiled server (tiled[server])")
+    require_module("tiled.server", "a Tiled server (tiled[server])")
     from bluesky.callbacks.tiled_writer import TiledWriter
     from tiled.client import from_uri
     from tiled.client.utils import ClientError

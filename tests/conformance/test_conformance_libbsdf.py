@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fitting.fitting_bench_runs import instrument, plan, scan
-from libbsdf_reader import ReaderUnavailable, build_probe, libbsdf_values
+from libbsdf_reader import ReaderUnavailable, ToolMissing, build_probe, libbsdf_values
+from required_tools import tool_missing
 
 from calibration.exports.astm import directions, read_astm
 from calibration.exports.zemax import read_zemax, turned, write_zemax
@@ -50,8 +51,12 @@ GRIDS = [
 
 @pytest.fixture(scope="module")
 def probe() -> Path:
+    """libbsdf's probe: a missing tool skips or fails (required_tools), a missing snapshot
+    skips."""
     try:
         return build_probe()
+    except ToolMissing as why:
+        tool_missing(f"libbsdf cannot be built: {why}")
     except ReaderUnavailable as why:
         pytest.skip(f"libbsdf not available: {why}")
 

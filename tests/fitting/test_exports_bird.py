@@ -19,6 +19,7 @@ from calibration.exports.measured import columns
 from calibration.formats import format_to_read
 from calibration.formats.file_format import ImportOptions
 from calibration.imports import read_measured
+from calibration.reduced import ReducedData
 from calibration.synthetic import synthesize
 from calibration.values import CalibrationError
 from gonio.config import load_config
@@ -161,3 +162,56 @@ def test_another_labs_file_takes_its_stated_uncertainty_and_the_given_index(tmp_
     np.testing.assert_allclose(back.sigma, [0.01, 0.005])
     np.testing.assert_allclose(back.theta_i_deg, [0.0, 30.0], atol=1e-3)
     assert back.meta["eta"] == 1.5
+
+
+def nominal_scan(rng: np.random.Generator) -> ReducedData:
+    """The demo plan's in-plane reflection points (theta_i 0 and 30 deg, theta_o -80 to 80 in
+    10 deg steps) with directions carrying float noise of about 1e-14, as a bench's rotations
+    give them."""
+    theta_i, theta_o = np.meshgrid([0.0, 30.0], np.arange(-80.0, 81.0, 10.0), indexing="ij")
+    theta_i, theta_o = np.radians(theta_i.ravel()), np.radians(theta_o.ravel())
+    wi = np.stack([-np.sin(theta_i), 0 * theta_i, np.cos(theta_i)], axis=1)
+    wo = np.stack([np.sin(theta_o), 0 * theta_o, np.cos(theta_o)], axis=1)
+    wi, wo = (w + 1e-14 * rng.standard_normal(w.shape) for w in (wi, wo))
+    wi, wo = (w / np.linalg.norm(w, axis=1, keepdims=True) for w in (wi, wo))
+    n = len(wi)
+    return ReducedData(wi, wo, np.full(n, 0.1), np.full(n, 0.001), np.ones(n, bool),
+                       np.zeros(n, bool), {"eta": 1.51, "wavelength_nm": 632.8})
+
+
+def test_the_angles_are_one_value_per_nominal_angle_and_one_source_azimuth(tmp_path):
+    path, _ = write_bird(nominal_scan(np.random.default_rng(1)), tmp_path / "demo.json",
+                         example_record())
+    data = json.loads(path.read_text())["data"]
+    assert set(data["theta_i"]["values"]) == {0.0, 30.0}
+    assert set(data["theta_r"]["values"]) == {float(t) for t in range(0, 81, 10)}
+    assert set(data["phi_i"]["values"]) == {180.0}  # the source's, normal incidence too
+    assert set(data["phi_r"]["values"]) == {0.0, 180.0}
+
+
+def test_a_record_without_the_wavelength_is_refused_in_one_line(glass, tmp_path):
+    record = example_record()
+    record["wavelength_nm"] = None
+    with pytest.raises(CalibrationError, match=r"^export: --format bird needs what the run's "
+                                               r"record lacks: config \[optics\] wavelength_nm$"):
+        write_bird(glass, tmp_path / "glass.json", record)
+    assert not (tmp_path / "glass.json").exists()
+
+
+@pytest.mark.parametrize("variable, values, said", [
+    ("wavelength_i", {"values": [450.0, 550.0, 450.0], "unit": "nm"},
+     "2 wavelengths in data.wavelength_i (450, 550 nm)"),
+    ("polarization_i", {"notation": "sp", "values": ["s", "p", "s"]},
+     "2 polarisations in data.polarization_i (p, s)"),
+])
+def test_a_spectral_or_polarised_file_is_refused_naming_what_it_holds(variable, values, said,
+                                                                       tmp_path, capsys):
+    path = tmp_path / "spectral.json"
+    data = {name: {"values": [0.0, 10.0, 20.0], "unit": "deg"} for name in
+            ("theta_i", "phi_i", "theta_r", "phi_r")}
+    data["BRDF"] = {"values": [0.5, 0.25, 0.1], "unit": "1/sr"}
+    data[variable] = values
+    path.write_text(json.dumps({"metadata": {}, "data": data}))
+    assert main(["fit", "--import", str(path), "--eta", "1.5", "--sigma-relative", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err and str(path) in err

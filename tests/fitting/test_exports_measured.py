@@ -22,7 +22,7 @@ from zemax_cells import assert_measured_cells, table_tis
 from calibration.exports import ExportRequest
 from calibration.exports.astm import astm_tables, write_astm
 from calibration.exports.cf import read_reduced_netcdf, write_raw_netcdf, write_reduced_netcdf
-from calibration.exports.measured import write_reduced_csv
+from calibration.exports.measured import shared_error_lines, write_reduced_csv
 from calibration.exports.model import measured_zemax_files, zemax_files
 from calibration.exports.run_files import write_data
 from calibration.exports.zemax import read_zemax, turned, write_zemax
@@ -448,3 +448,19 @@ def test_fit_and_reduce_import_cli(glass, tmp_path, capsys):
     assert again.meta["eta"] == 1.51 and "assumed" in again.meta["noise_model"]
     assert main(["fit", str(tmp_path), "--import", str(path)]) == 2
     assert "give a run directory or --import FILE (one of them)" in capsys.readouterr().err
+
+
+def test_a_shared_error_line_leaves_out_float_noise_and_states_the_signs(glass):
+    data = glass[0]
+    n = len(data.bsdf)
+    signed = np.where(np.arange(n) % 2 == 0, 8e-5, -4e-5)
+    signed[:3] = [1.25e-17, -3e-18, 0.0]  # float noise of a sum that cancels
+    data = replace(data, shared_rel=np.stack([np.full(n, 0.01), signed], axis=1),
+                   meta=dict(data.meta, budget={"shared": ["beam", "angle_offset"]}))
+    lines = shared_error_lines(data)
+    assert lines[1] == (f"shared error 1: common to {n} of {n} points, relative size 0.01, "
+                        "one sign at every point")
+    positive = int(np.sum(signed > 1e-12))
+    assert lines[2] == (f"shared error 2: common to {n - 3} of {n} points, relative size 4e-05 "
+                        f"to 8e-05, positive at {positive} points and negative at "
+                        f"{n - 3 - positive} (which ones: the NetCDF export's correlation)")

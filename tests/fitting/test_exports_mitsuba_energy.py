@@ -15,6 +15,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 from mitsuba_albedo import VARIANT, load_material, mitsuba_albedo
+from required_tools import tool_missing
 
 from calibration.exports import mitsuba_energy
 from calibration.exports.mitsuba import PLUGIN_TABLES
@@ -22,7 +23,6 @@ from calibration.exports.model import mitsuba_files
 from calibration.fit import FitResult
 from calibration.values import CalibrationError
 
-mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is the `mitsuba` extra (in `test`)")
 #: Dr.Jit's LLVM backend aborts the process with too old an LLVM (docs/performance.md): tried
 #: in a child process first.
 LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); "
@@ -42,13 +42,15 @@ def multiple_scattering_fit(alpha: float, masking: str, **changes) -> FitResult:
     return dataclasses.replace(result, **changes)
 
 
-@pytest.fixture(scope="module", autouse=True)
+@pytest.fixture(scope="module")
 def llvm_mitsuba():
-    """Skip unless Mitsuba's LLVM variant runs here (libllvm19 or newer)."""
+    """Mitsuba 3 (the `mitsuba` extra, in `test`) with its LLVM variant running here
+    (libllvm19 or newer), for the tests that sample or render with it; else a skip or, where
+    the conformance suite is required, a failure (required_tools)."""
     probe = subprocess.run([sys.executable, "-c", LLVM_PROBE], capture_output=True, text=True)
     if probe.returncode != 0:
-        pytest.skip(f"Mitsuba's {VARIANT} does not start (install libllvm19): "
-                    f"{probe.stderr.strip()[-200:]}")
+        tool_missing(f"Mitsuba's {VARIANT} does not start (install mitsuba and libllvm19): "
+                     f"{probe.stderr.strip()[-200:]}")
 
 
 @pytest.fixture(scope="module", params=[
@@ -79,6 +81,7 @@ def test_export_writes_the_plugin_beside_the_xml(exported):
 
 
 @pytest.mark.conformance
+@pytest.mark.usefixtures("llvm_mitsuba")
 def test_mitsuba_albedo_of_the_export_matches_the_model(exported):
     result, paths, _, model = exported
     bsdf = load_material(paths[0])
@@ -92,6 +95,7 @@ def test_mitsuba_albedo_of_the_export_matches_the_model(exported):
 
 
 @pytest.mark.conformance
+@pytest.mark.usefixtures("llvm_mitsuba")
 def test_single_scattering_export_states_what_it_drops(exported, tmp_path):
     result, _, _, model = exported
     paths, notes = mitsuba_files(result, tmp_path / "single.xml", "test",
@@ -152,7 +156,10 @@ def test_a_material_the_plugin_cannot_match_is_refused(tmp_path, monkeypatch):
 
 
 @pytest.mark.conformance
+@pytest.mark.usefixtures("llvm_mitsuba")
 def test_mitsuba_renders_a_scene_with_the_export(exported):
+    import mitsuba as mi
+
     _, paths, _, _ = exported
     load_material(paths[0])  # sets the variant and registers the plugin
     scene = paths[0].with_name("scene.xml")

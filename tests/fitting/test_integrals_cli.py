@@ -16,14 +16,32 @@ ROOT = Path(__file__).resolve().parents[2]
 QUANTITIES = ("reflectance", "tis_backward", "gloss", "transmittance", "tis_forward", "haze")
 
 
-def test_reduce_prints_the_integrals_and_writes_their_json(tmp_path, capsys):
-    cfg = instrument(tmp_path, {"sample": {"distribution": "ggx", "alpha": 0.394,
-                                           "multiple_scattering": False}})
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory) -> Path:
+    """A small emulated run at 60 deg, both sides (GGX alpha 0.394, single scattering)."""
+    tmp = tmp_path_factory.mktemp("integrals")
+    cfg = instrument(tmp, {"sample": {"distribution": "ggx", "alpha": 0.394,
+                                      "multiple_scattering": False}})
     grids = [{"side": side, "theta_i_deg": [60.0], "skip_forbidden": True,
               "theta_o_deg": {"start": -85.0, "stop": 85.0, "step": 10.0}}
              for side in ("reflection", "transmission")]
-    run = scan(plan(tmp_path, "integrals", grids, dark_every=10, beam_every=10), cfg,
-               tmp_path / "runs")
+    return scan(plan(tmp, "integrals", grids, dark_every=10, beam_every=10), cfg, tmp / "runs")
+
+
+def test_an_unwritable_integrals_json_is_refused_before_anything_is_written(small_run, tmp_path,
+                                                                            capsys):
+    reduced = small_run / "reduced.csv"
+    before = reduced.read_bytes() if reduced.exists() else None
+    missing = tmp_path / "no-such-folder" / "x.json"
+    for path, said in ((missing, f"cannot write in {missing.parent}"), (tmp_path, "is a folder")):
+        assert main(["reduce", str(small_run), "--integrals-json", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"--integrals-json {path}: {said}" in err
+    assert (reduced.read_bytes() if reduced.exists() else None) == before  # nothing written
+
+
+def test_reduce_prints_the_integrals_and_writes_their_json(small_run, tmp_path, capsys):
+    run = small_run
     out_json = tmp_path / "integrals.json"
     assert main(["reduce", str(run), "--integrals-json", str(out_json)]) == 0
     lines = capsys.readouterr().out.splitlines()

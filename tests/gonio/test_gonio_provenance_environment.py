@@ -22,15 +22,26 @@ def changed(table: str, change: dict) -> dict:
     return cfg
 
 
-def test_every_example_states_who_measured_the_source_the_sample_size_and_the_room():
+def test_every_example_states_the_source_and_sample_size_and_the_emulated_ones_who_and_where():
+    """The emulated bench's configs and plans state their provenance and their room as the
+    emulator's own (declared); the real bench's (lab.toml, and the plans run on it) leave both
+    to the lab, so that no made-up lab or room reaches a file."""
     for path in (EXAMPLES / "instruments").glob("*.toml"):
         cfg = parse_config(tomllib.loads(path.read_text()), path)
-        assert cfg.provenance is not None and cfg.provenance.licence, path
         assert cfg.optics.source_power_mw > 0 and cfg.optics.detector_spectral_range_nm, path
+        if path.name == "lab.toml":
+            assert cfg.provenance is None
+        else:
+            assert cfg.provenance is not None and cfg.provenance.licence, path
+            assert cfg.provenance.lab == "gonio emulated bench", path
     for path in (EXAMPLES / "plans").glob("*.toml"):
         plan = load_plan(path)
-        assert plan.environment.temperature_c == 21.5, path
         assert plan.sample.shape and plan.sample.dimensions_mm == {"diameter": 25.4}, path
+        if plan.instrument.name == "lab.toml":
+            assert plan.environment is None, path
+        else:
+            assert plan.environment.temperature_c == 21.5, path
+            assert plan.environment.notes.startswith("declared for the emulated room"), path
 
 
 @pytest.mark.parametrize("change, message", [
