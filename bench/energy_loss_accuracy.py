@@ -19,9 +19,11 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
+from scipy import integrate
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "bsdf_ms")]
@@ -85,6 +87,7 @@ def main() -> None:
     quick = "--quick" in sys.argv
     alphas = (1e-3, 1.0) if quick else ALPHAS
     thetas = (45.0, 89.0) if quick else THETAS_DEG
+    warnings.simplefilter("ignore", integrate.IntegrationWarning)  # the reference's own
     baseline = baseline_energy_loss()
     print("load average {:.2f} {:.2f} {:.2f} (1, 5, 15 min)".format(*os.getloadavg()))
     print(f"reference: tests/bsdf_ms/energy_reference.py; baseline: energy.py at "
@@ -104,6 +107,11 @@ def main() -> None:
                     rows.append((error(value, reference), error(old, reference),
                                  f"{alpha:g}, {theta_deg:g}", seconds, old_seconds))
             print(block_row(f"{medium} {name}", rows))
+    theta = np.radians(89.0)
+    print(f"Beckmann 1.0, eta 1/1.51, 89 deg: energy_loss "
+          f"{energy_loss('beckmann', 1.0, 1.0 / 1.51, theta):.6f}, baseline "
+          f"{baseline('beckmann', 1.0, 1.0 / 1.51, theta):.6f}, reference "
+          f"{loss('beckmann', 1.0, 1.0 / 1.51, theta):.6f}")
     print("load average {:.2f} {:.2f} {:.2f} (1, 5, 15 min)".format(*os.getloadavg()))
 
 

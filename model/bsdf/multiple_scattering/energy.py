@@ -21,7 +21,8 @@ from model.bsdf.multiple_scattering.walk import flip, walkable
 #: Gauss-Legendre nodes per panel, halvings of the panels towards each end of a stretch
 #: between breakpoints, and stretches of the facets' tilt (0 to pi/2) split apart.
 PANEL_NODES = 5
-GRADING = 12
+GRADING = 10
+GRADING_RATIO = 0.4
 ARC_PANELS = 6
 #: Azimuth: relative tolerance of the adaptive Gauss-Kronrod rule, the most halvings of a
 #: panel, and breakpoints about phi = pi/2 in units of the grazing visibility scale (those
@@ -59,7 +60,7 @@ def gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
 def _graded_unit_rule() -> tuple[np.ndarray, np.ndarray]:
     """Nodes and weights on [0, 1]: PANEL_NODES-point panels halving towards both ends
     GRADING times, so a stretch resolves what happens within 2^-GRADING of a breakpoint."""
-    edges = 0.5 * 0.5 ** np.arange(GRADING + 1)
+    edges = 0.5 * GRADING_RATIO ** np.arange(GRADING + 1)
     edges = np.concatenate([[0.0], edges[::-1], 1.0 - edges[1:], [1.0]])
     x, w = gauss_legendre_unit(PANEL_NODES)
     width = np.diff(edges)
