@@ -18,8 +18,9 @@ from model.bsdf.fresnel import dielectric_reflectance_transmittance
 from model.bsdf.masking import check_masking, log_beta
 from model.bsdf.multiple_scattering.walk import flip, walkable
 
-#: Gauss-Legendre nodes per panel, halvings of the panels towards each end of a stretch
-#: between breakpoints, and stretches of the facets' tilt (0 to pi/2) split apart.
+#: Gauss-Legendre nodes per panel, how many times and by what ratio the panels shrink towards
+#: each end of a stretch between breakpoints, and stretches of the facets' tilt (0 to pi/2)
+#: split apart.
 PANEL_NODES = 5
 GRADING = 10
 GRADING_RATIO = 0.4
@@ -58,8 +59,9 @@ def gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _graded_unit_rule() -> tuple[np.ndarray, np.ndarray]:
-    """Nodes and weights on [0, 1]: PANEL_NODES-point panels halving towards both ends
-    GRADING times, so a stretch resolves what happens within 2^-GRADING of a breakpoint."""
+    """Nodes and weights on [0, 1]: PANEL_NODES-point panels shrinking by GRADING_RATIO towards
+    both ends GRADING times, so a stretch resolves what happens near a breakpoint (the loss's
+    square-root and 1/elevation^2 behaviour at total internal reflection and the horizons)."""
     edges = 0.5 * GRADING_RATIO ** np.arange(GRADING + 1)
     edges = np.concatenate([[0.0], edges[::-1], 1.0 - edges[1:], [1.0]])
     x, w = gauss_legendre_unit(PANEL_NODES)
