@@ -34,7 +34,6 @@ from gonio.store import (
     READINGS,
     Lines,
     Run,
-    digest_problems,
     digests,
     encode_line,
     fsync_dir,
@@ -104,7 +103,7 @@ def check(run: Run, found: Sequence[str] = ()) -> Report:
     if lines.missing() and pending:
         notes.append(f"repaired copy: {describe_indices(lines.missing())} still to measure "
                      f"(gonio scan --resume {run.path})")
-    repairable = bool(lines.damaged or set(problems) - set(digest_problems(run)))
+    repairable = bool(lines.damaged or set(problems) - set(run.digest_damage))
     return Report(run, lines, problems, notes, completeness_of(run, len(lines.rows)), repairable)
 
 

@@ -407,25 +407,38 @@ class Run:
         (`meta`: as read since the run was opened, else the run's) and these lines say:
         meta.json's own (gonio.run_rules), the digests, readings lost, sessions and counts."""
         meta = self.meta if meta is None else meta
-        return (meta_problems(meta) + digest_problems(self)
+        return (meta_problems(meta) + self.digest_damage
                 + lost_and_session_problems(meta, lines, self.path))
 
-    def rows(self) -> list[dict[str, Any]]:
-        """The readings as dicts, by index (a torn last line is ignored); DamagedRunError
-        naming the first damage (a line, or a problem of `problems`) unless `force`."""
+    @functools.cached_property
+    def digest_damage(self) -> list[str]:
+        """digest_problems of the run, worked out once: the plan and config it compares were
+        read when the run was opened, the register maps are read here (a live view asks for
+        the run's problems at every poll)."""
+        return digest_problems(self)
+
+    def checked(self) -> tuple[Lines, list[str]]:
+        """The lines as they are now, and the run's `problems` with them."""
         lines = self.lines()
-        problems = self.problems(lines)
+        return lines, self.problems(lines)
+
+    def refuse_damage(self) -> Lines:
+        """The lines, once checked: DamagedRunError naming the first damage (a line, or a
+        problem of `problems`) unless `force`."""
+        lines, problems = self.checked()
         if (lines.damaged or problems) and not self.force:
             raise DamagedRunError(damage_message(self.path, lines, problems))
-        return lines.rows
+        return lines
+
+    def rows(self) -> list[dict[str, Any]]:
+        """The readings as dicts, by index (a torn last line is ignored), once refuse_damage
+        lets them be read."""
+        return self.refuse_damage().rows
 
     @functools.cached_property
     def read_past(self) -> list[str]:
         """The damage a read with `force` goes past ([] without force), one entry each."""
-        if not self.force:
-            return []
-        lines = self.lines()
-        return damage_list(lines, self.problems(lines))
+        return damage_list(*self.checked()) if self.force else []
 
     def resumable_lines(self) -> Lines:
         """The lines, once the run is found fit to resume: DamagedRunError for damage resume

@@ -47,18 +47,20 @@ def gate_runs(verb: str, args: argparse.Namespace) -> None:
     progress, not incomplete, and a directory that is no run is left to the verb's own error
     (one line)."""
     from gonio.completeness import being_written, completeness_of
-    from gonio.store import DamagedRunError, damage_message, open_run
+    from gonio.store import DamagedRunError, open_run
 
     force = bool(getattr(args, "force", False))
     for path in runs_read(args):
         try:
             run = open_run(path, force=force)
-            lines = run.lines()
-            problems = run.problems(lines)
         except (GonioError, OSError):
             continue
-        if (lines.damaged or problems) and not force:
-            raise DamagedRunError(damage_message(run.path, lines, problems))
+        try:
+            lines = run.refuse_damage()
+        except DamagedRunError:
+            raise
+        except (GonioError, OSError):
+            continue
         if being_written(run) and not run.read_past:
             continue
         found = completeness_of(run, len(lines.rows))
