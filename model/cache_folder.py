@@ -14,6 +14,7 @@ import errno
 import os
 import stat
 import warnings
+from collections.abc import Callable, Iterable
 from functools import cache
 from pathlib import Path
 from typing import BinaryIO
@@ -68,6 +69,18 @@ def made_private(folder: Path) -> str | None:
     the disk refuses to create it."""
     folder.mkdir(mode=0o700, exist_ok=True)
     return untrusted(folder)
+
+
+def all_trusted(what: str, folders: Iterable[Path],
+                judge: Callable[[Path], str | None] = untrusted) -> bool:
+    """Whether every folder passes `judge` (untrusted, or made_private to create them); the
+    first that does not is warned about (warn_untrusted: `what` is the cache's name)."""
+    for folder in folders:
+        reason = judge(folder)
+        if reason is not None:
+            warn_untrusted(what, str(folder), reason)
+            return False
+    return True
 
 
 @cache

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 
-from model.cache_folder import untrusted, warn_untrusted
+from model.cache_folder import all_trusted
 
 ROOT = Path(__file__).resolve().parent
 #: Where the sources' digest lives, beside numba's own cache files of this package.
@@ -108,12 +108,7 @@ def _tolerant_cache() -> type:
             if isinstance(self._impl.locator, InTreeCacheLocator):
                 return True
             folder = Path(self.cache_path)
-            for path in (folder, folder.parent):
-                reason = untrusted(path)
-                if reason is not None:
-                    warn_untrusted("numba's kernel cache", str(path), reason)
-                    return False
-            return True
+            return all_trusted("numba's kernel cache", (folder, folder.parent))
 
     return TolerantCache
 

@@ -28,10 +28,10 @@ import numpy as np
 
 from model.cache_folder import (
     UntrustedFile,
+    all_trusted,
     made_private,
     private_file,
     untrusted,
-    warn_untrusted,
 )
 
 #: The subdirectory of the cache directory that holds the planes.
@@ -168,12 +168,10 @@ class PlaneStore:
             return False
         if create:
             self.root.parent.mkdir(parents=True, exist_ok=True)
-        for folder in (self.root, self.folder):
-            reason = made_private(folder) if create else untrusted(folder)
-            if reason is not None:
-                warn_untrusted("gonio's table cache", str(folder), reason)
-                self._refused = True
-                return False
+        if not all_trusted("gonio's table cache", (self.root, self.folder),
+                           made_private if create else untrusted):
+            self._refused = True
+            return False
         self._private = self.folder.is_dir()
         return True
 
