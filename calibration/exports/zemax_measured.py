@@ -156,10 +156,11 @@ def _fill_block(table: ZemaxTable, r: int, a: int, theta_i_deg: float, points: R
                  - hemisphere_integral(lambda w: model(turned(w, -rotation)), scatter_type,
                                        angle, width_deg))
     u_data = math.hypot(*points.linear_uncertainty(np.tensordot(weights, coefficient, 2)))
+    at_points = model(points.wo)
     u_interp = abs(float(np.sum(weights * interpolated
-                                * (coefficient @ model(points.wo) - model_cells))))
+                                * (coefficient @ at_points - model_cells))))
     model_share = float(np.sum(weights * np.where(from_data, 0.0, model_cells)))
-    u_fill = _fill_uncertainty(points, model, model_share)
+    u_fill = _fill_uncertainty(points, at_points, model_share)
     return (f"measured at {int(measured.sum())} of its {int(inside.sum())} cells, interpolated "
             f"between them at {int((interpolated & inside).sum())}, {model_name} at the other "
             f"{int((inside & ~from_data).sum())}"
@@ -201,12 +202,11 @@ def _cell_weights(azimuth_at: np.ndarray, radial_at: np.ndarray, azimuth: np.nda
     return coefficient, measured, interpolated
 
 
-def _fill_uncertainty(points: ReducedData, model: Callable[[np.ndarray], np.ndarray],
-                      model_share: float) -> float:
+def _fill_uncertainty(points: ReducedData, expected: np.ndarray, model_share: float) -> float:
     """Standard uncertainty of the modelled cells' share of a TIS: that share times the RMS
-    relative difference between the model and the block's measured values (how far the model
-    is seen to stray from the data where both are known; a block without data: all of it)."""
-    expected = model(points.wo)
+    relative difference between the model (`expected` at the block's points) and their
+    measured values (how far the model is seen to stray from the data where both are known;
+    a block without data: all of it)."""
     keep = expected > 0
     if not keep.any():
         return abs(model_share)
