@@ -19,7 +19,7 @@ import numpy as np
 
 from calibration.detector import correct_power
 from calibration.values import CalibrationError, Measured
-from drivers.user_file import SETTINGS_FILE_CAP, read_user_file, read_user_text
+from drivers.user_file import SETTINGS_FILE_CAP, read_user_file, user_text
 
 FORMAT = "gonio-calibration/1"
 
@@ -120,39 +120,46 @@ def save(cal: Calibration, path: str | Path) -> Path:
 def load(path: str | Path) -> Calibration:
     """Read a calibration file (.json, or .toml with the same structure)."""
     path = Path(path)
-    text = read_user_text(path, "calibration file", SETTINGS_FILE_CAP, CalibrationError)
-    try:
-        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    except (ValueError, tomllib.TOMLDecodeError) as exc:
-        raise CalibrationError(f"{path}: not valid {path.suffix[1:] or 'JSON'}: {exc}") from exc
-    return Calibration.from_json(data, str(path))
+    return _parsed(path, _read(path))
 
 
 def reference(path: str | Path) -> dict[str, str]:
     """What a run's meta.json records about the calibration file it used."""
     path = Path(path).resolve()
-    cal = load(path)
-    return {"file": str(path), "sha256": _sha256(path), "created_utc": cal.created_utc}
+    data = _read(path)
+    return {"file": str(path), "sha256": hashlib.sha256(data).hexdigest(),
+            "created_utc": _parsed(path, data).created_utc}
 
 
 def used_by(meta: dict[str, Any]) -> Calibration | None:
-    """The calibration a run's meta records (None if none), checked against its hash."""
+    """The calibration a run's meta records (None if none), checked against its hash: the
+    bytes hashed are the bytes parsed."""
     ref = meta.get("calibration")
     if not ref:
         return None
     path = Path(ref["file"])
     if not path.exists():
         raise CalibrationError(f"the run's calibration file {path} is missing")
-    if _sha256(path) != ref.get("sha256"):
+    data = _read(path)
+    if hashlib.sha256(data).hexdigest() != ref.get("sha256"):
         raise CalibrationError(f"the run's calibration file {path} changed after the run "
                                "recorded it (sha256 differs)")
-    return load(path)
+    return _parsed(path, data)
 
 
-def _sha256(path: Path) -> str:
-    """The hex sha256 of a calibration file's contents (read bounded: drivers.user_file)."""
-    data = read_user_file(path, "calibration file", SETTINGS_FILE_CAP, CalibrationError)
-    return hashlib.sha256(data).hexdigest()
+def _read(path: Path) -> bytes:
+    """A calibration file's contents, read bounded (drivers.user_file)."""
+    return read_user_file(path, "calibration file", SETTINGS_FILE_CAP, CalibrationError)
+
+
+def _parsed(path: Path, data: bytes) -> Calibration:
+    """The calibration the contents `data` of the file `path` hold (JSON, or TOML by suffix)."""
+    text = user_text(data, path, "calibration file", CalibrationError)
+    try:
+        parsed = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except (ValueError, tomllib.TOMLDecodeError) as exc:
+        raise CalibrationError(f"{path}: not valid {path.suffix[1:] or 'JSON'}: {exc}") from exc
+    return Calibration.from_json(parsed, str(path))
 
 
 def apply(readings: np.ndarray, cal: Calibration) -> np.ndarray:

@@ -62,7 +62,13 @@ def read_user_file(path: str | Path, what: str, cap: int, error: type[Exception]
 
 def read_user_text(path: str | Path, what: str, cap: int, error: type[Exception]) -> str:
     """read_user_file decoded as UTF-8 (`error` if it is not text)."""
+    return user_text(read_user_file(path, what, cap, error), path, what, error)
+
+
+def user_text(data: bytes, path: str | Path, what: str, error: type[Exception]) -> str:
+    """The bytes of the user's file `path` (a `what`) decoded as UTF-8 (`error` if they are
+    not text)."""
     try:
-        return read_user_file(path, what, cap, error).decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise error(f"{path}: {what} is not a text file (UTF-8)") from None
