@@ -24,6 +24,14 @@ START_SESSION = {"at": "open", "match": r"-ends/meta\.json\.tmp$"}  # meta.json 
 CLOSE_DEVICES = {"at": "call", "match": r"gonio/instrument\.py:close_all$"}
 
 
+def default_signals() -> None:
+    """The scan's signals at their defaults, as in a terminal's foreground job: a suite run
+    under nohup, or as a background job, passes them on ignored, and the scan keeps a signal
+    ignored on entry (gonio.run_control)."""
+    for sig in (signal.SIGHUP, signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def scan_at(tmp_path: Path, steps: list[dict]) -> subprocess.CompletedProcess:
     """`gonio scan PLAN --sim` into tmp_path/runs, taking `steps` (scan_at_points.py); every
     step is checked to have been taken."""
@@ -34,7 +42,7 @@ def scan_at(tmp_path: Path, steps: list[dict]) -> subprocess.CompletedProcess:
                            "--sim", "--out", str(tmp_path / "runs"), "--no-plot",
                            "--no-progress"], capture_output=True, text=True, cwd=ROOT,
                           env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120,
-                          stdin=subprocess.DEVNULL)
+                          stdin=subprocess.DEVNULL, preexec_fn=default_signals)
     taken = steps_file.with_name("steps.json.taken")
     assert taken.exists() and len(taken.read_text().split()) == len(steps), proc.stderr
     assert "Traceback" not in proc.stderr, proc.stderr
