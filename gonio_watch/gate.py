@@ -201,7 +201,8 @@ class Gate:
         self._listen_again()
 
     def stop(self) -> None:
-        """End `run` (returns once it has, if it was running) and the workers."""
+        """End `run` (returns once it has, if it was running) and the workers, once the
+        requests already read are answered (each within its write time)."""
         self._stop.set()
         try:
             self._wake_w.send(b"x")
@@ -211,6 +212,8 @@ class Gate:
             self._done.wait()
         for _ in self._workers:
             self._queue.put(None)
+        for worker in self._workers:  # a reply being written is finished, not cut off
+            worker.join(self.limits.write_s)
         self._wake_r.close()
         self._wake_w.close()
 

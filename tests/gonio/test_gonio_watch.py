@@ -430,22 +430,36 @@ def test_scan_watch_serves_the_run_beside_the_scan(tmp_path):
             url = line.split()[-1]
             break
     assert url and url.startswith("http://127.0.0.1:")
-    conn = http.client.HTTPConnection("127.0.0.1", urlsplit(url).port)
-    keyed = f"/status.json?{urlsplit(url).query}"
-    conn.request("GET", keyed)
-    doc = json.loads(conn.getresponse().read())
-    assert doc["readings"] < doc["planned"]
+    port, keyed = urlsplit(url).port, f"/status.json?{urlsplit(url).query}"
+
+    def status() -> dict:
+        conn = http.client.HTTPConnection("127.0.0.1", port, timeout=60)
+        try:
+            conn.request("GET", keyed)
+            return json.loads(conn.getresponse().read())
+        finally:
+            conn.close()
+
+    first = status()
+    assert first["readings"] < first["planned"]
+    seen: list[str] = []
+
+    def page() -> None:  # asks as an open page does, until the viewer has gone
+        try:
+            while not threading.Event().wait(0.05):
+                seen.append(status()["status"])
+        except OSError:
+            pass
+
+    asking = threading.Thread(target=page, daemon=True)
+    asking.start()
     rest = []  # stderr stays open while the viewer, which shares it, lingers
     threading.Thread(target=lambda: rest.extend(proc.stderr), daemon=True).start()
     out = proc.stdout.read()
     assert proc.wait(timeout=120) == 0, rest
     run = open_run(out.strip().splitlines()[-1])
-    assert run.meta["status"] == "completed" and doc["run"] == run.path.name
-    assert doc["planned"] == run.meta["planned"] == len(run.rows())
-    def status() -> str:
-        conn.request("GET", keyed)
-        return json.loads(conn.getresponse().read())["status"]
-
-    # the viewer saw the page ask, so it lingers until told the end
-    wait_until(lambda: status() == "completed", what="the viewer showing the run's end",
-               poll_s=0.1)
+    assert run.meta["status"] == "completed" and first["run"] == run.path.name
+    assert first["planned"] == run.meta["planned"] == len(run.rows())
+    # the viewer saw the page ask, so it lingered until the page was told the end
+    asking.join(timeout=120)
+    assert not asking.is_alive() and seen[-1] == "completed", seen[-5:]
