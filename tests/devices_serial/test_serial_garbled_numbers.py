@@ -10,6 +10,7 @@ import pytest
 from garbling import reads_through_faults
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from waiting import HANG_S
 
 from drivers.base import ProtocolError
 from drivers.esp import decimal_parser
@@ -87,8 +88,9 @@ def test_pm100_no_garbled_reading_reaches_the_caller(pm_pair):
 
 def test_pm100_without_retries_every_dropped_byte_is_a_protocol_error(pm_pair):
     """Numbers, separators and the `0,"No error"` status all have fixed shapes, so a reply
-    that lost any byte (positive readings: no sign to lose) is rejected."""
-    emu, pm = pm_pair(power_w=1.234567e-6, detector=QUIET, retries=0)
+    that lost any byte (positive readings: no sign to lose) is rejected. Every reply ends, so
+    the timeout is only a hang guard: a stall under load is not a dropped byte."""
+    emu, pm = pm_pair(power_w=1.234567e-6, detector=QUIET, retries=0, timeout_s=HANG_S)
     emu.server.faults = FaultInjector(FaultSpec(drop_prob=1.0, seed=4))
     for _ in range(200):
         with pytest.raises(ProtocolError, match="pm100: "):
