@@ -1,9 +1,9 @@
 """An independent order 2 of the random walk on a Smith microsurface (Heitz et al. 2016) for one
-direction pair: nested adaptive scipy quadrature over the first event's outgoing direction of
-both events' phase functions times the expectation over both heights (derived in closed form
-here, one 1-D quadrature where there is none), its own phase functions, visible areas and
-height integrals, with D, Lambda and Fresnel from energy_reference. Shared by
-tests/bsdf_ms/test_ms_dark_tail.py; docs/multiple-scattering.md, "The dark tail".
+direction pair of a glass lit from air: nested adaptive scipy quadrature over the first event's
+outgoing direction of both events' phase functions times the expectation over both heights
+(derived here in closed form); its own phase functions, visible areas and height integrals, D,
+Lambda and Fresnel from energy_reference. Used by tests/bsdf_ms/test_ms_dark_tail.py;
+docs/multiple-scattering.md, "The dark tail".
 
 Order 2 of f |cos o| is the sum over the first event's lobes (reflected: w1 anywhere in the
 medium above; transmitted: w1 in the glass) of the integral over w1 of p1(wi -> w1) H p2(-d1 ->
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 from scipy import integrate, optimize
-from scipy.special import betainc, betaln, digamma
+from scipy.special import betaln, digamma
 
 from tests.bsdf_ms.energy_reference import fresnel, lam, ndf
 
@@ -60,10 +60,10 @@ def _scaled_area(name: str, alpha: float, w: np.ndarray) -> tuple[float, float]:
     return -w[2], _lambda(name, alpha, -w)
 
 
-def _reflect_phase(name: str, alpha: float, el: float | None, w_in: np.ndarray,
-                   w_out: np.ndarray) -> float:
-    """F D(h) / 4 (F = 1 for el None, a mirror): the reflection phase function times the
-    projected area of w_in (one side's frame, index ratio el)."""
+def _reflect_phase(name: str, alpha: float, el: float, w_in: np.ndarray, w_out: np.ndarray
+                   ) -> float:
+    """F D(h) / 4: the reflection phase function times the projected area of w_in (one side's
+    frame, index ratio el)."""
     h = w_in + w_out
     norm = np.linalg.norm(h)
     if norm == 0.0 or h[2] <= 0.0:
@@ -72,7 +72,7 @@ def _reflect_phase(name: str, alpha: float, el: float | None, w_in: np.ndarray,
     c = float(w_in @ h)
     if c <= 0.0:
         return 0.0
-    return (1.0 if el is None else fresnel(c, el)) * _ndf(name, alpha, h) / 4.0
+    return fresnel(c, el) * _ndf(name, alpha, h) / 4.0
 
 
 def _transmit_phase(name: str, alpha: float, el: float, w_in: np.ndarray, w_out: np.ndarray
@@ -107,20 +107,13 @@ def _heights_up(a0: float, up: float, transmitted: bool, own: float | None,
     escaping on d1's side (own: its Lambda) or through the other side (other).
     Reflected first (u2 in (u1, 1), then u1): own a0 / ((a0 + l)(a0 + own)), other
     a0 B(a0, other + 1) / (a0 + l). Transmitted first (glass CDF v = 1 - u): own
-    a0 (B(a0, l + 1) - B(a0, own + 1)) / (own - l); other, the integral over v2 of
-    v2^(-l - 1) (1 - v2)^other a0 B(l + 1, a0) I_v2(l + 1, a0) (u1 first)."""
+    a0 (B(a0, l + 1) - B(a0, own + 1)) / (own - l); never other, as no phase function refracts
+    a ray travelling away from the interface in the glass back out."""
     if not transmitted:
         if own is not None:
             return a0 / ((a0 + up) * (a0 + own))
         return a0 * math.exp(betaln(a0, other + 1.0)) / (a0 + up)
-    if own is not None:
-        return -a0 * _beta_quotient(up + 1.0, own + 1.0, a0)
-    scale = a0 * math.exp(betaln(up + 1.0, a0))
-
-    def inner(v):
-        return v ** (-up - 1.0) * (1.0 - v) ** other * betainc(up + 1.0, a0, v)
-
-    return scale * integrate.quad(inner, 0.0, 1.0, epsabs=0.0, epsrel=EPSREL, limit=LIMIT)[0]
+    return -a0 * _beta_quotient(up + 1.0, own + 1.0, a0)
 
 
 def _heights_down(a0: float, down: float, own: float | None, other: float | None) -> float:
@@ -133,17 +126,15 @@ def _heights_down(a0: float, down: float, own: float | None, other: float | None
 
 
 class SecondOrder:
-    """Order 2 of f |cos o| from wi (above) to wo of a glass (eta, light from air) or, with eta
-    None, a mirror (F = 1), slopes `name` with roughness alpha (isotropic)."""
+    """Order 2 of f |cos o| from wi (above) to wo of a glass (eta, light from air), slopes
+    `name` with roughness alpha (isotropic)."""
 
-    def __init__(self, name: str, alpha: float, eta: float | None, wi, wo):
+    def __init__(self, name: str, alpha: float, eta: float, wi, wo):
         self.name, self.alpha, self.eta = name, float(alpha), eta
         self.wi = np.asarray(wi, float) / np.linalg.norm(wi)
         self.wo = np.asarray(wo, float) / np.linalg.norm(wo)
         if self.wi[2] <= 0.0:
             raise ValueError("wi must be above the surface")
-        if eta is None and self.wo[2] <= 0.0:
-            raise ValueError("a mirror sends nothing below")
         self.a0 = 1.0 + _lambda(name, alpha, self.wi)
         self.area_i = self.wi[2] * self.a0
         # wo's escape Lambda on its own side (its frame's upward image)
@@ -151,8 +142,6 @@ class SecondOrder:
 
     def _phase(self, reflect: bool, outside: bool, w_in, w_out) -> float:
         """Phase function of an event on the air (outside) or glass side times w_in's area."""
-        if self.eta is None:
-            return _reflect_phase(self.name, self.alpha, None, w_in, w_out)
         el = self.eta if outside else 1.0 / self.eta
         if reflect:
             return _reflect_phase(self.name, self.alpha, el, w_in, w_out)
@@ -186,7 +175,7 @@ class SecondOrder:
         at w1_z = -wi_z, the second's at d1_z = wo_z (reflected) or el wo_z (transmitted)."""
         z = [0.0] if transmitted else [0.0, -self.wi[2]]
         wo = _flip(self.wo) if transmitted else self.wo
-        el = 1.0 if self.eta is None else (1.0 / self.eta if transmitted else self.eta)
+        el = 1.0 / self.eta if transmitted else self.eta
         d1_z = wo[2] if wo[2] > 0.0 else el * wo[2]
         z.append(-d1_z if transmitted else d1_z)
         return [math.acos(c) for c in z if -1.0 < c < 1.0]
@@ -224,8 +213,6 @@ class SecondOrder:
         """(value, error estimate) of one lobe: nested adaptive quadrature, w1's polar angle
         outside (split at the support edges and the peaks), its azimuth inside (split at the
         planes of wi and wo and at the peaks)."""
-        if transmitted and self.eta is None:
-            return 0.0, 0.0
         lo = 0.5 * math.pi if transmitted else 0.0
         peaks = self.peaks(transmitted)
         panels = np.linspace(lo, math.pi, POLAR_PANELS + 1)[1:-1].tolist()
