@@ -3,7 +3,8 @@ about the specular direction (calibration.integrals), and the interpolation betw
 rows. A row is the set of points at one azimuth about the side's normal (an in-plane scan has
 two: forward and backward); between two neighbouring rows and inside both rows' range of angles
 from the normal a cell is covered by the data (linear in that angle along each row, linear in
-azimuth between the rows), elsewhere it is not."""
+azimuth between the rows); beyond the rows' range each row's end value holds (or, to estimate
+that hold's error, the row's end interval continues)."""
 
 from __future__ import annotations
 
@@ -73,17 +74,18 @@ def side_coordinates(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class RowInterpolation:
-    """Cell values from point values, linear in the points: a covered cell gets
-    `linear[cell] @ values`, and `nearest[cell] @ values` takes the nearest row's value alone
-    (the cruder rule in azimuth, whose difference from the linear one measures the azimuthal
-    interpolation's error)."""
+    """Cell values from point values, linear in the points: a cell gets
+    `linear[cell] @ values` (inside the rows' radial range where `covered`, held or continued
+    beyond it), and `nearest[cell] @ values` takes the nearest row's value alone (the cruder
+    rule in azimuth, whose difference from the linear one measures the azimuthal
+    interpolation's error); a cell no row reaches has zero coefficients."""
 
     linear: np.ndarray  # (..., n_points)
     nearest: np.ndarray  # (..., n_points)
     covered: np.ndarray  # (...) bool
 
 
-def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: int | None
+def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: tuple[int, int] | None
           ) -> dict[float, tuple[np.ndarray, np.ndarray]]:
     """Per row azimuth: (radial nodes, (n_nodes, n_points) coefficients averaging the points at
     each node). Points at the normal itself belong to every row, and the opposite row's points
@@ -110,15 +112,17 @@ def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: int | Non
         np.add.at(coefficient, (which, at), 1.0)
         keep = np.ones(len(nodes), bool)
         if thin is not None:
-            keep[1:-1] = np.arange(1, len(nodes) - 1) % 2 != thin
+            stride, phase = thin
+            keep[1:-1] = np.arange(1, len(nodes) - 1) % stride == phase
         rows[key] = (nodes[keep], (coefficient / coefficient.sum(axis=1, keepdims=True))[keep])
     return rows
 
 
-def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
+def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray, extrapolate: bool
            ) -> tuple[np.ndarray, np.ndarray]:
     """(linear, inside) of one row at radial angles (N,): (N, n_points) coefficients and
-    whether each radial angle lies within the row's nodes."""
+    whether each radial angle lies within the row's nodes; beyond the row's ends the end
+    node's value holds, or with `extrapolate` the end interval's line continues."""
     inside = (radial >= nodes[0]) & (radial <= nodes[-1])
     hi = np.clip(np.searchsorted(nodes, radial), 1, max(len(nodes) - 1, 1))
     lo = hi - 1
@@ -126,18 +130,19 @@ def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
         lo = hi = np.zeros(len(radial), int)
     span = nodes[hi] - nodes[lo]
     s = np.where(span > 0, (radial - nodes[lo]) / np.where(span > 0, span, 1.0), 0.0)
-    s = np.clip(s, 0.0, 1.0)[:, None]
+    s = (s if extrapolate else np.clip(s, 0.0, 1.0))[:, None]
     return (1 - s) * coefficient[lo] + s * coefficient[hi], inside
 
 
 def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth: np.ndarray,
-                      radial: np.ndarray, mirror: bool, thin: int | None = None
-                      ) -> RowInterpolation:
+                      radial: np.ndarray, mirror: bool, thin: tuple[int, int] | None = None,
+                      extrapolate: bool = False) -> RowInterpolation:
     """The interpolation of point values at (azimuth, radial) (degrees, side_coordinates) onto
     cells at (cell_azimuth, cell_radial): linear along each row and, circularly, between the
-    two rows either side of a cell where it lies inside both rows' radial range; no cell is
-    covered with fewer than two rows. `thin`: every other inner node of each row only
-    (_rows)."""
+    two rows either side of a cell; covered where the cell lies inside both rows' radial
+    range, beyond it each row's end value held (or its end interval's line continued:
+    `extrapolate`); with fewer than two rows nothing is covered or reached. `thin` (stride,
+    phase): every stride-th inner node of each row only (_rows)."""
     shape, n = cell_azimuth.shape, len(azimuth)
     chi, theta = cell_azimuth.ravel(), cell_radial.ravel()
     rows = _rows(azimuth, radial, mirror, thin)
@@ -146,7 +151,7 @@ def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth
                                 np.zeros(shape, bool))
     keys = sorted(rows)
     linear_rows, inside_rows = (np.stack(a) for a in zip(
-        *(_along(*rows[key], theta) for key in keys), strict=True))
+        *(_along(*rows[key], theta, extrapolate) for key in keys), strict=True))
     bounds = np.array([*keys, keys[0] + 360.0])
     chi = np.where(chi >= keys[0], chi, chi + 360.0)
     k = np.clip(np.searchsorted(bounds, chi, side="right") - 1, 0, len(keys) - 1)

@@ -43,10 +43,6 @@ GLOSS_WINDOWS_DEG = {20.0: (1.8, 3.6), 60.0: (4.4, 11.7), 85.0: (4.0, 6.0)}
 GLOSS_STANDARD_INDEX = 1.567
 #: A block's incidence matches a gloss geometry within this, degrees.
 GLOSS_INCIDENCE_TOL_DEG = 0.5
-#: The share of the change, when every other node of a row is left out, taken as the
-#: interpolation's error along the rows: 1 (Richardson's 1/3 holds for nodes that resolve the
-#: lobe, which the coverage study, bench/integral_coverage.py, shows 10 deg nodes do not).
-THINNING_SHARE = 1.0
 #: Components of an integral's standard uncertainty, in the order tables show them.
 COMPONENTS = ("noise", "shared", "interpolation", "model_parameters", "model_form")
 #: What each quantity is, for tables and files.
@@ -89,17 +85,21 @@ class Integral:
 class Block:
     """The data and fitted model of one incidence and side on its cells: the model at the
     cells and the points, the data's residual from it interpolated (linearly, from the nearest
-    row, from every other node), the model's change with each fitted parameter (one sigma),
-    and its relative misfit beyond the data's noise."""
+    row, from every other and every fourth node, continued linearly beyond the rows' ends),
+    the model's change with each fitted parameter (one sigma), and its relative misfit beyond
+    the data's noise."""
 
     theta_i_deg: float
     grid: Cells
     points: ReducedData
     model_cells: np.ndarray  # (n_az, n_rad)
-    residual_linear: np.ndarray  # (n_az, n_rad): the data's residual interpolated (0: not covered)
+    residual_linear: np.ndarray  # (n_az, n_rad): the data's residual interpolated (0: no rows)
     residual_nearest: np.ndarray  # the nearest row's alone (in azimuth)
-    residual_thinned: np.ndarray  # (2, n_az, n_rad): from every other inner node of each row
+    residual_halves: np.ndarray  # (2, n_az, n_rad): from every other inner node of each row
+    residual_quarters: np.ndarray  # (4, n_az, n_rad): from every fourth inner node
+    residual_continued: np.ndarray  # beyond the rows' ends their end intervals' lines
     covered: np.ndarray
+    reached: np.ndarray  # cells the rows' residual reaches (all of them with two rows or more)
     gradient_basis: np.ndarray  # (n_az, n_rad, n): d(cell value)/d(point value)
     parameter_steps: np.ndarray  # (n_params, n_az, n_rad): model change per parameter's sigma
     parameter_correlation: np.ndarray
@@ -113,20 +113,36 @@ class Block:
         """sum(weight * f) over the cells."""
         return float(np.sum(weight * self.estimate))
 
+    def _along(self, weight: np.ndarray) -> float:
+        """The interpolation's error along the rows, by Richardson: the change d1 when every
+        other node is left out and d2 when every other of those is, their ratio q = d1 / d2
+        (2^-p for an interpolation of order p) giving d1 q / (1 - q); d1 itself where q is
+        1/2 or more (nodes that do not resolve the residual's change)."""
+        def integral(residual: np.ndarray) -> np.ndarray:
+            return np.sum(weight * residual, axis=(-2, -1))
+
+        halves = integral(self.residual_halves)
+        d1 = math.sqrt(float(np.mean((halves - integral(self.residual_linear)) ** 2)))
+        d2 = math.sqrt(float(np.mean((integral(self.residual_quarters) - halves[[0, 1, 0, 1]])
+                                     ** 2)))
+        q = d1 / d2 if d2 > 0 else 0.0 if d1 == 0 else 1.0
+        return d1 * (q / (1.0 - q) if q < 0.5 else 1.0)
+
     def components(self, weight: np.ndarray) -> dict[str, float]:
         """The standard uncertainty's components of sum(weight * f) (COMPONENTS)."""
         fill = ~self.covered
         gradient = np.tensordot(weight, self.gradient_basis, 2)
         noise, shared = self.points.linear_uncertainty(gradient)
-        across = float(np.sum(weight * (self.residual_linear - self.residual_nearest)))
-        along = np.sum(weight * (self.residual_thinned - self.residual_linear), axis=(1, 2))
-        interpolation = math.hypot(across, THINNING_SHARE * math.sqrt(float(np.mean(along ** 2))))
+        across = float(np.sum(np.abs(weight * (self.residual_linear - self.residual_nearest))))
+        interpolation = math.hypot(across, self._along(weight))
         steps = np.sum(np.where(fill, weight, 0.0) * self.parameter_steps, axis=(1, 2))
         parameters = math.sqrt(max(float(steps @ self.parameter_correlation @ steps), 0.0))
-        form = self.misfit_rel * float(np.sum(np.where(fill, np.abs(weight), 0.0)
+        held = float(np.sum(np.where(fill, weight, 0.0)
+                            * (self.residual_continued - self.residual_linear)))
+        bare = self.misfit_rel * float(np.sum(np.where(self.reached, 0.0, np.abs(weight))
                                               * self.model_cells))
-        return dict(zip(COMPONENTS, (noise, shared, interpolation, parameters, form),
-                        strict=True))
+        return dict(zip(COMPONENTS, (noise, shared, interpolation, parameters,
+                                     math.hypot(held, bare)), strict=True))
 
     def model_share(self, weight: np.ndarray) -> float:
         """The share of sum(weight * f) that the model fill gives."""
@@ -210,13 +226,17 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
                              isotropic)
     floor = float(np.median(np.abs(points.bsdf))) or 1.0  # 1/sr where half the data are 0
     relative = (points.bsdf - model_points) / (model_points + floor)
-    scale = np.where(rows.covered, model_cells + floor, 0.0)
-    linear = scale * (rows.linear @ relative)
-    nearest = scale * (rows.nearest @ relative)
-    thinned = np.stack([scale * (row_interpolation(*side_coordinates(grid.wo),
-                                                   *side_coordinates(points.wo), isotropic,
-                                                   thin).linear @ relative)
-                        for thin in (0, 1)])
+    reached = grid.on_side & np.any(rows.linear != 0, axis=-1)
+    scale = np.where(reached, model_cells + floor, 0.0)
+
+    def residual(thin: tuple[int, int] | None = None, extrapolate: bool = False
+                 ) -> np.ndarray:
+        """The relative residual interpolated onto the cells and scaled back (the rows
+        thinned or continued: row_interpolation)."""
+        found = row_interpolation(*side_coordinates(grid.wo), *side_coordinates(points.wo),
+                                  isotropic, thin, extrapolate)
+        return scale * (found.linear @ relative)
+
     basis = scale[..., None] * rows.linear / (model_points + floor)
     steps = []
     for k, sigma in enumerate(result.errors):
@@ -227,8 +247,12 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
         steps.append(0.5 * (up - down))
     spread = np.sqrt(np.clip(np.diag(result.covariance), 1e-300, None))
     correlation = result.covariance / np.outer(spread, spread)
-    return Block(theta_i_deg, grid, points, model_cells, linear, nearest, thinned,
-                 rows.covered, basis, np.array(steps), correlation,
+    return Block(theta_i_deg, grid, points, model_cells, scale * (rows.linear @ relative),
+                 scale * (rows.nearest @ relative),
+                 np.stack([residual((2, k)) for k in range(2)]),
+                 np.stack([residual((4, k)) for k in range(4)]),
+                 residual(extrapolate=True), rows.covered, reached, basis, np.array(steps),
+                 correlation,
                  _misfit(points, model_points) if len(points.bsdf) else 0.0)
 
 
