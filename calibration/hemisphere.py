@@ -8,7 +8,6 @@ that hold's error, the row's end interval continues)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,13 +16,19 @@ from calibration.exports.zemax import on_side, scatter_directions
 
 #: Edges of the radial panels, degrees about the specular direction: the standards' cone and
 #: window edges (calibration.integrals) fall on panel edges, so their regions are integrated
-#: without a partial cell.
-PANEL_EDGES_DEG = (0.0, 0.9, 1.8, 2.0, 2.2, 2.5, 3.0, 5.0, 5.85, 10.0, 20.0, 30.0, 45.0, 60.0,
-                   75.0, 85.0, 90.0, 105.0, 120.0, 150.0, 180.0)
+#: without a partial cell; the panels narrow towards the specular direction, where a glossy
+#: lobe (Beckmann alpha 0.001 spans about 0.1 deg) must be resolved.
+PANEL_EDGES_DEG = (0.0, 0.05, 0.1, 0.2, 0.45, 0.9, 1.8, 2.0, 2.2, 2.5, 3.0, 5.0, 5.85, 10.0,
+                   20.0, 30.0, 45.0, 60.0, 75.0, 85.0, 90.0, 105.0, 120.0, 150.0, 180.0)
 #: Gauss-Legendre nodes per radial panel.
 PANEL_NODES = 6
-#: Azimuth cells about the specular direction (3 deg each).
-AZIMUTHS = 120
+#: Edges of the azimuth panels, degrees from the plane of incidence (0 and 180 deg about the
+#: specular direction), in each of the four quadrants: they narrow towards the plane, where a
+#: glossy lobe at grazing incidence, flattened across it by cos theta_i, lies within a few
+#: degrees of azimuth (Beckmann alpha 0.002 at 85 deg: about 5 deg).
+AZIMUTH_PANEL_EDGES_DEG = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 15.0, 30.0, 60.0, 90.0)
+#: Gauss-Legendre nodes per azimuth panel.
+AZIMUTH_PANEL_NODES = 4
 #: Rows' azimuths and radial nodes are matched to this many decimals of a degree.
 NODE_DECIMALS = 3
 
@@ -46,20 +51,27 @@ class Cells:
         return self.weight > 0
 
 
+def _panels(edges_deg: np.ndarray, nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, weights), radians, of Gauss-Legendre rules of `nodes` points on each panel
+    between consecutive edges (degrees)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    edges = np.radians(edges_deg)
+    lo, hi = edges[:-1, None], edges[1:, None]
+    return (lo + (hi - lo) * 0.5 * (x + 1)).ravel(), ((hi - lo) * 0.5 * w).ravel()
+
+
 def cells(angle_deg: float, scatter_type: str) -> Cells:
     """The cells about the specular (BRDF) or direct-transmission (BTDF) direction at
-    `angle_deg` from the normal: Gauss-Legendre panels in the radial angle, midpoints in
-    azimuth."""
-    x, w = np.polynomial.legendre.leggauss(PANEL_NODES)
-    edges = np.radians(PANEL_EDGES_DEG)
-    lo, hi = edges[:-1, None], edges[1:, None]
-    radial = (lo + (hi - lo) * 0.5 * (x + 1)).ravel()
-    w_radial = ((hi - lo) * 0.5 * w).ravel()
-    azimuth_deg = (np.arange(AZIMUTHS) + 0.5) * 360.0 / AZIMUTHS
-    radial_deg = np.degrees(radial)
+    `angle_deg` from the normal: Gauss-Legendre panels in the radial angle and in azimuth."""
+    radial, w_radial = _panels(np.array(PANEL_EDGES_DEG), PANEL_NODES)
+    quadrant = np.array(AZIMUTH_PANEL_EDGES_DEG)
+    azimuth, w_azimuth = _panels(np.concatenate([quadrant, 180.0 - quadrant[-2::-1],
+                                                 180.0 + quadrant[1:], 360.0 - quadrant[-2::-1]]),
+                                 AZIMUTH_PANEL_NODES)
+    azimuth_deg, radial_deg = np.degrees(azimuth), np.degrees(radial)
     wo = scatter_directions(angle_deg, scatter_type, azimuth_deg, radial_deg)
-    area = np.sin(radial) * w_radial * (2.0 * math.pi / AZIMUTHS)
-    weight = np.where(on_side(wo, scatter_type), np.abs(wo[..., 2]) * area[None, :], 0.0)
+    area = w_azimuth[:, None] * (np.sin(radial) * w_radial)[None, :]
+    weight = np.where(on_side(wo, scatter_type), np.abs(wo[..., 2]) * area, 0.0)
     return Cells(azimuth_deg, radial_deg, wo, weight)
 
 

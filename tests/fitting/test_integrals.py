@@ -45,17 +45,18 @@ def test_black_glass_reflectance_is_fresnel_of_n_1567():
     assert black_glass_reflectance(60.0) == pytest.approx((rs ** 2 + rp ** 2) / 2, rel=1e-9)
 
 
-@pytest.mark.parametrize("geometry, alpha", [(20.0, 0.003), (60.0, 0.003), (60.0, 0.005),
-                                             (85.0, 0.005)])
+@pytest.mark.parametrize("geometry, alpha", [(20.0, 0.001), (20.0, 0.003), (60.0, 0.001),
+                                             (60.0, 0.003), (60.0, 0.005), (85.0, 0.002),
+                                             (85.0, 0.003), (85.0, 0.005)])
 def test_a_near_specular_black_glass_gives_100_gloss_units(geometry, alpha):
     """The gloss scale: a smooth black glass (n 1.567, the primary standard) reflects its
     Fresnel reflectance into the receptor window, 100 GU. The lobe must lie inside the window
     and be resolved by the cells: Beckmann's Gaussian slopes (GGX's tails, a fraction
     alpha^2 / 2 t^2 beyond a slope t, cut 3 % from the 20 deg window's +-0.9 deg at alpha
-    0.002, and the cells no longer resolve a smaller alpha), alpha 0.003 (the slopes' sigma
-    0.0021 against the 20 deg window's half-width of 0.0079 in slope: 3.7 sigma) where the
-    window is narrow, 0.005 at 85 deg, where a lobe flattened across the plane by cos 85 deg
-    needs to span several of the cells' 3 deg azimuths."""
+    0.002), alpha 0.003 or less (the slopes' sigma 0.0021 against the 20 deg window's
+    half-width of 0.0079 in slope: 3.7 sigma) where the window is narrow; at 85 deg a lobe of
+    alpha 0.002 about 0.2 deg long and flattened across the plane by cos 85 deg, which the
+    cells' narrowest radial panels and azimuth panels near the plane resolve."""
     model = build_model("beckmann", alpha, GLOSS_STANDARD_INDEX, "separable")
     grid = block_cells(geometry, False, GLOSS_STANDARD_INDEX)
     f = np.zeros(grid.weight.shape)
