@@ -101,7 +101,7 @@ class Block:
     covered: np.ndarray
     reached: np.ndarray  # cells the rows' residual reaches (all of them with two rows or more)
     gradient_basis: np.ndarray  # (n_az, n_rad, n): d(cell value)/d(point value)
-    parameter_steps: np.ndarray  # (n_params, n_az, n_rad): model change per parameter's sigma
+    parameter_steps: np.ndarray  # (n_params, n_az, n_rad): estimate's change per parameter's sigma
     parameter_correlation: np.ndarray
     misfit_rel: float
     estimate: np.ndarray = field(init=False)
@@ -113,28 +113,44 @@ class Block:
         """sum(weight * f) over the cells."""
         return float(np.sum(weight * self.estimate))
 
-    def _along(self, weight: np.ndarray) -> float:
-        """The interpolation's error along the rows, by Richardson: the change d1 when every
-        other node is left out and d2 when every other of those is, their ratio q = d1 / d2
-        (2^-p for an interpolation of order p) giving d1 q / (1 - q); d1 itself where q is
-        1/2 or more (nodes that do not resolve the residual's change)."""
+    def correction(self, weight: np.ndarray) -> float:
+        """The along-row interpolation's Richardson correction of sum(weight * f) (_along)."""
+        return self._along(weight)[0]
+
+    def _along(self, weight: np.ndarray) -> tuple[float, float]:
+        """(correction, standard uncertainty) of the interpolation along the rows, by
+        Richardson: for each half of the nodes (every other one), the change d1 when the rows
+        take that half alone and the change d2 when they take every other node of it, whose
+        ratio q = |d1| / |d2| is 2^-p for an interpolation of order p; the larger q of the two
+        halves gives the error -d1 q / (1 - q) (d1 their mean), its size the uncertainty; no
+        correction and d1 itself (root mean square) where q is 1/2 or more (nodes that do not
+        resolve the residual's change)."""
         def integral(residual: np.ndarray) -> np.ndarray:
             return np.sum(weight * residual, axis=(-2, -1))
 
         halves = integral(self.residual_halves)
-        d1 = math.sqrt(float(np.mean((halves - integral(self.residual_linear)) ** 2)))
-        d2 = math.sqrt(float(np.mean((integral(self.residual_quarters) - halves[[0, 1, 0, 1]])
-                                     ** 2)))
-        q = d1 / d2 if d2 > 0 else 0.0 if d1 == 0 else 1.0
-        return d1 * (q / (1.0 - q) if q < 0.5 else 1.0)
+        d1 = halves - integral(self.residual_linear)
+        d2 = (integral(self.residual_quarters) - halves[[0, 1, 0, 1]]).reshape(2, 2)
+        size = math.sqrt(float(np.mean(d1 ** 2)))
+        spread = np.sqrt(np.mean(d2 ** 2, axis=0))
+        q = max((abs(a) / b if b > 0 else 0.0 if a == 0 else 1.0)
+                for a, b in zip(d1, spread, strict=True))
+        if q >= 0.5:
+            return 0.0, size
+        factor = q / (1.0 - q)
+        return -float(np.mean(d1)) * factor, size * factor
 
     def components(self, weight: np.ndarray) -> dict[str, float]:
-        """The standard uncertainty's components of sum(weight * f) (COMPONENTS)."""
+        """The standard uncertainty's components of sum(weight * f) (COMPONENTS): across the
+        rows, each cell's value rectangular within +- its change to the nearest row's alone,
+        the cells' errors taken as one (two rows do not tell their signs apart); along them,
+        Richardson's (_along); beyond the rows' ends the change when their end intervals
+        continue instead of holding."""
         fill = ~self.covered
         gradient = np.tensordot(weight, self.gradient_basis, 2)
         noise, shared = self.points.linear_uncertainty(gradient)
         across = float(np.sum(np.abs(weight * (self.residual_linear - self.residual_nearest))))
-        interpolation = math.hypot(across, self._along(weight))
+        interpolation = math.hypot(across / math.sqrt(3.0), self._along(weight)[1])
         steps = np.sum(np.where(fill, weight, 0.0) * self.parameter_steps, axis=(1, 2))
         parameters = math.sqrt(max(float(steps @ self.parameter_correlation @ steps), 0.0))
         held = float(np.sum(np.where(fill, weight, 0.0)
@@ -237,13 +253,23 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
                                   isotropic, thin, extrapolate)
         return scale * (found.linear @ relative)
 
+    def estimate_at(values: np.ndarray) -> np.ndarray:
+        """The cells' estimate with the model's parameters at `values`: the model and the
+        data's residual from it, both moving with them (so that where the residual holds
+        beyond the rows, only the model's change of shape from the rows' ends counts)."""
+        fitted = replace(result, values=values)
+        cells_at = model_at(fitted)
+        points_at = fitted.predict(points.wi, points.wo)
+        return cells_at + np.where(reached, cells_at + floor, 0.0) * (
+            rows.linear @ ((points.bsdf - points_at) / (points_at + floor)))
+
     basis = scale[..., None] * rows.linear / (model_points + floor)
     steps = []
     for k, sigma in enumerate(result.errors):
         shifted = [result.values.copy(), result.values.copy()]
         shifted[0][k] += sigma
         shifted[1][k] -= sigma
-        up, down = (model_at(replace(result, values=v)) for v in shifted)
+        up, down = (estimate_at(v) for v in shifted)
         steps.append(0.5 * (up - down))
     spread = np.sqrt(np.clip(np.diag(result.covariance), 1e-300, None))
     correlation = result.covariance / np.outer(spread, spread)
@@ -314,16 +340,20 @@ def value_of(name: str, grid: Cells, theta_i_deg: float, f: np.ndarray) -> float
 
 
 def _integral(b: Block, name: str) -> Integral | None:
-    """The Integral of one quantity of a block; haze's uncertainty through the ratio's linear
-    weight (W_diffuse - h W) / T (None: no haze of a transmittance that is not positive)."""
+    """The Integral of one quantity of a block, with the along-row interpolation's Richardson
+    correction (Block.correction); haze's correction and uncertainty through the ratio's
+    linear weight (W_diffuse - h W) / T (None: no haze of a transmittance that is not
+    positive)."""
     w = weights(name, b.grid, b.theta_i_deg)
     if name != "haze":
-        return Integral(name, b.theta_i_deg, b.value(w), b.components(w), b.model_share(w))
+        return Integral(name, b.theta_i_deg, b.value(w) + b.correction(w), b.components(w),
+                        b.model_share(w))
     total = b.value(b.grid.weight)
     if not total > 0:
         return None
     h = b.value(w) / total
-    return Integral(name, b.theta_i_deg, h, b.components((w - h * b.grid.weight) / total),
+    linear = (w - h * b.grid.weight) / total
+    return Integral(name, b.theta_i_deg, h + b.correction(linear), b.components(linear),
                     b.model_share(w))
 
 
