@@ -4,18 +4,21 @@ directional-hemispherical reflectance and transmittance, the total scattering of
 (docs/fitting.md, "Integrated quantities").
 
 Each is sum(W * f) over the quadrature cells of one incidence and side (calibration.hemisphere)
-for a weight W that the quantity defines. Where measured rows cover a cell, f is the fitted
-model m plus the data's residual from it, interpolated between the rows relative to m + c (c:
-the median of the data, so that a residual follows the model's lobe where m is large and stays
-absolute where m vanishes; the interpolation carries only what the model misses); elsewhere f
-is the model alone (the fill).
+for a weight W that the quantity defines. f is the fitted model m plus the data's residual from
+it, interpolated between the rows relative to m + c (c: the median of the data, so that a
+residual follows the model's lobe where m is large and stays absolute where m vanishes; the
+interpolation carries only what the model misses); past the rows' ends (the fill) the rows'
+end residual holds, so that the fill is the model's shape scaled as the data at the ends scale
+it; with fewer than two rows f is the model alone. The along-row interpolation's Richardson
+correction is added to the value.
 
 The uncertainty's components: the readings' own noise and their shared (type B) errors carried
-through the interpolation's weights; the interpolation, along the rows (the change when every
-other node is left out: the error of a grid that does not resolve the lobe, an upper estimate
-of one that does) and across them (the change when each cell takes its nearest row alone); the
-fill's model parameters (the fit's covariance) and model form (the model's relative misfit to
-the data beyond their noise, carried into the fill)."""
+through the interpolation's weights; the interpolation, along the rows (Richardson's, from the
+rows thinned to every other and every fourth node) and across them (each cell rectangular
+within its change to the nearest row's alone, the cells' errors as one); the fill's model
+parameters (the fit's covariance) and model form (the change when the rows' end intervals
+continue instead of holding; where no row reaches, the model's relative misfit to the data
+beyond their noise)."""
 
 from __future__ import annotations
 
