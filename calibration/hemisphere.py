@@ -4,7 +4,7 @@ rows. A row is the set of points at one azimuth about the side's normal (an in-p
 two: forward and backward); between two neighbouring rows and inside both rows' range of angles
 from the normal a cell is covered by the data (linear in that angle along each row, linear in
 azimuth between the rows); beyond the rows' range each row's end value holds (or, to estimate
-that hold's error, the row's end interval continues)."""
+that hold's error, the parabola through the row's end nodes continues)."""
 
 from __future__ import annotations
 
@@ -130,11 +130,26 @@ def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: tuple[int
     return rows
 
 
+def _end_parabola(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
+                  ) -> np.ndarray:
+    """(N, n_points) coefficients at radial angles (N,) of the parabola through a row's three
+    nodes nearest each end (the first three below the row, the last three above it)."""
+    at = np.where(radial < nodes[0], 0, len(nodes) - 3)
+    x = np.stack([nodes[at + k] for k in range(3)], axis=1)
+    out = np.zeros((len(radial), coefficient.shape[1]))
+    for k in range(3):
+        a, b = (x[:, j] for j in range(3) if j != k)
+        weight = (radial - a) * (radial - b) / ((x[:, k] - a) * (x[:, k] - b))
+        out += weight[:, None] * coefficient[at + k]
+    return out
+
+
 def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray, extrapolate: bool
            ) -> tuple[np.ndarray, np.ndarray]:
     """(linear, inside) of one row at radial angles (N,): (N, n_points) coefficients and
     whether each radial angle lies within the row's nodes; beyond the row's ends the end
-    node's value holds, or with `extrapolate` the end interval's line continues."""
+    node's value holds, or with `extrapolate` the parabola through its three end nodes (the
+    end interval's line in a row of two) continues."""
     inside = (radial >= nodes[0]) & (radial <= nodes[-1])
     hi = np.clip(np.searchsorted(nodes, radial), 1, max(len(nodes) - 1, 1))
     lo = hi - 1
@@ -143,7 +158,10 @@ def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray, extra
     span = nodes[hi] - nodes[lo]
     s = np.where(span > 0, (radial - nodes[lo]) / np.where(span > 0, span, 1.0), 0.0)
     s = (s if extrapolate else np.clip(s, 0.0, 1.0))[:, None]
-    return (1 - s) * coefficient[lo] + s * coefficient[hi], inside
+    linear = (1 - s) * coefficient[lo] + s * coefficient[hi]
+    if extrapolate and len(nodes) >= 3:
+        linear = np.where(inside[:, None], linear, _end_parabola(nodes, coefficient, radial))
+    return linear, inside
 
 
 def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth: np.ndarray,
@@ -152,9 +170,9 @@ def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth
     """The interpolation of point values at (azimuth, radial) (degrees, side_coordinates) onto
     cells at (cell_azimuth, cell_radial): linear along each row and, circularly, between the
     two rows either side of a cell; covered where the cell lies inside both rows' radial
-    range, beyond it each row's end value held (or its end interval's line continued:
-    `extrapolate`); with fewer than two rows nothing is covered or reached. `thin` (stride,
-    phase): every stride-th inner node of each row only (_rows)."""
+    range, beyond it each row's end value held (or the parabola through its end nodes
+    continued: `extrapolate`); with fewer than two rows nothing is covered or reached.
+    `thin` (stride, phase): every stride-th inner node of each row only (_rows)."""
     shape, n = cell_azimuth.shape, len(azimuth)
     chi, theta = cell_azimuth.ravel(), cell_radial.ravel()
     rows = _rows(azimuth, radial, mirror, thin)

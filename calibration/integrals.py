@@ -16,9 +16,9 @@ The uncertainty's components: the readings' own noise and their shared (type B) 
 through the interpolation's weights; the interpolation, along the rows (Richardson's, from the
 rows thinned to every other and every fourth node) and across them (each cell rectangular
 within its change to the nearest row's alone, the cells' errors as one); the fill's model
-parameters (the fit's covariance) and model form (the change when the rows' end intervals
-continue instead of holding; where no row reaches, the model's relative misfit to the data
-beyond their noise)."""
+parameters (the fit's covariance without its scaling by chi2/dof) and model form (the change
+when the rows' end intervals continue instead of holding; where no row reaches, the model's
+relative misfit to the data beyond their noise)."""
 
 from __future__ import annotations
 
@@ -104,7 +104,7 @@ class Block:
     covered: np.ndarray
     reached: np.ndarray  # cells the rows' residual reaches (all of them with two rows or more)
     gradient_basis: np.ndarray  # (n_az, n_rad, n): d(cell value)/d(point value)
-    parameter_steps: np.ndarray  # (n_params, n_az, n_rad): estimate's change per parameter's sigma
+    parameter_steps: np.ndarray  # (n_params, n_az, n_rad): estimate's change per statistical sigma
     parameter_correlation: np.ndarray
     misfit_rel: float
     estimate: np.ndarray = field(init=False)
@@ -267,8 +267,11 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
             rows.linear @ ((points.bsdf - points_at) / (points_at + floor)))
 
     basis = scale[..., None] * rows.linear / (model_points + floor)
+    # the parameters' statistical sigmas: the fit scales its covariance by chi2/dof for the
+    # misfit, which here the residual carries and the model-form term bounds past the rows
+    sigmas = result.errors / math.sqrt(max(1.0, result.chi2_dof_fit))
     steps = []
-    for k, sigma in enumerate(result.errors):
+    for k, sigma in enumerate(sigmas):
         shifted = [result.values.copy(), result.values.copy()]
         shifted[0][k] += sigma
         shifted[1][k] -= sigma
