@@ -382,7 +382,8 @@ ASSUMPTIONS = (
     "an isotropic fit mirrors the points across the plane of incidence; the residual from the "
     "fitted model is interpolated linearly in azimuth between measured rows (an in-plane scan: "
     "its forward and backward halves), so U holds out-of-plane structure the model and the "
-    "rows miss only as far as the nearest-row term sees it",
+    "rows miss only as far as the nearest-row term sees it; past the rows' last measured angle "
+    "their end residual holds (the model's shape scaled as the data at the ends scale it)",
     "transmission is integrated inside the hemisphere's medium about the refracted direct beam "
     "(the integrals of f |cos theta_o|, as the Zemax export's TIS); ASTM D1003 defines haze "
     "at normal incidence",
