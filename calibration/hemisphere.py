@@ -3,11 +3,11 @@ about the specular direction (calibration.integrals), and the interpolation betw
 rows. A row is the set of points at one azimuth about the side's normal (an in-plane scan has
 two: forward and backward); between two neighbouring rows and inside both rows' range of angles
 from the normal a cell is covered by the data (linear in that angle along each row, linear in
-azimuth between the rows), elsewhere it is not."""
+azimuth between the rows); beyond the rows' range each row's end value holds (or, to estimate
+that hold's error, the parabola through the row's end nodes continues)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,13 +16,19 @@ from calibration.exports.zemax import on_side, scatter_directions
 
 #: Edges of the radial panels, degrees about the specular direction: the standards' cone and
 #: window edges (calibration.integrals) fall on panel edges, so their regions are integrated
-#: without a partial cell.
-PANEL_EDGES_DEG = (0.0, 0.9, 1.8, 2.0, 2.2, 2.5, 3.0, 5.0, 5.85, 10.0, 20.0, 30.0, 45.0, 60.0,
-                   75.0, 85.0, 90.0, 105.0, 120.0, 150.0, 180.0)
+#: without a partial cell; the panels narrow towards the specular direction, where a glossy
+#: lobe (Beckmann alpha 0.001 spans about 0.1 deg) must be resolved.
+PANEL_EDGES_DEG = (0.0, 0.05, 0.1, 0.2, 0.45, 0.9, 1.8, 2.0, 2.2, 2.5, 3.0, 5.0, 5.85, 10.0,
+                   20.0, 30.0, 45.0, 60.0, 75.0, 85.0, 90.0, 105.0, 120.0, 150.0, 180.0)
 #: Gauss-Legendre nodes per radial panel.
 PANEL_NODES = 6
-#: Azimuth cells about the specular direction (3 deg each).
-AZIMUTHS = 120
+#: Edges of the azimuth panels, degrees from the plane of incidence (0 and 180 deg about the
+#: specular direction), in each of the four quadrants: they narrow towards the plane, where a
+#: glossy lobe at grazing incidence, flattened across it by cos theta_i, lies within a few
+#: degrees of azimuth (Beckmann alpha 0.002 at 85 deg: about 5 deg).
+AZIMUTH_PANEL_EDGES_DEG = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 15.0, 30.0, 60.0, 90.0)
+#: Gauss-Legendre nodes per azimuth panel.
+AZIMUTH_PANEL_NODES = 4
 #: Rows' azimuths and radial nodes are matched to this many decimals of a degree.
 NODE_DECIMALS = 3
 
@@ -45,20 +51,27 @@ class Cells:
         return self.weight > 0
 
 
+def _panels(edges_deg: np.ndarray, nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, weights), radians, of Gauss-Legendre rules of `nodes` points on each panel
+    between consecutive edges (degrees)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    edges = np.radians(edges_deg)
+    lo, hi = edges[:-1, None], edges[1:, None]
+    return (lo + (hi - lo) * 0.5 * (x + 1)).ravel(), ((hi - lo) * 0.5 * w).ravel()
+
+
 def cells(angle_deg: float, scatter_type: str) -> Cells:
     """The cells about the specular (BRDF) or direct-transmission (BTDF) direction at
-    `angle_deg` from the normal: Gauss-Legendre panels in the radial angle, midpoints in
-    azimuth."""
-    x, w = np.polynomial.legendre.leggauss(PANEL_NODES)
-    edges = np.radians(PANEL_EDGES_DEG)
-    lo, hi = edges[:-1, None], edges[1:, None]
-    radial = (lo + (hi - lo) * 0.5 * (x + 1)).ravel()
-    w_radial = ((hi - lo) * 0.5 * w).ravel()
-    azimuth_deg = (np.arange(AZIMUTHS) + 0.5) * 360.0 / AZIMUTHS
-    radial_deg = np.degrees(radial)
+    `angle_deg` from the normal: Gauss-Legendre panels in the radial angle and in azimuth."""
+    radial, w_radial = _panels(np.array(PANEL_EDGES_DEG), PANEL_NODES)
+    quadrant = np.array(AZIMUTH_PANEL_EDGES_DEG)
+    azimuth, w_azimuth = _panels(np.concatenate([quadrant, 180.0 - quadrant[-2::-1],
+                                                 180.0 + quadrant[1:], 360.0 - quadrant[-2::-1]]),
+                                 AZIMUTH_PANEL_NODES)
+    azimuth_deg, radial_deg = np.degrees(azimuth), np.degrees(radial)
     wo = scatter_directions(angle_deg, scatter_type, azimuth_deg, radial_deg)
-    area = np.sin(radial) * w_radial * (2.0 * math.pi / AZIMUTHS)
-    weight = np.where(on_side(wo, scatter_type), np.abs(wo[..., 2]) * area[None, :], 0.0)
+    area = w_azimuth[:, None] * (np.sin(radial) * w_radial)[None, :]
+    weight = np.where(on_side(wo, scatter_type), np.abs(wo[..., 2]) * area, 0.0)
     return Cells(azimuth_deg, radial_deg, wo, weight)
 
 
@@ -73,17 +86,18 @@ def side_coordinates(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class RowInterpolation:
-    """Cell values from point values, linear in the points: a covered cell gets
-    `linear[cell] @ values`, and `nearest[cell] @ values` takes the nearest row's value alone
-    (the cruder rule in azimuth, whose difference from the linear one measures the azimuthal
-    interpolation's error)."""
+    """Cell values from point values, linear in the points: a cell gets
+    `linear[cell] @ values` (inside the rows' radial range where `covered`, held or continued
+    beyond it), and `nearest[cell] @ values` takes the nearest row's value alone (the cruder
+    rule in azimuth, whose difference from the linear one measures the azimuthal
+    interpolation's error); a cell no row reaches has zero coefficients."""
 
     linear: np.ndarray  # (..., n_points)
     nearest: np.ndarray  # (..., n_points)
     covered: np.ndarray  # (...) bool
 
 
-def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: int | None
+def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: tuple[int, int] | None
           ) -> dict[float, tuple[np.ndarray, np.ndarray]]:
     """Per row azimuth: (radial nodes, (n_nodes, n_points) coefficients averaging the points at
     each node). Points at the normal itself belong to every row, and the opposite row's points
@@ -110,15 +124,32 @@ def _rows(azimuth: np.ndarray, radial: np.ndarray, mirror: bool, thin: int | Non
         np.add.at(coefficient, (which, at), 1.0)
         keep = np.ones(len(nodes), bool)
         if thin is not None:
-            keep[1:-1] = np.arange(1, len(nodes) - 1) % 2 != thin
+            stride, phase = thin
+            keep[1:-1] = np.arange(1, len(nodes) - 1) % stride == phase
         rows[key] = (nodes[keep], (coefficient / coefficient.sum(axis=1, keepdims=True))[keep])
     return rows
 
 
-def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
+def _end_parabola(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
+                  ) -> np.ndarray:
+    """(N, n_points) coefficients at radial angles (N,) of the parabola through a row's three
+    nodes nearest each end (the first three below the row, the last three above it)."""
+    at = np.where(radial < nodes[0], 0, len(nodes) - 3)
+    x = np.stack([nodes[at + k] for k in range(3)], axis=1)
+    out = np.zeros((len(radial), coefficient.shape[1]))
+    for k in range(3):
+        a, b = (x[:, j] for j in range(3) if j != k)
+        weight = (radial - a) * (radial - b) / ((x[:, k] - a) * (x[:, k] - b))
+        out += weight[:, None] * coefficient[at + k]
+    return out
+
+
+def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray, extrapolate: bool
            ) -> tuple[np.ndarray, np.ndarray]:
     """(linear, inside) of one row at radial angles (N,): (N, n_points) coefficients and
-    whether each radial angle lies within the row's nodes."""
+    whether each radial angle lies within the row's nodes; beyond the row's ends the end
+    node's value holds, or with `extrapolate` the parabola through its three end nodes (the
+    end interval's line in a row of two) continues."""
     inside = (radial >= nodes[0]) & (radial <= nodes[-1])
     hi = np.clip(np.searchsorted(nodes, radial), 1, max(len(nodes) - 1, 1))
     lo = hi - 1
@@ -126,18 +157,22 @@ def _along(nodes: np.ndarray, coefficient: np.ndarray, radial: np.ndarray
         lo = hi = np.zeros(len(radial), int)
     span = nodes[hi] - nodes[lo]
     s = np.where(span > 0, (radial - nodes[lo]) / np.where(span > 0, span, 1.0), 0.0)
-    s = np.clip(s, 0.0, 1.0)[:, None]
-    return (1 - s) * coefficient[lo] + s * coefficient[hi], inside
+    s = (s if extrapolate else np.clip(s, 0.0, 1.0))[:, None]
+    linear = (1 - s) * coefficient[lo] + s * coefficient[hi]
+    if extrapolate and len(nodes) >= 3:
+        linear = np.where(inside[:, None], linear, _end_parabola(nodes, coefficient, radial))
+    return linear, inside
 
 
 def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth: np.ndarray,
-                      radial: np.ndarray, mirror: bool, thin: int | None = None
-                      ) -> RowInterpolation:
+                      radial: np.ndarray, mirror: bool, thin: tuple[int, int] | None = None,
+                      extrapolate: bool = False) -> RowInterpolation:
     """The interpolation of point values at (azimuth, radial) (degrees, side_coordinates) onto
     cells at (cell_azimuth, cell_radial): linear along each row and, circularly, between the
-    two rows either side of a cell where it lies inside both rows' radial range; no cell is
-    covered with fewer than two rows. `thin`: every other inner node of each row only
-    (_rows)."""
+    two rows either side of a cell; covered where the cell lies inside both rows' radial
+    range, beyond it each row's end value held (or the parabola through its end nodes
+    continued: `extrapolate`); with fewer than two rows nothing is covered or reached.
+    `thin` (stride, phase): every stride-th inner node of each row only (_rows)."""
     shape, n = cell_azimuth.shape, len(azimuth)
     chi, theta = cell_azimuth.ravel(), cell_radial.ravel()
     rows = _rows(azimuth, radial, mirror, thin)
@@ -146,7 +181,7 @@ def row_interpolation(cell_azimuth: np.ndarray, cell_radial: np.ndarray, azimuth
                                 np.zeros(shape, bool))
     keys = sorted(rows)
     linear_rows, inside_rows = (np.stack(a) for a in zip(
-        *(_along(*rows[key], theta) for key in keys), strict=True))
+        *(_along(*rows[key], theta, extrapolate) for key in keys), strict=True))
     bounds = np.array([*keys, keys[0] + 360.0])
     chi = np.where(chi >= keys[0], chi, chi + 360.0)
     k = np.clip(np.searchsorted(bounds, chi, side="right") - 1, 0, len(keys) - 1)

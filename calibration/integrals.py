@@ -4,18 +4,21 @@ directional-hemispherical reflectance and transmittance, the total scattering of
 (docs/fitting.md, "Integrated quantities").
 
 Each is sum(W * f) over the quadrature cells of one incidence and side (calibration.hemisphere)
-for a weight W that the quantity defines. Where measured rows cover a cell, f is the fitted
-model m plus the data's residual from it, interpolated between the rows relative to m + c (c:
-the median of the data, so that a residual follows the model's lobe where m is large and stays
-absolute where m vanishes; the interpolation carries only what the model misses); elsewhere f
-is the model alone (the fill).
+for a weight W that the quantity defines. f is the fitted model m plus the data's residual from
+it, interpolated between the rows relative to m + c (c: the median of the data, so that a
+residual follows the model's lobe where m is large and stays absolute where m vanishes; the
+interpolation carries only what the model misses); past the rows' ends (the fill) the rows'
+end residual holds, so that the fill is the model's shape scaled as the data at the ends scale
+it; with fewer than two rows f is the model alone. The along-row interpolation's Richardson
+correction is added to the value.
 
 The uncertainty's components: the readings' own noise and their shared (type B) errors carried
-through the interpolation's weights; the interpolation, along the rows (the change when every
-other node is left out: the error of a grid that does not resolve the lobe, an upper estimate
-of one that does) and across them (the change when each cell takes its nearest row alone); the
-fill's model parameters (the fit's covariance) and model form (the model's relative misfit to
-the data beyond their noise, carried into the fill)."""
+through the interpolation's weights; the interpolation, along the rows (Richardson's, from the
+rows thinned to every other and every fourth node) and across them (each cell rectangular
+within its change to the nearest row's alone, the cells' errors as one); the fill's model
+parameters (the fit's covariance without its scaling by chi2/dof) and model form (the change
+when the rows' end intervals continue instead of holding; where no row reaches, the model's
+relative misfit to the data beyond their noise)."""
 
 from __future__ import annotations
 
@@ -43,10 +46,6 @@ GLOSS_WINDOWS_DEG = {20.0: (1.8, 3.6), 60.0: (4.4, 11.7), 85.0: (4.0, 6.0)}
 GLOSS_STANDARD_INDEX = 1.567
 #: A block's incidence matches a gloss geometry within this, degrees.
 GLOSS_INCIDENCE_TOL_DEG = 0.5
-#: The share of the change, when every other node of a row is left out, taken as the
-#: interpolation's error along the rows: 1 (Richardson's 1/3 holds for nodes that resolve the
-#: lobe, which the coverage study, bench/integral_coverage.py, shows 10 deg nodes do not).
-THINNING_SHARE = 1.0
 #: Components of an integral's standard uncertainty, in the order tables show them.
 COMPONENTS = ("noise", "shared", "interpolation", "model_parameters", "model_form")
 #: What each quantity is, for tables and files.
@@ -89,19 +88,23 @@ class Integral:
 class Block:
     """The data and fitted model of one incidence and side on its cells: the model at the
     cells and the points, the data's residual from it interpolated (linearly, from the nearest
-    row, from every other node), the model's change with each fitted parameter (one sigma),
-    and its relative misfit beyond the data's noise."""
+    row, from every other and every fourth node, continued linearly beyond the rows' ends),
+    the model's change with each fitted parameter (one sigma), and its relative misfit beyond
+    the data's noise."""
 
     theta_i_deg: float
     grid: Cells
     points: ReducedData
     model_cells: np.ndarray  # (n_az, n_rad)
-    residual_linear: np.ndarray  # (n_az, n_rad): the data's residual interpolated (0: not covered)
+    residual_linear: np.ndarray  # (n_az, n_rad): the data's residual interpolated (0: no rows)
     residual_nearest: np.ndarray  # the nearest row's alone (in azimuth)
-    residual_thinned: np.ndarray  # (2, n_az, n_rad): from every other inner node of each row
+    residual_halves: np.ndarray  # (2, n_az, n_rad): from every other inner node of each row
+    residual_quarters: np.ndarray  # (4, n_az, n_rad): from every fourth inner node
+    residual_continued: np.ndarray  # beyond the rows' ends their end intervals' lines
     covered: np.ndarray
+    reached: np.ndarray  # cells the rows' residual reaches (all of them with two rows or more)
     gradient_basis: np.ndarray  # (n_az, n_rad, n): d(cell value)/d(point value)
-    parameter_steps: np.ndarray  # (n_params, n_az, n_rad): model change per parameter's sigma
+    parameter_steps: np.ndarray  # (n_params, n_az, n_rad): estimate's change per statistical sigma
     parameter_correlation: np.ndarray
     misfit_rel: float
     estimate: np.ndarray = field(init=False)
@@ -113,20 +116,52 @@ class Block:
         """sum(weight * f) over the cells."""
         return float(np.sum(weight * self.estimate))
 
+    def correction(self, weight: np.ndarray) -> float:
+        """The along-row interpolation's Richardson correction of sum(weight * f) (_along)."""
+        return self._along(weight)[0]
+
+    def _along(self, weight: np.ndarray) -> tuple[float, float]:
+        """(correction, standard uncertainty) of the interpolation along the rows, by
+        Richardson: for each half of the nodes (every other one), the change d1 when the rows
+        take that half alone and the change d2 when they take every other node of it, whose
+        ratio q = |d1| / |d2| is 2^-p for an interpolation of order p; the larger q of the two
+        halves gives the error -d1 q / (1 - q) (d1 their mean), its size the uncertainty; no
+        correction and d1 itself (root mean square) where q is 1/2 or more (nodes that do not
+        resolve the residual's change)."""
+        def integral(residual: np.ndarray) -> np.ndarray:
+            return np.sum(weight * residual, axis=(-2, -1))
+
+        halves = integral(self.residual_halves)
+        d1 = halves - integral(self.residual_linear)
+        d2 = (integral(self.residual_quarters) - halves[[0, 1, 0, 1]]).reshape(2, 2)
+        size = math.sqrt(float(np.mean(d1 ** 2)))
+        spread = np.sqrt(np.mean(d2 ** 2, axis=0))
+        q = max((abs(a) / b if b > 0 else 0.0 if a == 0 else 1.0)
+                for a, b in zip(d1, spread, strict=True))
+        if q >= 0.5:
+            return 0.0, size
+        factor = q / (1.0 - q)
+        return -float(np.mean(d1)) * factor, size * factor
+
     def components(self, weight: np.ndarray) -> dict[str, float]:
-        """The standard uncertainty's components of sum(weight * f) (COMPONENTS)."""
+        """The standard uncertainty's components of sum(weight * f) (COMPONENTS): across the
+        rows, each cell's value rectangular within +- its change to the nearest row's alone,
+        the cells' errors taken as one (two rows do not tell their signs apart); along them,
+        Richardson's (_along); beyond the rows' ends the change when their end intervals
+        continue instead of holding."""
         fill = ~self.covered
         gradient = np.tensordot(weight, self.gradient_basis, 2)
         noise, shared = self.points.linear_uncertainty(gradient)
-        across = float(np.sum(weight * (self.residual_linear - self.residual_nearest)))
-        along = np.sum(weight * (self.residual_thinned - self.residual_linear), axis=(1, 2))
-        interpolation = math.hypot(across, THINNING_SHARE * math.sqrt(float(np.mean(along ** 2))))
+        across = float(np.sum(np.abs(weight * (self.residual_linear - self.residual_nearest))))
+        interpolation = math.hypot(across / math.sqrt(3.0), self._along(weight)[1])
         steps = np.sum(np.where(fill, weight, 0.0) * self.parameter_steps, axis=(1, 2))
         parameters = math.sqrt(max(float(steps @ self.parameter_correlation @ steps), 0.0))
-        form = self.misfit_rel * float(np.sum(np.where(fill, np.abs(weight), 0.0)
+        held = float(np.sum(np.where(fill, weight, 0.0)
+                            * (self.residual_continued - self.residual_linear)))
+        bare = self.misfit_rel * float(np.sum(np.where(self.reached, 0.0, np.abs(weight))
                                               * self.model_cells))
-        return dict(zip(COMPONENTS, (noise, shared, interpolation, parameters, form),
-                        strict=True))
+        return dict(zip(COMPONENTS, (noise, shared, interpolation, parameters,
+                                     math.hypot(held, bare)), strict=True))
 
     def model_share(self, weight: np.ndarray) -> float:
         """The share of sum(weight * f) that the model fill gives."""
@@ -210,25 +245,46 @@ def block(data: ReducedData, result: FitResult, theta_i_deg: float, transmission
                              isotropic)
     floor = float(np.median(np.abs(points.bsdf))) or 1.0  # 1/sr where half the data are 0
     relative = (points.bsdf - model_points) / (model_points + floor)
-    scale = np.where(rows.covered, model_cells + floor, 0.0)
-    linear = scale * (rows.linear @ relative)
-    nearest = scale * (rows.nearest @ relative)
-    thinned = np.stack([scale * (row_interpolation(*side_coordinates(grid.wo),
-                                                   *side_coordinates(points.wo), isotropic,
-                                                   thin).linear @ relative)
-                        for thin in (0, 1)])
+    reached = grid.on_side & np.any(rows.linear != 0, axis=-1)
+    scale = np.where(reached, model_cells + floor, 0.0)
+
+    def residual(thin: tuple[int, int] | None = None, extrapolate: bool = False
+                 ) -> np.ndarray:
+        """The relative residual interpolated onto the cells and scaled back (the rows
+        thinned or continued: row_interpolation)."""
+        found = row_interpolation(*side_coordinates(grid.wo), *side_coordinates(points.wo),
+                                  isotropic, thin, extrapolate)
+        return scale * (found.linear @ relative)
+
+    def estimate_at(values: np.ndarray) -> np.ndarray:
+        """The cells' estimate with the model's parameters at `values`: the model and the
+        data's residual from it, both moving with them (so that where the residual holds
+        beyond the rows, only the model's change of shape from the rows' ends counts)."""
+        fitted = replace(result, values=values)
+        cells_at = model_at(fitted)
+        points_at = fitted.predict(points.wi, points.wo)
+        return cells_at + np.where(reached, cells_at + floor, 0.0) * (
+            rows.linear @ ((points.bsdf - points_at) / (points_at + floor)))
+
     basis = scale[..., None] * rows.linear / (model_points + floor)
+    # the parameters' statistical sigmas: the fit scales its covariance by chi2/dof for the
+    # misfit, which here the residual carries and the model-form term bounds past the rows
+    sigmas = result.errors / math.sqrt(max(1.0, result.chi2_dof_fit))
     steps = []
-    for k, sigma in enumerate(result.errors):
+    for k, sigma in enumerate(sigmas):
         shifted = [result.values.copy(), result.values.copy()]
         shifted[0][k] += sigma
         shifted[1][k] -= sigma
-        up, down = (model_at(replace(result, values=v)) for v in shifted)
+        up, down = (estimate_at(v) for v in shifted)
         steps.append(0.5 * (up - down))
     spread = np.sqrt(np.clip(np.diag(result.covariance), 1e-300, None))
     correlation = result.covariance / np.outer(spread, spread)
-    return Block(theta_i_deg, grid, points, model_cells, linear, nearest, thinned,
-                 rows.covered, basis, np.array(steps), correlation,
+    return Block(theta_i_deg, grid, points, model_cells, scale * (rows.linear @ relative),
+                 scale * (rows.nearest @ relative),
+                 np.stack([residual((2, k)) for k in range(2)]),
+                 np.stack([residual((4, k)) for k in range(4)]),
+                 residual(extrapolate=True), rows.covered, reached, basis, np.array(steps),
+                 correlation,
                  _misfit(points, model_points) if len(points.bsdf) else 0.0)
 
 
@@ -290,16 +346,20 @@ def value_of(name: str, grid: Cells, theta_i_deg: float, f: np.ndarray) -> float
 
 
 def _integral(b: Block, name: str) -> Integral | None:
-    """The Integral of one quantity of a block; haze's uncertainty through the ratio's linear
-    weight (W_diffuse - h W) / T (None: no haze of a transmittance that is not positive)."""
+    """The Integral of one quantity of a block, with the along-row interpolation's Richardson
+    correction (Block.correction); haze's correction and uncertainty through the ratio's
+    linear weight (W_diffuse - h W) / T (None: no haze of a transmittance that is not
+    positive)."""
     w = weights(name, b.grid, b.theta_i_deg)
     if name != "haze":
-        return Integral(name, b.theta_i_deg, b.value(w), b.components(w), b.model_share(w))
+        return Integral(name, b.theta_i_deg, b.value(w) + b.correction(w), b.components(w),
+                        b.model_share(w))
     total = b.value(b.grid.weight)
     if not total > 0:
         return None
     h = b.value(w) / total
-    return Integral(name, b.theta_i_deg, h, b.components((w - h * b.grid.weight) / total),
+    linear = (w - h * b.grid.weight) / total
+    return Integral(name, b.theta_i_deg, h + b.correction(linear), b.components(linear),
                     b.model_share(w))
 
 
@@ -322,7 +382,8 @@ ASSUMPTIONS = (
     "an isotropic fit mirrors the points across the plane of incidence; the residual from the "
     "fitted model is interpolated linearly in azimuth between measured rows (an in-plane scan: "
     "its forward and backward halves), so U holds out-of-plane structure the model and the "
-    "rows miss only as far as the nearest-row term sees it",
+    "rows miss only as far as the nearest-row term sees it; past the rows' last measured angle "
+    "their end residual holds (the model's shape scaled as the data at the ends scale it)",
     "transmission is integrated inside the hemisphere's medium about the refracted direct beam "
     "(the integrals of f |cos theta_o|, as the Zemax export's TIS); ASTM D1003 defines haze "
     "at normal incidence",
