@@ -19,7 +19,6 @@ from urllib.parse import urlsplit
 import numpy as np
 import pytest
 from gonio_testkit import ROOT, gonio_cli, one_line_error
-from waiting import wait_until
 from watch_testkit import plan_file
 
 from calibration.pipeline import reduce_run
