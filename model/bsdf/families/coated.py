@@ -1,0 +1,107 @@
+"""A coated or painted surface: a Fresnel-weighted rough dielectric interface (the microfacet
+reflection lobe of RoughDielectric) over a Lambertian base, coupled as Kelemen and
+Szirmay-Kalos do (Eurographics 2001 short paper, "A microfacet based coupled specular-matte
+BRDF model with importance sampling", sec. 3):
+
+    f = f_layer(i, o) + rho / pi * (1 - a(i)) (1 - a(o)) / (1 - a_mean),
+
+a(w) the layer's directional albedo, a_mean = 2 int a(mu) mu dmu its cosine-weighted mean. The
+base sees what the layer does not reflect, on the way in and on the way out, so f is reciprocal
+and the total albedo is a(i) + rho (1 - a(i)): at most 1, and 1 for a white base (rho = 1),
+whatever the layer loses to masking. a(mu) is tabulated on construction (AlbedoTable); the
+white-furnace error is the table's, measured in docs/bsdf-families.md."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from model.bsdf.families.base import Parameter, ReflectionFamily, cosine_hemisphere
+from model.bsdf.families.lambert import RHO
+
+ALPHA = Parameter("alpha", 1e-4, 4.0, True, "roughness of the coat's microfacet interface")
+ETA = Parameter("eta", 1.0001, 4.0, False, "refractive index of the coat over the exterior")
+#: Cosines of incidence at which a(mu) is tabulated: denser toward grazing, where it bends.
+TABLE_MU = np.linspace(0.0, 1.0, 49)[1:] ** 2
+#: Stratified uniforms per side (TABLE_STRATA^2 per cosine) of the table's visible-normal sums.
+TABLE_STRATA = 64
+
+
+class AlbedoTable:
+    """The directional albedo a(mu) of a reflection-only microfacet layer, by stratified sums
+    of its sample() weights at TABLE_MU, interpolated linearly in mu (held at TABLE_MU[0]
+    below it); `mean` is 2 int a(mu) mu dmu of that same interpolant, exactly (two-point
+    Gauss-Legendre per piece), so the coupled model's white furnace errs by the interpolant's
+    error at the incidence alone."""
+
+    def __init__(self, layer):
+        mu = TABLE_MU
+        edges = (np.arange(TABLE_STRATA) + 0.5) / TABLE_STRATA
+        u1, u2 = np.meshgrid(edges, edges, indexing="ij")
+        u = np.stack([u1.ravel(), u2.ravel(), np.full(u1.size, 0.5)], axis=-1)
+        wi = np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=-1)
+        weight = layer.sample(wi[:, None, :], u[None, :, :])[1]
+        self.mu, self.albedo = mu, weight.mean(axis=1)
+        knots = np.concatenate([[0.0], mu])
+        values = np.concatenate([[self.albedo[0]], self.albedo])
+        nodes = 0.5 + np.array([-0.5, 0.5]) / math.sqrt(3.0)  # two-point Gauss on [0, 1]
+        x = knots[:-1, None] + np.diff(knots)[:, None] * nodes
+        y = values[:-1, None] + np.diff(values)[:, None] * nodes
+        self.mean = float(2.0 * np.sum(0.5 * np.diff(knots)[:, None] * x * y))
+
+    def __call__(self, mu: np.ndarray) -> np.ndarray:
+        """a(mu) at cosines mu in [0, 1]."""
+        return np.interp(mu, self.mu, self.albedo)
+
+
+class CoatedDiffuse(ReflectionFamily):
+    """Lambert base of albedo rho under a rough dielectric coat (alpha, eta; distribution and
+    masking as RoughDielectric takes them), the `lambert+microfacet` family.
+
+    sample() picks the layer's lobe with probability a(i) / (a(i) + rho (1 - a(i))) (its share
+    of the reflected energy) and the cosine-weighted base otherwise; pdf() is that mixture."""
+
+    family = "lambert+microfacet"
+    PARAMETERS = (RHO, ALPHA, ETA)
+
+    def __init__(self, rho: float = 0.8, alpha: float = 0.1, eta: float = 1.5,
+                 distribution: str = "ggx", masking: str = "separable"):
+        from model.bsdf.dielectric import RoughDielectric
+
+        super().__init__(rho=rho, alpha=alpha, eta=eta)
+        self.layer = RoughDielectric(distribution, self.alpha, self.eta, masking,
+                                     lobes=("reflection",))
+        self.table = AlbedoTable(self.layer)
+
+    def _settings(self) -> dict:
+        return {"distribution": self.layer.distribution.name, "masking": self.layer.masking}
+
+    def _base(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """The base's share rho / pi (1 - a(i)) (1 - a(o)) / (1 - a_mean)."""
+        t = self.table
+        return (self.rho / math.pi * (1.0 - t(wi[:, 2])) * (1.0 - t(wo[:, 2]))
+                / (1.0 - t.mean))
+
+    def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return self.layer.eval(wi, wo) + self._base(wi, wo)
+
+    def layer_probability(self, cos_i: np.ndarray) -> np.ndarray:
+        """Probability that sample() draws from the layer's lobe at incidence cosine cos_i."""
+        a = self.table(cos_i)
+        total = a + self.rho * (1.0 - a)
+        return np.where(total > 0, a / np.where(total > 0, total, 1.0), 1.0)
+
+    def _pdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        p = self.layer_probability(wi[:, 2])
+        return p * self.layer.pdf(wi, wo) + (1.0 - p) * wo[:, 2] / math.pi
+
+    def _sample_directions(self, wi: np.ndarray, u: np.ndarray) -> np.ndarray:
+        p = self.layer_probability(wi[:, 2])
+        on_layer = u[:, 2] < p
+        u_layer = u.copy()
+        u_layer[:, 2] = np.where(on_layer, u[:, 2] / np.where(p > 0, p, 1.0), 0.0)
+        wo = cosine_hemisphere(u[:, 0], u[:, 1])
+        if on_layer.any():
+            wo[on_layer] = self.layer.sample(wi[on_layer], u_layer[on_layer])[0]
+        return wo
