@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from model.bsdf.distributions import WITH_KERNELS
 from model.bsdf.families.base import Parameter, ReflectionFamily, cosine_hemisphere
 from model.bsdf.families.lambert import RHO
 
@@ -24,8 +25,9 @@ ALPHA = Parameter("alpha", 1e-4, 4.0, True, "roughness of the coat's microfacet 
 ETA = Parameter("eta", 1.0001, 4.0, False, "refractive index of the coat over the exterior")
 #: Cosines of incidence at which a(mu) is tabulated: denser toward grazing, where it bends.
 TABLE_MU = np.linspace(0.0, 1.0, 49)[1:] ** 2
-#: Stratified uniforms per side (TABLE_STRATA^2 per cosine) of the table's visible-normal sums.
-TABLE_STRATA = 64
+#: Stratified uniforms per side (TABLE_STRATA^2 per cosine) of the table's visible-normal sums:
+#: the sum errs like 1 / TABLE_STRATA where the lobe meets the horizon (bench/bsdf_families.py).
+TABLE_STRATA = 128
 
 
 class AlbedoTable:
@@ -35,9 +37,8 @@ class AlbedoTable:
     Gauss-Legendre per piece), so the coupled model's white furnace errs by the interpolant's
     error at the incidence alone."""
 
-    def __init__(self, layer):
-        mu = TABLE_MU
-        edges = (np.arange(TABLE_STRATA) + 0.5) / TABLE_STRATA
+    def __init__(self, layer, mu: np.ndarray = TABLE_MU, strata: int = TABLE_STRATA):
+        edges = (np.arange(strata) + 0.5) / strata
         u1, u2 = np.meshgrid(edges, edges, indexing="ij")
         u = np.stack([u1.ravel(), u2.ravel(), np.full(u1.size, 0.5)], axis=-1)
         wi = np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=-1)
@@ -69,10 +70,16 @@ class CoatedDiffuse(ReflectionFamily):
                  distribution: str = "ggx", masking: str = "separable"):
         from model.bsdf.dielectric import RoughDielectric
 
+        if distribution not in WITH_KERNELS:
+            raise ValueError(f"distribution must be one of {WITH_KERNELS}, got {distribution!r}")
         super().__init__(rho=rho, alpha=alpha, eta=eta)
-        self.layer = RoughDielectric(distribution, self.alpha, self.eta, masking,
-                                     lobes=("reflection",))
-        self.table = AlbedoTable(self.layer)
+        coat = dict(distribution=distribution, alpha=self.alpha, eta=self.eta, masking=masking,
+                    lobes=("reflection",))
+        self.layer = RoughDielectric(**coat)
+        # the table sums sample() weights by the first compiled normal sampler (visible normals
+        # for GGX, Walter's for Beckmann): milliseconds where the numpy path takes seconds
+        sampling = self.layer.distribution.compiled_samplings[0]
+        self.table = AlbedoTable(RoughDielectric(**coat, sampling=sampling))
 
     def _settings(self) -> dict:
         return {"distribution": self.layer.distribution.name, "masking": self.layer.masking}
