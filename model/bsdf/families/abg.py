@@ -5,8 +5,8 @@ FRED, ASAP), reflection side, with OpticStudio's definitions ("Available Scatter
 
 beta the projection of the scattered direction on the surface plane (|beta| = sin theta_s),
 beta0 that of the specular direction (|beta0| = sin theta_r). Restrictions, as OpticStudio's:
-A >= 0; B > 1e-12 unless g = 0 (then B may be 0); g any value (typically 0 to 3); g = 0 is a
-constant BSDF. Reciprocal: with wi toward the source, beta0 = -wi_xy and |x| = |wo_xy + wi_xy|.
+A >= 0; B > 1e-12 unless g = 0 (then B may be 0); g = 0 is a constant BSDF. OpticStudio takes
+any g ("typically between 0 and 3"); here |g| <= 10, where |x|^g stays finite in float64. Reciprocal: with wi toward the source, beta0 = -wi_xy and |x| = |wo_xy + wi_xy|.
 
 Its total integrated scatter is A times the integral of 1 / (B + |x|^g) over the unit disk of
 beta (d^2 beta = cos theta_s d omega), whose radial part has the closed form radial_integral.
@@ -23,31 +23,53 @@ from model.bsdf.families.base import Parameter, ReflectionFamily
 
 A = Parameter("A", 0.0, math.inf, True, "BSDF scale, 1/sr")
 B = Parameter("B", 0.0, math.inf, True, "roll-off knee: BSDF = A / B at the specular direction")
-G = Parameter("g", -math.inf, math.inf, False, "slope of log BSDF against log |x| beyond the knee")
+G = Parameter("g", -10.0, 10.0, False, "slope of log BSDF against log |x| beyond the knee")
 #: OpticStudio's smallest B when g != 0.
 B_MIN = 1e-12
-#: The sampler's annuli about beta0: geometric radii from the knee / 1e3 to the largest |x|, 2.
+#: The sampler's annuli about beta0: geometric radii from the knee / 1e3 (within [1e-9, 1e-3])
+#: to the largest |x|, 2.
 ANNULI = 256
 X_MAX = 2.0
+#: hyp_one sums Pfaff's series from this c on (ABg's |g| below 0.25), HYP_TERMS terms.
+HYP_SERIES_FROM = 8.0
+HYP_TERMS = 200
 #: Azimuths of the trapezoid rule of the oblique total integrated scatter (periodic, smooth).
 TIS_AZIMUTHS = 512
 
 
-def radial_integral(r: np.ndarray, b: float, g: float) -> np.ndarray:
-    """int_0^r s / (b + s^g) ds in closed form (Gauss's hypergeometric function):
-    g = 0: r^2 / (2 (b + 1)); g > 0: r^2 / (2 b) 2F1(1, 2/g; 1 + 2/g; -r^g / b);
-    g < 0, h = -g: r^(2+h) / (2+h) 2F1(1, (2+h)/h; 1 + (2+h)/h; -b r^h)."""
+def hyp_one(c: float, z: np.ndarray) -> np.ndarray:
+    """Gauss's 2F1(1, c; 1 + c; z) = c int_0^1 t^(c-1) / (1 - z t) dt for z <= 0, c > 0:
+    -log(1 - z) / z at c = 1; scipy's hyp2f1 below c = 8 (within 1e-12 of mpmath there); from
+    c = 8 on, where scipy fails for |z| > 1, Pfaff's 2F1(1, 1; 1 + c; z / (z - 1)) / (1 - z),
+    whose terms fall like Gamma(1 + c) / n^c (HYP_TERMS of them: below 1e-14 for c >= 8)."""
     from scipy.special import hyp2f1
 
+    z = np.asarray(z, dtype=np.float64)
+    if c == 1.0:
+        return np.where(z < 0, np.log1p(-z) / np.where(z < 0, -z, 1.0), 1.0)
+    if c < HYP_SERIES_FROM:
+        return hyp2f1(1.0, c, 1.0 + c, z)
+    w = z / (z - 1.0)
+    term = np.ones_like(z)
+    total = np.ones_like(z)
+    for n in range(HYP_TERMS):
+        term = term * (n + 1.0) * w / (1.0 + c + n)
+        total = total + term
+    return total / (1.0 - z)
+
+
+def radial_integral(r: np.ndarray, b: float, g: float) -> np.ndarray:
+    """int_0^r s / (b + s^g) ds in closed form (hyp_one: Gauss's hypergeometric function):
+    g = 0: r^2 / (2 (b + 1)); g > 0: r^2 / (2 b) 2F1(1, 2/g; 1 + 2/g; -r^g / b), which is
+    log(1 + r^2 / b) / 2 at g = 2; g < 0, h = -g: r^(2+h) / (2+h) 2F1(1, (2+h)/h; 1 + (2+h)/h;
+    -b r^h)."""
     r = np.asarray(r, dtype=np.float64)
     if g == 0.0:
         return r * r / (2.0 * (b + 1.0))
     if g > 0.0:
-        c = 2.0 / g
-        return r * r / (2.0 * b) * hyp2f1(1.0, c, 1.0 + c, -(r**g) / b)
+        return r * r / (2.0 * b) * hyp_one(2.0 / g, -(r**g) / b)
     h = -g
-    c = (2.0 + h) / h
-    return r ** (2.0 + h) / (2.0 + h) * hyp2f1(1.0, c, 1.0 + c, -b * r**h)
+    return r ** (2.0 + h) / (2.0 + h) * hyp_one((2.0 + h) / h, -b * r**h)
 
 
 class ABg(ReflectionFamily):
@@ -60,8 +82,9 @@ class ABg(ReflectionFamily):
         super().__init__(A=A, B=B, g=g)
         if self.g != 0.0 and self.B <= B_MIN:
             raise ValueError(f"B must be > {B_MIN} unless g = 0, got B={B!r} with g={g!r}")
-        knee = self.B ** (1.0 / self.g) if self.g > 0 else 1.0
-        inner = min(knee, 1.0) * 1e-3
+        # the knee B^(1/g), in logs (it over- or underflows for small g)
+        log_knee = math.log(self.B) / self.g if self.g > 0 else 0.0
+        inner = math.exp(min(max(log_knee + math.log(1e-3), math.log(1e-9)), math.log(1e-3)))
         self.radii = np.concatenate([[0.0], np.geomspace(inner, X_MAX, ANNULI)])
         mass = np.diff(radial_integral(self.radii, self.B, self.g))
         self.cumulative = np.concatenate([[0.0], np.cumsum(mass)]) / mass.sum()
