@@ -6,7 +6,8 @@ FRED, ASAP), reflection side, with OpticStudio's definitions ("Available Scatter
 beta the projection of the scattered direction on the surface plane (|beta| = sin theta_s),
 beta0 that of the specular direction (|beta0| = sin theta_r). Restrictions, as OpticStudio's:
 A >= 0; B > 1e-12 unless g = 0 (then B may be 0); g = 0 is a constant BSDF. OpticStudio takes
-any g ("typically between 0 and 3"); here |g| <= 10, where |x|^g stays finite in float64. Reciprocal: with wi toward the source, beta0 = -wi_xy and |x| = |wo_xy + wi_xy|.
+any g ("typically between 0 and 3"); here |g| <= 10, where |x|^g stays finite in float64.
+Reciprocal: with wi toward the source, beta0 = -wi_xy and |x| = |wo_xy + wi_xy|.
 
 Its total integrated scatter is A times the integral of 1 / (B + |x|^g) over the unit disk of
 beta (d^2 beta = cos theta_s d omega), whose radial part has the closed form radial_integral.
