@@ -133,6 +133,8 @@ class ReflectionFamily:
         shape = wi.shape[:-1]
         wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
         live = (wi[:, 2] > COS_HORIZON) & (wo[:, 2] > COS_HORIZON)
+        if live.all():  # no copies of the live pairs
+            return value(wi, wo).reshape(shape)
         out = np.zeros(len(wi))
         if live.any():
             out[live] = value(wi[live], wo[live])
