@@ -8,10 +8,15 @@ run; then the coated model's albedo table, its build time against its white-furn
 table's interpolant against 1024^2-strata sums at the exact incidence), and the directional
 albedo of Oren-Nayar (rho = 1) and ABg (by stratified sums of sample() weights, ABg beside
 its closed-form total integrated scatter). Median of several runs, compile time excluded;
-the CPU-time rate is printed beside the wall-clock one (the machine is shared)."""
+the CPU-time rate is printed beside the wall-clock one (the machine is shared).
+
+    python bench/bsdf_families.py [--picture docs/img/bsdf_families.png]
+
+--picture also draws each family's in-plane f cos_o at two incidences."""
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import time
@@ -114,7 +119,51 @@ def albedos() -> None:
               + "; closed-form TIS " + " ".join(f"{v:.5f}" for v in tis))
 
 
+def picture(path: str) -> None:
+    """In-plane f cos_o against the signed viewing angle (negative: toward the source) of one
+    model per family, at incidences 30 and 60 degrees, log scale for ABg."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = {
+        "Lambert rho 0.8 and Oren-Nayar rho 0.8, sigma 0.5":
+            {"Lambert": Lambert(0.8), "Oren-Nayar full": OrenNayar(0.8, 0.5),
+             "Oren-Nayar qualitative": OrenNayar(0.8, 0.5, "qualitative")},
+        "coated: rho 0.6 under GGX alpha 0.15, eta 1.5":
+            {"coated": CoatedDiffuse(0.6, 0.15, 1.5)},
+        "ABg": {"A 2e-3, B 1e-3, g 2": ABg(2e-3, 1e-3, 2.0),
+                "A 0.05, B 0.02, g 1.5": ABg(0.05, 0.02, 1.5)},
+    }
+    view = np.radians(np.linspace(-89.5, 89.5, 719))
+    wo = np.stack([np.sin(view), np.zeros_like(view), np.cos(view)], axis=-1)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    for ax, (title, models) in zip(axes, panels.items(), strict=True):
+        for name, model in models.items():
+            for theta, style in ((30, "-"), (60, "--")):
+                wi = incidence(math.radians(-theta))  # the source on the negative side
+                ax.plot(np.degrees(view), model.eval(wi, wo) * wo[:, 2], style,
+                        label=f"{name}, {theta} deg")
+        ax.set_title(title, fontsize=10)
+        ax.set_xlabel("viewing angle, deg (negative: toward the source)")
+        if title == "ABg":
+            ax.set_yscale("log")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("f cos theta_o, 1/sr")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    print(f"picture: {path}")
+
+
 if __name__ == "__main__":
-    throughput()
-    albedo_table()
-    albedos()
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--picture", metavar="PNG", help="only draw the families' picture")
+    args = parser.parse_args()
+    if args.picture:
+        picture(args.picture)
+    else:
+        throughput()
+        albedo_table()
+        albedos()
