@@ -103,7 +103,7 @@ def test_every_family_is_registered_and_built_from_its_parameter_names():
         cls = family_class(name)
         assert cls.family == name
         model = next(m for m in MODELS.values() if type(m) is cls)
-        again = make_family(name, model.parameters(), **model._settings())
+        again = make_family(name, model.parameters(), **model.settings())
         wi, wo = direction(0.4), direction(0.5, 3.0)
         assert again.eval(wi, wo) == model.eval(wi, wo)
         assert [p.name for p in cls.PARAMETERS] == list(model.parameters())
@@ -122,6 +122,10 @@ def test_bad_parameters_are_one_clear_error():
         CoatedDiffuse(0.5, float("nan"))
     with pytest.raises(ValueError, match=r"unknown \['alpha'\], missing \['sigma'\]"):
         make_family("oren-nayar", {"rho": 0.5, "alpha": 0.2})
+    with pytest.raises(ValueError, match=r"takes settings \['variant'\], not \['masking'\]"):
+        make_family("oren-nayar", {"rho": 0.5, "sigma": 0.2}, masking="correlated")
+    with pytest.raises(ValueError, match="distribution must be one of"):
+        CoatedDiffuse(0.5, 0.2, 1.5, distribution="phong")
     with pytest.raises(ValueError, match="family must be one of"):
         make_family("phong", {})
     with pytest.raises(ValueError, match="directions must have shape"):

@@ -55,6 +55,8 @@ class ReflectionFamily:
 
     family = ""
     PARAMETERS: tuple[Parameter, ...] = ()
+    #: Names of the fixed settings the constructor takes beside the parameters (attributes).
+    SETTINGS: tuple[str, ...] = ()
 
     def __init__(self, **values):
         for p in self.PARAMETERS:
@@ -70,20 +72,23 @@ class ReflectionFamily:
         if unknown or missing:
             raise ValueError(f"{cls.family} takes parameters {sorted(names)}; unknown "
                              f"{unknown}, missing {missing}")
+        extra = sorted(set(settings) - set(cls.SETTINGS))
+        if extra:
+            raise ValueError(f"{cls.family} takes settings {list(cls.SETTINGS)}, not {extra}")
         return cls(**values, **settings)
 
     def parameters(self) -> dict[str, float]:
         """The parameter values by name, in PARAMETERS order."""
         return {p.name: getattr(self, p.name) for p in self.PARAMETERS}
 
+    def settings(self) -> dict:
+        """The fixed settings by name, in SETTINGS order."""
+        return {name: getattr(self, name) for name in self.SETTINGS}
+
     def __repr__(self) -> str:
         values = ", ".join(f"{k}={v!r}" for k, v in {**self.parameters(),
-                                                      **self._settings()}.items())
+                                                      **self.settings()}.items())
         return f"{type(self).__name__}({values})"
-
-    def _settings(self) -> dict:
-        """Fixed settings beside the parameters (for repr)."""
-        return {}
 
     # --- public contract (as the microfacet models) -------------------------------------------
 

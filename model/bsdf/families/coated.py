@@ -85,17 +85,16 @@ class CoatedDiffuse(ReflectionFamily):
 
     family = "lambert+microfacet"
     PARAMETERS = (RHO, ALPHA, ETA)
+    SETTINGS = ("distribution", "masking")
 
     def __init__(self, rho: float = 0.8, alpha: float = 0.1, eta: float = 1.5,
                  distribution: str = "ggx", masking: str = "separable"):
         if distribution not in WITH_KERNELS:
             raise ValueError(f"distribution must be one of {WITH_KERNELS}, got {distribution!r}")
         super().__init__(rho=rho, alpha=alpha, eta=eta)
+        self.distribution, self.masking = distribution, masking
         self.layer = coat_layer(distribution, self.alpha, self.eta, masking)
         self.table = albedo_table(distribution, self.alpha, self.eta, masking)
-
-    def _settings(self) -> dict:
-        return {"distribution": self.layer.distribution.name, "masking": self.layer.masking}
 
     def _base(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """The base's share rho / pi (1 - a(i)) (1 - a(o)) / (1 - a_mean)."""
@@ -117,11 +116,8 @@ class CoatedDiffuse(ReflectionFamily):
         return p * self.layer.pdf(wi, wo) + (1.0 - p) * wo[:, 2] / math.pi
 
     def _sample_directions(self, wi: np.ndarray, u: np.ndarray) -> np.ndarray:
-        p = self.layer_probability(wi[:, 2])
-        on_layer = u[:, 2] < p
-        u_layer = u.copy()
-        u_layer[:, 2] = np.where(on_layer, u[:, 2] / np.where(p > 0, p, 1.0), 0.0)
+        on_layer = u[:, 2] < self.layer_probability(wi[:, 2])
         wo = cosine_hemisphere(u[:, 0], u[:, 1])
-        if on_layer.any():
-            wo[on_layer] = self.layer.sample(wi[on_layer], u_layer[on_layer])[0]
+        if on_layer.any():  # the coat has one lobe: its sample() leaves u3 unused
+            wo[on_layer] = self.layer.sample(wi[on_layer], u[on_layer])[0]
         return wo

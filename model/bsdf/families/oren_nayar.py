@@ -42,15 +42,13 @@ class OrenNayar(ReflectionFamily):
 
     family = "oren-nayar"
     PARAMETERS = (RHO, SIGMA)
+    SETTINGS = ("variant",)
 
     def __init__(self, rho: float = 0.8, sigma: float = 0.3, variant: str = "full"):
         if variant not in VARIANTS:
             raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
         self.variant = variant
         super().__init__(rho=rho, sigma=sigma)
-
-    def _settings(self) -> dict:
-        return {"variant": self.variant}
 
     def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         theta_i, theta_o, cos_phi = polar_angles(wi, wo)
