@@ -92,9 +92,15 @@ class CoatedDiffuse(ReflectionFamily):
         if distribution not in WITH_KERNELS:
             raise ValueError(f"distribution must be one of {WITH_KERNELS}, got {distribution!r}")
         super().__init__(rho=rho, alpha=alpha, eta=eta)
-        self.distribution, self.masking = distribution, masking
         self.layer = coat_layer(distribution, self.alpha, self.eta, masking)
+        # the coat's Distribution and masking under the microfacet models' attribute names, so
+        # code that sizes its quadrature by model.distribution's alpha sees the coat's lobe
+        self.distribution, self.masking = self.layer.distribution, masking
         self.table = albedo_table(distribution, self.alpha, self.eta, masking)
+
+    def settings(self) -> dict:
+        """The fixed settings by name: the coat's distribution name and masking form."""
+        return {"distribution": self.distribution.name, "masking": self.masking}
 
     def _base(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """The base's share rho / pi (1 - a(i)) (1 - a(o)) / (1 - a_mean)."""
