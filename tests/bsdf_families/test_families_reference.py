@@ -10,6 +10,7 @@ import pytest
 from bsdf_quadrature import direction, integrate_sphere
 
 from model.bsdf import ABg, CoatedDiffuse, Lambert, OrenNayar
+from model.bsdf.families.abg import hyp_one
 
 ANGLES = [(0.0, 0.0, 0.7, 2.0), (0.3, 0.0, 0.3, np.pi), (1.2, 0.4, 0.5, 0.4),
           (0.9, 0.1, 1.4, 1.9), (1.5, 0.0, 0.2, 3.0), (0.6, 2.0, 0.6, 2.0 + np.pi / 2)]
@@ -94,3 +95,13 @@ def test_coated_is_walters_layer_plus_the_kelemen_base():
         base = (0.6 / np.pi * (1 - _layer_albedo(model.layer, wi[2]))
                 * (1 - _layer_albedo(model.layer, wo[2])) / (1 - mean))
         assert model.eval(wi, wo) == pytest.approx(layer + base, rel=2e-4)
+
+
+@pytest.mark.parametrize("c", [0.2, 1 - 1e-15, 1.0, 1 + 1e-9, 2 + 4e-16, 2.5, 3 + 1e-14, 7.999,
+                               12.0, 1e3, 1e6])
+def test_abg_hypergeometric_against_mpmath(c):
+    """ABg's radial integral rests on 2F1(1, c; 1 + c; z), z <= 0: near-integer c and large c
+    included, where scipy's hyp2f1 fails."""
+    x = np.array([0.0, 1e-12, 0.5, 1.999, 2.0, 2.001, 1e3, 1e9, 1e15])
+    want = [float(mp.hyp2f1(1, c, 1 + c, -mp.mpf(v))) for v in x]
+    np.testing.assert_allclose(hyp_one(c, -x), want, rtol=1e-13)

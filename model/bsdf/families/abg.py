@@ -31,32 +31,58 @@ B_MIN = 1e-12
 #: to the largest |x|, 2.
 ANNULI = 256
 X_MAX = 2.0
-#: hyp_one sums Pfaff's series from this c on (ABg's |g| below 0.25), HYP_TERMS terms.
-HYP_SERIES_FROM = 8.0
+#: hyp_one: Pfaff's series alone from this c on (|g| below 1/6), to HYP_TERMS terms (the
+#: last below 1e-19 there); HYP_NEAR_TERMS terms of the series within x <= 2 and of the tail.
+HYP_LARGE_C = 12.0
 HYP_TERMS = 200
+HYP_NEAR_TERMS = 100
 #: Azimuths of the trapezoid rule of the oblique total integrated scatter (periodic, smooth).
 TIS_AZIMUTHS = 512
 
 
-def hyp_one(c: float, z: np.ndarray) -> np.ndarray:
-    """Gauss's 2F1(1, c; 1 + c; z) = c int_0^1 t^(c-1) / (1 - z t) dt for z <= 0, c > 0:
-    -log(1 - z) / z at c = 1; scipy's hyp2f1 below c = 8 (within 1e-12 of mpmath there); from
-    c = 8 on, where scipy fails for |z| > 1, Pfaff's 2F1(1, 1; 1 + c; z / (z - 1)) / (1 - z),
-    whose terms fall like Gamma(1 + c) / n^c (HYP_TERMS of them: below 1e-14 for c >= 8)."""
-    from scipy.special import hyp2f1
-
-    z = np.asarray(z, dtype=np.float64)
-    if c == 1.0:
-        return np.where(z < 0, np.log1p(-z) / np.where(z < 0, -z, 1.0), 1.0)
-    if c < HYP_SERIES_FROM:
-        return hyp2f1(1.0, c, 1.0 + c, z)
-    w = z / (z - 1.0)
-    term = np.ones_like(z)
-    total = np.ones_like(z)
-    for n in range(HYP_TERMS):
-        term = term * (n + 1.0) * w / (1.0 + c + n)
+def pfaff_series(c: float, x: np.ndarray, terms: int) -> np.ndarray:
+    """2F1(1, c; 1 + c; -x) by Pfaff's transformation, 2F1(1, 1; 1 + c; w) / (1 + x) with
+    w = x / (1 + x), summed to `terms` terms (each at most w^n, and Gamma(1 + c) / n^c)."""
+    w = x / (1.0 + x)
+    term = np.ones_like(x)
+    total = np.ones_like(x)
+    for n in range(1, terms + 1):
+        term = term * n * w / (c + n)
         total = total + term
-    return total / (1.0 - z)
+    return total / (1.0 + x)
+
+
+def hyp_one(c: float, z: np.ndarray) -> np.ndarray:
+    """Gauss's 2F1(1, c; 1 + c; z) = c int_0^1 t^(c-1) / (1 - z t) dt for z <= 0 and c > 0,
+    within 3e-14 of mpmath for c from 0.2 to 1e300 (near-integer c included) and -z to 1e15.
+
+    With x = -z: for c >= HYP_LARGE_C, Pfaff's series (HYP_TERMS terms); otherwise Pfaff's
+    series up to x = 2 (w <= 2/3, HYP_NEAR_TERMS terms) and beyond it c x^-c J(x), where
+    J(x) = int_0^x s^(c-1) / (1 + s) ds = J(2) + sum_k (-1)^k (2^-e - x^-e) / e, e = k + 1 - c
+    (the integral from 2 to x in v = 1/s, its geometric series in v <= 1/2), each term
+    written with expm1 so that e near 0 (integer c) loses nothing (log(x / 2) at e = 0).
+    scipy's hyp2f1 fails here for large c and near integer c at large x."""
+    x = -np.asarray(z, dtype=np.float64)
+    if c >= HYP_LARGE_C:
+        return pfaff_series(c, x, HYP_TERMS)
+    near = x <= 2.0
+    inner = pfaff_series(c, np.where(near, x, 2.0), HYP_NEAR_TERMS)
+    if near.all():
+        return inner
+    x_far = np.where(near, 4.0, x)
+    ratio = np.log(0.5 * x_far)
+    tail = np.zeros_like(x_far)
+    for k in range(HYP_NEAR_TERMS + math.ceil(c)):
+        e = k + 1.0 - c
+        if e > 0:
+            part = 2.0**-e * -np.expm1(-e * ratio) / e
+        elif e < 0:
+            part = np.exp(-e * np.log(x_far)) * np.expm1(e * ratio) / e
+        else:
+            part = ratio
+        tail = tail + (-1.0) ** k * part
+    far = c * np.exp(-c * np.log(x_far)) * (2.0**c / c * inner + tail)
+    return np.where(near, inner, far)
 
 
 def radial_integral(r: np.ndarray, b: float, g: float) -> np.ndarray:
