@@ -27,7 +27,7 @@ ALPHA = Parameter("alpha", 1e-4, 4.0, True, "roughness of the coat's microfacet 
 ETA = Parameter("eta", 1.0001, 4.0, False, "refractive index of the coat over the exterior")
 #: Cosines of incidence at which a(mu) is tabulated: denser toward grazing, where it bends.
 TABLE_MU = np.linspace(0.0, 1.0, 49)[1:] ** 2
-#: Stratified uniforms per side (TABLE_STRATA^2 per cosine) of the table's visible-normal sums:
+#: Stratified uniforms per side (TABLE_STRATA^2 per cosine) of the table's sample() sums:
 #: the sum errs like 1 / TABLE_STRATA where the lobe meets the horizon (bench/bsdf_families.py).
 TABLE_STRATA = 128
 
