@@ -9,7 +9,7 @@ a(w) the layer's directional albedo, a_mean = 2 int a(mu) mu dmu its cosine-weig
 base sees what the layer does not reflect, on the way in and on the way out, so f is reciprocal
 and the total albedo is a(i) + rho (1 - a(i)): at most 1, and 1 for a white base (rho = 1),
 whatever the layer loses to masking. a(mu) is tabulated once per coat (albedo_table); the
-white-furnace error is the table's: at most 3e-4 at 128^2 strata, built in ~50 ms for a GGX coat
+white-furnace error is the table's: at most 3e-4 at 128^2 strata, built in 60-90 ms for a GGX coat
 (bench/bsdf_families.py, docs/bsdf-families.md)."""
 
 from __future__ import annotations
