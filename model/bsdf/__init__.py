@@ -1,4 +1,5 @@
-"""The microfacet BSDF model: rough dielectric (Walter et al. 2007) and rough conductor.
+"""The BSDF models: rough dielectric (Walter et al. 2007) and rough conductor, and the families
+beside them (families/: Lambert, Oren-Nayar, a coated diffuse surface, ABg).
 
 The models are imported on first use (PEP 562), so that the registries of distributions and
 maskings (model.bsdf.distributions, model.bsdf.masking) import without scipy: the CLI builds its
@@ -9,11 +10,16 @@ from __future__ import annotations
 import importlib
 
 _HOMES = {
+    "ABg": "model.bsdf.families.abg",
+    "CoatedDiffuse": "model.bsdf.families.coated",
+    "Lambert": "model.bsdf.families.lambert",
+    "OrenNayar": "model.bsdf.families.oren_nayar",
     "RoughConductor": "model.bsdf.conductor",
     "RoughDielectric": "model.bsdf.dielectric",
     "fresnel_conductor": "model.bsdf.fresnel",
     "fresnel_dielectric": "model.bsdf.fresnel",
     "make_distribution": "model.bsdf.distributions",
+    "make_family": "model.bsdf.families",
 }
 
 __all__ = sorted(_HOMES)

@@ -1,0 +1,16 @@
+"""One instance of every family per interesting parameter set, shared by the families' tests."""
+
+from model.bsdf import ABg, CoatedDiffuse, Lambert, OrenNayar
+
+MODELS = {
+    "lambert": Lambert(0.7),
+    "oren-nayar full": OrenNayar(0.8, 0.4),
+    "oren-nayar qualitative": OrenNayar(0.8, 0.4, variant="qualitative"),
+    "coated ggx": CoatedDiffuse(0.6, 0.25, 1.5),
+    "coated beckmann correlated": CoatedDiffuse(0.9, 0.08, 1.6, distribution="beckmann",
+                                                masking="correlated"),
+    "abg g=2": ABg(2e-3, 1e-3, 2.0),
+    "abg g=1.5": ABg(0.05, 0.02, 1.5),
+    "abg g=0": ABg(0.2, 0.0, 0.0),
+    "abg g<0": ABg(0.01, 0.5, -1.0),
+}
