@@ -185,9 +185,9 @@ def test_zemax_model_read_by_libbsdf(probe, ground_glass, tmp_path):
 def test_zemax_sample_rotations_read_by_libbsdf(scatter_type, probe, tmp_path):
     """A run with sample azimuths (0, 45 and 120 deg; gonio's sample frame turned by -p) is one
     SampleRotation per azimuth, each block holding its points; libbsdf returns every measured
-    value within 1e-4 relative but at one BTDF direction (in each of the three rotations):
-    6.3e-4 of a value 4e-8 of the peak at the transmitted lobe's edge (the next radial node 0),
-    where libbsdf's value does not move with the direction; not traced, so bounded at 1e-3."""
+    value within 1e-4 relative, the BTDF's lobe edge included (a value 4e-8 of the peak beside
+    a block whose value at the same cell is 2e4 times larger: the guard blocks, zemax.guarded,
+    keep libbsdf's 32-bit interpolation from that block off it)."""
     data = synthesize("ggx", 0.394, incidences_deg=(0.0, 30.0), n_uniform=24, n_peak=12,
                       seed=5)
     turns = [data.subset(data.valid)]
@@ -202,10 +202,7 @@ def test_zemax_sample_rotations_read_by_libbsdf(scatter_type, probe, tmp_path):
     points = side(rotated, scatter_type)
     kind, got = libbsdf_values(probe, "zemax", path, *zemax_directions(path, points))
     assert kind == scatter_type
-    expected = np.maximum(points.bsdf, 0.0)
-    off = disagreement(expected, got) > RELATIVE
-    assert off.sum() <= (3 if scatter_type == "BTDF" else 0)
-    assert worst(expected, got) < 1e-3
+    assert worst(np.maximum(points.bsdf, 0.0), got) < RELATIVE
 
 
 def test_astm_isotropic_near_normal_incidence(probe, ground_glass, tmp_path):
