@@ -219,39 +219,14 @@ def test_a_spectral_or_polarised_file_is_refused_naming_what_it_holds(variable, 
     assert err.count("\n") == 1 and said in err and str(path) in err
 
 
-SUPPLEMENT = """\
-[provenance]
-lab = "Optics lab, Example University"
-contact = "A. Person"
-email = "a.person@example.org"
-street = "Lab Road"
-building = "7"
-postal_code = "12345"
-city = "Example"
-country = "Nowhere"
-licence = "CC-BY-4.0"
-
-[environment]
-temperature_c = 22.1
-u_temperature_c = 0.2
-
-[optics]
-source_name = "HeNe laser, 1 mW"
-source_type = "HeNe laser"
-source_power_mw = 0.95
-u_source_power_mw = 0.01
-
-[sample]
-shape = "disc"
-diameter_mm = 50.8
-azimuth_reference = "sample azimuth 0: the holder's index mark points up"
-"""
+#: The export-time file of the tests here and of the conformance suite's.
+SUPPLEMENT = (Path(__file__).parent / "bird_given.toml").read_text()
 #: What a lab bench's run without [provenance], [environment], the source's power and the
 #: sample's shape lacks (lab.toml leaves them to the lab), as the file above gives it.
 GIVEN = ["[provenance] lab", "[provenance] contact", "[provenance] email",
          "[provenance] street", "[provenance] building", "[provenance] postal_code",
          "[provenance] city", "[provenance] country", "[provenance] licence",
-         "[environment] temperature_c",
+         "[provenance] licence_url", "[environment] temperature_c",
          "[environment] u_temperature_c", "[optics] source_power_mw",
          "[optics] u_source_power_mw", "[sample] shape", "[sample] diameter_mm"]
 
@@ -279,7 +254,8 @@ def test_an_export_time_file_fills_what_the_run_lacks_and_is_named(glass, tmp_pa
     meta = json.loads(out.read_text())["metadata"]
     assert meta["provenance"]["organization"] == "Optics lab, Example University"
     assert meta["license"] == {"type": "CC-BY-4.0",
-                               "rights_holder": "Optics lab, Example University"}
+                               "rights_holder": "Optics lab, Example University",
+                               "link": "https://creativecommons.org/licenses/by/4.0/"}
     assert meta["environment"] == {"temperature": {"value": 22.1, "unit": "°C",
                                                    "uncertainty": 0.2, "uncertainty_unit": "°C"}}
     source = meta["instrumentation"]["illumination_system"]["source"]
