@@ -41,9 +41,6 @@ SOURCES = ("Measured", "Model")
 HORIZON_COS = 1e-6  # |cos theta_o| below which a model table writes 0
 #: A guard block's distance below its block, degrees (guarded).
 GUARD_DEG = 1e-6
-#: Block angles are written to 1e-12 deg, so that a reader finds a point's block at the
-#: point's own incidence (a refracted angle is no whole number of degrees).
-BLOCK_DECIMALS = 12
 #: The comment that names the guard blocks' angles, as the header writes them.
 GUARD_COMMENT = "guard blocks"
 
@@ -166,9 +163,9 @@ def turned(v: np.ndarray, angle_deg: float) -> np.ndarray:
                     axis=-1) + 0.0
 
 
-def _angles(values: np.ndarray, decimals: int = ANGLE_DECIMALS) -> str:
+def _angles(values: np.ndarray) -> str:
     """A grid of angles, degrees, tab-separated (measured.angle_text: no float noise)."""
-    return "\t".join(angle_text(v, decimals) for v in values)
+    return "\t".join(angle_text(v) for v in values)
 
 
 def _guard_axis(nodes: np.ndarray, data: np.ndarray, tis: np.ndarray, axis: int
@@ -176,9 +173,9 @@ def _guard_axis(nodes: np.ndarray, data: np.ndarray, tis: np.ndarray, axis: int
     """(nodes, data, tis, guard nodes) with a guard node GUARD_DEG below each node of `axis`
     (0: sample rotation, 1: angle of incidence) but the first, holding the linear
     interpolation between its neighbours there."""
-    nodes = np.round(nodes, BLOCK_DECIMALS)
+    nodes = np.round(nodes, ANGLE_DECIMALS)
     at = np.flatnonzero(np.diff(nodes) > 2 * GUARD_DEG) + 1
-    guards = np.round(nodes[at] - GUARD_DEG, BLOCK_DECIMALS)
+    guards = np.round(nodes[at] - GUARD_DEG, ANGLE_DECIMALS)
     share = (nodes[at] - guards) / (nodes[at] - nodes[at - 1])
 
     def insert(values: np.ndarray) -> np.ndarray:
@@ -197,14 +194,14 @@ def guarded(table: ZemaxTable) -> ZemaxTable:
     from the node below (v0 + (v1 - v0) * 1): beside a block whose value at the same cell is
     far larger (a BTDF lobe's edge moves with the incidence) a node's value comes back off by
     up to half a float ulp of that larger value (6.3e-4 relative), from its guard within
-    1e-7."""
+    1e-6."""
     rotation, data, tis, rotation_guards = _guard_axis(table.sample_rotation_deg, table.data,
                                                        table.tis, 0)
     angle, data, tis, angle_guards = _guard_axis(table.angle_deg, data, tis, 1)
     if not len(rotation_guards) and not len(angle_guards):
         return table
-    note = (f"{GUARD_COMMENT}: SampleRotation {_angles(rotation_guards, BLOCK_DECIMALS)} "
-            f"AngleOfIncidence {_angles(angle_guards, BLOCK_DECIMALS)}".replace("\t", " ")
+    note = (f"{GUARD_COMMENT}: SampleRotation {_angles(rotation_guards)} "
+            f"AngleOfIncidence {_angles(angle_guards)}".replace("\t", " ")
             + f" (each {GUARD_DEG:g} deg below a block, the linear interpolation between its "
             "neighbours, so that a reader interpolating in 32-bit floats returns each block's "
             "values at its nodes)")
@@ -239,8 +236,7 @@ def _unguarded(table: ZemaxTable, fail: Callable[[str], CalibrationError]) -> Ze
 
 def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
     """Write the table in the Zemax tabular BSDF format, with its guard blocks (guarded):
-    angles by angle_text (block angles to BLOCK_DECIMALS), values and TIS with every digit
-    (repr)."""
+    angles by angle_text, values and TIS with every digit (repr)."""
     path = Path(path)
     table = guarded(table)
     lines = [f"# {c}" for c in table.comments]
@@ -249,9 +245,8 @@ def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
         f"Symmetry  {table.symmetry}",
         "SpectralContent  Monochrome",
         f"ScatterType  {table.scatter_type}",
-        f"SampleRotation  {len(table.sample_rotation_deg)}",
-        _angles(table.sample_rotation_deg, BLOCK_DECIMALS),
-        f"AngleOfIncidence  {len(table.angle_deg)}", _angles(table.angle_deg, BLOCK_DECIMALS),
+        f"SampleRotation  {len(table.sample_rotation_deg)}", _angles(table.sample_rotation_deg),
+        f"AngleOfIncidence  {len(table.angle_deg)}", _angles(table.angle_deg),
         f"ScatterAzimuth  {len(table.azimuth_deg)}", _angles(table.azimuth_deg),
         f"ScatterRadial  {len(table.radial_deg)}", _angles(table.radial_deg),
         "", "Monochrome", "DataBegin",

@@ -9,9 +9,10 @@ import sys
 from pathlib import Path
 
 from calibration.exports import ExportRequest, checked_what, write
-from calibration.exports.bird_supplement import read_supplement
+from calibration.exports.bird_supplement import SHAPE_KEYS, read_supplement
 from calibration.formats import FORMATS, WHATS
 from calibration.values import CalibrationError
+from gonio.optics import DESCRIPTIVE_KEYS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 from gonio_cli.commands.reduce import say_angle_terms
 from gonio_cli.incomplete import add_force_option
@@ -51,12 +52,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--provenance", metavar="FILE.toml",
                    help="bird: what BiRD requires and the run did not record, given now: a "
                         "TOML file with the tables the config and plan take, [provenance], "
-                        "[environment], [optics] (only source_name, source_type, "
-                        "source_power_mw, u_source_power_mw, detector_spectral_range_nm) and "
-                        "[sample] (only shape, azimuth_reference, diameter_mm, length_mm, "
-                        "width_mm, thickness_mm). It fills only what the run lacks and is "
-                        "refused where it contradicts what the run recorded; the file names it "
-                        "(path and sha256) and the keys it gave")
+                        f"[environment], [optics] (only {', '.join(DESCRIPTIVE_KEYS)}) and "
+                        f"[sample] (only {', '.join(SHAPE_KEYS)}). It fills only what the run "
+                        "lacks and is refused where it contradicts what the run recorded; the "
+                        "BiRD file names it (path and sha256) and the keys it gave")
     add_fit_options(p)
     p.set_defaults(func=run, check_args=check_args, reads_run="run")
 
