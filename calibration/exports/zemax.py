@@ -209,9 +209,9 @@ def guarded(table: ZemaxTable) -> ZemaxTable:
                       table.radial_deg, data, tis, [*table.comments, note], table.source)
 
 
-def _unguarded(table: ZemaxTable, fail: Callable[[str], CalibrationError]) -> ZemaxTable:
-    """The table without the guard blocks its GUARD_COMMENT names (fail's error where that
-    comment does not name them as write_zemax writes it)."""
+def _unguarded(table: ZemaxTable, path: Path) -> ZemaxTable:
+    """The table without the guard blocks its GUARD_COMMENT names (a CalibrationError naming
+    the file where that comment does not name them as write_zemax writes it)."""
     note = next((c for c in table.comments if c.startswith(GUARD_COMMENT + ":")), None)
     if note is None:
         return table
@@ -223,8 +223,9 @@ def _unguarded(table: ZemaxTable, fail: Callable[[str], CalibrationError]) -> Ze
         rotation_guards = np.array([float(w) for w in words[3:split]])
         angle_guards = np.array([float(w) for w in words[split + 1:]])
     except (ValueError, IndexError):
-        raise fail(f"the comment {note[:80]!r} does not name the guard blocks as "
-                   "'guard blocks: SampleRotation <angles> AngleOfIncidence <angles>'") from None
+        raise CalibrationError(f"{path}: the comment {note[:80]!r} does not name the guard "
+                               "blocks as 'guard blocks: SampleRotation <angles> "
+                               "AngleOfIncidence <angles>'") from None
     keep_rotation = ~np.isin(table.sample_rotation_deg, rotation_guards)
     keep_angle = ~np.isin(table.angle_deg, angle_guards)
     return ZemaxTable(table.scatter_type, table.symmetry, table.sample_rotation_deg[keep_rotation],
@@ -341,7 +342,7 @@ def read_zemax(source: str | Path | MeasuredFile) -> ZemaxTable:
     if pos >= len(body) or body[pos][1] != "DataEnd":
         raise fail("expected DataEnd")
     return _unguarded(ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data,
-                                 tis, comments, source), fail)
+                                 tis, comments, source), path)
 
 
 def _number(text: str, fail: Callable[[str], CalibrationError]) -> float:

@@ -1,7 +1,7 @@
 """The guard blocks of a Zemax file (calibration.exports.zemax.guarded): read from the file's
 text by an independent route, each lies 1e-6 deg below a sample rotation or angle of
 incidence and holds the linear interpolation between its neighbours; gonio's own reader drops
-them again, and a guard comment it cannot follow is one error naming the line."""
+them again, and a guard comment it cannot follow is one error naming the file."""
 
 import numpy as np
 import pytest
@@ -67,10 +67,10 @@ def test_one_block_has_no_guard(tmp_path):
     assert "guard" not in text and "SampleRotation  1\n0.0\nAngleOfIncidence  1\n0.0\n" in text
 
 
-def test_a_guard_comment_it_cannot_follow_names_its_line(tmp_path):
+def test_a_guard_comment_it_cannot_follow_names_the_file(tmp_path):
     path = write_zemax(two_by_two(), tmp_path / "guarded.bsdf")
     text = path.read_text().replace("AngleOfIncidence 19.3371219 (", "Angle 19.33 (")
     path.write_text(text)
-    with pytest.raises(CalibrationError, match=r"guarded\.bsdf:\d+: the comment 'guard blocks:"
+    with pytest.raises(CalibrationError, match=r"guarded\.bsdf: the comment 'guard blocks:"
                                                r".*does not name the guard blocks"):
         read_zemax(path)
