@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.exports.measured import ANGLE_DECIMALS, angle_text
+from calibration.exports.measured import angle_text
 from calibration.formats.limits import (
     MAX_POINTS,
     MeasuredFile,
@@ -39,10 +39,6 @@ SCATTER_TYPES = ("BRDF", "BTDF")
 SYMMETRIES = ("PlaneSymmetrical", "Asymmetrical")
 SOURCES = ("Measured", "Model")
 HORIZON_COS = 1e-6  # |cos theta_o| below which a model table writes 0
-#: A guard block's distance below its block, degrees (guarded).
-GUARD_DEG = 1e-6
-#: The comment that names the guard blocks' angles, as the header writes them.
-GUARD_COMMENT = "guard blocks"
 
 
 @dataclass
@@ -168,78 +164,10 @@ def _angles(values: np.ndarray) -> str:
     return "\t".join(angle_text(v) for v in values)
 
 
-def _guard_axis(nodes: np.ndarray, data: np.ndarray, tis: np.ndarray, axis: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(nodes, data, tis, guard nodes) with a guard node GUARD_DEG below each node of `axis`
-    (0: sample rotation, 1: angle of incidence) but the first, holding the linear
-    interpolation between its neighbours there."""
-    nodes = np.round(nodes, ANGLE_DECIMALS)
-    at = np.flatnonzero(np.diff(nodes) > 2 * GUARD_DEG) + 1
-    guards = np.round(nodes[at] - GUARD_DEG, ANGLE_DECIMALS)
-    share = (nodes[at] - guards) / (nodes[at] - nodes[at - 1])
-
-    def insert(values: np.ndarray) -> np.ndarray:
-        moved = np.moveaxis(values, axis, 0)
-        weight = share.reshape(-1, *[1] * (moved.ndim - 1))
-        between = moved[at] + weight * (moved[at - 1] - moved[at])
-        return np.moveaxis(np.insert(moved, at, between, axis=0), 0, axis)
-
-    return np.insert(nodes, at, guards), insert(data), insert(tis), guards
-
-
-def guarded(table: ZemaxTable) -> ZemaxTable:
-    """The table with a guard block GUARD_DEG below each sample rotation and angle of
-    incidence but the first, holding the table's own linear interpolation there, so that the
-    file describes the same function. libbsdf interpolates in 32-bit floats and reaches a node
-    from the node below (v0 + (v1 - v0) * 1): beside a block whose value at the same cell is
-    far larger (a BTDF lobe's edge moves with the incidence) a node's value comes back off by
-    up to half a float ulp of that larger value (6.3e-4 relative), from its guard within
-    1e-6."""
-    rotation, data, tis, rotation_guards = _guard_axis(table.sample_rotation_deg, table.data,
-                                                       table.tis, 0)
-    angle, data, tis, angle_guards = _guard_axis(table.angle_deg, data, tis, 1)
-    if not len(rotation_guards) and not len(angle_guards):
-        return table
-    note = (f"{GUARD_COMMENT}: SampleRotation {_angles(rotation_guards)} "
-            f"AngleOfIncidence {_angles(angle_guards)}".replace("\t", " ")
-            + f" (each {GUARD_DEG:g} deg below a block, the linear interpolation between its "
-            "neighbours, so that a reader interpolating in 32-bit floats returns each block's "
-            "values at its nodes)")
-    return ZemaxTable(table.scatter_type, table.symmetry, rotation, angle, table.azimuth_deg,
-                      table.radial_deg, data, tis, [*table.comments, note], table.source)
-
-
-def _unguarded(table: ZemaxTable, path: Path) -> ZemaxTable:
-    """The table without the guard blocks its GUARD_COMMENT names (a CalibrationError naming
-    the file where that comment does not name them as write_zemax writes it)."""
-    note = next((c for c in table.comments if c.startswith(GUARD_COMMENT + ":")), None)
-    if note is None:
-        return table
-    words = note.split("(")[0].split()
-    try:
-        split = words.index("AngleOfIncidence")
-        if words[2] != "SampleRotation":
-            raise ValueError
-        rotation_guards = np.array([float(w) for w in words[3:split]])
-        angle_guards = np.array([float(w) for w in words[split + 1:]])
-    except (ValueError, IndexError):
-        raise CalibrationError(f"{path}: the comment {note[:80]!r} does not name the guard "
-                               "blocks as 'guard blocks: SampleRotation <angles> "
-                               "AngleOfIncidence <angles>'") from None
-    keep_rotation = ~np.isin(table.sample_rotation_deg, rotation_guards)
-    keep_angle = ~np.isin(table.angle_deg, angle_guards)
-    return ZemaxTable(table.scatter_type, table.symmetry, table.sample_rotation_deg[keep_rotation],
-                      table.angle_deg[keep_angle], table.azimuth_deg, table.radial_deg,
-                      table.data[keep_rotation][:, keep_angle],
-                      table.tis[keep_rotation][:, keep_angle],
-                      [c for c in table.comments if c != note], table.source)
-
-
 def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
-    """Write the table in the Zemax tabular BSDF format, with its guard blocks (guarded):
-    angles by angle_text, values and TIS with every digit (repr)."""
+    """Write the table in the Zemax tabular BSDF format: angles by angle_text, values and TIS
+    with every digit (repr)."""
     path = Path(path)
-    table = guarded(table)
     lines = [f"# {c}" for c in table.comments]
     lines += [
         f"Source  {table.source}",
@@ -263,8 +191,7 @@ def write_zemax(table: ZemaxTable, path: str | Path) -> Path:
 
 def read_zemax(source: str | Path | MeasuredFile) -> ZemaxTable:
     """Parse a Zemax tabular BSDF file (monochrome) within calibration.formats.limits (its
-    grid's size checked before it is allocated), without the guard blocks its comment names
-    (guarded); errors name the line that is wrong."""
+    grid's size checked before it is allocated); errors name the line that is wrong."""
     file = measured_file(source)  # read once, within the limits
     path = file.path
     comments: list[str] = []
@@ -341,8 +268,8 @@ def read_zemax(source: str | Path | MeasuredFile) -> ZemaxTable:
                 data[r, a, z] = numbers("data row", len(radial))
     if pos >= len(body) or body[pos][1] != "DataEnd":
         raise fail("expected DataEnd")
-    return _unguarded(ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data,
-                                 tis, comments, source), path)
+    return ZemaxTable(scatter_type, symmetry, rotation, angle, azimuth, radial, data, tis, comments,
+                      source)
 
 
 def _number(text: str, fail: Callable[[str], CalibrationError]) -> float:
