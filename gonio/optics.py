@@ -18,6 +18,10 @@ from gonio.fields import Fields, stored_table
 
 #: Polarisation states a source or an analyser may have (or a linear angle in degrees).
 POLARISATIONS = ("unpolarised", "s", "p")
+#: The keys that describe the source and the detector's range: facts that reduction and fits
+#: never read (the BiRD export's, which may take them at export time).
+DESCRIPTIVE_KEYS = ("source_name", "source_type", "source_power_mw", "u_source_power_mw",
+                    "detector_spectral_range_nm")
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,25 @@ def _polarisation(f: Fields, key: str) -> str | float:
     return f.number(key, low=-180.0, high=180.0)
 
 
+def parse_descriptive(f: Fields) -> dict[str, Any]:
+    """The DESCRIPTIVE_KEYS of an [optics] table, checked: the source's power > 0 with an
+    uncertainty only beside it, the detector's range in wavelengths > 0."""
+    out = {"source_name": f.string("source_name", ""),
+           "source_type": f.string("source_type", ""),
+           "source_power_mw": f.number("source_power_mw", None, low=0.0, high=1e9,
+                                       low_open=True),
+           "u_source_power_mw": f.number("u_source_power_mw", None, low=0.0, high=1e9),
+           "detector_spectral_range_nm": f.pair("detector_spectral_range_nm", None)}
+    spectral = out["detector_spectral_range_nm"]
+    if spectral is not None and spectral[0] <= 0.0:
+        raise f.fail("detector_spectral_range_nm", f"must be wavelengths > 0 nm, got "
+                     f"[{spectral[0]:g}, {spectral[1]:g}]")
+    if out["u_source_power_mw"] is not None and out["source_power_mw"] is None:
+        raise f.fail("u_source_power_mw", "needs source_power_mw (the value it is the "
+                     "uncertainty of)")
+    return out
+
+
 def parse_optics(f: Fields) -> Optics:
     """Validate an [optics] table (the geometry's and wavelength's keys are required; the
     polarisations, the tolerance, the source's and the detector's range are not)."""
@@ -88,23 +111,12 @@ def parse_optics(f: Fields) -> Optics:
         analyser_polarisation=_polarisation(f, "analyser_polarisation"),
         aperture_diameter_tolerance_mm=f.number("aperture_diameter_tolerance_mm", None,
                                                 low=0.0, high=100.0),
-        source_name=f.string("source_name", ""),
-        source_type=f.string("source_type", ""),
-        source_power_mw=f.number("source_power_mw", None, low=0.0, high=1e9, low_open=True),
-        u_source_power_mw=f.number("u_source_power_mw", None, low=0.0, high=1e9),
-        detector_spectral_range_nm=f.pair("detector_spectral_range_nm", None),
+        **parse_descriptive(f),
     )
     f.done()
     if optics.aperture_diameter_mm >= optics.aperture_distance_mm:
         raise f.fail("aperture_diameter_mm", f"{optics.aperture_diameter_mm:g} mm must be "
                      f"smaller than aperture_distance_mm {optics.aperture_distance_mm:g} mm")
-    spectral = optics.detector_spectral_range_nm
-    if spectral is not None and spectral[0] <= 0.0:
-        raise f.fail("detector_spectral_range_nm", f"must be wavelengths > 0 nm, got "
-                     f"[{spectral[0]:g}, {spectral[1]:g}]")
-    if optics.u_source_power_mw is not None and optics.source_power_mw is None:
-        raise f.fail("u_source_power_mw", "needs source_power_mw (the value it is the "
-                     "uncertainty of)")
     tolerance = optics.aperture_diameter_tolerance_mm
     if tolerance is not None and tolerance >= optics.aperture_diameter_mm:
         raise f.fail("aperture_diameter_tolerance_mm", f"+-{tolerance:g} mm must be smaller "

@@ -3,7 +3,9 @@
 [optics]: source, beam, receiver aperture, detector range; the detector as it reported itself),
 the sample (plan [sample]: shape, dimensions, azimuth reference) and the room (plan
 [environment]). Every field the BiRD schema requires comes from the record; where the record
-lacks one, `bird_metadata` refuses with one line naming each plan or config key to add.
+lacks one, `bird_metadata` refuses with one line naming each plan or config key to add (or to
+give at export time: calibration.exports.bird_supplement, whose file the provenance comments
+then name).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import uuid
 from collections.abc import Mapping
 from typing import Any
 
+from calibration.exports.bird_supplement import supplement_sentence
 from calibration.values import CalibrationError
 
 SCHEMA_BASE = "https://raw.githubusercontent.com/BiRD-project/BiRD_view/master/BRDF_JSON_schema/"
@@ -86,6 +89,10 @@ def bird_metadata(record: Mapping[str, Any], description: str, comments: str) ->
         "software": software(), "sample": sample(record["sample"]),
         "environment": environment(record["environment"]), "comments": comments,
     }
+    given = supplement_sentence(record)
+    if given:
+        meta["provenance"]["comments"] = given
+        meta["comments"] = f"{comments} {given}"
     return meta
 
 

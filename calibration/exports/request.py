@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from calibration.exports.bird_supplement import Supplement
     from calibration.fit import FitOptions
 
 
@@ -24,3 +25,4 @@ class ExportRequest:
     subtract_signature: bool = False
     angle_terms: bool = True  # False: reduce without the budget's angle terms (U says so)
     single_scattering: bool = False  # Mitsuba: drop a fit's multiple scattering (and say so)
+    provenance: Supplement | None = None  # BiRD: what the run lacks, given at export time

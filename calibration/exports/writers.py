@@ -12,6 +12,7 @@ from typing import Any
 
 from calibration.exports.astm import AstmTable, astm_tables, side_paths, write_astm
 from calibration.exports.bird import write_bird
+from calibration.exports.bird_supplement import supplemented
 from calibration.exports.cf import write_reduced_netcdf
 from calibration.exports.measured import fact_lines, shared_error_lines, write_reduced_csv
 from calibration.exports.model import (
@@ -46,7 +47,10 @@ def reduced_netcdf(data: ReducedData, out: Path, record: Mapping[str, Any],
 def reduced_bird(data: ReducedData, out: Path, record: Mapping[str, Any],
                  request: ExportRequest, source: str = "") -> Written:
     """The reduced data's reflection points as a BiRD universal BRDF file (bird.write_bird;
-    its notes say what it leaves out)."""
+    its notes say what it leaves out), with what the request's provenance file gives where
+    the record lacks it (bird_supplement.supplemented)."""
+    if request.provenance is not None:
+        record = supplemented(record, request.provenance)
     path, notes = write_bird(data, out, record)
     return [path], notes
 

@@ -1,6 +1,6 @@
-"""`gonio export RUN --format FORMAT [--what raw|reduced|model] --out FILE`: write what a run
-measured (raw readings; reduced BSDF with its uncertainties) or its fitted model;
-calibration.exports."""
+"""`gonio export RUN --format FORMAT [--what raw|reduced|model] [--provenance FILE.toml] --out
+FILE`: write what a run measured (raw readings; reduced BSDF with its uncertainties) or its
+fitted model; calibration.exports."""
 
 from __future__ import annotations
 
@@ -9,7 +9,10 @@ import sys
 from pathlib import Path
 
 from calibration.exports import ExportRequest, checked_what, write
+from calibration.exports.bird_supplement import SHAPE_KEYS, read_supplement
 from calibration.formats import FORMATS, WHATS
+from calibration.values import CalibrationError
+from gonio.optics import DESCRIPTIVE_KEYS
 from gonio_cli.commands.fit import add_fit_options, emulator_sim, options_from
 from gonio_cli.commands.reduce import say_angle_terms
 from gonio_cli.incomplete import add_force_option
@@ -46,6 +49,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "keeps is printed and noted in the file); without it such a fit is "
                         "written as the gonio_multiscatter plugin, or refused where that cannot "
                         "match the model's R + T within 1 %%")
+    p.add_argument("--provenance", metavar="FILE.toml",
+                   help="bird: what BiRD requires and the run did not record, given now: a "
+                        "TOML file with the tables the config and plan take, [provenance], "
+                        f"[environment], [optics] (only {', '.join(DESCRIPTIVE_KEYS)}) and "
+                        f"[sample] (only {', '.join(SHAPE_KEYS)}). It fills only what the run "
+                        "lacks and is refused where it contradicts what the run recorded; the "
+                        "BiRD file names it (path and sha256) and the keys it gave")
     add_fit_options(p)
     p.set_defaults(func=run, check_args=check_args, reads_run="run")
 
@@ -54,14 +64,18 @@ def check_args(args: argparse.Namespace) -> None:
     """The arguments' checks that need no run (format, --what, --out's suffix), made before
     the run is read."""
     checked_what(args.format, args.what, Path(args.out))
+    if args.provenance is not None and args.format != "bird":
+        raise CalibrationError(f"export: --provenance gives what a BiRD file needs; --format "
+                               f"{args.format} does not take it")
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the file(s), print each path and any note (on stderr)."""
     sim = emulator_sim(args.run) if args.diffraction else None
+    supplement = None if args.provenance is None else read_supplement(args.provenance)
     request = ExportRequest(args.what, options_from(args, sim), args.fit, args.force,
                             args.calibration, args.shot_noise_w, args.subtract_signature,
-                            not args.no_angle_terms, args.single_scattering)
+                            not args.no_angle_terms, args.single_scattering, supplement)
     paths, notes = write(args.run, args.format, Path(args.out), request)
     if request.what != "raw":
         say_angle_terms(args)

@@ -24,6 +24,18 @@ def test_export_help_names_both_zemax_files(capsys):
     assert "csv and netcdf write the raw readings of a run that cannot be reduced" in text
 
 
+def test_export_help_says_what_provenance_gives(capsys):
+    """--provenance FILE.toml: the tables and keys a BiRD export takes at export time."""
+    with pytest.raises(SystemExit):
+        main(["export", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "[--provenance FILE.toml]" in text
+    assert ("[provenance], [environment], [optics] (only source_name, source_type, "
+            "source_power_mw, u_source_power_mw, detector_spectral_range_nm) and [sample] (only "
+            "shape, azimuth_reference, diameter_mm, length_mm, width_mm, thickness_mm)") in text
+    assert "fills only what the run lacks" in text and "sha256" in text
+
+
 @pytest.mark.parametrize("fmt,what", [("zemax", "raw"), ("csv", "model"), ("mitsuba", "raw")])
 def test_export_refuses_what_a_format_does_not_hold(fmt, what, tmp_path, capsys):
     assert main(["export", str(tmp_path), "--format", fmt, "--what", what,

@@ -4,11 +4,14 @@ $GONIO_THIRD_PARTY) with the jsonschema library, every format (uri, email, date-
 The demo plan scanned on the emulated serial bench, exported with `gonio export --format bird`,
 validates with no error, every required field holding the plan's and config's values; the
 schema refuses a file that breaks it (so the check is real); and `gonio reduce --import` of the
-file gives back the export's points."""
+file gives back the export's points. A run recorded without [provenance], [environment], the
+source's power and the sample's shape is refused by name, and exported with those given at
+export time (`--provenance FILE.toml`) validates too, its provenance naming the file."""
 
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 import sys
 import tomllib
@@ -96,3 +99,69 @@ def test_the_import_gives_back_the_exported_points(exported, tmp_path):
                                atol=1e-9)
     csv = tmp_path / "reduced.csv"
     assert main(["reduce", "--import", str(path), "--out", str(csv)]) == 0
+
+
+@pytest.fixture(scope="module")
+def bare_run(tmp_path_factory):
+    """The demo plan scanned as a run recorded without [provenance], [environment], the
+    source's power and the sample's shape and size (lab.toml leaves them to the lab): its
+    directory."""
+    from gonio.runner import new_scan
+
+    folder = tmp_path_factory.mktemp("bird-bare")
+    plan = tomllib.loads((EXAMPLES / "plans" / "demo.toml").read_text())
+    for key in ("instrument", "environment"):
+        plan.pop(key)
+    for key in ("shape", "diameter_mm"):
+        plan["sample"].pop(key)
+    plan["averaging"] = 1
+    cfg = fast_config("sim-serial")
+    cfg.pop("provenance")
+    for key in ("source_power_mw", "u_source_power_mw"):
+        cfg["optics"].pop(key)
+    result = new_scan(write_plan(folder, plan, cfg), sim=True, out=folder / "runs",
+                      progress=False)
+    assert result.outcome.status == "completed"
+    return result.path
+
+
+def test_a_run_without_them_is_refused_naming_the_keys(bare_run, tmp_path, capsys):
+    out = tmp_path / "bare.json"
+    assert main(["export", str(bare_run), "--format", "bird", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and not out.exists()
+    assert ("config [provenance] lab, contact, email, street, building, postal_code, city, "
+            "country, licence; config [optics] source_power_mw; plan [sample] shape, "
+            "diameter_mm (or length_mm and width_mm); plan [environment] temperature_c") in err
+
+
+def test_given_at_export_time_the_file_validates_and_names_them(bare_run, tmp_path):
+    """tests/fitting/bird_given.toml gives what the run lacks (and repeats the source's name
+    and type and the azimuth reference, which the run recorded alike)."""
+    given = TESTS / "fitting" / "bird_given.toml"
+    out = tmp_path / "bare.json"
+    assert main(["export", str(bare_run), "--format", "bird", "--provenance", str(given),
+                 "--out", str(out)]) == 0
+    document = json.loads(out.read_text())
+    errors = [f"{'/'.join(map(str, e.absolute_path))}: {e.message}"
+              for e in bird_validator().iter_errors(document)]
+    assert errors == []
+    meta = document["metadata"]
+    assert meta["provenance"]["organization"] == "Optics lab, Example University"
+    assert meta["license"]["link"] == "https://creativecommons.org/licenses/by/4.0/"
+    assert meta["environment"]["temperature"]["value"] == 22.1
+    power = meta["instrumentation"]["illumination_system"]["source"]["power"]
+    assert (power["value"], power["uncertainty"]) == (0.95, 0.01)
+    assert meta["sample"]["shape"] == "disc"
+    digest = hashlib.sha256(given.read_bytes()).hexdigest()
+    said = meta["provenance"]["comments"]
+    assert said.startswith("Given at export time (gonio export --provenance), not recorded by "
+                           f"the run: the file {given.resolve()} (sha256 {digest}) gave "
+                           "[provenance] lab, ")
+    assert ("[environment] temperature_c, [environment] u_temperature_c, [optics] "
+            "source_power_mw, [optics] u_source_power_mw, [sample] shape, [sample] "
+            "diameter_mm, which the run had not recorded.") in said
+    assert meta["comments"].endswith(said)
+    record = meta["adhoc_section"]["gonio_record"]
+    assert record["export_supplement"]["sha256"] == digest
+    assert record["environment"]["temperature_c"] == 22.1

@@ -1,7 +1,9 @@
 """Conformance with libbsdf, a reader nobody here wrote: every ASTM E1392 and Zemax tabular
 BSDF export (reduced data and fitted model) of Walter's ground glass measured on the emulated
 bench (0 and 30 deg, both sides, its multiple-scattering fit) is read by libbsdf's own
-readers, and at every measured point libbsdf returns gonio's value within 1e-4 relative.
+readers, and at every measured point libbsdf returns gonio's value within 1e-4 relative, or,
+for a Zemax file, within libbsdf's float32 precision (libbsdf_float: half a float32 ulp of the
+largest value it blends there), whichever is larger.
 
 Frames: libbsdf reads an isotropic ASTM file into its own frame, the source on +x (gonio's
 sample frame has it on -x: a half turn about the normal). Its Zemax frame is gonio's sample
@@ -18,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fitting.fitting_bench_runs import instrument, plan, scan
+from libbsdf_float import blend_bounds, point_bounds
 from libbsdf_reader import ReaderUnavailable, ToolMissing, build_probe, libbsdf_values
 from required_tools import tool_missing
 
@@ -124,6 +127,22 @@ def worst(expected: np.ndarray, got: np.ndarray) -> float:
     return float(np.max(disagreement(expected, got)))
 
 
+def assert_within_float32(expected: np.ndarray, got: np.ndarray, bound: np.ndarray,
+                          what: str) -> None:
+    """Every value within RELATIVE (disagreement) or, where that is the larger, within libbsdf's
+    float32 bound (libbsdf_float); prints how many points needed that bound and its largest."""
+    scale = np.where(expected != 0, np.abs(expected), 1.0)
+    allowed = np.maximum(RELATIVE * scale, bound)
+    off = np.abs(got - expected)
+    assert np.all(off <= allowed), (what, off[off > allowed], allowed[off > allowed])
+    needed = off > RELATIVE * scale
+    largest = float(bound[needed].max(initial=0.0))
+    elsewhere = float(np.max(off[~needed] / scale[~needed], initial=0.0))
+    print(f"{what}: {needed.sum()} of {len(off)} points within libbsdf's float32 bound only "
+          f"(largest bound {largest:.2g}, relative {float(np.max(off / scale)):.2g}); "
+          f"elsewhere worst {elsewhere:.2g} relative")
+
+
 def test_astm_reduced_read_by_libbsdf(probe, ground_glass, tmp_path):
     """Every measured value of both ASTM files comes back from libbsdf."""
     run, fit_json = ground_glass
@@ -160,7 +179,10 @@ def test_zemax_reduced_read_by_libbsdf(probe, ground_glass, tmp_path):
         wi, wo = zemax_directions(path, points)
         kind, got = libbsdf_values(probe, "zemax", path, wi, wo)
         assert kind == table.scatter_type
-        assert worst(np.maximum(points.bsdf, 0.0), got) < RELATIVE, path.name
+        nodes = measured_nodes(points, table.scatter_type, points.meta["eta"],
+                               table.symmetry == "PlaneSymmetrical")
+        assert_within_float32(np.maximum(points.bsdf, 0.0), got,
+                              point_bounds(table, nodes, len(points.bsdf)), path.name)
 
 
 def test_zemax_model_read_by_libbsdf(probe, ground_glass, tmp_path):
@@ -178,16 +200,16 @@ def test_zemax_model_read_by_libbsdf(probe, ground_glass, tmp_path):
                               np.searchsorted(table.radial_deg, at.radial)]
         _, got = libbsdf_values(probe, "zemax", path,
                                 *zemax_directions(path, points.subset(at.point)))
-        assert worst(expected, got) < RELATIVE, path.name
+        assert_within_float32(expected, got, blend_bounds(table, at), path.name)
 
 
 @pytest.mark.parametrize("scatter_type", ["BRDF", "BTDF"])
 def test_zemax_sample_rotations_read_by_libbsdf(scatter_type, probe, tmp_path):
     """A run with sample azimuths (0, 45 and 120 deg; gonio's sample frame turned by -p) is one
     SampleRotation per azimuth, each block holding its points; libbsdf returns every measured
-    value within 1e-4 relative but at one BTDF direction (in each of the three rotations):
-    6.3e-4 of a value 4e-8 of the peak at the transmitted lobe's edge (the next radial node 0),
-    where libbsdf's value does not move with the direction; not traced, so bounded at 1e-3."""
+    value within 1e-4 relative or within its float32 precision: on the BTDF's lobe edge a value
+    4e-8 of the peak lies beside a block whose value at the same cell is 2e4 times larger, and
+    libbsdf's blend from that block returns it within half a float32 ulp of that value."""
     data = synthesize("ggx", 0.394, incidences_deg=(0.0, 30.0), n_uniform=24, n_peak=12,
                       seed=5)
     turns = [data.subset(data.valid)]
@@ -202,10 +224,9 @@ def test_zemax_sample_rotations_read_by_libbsdf(scatter_type, probe, tmp_path):
     points = side(rotated, scatter_type)
     kind, got = libbsdf_values(probe, "zemax", path, *zemax_directions(path, points))
     assert kind == scatter_type
-    expected = np.maximum(points.bsdf, 0.0)
-    off = disagreement(expected, got) > RELATIVE
-    assert off.sum() <= (3 if scatter_type == "BTDF" else 0)
-    assert worst(expected, got) < 1e-3
+    nodes = measured_nodes(points, scatter_type, 1.51, False)
+    assert_within_float32(np.maximum(points.bsdf, 0.0), got,
+                          point_bounds(read_zemax(path), nodes, len(points.bsdf)), scatter_type)
 
 
 def test_astm_isotropic_near_normal_incidence(probe, ground_glass, tmp_path):

@@ -7,6 +7,7 @@ is refused in one line naming the plan or config keys; a bad BiRD file is one er
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 
 from calibration.exports.bird import write_bird
+from calibration.exports.bird_supplement import read_supplement, supplemented
 from calibration.exports.measured import columns
 from calibration.formats import format_to_read
 from calibration.formats.file_format import ImportOptions
@@ -215,3 +217,113 @@ def test_a_spectral_or_polarised_file_is_refused_naming_what_it_holds(variable, 
     assert main(["fit", "--import", str(path), "--eta", "1.5", "--sigma-relative", "0.05"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and said in err and str(path) in err
+
+
+#: The export-time file of the tests here and of the conformance suite's.
+SUPPLEMENT = (Path(__file__).parent / "bird_given.toml").read_text()
+#: What a lab bench's run without [provenance], [environment], the source's power and the
+#: sample's shape lacks (lab.toml leaves them to the lab), as the file above gives it.
+GIVEN = ["[provenance] lab", "[provenance] contact", "[provenance] email",
+         "[provenance] street", "[provenance] building", "[provenance] postal_code",
+         "[provenance] city", "[provenance] country", "[provenance] licence",
+         "[provenance] licence_url", "[environment] temperature_c",
+         "[environment] u_temperature_c", "[optics] source_power_mw",
+         "[optics] u_source_power_mw", "[sample] shape", "[sample] diameter_mm"]
+
+
+def bare_record() -> dict:
+    """The example record as a run recorded without [provenance], [environment], the source's
+    power and the sample's shape and size (an older run, or lab.toml's bench)."""
+    record = example_record()
+    record["provenance"] = record["environment"] = None
+    record["light_source"].update(source_power_mw=None, u_source_power_mw=None)
+    record["sample"].update(shape="", diameter_mm=None)
+    return record
+
+
+def supplement_file(tmp_path: Path, text: str = SUPPLEMENT) -> Path:
+    path = tmp_path / "given.toml"
+    path.write_text(text)
+    return path
+
+
+def test_an_export_time_file_fills_what_the_run_lacks_and_is_named(glass, tmp_path):
+    path = supplement_file(tmp_path)
+    record = supplemented(bare_record(), read_supplement(path))
+    out, _ = write_bird(glass, tmp_path / "glass.json", record)
+    meta = json.loads(out.read_text())["metadata"]
+    assert meta["provenance"]["organization"] == "Optics lab, Example University"
+    assert meta["license"] == {"type": "CC-BY-4.0",
+                               "rights_holder": "Optics lab, Example University",
+                               "link": "https://creativecommons.org/licenses/by/4.0/"}
+    assert meta["environment"] == {"temperature": {"value": 22.1, "unit": "°C",
+                                                   "uncertainty": 0.2, "uncertainty_unit": "°C"}}
+    source = meta["instrumentation"]["illumination_system"]["source"]
+    assert source["power"] == {"value": 0.95, "unit": "mW", "uncertainty": 0.01,
+                               "uncertainty_unit": "mW"}
+    assert source["name"] == "HeNe laser, 1 mW"  # recorded: the file's equal one not "given"
+    assert meta["sample"]["shape"] == "disc"
+    assert meta["sample"]["dimensions"]["diameter"] == {"value": 50.8, "unit": "mm"}
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    said = meta["provenance"]["comments"]
+    assert said == (f"Given at export time (gonio export --provenance), not recorded by the "
+                    f"run: the file {path.resolve()} (sha256 {digest}) gave "
+                    f"{', '.join(GIVEN)}, which the run had not recorded.")
+    assert meta["comments"].endswith(said)
+    given = meta["adhoc_section"]["gonio_record"]["export_supplement"]
+    assert given == {"file": str(path.resolve()), "sha256": digest, "gave": GIVEN}
+
+
+@pytest.mark.parametrize("change, said", [
+    (("temperature_c = 22.1", "temperature_c = 22.1\nhumidity_rel = 0.4"), None),
+    (('source_type = "HeNe laser"', 'source_type = "LED"'),
+     "[optics] source_type: 'LED' contradicts the run's recorded 'HeNe laser'"),
+    (("diameter_mm = 50.8", "diameter_mm = 50.8\nid = \"other\""),
+     "[sample] id: cannot be given at export time, only shape, azimuth_reference, "
+     "diameter_mm, length_mm, width_mm, thickness_mm (the run's plan holds the rest"),
+    (("[optics]", "[optics]\nwavelength_nm = 633.0"), "[optics] wavelength_nm: cannot be given"),
+    (("[environment]", "[sim]\nseed = 1\n[environment]"), "[sim] cannot be given at export time"),
+    (('email = "a.person@example.org"', 'email = "nobody"'),
+     "[provenance] email: must be an e-mail address, got 'nobody'"),
+    (("temperature_c = 22.1", "temperature = 22.1"),
+     "[environment]: missing required key 'temperature_c'"),
+    (("[sample]", "[sample"), "not valid TOML"),
+])
+def test_a_file_that_contradicts_the_run_or_gives_what_it_cannot_is_one_error(
+        change, said, glass, tmp_path):
+    path = supplement_file(tmp_path, SUPPLEMENT.replace(*change))
+    out = tmp_path / "glass.json"
+    if said is None:  # the run's own value again, and a key it lacks: taken
+        record = supplemented(bare_record(), read_supplement(path))
+        assert record["environment"]["humidity_rel"] == 0.4
+        return
+    with pytest.raises(CalibrationError) as caught:
+        write_bird(glass, out, supplemented(bare_record(), read_supplement(path)))
+    message = str(caught.value)
+    assert "\n" not in message and said in message and str(path) in message
+    assert not out.exists()
+
+
+def test_a_recorded_value_the_file_contradicts_is_named(glass, tmp_path):
+    path = supplement_file(tmp_path, "[environment]\ntemperature_c = 25.0\n")
+    with pytest.raises(CalibrationError, match=r"given\.toml: \[environment\] temperature_c: "
+                                               r"25\.0 contradicts the run's recorded 21\.5; an "
+                                               r"export-time file only fills what the run lacks"):
+        supplemented(example_record(), read_supplement(path))
+
+
+def test_a_file_that_fills_part_leaves_the_rest_refused_by_name(glass, tmp_path):
+    path = supplement_file(tmp_path, "[environment]\ntemperature_c = 22.1\n")
+    record = supplemented(bare_record(), read_supplement(path))
+    with pytest.raises(CalibrationError, match=r"^export: --format bird needs what the run's "
+                                               r"record lacks: config \[provenance\] lab, "):
+        write_bird(glass, tmp_path / "glass.json", record)
+
+
+def test_provenance_is_for_bird_only(tmp_path, capsys):
+    path = supplement_file(tmp_path)
+    assert main(["export", str(tmp_path / "no-run"), "--format", "csv", "--provenance",
+                 str(path), "--out", str(tmp_path / "x.csv")]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "gonio export: error: export: --provenance gives what a BiRD file needs; --format csv "
+        "does not take it")
