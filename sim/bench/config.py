@@ -151,8 +151,8 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
     "room": {  # sim.bench.room: the air the environment sensors read (drift per hour)
         "temperature_c": (21.0, _number(-40.0, 60.0)),
         "humidity_rel": (0.45, _number(0.0, 1.0)),
-        "temperature_drift_c_per_h": (0.0, _number(-10.0, 10.0)),
-        "humidity_drift_rel_per_h": (0.0, _number(-0.5, 0.5)),
+        "temperature_drift_c_per_h": (0.0, _number(-100.0, 100.0)),
+        "humidity_drift_rel_per_h": (0.0, _number(-1.0, 1.0)),
     },
     "stray": {  # sim.bench.stray: the instrument's own scatter (default: none)
         "halo_fraction": (0.0, _number(0.0, 0.1)),
