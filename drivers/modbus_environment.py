@@ -9,13 +9,10 @@ sensor's own error words) is a DeviceError naming it.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 from drivers.base import DeviceError, RoomReading
-from drivers.byte_link import LineSettings
-from drivers.modbus_transport import RTU_LINE, ModbusTimeouts
 from drivers.modbus_unit import MappedUnit
-from drivers.register_map import ROOM_REGISTERS, RegisterMap
+from drivers.register_map import ROOM_REGISTERS
 
 TEMPERATURE_RANGE_C = (-100.0, 100.0)  # what gonio's [environment] takes
 
@@ -23,18 +20,8 @@ TEMPERATURE_RANGE_C = (-100.0, 100.0)  # what gonio's [environment] takes
 class ModbusEnvironment(MappedUnit):
     """A room temperature and humidity sensor on a Modbus unit."""
 
-    def __init__(self, transport: str, port_or_host: str, unit: int,
-                 register_map: str | Path | RegisterMap, *, name: str = "modbus-environment",
-                 tcp_port: int = 502, line: LineSettings = RTU_LINE,
-                 timeouts: ModbusTimeouts | None = None, read_retries: int = 2):
-        super().__init__(transport, port_or_host, unit, register_map, name=name,
-                         tcp_port=tcp_port, line=line, timeouts=timeouts,
-                         read_retries=read_retries)
-        try:
-            self.map.require(ROOM_REGISTERS)
-        except ValueError:
-            self.close()
-            raise
+    kind_name = "modbus-environment"
+    needs = (ROOM_REGISTERS, (), ())
 
     def read_room(self) -> RoomReading:
         """Temperature (deg C) and relative humidity (fraction) now, in one read."""

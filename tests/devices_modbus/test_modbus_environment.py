@@ -2,8 +2,6 @@
 frames byte for byte on a real pty, gonio's driver and third-party masters (pymodbus's client,
 mbpoll) read it over RTU and TCP, and what the manual leaves to Modbus (exceptions) holds."""
 
-import os
-import shutil
 import subprocess
 
 import pytest
@@ -135,17 +133,6 @@ def test_pymodbus_serial_client_reads_the_sensor_at_its_factory_line(sensor):
         assert got.registers == [242, 383]
     finally:
         client.close()
-
-
-@pytest.fixture(scope="module")
-def mbpoll():
-    """Path of mbpoll: a failure in CI (it must be installed there), a skip elsewhere."""
-    path = shutil.which("mbpoll")
-    if path is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("mbpoll is not installed but CI=true (.ci/run installs it)")
-        pytest.skip("mbpoll not installed (Debian: apt-get install mbpoll)")
-    return path
 
 
 @pytest.mark.thirdparty

@@ -4,6 +4,7 @@ aborted run resumes and checks clean, and a plan or config that says the room tw
 clear error."""
 
 import copy
+import json
 import math
 
 import numpy as np
@@ -21,7 +22,10 @@ ROOM_MAP = EXAMPLES / "registermaps" / "xy-md02.toml"
 U_TEMPERATURE_C = 0.5 / math.sqrt(3.0)  # the XY-MD02 manual's +-0.5 degC
 U_HUMIDITY_REL = 0.03 / math.sqrt(3.0)  # and +-3 %RH
 DRIFT_C_PER_H = 30.0
-PLAN = {"name": "room", "dark": {"every": 8}, "beam": {"every": 8}, "grid": [
+SAMPLE = {"id": "room-glass", "kind": "hemisphere", "eta": 1.51, "lit_from": "air",
+          "shape": "hemisphere", "diameter_mm": 25.4,
+          "azimuth_reference": "sample azimuth 0: the holder's index mark points up"}
+PLAN = {"name": "room", "sample": SAMPLE, "dark": {"every": 8}, "beam": {"every": 8}, "grid": [
     {"side": "reflection", "theta_i_deg": [0.0, 30.0],
      "theta_o_deg": {"start": -60.0, "stop": 60.0, "step": 10.0}, "skip_forbidden": True}]}
 SENSOR = {"protocol": "modbus-environment", "transport": "rtu", "port": "/dev/ttyUSB3",
@@ -78,6 +82,20 @@ def test_the_records_environment_is_the_sensors_mean_with_its_spread(completed):
     devices = run.meta["sessions"][0]["devices"]
     assert devices["room"]["protocol"] == "modbus-environment"
     assert devices["room"]["identity"] == {}  # the XY-MD02 reports none
+
+
+def test_the_bird_export_states_the_sensors_environment(completed, tmp_path):
+    out = tmp_path / "room.json"
+    proc = gonio_cli("export", completed, "--format", "bird", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    env = run_record(open_run(completed))["environment"]
+    stated = json.loads(out.read_text())["metadata"]["environment"]
+    assert stated["temperature"]["value"] == pytest.approx(env["temperature_c"], rel=1e-12)
+    assert stated["temperature"]["uncertainty"] == pytest.approx(env["u_temperature_c"],
+                                                                 rel=1e-12)
+    assert stated["relative_humidity"]["value"] == pytest.approx(40.0, rel=1e-12)  # in %
+    assert stated["relative_humidity"]["uncertainty"] == pytest.approx(100 * U_HUMIDITY_REL,
+                                                                       rel=1e-12)
 
 
 def test_an_aborted_run_with_the_sensor_resumes_and_checks_clean(tmp_path):
