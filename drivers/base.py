@@ -162,6 +162,31 @@ class Reading:
     saturated: bool = False
 
 
+@dataclass(frozen=True)
+class RoomReading:
+    """One environment-sensor reading: air temperature in deg C, relative humidity as a
+    fraction (0 to 1)."""
+
+    temperature_c: float
+    humidity_rel: float
+
+
+@runtime_checkable
+class EnvironmentSensor(Protocol):
+    """A room temperature and humidity sensor, read beside the detector."""
+
+    name: str
+
+    def read_room(self) -> RoomReading:
+        """The temperature and humidity now."""
+
+    def identity(self) -> dict[str, str]:
+        """The device's identity as it reports it ({} if it reports none)."""
+
+    def close(self) -> None:
+        """Release the connection."""
+
+
 @runtime_checkable
 class Detector(Protocol):
     """An optical power detector."""

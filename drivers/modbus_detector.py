@@ -8,13 +8,9 @@ or autorange, one reading per call, and the dark zero.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 from drivers.base import DeviceError, Reading
-from drivers.byte_link import LineSettings
-from drivers.modbus_transport import RTU_LINE, ModbusTimeouts
 from drivers.modbus_unit import MappedUnit
-from drivers.register_map import RegisterMap
 
 DETECTOR_REGISTERS = ("reading", "status", "range_in_use", "fault_code", "gain_range",
                       "autorange", "averaging", "wavelength", "command")
@@ -25,20 +21,14 @@ DETECTOR_BITS = ("saturated", "fault")
 class ModbusDetector(MappedUnit):
     """An optical power detector on a Modbus photodiode amplifier."""
 
-    def __init__(self, transport: str, port_or_host: str, unit: int,
-                 register_map: str | Path | RegisterMap, *, name: str = "modbus-detector",
-                 tcp_port: int = 502, line: LineSettings = RTU_LINE,
-                 timeouts: ModbusTimeouts | None = None, read_retries: int = 2):
-        super().__init__(transport, port_or_host, unit, register_map, name=name,
-                         tcp_port=tcp_port, line=line, timeouts=timeouts,
-                         read_retries=read_retries)
-        try:
-            self.map.require(DETECTOR_REGISTERS, DETECTOR_COMMANDS, DETECTOR_BITS)
-            if not self.map.gain_ranges_w:
-                raise ValueError(f"{self.map.source}: [gain_ranges] full_scale_w is missing")
-        except ValueError:
-            self.close()
-            raise
+    kind_name = "modbus-detector"
+    needs = (DETECTOR_REGISTERS, DETECTOR_COMMANDS, DETECTOR_BITS)
+
+    def check_map(self) -> None:
+        """The registers, commands and bits it needs, and the gain ranges' full scales."""
+        super().check_map()
+        if not self.map.gain_ranges_w:
+            raise ValueError(f"{self.map.source}: [gain_ranges] full_scale_w is missing")
 
     @property
     def ranges_w(self) -> tuple[float, ...]:

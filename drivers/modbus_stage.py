@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 from drivers.base import DeviceError
-from drivers.byte_link import LineSettings
 from drivers.lost_reply import reraise, sent_once
-from drivers.modbus_transport import RTU_LINE, ModbusTimeouts
 from drivers.modbus_unit import MappedUnit
 from drivers.polling import poll_until
 from drivers.register_map import RegisterMap
@@ -30,19 +29,15 @@ LIMITS = ("limit_negative", "limit_positive")  # software travel limits, deg
 class ModbusStage(MappedUnit):
     """One rotation axis on a Modbus stepper drive; positions in degrees."""
 
+    kind_name = "modbus-stage"
+    needs = (STAGE_REGISTERS, STAGE_COMMANDS, STAGE_BITS)
+
     def __init__(self, transport: str, port_or_host: str, unit: int,
-                 register_map: str | Path | RegisterMap, *, name: str = "modbus-stage",
-                 tcp_port: int = 502, line: LineSettings = RTU_LINE,
-                 timeouts: ModbusTimeouts | None = None, read_retries: int = 2,
-                 poll_s: float = 0.005):
-        super().__init__(transport, port_or_host, unit, register_map, name=name,
-                         tcp_port=tcp_port, line=line, timeouts=timeouts,
-                         read_retries=read_retries)
-        try:
-            self.map.require(STAGE_REGISTERS, STAGE_COMMANDS, STAGE_BITS)
-        except ValueError:
-            self.close()
-            raise
+                 register_map: str | Path | RegisterMap, *, poll_s: float = 0.005,
+                 **link: Any):
+        """`link`: MappedUnit's keywords (name, tcp_port, line, timeouts, read_retries);
+        poll_s: the pause between status reads while waiting for a move."""
+        super().__init__(transport, port_or_host, unit, register_map, **link)
         self.poll_s = poll_s
 
     # -- state ------------------------------------------------------------------

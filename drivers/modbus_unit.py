@@ -1,10 +1,11 @@
 """One Modbus unit addressed by the names of its register map, over a shared link: the base of
-the stage and detector drivers (reads by name, settings written once and read back, commands,
-status bits, identity)."""
+the stage, detector and environment-sensor drivers (the map checked for what the driver needs,
+reads by name, settings written once and read back, commands, status bits, identity)."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 from drivers.base import DeviceError, DeviceTimeout, Interlocked, ProtocolError
 from drivers.byte_link import LineSettings
@@ -24,14 +25,21 @@ INTERLOCK_TEXT = "interlock input open (the unit stopped and refuses to run)"
 class MappedUnit:
     """One Modbus unit reached through a shared link and addressed by register names.
 
-    Base of the stage and detector drivers: owns the link reference, reads and writes
-    named registers through the map, closes on `close()` or leaving a `with` block.
+    Base of the stage, detector and environment-sensor drivers: owns the link reference,
+    reads and writes named registers through the map, closes on `close()` or leaving a `with`
+    block. A driver names what its map must hold (`needs`: registers, [commands] and
+    [status_bits]; `check_map` for more) and its default `name` (`kind_name`); a map without
+    it is a ValueError once the link is open, which is then released.
     """
 
+    kind_name: ClassVar[str] = "modbus-unit"
+    needs: ClassVar[tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]] = ((), (), ())
+
     def __init__(self, transport: str, port_or_host: str, unit: int,
-                 register_map: str | Path | RegisterMap, *, name: str, tcp_port: int = 502,
-                 line: LineSettings = RTU_LINE, timeouts: ModbusTimeouts | None = None,
-                 read_retries: int = 2):
+                 register_map: str | Path | RegisterMap, *, name: str | None = None,
+                 tcp_port: int = 502, line: LineSettings = RTU_LINE,
+                 timeouts: ModbusTimeouts | None = None, read_retries: int = 2):
+        name = self.kind_name if name is None else name
         if isinstance(unit, bool) or not isinstance(unit, int) or not 0 <= unit <= 247:
             raise ValueError(f"{name}: Modbus unit id must be an integer in 0..247, got {unit!r}")
         self.name, self.unit = name, unit
@@ -41,6 +49,15 @@ class MappedUnit:
                                 timeouts=timeouts, read_retries=read_retries, device=name)
         self.link = self._lease.link
         self._read_plans: dict[tuple[str, ...], list] = {}
+        try:
+            self.check_map()
+        except ValueError:
+            self.close()
+            raise
+
+    def check_map(self) -> None:
+        """ValueError unless the map has what the driver needs (`needs`), before any traffic."""
+        self.map.require(*self.needs)
 
     def read_values(self, *names: str) -> dict[str, float]:
         """Engineering values of the named registers, one read per table they lie in."""

@@ -33,6 +33,8 @@ _TABLES = ("holding", "input")
 _ACCESS = ("r", "rw")
 _TEXT_KEYS = ("table", "address", "count", "description")
 MAX_READ_REGISTERS = 125  # the most registers one Modbus read (03 / 04) may ask for
+#: the registers an environment sensor's map names: deg C and relative humidity (a fraction)
+ROOM_REGISTERS = ("temperature", "humidity")
 
 
 class RegisterMapError(ValueError):

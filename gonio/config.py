@@ -78,6 +78,7 @@ class InstrumentConfig:
     optics: Optics | None = None
     signature: Position | None = None  # [signature]: the sample retracted (arm_deg None)
     provenance: Provenance | None = None  # [provenance]: the lab, contact and licence
+    environment: str | None = None  # the environment sensor read at every reading, if any
 
     @property
     def sim(self) -> dict[str, Any]:
@@ -119,7 +120,8 @@ def parse_config(raw: dict[str, Any], path: str | Path | None = None) -> Instrum
             if setting.type == "file" and setting.key in dev.settings:
                 raw["devices"][dev.name][setting.key] = dev.settings[setting.key]
     return InstrumentConfig(name, path, devices, axes, detector, clearance, forbidden,
-                            beam, dark, raw, optics, signature, provenance)
+                            beam, dark, raw, optics, signature, provenance,
+                            environment_sensor(devices, where))
 
 
 def _devices(f: Fields, path: Path | None) -> dict[str, DeviceConfig]:
@@ -185,6 +187,16 @@ def _check_devices(devices: dict[str, DeviceConfig], axes: dict[str, AxisConfig]
             dev.kind.check(dev, [ax for ax in axes.values() if ax.device == dev.name], where,
                            devices)
     check_shared_links(devices, where)
+
+
+def environment_sensor(devices: dict[str, DeviceConfig], where: str) -> str | None:
+    """The one device of an environment kind (None: none); a ConfigError naming the second."""
+    sensors = [name for name, dev in devices.items() if dev.kind.role == "environment"]
+    if len(sensors) > 1:
+        raise ConfigError(f"{location(where, f'devices.{sensors[1]}')}: a second environment "
+                          f"sensor; the config has {sensors[0]!r} already (one is read at every "
+                          f"reading)")
+    return sensors[0] if sensors else None
 
 
 def _detector(f: Fields, devices: dict[str, DeviceConfig], optics: Optics | None

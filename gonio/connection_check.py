@@ -1,7 +1,8 @@
 """The check behind `gonio devices CONFIG`: open every device of a config as a scan does
-(gonio.instrument) and report who each says it is, where each axis stands and what the
-detector reads, without moving anything or pushing any of the config's settings; and whether
-the detector can measure at the config's wavelength, where it tells its sensor head's range.
+(gonio.instrument) and report who each says it is, where each axis stands, what the
+detector and the environment sensor read, without moving anything or pushing any of the
+config's settings; and whether the detector can measure at the config's wavelength, where it
+tells its sensor head's range.
 
 No Axis.configure (speed, acceleration, travel limits), no Detector.configure (wavelength,
 averaging, range), no home and no move is sent. What a driver does to open a device still
@@ -108,6 +109,12 @@ def reading_text(detector: Any) -> str:
     return f"{reading.power_w:.4e} W on the {reading.range_w:g} W range{over}"
 
 
+def room_text(sensor: Any) -> str:
+    """One reading of an environment sensor: temperature and relative humidity."""
+    room = sensor.read_room()
+    return f"{room.temperature_c:.1f} degC, {100.0 * room.humidity_rel:.1f} %RH"
+
+
 def wavelength_answer(subject: str, detector: Any, wavelength_nm: float) -> Answer | None:
     """A problem line when the detector's sensor head cannot take the config's wavelength,
     asked read-only where the detector tells its head's range (a PM100's SENS:CORR:WAV? MIN /
@@ -126,8 +133,9 @@ def wavelength_answer(subject: str, detector: Any, wavelength_nm: float) -> Answ
 def check_connections(cfg: InstrumentConfig,
                       at_positions: Callable[[dict[str, float]], None] | None = None
                       ) -> ConnectionReport:
-    """Open each device, ask its identity, each axis's position, one detector reading and
-    whether its head takes the config's wavelength; close everything. at_positions(positions
+    """Open each device, ask its identity, each axis's position, one detector reading,
+    whether its head takes the config's wavelength and one environment-sensor reading; close
+    everything. at_positions(positions
     by role) is told where the axes stand before the detector is read (the emulated detector
     of `--sim detector` lights itself from it)."""
     closers: list[Callable[[], None]] = []
@@ -162,6 +170,10 @@ def check_connections(cfg: InstrumentConfig,
             head = wavelength_answer(f"detector ({name})", opened[name],
                                      cfg.detector.wavelength_nm)
             answers.extend([head] if head is not None else [])
+        sensor = cfg.environment
+        if sensor in opened:
+            answers.append(_asked(f"environment ({sensor})", sensor,
+                                  lambda: room_text(opened[sensor])))
     finally:
         close_all(closers)
     return ConnectionReport(answers)

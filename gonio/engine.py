@@ -5,7 +5,9 @@ subscribe, and the engine knows none of them.
 The engine runs the compiled, index-addressed schedule (what makes resume after a kill exact).
 Of a schedule row it reads the index, the stage targets (`<role>_deg`) and the detector range
 (`range_w`); every other field is a tag it copies into the stored line unread (a tag the
-measurement also writes, such as theta_i_deg, is stored as plan_<name>).
+measurement also writes, such as theta_i_deg, is stored as plan_<name>). With an environment
+sensor in the config, each reading's line also carries the room read right after the detector
+(gonio.room_sensor: temperature_c, humidity_rel and their u).
 
 Failures: a device that reports an error (DeviceError) is not retried; a timeout, garbled reply
 or lost connection is retried (absolute moves and reads are safe to repeat) up to `retries`
@@ -62,6 +64,7 @@ from gonio.plan import (
     sweeps_source,
 )
 from gonio.reading_flags import INVALID, RETRIED
+from gonio.room_sensor import ROOM_FIELDS, room_readout
 from gonio.row_step import RowStep, arrival, row_step
 from gonio.run_clock import RunClock, wall_clock
 from gonio.run_control import Aborted, PauseControl
@@ -76,7 +79,7 @@ WAIT_MARGIN_S = 5.0
 HOME_S = 600.0  # device seconds a homing move may take
 RETRY_PAUSE_S = 0.05
 MEASURED = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "power_w", "saturated",
-            "t_s", "flags")  # what a stored line says of the measurement itself
+            "t_s", "flags", *ROOM_FIELDS)  # what a stored line says of the measurement itself
 
 
 def motion_timeout_s(instrument: Instrument, role: str, distance_deg: float) -> float:
@@ -171,6 +174,8 @@ class Engine:
         self._commanded: dict[str, float | None] = {role: None for role in instrument.axes}
         self._reported: dict[str, float] = {role: 0.0 for role in MOTION_ROLES}
         self._range: float | None = None  # the detector range last set (schedule's range_w)
+        self._room = room_readout(instrument.environment, instrument.config.raw,
+                                  instrument.config.environment)
 
     # -- one reading ------------------------------------------------------------
     def _wait_timeout(self, role: str, target: float) -> float:
@@ -217,7 +222,11 @@ class Engine:
         if pause_s > 0:  # instant time: no sleep(0), which only yields the core away
             time.sleep(pause_s)
         self._doing = f"reading the detector ({self.inst.detector.name})"
-        return self._record(row, self.inst.detector.read(), flags)
+        record = self._record(row, self.inst.detector.read(), flags)
+        if self._room is not None:
+            self._doing = f"reading the environment sensor ({self._room.sensor.name})"
+            record.update(self._room.read())
+        return record
 
     def _record(self, row: np.void, reading: Reading, flags: list[str]) -> dict[str, Any]:
         """The stored line of a reading taken at the axes' reported positions: the row's

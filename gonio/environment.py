@@ -3,7 +3,8 @@ humidity with their standard uncertainties, as read off the lab's own sensor).
 
 ASTM E2387 and ISO 19986 ask the record to state the conditions of the measurement; the record
 of every run carries this block, and the BiRD export needs the temperature. The values are
-entered by hand for the run (no device kind reads them at every reading).
+entered by hand for the run, or made from an environment sensor's readings when the instrument
+has one (gonio.room_sensor; the plan may not state them too).
 """
 
 from __future__ import annotations

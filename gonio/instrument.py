@@ -1,4 +1,4 @@
-"""Build an instrument (Axis and Detector drivers) from a validated config.
+"""Build an instrument (Axis, Detector and EnvironmentSensor drivers) from a validated config.
 
 Each device opens through its kind (gonio.device_kinds); this module opens them, shares a
 multi-axis controller among its axes, pushes the config's motion settings and travel limits
@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.base import Axis, Detector, DriverError, LineCounts
+from drivers.base import Axis, Detector, DriverError, EnvironmentSensor, LineCounts
 from gonio.config import InstrumentConfig
 from gonio.device_kinds import DeviceConfig
 from gonio.device_kinds.kind import AxisConfig
@@ -27,7 +27,8 @@ STOP_ATTEMPTS = 2
 
 @dataclass
 class Instrument:
-    """Live drivers for a config: axes by role, the detector, and how to close them.
+    """Live drivers for a config: axes by role, the detector, the environment sensor (None:
+the config has none), and how to close them.
 
     time_scale: virtual seconds per real second of the devices (1 on a real bench; the
     emulators' scale under --sim), so that settle and dwell waits shrink with it.
@@ -41,6 +42,7 @@ class Instrument:
     closers: list[Callable[[], None]] = field(default_factory=list)
     time_scale: float = 1.0
     devices: dict[str, dict[str, Any]] = field(default_factory=dict)
+    environment: EnvironmentSensor | None = None
 
     def stop_all(self) -> dict[str, str]:
         """Ask every axis to stop, each whatever the others did, twice if the first answer is
@@ -61,7 +63,7 @@ class Instrument:
     def line_counts(self) -> dict[str, dict[str, int]]:
         """Per device whose driver counts them (drivers.base.LineCounts), what its line has
         seen since it was opened: resyncs, unsolicited lines set aside."""
-        drivers = drivers_by_device(self.config, self.axes, self.detector)
+        drivers = drivers_by_device(self.config, self.axes, self.detector, self.environment)
         return {name: driver.line_counts() for name, driver in drivers.items()
                 if isinstance(driver, LineCounts)}
 
@@ -90,12 +92,15 @@ def close_all(closers: list[Callable[[], None]]) -> None:
     closers.clear()
 
 
-def drivers_by_device(cfg: InstrumentConfig, axes: dict[str, Axis], detector: Detector
-                      ) -> dict[str, Axis | Detector]:
+def drivers_by_device(cfg: InstrumentConfig, axes: dict[str, Axis], detector: Detector,
+                      environment: EnvironmentSensor | None = None
+                      ) -> dict[str, Axis | Detector | EnvironmentSensor]:
     """One driver per device name (an axis of a multi-axis controller speaks for it)."""
-    drivers: dict[str, Axis | Detector] = {cfg.axes[role].device: axis
-                                           for role, axis in axes.items()}
+    drivers: dict[str, Axis | Detector | EnvironmentSensor] = {
+        cfg.axes[role].device: axis for role, axis in axes.items()}
     drivers[cfg.detector.device] = detector
+    if environment is not None and cfg.environment is not None:
+        drivers[cfg.environment] = environment
     return drivers
 
 
@@ -143,17 +148,19 @@ def build_instrument(cfg: InstrumentConfig, time_scale: float = 1.0) -> Instrume
         axes = {role: _stage(cfg.devices[ax.device], ax, controllers, closers)
                 for role, ax in cfg.axes.items()}
         detector = open_device(cfg.devices[cfg.detector.device], closers)
-        drivers = drivers_by_device(cfg, axes, detector)  # an ESP's axes report alike
+        environment = (None if cfg.environment is None
+                       else open_device(cfg.devices[cfg.environment], closers))
+        drivers = drivers_by_device(cfg, axes, detector, environment)  # an ESP's axes alike
         devices = {name: _record(cfg.devices[name], drivers[name])
                    for name in cfg.devices if name in drivers}
     except BaseException:
         close_all(closers)
         raise
     return Instrument(cfg, axes, detector, closers, time_scale=float(time_scale),
-                      devices=devices)
+                      devices=devices, environment=environment)
 
 
-def _record(dev: DeviceConfig, driver: Axis | Detector) -> dict[str, Any]:
+def _record(dev: DeviceConfig, driver: Axis | Detector | EnvironmentSensor) -> dict[str, Any]:
     """What a run records of a device: protocol, endpoint, the settings its kind records (a
     Modbus transport and unit), and the identity the driver reports; a device that reports
     none, or fails to, is noted, never fatal."""

@@ -5,8 +5,9 @@ SEMI ME1392): wavelength and bandwidth, receiver solid angle, beam size and dive
 polarisation states, the source, the sample block, the room's environment, who measured
 (provenance), the calibration used and each device's identity per session. It is built from
 meta.json (what the scan recorded), falling back on the stored config's [optics] and plan's
-[sample] for runs older than those blocks; the environment comes from the stored plan's
-[environment], the provenance from the stored config's [provenance].
+[sample] for runs older than those blocks; the environment comes from the readings' room
+fields when the stored config has an environment sensor (gonio.room_sensor), else from the
+stored plan's [environment]; the provenance from the stored config's [provenance].
 
 `emulator_config(run)` is the only way reduction, fits and plots reach a run's [sim] table:
 it gives it for a run whose devices were all emulated, and None for any other run.
@@ -19,9 +20,10 @@ from collections.abc import Mapping
 from typing import Any
 
 from gonio.completeness import completeness_of
-from gonio.environment import environment_of_plan
+from gonio.environment import Environment, environment_of_plan
 from gonio.optics import optics_of_config
 from gonio.provenance import provenance_of_config
+from gonio.room_sensor import environment_of_lines, sensor_of_config
 from gonio.sample import sample_of_plan
 from gonio.store import Run
 
@@ -95,11 +97,20 @@ def run_record(run: Run) -> dict[str, Any]:
         "light_source": {key: o.get(key) for key in SOURCE_KEYS},
         "detector": run.config.get("detector", {}).get("device"),
         "detector_spectral_range_nm": o.get("detector_spectral_range_nm"),
-        "sample": sample, "environment": _json(environment_of_plan(run.plan, "run plan")),
+        "sample": sample, "environment": _json(run_environment(run)),
         "provenance": _json(provenance_of_config(run.config, "run config")),
         "calibration": meta.get("calibration"),
         "sessions": _sessions(meta),
     }
+
+
+def run_environment(run: Run) -> Environment | None:
+    """The run's environment: its environment sensor's readings summed up, if its config has
+    a sensor; else the plan's [environment]; None when neither says."""
+    sensor = sensor_of_config(run.config)
+    if sensor is not None:
+        return environment_of_lines(run.rows(), sensor)
+    return environment_of_plan(run.plan, "run plan")
 
 
 def _json(block: Any) -> dict[str, Any] | None:

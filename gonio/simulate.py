@@ -82,7 +82,7 @@ def visit(row: np.void, roles: Iterable[str]) -> Visit:
 
 def resolve_devices(cfg: InstrumentConfig, names: list[str] | None) -> list[str]:
     """Device names for `--sim [NAMES]`: None = all; a name may be a device or a role
-    (sample, arm, azimuth, elevation, detector)."""
+    (sample, arm, azimuth, elevation, detector, environment)."""
     if names is None:
         return list(cfg.devices)
     out = []
@@ -93,8 +93,11 @@ def resolve_devices(cfg: InstrumentConfig, names: list[str] | None) -> list[str]
             dev = cfg.axes[name].device
         elif name == "detector":
             dev = cfg.detector.device
+        elif name == "environment" and cfg.environment is not None:
+            dev = cfg.environment
         else:
-            roles = ", ".join([*cfg.axes, "detector"])
+            roles = ", ".join([*cfg.axes, "detector", *(["environment"] if cfg.environment
+                                                       else [])])
             raise ConfigError(f"--sim {name}: no such device or role (devices: "
                               f"{', '.join(cfg.devices)}; roles: {roles})")
         if dev not in out:

@@ -1,7 +1,7 @@
 """The device kinds sim emulates, each declared once: its name (a config's `protocol`),
-stage or detector, the factory that starts its emulator, the fault keys only it acts on and
-the [sim.devices.<name>] keys that say what its emulator is (a PM100's console and head, a
-Zaber product's device id, firmware and saved comm.alert).
+stage, detector or environment sensor, the factory that starts its emulator, the fault keys
+only it acts on and the [sim.devices.<name>] keys that say what its emulator is (a PM100's
+console and head, a Zaber product's device id, firmware and saved comm.alert).
 
 gonio.device_kinds declares the same names with the same roles (how the real devices are
 configured and opened); sim never imports it, and tests/test_device_kinds.py checks that the
@@ -24,12 +24,14 @@ from sim.devices.zaber import ZaberEmulator
 from sim.devices.zaber_device import IDENTITY_CHECKS
 from sim.emulator_factories import (
     DetectorFactory,
+    EnvironmentFactory,
     StageFactory,
     chain_on_pty,
     controller_on_pty,
     line_of,
     meter_on_pty,
     modbus_detector_unit,
+    modbus_environment_unit,
     modbus_stage_units,
 )
 
@@ -76,7 +78,16 @@ class DetectorEmulator(_Kind):
     start: DetectorFactory
 
 
-EmulatorKind = StageEmulator | DetectorEmulator
+@dataclass(frozen=True, kw_only=True)
+class EnvironmentEmulator(_Kind):
+    """An emulated environment-sensor kind: `start` serves a device's emulator reading the
+    bench's room ([sim.room])."""
+
+    role: ClassVar[str] = "environment"
+    start: EnvironmentFactory
+
+
+EmulatorKind = StageEmulator | DetectorEmulator | EnvironmentEmulator
 
 KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
     StageEmulator(name="esp", start=controller_on_pty(EspEmulator, "estop"),
@@ -89,6 +100,7 @@ KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
                      own_faults=("interlock",)),
     StageEmulator(name="zaber", start=chain_on_pty(ZaberEmulator), chained=True,
                   settings=IDENTITY_CHECKS),
+    EnvironmentEmulator(name="modbus-environment", start=modbus_environment_unit),
 )}
 
 

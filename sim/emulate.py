@@ -4,7 +4,8 @@
 on a real pty (serial, Modbus RTU) or TCP socket (Modbus TCP, and a line device whose
 `resource` is a TCPIP SOCKET one; on loopback unless `bind` names another address: the
 config's hosts are the real devices', never listen addresses), with motion on one
-VirtualClock and the detectors' light from the bench at the stages' positions. It returns
+VirtualClock, the detectors' light from the bench at the stages' positions and the
+environment sensors' air from its room ([sim.room], drifting on the run's clock). It returns
 the endpoints, so a caller can point the config's ports at them. `devices` limits it to
 some of the devices (hardware in the loop); then `positions()` must say where the real
 stages are.
@@ -29,10 +30,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sim.bench import build_power_source
+from sim.bench.room import build_room
 from sim.bench.tables import Progress, TablesPrepared
 from sim.device_kinds import (
     DetectorEmulator,
     EmulatorKind,
+    EnvironmentEmulator,
     LineKey,
     StageEmulator,
     check_faults,
@@ -45,11 +48,11 @@ from sim.devices.modbus_server import ModbusEmulatorServer
 from sim.devices.motion import VirtualClock
 from sim.devices.photodiode import SimConfigError
 from sim.devices.pty_server import LOOPBACK
-from sim.emulator_factories import EmulatedDevice, Light
+from sim.emulator_factories import EmulatedDevice, Light, RoomNow
 from sim.served_resources import serve_resource
 
 SIM_KEYS = ("time_scale", "seed", "source", "sample", "samples", "aperture", "alignment", "stray",
-            "detector", "faults", "devices")
+            "room", "detector", "faults", "devices")
 ROLES = ("sample", "arm", "azimuth", "elevation")
 #: A reading taken before this bench started: its commanded positions ({role: deg}) and its
 #: range setting (full scale in W; None = autorange).
@@ -211,7 +214,8 @@ def _modbus_group(dev: Mapping[str, Any], line_key: LineKey) -> tuple[str, Hasha
 
 
 class _Builder:
-    """Creates the emulators of one config, stages first, then the bench and the detectors."""
+    """Creates the emulators of one config, stages first, then the bench, the detectors and
+    the environment sensors."""
 
     def __init__(self, config: Mapping[str, Any], sim: dict[str, Any], chosen: list[str],
                  kinds: Mapping[str, EmulatorKind], bench: EmulatedBench, bind: str,
@@ -294,6 +298,13 @@ class _Builder:
                 for where, range_w in visited:
                     meter.visited(where, range_w)
 
+    def environment_sensors(self, room: RoomNow) -> None:
+        """Emulators of the chosen environment sensors, reading `room()`."""
+        for name in self.chosen:
+            kind = self.kinds[name]
+            if isinstance(kind, EnvironmentEmulator):
+                kind.start(self._device(name), room)
+
     def serve_modbus(self) -> None:
         """One Modbus server per bus or TCP endpoint, with all its collected units."""
         for (transport, _), units in self.modbus.items():
@@ -369,6 +380,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
             source.bench.warm_up(read(build.readers))
         build.detectors(source, lambda: _place(read(build.targets)),
                         [(_place(where), range_w) for where, range_w in visited])
+        build.environment_sensors(build_room(sim, build.run_time).now)
         build.serve_modbus()
         bench.begin_run(0.0)
     except BaseException:

@@ -1,5 +1,6 @@
 """Starting one device's emulator from its config tables: what a kind's factory is handed
-(`EmulatedDevice`, and a detector's `Light`), and the factories of the kinds sim serves.
+(`EmulatedDevice`, a detector's `Light`, an environment sensor's room), and the factories of
+the kinds sim serves.
 
 sim.device_kinds points each kind at one of these. A factory builds the emulator, hands it
 to `serve` (a pty or socket of its own, shared with the device's `mates` on a daisy chain) or
@@ -16,6 +17,7 @@ from typing import Any
 
 from sim.devices.faults import FaultSpec, InterlockInput
 from sim.devices.modbus_detector import ModbusDetectorEmulator
+from sim.devices.modbus_environment import ModbusEnvironmentEmulator
 from sim.devices.modbus_server import EmulatedUnit
 from sim.devices.modbus_stage import ModbusStageEmulator
 from sim.devices.motion import VirtualClock
@@ -63,6 +65,9 @@ class Light:
 
 StageFactory = Callable[[EmulatedDevice], None]
 DetectorFactory = Callable[[EmulatedDevice, Light], PhotodiodeModel]
+#: the room an environment sensor reads: (deg C, relative humidity 0..1) now
+RoomNow = Callable[[], tuple[float, float]]
+EnvironmentFactory = Callable[[EmulatedDevice, RoomNow], None]
 
 
 def home_deg(limits: Any) -> float:
@@ -190,3 +195,10 @@ def modbus_detector_unit(device: EmulatedDevice, light: Light) -> PhotodiodeMode
                                   interlock=device.interlock, clock=device.clock)
     device.join_bus(unit)
     return unit.model
+
+
+def modbus_environment_unit(device: EmulatedDevice, room: RoomNow) -> None:
+    """A Modbus temperature and humidity transmitter, as its register map describes it, on its
+    bus, reading the bench's room."""
+    device.join_bus(ModbusEnvironmentEmulator(room, device.table["register_map"], device.faults,
+                                              serial=device.serial))

@@ -17,7 +17,7 @@ from sim.devices.faults import KIND_FAULTS
 from sim.devices.photodiode import SimConfigError
 from sim.emulate import start
 
-KIND_NAMES = "esp, pm100, modbus-stage, modbus-detector, zaber"
+KIND_NAMES = "esp, pm100, modbus-stage, modbus-detector, zaber, modbus-environment"
 SIM_SERIAL = Path(__file__).resolve().parents[1] / "examples" / "instruments" / "sim-serial.toml"
 UNKNOWN_KIND = SIM_SERIAL.read_text().replace('protocol = "pm100"', 'protocol = "pm400"', 1)
 
@@ -25,7 +25,7 @@ UNKNOWN_KIND = SIM_SERIAL.read_text().replace('protocol = "pm100"', 'protocol = 
 def test_both_registries_name_the_same_kinds_in_the_same_roles():
     roles = {name: kind.role for name, kind in gonio.device_kinds.KINDS.items()}
     assert roles == {name: kind.role for name, kind in sim.device_kinds.KINDS.items()}
-    assert set(roles.values()) == {"stage", "detector"}
+    assert set(roles.values()) == {"stage", "detector", "environment"}
 
 
 def test_every_kind_fault_is_taken_by_some_kind_and_only_kind_faults_are_own():

@@ -1,5 +1,5 @@
 """The device kinds an instrument config may name as a device's `protocol`, each declared
-once: stage or detector, its settings, how it opens, its own config checks.
+once: stage, detector or environment sensor, its settings, how it opens, its own config checks.
 
 Config parsing (gonio.config) reads a device's settings from its kind, instrument building
 (gonio.instrument) opens it through its kind. sim.device_kinds declares the emulator of
@@ -12,11 +12,19 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from gonio.device_kinds.kind import DetectorKind, DeviceConfig, DeviceKind, StageKind, all_checks
+from gonio.device_kinds.kind import (
+    DetectorKind,
+    DeviceConfig,
+    DeviceKind,
+    EnvironmentKind,
+    StageKind,
+    all_checks,
+)
 from gonio.device_kinds.line_checks import check_line, line_agreement
 from gonio.device_kinds.modbus import (
     MODBUS_SETTINGS,
     check_register_map,
+    check_room_registers,
     check_stage_registers,
     map_full_scales_w,
     modbus_unit,
@@ -54,6 +62,11 @@ KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
               spec=fixed(ZABER),
               settings=serial_settings(Setting("address", "integer", 1, low=1, high=99),
                                        baudrate=115200)),
+    # a room temperature and humidity transmitter (the XY-MD02: examples/registermaps)
+    EnvironmentKind(name="modbus-environment", settings=MODBUS_SETTINGS,
+                    check=all_checks(check_room_registers, MODBUS_LINK), bus="unit",
+                    spec=register_map_spec,
+                    open=modbus_unit("drivers.modbus_environment:ModbusEnvironment")),
 )}
 
 
@@ -72,5 +85,5 @@ def endpoint_keys() -> tuple[str, ...]:
     return tuple(dict.fromkeys(keys))
 
 
-__all__ = ["KINDS", "DetectorKind", "DeviceConfig", "DeviceKind", "DeviceSpec", "Setting",
-           "StageKind", "device_spec", "endpoint_keys"]
+__all__ = ["KINDS", "DetectorKind", "DeviceConfig", "DeviceKind", "DeviceSpec",
+           "EnvironmentKind", "Setting", "StageKind", "device_spec", "endpoint_keys"]

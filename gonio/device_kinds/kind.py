@@ -1,8 +1,10 @@
-"""What a device kind is (`StageKind`, `DetectorKind`), a device of a config (`DeviceConfig`:
-its name, its kind and the values of the kind's settings) and an axis of one (`AxisConfig`).
+"""What a device kind is (`StageKind`, `DetectorKind`, `EnvironmentKind`), a device of a
+config (`DeviceConfig`: its name, its kind and the values of the kind's settings) and an axis
+of one (`AxisConfig`).
 
 A kind says once what the rest of gonio asks of a protocol: its config settings, how a
-device of it opens as `Axis` drivers or a `Detector`, and its own config checks.
+device of it opens as `Axis` drivers, a `Detector` or an `EnvironmentSensor`, and its own
+config checks.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
-from drivers.base import Axis, Detector
+from drivers.base import Axis, Detector, EnvironmentSensor
 from drivers.port_identity import port_key
 from gonio.device_kinds.endpoints import LINK_TYPES, socket_resource
 from gonio.device_kinds.settings import Setting
@@ -96,7 +98,16 @@ class DetectorKind(_Kind):
     config_full_scales_w: Callable[[DeviceConfig], tuple[float, ...]] | None = None
 
 
-DeviceKind = StageKind | DetectorKind
+@dataclass(frozen=True, kw_only=True)
+class EnvironmentKind(_Kind):
+    """A kind of room temperature and humidity sensor, read at every reading (a config has
+    at most one); its `spec` states its temperature_c and humidity_rel accuracy."""
+
+    role: ClassVar[str] = "environment"
+    open: Callable[[DeviceConfig], EnvironmentSensor]
+
+
+DeviceKind = StageKind | DetectorKind | EnvironmentKind
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.byte_link import LineSettings
-from drivers.register_map import RegisterMap
+from drivers.register_map import ROOM_REGISTERS, RegisterMap
 from gonio.device_kinds.kind import AxisConfig, DeviceConfig, driver_class
 from gonio.device_kinds.settings import (
     BAUDRATE,
@@ -24,7 +24,7 @@ from gonio.device_kinds.settings import (
     Setting,
     only_when,
 )
-from gonio.device_kinds.specs import specification_table
+from gonio.device_kinds.specs import MAP_KEYS, specification_table
 from gonio.errors import ConfigError
 from gonio.fields import location
 
@@ -91,6 +91,25 @@ def check_stage_registers(dev: DeviceConfig, axes: Sequence[AxisConfig], where: 
             except (KeyError, ValueError) as exc:
                 raise ConfigError(f"{location(where, f'axes.{ax.role}', key)}: the drive's "
                                   f"register map refuses it ({exc})") from None
+
+
+def check_room_registers(dev: DeviceConfig, axes: Sequence[AxisConfig], where: str,
+                         devices: Mapping[str, DeviceConfig]) -> None:
+    """A Modbus environment sensor's check: its map has the temperature and humidity registers
+    and its [specification] states both accuracies (every reading's u comes from them)."""
+    registers = register_map(dev, where)
+    stated = specification_table(Path(dev.settings["register_map"]))
+    field = location(where, f"devices.{dev.name}", "register_map")
+    try:
+        registers.require(ROOM_REGISTERS)
+    except ValueError as exc:
+        raise ConfigError(f"{field}: {exc}") from None
+    for figure in ("temperature_c", "humidity_rel"):
+        key = MAP_KEYS[figure][0]
+        if key not in stated:
+            raise ConfigError(f"{field}: {dev.settings['register_map']} [specification] "
+                              f"{key}: missing (the sensor's accuracy, a uniform +-a, gives "
+                              f"each reading its uncertainty)")
 
 
 def map_full_scales_w(dev: DeviceConfig) -> tuple[float, ...]:

@@ -1,6 +1,7 @@
 """The type-B specification each device kind declares for the uncertainty budget: a meter's
-range-to-range gain accuracy and non-linearity, a stage's bidirectional repeatability, each a
-1-sigma figure with the document it comes from (docs/fitting.md, "Uncertainty budget").
+range-to-range gain accuracy and non-linearity, a stage's bidirectional repeatability, an
+environment sensor's temperature and humidity accuracy, each a 1-sigma figure with the
+document it comes from (docs/fitting.md, "Uncertainty budget").
 
 A datasheet's uniform +-a becomes a / sqrt(3) (GUM 4.3.7). The Modbus kinds read theirs from
 the device's register-map file ([specification]), else take a stated conservative default.
@@ -18,7 +19,8 @@ from typing import Any
 from drivers.user_file import SETTINGS_FILE_CAP, read_user_text
 
 #: The figures a DeviceSpec holds, each 1-sigma in the unit its name ends with.
-FIGURES = ("range_gain_rel", "linearity_rel", "repeatability_deg")
+FIGURES = ("range_gain_rel", "linearity_rel", "repeatability_deg", "temperature_c",
+           "humidity_rel")
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,8 @@ class DeviceSpec:
     range_gain_rel: Figure | None = None
     linearity_rel: Figure | None = None
     repeatability_deg: Figure | None = None
+    temperature_c: Figure | None = None
+    humidity_rel: Figure | None = None
 
 
 #: A kind's specification of one device, from the device's settings (a register map's file).
@@ -92,10 +96,13 @@ MODBUS_DEFAULT = DeviceSpec(
 
 #: A register map's [specification] key of each figure: the half-width a of a uniform +-a (the
 #: 1-sigma figure is a / sqrt(3)), and the largest it may be (a relative one is a fraction,
-#: 0.0025 for +-0.25 %; a stage's repeatability in degrees).
+#: 0.0025 for +-0.25 %; a stage's repeatability in degrees; a sensor's temperature accuracy
+#: in deg C, its humidity accuracy as a fraction, 0.03 for +-3 %RH).
 MAP_KEYS = {"range_gain_rel": ("range_gain_half_width_rel", 1.0),
             "linearity_rel": ("linearity_half_width_rel", 1.0),
-            "repeatability_deg": ("repeatability_half_width_deg", 180.0)}
+            "repeatability_deg": ("repeatability_half_width_deg", 180.0),
+            "temperature_c": ("temperature_half_width_c", 50.0),
+            "humidity_rel": ("humidity_half_width_rel", 1.0)}
 
 
 class UnreadableMap(ValueError):

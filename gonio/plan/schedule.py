@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gonio.config import InstrumentConfig
+from gonio.errors import PlanError
+from gonio.fields import location
 from gonio.plan.estimate import estimate_seconds, move_times
 from gonio.plan.parse import MOTION_ROLES, Plan
 from gonio.plan.validate import (
@@ -140,6 +142,11 @@ def build_schedule(plan: Plan, cfg: InstrumentConfig, time_scale: float | None =
     """Validate the plan on the instrument and return its ordered readings and estimates: on
     the real bench, or (time_scale: its [sim] time_scale) on the emulated one."""
     where = str(plan.path) if plan.path else "plan"
+    if plan.environment is not None and cfg.environment is not None:
+        raise PlanError(f"{location(where, 'environment')}: the instrument's environment sensor "
+                        f"{cfg.environment!r} measures the room at every reading; state the "
+                        f"environment in one place: remove [environment] from the plan, or the "
+                        f"sensor from the config")
     targets, keep = stage_targets(plan, cfg)
     fixed = {k: fixed_position(cfg, k, where) for k, n in
              (("dark", plan.dark_every), ("beam", plan.beam_every),

@@ -2,9 +2,9 @@
 
 Reads the tables this package owns, [sim.source], [sim.sample] and the cabinet of samples
 [sim.samples.<id>] (a plan mounts the one named by its [sample] id), [sim.aperture],
-[sim.alignment] and [sim.stray] (docs/bench.md has the schema); every bad field raises one
-SimConfigError naming it. [sim.detector] belongs to sim.devices.photodiode, the other keys to
-the emulators.
+[sim.alignment], [sim.stray] and [sim.room] (docs/bench.md has the schema); every bad field
+raises one SimConfigError naming it. [sim.detector] belongs to sim.devices.photodiode, the
+other keys to the emulators.
 
 The bench's geometry comes from what the experimenter describes, the instrument config's
 [optics] and the plan's [sample] (passed in as plain tables); a key [sim] states itself wins
@@ -147,6 +147,12 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "arm_offset_deg": (0.0, _number(-10.0, 10.0)),
         "sample_repeatability_deg": (0.0, _number(0.0, 1.0)),
         "arm_repeatability_deg": (0.0, _number(0.0, 1.0)),
+    },
+    "room": {  # sim.bench.room: the air the environment sensors read (drift per hour)
+        "temperature_c": (21.0, _number(-40.0, 60.0)),
+        "humidity_rel": (0.45, _number(0.0, 1.0)),
+        "temperature_drift_c_per_h": (0.0, _number(-100.0, 100.0)),
+        "humidity_drift_rel_per_h": (0.0, _number(-1.0, 1.0)),
     },
     "stray": {  # sim.bench.stray: the instrument's own scatter (default: none)
         "halo_fraction": (0.0, _number(0.0, 0.1)),

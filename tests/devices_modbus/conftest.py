@@ -1,6 +1,8 @@
 """Fixtures: Modbus emulators (TCP on 127.0.0.1, RTU on a real pty) with drivers connected."""
 
 import math
+import os
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -113,3 +115,14 @@ def rig(tmp_path):
         for drv in (r.stage, r.second, r.detector):
             drv.close()
         r.server.stop()
+
+
+@pytest.fixture(scope="module")
+def mbpoll():
+    """Path of mbpoll: a failure in CI (it must be installed there), a skip elsewhere."""
+    path = shutil.which("mbpoll")
+    if path is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("mbpoll is not installed but CI=true (.ci/run installs it)")
+        pytest.skip("mbpoll not installed (Debian: apt-get install mbpoll)")
+    return path

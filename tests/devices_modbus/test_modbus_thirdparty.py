@@ -1,27 +1,13 @@
 """Third-party Modbus masters drive the emulators: mbpoll (libmodbus, Debian) and pymodbus's
 own client, over TCP on 127.0.0.1 and RTU on the pty, in both word orders of the maps."""
 
-import os
 import re
-import shutil
 import subprocess
 
 import pytest
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 pytestmark = pytest.mark.thirdparty
-
-
-
-@pytest.fixture(scope="module")
-def mbpoll():
-    """Path of mbpoll: a failure in CI (it must be installed there), a skip elsewhere."""
-    path = shutil.which("mbpoll")
-    if path is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("mbpoll is not installed but CI=true (.ci/run installs it)")
-        pytest.skip("mbpoll not installed (Debian: apt-get install mbpoll)")
-    return path
 
 
 def run_mbpoll(path, server, word_order, unit, kind, ref, count=1, values=()):
