@@ -54,7 +54,7 @@ def missing_keys(record: Mapping[str, Any]) -> list[tuple[str, str]]:
         if not _dimensions(sample):
             missing.append(("plan [sample]", "diameter_mm (or length_mm and width_mm)"))
     if (record.get("environment") or {}).get("temperature_c") is None:
-        missing.append(("plan [environment]", "temperature_c"))
+        missing.append(("plan [environment]", "temperature_c (or a config environment sensor)"))
     if not record.get("started_utc"):
         missing.append(("the run's meta.json", "started_utc"))
     return missing
@@ -74,7 +74,8 @@ def require_complete(record: Mapping[str, Any]) -> None:
     missing = missing_keys(record)
     if missing:
         raise CalibrationError("export: --format bird needs what the run's record lacks: "
-                               + missing_text(missing))
+                               + missing_text(missing)
+                               + "; --provenance FILE.toml gives them at export time")
 
 
 def bird_metadata(record: Mapping[str, Any], description: str, comments: str) -> dict[str, Any]:

@@ -132,7 +132,9 @@ def test_a_run_without_them_is_refused_naming_the_keys(bare_run, tmp_path, capsy
     assert err.count("\n") == 1 and not out.exists()
     assert ("config [provenance] lab, contact, email, street, building, postal_code, city, "
             "country, licence; config [optics] source_power_mw; plan [sample] shape, "
-            "diameter_mm (or length_mm and width_mm); plan [environment] temperature_c") in err
+            "diameter_mm (or length_mm and width_mm); plan [environment] temperature_c (or a "
+            "config environment sensor); --provenance FILE.toml gives them at export "
+            "time") in err
 
 
 def test_given_at_export_time_the_file_validates_and_names_them(bare_run, tmp_path):

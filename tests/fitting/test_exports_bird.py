@@ -128,7 +128,8 @@ def test_a_record_without_provenance_or_environment_is_refused_in_one_line(glass
     assert message == ("export: --format bird needs what the run's record lacks: config "
                        "[provenance] lab, contact, email, street, building, postal_code, city, "
                        "country, licence; config [optics] source_power_mw; plan [environment] "
-                       "temperature_c")
+                       "temperature_c (or a config environment sensor); --provenance FILE.toml "
+                       "gives them at export time")
 
 
 @pytest.mark.parametrize("text, said", [
@@ -195,7 +196,8 @@ def test_a_record_without_the_wavelength_is_refused_in_one_line(glass, tmp_path)
     record = example_record()
     record["wavelength_nm"] = None
     with pytest.raises(CalibrationError, match=r"^export: --format bird needs what the run's "
-                                               r"record lacks: config \[optics\] wavelength_nm$"):
+                                               r"record lacks: config \[optics\] "
+                                               r"wavelength_nm; --provenance"):
         write_bird(glass, tmp_path / "glass.json", record)
     assert not (tmp_path / "glass.json").exists()
 
