@@ -92,8 +92,10 @@ PATH = np.dtype([("dx", np.float64), ("dy", np.float64), ("dz", np.float64),
                  ("outside", np.bool_)], align=True)
 #: Columns of walk_all's per-walk outcome: events, log C1 of the first event's height (nan if
 #: none or the walk started after one), exit direction (world; nan unless an analog walk left)
-#: and weight, energy still inside at the cap.
-EVENTS, FIRST, EXIT_X, EXIT_Y, EXIT_Z, WEIGHT, TRUNCATED = range(7)
+#: and weight, energy still inside at the cap, Smith Lambda of the exit direction
+#: (unsigned_lambda, as the walk computed it for its last free path; nan if it did not leave).
+EVENTS, FIRST, EXIT_X, EXIT_Y, EXIT_Z, WEIGHT, TRUNCATED, EXIT_LAMBDA = range(8)
+OUTCOMES = 8
 
 
 def paths(n: int) -> np.ndarray:
@@ -203,6 +205,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
         walk_key = key_of_walk(key, first + j) if state is None else np.uint64(0)
         events, first_height = 0, math.nan
         ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
+        exit_lambda = math.nan
         lo, hi = (j, j + 1) if rules.each else (0, directions.shape[0])
         if rules.guided:
             guide = Guide(directions[j, 0], directions[j, 1], directions[j, 2],
@@ -222,6 +225,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             if not new < 0.0:
                 if not rules.forced:
                     ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
+                    exit_lambda = lam_up
                 break
             other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
             events = k
@@ -277,6 +281,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             out[j, EVENTS], out[j, FIRST], out[j, WEIGHT], out[j, TRUNCATED] = (
                 events, first_height, weight, truncated)
             out[j, EXIT_X], out[j, EXIT_Y], out[j, EXIT_Z] = ex, ey, ez
+            out[j, EXIT_LAMBDA] = exit_lambda
 
 
 def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, unit_mode,
@@ -290,7 +295,7 @@ def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, 
                                 dtype=np.float64).reshape(-1, 3)
     s = surface(walker.slopes, walker.micro, unit_mode)
     value = np.zeros((n, 1 if each or sampling else len(aims)))
-    out = np.empty((n, 7))
+    out = np.empty((n, OUTCOMES))
     walk_all(s, Rules(not sampling, each, each and walker.guided, order or 0,
                       int(min_order), max_order or 0, float(roulette), False, 0.0),
              wi, paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64),

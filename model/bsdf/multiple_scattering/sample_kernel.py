@@ -1,0 +1,143 @@
+"""RandomWalkBSDF.sample and approximate_pdf compiled (numba): one walk per sample, its lobes and
+its approximate density in one pass, with no numpy pass per sample.
+
+approximate_density is approximate_pdf at one pair: order 1 of the walk in closed form
+(kernels.dielectric_pair / conductor_pair: the height-correlated single-scattering model, F = 1
+for a conductor) plus the orders >= 2 as a cosine lobe carrying their share, interpolated in a
+table over the incidence of wi (model.MASS_NODES_DEG); model.py keeps the numpy version, the
+reference and the path without numba. sample walks the batch with walk_kernel.walk_all (the
+analog walk, the caller's uniforms for the first event) and then finishes each walk: exit
+direction, weight (0 outside the parent's lobes or when the walk did not leave) and the density
+at it, computed as approximate_pdf computes it from the same numbers, so the two agree to the
+last bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from model.bsdf.constants import Masking, Sampling
+from model.bsdf.multiple_scattering.nee_kernel import AVAILABLE, surface, unsigned_lambda
+from model.bsdf.multiple_scattering.walk_kernel import (
+    EXIT_LAMBDA,
+    EXIT_X,
+    EXIT_Y,
+    EXIT_Z,
+    OUTCOMES,
+    WEIGHT,
+    Rules,
+    paths,
+    walk_all,
+)
+from model.bsdf.primitives import cos_lambda, scalar, unit
+from model.kernel_cache import compiled
+
+#: What walk_all takes for "no target directions" (a sampling walk scores nothing).
+NO_TARGETS, NO_LAMBDAS = np.zeros((0, 3)), np.zeros(0)
+CORRELATED, VISIBLE = int(Masking.CORRELATED), int(Sampling.VISIBLE)
+INV_PI = 1.0 / math.pi
+
+
+@scalar
+def interpolate(nodes, table, x):
+    """table at x, linear between nodes (increasing), its end values beyond them (np.interp)."""
+    if x <= nodes[0]:
+        return table[0]
+    for j in range(1, nodes.shape[0]):
+        if x <= nodes[j]:
+            t = (x - nodes[j - 1]) / (nodes[j] - nodes[j - 1])
+            return table[j - 1] + t * (table[j] - table[j - 1])
+    return table[nodes.shape[0] - 1]
+
+
+@scalar
+def lobe_mass(nodes, shares, vz):
+    """The share of orders >= 2 at the incidence of unit wi (z component vz): shares[0] lit
+    from outside, shares[1] from inside, interpolated in degrees."""
+    theta = math.degrees(math.acos(min(abs(vz), 1.0)))
+    return interpolate(nodes, shares[0] if vz > 0.0 else shares[1], theta)
+
+
+if AVAILABLE:
+    from model.bsdf.kernels import conductor_unit, dielectric_unit
+
+    @compiled(error_model="numpy")
+    def approximate_density(s, mass, vx, vy, vz, li, wx, wy, wz, lo):
+        """approximate_pdf at unit wi = v, wo = w, with li, lo their |z| Lambda (cos_lambda)
+        and mass the orders >= 2's share at wi (lobe_mass): order 1 of the walk plus a lobe
+        mass |cos o| / pi above a conductor, mass |cos o| / (2 pi) either side of glass."""
+        cos_o = abs(wz)
+        if s.conductor:
+            first = conductor_unit(vx, vy, vz, wx, wy, wz, s.ndf, s.alpha_x, s.alpha_y, False,
+                                   0j, CORRELATED, VISIBLE, False, li, lo)
+            return first * cos_o + (mass * cos_o * INV_PI if vz > 0.0 and wz > 0.0 else 0.0)
+        first = dielectric_unit(vx, vy, vz, wx, wy, wz, s.ndf, s.alpha_x, s.alpha_y, s.eta,
+                                CORRELATED, True, True, VISIBLE, False, li, lo)
+        return first * cos_o + mass * cos_o * (0.5 * INV_PI)
+
+    @compiled(error_model="numpy")
+    def densities(s, nodes, shares, wi, wo, lambdas, result):
+        """result[j] = approximate_density at row j of wi (row 0 if it has one) and of wo, each
+        normalised; lambdas[j] is the Smith Lambda (unsigned_lambda) of wo[j] as it stands, so a
+        walk that computed it spares it when normalising leaves wo[j] as it was (nan: not known).
+        Through rows of one wi its share and Lambda are computed once."""
+        last = -1
+        vx = vy = vz = li = mass = 0.0
+        for j in range(result.shape[0]):
+            r = j if wi.shape[0] > 1 else 0
+            if r != last:
+                vx, vy, vz = unit(wi[r, 0], wi[r, 1], wi[r, 2])
+                li = cos_lambda(s.ndf, s.alpha_x, s.alpha_y, vx, vy, vz)
+                mass = lobe_mass(nodes, shares, vz)
+                last = r
+            x, y, z = wo[j, 0], wo[j, 1], wo[j, 2]
+            wx, wy, wz = unit(x, y, z)
+            lam = lambdas[j]
+            if not (wx == x and wy == y and wz == z and lam == lam):
+                lam = unsigned_lambda(s, wx, wy, wz)
+            result[j] = approximate_density(s, mass, vx, vy, vz, li, wx, wy, wz, lam * abs(wz))
+
+    @compiled(error_model="numpy")
+    def finish(outcome, wi, reflect, transmit, wo, weight, lambdas):
+        """wo, weight and wo's Lambda of each walk from its outcome row (walk_all): a walk that
+        did not leave, or left into a lobe the parent lacks, weighs 0 (wo (0, 0, 1))."""
+        for j in range(outcome.shape[0]):
+            r = j if wi.shape[0] > 1 else 0
+            x, y, z = outcome[j, EXIT_X], outcome[j, EXIT_Y], outcome[j, EXIT_Z]
+            w = 0.0
+            if math.isfinite(x):
+                w = outcome[j, WEIGHT] if (reflect if (wi[r, 2] > 0.0) == (z > 0.0)
+                                           else transmit) else 0.0
+            else:
+                x, y, z = 0.0, 0.0, 1.0
+            wo[j, 0], wo[j, 1], wo[j, 2] = x, y, z
+            weight[j] = w
+            lambdas[j] = outcome[j, EXIT_LAMBDA]
+
+
+def approximate_pdf(walk, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """RandomWalkBSDF.approximate_pdf by the kernel, wi (m, 3) with m = 1 or n, wo (n, 3)."""
+    result = np.empty(wo.shape[0])
+    densities(surface(walk.slopes, walk.micro), walk.share_nodes, walk.share_tables(), wi, wo,
+              np.full(wo.shape[0], np.nan), result)
+    return result
+
+
+def sample(walk, wi: np.ndarray, wi_unit: np.ndarray, u: np.ndarray,
+           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """RandomWalkBSDF.sample by the kernel: one walk from each row of wi_unit (normalised wi;
+    one row for all, or n), the first event driven by u (n, 3); the density at the caller's
+    wi (same rows) where the weight is not 0."""
+    n = u.shape[0]
+    s = surface(walk.slopes, walk.micro)
+    outcome = np.empty((n, OUTCOMES))
+    walk_all(s, Rules(False, False, False, 0, 1, walk.max_order or 0, 0.0, False, 0.0), wi_unit,
+             paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64), u,
+             NO_TARGETS, NO_LAMBDAS, np.empty((n, 0)), outcome)
+    lobes = getattr(walk.parent, "lobes", ("reflection", "transmission"))
+    wo, weight, lambdas, pdf = np.empty((n, 3)), np.empty(n), np.empty(n), np.empty(n)
+    finish(outcome, wi, "reflection" in lobes, "transmission" in lobes, wo, weight, lambdas)
+    densities(s, walk.share_nodes, walk.share_tables(), wi, wo, lambdas, pdf)
+    return wo, weight, np.where(weight > 0.0, pdf, 0.0)
