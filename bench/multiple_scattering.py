@@ -352,8 +352,8 @@ SAMPLE_INCIDENCES_DEG = (0.0, 30.0, 60.0, 85.0)
 SAMPLE_ALPHAS = (0.1, 0.3, 1.0)
 #: Paired runs per case: the C++ walk, then gonio's sample(), alternately.
 PAIRED_RUNS = 3
-CPP_WALKS = 200_000
-GONIO_SAMPLES = 100_000
+CPP_WALKS = 400_000
+GONIO_SAMPLES = 200_000
 #: Heitz et al.'s C++ sample walk (g++ 12 -O2, Gaussian heights, eta 1.51 or an F = 1
 #: conductor), walks per CPU-second, median of PAIRED_RUNS runs per case, measured by
 #: sample_table on this machine on 2026-12-08: what the ratios are taken against when the

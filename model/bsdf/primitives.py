@@ -177,10 +177,18 @@ def log_beta(p, q):
 
 @scalar
 def beta_over_cosines(ci, co, li, lo):
-    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co)."""
+    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co): by
+    B itself where both arguments stay below STIRLING_FROM (B(1, b) = 1/b where a direction
+    is unmasked, as at normal incidence; else three lgamma), in log form beyond."""
     if not (ci > 0.0 and co > 0.0 and math.isfinite(li) and math.isfinite(lo)):
         return 0.0
-    return math.exp(log_beta(1.0 + li / ci, 1.0 + lo / co) - math.log(ci) - math.log(co))
+    p, q = 1.0 + li / ci, 1.0 + lo / co
+    a, b = min(p, q), max(p, q)
+    if b < STIRLING_FROM:
+        if a == 1.0:
+            return 1.0 / (b * ci * co)
+        return math.exp(math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b)) / (ci * co)
+    return math.exp(log_beta(p, q) - math.log(ci) - math.log(co))
 
 
 @scalar

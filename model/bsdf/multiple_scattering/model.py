@@ -18,7 +18,7 @@ from model.bsdf.multiple_scattering.energy import energy_loss
 from model.bsdf.multiple_scattering.heights import make_heights
 from model.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric, MicroDiffuse
 from model.bsdf.multiple_scattering.walk import Walker, walkable
-from model.bsdf.vectors import direction_arrays, directions, unit
+from model.bsdf.vectors import direction_arrays, directions
 
 KINDS = ("dielectric", "conductor", "diffuse")
 #: Guided direction sampling is on by default below this alpha (measured: ~5x less variance
@@ -260,7 +260,7 @@ class RandomWalkBSDF:
             wi_rows = _rows(wi, wi_b)
             u = np.asarray(u, dtype=np.float64)
             u = np.ascontiguousarray(np.broadcast_to(u, shape + (3,))).reshape(-1, 3)
-            wo, weight, pdf = sample_kernel.sample(self, wi_rows, unit(wi_rows), u, rng)
+            wo, weight, pdf = sample_kernel.sample(self, wi_rows, u, rng)
             return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
         wo, weight = self.walk_once(wi, u, rng)
         (wi,) = directions(wi)

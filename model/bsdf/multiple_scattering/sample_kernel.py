@@ -2,14 +2,15 @@
 its approximate density in one pass, with no numpy pass per sample.
 
 approximate_density is approximate_pdf at one pair: order 1 of the walk in closed form
-(kernels.dielectric_pair / conductor_pair: the height-correlated single-scattering model, F = 1
+(kernels.dielectric_unit / conductor_unit: the height-correlated single-scattering model, F = 1
 for a conductor) plus the orders >= 2 as a cosine lobe carrying their share, interpolated in a
 table over the incidence of wi (model.MASS_NODES_DEG); model.py keeps the numpy version, the
 reference and the path without numba. sample walks the batch with walk_kernel.walk_all (the
 analog walk, the caller's uniforms for the first event) and then finishes each walk: exit
 direction, weight (0 outside the parent's lobes or when the walk did not leave) and the density
-at it, computed as approximate_pdf computes it from the same numbers, so the two agree to the
-last bit.
+at it, computed as approximate_pdf computes it from the same numbers (the Lambda of the exit
+direction the walk computed for its last free path among them), so the two agree to the last
+bit.
 """
 
 from __future__ import annotations
@@ -80,24 +81,32 @@ if AVAILABLE:
     @compiled(error_model="numpy")
     def densities(s, nodes, shares, wi, wo, lambdas, result):
         """result[j] = approximate_density at row j of wi (row 0 if it has one) and of wo, each
-        normalised; lambdas[j] is the Smith Lambda (unsigned_lambda) of wo[j] as it stands, so a
-        walk that computed it spares it when normalising leaves wo[j] as it was (nan: not known).
-        Through rows of one wi its share and Lambda are computed once."""
-        last = -1
+        normalised; wo's Lambda is unsigned_lambda of wo[j] as given (it does not depend on the
+        length), or lambdas[j] where not nan: a walk's own, computed from the same numbers.
+        Through rows that repeat the row before, wi's share and Lambda are computed once."""
+        px = py = pz = math.nan
         vx = vy = vz = li = mass = 0.0
         for j in range(result.shape[0]):
             r = j if wi.shape[0] > 1 else 0
-            if r != last:
-                vx, vy, vz = unit(wi[r, 0], wi[r, 1], wi[r, 2])
+            if not (wi[r, 0] == px and wi[r, 1] == py and wi[r, 2] == pz):
+                px, py, pz = wi[r, 0], wi[r, 1], wi[r, 2]
+                vx, vy, vz = unit(px, py, pz)
                 li = cos_lambda(s.ndf, s.alpha_x, s.alpha_y, vx, vy, vz)
                 mass = lobe_mass(nodes, shares, vz)
-                last = r
             x, y, z = wo[j, 0], wo[j, 1], wo[j, 2]
             wx, wy, wz = unit(x, y, z)
             lam = lambdas[j]
-            if not (wx == x and wy == y and wz == z and lam == lam):
-                lam = unsigned_lambda(s, wx, wy, wz)
+            if math.isnan(lam):
+                lam = unsigned_lambda(s, x, y, z)
             result[j] = approximate_density(s, mass, vx, vy, vz, li, wx, wy, wz, lam * abs(wz))
+
+    @compiled(error_model="numpy")
+    def unit_rows(w):
+        """The rows of w (m, 3) normalised (primitives.unit), a new array."""
+        out = np.empty(w.shape)
+        for j in range(w.shape[0]):
+            out[j, 0], out[j, 1], out[j, 2] = unit(w[j, 0], w[j, 1], w[j, 2])
+        return out
 
     @compiled(error_model="numpy")
     def finish(outcome, wi, reflect, transmit, wo, weight, lambdas):
@@ -125,17 +134,18 @@ def approximate_pdf(walk, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     return result
 
 
-def sample(walk, wi: np.ndarray, wi_unit: np.ndarray, u: np.ndarray,
+def sample(walk, wi: np.ndarray, u: np.ndarray,
            rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """RandomWalkBSDF.sample by the kernel: one walk from each row of wi_unit (normalised wi;
-    one row for all, or n), the first event driven by u (n, 3); the density at the caller's
-    wi (same rows) where the weight is not 0."""
+    """RandomWalkBSDF.sample by the kernel: one walk from each row of wi (m, 3; one row for all,
+    or n) normalised, the first event driven by u (n, 3); the density at wi as given where the
+    weight is not 0."""
     n = u.shape[0]
     s = surface(walk.slopes, walk.micro)
     outcome = np.empty((n, OUTCOMES))
-    walk_all(s, Rules(False, False, False, 0, 1, walk.max_order or 0, 0.0, False, 0.0), wi_unit,
-             paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64), u,
-             NO_TARGETS, NO_LAMBDAS, np.empty((n, 0)), outcome)
+    walk_all(s, Rules(False, False, False, 0, 1, walk.max_order or 0, 0.0, False, 0.0),
+             unit_rows(wi), paths(0), np.uint64(0), 0,
+             rng.integers(0, 2**64, size=4, dtype=np.uint64), u, NO_TARGETS, NO_LAMBDAS,
+             np.empty((n, 0)), outcome)
     lobes = getattr(walk.parent, "lobes", ("reflection", "transmission"))
     wo, weight, lambdas, pdf = np.empty((n, 3)), np.empty(n), np.empty(n), np.empty(n)
     finish(outcome, wi, "reflection" in lobes, "transmission" in lobes, wo, weight, lambdas)
