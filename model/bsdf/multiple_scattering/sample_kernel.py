@@ -35,6 +35,9 @@ from model.bsdf.multiple_scattering.walk_kernel import (
 from model.bsdf.primitives import cos_lambda, scalar, unit
 from model.kernel_cache import compiled
 
+#: Walks per block: each block is walked, then finished, while its outcome is in cache and in
+#: one scratch array (a batch's outcome at once was 64 bytes a walk of fresh memory).
+BLOCK = 8192
 #: What walk_all takes for "no target directions" (a sampling walk scores nothing).
 NO_TARGETS, NO_LAMBDAS = np.zeros((0, 3)), np.zeros(0)
 CORRELATED, VISIBLE = int(Masking.CORRELATED), int(Sampling.VISIBLE)
@@ -141,13 +144,24 @@ def sample(walk, wi: np.ndarray, u: np.ndarray,
     weight is not 0."""
     n = u.shape[0]
     s = surface(walk.slopes, walk.micro)
-    outcome = np.empty((n, OUTCOMES))
-    walk_all(s, Rules(False, False, False, 0, 1, walk.max_order or 0, 0.0, False, 0.0),
-             unit_rows(wi), paths(0), np.uint64(0), 0,
-             rng.integers(0, 2**64, size=4, dtype=np.uint64), u, NO_TARGETS, NO_LAMBDAS,
-             np.empty((n, 0)), outcome)
+    rules = Rules(False, False, False, 0, 1, walk.max_order or 0, 0.0, False, 0.0)
     lobes = getattr(walk.parent, "lobes", ("reflection", "transmission"))
-    wo, weight, lambdas, pdf = np.empty((n, 3)), np.empty(n), np.empty(n), np.empty(n)
-    finish(outcome, wi, "reflection" in lobes, "transmission" in lobes, wo, weight, lambdas)
-    densities(s, walk.share_nodes, walk.share_tables(), wi, wo, lambdas, pdf)
-    return wo, weight, np.where(weight > 0.0, pdf, 0.0)
+    reflect, transmit = "reflection" in lobes, "transmission" in lobes
+    nodes, shares = walk.share_nodes, walk.share_tables()
+    state = rng.integers(0, 2**64, size=4, dtype=np.uint64)  # walk_all advances it
+    units, resumed = unit_rows(wi), paths(0)
+    block = min(n, BLOCK)
+    outcome, lambdas, scores = np.empty((block, OUTCOMES)), np.empty(block), np.empty((block, 0))
+    wo, weight, pdf = np.empty((n, 3)), np.empty(n), np.empty(n)
+    for start in range(0, n, BLOCK):
+        stop = min(n, start + BLOCK)
+        m = stop - start
+        rows, rows_unit = ((wi, units) if len(wi) == 1 else
+                           (wi[start:stop], units[start:stop]))
+        walk_all(s, rules, rows_unit, resumed, np.uint64(0), 0, state, u[start:stop],
+                 NO_TARGETS, NO_LAMBDAS, scores[:m], outcome[:m])
+        finish(outcome[:m], rows, reflect, transmit, wo[start:stop], weight[start:stop],
+               lambdas[:m])
+        densities(s, nodes, shares, rows, wo[start:stop], lambdas[:m], pdf[start:stop])
+    pdf[weight == 0.0] = 0.0
+    return wo, weight, pdf

@@ -169,8 +169,9 @@ def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
     sin2_t = (1.0 - c * c) / (el * el)
     if u >= q and sin2_t < 1.0:
         cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-        k = c / el - cos_t
-        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
+        inv = 1.0 / el  # one division for four
+        k = c * inv - cos_t
+        x, y, z = unit(k * mx - ix * inv, k * my - iy * inv, k * mz - iz * inv)
         return x, y, z, (1.0 if q == f else (1.0 - f) / (1.0 - q)), True
     x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
     return x, y, z, (1.0 if q == f else f / q), False
