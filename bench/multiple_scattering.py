@@ -13,7 +13,7 @@ run; and order 2 by quadrature (second_order) per table column, CPU time and err
 the numpy route it replaced (second_order_reference), same run; and the public sample() (pdf
 included) per CPU-second beside Heitz et al.'s C++ walk built from its published source and run
 case by case alternately with it in the same run (sample_table; --cpp-source DIR or
-GONIO_HEITZ_SOURCE names the source, heitz_cpp.py builds it; without it the stored figures
+GONIO_HEITZ_SOURCE names the source, _heitz_cpp.py builds it; without it the stored figures
 CPP_SAMPLE_STORED stand in, labelled so).
 """
 
@@ -40,7 +40,7 @@ from model.bsdf.multiple_scattering.walk import Walker
 from sim.bench.sample import HigherOrders
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import heitz_cpp  # noqa: E402  (beside this script)
+import _heitz_cpp as heitz_cpp  # noqa: E402  (beside this script)
 
 ETA = 1.51
 ALPHAS = (0.3, 1.0)

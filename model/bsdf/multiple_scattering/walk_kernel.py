@@ -228,7 +228,12 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
                     ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
                     exit_lambda = lam_up
                 break
-            other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
+            if s.conductor:
+                other = 0.0  # no side below
+            elif cur == 0.0 and lam_d == -1.0 and p_hit == 1.0:
+                other = math.log(u)  # from the top straight down C1 = 1 - u: log(1 - C1)
+            else:
+                other = log1mexp(new)
             events = k
             if k == 1:
                 first_height = new if outside else other
