@@ -356,9 +356,45 @@ CPP_WALKS = 400_000
 GONIO_SAMPLES = 200_000
 #: Heitz et al.'s C++ sample walk (g++ 12 -O2, Gaussian heights, eta 1.51 or an F = 1
 #: conductor), walks per CPU-second, median of PAIRED_RUNS runs per case, measured by
-#: sample_table on this machine on 2026-12-08: what the ratios are taken against when the
+#: sample_table on this machine on 2026-12-07: what the ratios are taken against when the
 #: source is not given (labelled "stored").
-CPP_SAMPLE_STORED: dict[tuple[str, str, float, float], float] = {}
+CPP_SAMPLE_STORED: dict[tuple[str, str, float, float], float] = {
+    ("ggx", "dielectric", 0.1, 0.0): 5.057e+06, ("ggx", "dielectric", 0.1, 30.0): 3.715e+06,
+    ("ggx", "dielectric", 0.1, 60.0): 3.485e+06, ("ggx", "dielectric", 0.1, 85.0): 3.018e+06,
+    ("ggx", "dielectric", 0.3, 0.0): 4.943e+06, ("ggx", "dielectric", 0.3, 30.0): 3.702e+06,
+    ("ggx", "dielectric", 0.3, 60.0): 3.265e+06, ("ggx", "dielectric", 0.3, 85.0): 2.752e+06,
+    ("ggx", "dielectric", 1.0, 0.0): 4.314e+06, ("ggx", "dielectric", 1.0, 30.0): 3.008e+06,
+    ("ggx", "dielectric", 1.0, 60.0): 2.166e+06, ("ggx", "dielectric", 1.0, 85.0): 1.404e+06,
+    ("ggx", "conductor", 0.1, 0.0): 6.075e+06, ("ggx", "conductor", 0.1, 30.0): 4.185e+06,
+    ("ggx", "conductor", 0.1, 60.0): 3.810e+06, ("ggx", "conductor", 0.1, 85.0): 3.372e+06,
+    ("ggx", "conductor", 0.3, 0.0): 4.766e+06, ("ggx", "conductor", 0.3, 30.0): 3.569e+06,
+    ("ggx", "conductor", 0.3, 60.0): 3.307e+06, ("ggx", "conductor", 0.3, 85.0): 3.477e+06,
+    ("ggx", "conductor", 1.0, 0.0): 1.982e+06, ("ggx", "conductor", 1.0, 30.0): 1.840e+06,
+    ("ggx", "conductor", 1.0, 60.0): 2.044e+06, ("ggx", "conductor", 1.0, 85.0): 3.026e+06,
+    ("beckmann", "dielectric", 0.1, 0.0): 4.373e+06,
+    ("beckmann", "dielectric", 0.1, 30.0): 1.928e+06,
+    ("beckmann", "dielectric", 0.1, 60.0): 1.929e+06,
+    ("beckmann", "dielectric", 0.1, 85.0): 1.610e+06,
+    ("beckmann", "dielectric", 0.3, 0.0): 3.990e+06,
+    ("beckmann", "dielectric", 0.3, 30.0): 2.058e+06,
+    ("beckmann", "dielectric", 0.3, 60.0): 1.805e+06,
+    ("beckmann", "dielectric", 0.3, 85.0): 1.624e+06,
+    ("beckmann", "dielectric", 1.0, 0.0): 4.083e+06,
+    ("beckmann", "dielectric", 1.0, 30.0): 1.767e+06,
+    ("beckmann", "dielectric", 1.0, 60.0): 1.534e+06,
+    ("beckmann", "dielectric", 1.0, 85.0): 1.165e+06,
+    ("beckmann", "conductor", 0.1, 0.0): 4.665e+06,
+    ("beckmann", "conductor", 0.1, 30.0): 2.124e+06,
+    ("beckmann", "conductor", 0.1, 60.0): 2.118e+06,
+    ("beckmann", "conductor", 0.1, 85.0): 1.716e+06,
+    ("beckmann", "conductor", 0.3, 0.0): 5.073e+06,
+    ("beckmann", "conductor", 0.3, 30.0): 2.093e+06,
+    ("beckmann", "conductor", 0.3, 60.0): 1.746e+06,
+    ("beckmann", "conductor", 0.3, 85.0): 1.678e+06,
+    ("beckmann", "conductor", 1.0, 0.0): 1.818e+06,
+    ("beckmann", "conductor", 1.0, 30.0): 1.225e+06,
+    ("beckmann", "conductor", 1.0, 60.0): 1.402e+06,
+    ("beckmann", "conductor", 1.0, 85.0): 1.685e+06}
 
 
 def _public_model(name: str, kind: str, alpha: float):
