@@ -22,8 +22,14 @@ struct vec3 {
     vec3& operator*=(float s) { x *= s; y *= s; z *= s; return *this; }
 };
 
-inline vec3 operator+(const vec3& a, const vec3& b) { return vec3(a.x + b.x, a.y + b.y, a.z + b.z); }
-inline vec3 operator-(const vec3& a, const vec3& b) { return vec3(a.x - b.x, a.y - b.y, a.z - b.z); }
+inline vec3 operator+(const vec3& a, const vec3& b)
+{
+    return vec3(a.x + b.x, a.y + b.y, a.z + b.z);
+}
+inline vec3 operator-(const vec3& a, const vec3& b)
+{
+    return vec3(a.x - b.x, a.y - b.y, a.z - b.z);
+}
 inline vec3 operator-(const vec3& a) { return vec3(-a.x, -a.y, -a.z); }
 inline vec3 operator*(const vec3& a, float s) { return vec3(a.x * s, a.y * s, a.z * s); }
 inline vec3 operator*(float s, const vec3& a) { return a * s; }

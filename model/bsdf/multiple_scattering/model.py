@@ -144,9 +144,14 @@ class RandomWalkBSDF:
 
     def _lobe_mask(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """1 where the parent's `lobes` (reflection / transmission) include the pair, else 0."""
-        lobes = getattr(self.parent, "lobes", ("reflection", "transmission"))
         same = (wi[..., 2] > 0.0) == (wo[..., 2] > 0.0)
-        return np.where(same, "reflection" in lobes, "transmission" in lobes).astype(float)
+        return np.where(same, "reflection" in self.lobes, "transmission" in self.lobes
+                        ).astype(float)
+
+    @property
+    def lobes(self) -> tuple[str, ...]:
+        """The parent's lobes ("reflection", "transmission"), both if it does not say."""
+        return tuple(getattr(self.parent, "lobes", ("reflection", "transmission")))
 
     def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
                  walks: int | None = None) -> Estimate:
