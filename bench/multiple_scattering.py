@@ -10,12 +10,19 @@ the two-scale diffraction model's evals per second beside the plain microfacet e
 the bench's tabulated orders >= 2 (HigherOrderLobe), the error against walks per table build
 and the build time, beside the per-pair walk (HigherOrders) it replaced, measured in the same
 run; and order 2 by quadrature (second_order) per table column, CPU time and error, beside
-the numpy route it replaced (second_order_reference), same run.
+the numpy route it replaced (second_order_reference), same run; and the public sample() (pdf
+included) per CPU-second beside Heitz et al.'s C++ walk built from its published source and run
+case by case alternately with it in the same run (sample_table; --cpp-source DIR or
+GONIO_HEITZ_SOURCE names the source, _heitz_cpp.py builds it; without it the stored figures
+CPP_SAMPLE_STORED stand in, labelled so).
 """
 
 from __future__ import annotations
 
+import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -31,6 +38,9 @@ from model.bsdf.multiple_scattering import (
 from model.bsdf.multiple_scattering.second_order import second_order, second_order_reference
 from model.bsdf.multiple_scattering.walk import Walker
 from sim.bench.sample import HigherOrders
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _heitz_cpp as heitz_cpp  # noqa: E402  (beside this script)
 
 ETA = 1.51
 ALPHAS = (0.3, 1.0)
@@ -338,12 +348,137 @@ def second_order_table(rng: np.random.Generator) -> list[str]:
     return lines
 
 
-def main() -> None:
-    """Print the tables."""
+SAMPLE_INCIDENCES_DEG = (0.0, 30.0, 60.0, 85.0)
+SAMPLE_ALPHAS = (0.1, 0.3, 1.0)
+#: Paired runs per case: the C++ walk, then gonio's sample(), alternately.
+PAIRED_RUNS = 3
+CPP_WALKS = 400_000
+GONIO_SAMPLES = 200_000
+#: Heitz et al.'s C++ sample walk (g++ 12 -O2, Gaussian heights, eta 1.51 or an F = 1
+#: conductor), walks per CPU-second, median of PAIRED_RUNS runs per case, measured by
+#: sample_table on this machine on 2026-12-07: what the ratios are taken against when the
+#: source is not given (labelled "stored").
+CPP_SAMPLE_STORED: dict[tuple[str, str, float, float], float] = {
+    ("ggx", "dielectric", 0.1, 0.0): 5.057e+06, ("ggx", "dielectric", 0.1, 30.0): 3.715e+06,
+    ("ggx", "dielectric", 0.1, 60.0): 3.485e+06, ("ggx", "dielectric", 0.1, 85.0): 3.018e+06,
+    ("ggx", "dielectric", 0.3, 0.0): 4.943e+06, ("ggx", "dielectric", 0.3, 30.0): 3.702e+06,
+    ("ggx", "dielectric", 0.3, 60.0): 3.265e+06, ("ggx", "dielectric", 0.3, 85.0): 2.752e+06,
+    ("ggx", "dielectric", 1.0, 0.0): 4.314e+06, ("ggx", "dielectric", 1.0, 30.0): 3.008e+06,
+    ("ggx", "dielectric", 1.0, 60.0): 2.166e+06, ("ggx", "dielectric", 1.0, 85.0): 1.404e+06,
+    ("ggx", "conductor", 0.1, 0.0): 6.075e+06, ("ggx", "conductor", 0.1, 30.0): 4.185e+06,
+    ("ggx", "conductor", 0.1, 60.0): 3.810e+06, ("ggx", "conductor", 0.1, 85.0): 3.372e+06,
+    ("ggx", "conductor", 0.3, 0.0): 4.766e+06, ("ggx", "conductor", 0.3, 30.0): 3.569e+06,
+    ("ggx", "conductor", 0.3, 60.0): 3.307e+06, ("ggx", "conductor", 0.3, 85.0): 3.477e+06,
+    ("ggx", "conductor", 1.0, 0.0): 1.982e+06, ("ggx", "conductor", 1.0, 30.0): 1.840e+06,
+    ("ggx", "conductor", 1.0, 60.0): 2.044e+06, ("ggx", "conductor", 1.0, 85.0): 3.026e+06,
+    ("beckmann", "dielectric", 0.1, 0.0): 4.373e+06,
+    ("beckmann", "dielectric", 0.1, 30.0): 1.928e+06,
+    ("beckmann", "dielectric", 0.1, 60.0): 1.929e+06,
+    ("beckmann", "dielectric", 0.1, 85.0): 1.610e+06,
+    ("beckmann", "dielectric", 0.3, 0.0): 3.990e+06,
+    ("beckmann", "dielectric", 0.3, 30.0): 2.058e+06,
+    ("beckmann", "dielectric", 0.3, 60.0): 1.805e+06,
+    ("beckmann", "dielectric", 0.3, 85.0): 1.624e+06,
+    ("beckmann", "dielectric", 1.0, 0.0): 4.083e+06,
+    ("beckmann", "dielectric", 1.0, 30.0): 1.767e+06,
+    ("beckmann", "dielectric", 1.0, 60.0): 1.534e+06,
+    ("beckmann", "dielectric", 1.0, 85.0): 1.165e+06,
+    ("beckmann", "conductor", 0.1, 0.0): 4.665e+06,
+    ("beckmann", "conductor", 0.1, 30.0): 2.124e+06,
+    ("beckmann", "conductor", 0.1, 60.0): 2.118e+06,
+    ("beckmann", "conductor", 0.1, 85.0): 1.716e+06,
+    ("beckmann", "conductor", 0.3, 0.0): 5.073e+06,
+    ("beckmann", "conductor", 0.3, 30.0): 2.093e+06,
+    ("beckmann", "conductor", 0.3, 60.0): 1.746e+06,
+    ("beckmann", "conductor", 0.3, 85.0): 1.678e+06,
+    ("beckmann", "conductor", 1.0, 0.0): 1.818e+06,
+    ("beckmann", "conductor", 1.0, 30.0): 1.225e+06,
+    ("beckmann", "conductor", 1.0, 60.0): 1.402e+06,
+    ("beckmann", "conductor", 1.0, 85.0): 1.685e+06}
+
+
+def _public_model(name: str, kind: str, alpha: float):
+    """The public model a renderer calls: RoughDielectric (eta ETA) or an F = 1 RoughConductor,
+    height-correlated, with multiple scattering."""
+    if kind == "dielectric":
+        return RoughDielectric(name, alpha, ETA, masking="correlated", multiple_scattering=True)
+    return RoughConductor(name, alpha, None, masking="correlated", multiple_scattering=True)
+
+
+def _sample_rate(model, wi: np.ndarray, rng: np.random.Generator) -> tuple[float, np.ndarray]:
+    """(samples per CPU-second of one sample() call over the rows of wi, pdf included; its wo)."""
+    u = rng.random((len(wi), 3))
+    start = time.process_time()
+    wo, _, _ = model.sample(wi, u, rng)
+    return len(wi) / (time.process_time() - start), wo
+
+
+def sample_table(rng: np.random.Generator, cpp_binary: Path | None) -> list[str]:
+    """The public sample() (wo, weight and its pdf) per CPU-second against Heitz's C++ sample
+    walk, every case: GGX and Beckmann, glass (eta 1.51) and F = 1 mirror, alpha 0.1, 0.3, 1.0,
+    incidence 0, 30, 60, 85 deg; PAIRED_RUNS pairs per case, C++ (CPP_WALKS walks) then gonio
+    (one call over GONIO_SAMPLES directions), so load falls on both alike. ratio: gonio / C++
+    per pair, least (min), median and largest; T: the share of wo below the surface, C++ and
+    gonio (the same walk, so the same within ~0.002)."""
+    source = ("C++ built from its published source in this run" if cpp_binary else
+              "C++: STORED figures (CPP_SAMPLE_STORED; no --cpp-source DIR or "
+              f"${heitz_cpp.SOURCE_ENV} given)")
+    lines = [f"public sample() (pdf included) vs Heitz's C++ sample walk, per CPU-second, "
+             f"{PAIRED_RUNS} paired runs per case; {source}",
+             f"{'surface':>20} {'theta':>5} {'C++ walks/s':>11} {'gonio/s':>10} "
+             f"{'ratio min':>9} {'median':>6} {'max':>6} {'T C++':>6} {'gonio':>6}"]
+    ratios = []
+    for name in ("ggx", "beckmann"):
+        for kind in ("dielectric", "conductor"):
+            for alpha in SAMPLE_ALPHAS:
+                model = _public_model(name, kind, alpha)
+                for theta in SAMPLE_INCIDENCES_DEG:
+                    wi = np.tile(direction(theta), (GONIO_SAMPLES, 1))
+                    _sample_rate(model, wi[:64], rng)  # compile (or load the cache)
+                    cpp, ours, below = [], [], (np.nan, np.nan)
+                    for _ in range(PAIRED_RUNS):
+                        if cpp_binary is None:
+                            cpp.append(CPP_SAMPLE_STORED.get((name, kind, alpha, theta), np.nan))
+                        else:
+                            rate, _, share = heitz_cpp.walks_per_cpu_second(
+                                cpp_binary, name, kind, alpha, theta, "sample", CPP_WALKS)
+                            cpp.append(rate)
+                            below = (share, below[1])
+                        rate, wo = _sample_rate(model, wi, rng)
+                        ours.append(rate)
+                        below = (below[0], float(np.mean(wo[:, 2] < 0.0)))
+                    r = np.array(ours) / np.array(cpp)
+                    ratios.append(r.min())
+                    label = f"{name} {'glass' if kind == 'dielectric' else 'mirror'} {alpha}"
+                    lines.append(f"{label:>20} {theta:5.0f} {np.median(cpp):11.3e} "
+                                 f"{np.median(ours):10.3e} {r.min():9.2f} {np.median(r):6.2f} "
+                                 f"{r.max():6.2f} {below[0]:6.3f} {below[1]:6.3f}")
+    lines.append(f"least ratio (min over runs) {np.nanmin(ratios):.2f}, median over cases "
+                 f"{np.nanmedian(ratios):.2f}, cases below 1: "
+                 f"{int(np.sum(np.array(ratios) < 1.0))} of {len(ratios)}")
+    return lines
+
+
+TABLES = {"eval_error": eval_error_table, "furnace": furnace_table,
+          "throughput": throughput_table, "diffraction": diffraction_table,
+          "lobe": lobe_table, "second_order": second_order_table, "sample": sample_table}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Print the tables (all, or those named by --table)."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cpp-source", metavar="DIR",
+                        help="folder with Heitz et al.'s MicrosurfaceScattering.cpp and .h "
+                             f"(default: ${heitz_cpp.SOURCE_ENV}); built with g++ -O2")
+    parser.add_argument("--table", action="append", choices=sorted(TABLES),
+                        help="print only this table (repeatable)")
+    args = parser.parse_args(argv)
+    source = heitz_cpp.source_folder(args.cpp_source)
+    binary = heitz_cpp.build(source) if source is not None else None
     rng = np.random.default_rng(2016)
-    for table in (eval_error_table, furnace_table, throughput_table, diffraction_table,
-                  lobe_table, second_order_table):
-        print("\n".join(table(rng)))
+    for name in args.table or TABLES:
+        table = TABLES[name]
+        print("\n".join(table(rng, binary) if table is sample_table else table(rng)))
         print()
 
 

@@ -42,8 +42,17 @@ def _visible_slope(mu: np.ndarray, u: np.ndarray) -> np.ndarray:
     return x
 
 
+def vertical_slopes(u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Visible slopes of the alpha = 1 Beckmann surface seen from straight above: every facet
+    is seen as its slope density exp(-x^2 - y^2) / pi says, so the slope's squared radius is
+    Exp(1) and its azimuth uniform (x = r cos 2 pi u2, y = r sin 2 pi u2, r^2 = -log(1 - u1))."""
+    r = np.sqrt(-np.log1p(-u1))
+    return r * np.cos(2.0 * np.pi * u2), r * np.sin(2.0 * np.pi * u2)
+
+
 def beckmann_visible_unit(v: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
-    """Visible normal of the alpha = 1 Beckmann surface seen from unit v (any direction)."""
+    """Visible normal of the alpha = 1 Beckmann surface seen from unit v (any direction); seen
+    from straight above, in closed form (vertical_slopes)."""
     sin_t = np.hypot(v[..., 0], v[..., 1])
     # cot theta, clipped; the divisor is floored so a denormal sin_t cannot overflow
     mu = np.clip(v[..., 2] / np.maximum(sin_t, 1e-200), -1e4, 1e8)
@@ -57,5 +66,9 @@ def beckmann_visible_unit(v: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.n
     s = np.where(sin_t > 0.0, v[..., 1] / safe, 0.0)
     sx = c * x - s * y
     sy = s * x + c * y
+    above = (sin_t == 0.0) & (v[..., 2] > 0.0)
+    if np.any(above):
+        vx, vy = vertical_slopes(u1, u2)
+        sx, sy = np.where(above, vx, sx), np.where(above, vy, sy)
     n = np.stack([-sx, -sy, np.ones_like(sx)], axis=-1)
     return n / np.linalg.norm(n, axis=-1, keepdims=True)

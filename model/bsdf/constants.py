@@ -45,9 +45,17 @@ BECKMANN_CF_FROM = 2.0
 #: Terms of the erfc continued fraction; enough for full float64 accuracy for a >= 2.
 BECKMANN_CF_TERMS = 60
 #: The compiled a*Lambda(a) keeps the closed form up to this a: its cancellation costs ~2a^2
-#: ulps (2e-14 at most against mpmath), where the continued fraction needs 60 chained divisions
-#: at a = 2 and 14-21 from here on (62 ns a call over walk directions, 117 ns with it from a = 2).
-BECKMANN_KERNEL_CF_FROM = 5.0
+#: ulps (2e-14 at most against mpmath); from here on it takes Cody's rational approximation of
+#: erfc's tail (CODY_ERFC_P, CODY_ERFC_Q: 8e-16 relative against mpmath up to a = 26.5, ten
+#: multiply-adds and a division where the continued fraction chained 14-21 divisions).
+BECKMANN_KERNEL_TAIL_FROM = 5.0
+#: W. J. Cody, "Rational Chebyshev approximations for the error function", Math. Comp. 23
+#: (1969), the x >= 4 range as his CALERF takes it: erfc(x) = exp(-x^2) / x (1/sqrt(pi) - R),
+#: R = z (P5 + z (P0 + z (... P4 ... ))) / (Q4 + ...) in z = 1/x^2 (cody_tail).
+CODY_ERFC_P = (3.05326634961232344e-1, 3.60344899949804439e-1, 1.25781726111229246e-1,
+               1.60837851487422766e-2, 6.58749161529837803e-4, 1.63153871373020978e-2)
+CODY_ERFC_Q = (2.56852019228982242e00, 1.87295284992346725e00, 5.27905102951428412e-1,
+               6.05183413124413191e-2, 2.33520497626869185e-3)
 #: Above this argument log Gamma is taken as Stirling's form plus STIRLING_TERMS corrections.
 STIRLING_FROM = 10.0
 #: Coefficients B_2k / (2k (2k - 1)) of the Stirling correction sum_k c_k / x^(2k - 1); at

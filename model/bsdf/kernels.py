@@ -80,6 +80,15 @@ if AVAILABLE:
     def _dielectric_one(wi, wo, k, ndf, ax, ay, eta, masking, refl, trans, sampling, want_pdf):
         ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
+        return dielectric_unit(ix, iy, iz, ox, oy, oz, ndf, ax, ay, eta, masking, refl, trans,
+                               sampling, want_pdf, math.nan, math.nan)
+
+    @compiled(error_model="numpy")
+    def dielectric_unit(ix, iy, iz, ox, oy, oz, ndf, ax, ay, eta, masking, refl, trans,
+                        sampling, want_pdf, li, lo):
+        """RoughDielectric's eval or pdf at unit wi = (ix, iy, iz), wo = (ox, oy, oz); li, lo:
+        |z| Lambda of wi and of wo (cos_lambda) where the caller has them, nan to compute them
+        here (only an eval needs them)."""
         e = eta
         em1 = eta - 1.0
         if iz < 0.0:
@@ -101,8 +110,8 @@ if AVAILABLE:
                 om = ox * hx + oy * hy + oz * hz
                 return choice * normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
                     4.0 * om)
-            li = cos_lambda(ndf, ax, ay, ix, iy, iz)
-            lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+            li = cos_lambda(ndf, ax, ay, ix, iy, iz) if math.isnan(li) else li
+            lo = cos_lambda(ndf, ax, ay, ox, oy, oz) if math.isnan(lo) else lo
             return (0.25 * fr * normal_density(ndf, ax, ay, hx, hy, hz)
                     * g2_over_cosines(masking, iz, oz, li, lo, False))
         if not trans:
@@ -126,8 +135,8 @@ if AVAILABLE:
             return (choice * normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, mx, my, mz)
                     * e * e * om / n2)
         ft = dielectric_transmittance(im, om, e)
-        li = cos_lambda(ndf, ax, ay, ix, iy, iz)
-        lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+        li = cos_lambda(ndf, ax, ay, ix, iy, iz) if math.isnan(li) else li
+        lo = cos_lambda(ndf, ax, ay, ox, oy, oz) if math.isnan(lo) else lo
         return (im * om * e * e * ft * normal_density(ndf, ax, ay, mx, my, mz)
                 * g2_over_cosines(masking, iz, abs(oz), li, lo, True) / n2)
 
@@ -144,6 +153,13 @@ if AVAILABLE:
     def _conductor_one(wi, wo, k, ndf, ax, ay, has_f, n_c, masking, sampling, want_pdf):
         ix, iy, iz = unit(wi[k, 0], wi[k, 1], wi[k, 2])
         ox, oy, oz = unit(wo[k, 0], wo[k, 1], wo[k, 2])
+        return conductor_unit(ix, iy, iz, ox, oy, oz, ndf, ax, ay, has_f, n_c, masking,
+                              sampling, want_pdf, math.nan, math.nan)
+
+    @compiled(error_model="numpy")
+    def conductor_unit(ix, iy, iz, ox, oy, oz, ndf, ax, ay, has_f, n_c, masking, sampling,
+                       want_pdf, li, lo):
+        """RoughConductor's eval or pdf at unit wi, wo; li, lo as dielectric_unit takes them."""
         if iz <= COS_HORIZON or oz <= COS_HORIZON:
             return 0.0
         hx, hy, hz = unit(ix + ox, iy + oy, iz + oz)
@@ -152,8 +168,8 @@ if AVAILABLE:
             return normal_pdf(ndf, ax, ay, sampling, ix, iy, iz, hx, hy, hz) / (
                 4.0 * (ox * hx + oy * hy + oz * hz))
         f = conductor_fresnel(c, has_f, n_c)
-        li = cos_lambda(ndf, ax, ay, ix, iy, iz)
-        lo = cos_lambda(ndf, ax, ay, ox, oy, oz)
+        li = cos_lambda(ndf, ax, ay, ix, iy, iz) if math.isnan(li) else li
+        lo = cos_lambda(ndf, ax, ay, ox, oy, oz) if math.isnan(lo) else lo
         return (0.25 * f * normal_density(ndf, ax, ay, hx, hy, hz)
                 * g2_over_cosines(masking, iz, oz, li, lo, False))
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from model.bsdf import primitives as p
-from model.bsdf.constants import BECKMANN_KERNEL_CF_FROM, Masking, Ndf, Sampling
+from model.bsdf.constants import BECKMANN_KERNEL_TAIL_FROM, Masking, Ndf, Sampling
 from model.bsdf.distributions import (
     DISTRIBUTIONS,
     WITH_KERNELS,
@@ -72,11 +72,11 @@ def test_beckmann_a_lambda_both_branches():
 
 def test_beckmann_a_lambda_matches_mpmath_in_every_branch():
     """The closed form to a = 2, the closed form with exp(-a^2) exactly rounded to
-    BECKMANN_KERNEL_CF_FROM, the continued fraction beyond it: within 3e-14 of 40 digits."""
+    BECKMANN_KERNEL_TAIL_FROM, Cody's tail of erfc beyond it: within 3e-14 of 40 digits."""
     import mpmath
 
     a = np.concatenate([np.geomspace(1e-6, 2.0, 60), np.random.default_rng(5).uniform(2, 26, 600),
-                        [BECKMANN_KERNEL_CF_FROM, np.nextafter(BECKMANN_KERNEL_CF_FROM, 0.0)]])
+                        [BECKMANN_KERNEL_TAIL_FROM, np.nextafter(BECKMANN_KERNEL_TAIL_FROM, 0.0)]])
     with mpmath.workdps(40):
         exact = np.array([float((mpmath.exp(-mpmath.mpf(x) ** 2) / mpmath.sqrt(mpmath.pi)
                                  - x * mpmath.erfc(x)) / 2) for x in a])

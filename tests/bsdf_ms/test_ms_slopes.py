@@ -59,10 +59,10 @@ def test_lambda_is_finite_and_monotone_at_extremes(name):
 
 
 @pytest.mark.parametrize("name,alpha", CASES)
-@pytest.mark.parametrize("theta", [0.4, 1.3, 1.75, 2.6])
+@pytest.mark.parametrize("theta", [0.0, 0.4, 1.3, 1.75, 2.6])
 def test_visible_normal_sampling_matches_its_density(name, alpha, theta):
     """Chi-square test of sampled normals against D_visible binned in (m_z, phi), w above or
-    below the horizon."""
+    below the horizon or straight above (Beckmann's closed form there)."""
     s = make_distribution(name, alpha)
     w = direction(theta)
     rng = np.random.default_rng(11)

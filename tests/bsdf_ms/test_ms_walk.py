@@ -10,6 +10,7 @@ from model.bsdf.multiple_scattering import (
     RandomWalkBSDF,
     albedo_estimate,
     energy_loss,
+    sample_kernel,
 )
 
 Z_MAX = 4.5  # |z-score| allowed for a Monte Carlo comparison (deterministic seeds)
@@ -174,11 +175,16 @@ def test_approximate_pdf_is_a_density_with_the_walks_order_one(surface, theta):
     assert np.all(p >= 0) and np.sum(np.outer(w, w) * np.pi * p) == pytest.approx(1.0, abs=2e-3)
 
 
-def test_sample_walks_once_per_direction():
+def test_sample_walks_once_per_direction(monkeypatch):
+    """Counted where the walks start: Walker.run (numpy), or sample_kernel's walk_all (compiled:
+    its given first-event uniforms, one row per walk)."""
     walk = RandomWalkBSDF(Microsurface("ggx", 0.7, "dielectric", eta=1.5), walks=256)
     calls = []
     run = walk.walker.run
     walk.walker.run = lambda wi, *args, **kwargs: calls.append(len(wi)) or run(wi, *args, **kwargs)
+    walk_all = sample_kernel.walk_all
+    monkeypatch.setattr(sample_kernel, "walk_all", lambda *args: calls.append(len(args[7]))
+                        or walk_all(*args))
     u = np.random.default_rng(1).random((1000, 3))
     walk.sample(np.broadcast_to(direction(30), (1000, 3)), u, np.random.default_rng(2))
     assert calls == [1000]

@@ -51,6 +51,7 @@ from model.bsdf.multiple_scattering.random_kernel import (
 )
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
 from model.bsdf.multiple_scattering.walk_kernel import (
+    OUTCOMES,
     Rules,
     branch_share,
     event_area,
@@ -64,7 +65,7 @@ from model.bsdf.primitives import inlined, scalar
 
 #: A keyed walk's given uniforms and per-walk outcome: none; and what walk_all takes for "no
 #: direction of incidence" (every walk resumed) and "no walk resumed".
-NOTHING_GIVEN, NO_OUTCOME = np.zeros((0, 3)), np.zeros((0, 7))
+NOTHING_GIVEN, NO_OUTCOME = np.zeros((0, 3)), np.zeros((0, OUTCOMES))
 NO_INCIDENCE, NONE_RESUMED = np.zeros((0, 3)), paths(0)
 
 

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from model.bsdf.distributions import Distribution, make_distribution
+from model.bsdf.multiple_scattering import sample_kernel
 from model.bsdf.multiple_scattering.energy import energy_loss
 from model.bsdf.multiple_scattering.heights import make_heights
 from model.bsdf.multiple_scattering.micro import MicroConductor, MicroDielectric, MicroDiffuse
 from model.bsdf.multiple_scattering.walk import Walker, walkable
-from model.bsdf.vectors import directions
+from model.bsdf.vectors import direction_arrays, directions
 
 KINDS = ("dielectric", "conductor", "diffuse")
 #: Guided direction sampling is on by default below this alpha (measured: ~5x less variance
@@ -111,6 +112,7 @@ class RandomWalkBSDF:
         self.walker = Walker(self.slopes, self.micro, self.guided)
         self._single = None  # the order-1 model behind approximate_pdf, built on first use
         self._shares: dict[bool, np.ndarray] = {}
+        self.share_nodes = np.array(MASS_NODES_DEG, dtype=np.float64)
 
     def _pairs(self, wi, wo, order, unit, rng, walks) -> tuple[np.ndarray, ...]:
         """Mean, standard error and truncated energy per pair, walking in batches of BATCH."""
@@ -142,9 +144,14 @@ class RandomWalkBSDF:
 
     def _lobe_mask(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """1 where the parent's `lobes` (reflection / transmission) include the pair, else 0."""
-        lobes = getattr(self.parent, "lobes", ("reflection", "transmission"))
         same = (wi[..., 2] > 0.0) == (wo[..., 2] > 0.0)
-        return np.where(same, "reflection" in lobes, "transmission" in lobes).astype(float)
+        return np.where(same, "reflection" in self.lobes, "transmission" in self.lobes
+                        ).astype(float)
+
+    @property
+    def lobes(self) -> tuple[str, ...]:
+        """The parent's lobes ("reflection", "transmission"), both if it does not say."""
+        return tuple(getattr(self.parent, "lobes", ("reflection", "transmission")))
 
     def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
                  walks: int | None = None) -> Estimate:
@@ -169,7 +176,13 @@ class RandomWalkBSDF:
         carrying their share of the walks (energy_loss at wi's incidence, in the x-z plane for
         an anisotropic surface): M |cos o| / pi above a conductor, M |cos o| / (2 pi) on either
         side of a dielectric; diffuse facets: |cos o| / pi. Deterministic and cheap, positive
-        wherever the walk reaches, for multiple importance sampling; not the exact density."""
+        wherever the walk reaches, for multiple importance sampling; not the exact density.
+        Compiled (sample_kernel) where the walk is."""
+        if self.walker.compiled:
+            wi_b, wo_b = direction_arrays(wi, wo)
+            shape = wo_b.shape[:-1]
+            wo_rows = np.ascontiguousarray(wo_b).reshape(-1, 3)
+            return sample_kernel.approximate_pdf(self, _rows(wi, wi_b), wo_rows).reshape(shape)
         wi, wo = directions(wi, wo)
         same = (wi[..., 2] > 0.0) == (wo[..., 2] > 0.0)
         cos_o = np.abs(wo[..., 2])
@@ -206,6 +219,10 @@ class RandomWalkBSDF:
                 share[pick] = np.interp(theta[pick], MASS_NODES_DEG, self._share_table(side))
         return share
 
+    def share_tables(self) -> np.ndarray:
+        """(2, len(MASS_NODES_DEG)): _share_table from outside, then from inside."""
+        return np.array([self._share_table(True), self._share_table(False)])
+
     def _share_table(self, outside: bool) -> np.ndarray:
         """energy_loss at MASS_NODES_DEG from outside or (a dielectric) from inside."""
         if outside not in self._shares:
@@ -239,8 +256,17 @@ class RandomWalkBSDF:
 
         One walk per sample: the weight is exact for the walk's own density p; the pdf returned
         is approximate_pdf, not p (p is known only by further walks: pdf()), so use it for MIS
-        weights, not to divide by.
+        weights, not to divide by. Compiled (sample_kernel) where the walk is: the walk and
+        the pdf in one pass.
         """
+        if self.walker.compiled:
+            (wi_b,) = direction_arrays(wi)
+            shape = wi_b.shape[:-1]
+            wi_rows = _rows(wi, wi_b)
+            u = np.asarray(u, dtype=np.float64)
+            u = np.ascontiguousarray(np.broadcast_to(u, shape + (3,))).reshape(-1, 3)
+            wo, weight, pdf = sample_kernel.sample(self, wi_rows, u, rng)
+            return wo.reshape(shape + (3,)), weight.reshape(shape), pdf.reshape(shape)
         wo, weight = self.walk_once(wi, u, rng)
         (wi,) = directions(wi)
         pdf = np.where(weight > 0.0, self.approximate_pdf(np.broadcast_to(wi, wo.shape), wo), 0.0)
@@ -251,3 +277,10 @@ class RandomWalkBSDF:
         (wi,) = directions(wi)
         res = self.walker.run(np.repeat(wi.reshape(1, 3), walks, axis=0), rng, max_order=1)
         return self.heights.inv_log_cdf(res.first_log_cdf)
+
+
+def _rows(wi, broadcast: np.ndarray) -> np.ndarray:
+    """wi as contiguous rows (m, 3), not normalised: one row when wi is one direction, else its
+    broadcast view's rows."""
+    rows = np.asarray(wi, dtype=np.float64) if np.ndim(wi) == 1 else broadcast
+    return np.ascontiguousarray(rows).reshape(-1, 3)

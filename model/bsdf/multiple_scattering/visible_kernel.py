@@ -171,11 +171,15 @@ def _visible_slope(mu, u, theta):
 @scalar
 def beckmann_visible_unit(vx, vy, vz, u1, u2):
     """Visible normal of the alpha = 1 Beckmann surface seen from unit v, any direction
-    (beckmann_sphere.beckmann_visible_unit)."""
+    (beckmann_sphere.beckmann_visible_unit); from straight above in closed form, as there."""
     sin_t = math.sqrt(vx * vx + vy * vy)
     if sin_t > 0.0:
         mu = min(max(vz / max(sin_t, 1e-200), -1e4), 1e8)
         c, s = vx / sin_t, vy / sin_t
+    elif vz > 0.0:  # beckmann_sphere.vertical_slopes
+        u1 = min(max(u1, 0.0), 1.0 - 2.0**-53)
+        r = math.sqrt(-math.log1p(-u1))
+        return unit(-r * math.cos(2.0 * math.pi * u2), -r * math.sin(2.0 * math.pi * u2), 1.0)
     else:
         mu = 1e8 if vz > 0.0 else -1e4
         c, s = 1.0, 0.0

@@ -92,8 +92,10 @@ PATH = np.dtype([("dx", np.float64), ("dy", np.float64), ("dz", np.float64),
                  ("outside", np.bool_)], align=True)
 #: Columns of walk_all's per-walk outcome: events, log C1 of the first event's height (nan if
 #: none or the walk started after one), exit direction (world; nan unless an analog walk left)
-#: and weight, energy still inside at the cap.
-EVENTS, FIRST, EXIT_X, EXIT_Y, EXIT_Z, WEIGHT, TRUNCATED = range(7)
+#: and weight, energy still inside at the cap, Smith Lambda of the exit direction
+#: (unsigned_lambda, as the walk computed it for its last free path; nan if it did not leave).
+EVENTS, FIRST, EXIT_X, EXIT_Y, EXIT_Z, WEIGHT, TRUNCATED, EXIT_LAMBDA = range(8)
+OUTCOMES = 8
 
 
 def paths(n: int) -> np.ndarray:
@@ -167,8 +169,9 @@ def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
     sin2_t = (1.0 - c * c) / (el * el)
     if u >= q and sin2_t < 1.0:
         cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-        k = c / el - cos_t
-        x, y, z = unit(-ix / el + k * mx, -iy / el + k * my, -iz / el + k * mz)
+        inv = 1.0 / el  # one division for four
+        k = c * inv - cos_t
+        x, y, z = unit(k * mx - ix * inv, k * my - iy * inv, k * mz - iz * inv)
         return x, y, z, (1.0 if q == f else (1.0 - f) / (1.0 - q)), True
     x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
     return x, y, z, (1.0 if q == f else f / q), False
@@ -203,6 +206,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
         walk_key = key_of_walk(key, first + j) if state is None else np.uint64(0)
         events, first_height = 0, math.nan
         ex, ey, ez, weight, truncated = math.nan, math.nan, math.nan, 0.0, 0.0
+        exit_lambda = math.nan
         lo, hi = (j, j + 1) if rules.each else (0, directions.shape[0])
         if rules.guided:
             guide = Guide(directions[j, 0], directions[j, 1], directions[j, 2],
@@ -222,8 +226,14 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             if not new < 0.0:
                 if not rules.forced:
                     ex, ey, ez, weight = dx, dy, (dz if outside else -dz), beta
+                    exit_lambda = lam_up
                 break
-            other = 0.0 if s.conductor else log1mexp(new)  # the side below, if there is one
+            if s.conductor:
+                other = 0.0  # no side below
+            elif cur == 0.0 and lam_d == -1.0 and p_hit == 1.0:
+                other = math.log(u)  # from the top straight down C1 = 1 - u: log(1 - C1)
+            else:
+                other = log1mexp(new)
             events = k
             if k == 1:
                 first_height = new if outside else other
@@ -277,6 +287,7 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             out[j, EVENTS], out[j, FIRST], out[j, WEIGHT], out[j, TRUNCATED] = (
                 events, first_height, weight, truncated)
             out[j, EXIT_X], out[j, EXIT_Y], out[j, EXIT_Z] = ex, ey, ez
+            out[j, EXIT_LAMBDA] = exit_lambda
 
 
 def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, unit_mode,
@@ -290,7 +301,7 @@ def run(walker, wi: np.ndarray, rng: np.random.Generator, wo, order, max_order, 
                                 dtype=np.float64).reshape(-1, 3)
     s = surface(walker.slopes, walker.micro, unit_mode)
     value = np.zeros((n, 1 if each or sampling else len(aims)))
-    out = np.empty((n, 7))
+    out = np.empty((n, OUTCOMES))
     walk_all(s, Rules(not sampling, each, each and walker.guided, order or 0,
                       int(min_order), max_order or 0, float(roulette), False, 0.0),
              wi, paths(0), np.uint64(0), 0, rng.integers(0, 2**64, size=4, dtype=np.uint64),
