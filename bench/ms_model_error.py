@@ -4,7 +4,8 @@ Walter's ground glass (GGX 0.394) and acid-etched glass (GGX 0.553) are scanned 
 normal incidence on the emulated bench (the example plans' normal-incidence grids, `gonio scan
 --sim`) and reduced; at those fit points the walked orders >= 3 of the fit's model (the truth
 alpha, so many walks per incidence) are compared with a reference from REFERENCE_WALKS walks,
-in units of each point's data sigma: median and worst over points and --seeds seeds, for the
+in units of each point's data sigma: the median and the worst over the points, each as the
+median [min, max] over --seeds seeds (SEEDS), for the
 sequential shared-path walk (lobe.walk_to_targets(keyed=False)), the keyed, branch-split
 walk (keyed.keyed_walk_to_targets) towards every point, and the fit as it is: the distinct
 polar angles walked once (normal incidence: the lobe has no azimuth; lobe.higher_orders_at)
@@ -15,7 +16,7 @@ exceeds MS_REWALK_SIGMA of their data sigma walked again.
 keyed.THREADS threads) of the walks of one fit (calibration.fit.orders.OrdersTable: 7 alphas 0.1
 apart in log alpha, the covariance at the centre one, forward; and the refit's term, both ways
 for "both"). The reference's own standard error is shown in its row.
-Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 33554432]
+Run: python bench/ms_model_error.py [--seeds 8] [--reference-walks 33554432]
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _seeds import SEEDS, median_range
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -134,14 +136,15 @@ def table_seconds(alpha: float, wo: np.ndarray, walks: int, refit: int, keyed: b
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--seeds", type=int, default=SEEDS)
     ap.add_argument("--reference-walks", type=int, default=REFERENCE_WALKS)
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f}; reference {args.reference_walks} walks "
-          f"(both ways); error / data sigma over the normal-incidence fit points x "
-          f"{args.seeds} seeds; {THREADS} threads")
+          f"(both ways); error / data sigma over the normal-incidence fit points, median and "
+          f"worst point per seed, each the median [min, max] over {args.seeds} seeds; "
+          f"{THREADS} threads")
     print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'wall s':>7} "
-          f"{'median':>7} {'worst':>7}")
+          f"{'median point':>20} {'worst point':>23}")
     with tempfile.TemporaryDirectory() as tmp:
         for name, alpha, wo, sigma, _ in fit_points(Path(tmp)):
             walk = glass(alpha)
@@ -149,15 +152,16 @@ def main() -> None:
                 orders3(walk, wo[:2], 64, keyed, 0, False, covariance=True)
             ref, ref_err = orders3(walk, wo, args.reference_walks, "both", 999, True)
             print(f"{name:>13} {'reference':>26} {args.reference_walks:>8} {'':>15} "
-                  f"{np.median(ref_err / sigma):7.2f} {np.max(ref_err / sigma):7.2f}")
+                  f"{np.median(ref_err / sigma):20.2f} {np.max(ref_err / sigma):23.2f}")
             for label, keyed, walks, centre, distinct in ESTIMATES:
-                dev = np.concatenate([
+                dev = np.array([
                     np.abs((refitted3(alpha, wo, walks * centre, seed, sigma) if keyed == "refit"
                             else orders3(walk, wo, walks * centre, keyed, seed, distinct)[0])
                            - ref) / sigma for seed in range(args.seeds)])
                 cpu, wall = table_seconds(alpha, wo, walks, centre, keyed, distinct, sigma)
                 print(f"{name:>13} {label:>26} {walks * centre:>8} {cpu:7.2f} {wall:7.2f} "
-                      f"{np.median(dev):7.2f} {np.max(dev):7.2f}")
+                      f"{median_range(np.median(dev, axis=1), '.2f'):>20} "
+                      f"{median_range(np.max(dev, axis=1), '.2f'):>23}")
 
 
 if __name__ == "__main__":
