@@ -16,7 +16,19 @@ import os
 
 import numpy as np
 from _seeds import SEEDS, median_range
-from multiple_scattering import direction, direction_pairs, off_grid_pairs, timed
+from multiple_scattering import (
+    ALPHAS,
+    ETA,
+    FURNACE_SAMPLES,
+    REFERENCE_WALKS,
+    TABLE_REFERENCE_WALKS,
+    TABLE_WALKS,
+    WALKS,
+    direction,
+    direction_pairs,
+    off_grid_pairs,
+    timed,
+)
 
 from model.bsdf import RoughDielectric
 from model.bsdf.multiple_scattering import (
@@ -29,15 +41,8 @@ from model.bsdf.multiple_scattering import (
 from model.bsdf.multiple_scattering.second_order import second_order
 from sim.bench.sample import HigherOrders
 
-ETA = 1.51
-ALPHAS = (0.3, 1.0)
-WALKS = (16, 64, 256, 1024, 4096)
-REFERENCE_WALKS = 1 << 17
-FURNACE_SAMPLES = (1000, 4000, 16000, 64000)
-TABLE_WALKS = (1024, 4096, 16384, 65536)
-#: The tables' reference: the mean of two walks at the pairs, this many walks each, from these
-#: seeds (their difference states the reference's own error).
-TABLE_REFERENCE_WALKS = 1 << 18
+#: The tables' reference: the mean of two walks at the pairs (TABLE_REFERENCE_WALKS each) from
+#: these seeds; their difference states the reference's own error.
 TABLE_REFERENCE_SEEDS = (99, 100)
 PAIR_WALKS = 1024
 
