@@ -25,6 +25,7 @@ nodes around 1; the 2-D table at eta = 1.5 against the 3-D table at other indice
 focusing approximation against Walter's eq. 17.
 
     python bench/lut_bake.py [--samples 256] [--skip-accuracy] [--quick] [--only-issue-18]
+                             [--only-accuracy]
 """
 
 from __future__ import annotations
@@ -288,17 +289,21 @@ def main() -> None:
                         help="32x32x16 for the timing, smaller accuracy sweep")
     parser.add_argument("--only-issue-18", action="store_true",
                         help="only the remap before/after, fixed-index and focusing figures")
+    parser.add_argument("--only-accuracy", action="store_true",
+                        help="only the error-against-run-time tables and issue 18's figures")
     args = parser.parse_args()
     if args.only_issue_18:
         issue_18()
         return
-    shape = (32, 32, 16) if args.quick else (64, 64, 32)
-    print(f"== bake time, transmission {'x'.join(map(str, shape))}, {args.samples} samples/entry")
-    bake_times(shape, args.samples)
-    small = (32, 32, 4) if args.quick else (64, 64, 8)
-    print(f"== thread policy, transmission {'x'.join(map(str, small))}, {args.samples} "
-          f"samples/entry, {usable_cores()} cores")
-    thread_policy(small, args.samples)
+    if not args.only_accuracy:
+        shape = (32, 32, 16) if args.quick else (64, 64, 32)
+        print(f"== bake time, transmission {'x'.join(map(str, shape))}, {args.samples} "
+              f"samples/entry")
+        bake_times(shape, args.samples)
+        small = (32, 32, 4) if args.quick else (64, 64, 8)
+        print(f"== thread policy, transmission {'x'.join(map(str, small))}, {args.samples} "
+              f"samples/entry, {usable_cores()} cores")
+        thread_policy(small, args.samples)
     if args.skip_accuracy:
         return
     samples = [64, 256] if args.quick else [64, 256, 1024]
