@@ -23,6 +23,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from _seeds import DETERMINISTIC
 from scipy import integrate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,6 +91,7 @@ def main() -> None:
     warnings.simplefilter("ignore", integrate.IntegrationWarning)  # the reference's own
     baseline = baseline_energy_loss()
     print("load average {:.2f} {:.2f} {:.2f} (1, 5, 15 min)".format(*os.getloadavg()))
+    print(f"{DETERMINISTIC}; quadratures, gonio's and the reference's")
     print(f"reference: tests/bsdf_ms/energy_reference.py; baseline: energy.py at "
           f"{BASELINE_COMMIT}; relative errors over losses >= {FLOOR:g}, absolute below")
     print("| block | rel. err. | baseline | abs. err. (< 1e-7) | baseline | worst at "

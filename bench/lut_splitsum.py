@@ -9,7 +9,9 @@ with four choices: the albedo-only baseline (alpha_b = alpha, d = ideal refracti
 blur table's alpha_b, with the direction table's offset, and with both; T, alpha_b and the
 offset come from float16 tables of each size (1024 samples per entry) or directly from the
 model at the point ("direct": the split sum's own error, no table). Errors are relative,
-over the points whose reference is at least FLOOR.
+over the points whose reference is at least FLOOR. Each row is drawn from SEEDS seeds (of the
+tables' bakes, the direct estimates and the prefiltered lobe's samples; the reference is
+shared): the median error's median [min, max] over them, the other figures' medians.
 
     python bench/lut_splitsum.py [--points 100] [--picture docs/img/lut_splitsum.png]
 """
@@ -21,6 +23,7 @@ import os
 import time
 
 import numpy as np
+from _seeds import SEEDS, median_range
 from scipy.stats import qmc
 
 from model.lut import TableSpec, bake
@@ -64,16 +67,17 @@ def references(points: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray
     return 0.5 * (runs[0] + runs[1]), 0.5 * (runs[0] - runs[1])
 
 
-def direct_channels(points: np.ndarray, samples: int) -> dict[str, np.ndarray]:
+def direct_channels(points: np.ndarray, samples: int, seed: int) -> dict[str, np.ndarray]:
     """T, blur_alpha and offset estimated from the model at the points themselves."""
-    u, rng = sobol(3, samples, 7), np.random.default_rng(7)
+    u, rng = sobol(3, samples, 7 + seed), np.random.default_rng(7 + seed)
     return {kind: estimator_for(TableSpec(kind=kind, shape=(2, 2, 2)))(points, u, rng)[:, 0]
             for kind in KINDS}
 
 
-def baked(shape: tuple[int, ...]) -> dict:
-    """The three float16 tables of shape, 1024 samples per entry."""
-    return {kind: bake(TableSpec(kind=kind, shape=shape, samples=1024, dtype="float16"))
+def baked(shape: tuple[int, ...], seed: int = 0) -> dict:
+    """The three float16 tables of shape, 1024 samples per entry, from one seed."""
+    return {kind: bake(TableSpec(kind=kind, shape=shape, samples=1024, dtype="float16",
+                                 seed=seed))
             for kind in KINDS}
 
 
@@ -83,9 +87,10 @@ def looked_up(tables: dict, points: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def split_sum(points: np.ndarray, channels: dict, blur: bool, direction: bool,
-              samples: int) -> np.ndarray:
-    """T * P(d, alpha_b) at each point for one variant."""
-    u, u_sun = sobol(2, samples, 31), sobol(2, samples // 4, 32)
+              samples: int, seed: int = 0) -> np.ndarray:
+    """T * P(d, alpha_b) at each point for one variant, the prefiltered lobe's samples from
+    one seed."""
+    u, u_sun = sobol(2, samples, 31 + 2 * seed), sobol(2, samples // 4, 32 + 2 * seed)
     alpha_b = channels["transmission-blur"] if blur else points[:, 1]
     offset = channels["transmission-direction"] if direction else np.zeros(len(points))
     d = lookup_direction(points[:, 0], points[:, 2], offset)
@@ -94,8 +99,8 @@ def split_sum(points: np.ndarray, channels: dict, blur: bool, direction: bool,
 
 
 def error_table(points: int, samples: int) -> dict:
-    """The error of each variant against table size and bake time; returns the largest
-    size's tables."""
+    """The error of each variant against table size and bake time over SEEDS seeds; returns
+    the largest size's tables (of the last seed)."""
     params = random_points(points, seed=3)
     start = time.perf_counter()
     ref, noise = references(params, samples)
@@ -105,17 +110,30 @@ def error_table(points: int, samples: int) -> dict:
           f"{np.sqrt(np.mean((noise[counted] / ref[counted]) ** 2)):.1e}; "
           f"{counted.sum()} points with reference >= {FLOOR} counted")
     print(f"{'tables':>10} {'T s':>6} {'blur s':>6} {'dir s':>6}  {'variant':24s} "
-          f"{'median':>8} {'rms':>8} {'max':>8}   (relative error)")
-    tables = {shape: baked(shape) for shape in SIZES}
-    rows = [("direct", direct_channels(params, samples), f"{'-':>6} {'-':>6} {'-':>6}")]
-    rows += [("x".join(map(str, s)), looked_up(t, params),
-              " ".join(f"{t[k].bake_seconds:6.2f}" for k in KINDS)) for s, t in tables.items()]
-    for label, channels, times in rows:
-        for name, blur, direction in VARIANTS:
-            approx = split_sum(params, channels, blur, direction, samples)
-            rel = np.abs(approx[counted] / ref[counted] - 1.0)
-            print(f"{label:>10} {times}  {name:24s} {np.median(rel):8.3f} "
-                  f"{np.sqrt(np.mean(rel**2)):8.3f} {rel.max():8.3f}")
+          f"{'median [min, max] over seeds':>28} {'rms':>8} {'max':>8}   (relative error)")
+    labels = ["direct"] + ["x".join(map(str, s)) for s in SIZES]
+    errors: dict[tuple[str, str], list[tuple[float, float, float]]] = {}
+    seconds: dict[str, list[list[float]]] = {label: [] for label in labels}
+    for seed in range(SEEDS):
+        tables = {shape: baked(shape, seed) for shape in SIZES}
+        rows = [("direct", direct_channels(params, samples, seed))]
+        rows += [(label, looked_up(t, params)) for label, t in zip(labels[1:], tables.values(),
+                                                                     strict=True)]
+        for label, t in zip(labels[1:], tables.values(), strict=True):
+            seconds[label].append([t[k].bake_seconds for k in KINDS])
+        for label, channels in rows:
+            for name, blur, direction in VARIANTS:
+                approx = split_sum(params, channels, blur, direction, samples, seed)
+                rel = np.abs(approx[counted] / ref[counted] - 1.0)
+                errors.setdefault((label, name), []).append(
+                    (np.median(rel), np.sqrt(np.mean(rel**2)), rel.max()))
+    for label in labels:
+        times = (" ".join(f"{t:6.2f}" for t in np.median(seconds[label], axis=0))
+                 if seconds[label] else f"{'-':>6} {'-':>6} {'-':>6}")
+        for name, _, _ in VARIANTS:
+            runs = np.array(errors[label, name])
+            print(f"{label:>10} {times}  {name:24s} {median_range(runs[:, 0], '.3f'):>28} "
+                  f"{np.median(runs[:, 1]):8.3f} {np.median(runs[:, 2]):8.3f}")
     return tables[SIZES[-1]]
 
 

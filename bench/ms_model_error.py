@@ -4,18 +4,23 @@ Walter's ground glass (GGX 0.394) and acid-etched glass (GGX 0.553) are scanned 
 normal incidence on the emulated bench (the example plans' normal-incidence grids, `gonio scan
 --sim`) and reduced; at those fit points the walked orders >= 3 of the fit's model (the truth
 alpha, so many walks per incidence) are compared with a reference from REFERENCE_WALKS walks,
-in units of each point's data sigma: median and worst over points and --seeds seeds, for the
+in units of each point's data noise (NOISE_COMPONENTS of the reduction's budget: what the run's
+own readings measure, not the stated type-B terms, which are shared by the points and dwarf it
+on these runs): the median and the worst over the points, each as the median [min, max] over
+--seeds seeds (SEEDS), for the
 sequential shared-path walk (lobe.walk_to_targets(keyed=False)), the keyed, branch-split
 walk (keyed.keyed_walk_to_targets) towards every point, and the fit as it is: the distinct
 polar angles walked once (normal incidence: the lobe has no azimuth; lobe.higher_orders_at)
 and the term at the fit's result walked MS_CENTRE_WALKS times the table's walks (the refit),
 both ways, then, as the fit has it now (calibration.fit.refit_orders), its points whose error
-exceeds MS_REWALK_SIGMA of their data sigma walked again.
+exceeds MS_REWALK_SIGMA of their data sigma (the whole budget, as the fit passes it) walked
+again. The scans are reduced as `gonio reduce` does an emulated run (the meter's shot noise
+from the emulator's truth).
 "walks": those behind the estimate at the truth alpha; "table s": CPU time (and "wall s", on
 keyed.THREADS threads) of the walks of one fit (calibration.fit.orders.OrdersTable: 7 alphas 0.1
 apart in log alpha, the covariance at the centre one, forward; and the refit's term, both ways
 for "both"). The reference's own standard error is shown in its row.
-Run: python bench/ms_model_error.py [--seeds 4] [--reference-walks 33554432]
+Run: python bench/ms_model_error.py [--seeds 8] [--reference-walks 33554432]
 """
 
 from __future__ import annotations
@@ -30,12 +35,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _seeds import SEEDS, median_range
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from calibration.fit import MS_CENTRE_WALKS, refit_orders  # noqa: E402
 from calibration.pipeline import reduce_run  # noqa: E402
+from gonio_cli import emulator_truth  # noqa: E402
 from model.bsdf import RoughDielectric  # noqa: E402
 from model.bsdf.multiple_scattering.keyed import THREADS  # noqa: E402
 from model.bsdf.multiple_scattering.lobe import walk_both_ways, walk_to_targets  # noqa: E402
@@ -53,6 +60,10 @@ ESTIMATES = (("sequential walk", False, 1 << 15, 1, False),
 REFERENCE_WALKS = 1 << 25
 #: The fit table's alphas (calibration.fit.orders: MS_TABLE_NODES, MS_TABLE_STEP in log alpha).
 TABLE_NODES, TABLE_STEP = 7, 0.1
+#: The budget's components that make the data's noise: the readings' own noise and what the
+#: run's dark and beam readings measure (calibration.reduce), not the stated type-B terms
+#: (linearity, range gain, solid angle, angles).
+NOISE_COMPONENTS = ("read_noise", "shot_noise", "dark", "beam_normalisation")
 
 
 def scan_normal_incidence(name: str, out: Path) -> Path:
@@ -72,11 +83,13 @@ def scan_normal_incidence(name: str, out: Path) -> Path:
 
 def fit_points(tmp: Path):
     """For each of SAMPLES, scanned afresh at normal incidence under tmp: (name, truth alpha,
-    wo (n, 3), data sigma (n,), f (n,)) at its normal-incidence points."""
+    wo (n, 3), data sigma (n,), data noise (n,)) at its normal-incidence points."""
     for name, alpha in SAMPLES:
         data = reduce_run(scan_normal_incidence(name, tmp))
         rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
-        yield name, alpha, data.wo[rows], data.sigma[rows], data.bsdf[rows]
+        noise = np.sqrt(sum(data.components[c][rows] ** 2 for c in NOISE_COMPONENTS
+                            if c in data.components))
+        yield name, alpha, data.wo[rows], data.sigma[rows], noise
 
 
 def glass(alpha: float) -> RandomWalkBSDF:
@@ -134,30 +147,35 @@ def table_seconds(alpha: float, wo: np.ndarray, walks: int, refit: int, keyed: b
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--seeds", type=int, default=SEEDS)
     ap.add_argument("--reference-walks", type=int, default=REFERENCE_WALKS)
     args = ap.parse_args()
+    emulator_truth.install()
     print(f"load average {os.getloadavg()[0]:.1f}; reference {args.reference_walks} walks "
-          f"(both ways); error / data sigma over the normal-incidence fit points x "
-          f"{args.seeds} seeds; {THREADS} threads")
+          f"(both ways); error / data noise over the normal-incidence fit points, median and "
+          f"worst point per seed, each the median [min, max] over {args.seeds} seeds; "
+          f"{THREADS} threads")
     print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'wall s':>7} "
-          f"{'median':>7} {'worst':>7}")
+          f"{'median point':>20} {'worst point':>23}")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, alpha, wo, sigma, _ in fit_points(Path(tmp)):
+        for name, alpha, wo, sigma, noise in fit_points(Path(tmp)):
+            print(f"{name:>13} data sigma / data noise: median {np.median(sigma / noise):.1f}, "
+                  f"smallest {np.min(sigma / noise):.1f}")
             walk = glass(alpha)
             for keyed in (True, False, "both"):  # compile outside the timings
                 orders3(walk, wo[:2], 64, keyed, 0, False, covariance=True)
             ref, ref_err = orders3(walk, wo, args.reference_walks, "both", 999, True)
             print(f"{name:>13} {'reference':>26} {args.reference_walks:>8} {'':>15} "
-                  f"{np.median(ref_err / sigma):7.2f} {np.max(ref_err / sigma):7.2f}")
+                  f"{np.median(ref_err / noise):20.2f} {np.max(ref_err / noise):23.2f}")
             for label, keyed, walks, centre, distinct in ESTIMATES:
-                dev = np.concatenate([
+                dev = np.array([
                     np.abs((refitted3(alpha, wo, walks * centre, seed, sigma) if keyed == "refit"
                             else orders3(walk, wo, walks * centre, keyed, seed, distinct)[0])
-                           - ref) / sigma for seed in range(args.seeds)])
+                           - ref) / noise for seed in range(args.seeds)])
                 cpu, wall = table_seconds(alpha, wo, walks, centre, keyed, distinct, sigma)
                 print(f"{name:>13} {label:>26} {walks * centre:>8} {cpu:7.2f} {wall:7.2f} "
-                      f"{np.median(dev):7.2f} {np.max(dev):7.2f}")
+                      f"{median_range(np.median(dev, axis=1), '.2f'):>20} "
+                      f"{median_range(np.max(dev, axis=1), '.2f'):>23}")
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ import os
 import time
 
 import numpy as np
+from _seeds import DETERMINISTIC
 
 from calibration.fit import build_model
 from calibration.smearing import Smearing, smearing_order
@@ -131,6 +132,7 @@ def main() -> None:
         lambda: optics.average(model, swi, swo), repeats=20)
 
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores, shared)")
+    print(f"{DETERMINISTIC}; quadrature")
     print(f"{optics}")
     print(f"{'rule':<34}{'max |err| / peak':>18}{'max rel err':>13}{'ms / call':>11}")
     lit = reference > 1e-3 * peak

@@ -5,7 +5,8 @@ normal incidence) and what a multiple-scattering fit returns.
 For each sample the bench's exact expectation at the example plan's normal-incidence readings,
 weighted by the emulated meter's predicted noise (tests/fitting/single_scattering_alpha.py),
 is fitted with the default options and with --multiple-scattering's; the single-scattering
-fit is repeated with the bench's tables at WALKS walks in place of the config's 2^24, and with
+fit is repeated with the bench's tables at WALKS walks in place of the config's 2^24 (walked from
+SEEDS seeds: alpha's shift as the median [min, max] over them), and with
 only the sample's own distribution, the two economies of
 tests/fitting/test_fitting_walter_single_scattering_alpha.py. With --scan SAMPLE the example
 plan is also scanned (`gonio scan --sim --time-scale inf`, the default table cache) and fitted
@@ -27,6 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "fitting")]
 
+from _seeds import SEEDS, median_range  # noqa: E402
 from single_scattering_alpha import (  # noqa: E402
     SAMPLES,
     normal_incidence_expectation,
@@ -82,12 +84,12 @@ def main() -> None:
               f"{multiple.distribution} {multiple.values[0]:.6f} +- {multiple.errors[0]:.2g}   "
               f"{table['single_scattering_alpha']:g} +- {table['single_scattering_alpha_u']:g}")
         own = (table["distribution"],)
-        shifts = [single_scattering_fit(sample, walks, own).values[0] - single.values[0]
-                  for walks in WALKS]
+        shifts = [[single_scattering_fit(sample, walks, own, seed).values[0] - single.values[0]
+                   for seed in range(SEEDS)] for walks in WALKS]
         print(f"{'':13} its own distribution alone: "
               f"{single_scattering_fit(sample, None, own).values[0]:.6f}; "
-              "tables at 2^14, 2^16, 2^18, 2^20 walks: alpha "
-              + ", ".join(f"{shift:+.1e}" for shift in shifts))
+              f"tables at 2^14, 2^16, 2^18, 2^20 walks ({SEEDS} seeds each): alpha "
+              + ", ".join(median_range(row, "+.1e") for row in shifts))
     with tempfile.TemporaryDirectory() as tmp:
         for sample in args.scan:
             single, multiple = scanned(sample, Path(tmp))

@@ -44,18 +44,22 @@ def sample_table(sample: str) -> dict:
     return tomllib.loads(instrument_path(sample).read_text())["sim"]["sample"]
 
 
-def normal_incidence_expectation(sample: str, ms_walks: int | None = None) -> ReducedData:
+def normal_incidence_expectation(sample: str, ms_walks: int | None = None,
+                                 seed: int | None = None) -> ReducedData:
     """ReducedData of the example plan's normal-incidence readings on the sample's emulated
     bench: the bench's exact expectation; each point's own sigma the emulated meter's
     predicted noise of its reading (autoranged, the plan's averaging) over the reading's
     scale, and the beam normalisation's error (the mean of the plan's beam readings, each
     with the meter's predicted noise) shared by every point. ms_walks: the
-    multiple-scattering tables' walks in place of the config's (None: the config's)."""
+    multiple-scattering tables' walks in place of the config's (None: the config's); seed: the
+    [sim] seed the tables are walked from in place of the config's (None: the config's)."""
     path = instrument_path(sample)
     raw = tomllib.loads(path.read_text())
     sim = dict(raw["sim"])
     if ms_walks is not None:
         sim["sample"] = {**sim["sample"], "ms_walks": ms_walks}
+    if seed is not None:
+        sim["seed"] = seed
     plan = load_plan(ROOT / "examples" / "plans" / f"walter-{sample}.toml")
     readings = build_schedule(plan, parse_config(raw, path)).readings
     rows = readings[(readings["kind"] == "sample") & (readings["theta_i_deg"] == 0.0)]
@@ -93,9 +97,10 @@ def normal_incidence_expectation(sample: str, ms_walks: int | None = None) -> Re
 
 
 def single_scattering_fit(sample: str, ms_walks: int | None = None,
-                          distributions: tuple[str, ...] | None = None) -> FitResult:
+                          distributions: tuple[str, ...] | None = None,
+                          seed: int | None = None) -> FitResult:
     """The default fit (`gonio fit RUN`: separable masking, normal incidence, every
     distribution unless `distributions` names some) of normal_incidence_expectation."""
     options = FitOptions() if distributions is None else FitOptions(distributions=distributions)
-    return fit(normal_incidence_expectation(sample, ms_walks), options)
+    return fit(normal_incidence_expectation(sample, ms_walks, seed), options)
 
