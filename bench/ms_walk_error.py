@@ -19,14 +19,8 @@ from _seeds import SEEDS, median_range
 from multiple_scattering import (
     ALPHAS,
     ETA,
-    FURNACE_SAMPLES,
-    REFERENCE_WALKS,
-    TABLE_REFERENCE_WALKS,
-    TABLE_WALKS,
-    WALKS,
     direction,
     direction_pairs,
-    off_grid_pairs,
     timed,
 )
 
@@ -41,10 +35,22 @@ from model.bsdf.multiple_scattering import (
 from model.bsdf.multiple_scattering.second_order import second_order
 from sim.bench.sample import HigherOrders
 
+WALKS = (16, 64, 256, 1024, 4096)  # per direction pair, for the eval error
+REFERENCE_WALKS = 1 << 17  # per pair, the eval error's reference
+FURNACE_SAMPLES = (1000, 4000, 16000, 64000)
+TABLE_WALKS = (1024, 4096, 16384, 65536)  # per HigherOrderLobe build
+TABLE_REFERENCE_WALKS = 1 << 18
 #: The tables' reference: the mean of two walks at the pairs (TABLE_REFERENCE_WALKS each) from
 #: these seeds; their difference states the reference's own error.
 TABLE_REFERENCE_SEEDS = (99, 100)
 PAIR_WALKS = 1024
+
+
+def off_grid_pairs() -> tuple[np.ndarray, np.ndarray]:
+    """12 pairs between the table's nodes: incidence 0, 32, 60 deg; both lobes, in and out of
+    plane (polar angles and azimuths off the 5 x 15 deg grid)."""
+    return direction_pairs((0.0, 32.0, 60.0),
+                           ((22.0, 172.0), (47.0, 100.0), (152.0, 8.0), (168.0, 172.0)))
 
 
 def _glass(alpha: float) -> RoughDielectric:

@@ -1,20 +1,17 @@
-"""Multiple scattering (Heitz 2016 random walk): error against run time, and walk throughput.
+"""Multiple scattering (Heitz 2016 random walk): walk throughput, order 2 by quadrature, and the
+public sample() beside Heitz et al.'s C++ walk.
 
-For the reference glass (GGX, eta = 1.51) at alpha 0.3 and 1.0: the eval error against walks
-per direction pair (reference: 2^17 walks per pair, computed in this run), the white-furnace
-error against run time (F = 1 conductor, and R + T for the glass), and walks per CPU-second
-of the compiled walk (eval, sample, shared paths; GGX and Beckmann, glass and mirror, alpha 0.3
-and 1.0) beside the numpy walk measured in the same run as the baseline and against issue 19's
-C++ figures for this machine and the C++ walk as measured here once (CPP_MEASURED); and
-the two-scale diffraction model's evals per second beside the plain microfacet eval; for
-the bench's tabulated orders >= 2 (HigherOrderLobe), the error against walks per table build
-and the build time, beside the per-pair walk (HigherOrders) it replaced, measured in the same
-run; and order 2 by quadrature (second_order) per table column, CPU time and error, beside
-the numpy route it replaced (second_order_reference), same run; and the public sample() (pdf
+Walks per CPU-second of the compiled walk (eval, sample, shared paths; GGX and Beckmann, glass
+and mirror, alpha 0.3 and 1.0) beside the numpy walk measured in the same run as the baseline
+and against issue 19's C++ figures for this machine and the C++ walk as measured here once
+(CPP_MEASURED); the two-scale diffraction model's evals per second beside the plain microfacet
+eval; order 2 by quadrature (second_order) per table column, CPU time and error, beside the
+numpy route it replaced (second_order_reference), same run; and the public sample() (pdf
 included) per CPU-second beside Heitz et al.'s C++ walk built from its published source and run
 case by case alternately with it in the same run (sample_table; --cpp-source DIR or
 GONIO_HEITZ_SOURCE names the source, _heitz_cpp.py builds it; without it the stored figures
-CPP_SAMPLE_STORED stand in, labelled so).
+CPP_SAMPLE_STORED stand in, labelled so). The walk's error against walks over seeds is
+bench/ms_walk_error.py.
 """
 
 from __future__ import annotations
@@ -29,27 +26,17 @@ import numpy as np
 from model.bsdf import RoughConductor, RoughDielectric
 from model.bsdf.diffraction import KCorrelationPSD, TwoScaleDiffraction
 from model.bsdf.multiple_scattering import (
-    HigherOrderLobe,
     Microsurface,
     RandomWalkBSDF,
-    albedo_estimate,
-    higher_orders_at,
 )
 from model.bsdf.multiple_scattering.second_order import second_order, second_order_reference
 from model.bsdf.multiple_scattering.walk import Walker
-from sim.bench.sample import HigherOrders
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _heitz_cpp as heitz_cpp  # noqa: E402  (beside this script)
 
 ETA = 1.51
 ALPHAS = (0.3, 1.0)
-WALKS = (16, 64, 256, 1024, 4096)
-REFERENCE_WALKS = 1 << 17
-REPEATS = 8
-FURNACE_SAMPLES = (1000, 4000, 16000, 64000)
-TABLE_WALKS = (1024, 4096, 16384, 65536)
-TABLE_REFERENCE_WALKS = 1 << 18
 
 
 def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
@@ -74,55 +61,6 @@ def timed(fn, *args, **kwargs):
     start = time.perf_counter()
     out = fn(*args, **kwargs)
     return out, time.perf_counter() - start
-
-
-def eval_error_table(rng: np.random.Generator) -> list[str]:
-    """Eval error over the pairs against walks per pair, with run time, over REPEATS runs.
-
-    rms dev: relative RMS deviation from the reference over pairs and runs; expected: what the
-    walks' own spread predicts for it (reference error included); rms/peak: RMS absolute
-    deviation over the largest reference value (the scale a detector range sees); time: one
-    eval of 12 pairs.
-    """
-    wi, wo = direction_pairs()
-    lines = [f"eval error vs walks per direction pair (GGX glass, eta 1.51, 12 pairs, "
-             f"{REPEATS} runs each)",
-             f"{'alpha':>5} {'walks/pair':>10} {'time s':>8} {'rms dev':>8} {'expected':>8} "
-             f"{'rms/peak':>9}"]
-    for alpha in ALPHAS:
-        glass = RoughDielectric("ggx", alpha, ETA, masking="correlated")
-        ref, ref_seconds = timed(RandomWalkBSDF(glass, walks=REFERENCE_WALKS).estimate, wi, wo,
-                                 rng)
-        for walks in WALKS:
-            model = RandomWalkBSDF(glass, walks=walks)
-            dev2, exp2, abs2, seconds = 0.0, 0.0, 0.0, 0.0
-            for _ in range(REPEATS):
-                est, t = timed(model.estimate, wi, wo, rng)
-                dev2 += np.mean(((est.value - ref.value) / ref.value) ** 2) / REPEATS
-                exp2 += np.mean((est.stderr**2 + ref.stderr**2) / ref.value**2) / REPEATS
-                abs2 += np.mean((est.value - ref.value) ** 2) / REPEATS
-                seconds += t / REPEATS
-            lines.append(f"{alpha:5.1f} {walks:10d} {seconds:8.4f} {np.sqrt(dev2):8.4f} "
-                         f"{np.sqrt(exp2):8.4f} {np.sqrt(abs2) / ref.value.max():9.5f}")
-        lines.append(f"{alpha:5.1f} {REFERENCE_WALKS:10d} {ref_seconds:8.3f} {'(ref)':>8} "
-                     f"{np.sqrt(np.mean((ref.stderr / ref.value) ** 2)):8.4f}")
-    return lines
-
-
-def furnace_table(rng: np.random.Generator) -> list[str]:
-    """|albedo - 1| of the F = 1 conductor and of the glass (R + T) against run time."""
-    wi = direction(60.0)
-    lines = ["white furnace at 60 deg incidence: |integral of f cos - 1| vs run time",
-             f"{'surface':>10} {'alpha':>5} {'samples':>8} {'time s':>8} {'|E - 1|':>9} "
-             f"{'std err':>9}"]
-    for kind in ("conductor", "dielectric"):
-        for alpha in ALPHAS:
-            model = RandomWalkBSDF(Microsurface("ggx", alpha, kind, eta=ETA), walks=1)
-            for n in FURNACE_SAMPLES:
-                (value, err), seconds = timed(albedo_estimate, model, wi, rng, n)
-                lines.append(f"{kind:>10} {alpha:5.1f} {n:8d} {seconds:8.3f} "
-                             f"{abs(value - 1.0):9.5f} {err:9.5f}")
-    return lines
 
 
 #: Issue 19's single-thread figures for Heitz et al.'s C++ random walk on this machine, walks per
@@ -245,51 +183,6 @@ def diffraction_table(rng: np.random.Generator) -> list[str]:
     _, t_d = timed(model.eval, wi, wo, 633e-9)
     _, t_m = timed(mf.eval, wi, wo)
     lines.append(f"{n:6d} {n / t_d:20.3e} {n / t_m:19.3e}")
-    return lines
-
-
-def off_grid_pairs() -> tuple[np.ndarray, np.ndarray]:
-    """12 pairs between the table's nodes: incidence 0, 32, 60 deg; both lobes, in and out of
-    plane (polar angles and azimuths off the 5 x 15 deg grid)."""
-    return direction_pairs((0.0, 32.0, 60.0),
-                           ((22.0, 172.0), (47.0, 100.0), (152.0, 8.0), (168.0, 172.0)))
-
-
-def _score(value: np.ndarray, ref: np.ndarray) -> str:
-    """Relative RMS deviation and RMS deviation over the peak, formatted."""
-    rel = np.sqrt(np.mean(((value - ref) / ref) ** 2))
-    return f"{rel:8.4f} {np.sqrt(np.mean((value - ref) ** 2)) / ref.max():9.5f}"
-
-
-def lobe_table(rng: np.random.Generator) -> list[str]:
-    """The bench's orders >= 2: HigherOrderLobe (tables per incidence and plane through the
-    normal, interpolated) against walks per build, off the grid, beside the per-pair HigherOrders
-    (1024 walks per pair, what the bench used before) at the same pairs.
-
-    rms dev: relative RMS deviation from a reference walked at the pairs themselves
-    (higher_orders_at, TABLE_REFERENCE_WALKS per incidence); rms/peak: RMS absolute deviation
-    over the largest reference value; build s: building the tables the 12 pairs need; per pair
-    ms: one more pair once its tables exist (what a bench reading then costs).
-    """
-    wi, wo = off_grid_pairs()
-    lines = ["orders >= 2 for the bench: tables per incidence x plane (GGX glass, eta "
-             "1.51, 12 off-grid pairs)",
-             f"{'alpha':>5} {'method':>24} {'build s':>8} {'per pair ms':>11} {'rms dev':>8} "
-             f"{'rms/peak':>9}"]
-    for alpha in ALPHAS:
-        glass = RoughDielectric("ggx", alpha, ETA, masking="correlated")
-        ref = higher_orders_at(glass, wi, wo, TABLE_REFERENCE_WALKS, seed=99)[0]
-
-        pair = HigherOrders(glass, 1024, seed=1, fixed_seed=True)
-        value, seconds = timed(pair.eval, wi, wo)
-        lines.append(f"{alpha:5.1f} {'per-pair walk, 1024':>24} {0.0:8.3f} "
-                     f"{1e3 * seconds / len(wi):11.2f} {_score(value, ref)}")
-        for walks in TABLE_WALKS:
-            lobe = HigherOrderLobe(glass, walks=walks, seed=int(rng.integers(1 << 30)))
-            value, build = timed(lobe.eval, wi, wo)
-            _, again = timed(lobe.eval, wi[:1], wo[:1])
-            lines.append(f"{alpha:5.1f} {f'table, {walks}/build':>24} {build:8.3f} "
-                         f"{1e3 * again:11.2f} {_score(value, ref)}")
     return lines
 
 
@@ -459,9 +352,8 @@ def sample_table(rng: np.random.Generator, cpp_binary: Path | None) -> list[str]
     return lines
 
 
-TABLES = {"eval_error": eval_error_table, "furnace": furnace_table,
-          "throughput": throughput_table, "diffraction": diffraction_table,
-          "lobe": lobe_table, "second_order": second_order_table, "sample": sample_table}
+TABLES = {"throughput": throughput_table, "diffraction": diffraction_table,
+          "second_order": second_order_table, "sample": sample_table}
 
 
 def main(argv: list[str] | None = None) -> None:
