@@ -294,10 +294,12 @@ def azimuth_scales(theta, sin_z, alpha, poles):
 
 
 @scalar
-def cell_nodes(span, density, rules):
-    """Gauss-Legendre nodes for a cell of this span at `density` nodes per unit: at least 4,
-    at most the largest rule in `rules`."""
-    return min(rules.shape[0] - 1, max(4, int(math.ceil(density * span))))
+def cell_nodes(span, density, least, rules):
+    """Gauss-Legendre nodes for a cell of this span at `density` nodes per unit: at least 4 and
+    a third of `least` (the caller's nodes per radian: graded cells refine with the rest), at
+    most the largest rule in `rules`."""
+    floor = max(4, int(math.ceil(least / 3.0)))
+    return min(rules.shape[0] - 1, max(floor, int(math.ceil(density * span))))
 
 
 @scalar
@@ -305,8 +307,8 @@ def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, 
     """Order 2 of f |cos o| of the Surface s from wi = (ix, iy, iz), iz > 0, towards the world
     target t:
     `polar` nodes per radian of w1's polar angle (times max(1, POLAR_ALPHA alpha)) and
-    `azimuth` per radian of its azimuth, per cell (at least 4), from the Gauss-Legendre rules
-    on [0, 1] xs[n, :n], ws[n, :n]."""
+    `azimuth` per radian of its azimuth, per cell (at least 4 and a third of either), from the
+    Gauss-Legendre rules on [0, 1] xs[n, :n], ws[n, :n]."""
     conductor, eta = s.conductor, s.eta
     area_i = projected_area(s, ix, iy, iz)
     el, elm1 = side_eta(eta, True)
@@ -344,7 +346,7 @@ def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, 
             # in the polar angle: smooth also where a support edge shrinks onto a pole
             t0 = math.acos(edges[cell + 1])
             span = math.acos(edges[cell]) - t0
-            n_p = cell_nodes(span, polar * max(1.0, POLAR_ALPHA * s.alpha_x), xs)
+            n_p = cell_nodes(span, polar * max(1.0, POLAR_ALPHA * s.alpha_x), polar, xs)
             for p in range(n_p):
                 theta = t0 + span * xs[n_p, p]
                 z, sin_z = math.cos(theta), math.sin(theta)
@@ -358,7 +360,7 @@ def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, 
                     f0, fspan = arcs[a], arcs[a + 1] - arcs[a]
                     if fspan <= 1e-12:
                         continue
-                    n_q = cell_nodes(fspan, azimuth, xs)
+                    n_q = cell_nodes(fspan, azimuth, azimuth, xs)
                     for q in range(n_q):
                         phi = f0 + fspan * xs[n_q, q]
                         ox, oy = sin_z * math.cos(phi), sin_z * math.sin(phi)
