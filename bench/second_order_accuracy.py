@@ -15,18 +15,17 @@ Usage: python bench/second_order_accuracy.py [--quick]   (--quick: alpha 0.1 and
 
 from __future__ import annotations
 
-import importlib.util
 import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT)]
+sys.path[:0] = [str(ROOT), str(ROOT / "bench")]
+
+from _git_baseline import module_at  # noqa: E402
 
 from model.bsdf import RoughConductor, RoughDielectric  # noqa: E402
 from model.bsdf.multiple_scattering import (  # noqa: E402
@@ -47,18 +46,6 @@ INCIDENCES_DEG = (0.0, 30.0, 60.0, 85.0)
 MEDIA = ("glass from air", "glass from inside", "conductor")
 FLOOR = 1e-3
 LABELS = {"beckmann": "Beckmann", "ggx": "GGX"}
-
-
-def baseline_kernel():
-    """second_order_kernel.py of BASELINE_COMMIT, imported from git beside the current one."""
-    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{BASELINE_COMMIT}:{KERNEL_PATH}"],
-                            check=True, capture_output=True, text=True).stdout
-    path = Path(tempfile.mkdtemp()) / "second_order_kernel_baseline.py"
-    path.write_text(source)
-    spec = importlib.util.spec_from_file_location("second_order_kernel_baseline", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
@@ -97,7 +84,7 @@ def timed(kernel, walk, wi, polar, azimuth) -> tuple[np.ndarray, float]:
 
 
 def main(quick: bool) -> None:
-    old = baseline_kernel()
+    old = module_at(BASELINE_COMMIT, KERNEL_PATH, "second_order_kernel_baseline")
     alphas, incidences = ((0.1, 0.3), (30.0, 85.0)) if quick else (ALPHAS, INCIDENCES_DEG)
     print("load average {:.2f} {:.2f} {:.2f} (1, 5, 15 min)".format(*os.getloadavg()))
     print(f"reference: the old rule at {REFERENCE_SCALE}x its nodes; old rule: {KERNEL_PATH} at "
