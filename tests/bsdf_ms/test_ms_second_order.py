@@ -124,10 +124,9 @@ def test_integral_over_the_sphere_is_the_share_leaving_after_two_events():
 
 @pytest.mark.parametrize("name", CASES)
 def test_default_nodes_are_converged(name):
-    """Within 1 % of three times the nodes per cell where order 2 is not dark (2e-5 to 1e-4
-    seen for GGX, 0.6 % for Beckmann glass lit from below at its target of 1.5 % of the
-    peak): the cells end where the phase functions' supports and kinks do, so the rule
-    converges fast."""
+    """Within 1 % of three times the nodes per cell where order 2 is not dark (1e-6 to 4e-6
+    seen for GGX, 2.6e-4 for Beckmann glass lit from below): the cells end where the phase
+    functions' supports and kinks do, so the rule converges fast."""
     model, wi = CASES[name]
     walker = RandomWalkBSDF(model, guided=False).walker
     default = second_order(walker, wi, TARGETS)
