@@ -13,11 +13,8 @@ Usage: python bench/energy_loss_accuracy.py [--quick]
 
 from __future__ import annotations
 
-import importlib.util
 import os
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -27,8 +24,9 @@ from _seeds import DETERMINISTIC
 from scipy import integrate
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "bsdf_ms")]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "bsdf_ms"), str(ROOT / "bench")]
 
+from _git_baseline import module_at  # noqa: E402
 from energy_reference import loss  # noqa: E402
 
 from model.bsdf.multiple_scattering import energy_loss  # noqa: E402
@@ -44,14 +42,7 @@ FLOOR = 1e-7
 
 def baseline_energy_loss():
     """energy_loss of BASELINE_COMMIT's energy.py, imported from git beside the current one."""
-    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{BASELINE_COMMIT}:{ENERGY_PATH}"],
-                            check=True, capture_output=True, text=True).stdout
-    path = Path(tempfile.mkdtemp()) / "energy_baseline.py"
-    path.write_text(source)
-    spec = importlib.util.spec_from_file_location("energy_baseline", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.energy_loss
+    return module_at(BASELINE_COMMIT, ENERGY_PATH, "energy_baseline").energy_loss
 
 
 def timed(function, *args) -> tuple[float, float]:

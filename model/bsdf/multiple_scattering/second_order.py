@@ -12,8 +12,9 @@ along d1 (u2 / u1 = exp(E / Lambda(d1)), forced to hit and weighted by the hit p
 the walk does) and wo escapes from it with G1. H depends on w1 only through its polar angle
 (isotropic Lambda). second_order is the compiled route (second_order_kernel: H in closed
 form where it has one; cells in w1's polar angle and azimuth cut per target at every support
-edge of both events and at the Fresnel and refraction kink cones, Gauss-Legendre nodes in
-proportion to a cell's size, POLAR_NODES and AZIMUTH_NODES per radian);
+edge of both events and at the Fresnel and refraction kink cones, graded about the lobes'
+peaks, Gauss-Legendre nodes in proportion to a cell's size, POLAR_NODES and AZIMUTH_NODES per
+radian);
 second_order_reference is the numpy route it was checked against: H by Gauss-Legendre rules
 over the two heights' uniforms, once per (polar node, branch, target), times Gauss-Legendre
 in w1_z (split only at the horizon, where Lambda changes branch) and in azimuth on the arcs
@@ -36,7 +37,7 @@ from model.bsdf.multiple_scattering.walk import Walker, flip
 #: Gauss-Legendre nodes per radian of w1's polar angle and of its azimuth in each cell (at
 #: least 4, at most MAX_CELL_NODES; compiled route), per height uniform (both routes).
 POLAR_NODES = 12
-AZIMUTH_NODES = 9
+AZIMUTH_NODES = 12
 MAX_CELL_NODES = 128
 HEIGHT_NODES = 8
 #: The numpy reference's nodes in w1_z per hemisphere and of w1's azimuth (all arcs).

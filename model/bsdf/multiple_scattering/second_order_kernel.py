@@ -8,11 +8,16 @@ proportional to z_in + eta z_out, so those edges are rings: the horizon, -wi_z o
 for the first event, wo_z or eta wo_z for the second, mirrored as the side requires), in
 azimuth at the planes of wi and of the target (where both events peak), and on the cones where
 a Fresnel factor has its kink (total internal reflection) or a refraction its limit (kink_cones;
-their rings' ends cut the polar angle too). Integrating in the polar angle rather than in w1_z
-keeps a cell smooth where an edge shrinks onto a pole. A target in wi's plane makes the
-integrand symmetric about that plane, so half the circle is integrated. The height
-expectation H is in closed form except for light transmitted at both events (there
-second_order.py's product rule over the heights' uniforms), once per polar node.
+their rings' ends cut the polar angle too). Where lobes are narrow (small alpha, grazing light)
+cells are graded geometrically (GRADE_*) about where the integrand lives: in the polar angle
+about the events' specular peak rings, the horizon, the kink rings' ends and the half-vector
+poles (w1 = -wi, w1 = the target: there a reflection's lobe closes into a wedge), in azimuth
+about the first event's forward plane and the target's, the finer the nearer a pole.
+Integrating in the polar angle rather than in w1_z keeps a cell smooth where an edge shrinks
+onto a pole. A target in wi's plane makes the integrand symmetric about that plane, so half
+the circle is integrated. The height expectation H is in closed form except for light
+transmitted at both events (there second_order.py's product rule over the heights' uniforms),
+once per polar node.
 """
 
 from __future__ import annotations
@@ -29,6 +34,18 @@ from model.bsdf.multiple_scattering.nee_kernel import (
     unsigned_lambda,
 )
 from model.bsdf.primitives import log_beta, scalar
+
+#: Graded cells about the peaks: the first GRADE_SCALE alpha from a peak ring (in the polar
+#: angle) or a peak plane (in azimuth, divided by the ring's sine and, near a half-vector
+#: pole, times the ring's polar distance from it), each GRADE_RATIO times the last, up to
+#: GRADE_REACH radians; GRADE_LEVELS bounds the levels (room in the break arrays).
+GRADE_SCALE = 0.25
+GRADE_RATIO = 4.0
+GRADE_REACH = 0.5
+GRADE_LEVELS = 12
+#: Polar nodes per radian grow as max(1, POLAR_ALPHA alpha) times `polar`: rough Beckmann
+#: lobes meet in products of their tails, bumps narrower than the lobes.
+POLAR_ALPHA = 3.0
 
 
 @scalar
@@ -138,13 +155,68 @@ def kink_cones(ix, iy, iz, tx, ty, tz, eta, conductor, crossed):
 
 
 @scalar
-def polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones):
+def peak_rings(iz, tz, eta, conductor, crossed):
+    """(w1_z (2,), count) of the rings through the events' specular peaks on a branch: the
+    first event's mirror image (iz) or refraction of wi, the second's (on the reflected branch
+    only: d1 travelling down onto the surface) mirror image of the target (-tz) or the
+    direction in air that refracts into it."""
+    rings, k = np.zeros(2), 0
+    if crossed:
+        s2 = (1.0 - iz * iz) / (eta * eta)
+        if s2 < 1.0:
+            rings[k], k = -math.sqrt(1.0 - s2), k + 1
+        return rings, k
+    rings[k], k = iz, k + 1
+    if tz > 0.0:
+        rings[k], k = -tz, k + 1
+    elif not conductor:
+        s2 = eta * eta * (1.0 - tz * tz)
+        if s2 < 1.0:
+            rings[k], k = -math.sqrt(1.0 - s2), k + 1
+    return rings, k
+
+
+@scalar
+def graded(out, n, centre, scale, lo, hi, side):
+    """out[n:] += centre + side * scale * GRADE_RATIO^k up to GRADE_REACH, on both sides where
+    side is 0, that lie in (lo, hi): cells that widen geometrically away from a peak, so that
+    any width from scale up gets a few nodes; returns the new n."""
+    step = max(scale, GRADE_REACH * GRADE_RATIO ** (1 - GRADE_LEVELS))
+    while step < GRADE_REACH:
+        for x in (centre - step, centre + step):
+            if lo < x < hi and side * (x - centre) >= 0.0:
+                out[n] = x
+                n += 1
+        step *= GRADE_RATIO
+    return n
+
+
+@scalar
+def half_vector_poles(iz, tz, crossed):
+    """(w1_z (2,), count) of the points where a reflection's half vector is undefined: w1 = -wi
+    (the first event's, on the reflected branch) and w1 = the target (the second event's, where
+    it reflects). Near them the events' lobes close into a wedge as narrow as its distance to
+    the point times alpha; both lie on a support edge, the first in the plane of wi, the second
+    in the target's."""
+    poles = np.full(2, math.nan)
+    if not crossed:
+        poles[0] = -iz
+    if (tz > 0.0) != crossed:
+        poles[1] = tz
+    return poles
+
+
+@scalar
+def polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones, alpha):
     """The w1_z where an event's support ends (the horizon, -iz or -iz / eta, then tz or
-    eta tz, mirrored as the side requires) and where a kink cone's rings begin and end, on
-    the reflected (w1 anywhere) or the transmitted (w1 below) branch; sorted, clamped to the
-    branch's interval, with its ends."""
+    eta tz, mirrored as the side requires), where a kink cone's rings begin and end, and
+    graded from GRADE_SCALE alpha about the horizon, the events' peak rings, the kink rings'
+    ends and the half-vector poles (the last two into the side where the integrand lives);
+    sorted, clamped to the branch's interval, with its ends."""
     hi = 0.0 if crossed else 1.0
-    edges = np.full(5 + 2 * cones, -1.0)
+    rings, count = peak_rings(iz, tz, eta, conductor, crossed)
+    poles = half_vector_poles(iz, tz, crossed)
+    edges = np.full(5 + (2 * cones + count + 3) * (1 + 2 * GRADE_LEVELS), -1.0)
     edges[1] = 0.0
     edges[2] = hi
     if crossed:
@@ -156,17 +228,44 @@ def polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones):
         half = math.acos(min(1.0, max(-1.0, cosines[c])))
         edges[5 + 2 * c] = math.cos(theta + half)  # past a pole, the ring turns back
         edges[6 + 2 * c] = math.cos(theta - half)
+    thetas = np.empty(edges.shape[0])
+    n = 0
+    for c in range(cones):  # the rings' ends: the cut ring's arcs shrink like a square root
+        theta = math.acos(min(1.0, max(-1.0, axes[c, 2])))
+        half = math.acos(min(1.0, max(-1.0, cosines[c])))
+        n = graded(thetas, n, abs(theta - half), GRADE_SCALE * alpha, 0.0, math.pi, 1.0)
+        n = graded(thetas, n, math.pi - abs(math.pi - theta - half), GRADE_SCALE * alpha, 0.0,
+                   math.pi, -1.0)
+    n = graded(thetas, n, 0.5 * math.pi, GRADE_SCALE * alpha, 0.0, math.pi, 0.0)  # Lambda
+    for r in range(count):
+        centre = math.acos(rings[r])
+        thetas[n], n = centre, n + 1
+        n = graded(thetas, n, centre, GRADE_SCALE * alpha, 0.0, math.pi, 0.0)
+    for r in range(2):  # into the support only: the wedge's side
+        if not math.isnan(poles[r]):
+            inward = 1.0 if (r == 1 and not crossed) else -1.0
+            n = graded(thetas, n, math.acos(poles[r]), GRADE_SCALE * alpha, 0.0, math.pi, inward)
+    edges[5 + 2 * cones:5 + 2 * cones + n] = np.cos(thetas[:n])
     return np.sort(np.minimum(np.maximum(edges, -1.0), hi))
 
 
 @scalar
-def ring_breaks(plane_breaks, z, sin_z, axes, cosines, cones):
+def ring_breaks(plane_breaks, z, sin_z, axes, cosines, cones, peaks, scales):
     """The azimuths of one ring of w1 (polar z) at which to split it: the planes' (sorted,
-    first to last, the last closing the range) and where the kink cones cross the ring."""
+    first to last, the last closing the range), graded from scales[k] on either side of the
+    peak planes peaks[k] (the first event's forward plane, the target's), and where the kink
+    cones cross the ring."""
     lo, hi = plane_breaks[0], plane_breaks[-1]
-    out = np.empty(plane_breaks.shape[0] + 2 * cones)
     n = plane_breaks.shape[0]
+    out = np.empty(n + 2 * cones + peaks.shape[0] * 6 * GRADE_LEVELS)
     out[:n] = plane_breaks
+    first = lo + (peaks[0] - lo) % (2.0 * math.pi)
+    second = lo + (peaks[1] - lo) % (2.0 * math.pi)
+    together = abs(first - second) < 1e-9
+    for centre, scale in ((first, min(scales[0], scales[1]) if together else scales[0]),
+                          (second, math.inf if together else scales[1])):
+        for turn in (-2.0 * math.pi, 0.0, 2.0 * math.pi):
+            n = graded(out, n, centre + turn, scale, lo, hi, 0.0)
     for c in range(cones):
         r = math.hypot(axes[c, 0], axes[c, 1]) * sin_z
         rhs = cosines[c] - axes[c, 2] * z
@@ -183,18 +282,33 @@ def ring_breaks(plane_breaks, z, sin_z, axes, cosines, cones):
 
 
 @scalar
-def cell_nodes(span, density, rules):
-    """Gauss-Legendre nodes for a cell of this span at `density` nodes per unit: at least 4,
-    at most the largest rule in `rules`."""
-    return min(rules.shape[0] - 1, max(4, int(math.ceil(density * span))))
+def azimuth_scales(theta, sin_z, alpha, poles):
+    """The first graded cell's width in azimuth on the ring at polar angle theta about each
+    peak plane: GRADE_SCALE alpha / sin, shrunk near that plane's half-vector pole in
+    proportion to the ring's polar distance from it."""
+    scales = np.empty(2)
+    for k in range(2):
+        near = 1.0 if math.isnan(poles[k]) else min(1.0, abs(theta - math.acos(poles[k])))
+        scales[k] = GRADE_SCALE * alpha * near / max(sin_z, 1e-9)
+    return scales
+
+
+@scalar
+def cell_nodes(span, density, least, rules):
+    """Gauss-Legendre nodes for a cell of this span at `density` nodes per unit: at least 4 and
+    a third of `least` (the caller's nodes per radian: graded cells refine with the rest), at
+    most the largest rule in `rules`."""
+    floor = max(4, int(math.ceil(least / 3.0)))
+    return min(rules.shape[0] - 1, max(floor, int(math.ceil(density * span))))
 
 
 @scalar
 def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, hw):
     """Order 2 of f |cos o| of the Surface s from wi = (ix, iy, iz), iz > 0, towards the world
     target t:
-    `polar` nodes per radian of w1's polar angle and `azimuth` per radian of its azimuth, per
-    cell, from the Gauss-Legendre rules on [0, 1] xs[n, :n], ws[n, :n]."""
+    `polar` nodes per radian of w1's polar angle (times max(1, POLAR_ALPHA alpha)) and
+    `azimuth` per radian of its azimuth, per cell (at least 4 and a third of either), from the
+    Gauss-Legendre rules on [0, 1] xs[n, :n], ws[n, :n]."""
     conductor, eta = s.conductor, s.eta
     area_i = projected_area(s, ix, iy, iz)
     el, elm1 = side_eta(eta, True)
@@ -215,6 +329,7 @@ def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, 
         planes[:4] = np.sort(phi_i + np.array([0.0, gap, math.pi, math.pi + gap]))
         planes[4] = planes[0] + 2.0 * math.pi
         scale = 1.0
+    peaks = np.array([phi_i + math.pi, phi_t])
     total = 0.0
     for branch in range(1 if conductor else 2):
         crossed = branch == 1
@@ -222,19 +337,22 @@ def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, 
         el2, el2m1 = side_eta(eta, not crossed)
         lz = -tz if crossed else tz  # the target in d1's frame
         axes, cosines, cones = kink_cones(ix, iy, iz, tx, ty, tz, eta, conductor, crossed)
-        edges = polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones)
+        edges = polar_breaks(iz, tz, eta, conductor, crossed, axes, cosines, cones,
+                             s.alpha_x)
+        poles = half_vector_poles(iz, tz, crossed)
         for cell in range(edges.shape[0] - 1):
             if edges[cell + 1] - edges[cell] <= 1e-12:
                 continue
             # in the polar angle: smooth also where a support edge shrinks onto a pole
             t0 = math.acos(edges[cell + 1])
             span = math.acos(edges[cell]) - t0
-            n_p = cell_nodes(span, polar, xs)
+            n_p = cell_nodes(span, polar * max(1.0, POLAR_ALPHA * s.alpha_x), polar, xs)
             for p in range(n_p):
                 theta = t0 + span * xs[n_p, p]
                 z, sin_z = math.cos(theta), math.sin(theta)
                 dz = z if not crossed else -z  # d1's z in its own frame
-                arcs = ring_breaks(planes, z, sin_z, axes, cosines, cones)
+                arcs = ring_breaks(planes, z, sin_z, axes, cosines, cones, peaks,
+                                   azimuth_scales(theta, sin_z, s.alpha_x, poles))
                 # the second event's w_in = -d1 in d1's frame: isotropic, one area per ring
                 area = projected_area(s, sin_z, 0.0, -dz)
                 ring = 0.0
@@ -242,7 +360,7 @@ def second_order_one(s, ix, iy, iz, a0, tx, ty, tz, polar, azimuth, xs, ws, hx, 
                     f0, fspan = arcs[a], arcs[a + 1] - arcs[a]
                     if fspan <= 1e-12:
                         continue
-                    n_q = cell_nodes(fspan, azimuth, xs)
+                    n_q = cell_nodes(fspan, azimuth, azimuth, xs)
                     for q in range(n_q):
                         phi = f0 + fspan * xs[n_q, q]
                         ox, oy = sin_z * math.cos(phi), sin_z * math.sin(phi)
