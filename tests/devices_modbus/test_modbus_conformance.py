@@ -11,6 +11,7 @@ import pytest
 import serial
 from modbus_testkit import DETECTOR_UNIT, STAGE_UNIT, crc16  # noqa: I001 - the folder's own helpers
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from waiting import HANG_S
 
 from sim.devices.register_map import ILLEGAL_FUNCTION
 
@@ -49,12 +50,20 @@ def tcp_replies(server, data: bytes, expected: int, chunk: int | None = None,
     return frames
 
 
-def rtu_reply(port: serial.Serial, unit: int, pdu: bytes) -> bytes:
-    """One RTU request on the pty; the reply's PDU (CRC checked), b"" for silence."""
+def rtu_reply(port: serial.Serial, unit: int, pdu: bytes, silent: bool = False) -> bytes:
+    """One RTU request on the pty; the reply's PDU (CRC checked), b"" for silence. The first
+    byte of an expected reply is awaited for HANG_S (a hang guard: a loaded machine may be
+    slow to answer); the frame ends when the line has been quiet for the port's timeout, which
+    is also how long a `silent` unit is given to prove it stays silent."""
     frame = bytes([unit]) + pdu
     port.write(frame + crc16(frame))
-    reply = b""
-    while chunk := port.read(256):  # until the line has been quiet for the port's timeout
+    quiet_s = port.timeout
+    port.timeout = quiet_s if silent else HANG_S
+    try:
+        reply = port.read(1)
+    finally:
+        port.timeout = quiet_s
+    while reply and (chunk := port.read(256)):  # until the line has been quiet
         reply += chunk
     if not reply:
         return b""
@@ -135,7 +144,7 @@ def test_rtu_diagnostics_per_spec_and_the_resync_echo_still_works(rig):
     with serial.Serial(r.server.endpoint, 115200, timeout=0.05) as port:
         assert [rtu_reply(port, STAGE_UNIT, pdu) for pdu, _ in DIAGNOSTICS] == [
             want for _, want in DIAGNOSTICS]
-        assert rtu_reply(port, ABSENT_UNIT, bytes([7])) == b""  # absent units stay silent
+        assert rtu_reply(port, ABSENT_UNIT, bytes([7]), silent=True) == b""  # absent: silent
     assert r.stage.position() == 0.0
 
 
