@@ -29,8 +29,9 @@ ANGLE_TERMS_EXCLUDED = ("angle: excluded (--no-angle-terms): U excludes the stag
 
 def slope_fit_options(options: FitOptions) -> FitOptions:
     """A fit's options as the slope fit takes them: over every valid point, each incidence
-    the run has (a run without normal incidence has its slope too)."""
-    return replace(options, fit_incidence_deg=None)
+    the run has (a run without normal incidence has its slope too), for the slope only
+    (FitOptions.ms_slope_only: the budget needs the model's slope, not alpha's last digits)."""
+    return replace(options, fit_incidence_deg=None, ms_slope_only=True)
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:

@@ -33,6 +33,11 @@ MS_TABLE_NODES = 7
 MS_TABLE_RECENTRE = 3
 MS_CENTRE_WALKS = 16
 MS_CENTRE_REACH = 0.25
+# The table's nodes are walked with FitOptions.ms_walks // MS_SEARCH_SHARE walks (at least 2):
+# it steers the search and gives the term's slope in alpha (one seed for every node, so its
+# Monte Carlo error is common to the nodes and the spline stays smooth), while the refit sets
+# the fitted term's value; on the Walter runs the fit's alpha moves by < 0.2 of its sigma.
+MS_SEARCH_SHARE = 8
 # Points whose refitted term's error exceeds MS_REWALK_SIGMA of their data sigma are walked
 # again with MS_REWALK_WALKS times the refit's walks (the transmitted wings at normal incidence):
 # the worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run, +0.8-1.7 s a fit.
@@ -42,19 +47,20 @@ MS_REWALK_WALKS = 1
 
 class OrdersTable:
     """Orders >= 2 at the fitted points (higher_orders_at: walked at the points themselves, one
-    set of walks per incidence) at MS_TABLE_NODES alphas MS_TABLE_STEP apart in log alpha about
-    `centre`, all from one seed, and a cubic spline in log alpha through them (clamped at the
-    ends): a deterministic, smooth term for the optimiser. `refine` adds a constant so that
-    the term at one alpha is its value walked MS_CENTRE_WALKS times over (the spline keeps the
-    slope). `error` and `covariance` are the Monte Carlo standard error per point and their
-    covariance (points of one incidence share walks) at the centre node, or where refined."""
+    set of ms_walks // MS_SEARCH_SHARE walks per incidence) at MS_TABLE_NODES alphas
+    MS_TABLE_STEP apart in log alpha about `centre`, all from one seed, and a cubic spline in
+    log alpha through them (clamped at the ends): a deterministic, smooth term for the
+    optimiser. `refine` adds a constant so that the term at one alpha is its value walked
+    MS_CENTRE_WALKS times over (the spline keeps the slope). `error` and `covariance` are the
+    Monte Carlo standard error per point and their covariance (points of one incidence share
+    walks) at the centre node, or where refined."""
 
     def __init__(self, problem: Problem, centre: float):
         from scipy.interpolate import CubicSpline
 
         half = 0.5 * (MS_TABLE_NODES - 1)
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
-        walks = problem.options.ms_walks
+        walks = max(2, problem.options.ms_walks // MS_SEARCH_SHARE)
         walked = [_walked_orders(problem, math.exp(a), walks, node == MS_TABLE_NODES // 2,
                                  both_ways=False) for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)

@@ -53,6 +53,8 @@ class FitResult:
     walks: int | None = None  # walks per incidence of predictions' orders >= 2 (the fitted
     # points' term at the result walked MS_CENTRE_WALKS times as many); None: off
     seed: int = 0
+    ms_both_ways: bool = True  # predictions' orders >= 2: transmitted pairs walked in reverse
+    # where better (higher_orders_at's both_ways); False: all forward, each pair's value its own
     diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
     fit_time_s: float = 0.0  # wall time of fit()
 
@@ -100,7 +102,8 @@ class FitResult:
         err = np.zeros_like(f)
         if self.walks is not None:
             orders, err, _ = walked_orders(self.distribution, self.alpha, self.eta, self.k, wi,
-                                           wo, self.walks, self.seed)
+                                           wo, self.walks, self.seed,
+                                           both_ways=self.ms_both_ways)
             f = f + orders
         return self.scale * f, abs(self.scale) * err
 

@@ -1,8 +1,8 @@
 """fit(): every candidate (distribution x masking) solved on the chosen subset, the preferred one
 chosen, refined and scored on the held-out points, as a FitResult. Each candidate's
 `chi2_dof_fit` is the one it was ranked by; with multiple scattering the chosen one is refitted
-with its term walked MS_CENTRE_WALKS times over, and its `chi2_dof_refit` is the result's
-chi2_dof_fit."""
+with its term walked MS_CENTRE_WALKS times over (unless FitOptions.ms_slope_only), and its
+`chi2_dof_refit` is the result's chi2_dof_fit."""
 
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def fit(data: ReducedData, options: FitOptions | None = None,
     problem, best = _preferred(scored, options.distributions)
     chi2_ranked = best.chi2  # the candidates were ranked with their tables as first walked
     refit = {}
-    if problem.orders is not None:
+    if problem.orders is not None and not options.ms_slope_only:
         best = refine(problem, best)
         refit = {"chi2_dof_refit": best.chi2_dof}  # the chosen one's, as the result gives it
     if best.at_bound:
@@ -106,6 +106,7 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         + [{"failed": msg} for msg in failures],
         optics=optics,
         walks=walk_settings(options)[0], seed=options.ms_seed,
+        ms_both_ways=not options.ms_slope_only,
         diffraction=diffraction, fit_time_s=time.perf_counter() - started,
     )
 
