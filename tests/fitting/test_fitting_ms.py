@@ -193,3 +193,23 @@ def test_walk_streams_are_independent_and_stream_0_is_the_default():
         walked_orders("ggx", ALPHA, 1.51, None, wi, wo, 1 << 10, 2, stream=0)[0], default)
     assert np.all(walked_orders("ggx", ALPHA, 1.51, None, wi, wo, 1 << 10, 2, stream=1)[0]
                   != default)
+
+
+def test_a_points_model_value_does_not_depend_on_the_points_sharing_the_call():
+    """The fitted model at a point (build_model with walks: what point_model and the exports
+    evaluate) is the same whichever other points share the call: walked alone, in the whole
+    set, or with points at a slightly different incidence in its walk group."""
+    theta = np.radians([15.0, 40.0, 70.0, 110.0, 140.0, 170.0])
+    wo = np.stack([np.sin(theta), 0.0 * theta, np.cos(theta)], axis=-1)
+    tilt = np.radians(30.0)
+    wi = np.array([[0.0, 0.0, 1.0]] * 6 + [[np.sin(tilt), 0.0, np.cos(tilt)]] * 6)
+    wo = np.concatenate([wo, wo])
+    model = build_model("ggx", ALPHA, 1.51, "correlated", walks=1 << 10, seed=4)
+    together = model.eval(wi, wo)
+    alone = np.array([model.eval(wi[k:k + 1], wo[k:k + 1])[0] for k in range(len(wi))])
+    np.testing.assert_array_equal(alone, together)
+    nudged = np.radians(30.04)  # in the 30 deg walk group (within 0.05 deg)
+    beside = np.array([[np.sin(nudged), 0.0, np.cos(nudged)]] * 3)
+    with_others = model.eval(np.concatenate([wi[6:], beside]),
+                             np.concatenate([wo[6:], wo[6:9]]))
+    np.testing.assert_array_equal(with_others[:6], together[6:])
