@@ -42,8 +42,7 @@ class FitOptions:
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
     beam_divergence_deg: float | None = None  # half-angle; None: meta's, if any; 0: none
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
-    ms_walks: int = 1 << 17  # walks per incidence of predictions (the table's: // MS_SEARCH_SHARE,
-    #                         the refit's: x MS_CENTRE_WALKS)
+    ms_walks: int = 1 << 17  # walks per incidence and table alpha (the refit: x MS_CENTRE_WALKS)
     ms_seed: int = 0
     ms_slope_only: bool = False  # a fit for the model's slope (the reduction's angle terms):
     #   no refit of its term at the result, predictions' term walked forward (per point)

@@ -28,16 +28,15 @@ class Problem(Protocol):
 # preferred candidate is then refitted with the term at its result walked CENTRE_WALKS times
 # FitOptions.ms_walks (the fitted model's value), again while it ends more than CENTRE_REACH
 # steps from where that was walked.
-MS_TABLE_STEP = 0.1
-MS_TABLE_NODES = 7
+MS_TABLE_STEP = 0.125
+MS_TABLE_NODES = 5
 MS_TABLE_RECENTRE = 3
-MS_CENTRE_WALKS = 16
-MS_CENTRE_REACH = 0.25
-# The table's nodes are walked with FitOptions.ms_walks // MS_SEARCH_SHARE walks (at least 2):
-# it steers the search and gives the term's slope in alpha (one seed for every node, so its
-# Monte Carlo error is common to the nodes and the spline stays smooth), while the refit sets
-# the fitted term's value; on the Walter runs the fit's alpha moves by < 0.2 of its sigma.
-MS_SEARCH_SHARE = 8
+MS_CENTRE_WALKS = 4
+MS_CENTRE_REACH = 0.2
+# Only candidates whose fit with their first table is within MS_CONTENTION times the best one's
+# chi-square (plus PREFERENCE_DELTA_CHI2) have their tables recentred; the others are ranked by
+# that fit (on the Walter runs the losers' chi-square is 10^4 times the winner's).
+MS_CONTENTION = 4.0
 # Points whose refitted term's error exceeds MS_REWALK_SIGMA of their data sigma are walked
 # again with MS_REWALK_WALKS times the refit's walks (the transmitted wings at normal incidence):
 # the worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run, +0.8-1.7 s a fit.
@@ -47,7 +46,7 @@ MS_REWALK_WALKS = 1
 
 class OrdersTable:
     """Orders >= 2 at the fitted points (higher_orders_at: walked at the points themselves, one
-    set of ms_walks // MS_SEARCH_SHARE walks per incidence) at MS_TABLE_NODES alphas
+    set of ms_walks walks per incidence) at MS_TABLE_NODES alphas
     MS_TABLE_STEP apart in log alpha about `centre`, all from one seed, and a cubic spline in
     log alpha through them (clamped at the ends): a deterministic, smooth term for the
     optimiser. `refine` adds a constant so that the term at one alpha is its value walked
@@ -60,7 +59,7 @@ class OrdersTable:
 
         half = 0.5 * (MS_TABLE_NODES - 1)
         self.log_alpha = math.log(centre) + (np.arange(MS_TABLE_NODES) - half) * MS_TABLE_STEP
-        walks = max(2, problem.options.ms_walks // MS_SEARCH_SHARE)
+        walks = problem.options.ms_walks
         walked = [_walked_orders(problem, math.exp(a), walks, node == MS_TABLE_NODES // 2,
                                  both_ways=False) for node, a in enumerate(self.log_alpha)]
         self.spline = CubicSpline(self.log_alpha, np.array([w[0] for w in walked]), axis=0)
