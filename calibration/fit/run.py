@@ -115,7 +115,7 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         + [{"failed": msg} for msg in failures],
         optics=optics,
         walks=walk_settings(options)[0], seed=options.ms_seed,
-        ms_both_ways=not options.ms_slope_only,
+        slope_only=options.ms_slope_only,
         diffraction=diffraction, fit_time_s=time.perf_counter() - started,
     )
 
