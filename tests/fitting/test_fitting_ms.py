@@ -213,3 +213,37 @@ def test_a_points_model_value_does_not_depend_on_the_points_sharing_the_call():
     with_others = model.eval(np.concatenate([wi[6:], beside]),
                              np.concatenate([wo[6:], wo[6:9]]))
     np.testing.assert_array_equal(with_others[:6], together[6:])
+
+
+def test_a_slope_only_fit_ranks_by_single_scattering_and_walks_the_chosen_term_once(data):
+    """FitOptions.ms_slope_only (the reduction's slope fit): the candidates are ranked by
+    single scattering, the chosen one fitted with its table and no refit (its fitted walks are
+    the table's), and its predictions walked forward; phong, which the walk cannot walk on, is
+    left out of the ranking."""
+    lines: list[str] = []
+    slope = fit(data, FitOptions(distributions=("phong", "ggx"), maskings=("correlated",),
+                                 fit_incidence_deg=(0.0, 60.0), aperture_half_angle_deg=0.0,
+                                 beam_divergence_deg=0.0, multiple_scattering=True,
+                                 ms_slope_only=True), lines.append)
+    out = slope.to_dict()
+    assert out["distribution"] == "ggx"
+    assert out["multiple_scattering"]["fitted_walks"] == out["multiple_scattering"]["walks"]
+    assert [c["distribution"] for c in out["candidates"]] == ["ggx"]
+    assert not any("phong" in line or "multiple-scattering term at" in line for line in lines)
+    assert sum("multiple-scattering table" in line for line in lines) >= 1
+    forward = walked_orders("ggx", slope.alpha, slope.eta, None, data.wi, data.wo, slope.walks,
+                            slope.seed, both_ways=False)[0]
+    single = build_model("ggx", slope.alpha, slope.eta, "correlated")
+    np.testing.assert_allclose(slope.predict(data.wi, data.wo),
+                               single.eval(data.wi, data.wo) + forward, rtol=1e-12)
+
+
+def test_a_distribution_the_walk_cannot_walk_on_is_refused_before_its_fit(data):
+    lines: list[str] = []
+    result = fit(data, FitOptions(distributions=("phong", "ggx"), maskings=("correlated",),
+                                  fit_incidence_deg=(0.0,), aperture_half_angle_deg=0.0,
+                                  beam_divergence_deg=0.0, multiple_scattering=True,
+                                  ms_walks=1 << 12), lines.append)
+    assert result.distribution == "ggx"
+    assert any("phong" in c.get("failed", "") for c in result.candidates)
+    assert not any(line.startswith("fit: phong") for line in lines)
