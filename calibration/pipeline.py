@@ -22,6 +22,9 @@ if TYPE_CHECKING:
 #: The fit whose model gives `reduce_run` the BSDF's slope: the default one, made over every
 #: valid point by `slope_fit_options`.
 DEFAULT_SLOPE_FIT = FitOptions()
+#: The slope fit's multiple-scattering term walks the fit's ms_walks // this (its walks are
+#: forward, common to the nearby angles whose readings the slope differences).
+SLOPE_FIT_WALKS_SHARE = 8
 #: meta["budget"]["angle_terms"] and the note of a reduction asked to leave them out.
 ANGLE_TERMS_EXCLUDED = ("angle: excluded (--no-angle-terms): U excludes the stages' "
                         "repeatability and the calibration's angle offsets")
@@ -29,8 +32,11 @@ ANGLE_TERMS_EXCLUDED = ("angle: excluded (--no-angle-terms): U excludes the stag
 
 def slope_fit_options(options: FitOptions) -> FitOptions:
     """A fit's options as the slope fit takes them: over every valid point, each incidence
-    the run has (a run without normal incidence has its slope too)."""
-    return replace(options, fit_incidence_deg=None)
+    the run has (a run without normal incidence has its slope too), for the slope only
+    (FitOptions.ms_slope_only, ms_walks // SLOPE_FIT_WALKS_SHARE walks: the budget needs the
+    model's slope, not alpha's last digits)."""
+    return replace(options, fit_incidence_deg=None, ms_slope_only=True,
+                   ms_walks=max(2, options.ms_walks // SLOPE_FIT_WALKS_SHARE))
 
 
 def calibration_for(meta: dict, calibration_file: str | Path | None) -> calfile.Calibration | None:

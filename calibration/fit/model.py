@@ -56,7 +56,8 @@ class Diffraction:
 
 class _WithHigherOrders:
     """A single-scattering model plus the random walk's orders >= 2 on the same microsurface
-    (model.bsdf.multiple_scattering.higher_orders_at: walked at the pairs, fixed seed)."""
+    (model.bsdf.multiple_scattering.higher_orders_at: walked forward at the pairs, fixed seed,
+    so a pair's value is the same whichever pairs share the call)."""
 
     def __init__(self, single: Any, correlated: Any, walks: int, seed: int):
         self.single, self.correlated = single, correlated
@@ -68,7 +69,7 @@ class _WithHigherOrders:
 
         wi, wo = np.broadcast_arrays(wi, wo)
         extra = higher_orders_at(self.correlated, wi, wo, self.walks, self.seed,
-                                 covariance=False)[0]
+                                 covariance=False, both_ways=False)[0]
         return self.single.eval(wi, wo) + extra.reshape(wi.shape[:-1])
 
 

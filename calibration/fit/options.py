@@ -44,6 +44,8 @@ class FitOptions:
     multiple_scattering: bool = False  # add the random walk's orders >= 2 to the model
     ms_walks: int = 1 << 17  # walks per incidence and table alpha (the refit: x MS_CENTRE_WALKS)
     ms_seed: int = 0
+    ms_slope_only: bool = False  # a fit for the model's slope (the reduction's angle terms):
+    #   no refit of its term at the result, predictions' term walked forward (per point)
     diffraction: bool = False  # the two-scale model (Holzschuch-Pacanowski) around the trial one
     rms_height_nm: float | None = None  # nano-roughness of the K-correlation PSD (held fixed)
     correlation_length_um: float | None = None

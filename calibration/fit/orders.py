@@ -28,11 +28,15 @@ class Problem(Protocol):
 # preferred candidate is then refitted with the term at its result walked CENTRE_WALKS times
 # FitOptions.ms_walks (the fitted model's value), again while it ends more than CENTRE_REACH
 # steps from where that was walked.
-MS_TABLE_STEP = 0.1
-MS_TABLE_NODES = 7
+MS_TABLE_STEP = 0.125
+MS_TABLE_NODES = 5
 MS_TABLE_RECENTRE = 3
-MS_CENTRE_WALKS = 16
-MS_CENTRE_REACH = 0.25
+MS_CENTRE_WALKS = 4
+MS_CENTRE_REACH = 0.2
+# Only candidates whose fit with their first table is within MS_CONTENTION times the best one's
+# chi-square (plus PREFERENCE_DELTA_CHI2) have their tables recentred; the others are ranked by
+# that fit (on the Walter runs the losers' chi-square is 10^4 times the winner's).
+MS_CONTENTION = 4.0
 # Points whose refitted term's error exceeds MS_REWALK_SIGMA of their data sigma are walked
 # again with MS_REWALK_WALKS times the refit's walks (the transmitted wings at normal incidence):
 # the worst point's error falls 1.21 -> 0.85 data sigma on the acid-etched run, +0.8-1.7 s a fit.
@@ -42,12 +46,13 @@ MS_REWALK_WALKS = 1
 
 class OrdersTable:
     """Orders >= 2 at the fitted points (higher_orders_at: walked at the points themselves, one
-    set of walks per incidence) at MS_TABLE_NODES alphas MS_TABLE_STEP apart in log alpha about
-    `centre`, all from one seed, and a cubic spline in log alpha through them (clamped at the
-    ends): a deterministic, smooth term for the optimiser. `refine` adds a constant so that
-    the term at one alpha is its value walked MS_CENTRE_WALKS times over (the spline keeps the
-    slope). `error` and `covariance` are the Monte Carlo standard error per point and their
-    covariance (points of one incidence share walks) at the centre node, or where refined."""
+    set of ms_walks walks per incidence) at MS_TABLE_NODES alphas
+    MS_TABLE_STEP apart in log alpha about `centre`, all from one seed, and a cubic spline in
+    log alpha through them (clamped at the ends): a deterministic, smooth term for the
+    optimiser. `refine` adds a constant so that the term at one alpha is its value walked
+    MS_CENTRE_WALKS times over (the spline keeps the slope). `error` and `covariance` are the
+    Monte Carlo standard error per point and their covariance (points of one incidence share
+    walks) at the centre node, or where refined."""
 
     def __init__(self, problem: Problem, centre: float):
         from scipy.interpolate import CubicSpline

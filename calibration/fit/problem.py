@@ -110,10 +110,14 @@ class Problem:
 
     def start(self, alpha0: float) -> np.ndarray:
         """Best of a coarse log-alpha grid about the peak-width estimate (a guard against a
-        poor estimate trapping the optimiser in a local minimum). With diffraction the grid
+        poor estimate trapping the optimiser in a local minimum). With a multiple-scattering
+        table, the best of its nodes (the single-scattering fit it is centred on searched the
+        grid; outside its nodes the table is clamped). With diffraction the grid
         is scored by the microfacet model alone (the two-scale model costs a few hundred
         microfacet evaluations per point) and only START_REFINE points about its best by the
         full model."""
+        if self.orders is not None:
+            return self._best_of(np.exp(self.orders.log_alpha))
         if self.diffraction is not None:
             plain = Problem(self.data, self.distribution, self.masking, self.options,
                             self.eta0, self.k, self.optics)

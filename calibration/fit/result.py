@@ -53,6 +53,9 @@ class FitResult:
     walks: int | None = None  # walks per incidence of predictions' orders >= 2 (the fitted
     # points' term at the result walked MS_CENTRE_WALKS times as many); None: off
     seed: int = 0
+    slope_only: bool = False  # FitOptions.ms_slope_only: the fitted term is the table's (no
+    # refit) and predictions walk all pairs forward, each pair's value its own; else
+    # transmitted pairs in reverse where better (higher_orders_at's both_ways)
     diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
     fit_time_s: float = 0.0  # wall time of fit()
 
@@ -100,7 +103,8 @@ class FitResult:
         err = np.zeros_like(f)
         if self.walks is not None:
             orders, err, _ = walked_orders(self.distribution, self.alpha, self.eta, self.k, wi,
-                                           wo, self.walks, self.seed)
+                                           wo, self.walks, self.seed,
+                                           both_ways=not self.slope_only)
             f = f + orders
         return self.scale * f, abs(self.scale) * err
 
@@ -129,7 +133,8 @@ class FitResult:
             "beam_divergence_deg": self.optics.divergence_deg,
             "multiple_scattering": (None if self.walks is None
                                     else {"walks": self.walks, "seed": self.seed,
-                                          "fitted_walks": self.walks * MS_CENTRE_WALKS}),
+                                          "fitted_walks": self.walks * (1 if self.slope_only
+                                                                  else MS_CENTRE_WALKS)}),
             "diffraction": None if self.diffraction is None else self.diffraction.to_dict(),
             "fit_time_s": self.fit_time_s,
             "candidates": self.candidates,

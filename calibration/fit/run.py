@@ -1,13 +1,14 @@
 """fit(): every candidate (distribution x masking) solved on the chosen subset, the preferred one
 chosen, refined and scored on the held-out points, as a FitResult. Each candidate's
 `chi2_dof_fit` is the one it was ranked by; with multiple scattering the chosen one is refitted
-with its term walked MS_CENTRE_WALKS times over, and its `chi2_dof_refit` is the result's
-chi2_dof_fit."""
+with its term walked MS_CENTRE_WALKS times over (unless FitOptions.ms_slope_only), and its
+`chi2_dof_refit` is the result's chi2_dof_fit."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -19,10 +20,11 @@ from calibration.fit.options import (
     fit_subset_mask,
     walk_settings,
 )
+from calibration.fit.orders import MS_CONTENTION
 from calibration.fit.problem import Problem, initial_alpha
 from calibration.fit.progress import Progress
 from calibration.fit.result import PREFERENCE_DELTA_CHI2, FitResult
-from calibration.fit.solve import Solution, refine, solve
+from calibration.fit.solve import Solution, recentre, refine, solve
 from calibration.reduced import ReducedData
 from calibration.smearing import Smearing, smearing_order
 
@@ -64,10 +66,11 @@ def fit(data: ReducedData, options: FitOptions | None = None,
     optics = Smearing(aperture, smearing_order(aperture, alpha0) if order is None else order,
                       divergence, smearing_order(divergence, alpha0))
 
+    ranking = _ranking(options)
     scored, failures = [], []
-    for distribution in options.distributions:
-        for masking in options.maskings:
-            problem = Problem(fit_data, distribution, masking, options, eta0, k, optics,
+    for distribution in ranking.distributions:
+        for masking in ranking.maskings:
+            problem = Problem(fit_data, distribution, masking, ranking, eta0, k, optics,
                               diffraction, reporter)
             try:
                 scored.append((problem, solve(problem, alpha0)))
@@ -77,10 +80,16 @@ def fit(data: ReducedData, options: FitOptions | None = None,
                 failures.append(f"fit {distribution}: {exc}")
     if not scored:
         raise FitError("; ".join(failures))
+    if ranking.multiple_scattering:
+        scored = _recentred(scored)
     problem, best = _preferred(scored, options.distributions)
     chi2_ranked = best.chi2  # the candidates were ranked with their tables as first walked
+    if ranking is not options:  # the chosen one, with its multiple-scattering term
+        problem = Problem(fit_data, problem.distribution, problem.masking, options, eta0, k,
+                          optics, diffraction, reporter)
+        best = recentre(problem, solve(problem, alpha0))
     refit = {}
-    if problem.orders is not None:
+    if problem.orders is not None and not options.ms_slope_only:
         best = refine(problem, best)
         refit = {"chi2_dof_refit": best.chi2_dof}  # the chosen one's, as the result gives it
     if best.at_bound:
@@ -106,8 +115,30 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         + [{"failed": msg} for msg in failures],
         optics=optics,
         walks=walk_settings(options)[0], seed=options.ms_seed,
+        slope_only=options.ms_slope_only,
         diffraction=diffraction, fit_time_s=time.perf_counter() - started,
     )
+
+
+def _ranking(options: FitOptions) -> FitOptions:
+    """The options the candidates are ranked with: a slope-only fit with multiple scattering
+    (FitOptions.ms_slope_only) ranks those the walk can walk on by single scattering and adds
+    the term to the chosen one only; any other fit, its own options."""
+    from model.bsdf.distributions import WALKABLE
+
+    walkable = tuple(d for d in options.distributions if d in WALKABLE)
+    if not (options.multiple_scattering and options.ms_slope_only and walkable):
+        return options
+    return replace(options, multiple_scattering=False, distributions=walkable)
+
+
+def _recentred(scored: list[tuple[Problem, Solution]]) -> list[tuple[Problem, Solution]]:
+    """The candidates in contention (within MS_CONTENTION of the lowest chi-square, plus
+    PREFERENCE_DELTA_CHI2) with their multiple-scattering tables recentred; the rest as they
+    are, ranked by their first table's fit."""
+    lowest = min(s.chi2 for _, s in scored)
+    return [(p, recentre(p, s) if s.chi2 <= MS_CONTENTION * lowest + PREFERENCE_DELTA_CHI2
+             else s) for p, s in scored]
 
 
 def _preferred(scored: list[tuple[Problem, Solution]],

@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from calibration.fit.model import build_model
 from calibration.fit.options import FitError
 from calibration.fit.orders import MS_CENTRE_WALKS, MS_TABLE_RECENTRE, OrdersTable
 from calibration.fit.problem import Problem
@@ -34,7 +35,7 @@ class Solution:
 
 def solve(problem: Problem, alpha0: float) -> Solution:
     """Run one candidate's fit from the best start about alpha0 (with multiple scattering,
-    through its table)."""
+    through its first table: `recentre` goes on from there)."""
     if problem.options.multiple_scattering:
         optimum = _solve_with_orders(problem, alpha0)
     else:
@@ -70,24 +71,38 @@ def _least_squares(problem: Problem, alpha0: float) -> OptimizeResult:
                          xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
 
 
-def _solve_with_orders(problem: Problem, alpha0: float) -> OptimizeResult:
-    """The fit with the multiple-scattering table: built about the single-scattering fit's
-    alpha (within a few % of the answer), and rebuilt about the result while that falls
-    outside the table's inner nodes. Each point's sigma gains the table's Monte Carlo error in
-    quadrature (the model's own uncertainty)."""
-    single = Problem(problem.data, problem.distribution, problem.masking,
-                     replace(problem.options, multiple_scattering=False), problem.eta0,
-                     problem.k, problem.optics, problem.diffraction, problem.progress)
-    centre = single.unpack(_least_squares(single, alpha0).x)[0]
-    for _ in range(MS_TABLE_RECENTRE):
-        problem.progress.stage(problem, f"multiple-scattering table about alpha {centre:.4g}")
-        problem.orders = OrdersTable(problem, centre)
-        optimum = _least_squares(problem, centre)
+def recentre(problem: Problem, solution: Solution) -> Solution:
+    """A multiple-scattering fit (solve's) redone with its table rebuilt about the result while
+    that falls outside the table's inner nodes, MS_TABLE_RECENTRE tables in all at most."""
+    optimum = solution.optimum
+    for _ in range(MS_TABLE_RECENTRE - 1):
         alpha = problem.unpack(optimum.x)[0]
         if problem.orders.covers(alpha):
             break
-        centre = alpha
-    return optimum
+        optimum = _table_fit(problem, alpha)
+    return solution if optimum is solution.optimum else _summary(problem, optimum)
+
+
+def _table_fit(problem: Problem, centre: float) -> OptimizeResult:
+    """The fit with a multiple-scattering table built about centre. Each point's sigma gains
+    the table's Monte Carlo error in quadrature (the model's own uncertainty)."""
+    problem.progress.stage(problem, f"multiple-scattering table about alpha {centre:.4g}")
+    problem.orders = OrdersTable(problem, centre)
+    return _least_squares(problem, centre)
+
+
+def _solve_with_orders(problem: Problem, alpha0: float) -> OptimizeResult:
+    """The fit with the multiple-scattering table built about the single-scattering fit's
+    alpha (within a few % of the answer). A distribution the walk cannot walk on is refused
+    before its single-scattering fit."""
+    from model.bsdf.multiple_scattering.walk import walkable
+
+    walkable(build_model(problem.distribution, alpha0, problem.eta0, "correlated",
+                         problem.k).distribution)
+    single = Problem(problem.data, problem.distribution, problem.masking,
+                     replace(problem.options, multiple_scattering=False), problem.eta0,
+                     problem.k, problem.optics, problem.diffraction, problem.progress)
+    return _table_fit(problem, single.unpack(_least_squares(single, alpha0).x)[0])
 
 
 def _summary(problem: Problem, optimum: OptimizeResult) -> Solution:

@@ -52,7 +52,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ms-walks", type=int, default=1 << 17, metavar="N",
                    help="walks per incidence angle and table alpha for --multiple-scattering "
                         "(default 131072, at most 4194304; the fitted term at the result walks "
-                        "16x as many: about 2 s on a Walter run at the default, in proportion "
+                        "4x as many: about 1 s on a Walter run at the default, in proportion "
                         "to N)")
     p.add_argument("--diffraction", action="store_true",
                    help="fit the two-scale diffraction model (Holzschuch-Pacanowski) around the "

@@ -193,3 +193,57 @@ def test_walk_streams_are_independent_and_stream_0_is_the_default():
         walked_orders("ggx", ALPHA, 1.51, None, wi, wo, 1 << 10, 2, stream=0)[0], default)
     assert np.all(walked_orders("ggx", ALPHA, 1.51, None, wi, wo, 1 << 10, 2, stream=1)[0]
                   != default)
+
+
+def test_a_points_model_value_does_not_depend_on_the_points_sharing_the_call():
+    """The fitted model at a point (build_model with walks: what point_model and the exports
+    evaluate) is the same whichever other points share the call: walked alone, in the whole
+    set, or with points at a slightly different incidence in its walk group."""
+    theta = np.radians([15.0, 40.0, 70.0, 110.0, 140.0, 170.0])
+    wo = np.stack([np.sin(theta), 0.0 * theta, np.cos(theta)], axis=-1)
+    tilt = np.radians(30.0)
+    wi = np.array([[0.0, 0.0, 1.0]] * 6 + [[np.sin(tilt), 0.0, np.cos(tilt)]] * 6)
+    wo = np.concatenate([wo, wo])
+    model = build_model("ggx", ALPHA, 1.51, "correlated", walks=1 << 10, seed=4)
+    together = model.eval(wi, wo)
+    alone = np.array([model.eval(wi[k:k + 1], wo[k:k + 1])[0] for k in range(len(wi))])
+    np.testing.assert_array_equal(alone, together)
+    nudged = np.radians(30.04)  # in the 30 deg walk group (within 0.05 deg)
+    beside = np.array([[np.sin(nudged), 0.0, np.cos(nudged)]] * 3)
+    with_others = model.eval(np.concatenate([wi[6:], beside]),
+                             np.concatenate([wo[6:], wo[6:9]]))
+    np.testing.assert_array_equal(with_others[:6], together[6:])
+
+
+def test_a_slope_only_fit_ranks_by_single_scattering_and_walks_the_chosen_term_once(data):
+    """FitOptions.ms_slope_only (the reduction's slope fit): the candidates are ranked by
+    single scattering, the chosen one fitted with its table and no refit (its fitted walks are
+    the table's), and its predictions walked forward; phong, which the walk cannot walk on, is
+    left out of the ranking."""
+    lines: list[str] = []
+    slope = fit(data, FitOptions(distributions=("phong", "ggx"), maskings=("correlated",),
+                                 fit_incidence_deg=(0.0, 60.0), aperture_half_angle_deg=0.0,
+                                 beam_divergence_deg=0.0, multiple_scattering=True,
+                                 ms_slope_only=True), lines.append)
+    out = slope.to_dict()
+    assert out["distribution"] == "ggx"
+    assert out["multiple_scattering"]["fitted_walks"] == out["multiple_scattering"]["walks"]
+    assert [c["distribution"] for c in out["candidates"]] == ["ggx"]
+    assert not any("phong" in line or "multiple-scattering term at" in line for line in lines)
+    assert sum("multiple-scattering table" in line for line in lines) >= 1
+    forward = walked_orders("ggx", slope.alpha, slope.eta, None, data.wi, data.wo, slope.walks,
+                            slope.seed, both_ways=False)[0]
+    single = build_model("ggx", slope.alpha, slope.eta, "correlated")
+    np.testing.assert_allclose(slope.predict(data.wi, data.wo),
+                               single.eval(data.wi, data.wo) + forward, rtol=1e-12)
+
+
+def test_a_distribution_the_walk_cannot_walk_on_is_refused_before_its_fit(data):
+    lines: list[str] = []
+    result = fit(data, FitOptions(distributions=("phong", "ggx"), maskings=("correlated",),
+                                  fit_incidence_deg=(0.0,), aperture_half_angle_deg=0.0,
+                                  beam_divergence_deg=0.0, multiple_scattering=True,
+                                  ms_walks=1 << 12), lines.append)
+    assert result.distribution == "ggx"
+    assert any("phong" in c.get("failed", "") for c in result.candidates)
+    assert not any(line.startswith("fit: phong") for line in lines)

@@ -14,6 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from model.bsdf.multiple_scattering import keyed_kernel
 from model.bsdf.multiple_scattering.nee_kernel import surface
@@ -117,16 +118,25 @@ def _fill(walk, first: int, value: np.ndarray) -> None:
         done.result()
 
 
+@cache
+def _blas() -> ThreadpoolController:
+    """The process's BLAS thread pools (numpy's, loaded by now)."""
+    return ThreadpoolController()
+
+
 def _walk_in_batches(walk, m: int, walks: int, covariance: bool
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(mean, standard error, covariance or None) over `walks` walks of m scores each, walk(first,
-    value) filling value (walks in this batch, m) from walk index first."""
+    value) filling value (walks in this batch, m) from walk index first. BLAS runs on one thread
+    meanwhile: its threads, spinning between the batches' products, took the walk threads' cores
+    (a table node of the Walter fit: 1.9 CPU s with them, 0.13 without)."""
     sums = _Sums(m, covariance)
     batch = max(MIN_BATCH_WALKS, BATCH_SCORES // max(m, 1))
-    while sums.n < walks:
-        value = np.zeros((min(batch, walks - sums.n), m))
-        _fill(walk, sums.n, value)
-        sums.add(value)
+    with _blas().limit(limits=1, user_api="blas"):
+        while sums.n < walks:
+            value = np.zeros((min(batch, walks - sums.n), m))
+            _fill(walk, sums.n, value)
+            sums.add(value)
     mean, err = sums.mean_error()
     return mean, err, sums.covariance(err) if covariance else None
 

@@ -146,8 +146,11 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     exact_second (dielectric and conductor facets), order 2 comes from the deterministic
     quadrature of second_order and only orders >= 3 are walked (their Monte Carlo error is a
     few times smaller than that of walked orders >= 2); the error is the walks'. Pairs whose
-    incidence agrees within incidence_tol_deg share one set of `walks` walks from
-    (seed, side, group), so their errors are correlated; other pairs' are independent. Pairs
+    incidence rounds to the same multiple of 2 incidence_tol_deg share one set of `walks` walks
+    from (seed, side, group) at that incidence, so their errors are correlated; other pairs' are
+    independent. Forward walks score each target on its own, so with both_ways False a pair's
+    value does not depend on the other pairs of the call; both ways, a reverse walk's starts
+    share its walks (keyed_walk_from_starts), so it does at the level of its error. Pairs
     the isotropic lobe cannot tell apart (the same theta_o and |phi_o - phi_i|; the same theta_o
     in the group at normal incidence, taken as exactly normal) are computed once. both_ways
     walks transmitted pairs in reverse (walk_both_ways), else all forward (walk_to_targets).
@@ -165,7 +168,7 @@ def higher_orders_at(parent, wi: np.ndarray, wo: np.ndarray, walks: int, seed: i
     cov = np.zeros((len(wi), len(wi))) if covariance else None
     for s, g in sorted(set(zip(side.tolist(), group.tolist(), strict=True))):
         rows = np.flatnonzero((side == s) & (group == g))
-        theta = np.radians(np.mean(theta_i[rows])) if g else 0.0
+        theta = np.radians(2.0 * incidence_tol_deg * g)  # the group's, whoever is in it
         start = np.array([np.sin(theta), 0.0, s * np.cos(theta)])
         azimuth = dphi[rows] if g else np.zeros(len(rows))  # none at normal incidence
         targets, index = _distinct_targets(theta_o[rows], azimuth)
