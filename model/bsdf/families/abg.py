@@ -122,7 +122,8 @@ class ABg(ReflectionFamily):
         return np.hypot(wo[..., 0] + wi[..., 0], wo[..., 1] + wi[..., 1])
 
     def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        with np.errstate(divide="ignore"):  # g < 0 at x = 0: |x|^g = inf, f = 0
+        # g < 0 at x = 0, or |x|^g past the float range for g near -10: |x|^g = inf, f = 0
+        with np.errstate(divide="ignore", over="ignore"):
             return self.A / (self.B + self.separation(wi, wo) ** self.g)
 
     def _pdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
