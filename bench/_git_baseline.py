@@ -1,5 +1,5 @@
-"""A module as it was at a commit, imported from git beside the current one: the baseline a
-bench script measures a change against in the same run."""
+"""Code as it was at a commit, from git beside the current one (a module imported, or the
+whole tree unpacked): the baseline a bench script measures a change against in the same run."""
 
 from __future__ import annotations
 
@@ -22,3 +22,13 @@ def module_at(commit: str, path: str, name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def tree_at(commit: str, out: Path) -> Path:
+    """The checkout's files at `commit` (git archive), unpacked in the new folder out/commit."""
+    tree = out / commit
+    tree.mkdir()
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    return tree

@@ -25,7 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from _git_baseline import ROOT, tree_at
+
 #: The commit whose fit is "before" (the fit as issue 36 measured it: 9x single scattering).
 BEFORE = "f5df95b"
 SAMPLES = (("ground-glass", 0.394), ("acid-etched", 0.553))
@@ -66,16 +67,6 @@ def measured(tree: Path, run: Path, repeats: int) -> dict[str, dict[str, float]]
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def before_tree(out: Path) -> Path:
-    """BEFORE's files (git archive) unpacked in out."""
-    tree = out / "before"
-    tree.mkdir()
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", BEFORE], capture_output=True,
-                             check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
-    return tree
-
-
 def row(name: str, truth: float, code: str, fits: dict, shift: str) -> str:
     """One table row: times, ratios, and each fit's alpha, pull and chi2/dof."""
     ss, ms = fits["ss"], fits["ms"]
@@ -108,7 +99,7 @@ def main() -> None:
     print(f"{'sample':>12} {'code':>7} {'SS wall':>7} {'CPU':>6} {'MS wall':>7} {'CPU':>6} "
           f"{'MS/SS':>6} {'CPU':>6}  {'single scattering':<46}{'multiple scattering':<46} shift")
     with tempfile.TemporaryDirectory() as tmp:
-        old = before_tree(Path(tmp))
+        old = tree_at(BEFORE, Path(tmp))
         for k, (name, truth) in enumerate(SAMPLES):
             run = args.runs[k] if args.runs else scan(name, Path(tmp), None)
             before = measured(old, run, args.repeats)
