@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import time
 
+import serial
 from pymodbus.client import ModbusSerialClient
 from pymodbus.exceptions import ConnectionException
+
+from drivers.serial_link import write_through
 
 
 class RtuClient(ModbusSerialClient):
@@ -26,12 +29,25 @@ class RtuClient(ModbusSerialClient):
     _waited = False  # a wait of the current reply has ended: later waits get what is left
 
     def send(self, request: bytes, addr: tuple | None = None) -> int:
-        """Send a request frame and start its reply deadline."""
+        """Send a request frame and start its reply deadline; the frame is written through the
+        port's descriptor (drivers.serial_link.write_through), since pyserial's write fails a
+        write that all went out when the writer was descheduled longer than its timeout."""
         port, timeout_s = self.socket, self.comm_params.timeout_connect
         if port is not None and port.timeout != timeout_s:
             port.timeout = timeout_s  # shortened while the last reply came in pieces
         self._deadline, self._waited = time.monotonic() + timeout_s, False
-        return super().send(request, addr)
+        if port is None:
+            raise ConnectionException(str(self))
+        try:
+            if waiting := port.in_waiting:  # as pymodbus: no stale byte before a request
+                port.read(waiting)
+            write_through(port, request)
+        except serial.SerialTimeoutException:  # the port took no byte in the timeout
+            raise ConnectionException(str(self)) from None
+        except OSError:  # pyserial's SerialException: the port went away
+            self.close()
+            raise ConnectionException(str(self)) from None
+        return len(request)
 
     def recv(self, size: int | None) -> bytes:
         """The bytes waiting now, or the first to arrive before the deadline and those with

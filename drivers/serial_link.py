@@ -27,6 +27,20 @@ PARITY = {"none": serial.PARITY_NONE, "even": serial.PARITY_EVEN, "odd": serial.
 STOPBITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
 
 
+def write_through(port: serial.Serial, data: bytes) -> None:
+    """One os.write on the port's descriptor (pyserial opens it non-blocking); pyserial's
+    write, which waits for room up to the write timeout, only for what the port did not take at
+    once. (pyserial's write selects for room after every write and fails with a write timeout
+    when that write took longer than the timeout, so a stall of the writer under load would
+    read as a port that takes no bytes.)"""
+    try:
+        written = os.write(port.fileno(), data)
+    except BlockingIOError:
+        written = 0
+    if written < len(data):
+        port.write(data[written:])
+
+
 class SerialLink:
     """A serial port opened with the line settings; timeout_s bounds a write."""
 
@@ -53,17 +67,9 @@ class SerialLink:
         return bytes(taken)
 
     def write(self, data: bytes) -> None:
-        """One os.write on the port's descriptor (pyserial opens it non-blocking); pyserial's
-        write, which waits for room up to the write timeout, only for what the port did not
-        take at once (it would select for room after every write, room or not); then wait
-        until it is transmitted."""
+        """Write data (write_through), then wait until it is transmitted."""
         try:
-            try:
-                written = os.write(self.fd, data)
-            except BlockingIOError:
-                written = 0
-            if written < len(data):
-                self._serial.write(data[written:])
+            write_through(self._serial, data)
             self._serial.flush()
         except PORT_FAILURES as exc:
             raise LinkFailure(exc, isinstance(exc, serial.SerialTimeoutException)) from exc

@@ -77,6 +77,32 @@ def test_the_driver_client_assembles_a_reply_that_comes_in_pieces():
         device.close()
 
 
+def test_a_request_that_all_went_out_is_sent_however_long_the_writer_was_held_off():
+    # pyserial's write checks its write timeout after a write that took every byte, so a
+    # writer descheduled longer than the timeout (a loaded machine) fails a request that went
+    # out. A write timeout that has always expired stands for that stall here.
+    master, slave = os.openpty()
+    bare = serial.Serial(os.ttyname(slave), write_timeout=1e-9)
+    try:
+        with pytest.raises(serial.SerialTimeoutException):
+            bare.write(READ_8_9)
+        assert os.read(master, 64) == READ_8_9  # ... though every byte went out
+    finally:
+        bare.close()
+        os.close(master)
+        os.close(slave)
+    device = ScriptedDevice([len(REPLY)], pause_s=0.0)
+    client = RtuClient(device.path, baudrate=115200, timeout=1.0, retries=0)
+    try:
+        assert client.connect()
+        client.socket.write_timeout = 1e-9
+        reply = client.read_holding_registers(8, count=2, device_id=1)
+        assert reply.registers == [0x1234, 0x5678]
+    finally:
+        client.close()
+        device.close()
+
+
 def test_a_reply_that_stays_short_times_out_at_reply_s_in_all():
     # a byte every 0.25 s: the wait after each byte gets only what is left of reply_s (0.3 s),
     # so the timeout comes at 0.3 s, with the reply short; a wait that started afresh with
