@@ -87,8 +87,10 @@ def test_bad_crc_means_nothing_on_tcp(rig):
 @pytest.mark.parametrize("transport", TRANSPORTS)
 def test_every_reply_bad_crc_or_stalled_gives_a_timeout(rig, transport):
     kind = "bad_crc_prob" if transport == "rtu" else "stall_prob"
-    r = rig(transport, stage_faults={kind: 1.0}, reply_s=0.05, read_retries=2)
-    with pytest.raises(DeviceTimeout, match="sample: timeout after 0.05 s"):
+    # reply_s 0.5: a reply that missed its wait on a loaded machine would be late, not garbled
+    # or lost, and its attempt would follow another path (counted differently below)
+    r = rig(transport, stage_faults={kind: 1.0}, reply_s=0.5, read_retries=2)
+    with pytest.raises(DeviceTimeout, match="sample: timeout after 0.5 s"):
         r.stage.position()
     # the first try and two retries, no more (on RTU each retry follows the echo that brings
     # the line back in step after a timeout: drivers.modbus_rtu_sync)
