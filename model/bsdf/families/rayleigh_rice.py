@@ -146,20 +146,22 @@ class RayleighRice(ReflectionFamily):
         wi = np.asarray(wi, dtype=np.float64)
         return fresnel_conductor(wi[..., 2] / np.linalg.norm(wi, axis=-1), self.eta_complex)
 
+    def _phase_variance(self, wi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(cos_i > 0, R, (4 pi sigma_rel cos_i / lambda)^2) for incident directions wi."""
+        wi = np.asarray(wi, dtype=np.float64)
+        cos_i = wi[..., 2] / np.linalg.norm(wi, axis=-1)
+        return (cos_i > 0, self.fresnel_reflectance(wi),
+                self.scale * cos_i**2 * self.propagating_share(wi))
+
     def smooth_surface_tis(self, wi) -> np.ndarray:
         """The smooth-surface total integrated scatter R (4 pi sigma_rel cos_i / lambda)^2 for
         incident directions wi (..., 3), which the scatter's hemisphere integral approaches as
         the PSD's lobe narrows (Q cos_o -> R cos_i across it); 0 below the horizon."""
-        wi = np.asarray(wi, dtype=np.float64)
-        cos_i = wi[..., 2] / np.linalg.norm(wi, axis=-1)
-        tis = (self.fresnel_reflectance(wi) * self.scale * cos_i**2
-               * self.propagating_share(wi))
-        return np.where(cos_i > 0, tis, 0.0)
+        up, reflectance, x2 = self._phase_variance(wi)
+        return np.where(up, reflectance * x2, 0.0)
 
     def specular_reflectance(self, wi) -> np.ndarray:
         """Power of the specular beam, which f leaves out: R exp(-(4 pi sigma_rel cos_i /
         lambda)^2) for incident directions wi (..., 3); 0 below the horizon."""
-        wi = np.asarray(wi, dtype=np.float64)
-        cos_i = wi[..., 2] / np.linalg.norm(wi, axis=-1)
-        x2 = self.scale * cos_i**2 * self.propagating_share(wi)
-        return np.where(cos_i > 0, self.fresnel_reflectance(wi) * np.exp(-x2), 0.0)
+        up, reflectance, x2 = self._phase_variance(wi)
+        return np.where(up, reflectance * np.exp(-x2), 0.0)
