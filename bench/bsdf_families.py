@@ -1,13 +1,15 @@
 """Evaluations and samples per second of the model families, beside the microfacet model.
 
 Throughput of each family of model.bsdf.families (Lambert, Oren-Nayar full and qualitative,
-the coated diffuse surface over GGX and Beckmann coats, ABg) on 1,000,000 random direction
-pairs above the surface, eval() and sample() (each sample's weight f cos / pdf included), beside
-RoughDielectric GGX (alpha 0.3, eta 1.51, its default backend) on the same pairs in the same
-run; then the coated model's albedo table, its build time against its white-furnace error (the
-table's interpolant against 1024^2-strata sums at the exact incidence), and the directional
-albedo of Oren-Nayar (rho = 1) and ABg (by stratified sums of sample() weights, ABg beside
-its closed-form total integrated scatter). Median of several runs, compile time excluded;
+the coated diffuse surface over GGX and Beckmann coats, ABg, Rayleigh-Rice) on 1,000,000 random
+direction pairs above the surface, eval() and sample() (each sample's weight f cos / pdf
+included), beside RoughDielectric GGX (alpha 0.3, eta 1.51, its default backend) on the same
+pairs in the same run; then the coated model's albedo table, its build time against its
+white-furnace error (the table's interpolant against 1024^2-strata sums at the exact
+incidence), the directional albedo of Oren-Nayar (rho = 1) and ABg (by stratified sums of
+sample() weights, ABg beside its closed-form total integrated scatter), and Rayleigh-Rice's
+scatter integral over the smooth-surface TIS R (4 pi sigma_rel cos_i / lambda)^2 as the
+correlation length grows against the wavelength. Median of several runs, compile time excluded;
 the CPU-time rate is printed beside the wall-clock one (the machine is shared).
 
     python bench/bsdf_families.py [--picture docs/img/bsdf_families.png]
@@ -24,7 +26,7 @@ import time
 import numpy as np
 from bsdf_throughput import N, directions, rate
 
-from model.bsdf import ABg, CoatedDiffuse, Lambert, OrenNayar, RoughDielectric
+from model.bsdf import ABg, CoatedDiffuse, Lambert, OrenNayar, RayleighRice, RoughDielectric
 from model.bsdf.families.coated import TABLE_MU, AlbedoTable
 
 WHITE_THETAS = np.array([0.0, 0.5, 1.0, 1.3, 1.45, 1.52, 1.56])
@@ -60,6 +62,8 @@ def throughput() -> None:
         "coated, Beckmann coat": CoatedDiffuse(0.6, 0.2, 1.5, "beckmann"),
         "ABg (2e-3, 1e-3, 2)": ABg(2e-3, 1e-3, 2.0),
         "ABg (0.05, 0.02, 1.5)": ABg(0.05, 0.02, 1.5),
+        "Rayleigh-Rice glass, 1 nm, 2 um, 2": RayleighRice(1.0, 2.0, 2.0, eta=1.5),
+        "Rayleigh-Rice Al, 2 nm, 20 um, 3": RayleighRice(2.0, 20.0, 3.0, eta=1.37, k=7.6),
     }
     load_before = os.getloadavg()[0]
     rows = []
@@ -119,9 +123,26 @@ def albedos() -> None:
               + "; closed-form TIS " + " ".join(f"{v:.5f}" for v in tis))
 
 
+def smooth_surface_limit() -> None:
+    print()
+    u = stratified(512)
+    print("Rayleigh-Rice, sigma 1 nm at 632.8 nm: scatter integral (mean of sample() weights over "
+          "512^2 strata) / smooth-surface TIS - 1 at theta_i = "
+          f"{', '.join(f'{t:g}' for t in ALBEDO_THETAS)} rad")
+    for label, material in (("glass", dict(eta=1.5)), ("Al", dict(eta=1.37, k=7.6))):
+        for c in (2.0, 3.0):
+            for b in (2.0, 20.0, 200.0):
+                model = RayleighRice(1.0, b, c, **material)
+                values = [model.sample(incidence(t), u)[1].mean()
+                          / float(model.smooth_surface_tis(incidence(t))) - 1.0
+                          for t in ALBEDO_THETAS]
+                print(f"{label:5s} c {c:3.1f}, b {b:5.0f} um: "
+                      + " ".join(f"{v:+.1e}" for v in values))
+
+
 def picture(path: str) -> None:
     """In-plane f cos_o against the signed viewing angle (negative: toward the source) of one
-    model per family, at incidences 30 and 60 degrees, log scale for ABg."""
+    model per family, at incidences 30 and 60 degrees, log scale for ABg and Rayleigh-Rice."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -135,10 +156,13 @@ def picture(path: str) -> None:
             {"coated": CoatedDiffuse(0.6, 0.15, 1.5)},
         "ABg": {"A 2e-3, B 1e-3, g 2": ABg(2e-3, 1e-3, 2.0),
                 "A 0.05, B 0.02, g 1.5": ABg(0.05, 0.02, 1.5)},
+        "Rayleigh-Rice, sigma 1 nm, 632.8 nm": {
+            "glass, b 2 um, c 2": RayleighRice(1.0, 2.0, 2.0, eta=1.5),
+            "Al, b 20 um, c 3": RayleighRice(1.0, 20.0, 3.0, eta=1.37, k=7.6)},
     }
     view = np.radians(np.linspace(-89.5, 89.5, 719))
     wo = np.stack([np.sin(view), np.zeros_like(view), np.cos(view)], axis=-1)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    fig, axes = plt.subplots(1, 4, figsize=(20, 4.2))
     for ax, (title, models) in zip(axes, panels.items(), strict=True):
         for name, model in models.items():
             for theta, style in ((30, "-"), (60, "--")):
@@ -147,7 +171,7 @@ def picture(path: str) -> None:
                         label=f"{name}, {theta} deg")
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("viewing angle, deg (negative: toward the source)")
-        if title == "ABg":
+        if title.startswith(("ABg", "Rayleigh-Rice")):
             ax.set_yscale("log")
         ax.legend(fontsize=7)
     axes[0].set_ylabel("f cos theta_o, 1/sr")
@@ -167,3 +191,4 @@ if __name__ == "__main__":
         throughput()
         albedo_table()
         albedos()
+        smooth_surface_limit()

@@ -1,5 +1,5 @@
 """The BSDF models: rough dielectric (Walter et al. 2007) and rough conductor, and the families
-beside them (families/: Lambert, Oren-Nayar, a coated diffuse surface, ABg).
+beside them (families/: Lambert, Oren-Nayar, a coated diffuse surface, ABg, Rayleigh-Rice).
 
 The models are imported on first use (PEP 562), so that the registries of distributions and
 maskings (model.bsdf.distributions, model.bsdf.masking) import without scipy: the CLI builds its
@@ -14,6 +14,7 @@ _HOMES = {
     "CoatedDiffuse": "model.bsdf.families.coated",
     "Lambert": "model.bsdf.families.lambert",
     "OrenNayar": "model.bsdf.families.oren_nayar",
+    "RayleighRice": "model.bsdf.families.rayleigh_rice",
     "RoughConductor": "model.bsdf.conductor",
     "RoughDielectric": "model.bsdf.dielectric",
     "fresnel_conductor": "model.bsdf.fresnel",

@@ -56,11 +56,31 @@ class KCorrelationPSD:
         self.b = float(correlation_length_m)
         self.c = float(exponent)
 
+    @classmethod
+    def from_abc(cls, a: float, b: float, c: float) -> KCorrelationPSD:
+        """The PSD written as Church's ABC form A / (1 + (B f)^2)^((C+1)/2) (A in m^4, B in m):
+        B is the correlation length, C the exponent and sigma^2 = 2 pi A / (B^2 (C - 1))."""
+        if not (np.isfinite(a) and a > 0.0):
+            raise ValueError(f"A must be positive and finite, got {a!r}")
+        if not (np.isfinite(b) and b > 0.0 and np.isfinite(c) and c > 1.0):
+            raise ValueError(f"B must be positive and C > 1 (both finite), got B={b!r}, C={c!r}")
+        return cls(float(np.sqrt(2.0 * np.pi * a / (b * b * (c - 1.0)))), b, c)
+
+    def abc(self) -> tuple[float, float, float]:
+        """(A, B, C) of the ABC form A / (1 + (B f)^2)^((C+1)/2): A in m^4, B in m."""
+        return self.sigma**2 * self.b**2 * (self.c - 1.0) / (2.0 * np.pi), self.b, self.c
+
     def __call__(self, f: np.ndarray) -> np.ndarray:
         """S(|f|) in m^4."""
         f = np.asarray(f, dtype=np.float64)
         norm = self.sigma**2 * self.b**2 * (self.c - 1.0) / (2.0 * np.pi)
         return norm * (1.0 + (self.b * f) ** 2) ** (-0.5 * (self.c + 1.0))
+
+    def lobe(self, s: np.ndarray, wavelength_m) -> np.ndarray:
+        """S(|s| / lambda) / (sigma^2 lambda^2): the PSD as a density over displacements s in
+        direction cosines (the grating equation's s = lambda f), integrating to 1 over the plane."""
+        return self(np.asarray(s, dtype=np.float64) / wavelength_m) / (
+            self.sigma**2 * np.asarray(wavelength_m) ** 2)
 
     def radial_cdf(self, f: np.ndarray) -> np.ndarray:
         """Share of sigma^2 at spatial frequencies below |f|: 1 - (1 + b^2 f^2)^(-(c-1)/2)."""
@@ -149,11 +169,6 @@ class TwoScaleDiffraction:
         """Refractive index of the medium on w's side (1 above, model.eta below)."""
         return np.where(w[..., 2] > 0.0, 1.0, self.eta if self.eta is not None else 1.0)
 
-    def _kernel(self, s: np.ndarray, wavelength_m) -> np.ndarray:
-        """The diffraction lobe per unit direction-cosine area, at displacement |s|, for the
-        wavelength in the exit medium."""
-        return self.psd(s / wavelength_m) / (self.psd.sigma**2 * wavelength_m**2)
-
     def relevant_fraction(self, r0: np.ndarray, wavelength_m) -> np.ndarray:
         """sigma_rel^2 / sigma_s^2: share of the lobe centred at |o'_xy| = r0 in the unit disk
         (wavelength_m: in the exit medium; broadcasts with r0)."""
@@ -226,7 +241,7 @@ class TwoScaleDiffraction:
         wi_all = np.broadcast_to(wi[:, None, :], src.shape)
         f_src = np.where(ok, self._f_side(wi_all, src, side), 0.0)
         a_src, share = self.specular_fraction(wi_all, src, lam0, table)
-        k = self._kernel(np.linalg.norm(wo[:, None, :2] - src[..., :2], axis=-1), lam)
+        k = self.psd.lobe(np.linalg.norm(wo[:, None, :2] - src[..., :2], axis=-1), lam)
         p_model = (np.where(ok, sampler.pdf(wi_all, src), 0.0)
                    / np.maximum(np.abs(src[..., 2]), 1e-300))
         mixture = 0.5 * (k + p_model)

@@ -1,6 +1,7 @@
 """Extreme inputs give finite values: grazing, normal and exactly horizontal directions, albedo
 0 and 1, Oren-Nayar sigma 0 to pi/2, coats of alpha 1e-4 to 4 and eta near 1, ABg's B from
-1e-12 to 1e6 and g from -10 to 10; f, pdf and sample weights are finite and non-negative."""
+1e-12 to 1e6 and g from -10 to 10, Rayleigh-Rice over its parameters' and settings' whole
+ranges; f, pdf and sample weights are finite and non-negative."""
 
 import math
 
@@ -8,7 +9,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from model.bsdf import ABg, CoatedDiffuse, Lambert, OrenNayar
+from model.bsdf import ABg, CoatedDiffuse, Lambert, OrenNayar, RayleighRice
+from model.bsdf.families.rayleigh_rice import ETA, WAVELENGTH, K
 
 GRAZING = [0.0, 1e-12, 1e-6, 0.3, math.pi / 2 - 1e-9, math.pi / 2 - 1e-15, math.pi / 2]
 thetas = st.one_of(st.sampled_from(GRAZING), st.floats(0.0, math.pi / 2))
@@ -61,3 +63,23 @@ def test_coated(angles, u, rho, alpha, eta, distribution, masking):
     model = CoatedDiffuse(rho, alpha, eta, distribution, masking)
     assert 0.0 <= model.table.mean < 1.0 and np.all(model.table.albedo <= 1.0)
     _check(model, angles, u)
+
+
+def _edges_and_inside(p):
+    """A parameter's bounds, its bounds' neighbours and anything between."""
+    lo, hi = p.lower, p.upper
+    return st.one_of(st.sampled_from([lo, hi, lo * 1.001 if lo > 0 else 1e-9, hi * 0.999]),
+                     st.floats(lo, hi))
+
+
+@settings(max_examples=150, deadline=None)
+@given(angles=angle_sets, u=uniforms,
+       values=st.tuples(*(_edges_and_inside(p) for p in RayleighRice.PARAMETERS)),
+       wavelength=_edges_and_inside(WAVELENGTH), eta=_edges_and_inside(ETA),
+       k=st.one_of(st.just(0.0), _edges_and_inside(K)))
+def test_rayleigh_rice(angles, u, values, wavelength, eta, k):
+    model = RayleighRice(*values, wavelength_nm=wavelength, eta=eta, k=k)
+    _check(model, angles, u)
+    wi = _direction(*angles[:2])
+    for value in (model.specular_reflectance(wi), model.smooth_surface_tis(wi)):
+        assert np.isfinite(value) and value >= 0

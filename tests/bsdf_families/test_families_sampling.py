@@ -26,7 +26,9 @@ def test_samples_follow_the_pdf(name, theta_i):
                                       order=12)
     assert p_value > P_MIN
     frac = ok.mean()
-    if not name.startswith("abg"):  # its peak is finer than the cells: test_abg_valid_fraction
+    # ABg's and Rayleigh-Rice's peaks are finer than the cells (at grazing incidence a sliver
+    # above the horizon): test_abg_valid_fraction, test_rayleigh_rice's pdf integral
+    if not name.startswith(("abg", "rayleigh-rice")):
         assert abs(frac - mass) < 5 * np.sqrt(max(frac * (1 - frac), 1e-4) / N) + 2e-3
     np.testing.assert_allclose(pdf[ok], model.pdf(wi, wo[ok]), rtol=1e-12)
     f = model.eval(wi, wo[ok])

@@ -42,7 +42,7 @@ def test_relevant_fraction_is_the_lobe_share_inside_the_unit_disk(r0):
     x = np.linspace(-1, 1, n)
     xx, yy = np.meshgrid(x, x, indexing="ij")
     inside = xx**2 + yy**2 < 1
-    k = model._kernel(np.hypot(xx - r0, yy), LAMBDA)
+    k = model.psd.lobe(np.hypot(xx - r0, yy), LAMBDA)
     brute = np.sum(k * inside) * (x[1] - x[0]) ** 2
     assert model.relevant_fraction(np.array(r0), LAMBDA) == pytest.approx(brute, rel=5e-3)
 

@@ -15,6 +15,7 @@ FAMILIES = {
     "oren-nayar": ("model.bsdf.families.oren_nayar", "OrenNayar"),
     "lambert+microfacet": ("model.bsdf.families.coated", "CoatedDiffuse"),
     "abg": ("model.bsdf.families.abg", "ABg"),
+    "rayleigh-rice": ("model.bsdf.families.rayleigh_rice", "RayleighRice"),
 }
 FAMILY_NAMES = tuple(FAMILIES)
 

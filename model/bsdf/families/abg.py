@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from model.bsdf.families.base import Parameter, ReflectionFamily
+from model.bsdf.families.base import Parameter, ReflectionFamily, reach_in_unit_disk
 
 A = Parameter("A", 0.0, math.inf, True, "BSDF scale, 1/sr")
 B = Parameter("B", 0.0, math.inf, True, "roll-off knee: BSDF = A / B at the specular direction")
@@ -154,8 +154,6 @@ class ABg(ReflectionFamily):
         b0 = -wi[..., :2]
         phi = 2.0 * math.pi * np.arange(TIS_AZIMUTHS) / TIS_AZIMUTHS
         e = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-        along = np.einsum("...i,ki->...k", b0, e)
-        rest = np.maximum(1.0 - np.sum(b0 * b0, axis=-1), 0.0)[..., None]
-        reach = -along + np.sqrt(along * along + rest)
+        reach = reach_in_unit_disk(b0[..., None, :], e)
         tis = self.A * 2.0 * math.pi * np.mean(radial_integral(reach, self.B, self.g), axis=-1)
         return np.where(wi[..., 2] > 0, tis, 0.0)

@@ -47,6 +47,17 @@ def cosine_hemisphere(u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
+def reach_in_unit_disk(b0: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Distance from points b0 (..., 2) of the unit disk of direction cosines to the unit
+    circle along unit vectors e (..., 2), broadcast: the root t >= 0 of |b0 + t e| = 1, written
+    without cancellation (s / (a + sqrt(a^2 + s)) where a = e.b0 > 0, s = 1 - |b0|^2)."""
+    along = np.sum(b0 * e, axis=-1)
+    rest = np.maximum(1.0 - np.sum(b0 * b0, axis=-1), 0.0)
+    root = np.sqrt(along * along + rest)
+    outward = along > 0
+    return np.where(outward, rest / np.where(outward, along + root, 1.0), root - along)
+
+
 class ReflectionFamily:
     """Base of the opaque families: only pairs with both directions above the surface scatter.
 
