@@ -14,6 +14,7 @@ from calibration.exports.astm import AstmTable, astm_tables, side_paths, write_a
 from calibration.exports.bird import write_bird
 from calibration.exports.bird_supplement import supplemented
 from calibration.exports.cf import write_reduced_netcdf
+from calibration.exports.family_fit import family_fit
 from calibration.exports.measured import fact_lines, shared_error_lines, write_reduced_csv
 from calibration.exports.model import (
     astm_model_tables,
@@ -83,7 +84,8 @@ def _fitted(data: ReducedData, record: Mapping[str, Any], request: ExportRequest
     """The fit to export (model.fit_for_export), its warnings and the file's lines (the record,
     the facts, the warnings)."""
     result, warnings = fit_for_export(data, request.fit_options, request.fit_file, request.force)
-    return result, warnings, [*record_lines(record), *fact_lines(data, result.eta), *warnings]
+    eta = result.eta if family_fit(result) is None else None  # a family's tables: reflection
+    return result, warnings, [*record_lines(record), *fact_lines(data, eta), *warnings]
 
 
 def _astm_files(tables: Sequence[AstmTable], out: Path) -> list[Path]:
