@@ -222,17 +222,18 @@ class CoatedDiffuseMethods:
     def sample(self, ctx, si, sample1, sample2, active=True):
         """The coat's sample or a cosine-lobe direction, with the mixture's weight."""
         p = self._coat_probability(si)
-        use_coat = sample1 < p
-        rescaled = dr.select(use_coat, sample1 / p, (sample1 - p) / (1.0 - p))
+        use_base = sample1 >= p
+        rescaled = dr.select(use_base, (sample1 - p) / (1.0 - p), sample1 / p)
         bs, coat_weight = self.coat.sample(ctx, si, rescaled, sample2, active)
+        # a sample the coat fails stays failed (as gonio_multiscatter's nested one)
         coat_ok = (bs.pdf > 0) & dr.any(coat_weight != 0)
-        wo = dr.select(use_coat, bs.wo, mi.warp.square_to_cosine_hemisphere(sample2))
+        wo = dr.select(use_base, mi.warp.square_to_cosine_hemisphere(sample2), bs.wo)
         value, pdf = self.eval_pdf(ctx, si, wo, active)
         bs.wo, bs.pdf, bs.eta = wo, pdf, 1.0
-        bs.sampled_type = dr.select(use_coat, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
-                                    mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
-        bs.sampled_component = dr.select(use_coat, mi.UInt32(0), mi.UInt32(1))
-        ok = (active & (pdf > 0) & (use_coat | coat_ok)
+        bs.sampled_type = dr.select(use_base, mi.UInt32(+mi.BSDFFlags.DiffuseReflection),
+                                    mi.UInt32(+mi.BSDFFlags.GlossyReflection))
+        bs.sampled_component = dr.select(use_base, mi.UInt32(1), mi.UInt32(0))
+        ok = (active & (pdf > 0) & (use_base | coat_ok)
               & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0))
         return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
 

@@ -8,14 +8,12 @@ plugin cannot match the model the export refuses."""
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from mitsuba_albedo import VARIANT, load_material, mitsuba_albedo
-from required_tools import tool_missing
+from mitsuba_albedo import load_material, mitsuba_albedo
+from mitsuba_llvm import llvm_mitsuba  # noqa: F401 (a fixture)
 
 from calibration.exports import mitsuba_energy
 from calibration.exports.mitsuba import PLUGIN_TABLES
@@ -23,12 +21,6 @@ from calibration.exports.model import mitsuba_files
 from calibration.fit import FitResult
 from calibration.values import CalibrationError
 
-#: Dr.Jit's LLVM backend aborts the process with too old an LLVM (docs/performance.md): tried
-#: in a child process first.
-LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); "
-              "b = mi.load_dict({'type': 'roughdielectric'}); "
-              "si = mi.SurfaceInteraction3f(); si.wi = mi.Vector3f(0, 0, 1); "
-              "print(b.sample(mi.BSDFContext(), si, mi.Float(0.5), mi.Point2f(0.5, 0.5))[1])")
 ANGLES = mitsuba_energy.REPORT_ANGLES_DEG
 SAMPLES = 1 << 18  # per incidence; the standard error of R + T is about 2e-4
 
@@ -40,17 +32,6 @@ def multiple_scattering_fit(alpha: float, masking: str, **changes) -> FitResult:
                        eta=1.51, k=None, chi2_dof_fit=1.0, n_fit=40, chi2_dof_heldout=1.1,
                        n_heldout=20, preferred_by=None, walks=64)
     return dataclasses.replace(result, **changes)
-
-
-@pytest.fixture(scope="module")
-def llvm_mitsuba():
-    """Mitsuba 3 (the `mitsuba` extra, in `test`) with its LLVM variant running here
-    (libllvm19 or newer), for the tests that sample or render with it; else a skip or, where
-    the conformance suite is required, a failure (required_tools)."""
-    probe = subprocess.run([sys.executable, "-c", LLVM_PROBE], capture_output=True, text=True)
-    if probe.returncode != 0:
-        tool_missing(f"Mitsuba's {VARIANT} does not start (install mitsuba and libllvm19): "
-                     f"{probe.stderr.strip()[-200:]}")
 
 
 @pytest.fixture(scope="module", params=[
