@@ -64,8 +64,13 @@ class FamilyFit:
             return max(math.degrees(math.asin(min(knee, 1.0))), 1e-3)
         return BROAD_WIDTH_DEG
 
+    def title(self) -> str:
+        """The family and its settings: `lambert+microfacet (distribution ggx)`."""
+        said = ", ".join(f"{k} {v}" for k, v in self.settings.items())
+        return f"{self.family} ({said})" if said else self.family
+
     def describe(self) -> str:
-        """The family, its parameters and settings in one phrase."""
+        """The family, its settings, parameters and scale in one phrase."""
         said = ", ".join([f"{k} = {v:.6g}" for k, v in self.values.items()]
                          + [f"{k} {v}" for k, v in self.settings.items()])
         scale = "" if self.scale == 1.0 else f", scale {self.scale:.6g}"

@@ -5,10 +5,10 @@ a black base, whose value is gonio's coat lobe.
 
 Mitsuba's `roughplastic` with the fitted base is not gonio's CoatedDiffuse: its base term is
 rho/pi T(i) T(o) / (eta^2 (1 - F_int)), with the coat's transmittance T and its mean internal
-reflectance F_int, where gonio's is rho/pi (1 - a(i)) (1 - a(o)) / (1 - a_mean); measured
-against Mitsuba itself they differ by 9-50 % (rms over a grid of pairs, docs/exports.md,
-tests/fitting/test_exports_families.py), so the export writes the plugin, which equals gonio's
-model to float32 rounding."""
+reflectance F_int, where gonio's is rho/pi (1 - a(i)) (1 - a(o)) / (1 - a_mean). Measured
+against Mitsuba itself, they differ by 2.6 % (rms over a grid of pairs) for a near-smooth coat
+to 50 % for alpha 0.5 (docs/fitting.md, tests/fitting/test_exports_families.py), so the export
+writes the plugin, which equals gonio's model to float32 rounding (GGX)."""
 
 from __future__ import annotations
 
@@ -19,10 +19,11 @@ from calibration.exports.mitsuba import PLUGIN_USE, listed
 
 COATED_TYPE = "gonio_coated"
 #: The measured mismatch of Mitsuba's roughplastic (one line for the export's notes).
-ROUGHPLASTIC_NOTE = ("Mitsuba's own roughplastic with this base differs from the model by 9-50 % "
-                     "(its base term carries 1/eta^2 and the coat's internal reflectance, "
-                     "docs/exports.md), so the material is gonio's gonio_coated plugin around a "
-                     "roughplastic with a black base (the coat lobe alone, which is gonio's)")
+ROUGHPLASTIC_NOTE = ("Mitsuba's own roughplastic with this base is darker than the model (by 2.6 "
+                     "% rms for a coat of alpha 0.02 to 50 % for 0.5: its base term carries "
+                     "1/eta^2 and the coat's internal reflectance; docs/fitting.md), so the "
+                     "material is gonio's gonio_coated plugin around a roughplastic with a "
+                     "black base (the coat lobe alone, which is gonio's)")
 
 
 def family_material(family: FamilyFit) -> tuple[dict[str, Any], list[str]]:

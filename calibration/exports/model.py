@@ -47,7 +47,7 @@ def fit_notes(result: FitResult, source: str, record: Sequence[str]) -> list[str
     held = ("n/a" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.3g}")
     family = family_fit(result)
     model = (f"{result.distribution} ({result.masking} masking), {params}, eta = "
-             f"{result.eta:.6g}" if family is None else f"{family.describe()}: {params}")
+             f"{result.eta:.6g}" if family is None else f"{family.title()}: {params}")
     return [f"gonio fit of {source}: {model}; chi2/dof fitted {result.chi2_dof_fit:.3g} "
             f"({result.n_fit} points), held out {held} ({result.n_heldout} points)",
             *record]

@@ -13,7 +13,7 @@ TIS at a few incidences (ABg.total_integrated_scatter) and the export notes any 
 The layout, one `Keyword value ...` line per field, `#` comments, is gonio's: OpticStudio
 publishes the entry's fields, not the syntax of its catalog files (ABg_Data/*.DAT), which its
 catalog dialog writes. Enter the fields there (Libraries, ABg Scatter Data Catalogs, Insert;
-docs/exports.md)."""
+docs/fitting.md, "Exports of the model families")."""
 
 from __future__ import annotations
 
