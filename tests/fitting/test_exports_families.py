@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from mitsuba_albedo import load_material, mitsuba_albedo
+from mitsuba_albedo import load_material, mitsuba_albedo, render_white_furnace
 from mitsuba_llvm import llvm_mitsuba  # noqa: F401 (a fixture)
 
 from calibration.exports.family_fit import family_fit, family_of
@@ -263,23 +263,6 @@ PAIRS_DEG = [(ti, to, phi) for ti in (0.0, 20.0, 40.0, 60.0, 75.0)
                                                                         180.0)]
 
 
-def scalar_material(mi, path):
-    """The exported BSDF as Mitsuba's parser loads it in scalar_rgb, the plugin beside the
-    XML (if any) registered first."""
-    import importlib.util
-
-    mi.set_variant("scalar_rgb")
-    plugin = path.with_name("gonio_mitsuba_plugin.py")
-    if plugin.exists():
-        spec = importlib.util.spec_from_file_location("gonio_mitsuba_plugin", plugin)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        module.register()
-    bsdf = ET.parse(path).getroot().find("bsdf")
-    bsdf.set("version", "3.0.0")
-    return mi.load_string(ET.tostring(bsdf, encoding="unicode"))
-
-
 def mitsuba_f(mi, bsdf, toward_camera, toward_light) -> float:
     """Mitsuba's BSDF value (radiance mode) without its cosine factor."""
     si = mi.SurfaceInteraction3f()
@@ -310,7 +293,7 @@ def test_a_lambert_fit_is_mitsubas_diffuse(mi, tmp_path):
                                  tmp_path / "matte.xml")
     assert [p.name for p in paths] == ["matte.xml"] and notes == []
     assert ET.parse(paths[0]).getroot().find("bsdf").get("type") == "diffuse"
-    bsdf = scalar_material(mi, paths[0])
+    bsdf = load_material(paths[0], "scalar_rgb")
     error = relative_differences(mi, bsdf, make_family("lambert", {"rho": 0.62}), 0.9)
     assert np.abs(error).max() < 1e-6
 
@@ -340,7 +323,7 @@ def test_the_coated_plugin_is_gonios_model_and_roughplastic_is_not(mi, tmp_path,
     assert "gonio_mitsuba_plugin.register()" in text
     model = make_family("lambert+microfacet", {"rho": rho, "alpha": alpha, "eta": eta},
                         distribution=distribution)
-    error = relative_differences(mi, scalar_material(mi, paths[0]), model, 0.95)
+    error = relative_differences(mi, load_material(paths[0], "scalar_rgb"), model, 0.95)
     # float32 and the same albedo table; Mitsuba's Beckmann lobe is within 0.6 % of gonio's
     assert np.abs(error).max() < (2e-5 if distribution == "ggx" else 5e-3)
     plastic = mi.load_dict({"type": "roughplastic", "distribution": distribution,
@@ -354,8 +337,6 @@ def test_the_coated_plugin_is_gonios_model_and_roughplastic_is_not(mi, tmp_path,
 @pytest.mark.conformance
 @pytest.mark.usefixtures("llvm_mitsuba")
 def test_mitsuba_samples_and_renders_the_coated_plugin(tmp_path):
-    import mitsuba as mi
-
     rho, alpha, eta = 0.8, 0.3, 1.5
     paths, _ = mitsuba_files(coated_fit(tmp_path, "ggx", alpha, eta, rho), tmp_path / "p.xml")
     bsdf = load_material(paths[0])
@@ -364,22 +345,7 @@ def test_mitsuba_samples_and_renders_the_coated_plugin(tmp_path):
         r, t, sigma = mitsuba_albedo(bsdf, theta, 1 << 18)
         a = float(model.table(math.cos(math.radians(theta))))
         assert t == 0.0 and abs(r - (a + rho * (1.0 - a))) < 4 * sigma + 1e-3
-    scene = paths[0].with_name("scene.xml")
-    scene.write_text(f"""<scene version="3.0.0">
-  <include filename="{paths[0].name}"/>
-  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
-  <sensor type="perspective">
-    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
-    </film>
-    <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-  </sensor>
-  <emitter type="constant"/>
-  <shape type="sphere"><ref id="gonio_sample"/></shape>
-</scene>
-""")
-    image = np.array(mi.render(mi.load_file(str(scene))))
+    image = render_white_furnace(paths[0])
     # a painted sphere in a white furnace: it reflects a(i) + rho (1 - a(i)) of what comes in
     assert image.shape == (16, 16, 3) and np.isfinite(image).all()
     assert 0.5 < image.min() and image.mean() < 1.0

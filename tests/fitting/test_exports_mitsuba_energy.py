@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from mitsuba_albedo import load_material, mitsuba_albedo
+from mitsuba_albedo import load_material, mitsuba_albedo, render_white_furnace
 from mitsuba_llvm import llvm_mitsuba  # noqa: F401 (a fixture)
 
 from calibration.exports import mitsuba_energy
@@ -139,26 +139,8 @@ def test_a_material_the_plugin_cannot_match_is_refused(tmp_path, monkeypatch):
 @pytest.mark.conformance
 @pytest.mark.usefixtures("llvm_mitsuba")
 def test_mitsuba_renders_a_scene_with_the_export(exported):
-    import mitsuba as mi
-
     _, paths, _, _ = exported
-    load_material(paths[0])  # sets the variant and registers the plugin
-    scene = paths[0].with_name("scene.xml")
-    scene.write_text(f"""<scene version="3.0.0">
-  <include filename="{paths[0].name}"/>
-  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
-  <sensor type="perspective">
-    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
-    </film>
-    <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-  </sensor>
-  <emitter type="constant"/>
-  <shape type="sphere"><ref id="gonio_sample"/></shape>
-</scene>
-""")
-    image = np.array(mi.render(mi.load_file(str(scene))))
+    image = render_white_furnace(paths[0])
     # a glass sphere in a white furnace: every pixel sees light, none more than comes in
     assert image.shape == (16, 16, 3) and np.isfinite(image).all()
     assert 0.5 < image.min() and image.mean() < 1.05
