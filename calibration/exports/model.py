@@ -66,13 +66,14 @@ def point_model(result: FitResult) -> Callable[[np.ndarray, np.ndarray], np.ndar
     return f
 
 
-def table_grid(result: FitResult) -> tuple[float, float, bool, str]:
+def table_grid(result: FitResult, data: ReducedData) -> tuple[float, float, bool, str]:
     """(index, lobe width in degrees, isotropic, the model's name) that size a table of the
-    fit's model: the fitted alpha and index, or a family's lobe width (FamilyFit) with no
-    index (its tables are reflection only)."""
+    fit's model: the fitted alpha and index; or a family's lobe width (FamilyFit) and the
+    data's index (a family reflects only: a BTDF table holds the measured data, or zeros)."""
     family = family_fit(result)
     if family is not None:
-        return 1.0, family.lobe_width_deg(), True, f"the fitted {family.describe()} model"
+        return (float(data.meta.get("eta") or 1.0), family.lobe_width_deg(), True,
+                f"the fitted {family.describe()} model")
     alpha = np.atleast_1d(result.alpha)
     return (result.eta, math.degrees(float(alpha.min())), bool(alpha[0] == alpha[-1]),
             f"the fitted {result.distribution} model (alpha "
@@ -102,7 +103,7 @@ def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
     from calibration.exports.zemax_measured import measured_nodes
 
     theta_i, sides, notes = _zemax_layout(data, result, source, record)
-    eta, width_deg, isotropic, _ = table_grid(result)
+    eta, width_deg, isotropic, _ = table_grid(result, data)
     paths = []
     for side, path in zip(sides, side_paths(out_path, sides), strict=True):
         points = data.subset(data.valid & (data.transmission == (side == "BTDF")))
@@ -121,7 +122,7 @@ def measured_zemax_files(data: ReducedData, result: FitResult, out_path: str | P
     from calibration.exports.zemax_measured import measured_table
 
     _, sides, notes = _zemax_layout(data, result, source, record)
-    eta, width_deg, isotropic, name = table_grid(result)
+    eta, width_deg, isotropic, name = table_grid(result, data)
     return [write_zemax(measured_table(data, side, eta, point_model(result), width_deg,
                                        isotropic, notes, name), path)
             for side, path in zip(sides, side_paths(out_path, sides), strict=True)]
@@ -306,7 +307,7 @@ def astm_model_tables(data: ReducedData, result: FitResult, notes: Sequence[str]
 
     good = data.subset(data.valid)
     incidences = np.unique(np.round(good.theta_i_deg, 3))
-    stop = 180.1 if table_grid(result)[2] else 360.0
+    stop = 180.1 if table_grid(result, data)[2] else 360.0
     theta_s, phi_s = (g.ravel() for g in np.meshgrid(np.arange(0.0, 89.5, 1.0),
                                                       np.arange(0.0, stop, 5.0)))
     model = point_model(result)

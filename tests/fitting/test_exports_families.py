@@ -256,6 +256,20 @@ def test_every_family_tabulates_as_zemax_and_astm(reflection_data, tmp_path, fam
     assert f"the fitted {family} (" in measured.read_text()
 
 
+def test_a_family_fit_of_data_with_transmission_keeps_the_datas_index(tmp_path):
+    """A family reflects only: the measured BTDF table keeps the data's index for its
+    AngleOfIncidence (the refracted angle), and the model's BTDF is zero."""
+    data = synthesize("ggx", 0.3, eta=1.51, incidences_deg=(0.0, 30.0))
+    result = saved(tmp_path, fit_json("lambert"))[1]
+    refracted = np.degrees(np.arcsin(np.sin(np.radians([0.0, 30.0])) / 1.51))
+    measured = read_zemax(measured_zemax_files(data, result, tmp_path / "r.bsdf")[0])
+    modelled = read_zemax(zemax_files(data, result, tmp_path / "m.bsdf")[0])
+    for table in (measured, modelled):
+        assert table.scatter_type == "BTDF"
+        np.testing.assert_allclose(table.angle_deg, refracted, atol=1e-9)
+    assert measured.data.max() > 0 and not modelled.data.any() and not modelled.tis.any()
+
+
 # --- Mitsuba 3 --------------------------------------------------------------------------------
 
 PAIRS_DEG = [(ti, to, phi) for ti in (0.0, 20.0, 40.0, 60.0, 75.0)
