@@ -348,6 +348,16 @@ def test_the_coated_plugin_is_gonios_model_and_roughplastic_is_not(mi, tmp_path,
     assert (rms, worst) == pytest.approx(expected, rel=0.02)
 
 
+def test_a_coat_fitted_with_correlated_masking_says_mitsuba_masks_separably(tmp_path):
+    fitted = fit_json("lambert+microfacet")
+    fitted["masking"] = "correlated"
+    result = saved(tmp_path, fitted)[1]
+    assert family_fit(result).settings == {"distribution": "ggx", "masking": "correlated"}
+    paths, _ = mitsuba_files(result, tmp_path / "paint.xml")
+    assert ("the fit's coat used correlated masking; Mitsuba's roughplastic uses separable "
+            "Smith") in paths[0].read_text()
+
+
 @pytest.mark.conformance
 @pytest.mark.usefixtures("llvm_mitsuba")
 def test_mitsuba_samples_and_renders_the_coated_plugin(tmp_path):
