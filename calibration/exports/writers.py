@@ -84,7 +84,7 @@ def _fitted(data: ReducedData, record: Mapping[str, Any], request: ExportRequest
     """The fit to export (model.fit_for_export), its warnings and the file's lines (the record,
     the facts, the warnings)."""
     result, warnings = fit_for_export(data, request.fit_options, request.fit_file, request.force)
-    eta = result.eta if family_fit(result) is None else None  # a family's tables: reflection
+    eta = result.eta if family_fit(result) is None else None  # a family's tables: the data's index
     return result, warnings, [*record_lines(record), *fact_lines(data, eta), *warnings]
 
 
