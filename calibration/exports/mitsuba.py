@@ -19,6 +19,9 @@ from pathlib import Path
 from typing import Any
 
 SCENE_VERSION = "3.0.0"
+#: Parameters written as `<rgb>` (Mitsuba's spectra and textures); the others are floats.
+RGB_PARAMETERS = ("specular_reflectance", "specular_transmittance", "eta", "k", "reflectance",
+                  "diffuse_reflectance")
 #: The plugin's file name beside an export that needs it, and its type in the XML.
 PLUGIN_FILE = "gonio_mitsuba_plugin.py"
 PLUGIN_TYPE = "gonio_multiscatter"
@@ -52,13 +55,15 @@ def material_parameters(distribution: str, alpha: float | tuple[float, float], e
     return {"type": "roughconductor", "params": params}
 
 
+def listed(values: Sequence[float], digits: int = 6) -> str:
+    """Numbers as a plugin's comma-separated list property."""
+    return ", ".join(f"{float(v):.{digits}g}" for v in values)
+
+
 def plugin_material(single: dict[str, Any], ior: float, theta_deg: Sequence[float],
                     tables: dict[str, Sequence[float]]) -> dict[str, Any]:
     """The `gonio_multiscatter` material around the single-scattering one: its tables (names
     as mitsuba_plugin.TABLES) at the angles theta_deg, and the index of transmitted light."""
-    def listed(values: Sequence[float]) -> str:
-        return ", ".join(f"{float(v):.6g}" for v in values)
-
     params: dict[str, Any] = {"ior": float(ior), "theta_deg": listed(theta_deg)}
     params.update({name: listed(values) for name, values in tables.items()})
     return {"type": PLUGIN_TYPE, "params": params, "nested": {"single": single}}
@@ -70,7 +75,7 @@ def _add_bsdf(parent: ET.Element, material: dict[str, Any], **attributes: str) -
     for name, value in material["params"].items():
         if isinstance(value, str):
             ET.SubElement(bsdf, "string", name=name, value=value)
-        elif name in ("specular_reflectance", "specular_transmittance", "eta", "k"):
+        elif name in RGB_PARAMETERS:
             ET.SubElement(bsdf, "rgb", name=name, value=f"{value:.9g}")
         else:
             ET.SubElement(bsdf, "float", name=name, value=f"{value:.9g}")

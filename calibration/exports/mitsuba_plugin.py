@@ -1,5 +1,6 @@
-"""Mitsuba 3 BSDF plugin `gonio_multiscatter`: a nested single-scattering BSDF plus the energy
-that scattering more than once adds, as cosine lobes whose albedo follows a table.
+"""Mitsuba 3 BSDF plugins of gonio's exports: `gonio_multiscatter`, a nested single-scattering
+BSDF plus the energy that scattering more than once adds, as cosine lobes whose albedo follows a
+table; and `gonio_coated`, the `lambert+microfacet` family (model.bsdf.families.coated).
 
 The table gives, at incidence angles `theta_deg` from the normal of the side the light arrives
 on, the reflectance and transmittance that the nested BSDF lacks, from outside (+z) and from
@@ -9,6 +10,12 @@ two), so the directional albedo of light arriving from any direction is the nest
 the table's. Imports only mitsuba and drjit: gonio's Mitsuba export writes this file beside
 the XML, and a script that renders the XML calls register() first (a scene file cannot load a
 Python plugin). Non-polarized variants only.
+
+`gonio_coated` is gonio's CoatedDiffuse: a nested coat (Mitsuba's `roughplastic` with a black
+base, whose value is gonio's coat lobe) plus rho/pi (1 - a(i)) (1 - a(o)) / (1 - a_mean), a(mu)
+the coat's directional albedo as gonio tabulates it (`albedo_mu`, `albedo`: linear in mu, held
+below the first cosine) and a_mean its cosine-weighted mean (`albedo_mean`); sampled as gonio
+samples it (the coat with probability a(i) / (a(i) + rho (1 - a(i))), else the cosine lobe).
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 
 PLUGIN_NAME = "gonio_multiscatter"
+COATED_NAME = "gonio_coated"
 #: Table properties: reflectance and transmittance of light arriving from outside and inside.
 TABLES = ("reflectance_outside", "transmittance_outside", "reflectance_inside",
           "transmittance_inside")
@@ -31,18 +39,37 @@ def _numbers(props, name: str) -> list[float]:
     return [float(x) for x in str(props[name]).split(",")]
 
 
+def _interpolated(x, nodes: list[float], values: list[float]):
+    """values at x, linear between nodes, held at the end values beyond them."""
+    out = x * 0.0 + values[0]
+    for k in range(len(nodes) - 1):
+        share = dr.clip((x - nodes[k]) / (nodes[k + 1] - nodes[k]), 0.0, 1.0)
+        out = dr.select(x > nodes[k], values[k] + share * (values[k + 1] - values[k]), out)
+    return out
+
+
+def _nested(props, plugin: str):
+    """The one nested BSDF of the plugin's properties."""
+    nested = [props[k] for k in props.keys() if isinstance(props[k], mi.BSDF)]
+    if len(nested) != 1:
+        raise RuntimeError(f"{plugin}: needs exactly one nested bsdf, got {len(nested)}")
+    return nested[0]
+
+
+def _refuse_polarized(plugin: str) -> None:
+    """A RuntimeError in a polarized variant, which the plugins do not support."""
+    if mi.is_polarized:
+        raise RuntimeError(f"{plugin}: polarized variants are not supported")
+
+
 class MultipleScatteringMethods:
     """The nested BSDF plus the tabulated cosine lobes (see the module docstring): the methods
     register() gives a mitsuba.BSDF subclass of the variant in use (nanobind takes one base)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
-        if mi.is_polarized:
-            raise RuntimeError(f"{PLUGIN_NAME}: polarized variants are not supported")
-        nested = [props[k] for k in props.keys() if isinstance(props[k], mi.BSDF)]
-        if len(nested) != 1:
-            raise RuntimeError(f"{PLUGIN_NAME}: needs exactly one nested bsdf, got {len(nested)}")
-        self.single = nested[0]
+        _refuse_polarized(PLUGIN_NAME)
+        self.single = _nested(props, PLUGIN_NAME)
         self.eta = float(props["ior"])
         self.theta = _numbers(props, "theta_deg")
         self.tables = {name: _numbers(props, name) for name in TABLES}
@@ -56,13 +83,7 @@ class MultipleScatteringMethods:
 
     def _table(self, name: str, theta_deg):
         """The table `name` at theta_deg, linear between its angles, constant beyond them."""
-        values, nodes = self.tables[name], self.theta
-        out = theta_deg * 0.0 + values[0]
-        for k in range(len(nodes) - 1):
-            share = dr.clip((theta_deg - nodes[k]) / (nodes[k + 1] - nodes[k]), 0.0, 1.0)
-            out = dr.select(theta_deg > nodes[k], values[k] + share * (values[k + 1] - values[k]),
-                            out)
-        return out
+        return _interpolated(theta_deg, self.theta, self.tables[name])
 
     def _albedos(self, light):
         """(reflectance, transmittance) the lobes add for light arriving along `light`."""
@@ -149,10 +170,85 @@ class MultipleScatteringMethods:
         return f"{PLUGIN_NAME}[single = {self.single}, theta_deg = {self.theta}]"
 
 
+class CoatedDiffuseMethods:
+    """The coat plus the coupled Lambertian base (the module docstring): the methods register()
+    gives a mitsuba.BSDF subclass of the variant in use."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        _refuse_polarized(COATED_NAME)
+        self.coat = _nested(props, COATED_NAME)
+        self.rho = float(props["rho"])
+        self.mu, self.albedo = _numbers(props, "albedo_mu"), _numbers(props, "albedo")
+        self.mean = float(props["albedo_mean"])
+        if len(self.mu) != len(self.albedo) or len(self.mu) < 2:
+            raise RuntimeError(f"{COATED_NAME}: albedo_mu and albedo need the same length (>= 2)")
+        glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+        diffuse = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        self.m_components = [glossy, diffuse]
+        self.m_flags = glossy | diffuse
+
+    def _base(self, si, wo):
+        """(the base's f cos wo at wo, its density of wo), 0 unless both are above."""
+        cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
+        up = (cos_i > 0) & (cos_o > 0)
+        a_i = _interpolated(cos_i, self.mu, self.albedo)
+        a_o = _interpolated(cos_o, self.mu, self.albedo)
+        value = self.rho / math.pi * (1.0 - a_i) * (1.0 - a_o) / (1.0 - self.mean) * cos_o
+        return dr.select(up, value, 0.0), dr.select(up, cos_o / math.pi, 0.0)
+
+    def _coat_probability(self, si):
+        """Probability of sampling the coat at si.wi: its share of the reflected energy."""
+        a = _interpolated(mi.Frame3f.cos_theta(si.wi), self.mu, self.albedo)
+        total = a + self.rho * (1.0 - a)
+        return dr.select(total > 0, a / dr.select(total > 0, total, 1.0), 1.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        """f cos wo: the coat's plus the base's."""
+        return self.coat.eval(ctx, si, wo, active) + mi.Spectrum(self._base(si, wo)[0])
+
+    def pdf(self, ctx, si, wo, active=True):
+        """Density of sample()'s wo: the mixture of the coat's and the cosine lobe's."""
+        p = self._coat_probability(si)
+        return p * self.coat.pdf(ctx, si, wo, active) + (1.0 - p) * self._base(si, wo)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        """eval() and pdf() together."""
+        value, pdf = self.coat.eval_pdf(ctx, si, wo, active)
+        base, base_pdf = self._base(si, wo)
+        p = self._coat_probability(si)
+        return value + mi.Spectrum(base), p * pdf + (1.0 - p) * base_pdf
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        """The coat's sample or a cosine-lobe direction, with the mixture's weight."""
+        p = self._coat_probability(si)
+        use_base = sample1 >= p
+        rescaled = dr.select(use_base, (sample1 - p) / (1.0 - p), sample1 / p)
+        bs, coat_weight = self.coat.sample(ctx, si, rescaled, sample2, active)
+        # a sample the coat fails stays failed (as gonio_multiscatter's nested one)
+        coat_ok = (bs.pdf > 0) & dr.any(coat_weight != 0)
+        wo = dr.select(use_base, mi.warp.square_to_cosine_hemisphere(sample2), bs.wo)
+        value, pdf = self.eval_pdf(ctx, si, wo, active)
+        bs.wo, bs.pdf, bs.eta = wo, pdf, 1.0
+        bs.sampled_type = dr.select(use_base, mi.UInt32(+mi.BSDFFlags.DiffuseReflection),
+                                    mi.UInt32(+mi.BSDFFlags.GlossyReflection))
+        bs.sampled_component = dr.select(use_base, mi.UInt32(1), mi.UInt32(0))
+        ok = (active & (pdf > 0) & (use_base | coat_ok)
+              & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0))
+        return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+
+    def to_string(self):
+        """The plugin, its coat and base albedo."""
+        return f"{COATED_NAME}[coat = {self.coat}, rho = {self.rho}]"
+
+
 def register() -> None:
-    """Make `gonio_multiscatter` known to Mitsuba's loader in the variant in use (call it after
-    mitsuba.set_variant, once per variant)."""
-    methods = {name: value for name, value in vars(MultipleScatteringMethods).items()
-               if name == "__init__" or not name.startswith("__")}
-    bsdf = type("MultipleScatteringBSDF", (mi.BSDF,), methods)
-    mi.register_bsdf(PLUGIN_NAME, lambda props: bsdf(props))
+    """Make `gonio_multiscatter` and `gonio_coated` known to Mitsuba's loader in the variant in
+    use (call it after mitsuba.set_variant, once per variant)."""
+    for name, methods_class, class_name in (
+            (PLUGIN_NAME, MultipleScatteringMethods, "MultipleScatteringBSDF"),
+            (COATED_NAME, CoatedDiffuseMethods, "CoatedDiffuseBSDF")):
+        methods = {key: value for key, value in vars(methods_class).items()
+                   if key == "__init__" or not key.startswith("__")}
+        bsdf = type(class_name, (mi.BSDF,), methods)
+        mi.register_bsdf(name, lambda props, bsdf=bsdf: bsdf(props))

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.exports.astm import side_paths, sides_of
+from calibration.exports.family_fit import MICROFACET, FamilyFit, family_fit
 from calibration.exports.mitsuba import (
     PLUGIN_TABLES,
     PLUGIN_TYPE,
@@ -44,20 +45,39 @@ def fit_notes(result: FitResult, source: str, record: Sequence[str]) -> list[str
     params = ", ".join(f"{n} = {v:.6g} +- {e:.2g}"
                        for n, v, e in zip(result.names, result.values, result.errors, strict=True))
     held = ("n/a" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.3g}")
-    return [f"gonio fit of {source}: {result.distribution} ({result.masking} masking), {params}, "
-            f"eta = {result.eta:.6g}; chi2/dof fitted {result.chi2_dof_fit:.3g} "
+    family = family_fit(result)
+    model = (f"{result.distribution} ({result.masking} masking), {params}, eta = "
+             f"{result.eta:.6g}" if family is None else f"{family.title()}: {params}")
+    return [f"gonio fit of {source}: {model}; chi2/dof fitted {result.chi2_dof_fit:.3g} "
             f"({result.n_fit} points), held out {held} ({result.n_heldout} points)",
             *record]
 
 
 def point_model(result: FitResult) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """The fitted model at a point (no aperture average), scale included: f(wi, wo), 1/sr."""
+    family = family_fit(result)
+    if family is not None:
+        return family.point_model()
     model = result.model()
 
     def f(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         return result.scale * model.eval(wi, wo)
 
     return f
+
+
+def table_grid(result: FitResult, data: ReducedData) -> tuple[float, float, bool, str]:
+    """(index, lobe width in degrees, isotropic, the model's name) that size a table of the
+    fit's model: the fitted alpha and index; or a family's lobe width (FamilyFit) and the
+    data's index (a family reflects only: a BTDF table holds the measured data, or zeros)."""
+    family = family_fit(result)
+    if family is not None:
+        return (float(data.meta.get("eta") or 1.0), family.lobe_width_deg(), True,
+                f"the fitted {family.describe()} model")
+    alpha = np.atleast_1d(result.alpha)
+    return (result.eta, math.degrees(float(alpha.min())), bool(alpha[0] == alpha[-1]),
+            f"the fitted {result.distribution} model (alpha "
+            f"{', '.join(f'{a:.6g}' for a in alpha)})")
 
 
 def _zemax_layout(data: ReducedData, result: FitResult, source: str, record: Sequence[str]
@@ -83,15 +103,13 @@ def zemax_files(data: ReducedData, result: FitResult, out_path: str | Path,
     from calibration.exports.zemax_measured import measured_nodes
 
     theta_i, sides, notes = _zemax_layout(data, result, source, record)
-    alpha = np.atleast_1d(result.alpha)
-    isotropic = bool(alpha[0] == alpha[-1])
+    eta, width_deg, isotropic, _ = table_grid(result, data)
     paths = []
     for side, path in zip(sides, side_paths(out_path, sides), strict=True):
         points = data.subset(data.valid & (data.transmission == (side == "BTDF")))
-        at = measured_nodes(points, side, result.eta, isotropic)
-        table = tabulate(point_model(result), side, theta_i, result.eta,
-                         math.degrees(float(alpha.min())), isotropic=isotropic,
-                         comments=notes, nodes=(at.azimuth, at.radial))
+        at = measured_nodes(points, side, eta, isotropic)
+        table = tabulate(point_model(result), side, theta_i, eta, width_deg,
+                         isotropic=isotropic, comments=notes, nodes=(at.azimuth, at.radial))
         paths.append(write_zemax(table, path))
     return paths
 
@@ -104,12 +122,9 @@ def measured_zemax_files(data: ReducedData, result: FitResult, out_path: str | P
     from calibration.exports.zemax_measured import measured_table
 
     _, sides, notes = _zemax_layout(data, result, source, record)
-    alpha = np.atleast_1d(result.alpha)
-    name = (f"the fitted {result.distribution} model (alpha "
-            f"{', '.join(f'{a:.6g}' for a in alpha)})")
-    return [write_zemax(measured_table(data, side, result.eta, point_model(result),
-                                       math.degrees(float(alpha.min())),
-                                       bool(alpha[0] == alpha[-1]), notes, name), path)
+    eta, width_deg, isotropic, name = table_grid(result, data)
+    return [write_zemax(measured_table(data, side, eta, point_model(result), width_deg,
+                                       isotropic, notes, name), path)
             for side, path in zip(sides, side_paths(out_path, sides), strict=True)]
 
 
@@ -123,6 +138,9 @@ def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
     from calibration.exports.mitsuba_energy import dropped_energy_line
 
     notes = fit_notes(result, source, record)
+    family = family_fit(result)
+    if family is not None:
+        return _family_mitsuba_files(family, out_path, notes)
     if result.distribution == "phong":
         notes.append("Mitsuba 3 has no Phong distribution: written as Beckmann of the same alpha "
                      "(Walter's mapping)")
@@ -143,6 +161,18 @@ def mitsuba_files(result: FitResult, out_path: str | Path, source: str = "",
     material, said = _multiple_scattering_material(result, material)
     path = write_mitsuba(material, out_path, [*notes, *said])
     return [path, write_plugin_beside(path)], []
+
+
+def _family_mitsuba_files(family: FamilyFit, out_path: str | Path, notes: list[str]
+                          ) -> tuple[list[Path], list[str]]:
+    """A family fit's Mitsuba material (mitsuba_families.family_material) and, for a plugin
+    material, the plugin file beside it."""
+    from calibration.exports.mitsuba_families import COATED_TYPE, family_material
+
+    material, said = family_material(family)
+    path = write_mitsuba(material, out_path, [*notes, *said])
+    return ([path, write_plugin_beside(path)] if material["type"] == COATED_TYPE
+            else [path]), []
 
 
 def _multiple_scattering_material(result: FitResult, single: dict
@@ -174,13 +204,22 @@ def _multiple_scattering_material(result: FitResult, single: dict
 
 def result_from_json(fitted: dict, where: str) -> FitResult:
     """The FitResult of a `gonio fit --json` object (its covariance: the parameters'
-    variances); a CalibrationError names `where` if the object is not one."""
+    variances), of the family its `family` names (the microfacet interface where it names
+    none); a CalibrationError names `where` if the object is not one."""
     try:
+        family = fitted.get("family") or MICROFACET
         params = fitted["parameters"]
         names = tuple(n for n, p in params.items() if not p.get("fixed")
                       and n != "phong_exponent")
         values = np.array([float(params[n]["value"]) for n in names])
         errors = np.array([float(params[n].get("sigma", 0.0)) for n in names])
+        scores = dict(chi2_dof_fit=float(fitted["chi2_dof_fit"]), n_fit=int(fitted["n_fit"]),
+                      chi2_dof_heldout=fitted.get("chi2_dof_heldout"),
+                      n_heldout=int(fitted.get("n_heldout", 0)),
+                      preferred_by=fitted.get("preferred_by_delta_chi2"),
+                      candidates=list(fitted.get("candidates", [])))
+        if family != MICROFACET:
+            return _family_result(fitted, family, names, values, errors, scores, where)
         ms, diffraction = fitted.get("multiple_scattering"), fitted.get("diffraction")
         aperture = float(fitted.get("aperture_half_angle_deg") or 0.0)
         divergence = float(fitted.get("beam_divergence_deg") or 0.0)
@@ -190,12 +229,7 @@ def result_from_json(fitted: dict, where: str) -> FitResult:
             distribution=fitted["distribution"], masking=fitted["masking"], names=names,
             values=values, errors=errors, covariance=np.diag(errors ** 2),
             eta=float(params["eta"]["value"]),
-            k=float(params["k"]["value"]) if "k" in params else None,
-            chi2_dof_fit=float(fitted["chi2_dof_fit"]), n_fit=int(fitted["n_fit"]),
-            chi2_dof_heldout=fitted.get("chi2_dof_heldout"),
-            n_heldout=int(fitted.get("n_heldout", 0)),
-            preferred_by=fitted.get("preferred_by_delta_chi2"),
-            candidates=list(fitted.get("candidates", [])),
+            k=float(params["k"]["value"]) if "k" in params else None, **scores,
             optics=Smearing(aperture, smearing_order(aperture, alpha), divergence,
                             smearing_order(divergence, alpha)),
             walks=None if ms is None else int(ms["walks"]),
@@ -206,6 +240,23 @@ def result_from_json(fitted: dict, where: str) -> FitResult:
         from calibration.fit import Diffraction
 
         result.diffraction = Diffraction(**diffraction)
+    return result
+
+
+def _family_result(fitted: dict, family: str, names: tuple[str, ...], values: np.ndarray,
+                   errors: np.ndarray, scores: dict, where: str) -> FitResult:
+    """The FitResult of a family's `gonio fit --json` object, once its parameters build the
+    family's model (a CalibrationError naming `where` and what is wrong otherwise)."""
+    result = FitResult(distribution=fitted.get("distribution") or "",
+                       masking=fitted.get("masking") or "", names=names, values=values,
+                       errors=errors, covariance=np.diag(errors ** 2),
+                       eta=float(dict(zip(names, values, strict=True)).get("eta", 1.0)), k=None,
+                       family=family, **scores)
+    try:
+        family_fit(result).model()
+    except ValueError as exc:
+        raise CalibrationError(f"{where}: the {family} fit does not build its model ({exc})"
+                               ) from None
     return result
 
 
@@ -227,7 +278,8 @@ def check_describes(result: FitResult, force: bool, from_file: bool = False) -> 
     worst, which = worst_chi2_dof(result.chi2_dof_fit, result.chi2_dof_heldout)
     if worst <= MAX_CHI2_DOF:
         return []
-    said = (f"the {result.distribution} fit's {which} chi2/dof is {worst:.3g} (above "
+    name = result.distribution if family_fit(result) is None else result.family
+    said = (f"the {name} fit's {which} chi2/dof is {worst:.3g} (above "
             f"{MAX_CHI2_DOF:g}): the model does not describe the data within their "
             "uncertainties")
     if not force:
@@ -255,11 +307,10 @@ def astm_model_tables(data: ReducedData, result: FitResult, notes: Sequence[str]
 
     good = data.subset(data.valid)
     incidences = np.unique(np.round(good.theta_i_deg, 3))
-    alpha = np.atleast_1d(result.alpha)
-    stop = 180.1 if alpha[0] == alpha[-1] else 360.0
+    stop = 180.1 if table_grid(result, data)[2] else 360.0
     theta_s, phi_s = (g.ravel() for g in np.meshgrid(np.arange(0.0, 89.5, 1.0),
                                                       np.arange(0.0, stop, 5.0)))
-    model = result.model()
+    model = point_model(result)
     wavelength = good.meta.get("wavelength_nm")
     tables = []
     for side in sides_of(good.transmission):
@@ -269,7 +320,7 @@ def astm_model_tables(data: ReducedData, result: FitResult, notes: Sequence[str]
             if side == "BTDF":
                 wo[:, 2] *= -1.0
             wi = np.broadcast_to(unit_vectors(np.array([ti]), np.array([180.0])), wo.shape)
-            rows.append((np.full(len(wo), ti), result.scale * model.eval(wi, wo)))
+            rows.append((np.full(len(wo), ti), model(wi, wo)))
         ti_all = np.concatenate([r[0] for r in rows])
         n = len(ti_all)
         tables.append(AstmTable(side, np.radians(ti_all), np.full(n, math.pi),

@@ -14,6 +14,7 @@ from calibration.exports.astm import AstmTable, astm_tables, side_paths, write_a
 from calibration.exports.bird import write_bird
 from calibration.exports.bird_supplement import supplemented
 from calibration.exports.cf import write_reduced_netcdf
+from calibration.exports.family_fit import check_family, family_fit, family_of
 from calibration.exports.measured import fact_lines, shared_error_lines, write_reduced_csv
 from calibration.exports.model import (
     astm_model_tables,
@@ -83,7 +84,8 @@ def _fitted(data: ReducedData, record: Mapping[str, Any], request: ExportRequest
     """The fit to export (model.fit_for_export), its warnings and the file's lines (the record,
     the facts, the warnings)."""
     result, warnings = fit_for_export(data, request.fit_options, request.fit_file, request.force)
-    return result, warnings, [*record_lines(record), *fact_lines(data, result.eta), *warnings]
+    eta = result.eta if family_fit(result) is None else None  # a family's tables: the data's index
+    return result, warnings, [*record_lines(record), *fact_lines(data, eta), *warnings]
 
 
 def _astm_files(tables: Sequence[AstmTable], out: Path) -> list[Path]:
@@ -105,6 +107,25 @@ def model_mitsuba(data: ReducedData, out: Path, record: Mapping[str, Any],
     result, warnings, lines = _fitted(data, record, request)
     paths, said = mitsuba_files(result, out, source, lines, request.single_scattering)
     return paths, [*warnings, *said]
+
+
+def model_abg(data: ReducedData, out: Path, record: Mapping[str, Any],
+              request: ExportRequest, source: str = "") -> Written:
+    """An ABg fit as an entry of Zemax OpticStudio's ABg scatter data catalog (zemax_abg),
+    named after the file, at the data's wavelength; a fit of another family is refused, naming
+    the formats that take it (family_fit.check_family)."""
+    from calibration.exports.zemax_abg import abg_entry, tis_notes, write_abg
+
+    result, warnings, lines = _fitted(data, record, request)
+    family = family_fit(result)
+    check_family("abg", family_of(result))
+    tis_line, said = tis_notes(family)
+    entry = abg_entry(family, out.stem, data.meta.get("wavelength_nm"))
+    notes = [*fit_notes(result, source, lines), *tis_line, *said]
+    if entry.wave_um == 0.0:
+        notes.append("the data give no wavelength: Wave 0, so OpticStudio does not scale A "
+                     "and B with wavelength")
+    return [write_abg(entry, out, notes)], [*warnings, *said]
 
 
 #: Zemax of the data, with the model filling where there is none (model.measured_zemax_files).

@@ -58,6 +58,7 @@ class FitResult:
     # transmitted pairs in reverse where better (higher_orders_at's both_ways)
     diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
     fit_time_s: float = 0.0  # wall time of fit()
+    family: str = "microfacet"  # the model family (model.bsdf.families), else the interface
 
     @property
     def clearly_preferred(self) -> bool:

@@ -38,6 +38,8 @@ FORMATS: dict[str, FileFormat] = {fmt.name: fmt for fmt in (
                reader="calibration.imports:from_bird"),
     FileFormat(name="mitsuba", suffixes=(".xml",), default_what="model",
                writers={"model": f"{_WRITERS}:model_mitsuba"}),
+    FileFormat(name="abg", suffixes=(".abg", ".txt"), default_what="model",
+               writers={"model": f"{_WRITERS}:model_abg"}),
 )}
 
 #: What a file that no format's magic, suffix or keyword claims is read as: a plain CSV of

@@ -40,7 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fit", metavar="FIT.json",
                    help="the fit to export (the output of `gonio fit RUN --json`) instead of "
                         "fitting here with the fit options below (zemax, astm --what model, "
-                        "mitsuba)")
+                        "mitsuba, abg); a fit of a model family exports where the family has a "
+                        "form (abg: an ABg fit; mitsuba: lambert, lambert+microfacet), and as "
+                        "zemax and astm tables of its values")
     add_force_option(p, also="; and export a fit whose chi2/dof says it does not describe "
                              "the data (refused otherwise)")
     p.add_argument("--single-scattering", action="store_true",

@@ -25,13 +25,15 @@ from libbsdf_reader import ReaderUnavailable, ToolMissing, build_probe, libbsdf_
 from required_tools import tool_missing
 
 from calibration.exports.astm import directions, read_astm
+from calibration.exports.model import zemax_files
 from calibration.exports.zemax import read_zemax, turned, write_zemax
 from calibration.exports.zemax_measured import measured_nodes, measured_table
-from calibration.fit import FitOptions, fit
+from calibration.fit import FitOptions, FitResult, fit
 from calibration.pipeline import reduce_run
 from calibration.reduced import ReducedData
 from calibration.synthetic import synthesize
 from gonio_cli.main import main
+from model.bsdf.families import make_family
 
 pytestmark = pytest.mark.conformance
 
@@ -192,15 +194,47 @@ def test_zemax_model_read_by_libbsdf(probe, ground_glass, tmp_path):
     data = reduce_run(run)
     for path in export(run, fit_json, "zemax", "model", tmp_path / "model.bsdf"):
         table = read_zemax(path)
-        points = side(data, table.scatter_type)
-        at = measured_nodes(points, table.scatter_type, points.meta["eta"], True)
-        blocks = [int(np.flatnonzero(np.isclose(table.angle_deg, a))[0]) for a in at.angle_deg]
-        expected = table.data[0, np.array(blocks)[at.block],
-                              np.searchsorted(table.azimuth_deg, at.azimuth),
-                              np.searchsorted(table.radial_deg, at.radial)]
-        _, got = libbsdf_values(probe, "zemax", path,
-                                *zemax_directions(path, points.subset(at.point)))
-        assert_within_float32(expected, got, blend_bounds(table, at), path.name)
+        assert_nodes_read_back(probe, path, side(data, table.scatter_type),
+                               data.meta["eta"])
+
+
+def assert_nodes_read_back(probe, path: Path, points: ReducedData, eta: float) -> np.ndarray:
+    """libbsdf's values of a model table at the measured directions, its nodes (the table's
+    index `eta`), against the table's own values there (assert_within_float32); returns the
+    table's values."""
+    table = read_zemax(path)
+    at = measured_nodes(points, table.scatter_type, eta, True)
+    blocks = [int(np.flatnonzero(np.isclose(table.angle_deg, a))[0]) for a in at.angle_deg]
+    expected = table.data[0, np.array(blocks)[at.block],
+                          np.searchsorted(table.azimuth_deg, at.azimuth),
+                          np.searchsorted(table.radial_deg, at.radial)]
+    _, got = libbsdf_values(probe, "zemax", path,
+                            *zemax_directions(path, points.subset(at.point)))
+    assert_within_float32(expected, got, blend_bounds(table, at), path.name)
+    return expected
+
+
+@pytest.mark.parametrize("family, values, settings", [
+    ("lambert", {"rho": 0.62}, {}), ("oren-nayar", {"rho": 0.7, "sigma": 0.35}, {}),
+    ("lambert+microfacet", {"rho": 0.5, "alpha": 0.2, "eta": 1.5}, {"distribution": "ggx"}),
+    ("abg", {"A": 2e-3, "B": 1e-4, "g": 1.8}, {})])
+def test_zemax_family_tables_read_by_libbsdf(probe, tmp_path, family, values, settings):
+    """A model family's Zemax table (the general export of every family): libbsdf returns the
+    family's value at every measured direction, its nodes."""
+    data = synthesize("ggx", 0.3, incidences_deg=(0.0, 30.0, 60.0), sides=("reflection",))
+    result = FitResult(distribution=settings.get("distribution", ""), masking="separable",
+                       names=tuple(values), values=np.array(list(values.values())),
+                       errors=np.zeros(len(values)), covariance=np.eye(len(values)), eta=1.0,
+                       k=None, chi2_dof_fit=1.0, n_fit=len(data.bsdf), chi2_dof_heldout=None,
+                       n_heldout=0, preferred_by=None, family=family)
+    (path,) = zemax_files(data, result, tmp_path / f"{family}.bsdf", "test")
+    points = data.subset(data.valid)
+    at = measured_nodes(points, "BRDF", 1.0, True)
+    expected = assert_nodes_read_back(probe, path, points, 1.0)
+    model = make_family(family, values, **settings)
+    # the nodes are the measured directions to the grid's rounding (1e-6 deg)
+    np.testing.assert_allclose(expected, model.eval(points.wi[at.point], points.wo[at.point]),
+                               rtol=1e-5)
 
 
 @pytest.mark.parametrize("scatter_type", ["BRDF", "BTDF"])

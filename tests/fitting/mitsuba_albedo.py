@@ -17,13 +17,13 @@ VARIANT = "llvm_ad_rgb"
 PLUGIN_MODULE = "gonio_mitsuba_plugin"
 
 
-def load_material(path: str | Path):
-    """The exported BSDF as Mitsuba's own parser loads it, in VARIANT; the plugin beside the
+def load_material(path: str | Path, variant: str = VARIANT):
+    """The exported BSDF as Mitsuba's own parser loads it, in `variant`; the plugin beside the
     XML, if there is one, imported and registered first."""
     import mitsuba as mi
 
     path = Path(path)
-    mi.set_variant(VARIANT)
+    mi.set_variant(variant)
     plugin = path.with_name(f"{PLUGIN_MODULE}.py")
     if plugin.exists():
         spec = importlib.util.spec_from_file_location(PLUGIN_MODULE, plugin)
@@ -52,3 +52,28 @@ def mitsuba_albedo(bsdf, theta_deg: float, samples: int, seed: int = 7
     up = np.array(sample.wo)[2] > 0
     return (float(np.mean(np.where(up, w, 0.0))), float(np.mean(np.where(up, 0.0, w))),
             float(np.std(w) / math.sqrt(samples)))
+
+
+def render_white_furnace(path: str | Path) -> np.ndarray:
+    """A 16 x 16 render (VARIANT, path tracing) of a sphere of the exported material under a
+    uniform white sky: every pixel sees at most the light that comes in."""
+    import mitsuba as mi
+
+    path = Path(path)
+    load_material(path)  # sets the variant and registers the plugin
+    scene = path.with_name("scene.xml")
+    scene.write_text(f"""<scene version="3.0.0">
+  <include filename="{path.name}"/>
+  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+    </film>
+    <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
+  </sensor>
+  <emitter type="constant"/>
+  <shape type="sphere"><ref id="gonio_sample"/></shape>
+</scene>
+""")
+    return np.array(mi.render(mi.load_file(str(scene))))

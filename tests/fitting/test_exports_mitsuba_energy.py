@@ -8,14 +8,12 @@ plugin cannot match the model the export refuses."""
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from mitsuba_albedo import VARIANT, load_material, mitsuba_albedo
-from required_tools import tool_missing
+from mitsuba_albedo import load_material, mitsuba_albedo, render_white_furnace
+from mitsuba_llvm import llvm_mitsuba  # noqa: F401 (a fixture)
 
 from calibration.exports import mitsuba_energy
 from calibration.exports.mitsuba import PLUGIN_TABLES
@@ -23,12 +21,6 @@ from calibration.exports.model import mitsuba_files
 from calibration.fit import FitResult
 from calibration.values import CalibrationError
 
-#: Dr.Jit's LLVM backend aborts the process with too old an LLVM (docs/performance.md): tried
-#: in a child process first.
-LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); "
-              "b = mi.load_dict({'type': 'roughdielectric'}); "
-              "si = mi.SurfaceInteraction3f(); si.wi = mi.Vector3f(0, 0, 1); "
-              "print(b.sample(mi.BSDFContext(), si, mi.Float(0.5), mi.Point2f(0.5, 0.5))[1])")
 ANGLES = mitsuba_energy.REPORT_ANGLES_DEG
 SAMPLES = 1 << 18  # per incidence; the standard error of R + T is about 2e-4
 
@@ -40,17 +32,6 @@ def multiple_scattering_fit(alpha: float, masking: str, **changes) -> FitResult:
                        eta=1.51, k=None, chi2_dof_fit=1.0, n_fit=40, chi2_dof_heldout=1.1,
                        n_heldout=20, preferred_by=None, walks=64)
     return dataclasses.replace(result, **changes)
-
-
-@pytest.fixture(scope="module")
-def llvm_mitsuba():
-    """Mitsuba 3 (the `mitsuba` extra, in `test`) with its LLVM variant running here
-    (libllvm19 or newer), for the tests that sample or render with it; else a skip or, where
-    the conformance suite is required, a failure (required_tools)."""
-    probe = subprocess.run([sys.executable, "-c", LLVM_PROBE], capture_output=True, text=True)
-    if probe.returncode != 0:
-        tool_missing(f"Mitsuba's {VARIANT} does not start (install mitsuba and libllvm19): "
-                     f"{probe.stderr.strip()[-200:]}")
 
 
 @pytest.fixture(scope="module", params=[
@@ -158,26 +139,8 @@ def test_a_material_the_plugin_cannot_match_is_refused(tmp_path, monkeypatch):
 @pytest.mark.conformance
 @pytest.mark.usefixtures("llvm_mitsuba")
 def test_mitsuba_renders_a_scene_with_the_export(exported):
-    import mitsuba as mi
-
     _, paths, _, _ = exported
-    load_material(paths[0])  # sets the variant and registers the plugin
-    scene = paths[0].with_name("scene.xml")
-    scene.write_text(f"""<scene version="3.0.0">
-  <include filename="{paths[0].name}"/>
-  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
-  <sensor type="perspective">
-    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
-    </film>
-    <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-  </sensor>
-  <emitter type="constant"/>
-  <shape type="sphere"><ref id="gonio_sample"/></shape>
-</scene>
-""")
-    image = np.array(mi.render(mi.load_file(str(scene))))
+    image = render_white_furnace(paths[0])
     # a glass sphere in a white furnace: every pixel sees light, none more than comes in
     assert image.shape == (16, 16, 3) and np.isfinite(image).all()
     assert 0.5 < image.min() and image.mean() < 1.05

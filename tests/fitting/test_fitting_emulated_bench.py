@@ -195,6 +195,29 @@ def test_fit_after_calibration_matches_ideal_bench(tmp_path):
     assert reference.chi2_dof_heldout < 1.5 and calibrated.chi2_dof_heldout < 1.5
 
 
+def test_export_cli_of_family_fits(quick_run, tmp_path, capsys):
+    """`gonio export --fit` of a model family's fit: an ABg fit as OpticStudio's ABg entry
+    (the file's path printed), an Oren-Nayar fit refused by Mitsuba in one line naming the
+    formats that take it, nothing written."""
+    fit = {"chi2_dof_fit": 1.2, "n_fit": 40, "chi2_dof_heldout": None, "n_heldout": 0}
+    (tmp_path / "abg.json").write_text(json.dumps({**fit, "family": "abg", "parameters": {
+        "A": {"value": 1e-3, "sigma": 1e-5}, "B": {"value": 2e-4, "sigma": 1e-6},
+        "g": {"value": 2.1, "sigma": 0.02}}}) + "\n")
+    assert main(["export", str(quick_run), "--format", "abg", "--fit",
+                 str(tmp_path / "abg.json"), "--out", str(tmp_path / "paint.abg")]) == 0
+    assert capsys.readouterr().out.split() == [str(tmp_path / "paint.abg")]
+    lines = (tmp_path / "paint.abg").read_text().splitlines()
+    assert "Name  PAINT" in lines and "Row  1  0.0  0.001  0.0002  2.1" in lines
+    (tmp_path / "on.json").write_text(json.dumps({**fit, "family": "oren-nayar", "parameters": {
+        "rho": {"value": 0.6, "sigma": 0.01}, "sigma": {"value": 0.3, "sigma": 0.01}}}))
+    assert main(["export", str(quick_run), "--format", "mitsuba", "--fit",
+                 str(tmp_path / "on.json"), "--out", str(tmp_path / "on.xml")]) == 2
+    assert capsys.readouterr().err == (
+        "gonio export: error: export: --format mitsuba has no form of the oren-nayar family; a "
+        "oren-nayar fit exports as --format zemax or astm (zemax and astm tabulate it)\n")
+    assert not (tmp_path / "on.xml").exists()
+
+
 def test_export_and_plot_cli(quick_run, tmp_path, capsys):
     """Walter's ground glass (the bench adds multiple scattering): the default single-
     scattering fit does not describe it, so a model export refuses it; its multiple-scattering
