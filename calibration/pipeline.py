@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from calibration import calfile
-from calibration.fit import FitError, FitOptions, FitResult, fit
+from calibration.fit import FitError, FitOptions, FitResult, fit, select
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -155,5 +155,5 @@ def fit_run(run_dir: str | Path | Run, options: FitOptions | None = None,
     options = options or FitOptions()
     data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature,
                       slope_options=options, angle_terms=angle_terms)
-    return data, fit(data, options, progress)
+    return data, select(data, options, progress)
 
