@@ -15,8 +15,9 @@ from calibration.reduced import ReducedData
 
 #: Reflected directions this far (deg) from the mirror direction and from the source are "far".
 FAR_DEG = 25.0
-#: Reflected directions this close (deg) to the source, at incidences from RETRO_MIN_THETA_I
-#: on (nearer normal the source and the mirror direction coincide), are "retro".
+#: Reflected directions this close (deg) to the source are not "far" (retro-reflection); the
+#: far ones on the source's side against those forward tell back-scatter, at incidences from
+#: RETRO_MIN_THETA_I on (nearer normal the two sides are alike).
 RETRO_DEG = 15.0
 RETRO_MIN_THETA_I = 20.0
 #: A group's mean whitened residual counts when beyond this many of its standard errors and
@@ -43,10 +44,21 @@ def _mean_if_significant(z: np.ndarray) -> float:
     return mean if abs(mean) > max(STANDARD_ERRORS * error, SIGNIFICANT) else 0.0
 
 
+def _difference_if_significant(a: np.ndarray, b: np.ndarray) -> float:
+    """mean(a) - mean(b) if it stands out of their noise as _mean_if_significant asks, else 0;
+    0 for fewer than MIN_POINTS in either."""
+    if min(len(a), len(b)) < MIN_POINTS:
+        return 0.0
+    difference = float(np.mean(a) - np.mean(b))
+    error = math.hypot(float(np.std(a)) / math.sqrt(len(a)), float(np.std(b)) / math.sqrt(len(b)))
+    return difference if abs(difference) > max(STANDARD_ERRORS * error, SIGNIFICANT) else 0.0
+
+
 def residual_pattern(data: ReducedData, result: Any) -> dict[str, Any]:
     """The fitted model's residual pattern over the data's valid reflected points: `floor` the
     mean whitened residual far from the mirror direction, `floor_flat` whether the excess there
-    is flat, `retro` the mean toward the source beyond the floor, `lobe` the mean near the
+    is flat, `retro` the mean there on the source's side less that forward (back-scatter, at
+    oblique incidence), `lobe` the mean near the
     mirror direction nearer its centre minus that farther out (> 0: the model's lobe is too wide,
     < 0: too narrow), `peak` the mean nearer its centre alone; each 0 where it does not stand
     out of the noise."""
@@ -64,9 +76,9 @@ def residual_pattern(data: ReducedData, result: Any) -> dict[str, Any]:
     excess = (part.bsdf - model)[far]
     flat = bool(floor > 0 and np.mean(excess) > 0
                 and np.std(excess) < FLAT_SPREAD * np.mean(excess))
-    retro_points = ((from_source < RETRO_DEG) & (from_mirror > FAR_DEG)
-                    & (part.theta_i_deg >= RETRO_MIN_THETA_I))
-    retro = _mean_if_significant(z[retro_points] - (floor if floor else 0.0))
+    oblique = far & (part.theta_i_deg >= RETRO_MIN_THETA_I)
+    toward = np.sum(part.wo[:, :2] * part.wi[:, :2], axis=1) > 0
+    retro = _difference_if_significant(z[oblique & toward], z[oblique & ~toward])
     near = from_mirror <= FAR_DEG
     lobe = peak = 0.0
     if np.count_nonzero(near) >= 2 * MIN_POINTS:

@@ -208,8 +208,9 @@ DIFFUSE = ("lambert", "oren-nayar", "lambert+microfacet")
 def residual_hints(out: dict) -> list[str]:
     """Hints of a bad fit from where its residuals lie (calibration.fit.pattern): a diffuse
     floor suggests a diffuse term (multiple scattering when a rough microfacet fit's floor is
-    not flat), an excess toward the source Oren-Nayar, a lobe of the wrong width another
-    distribution, a peak over a model without a lobe a lobe."""
+    not flat), an excess on the source's side beyond any floor Oren-Nayar (unless the lobe's
+    shape is off, whose tails lift it too), a lobe of the wrong width another distribution, a peak over a model
+    without a lobe a lobe."""
     pattern, family = out["residual_pattern"], out.get("family", "microfacet")
     hints = []
     if pattern["floor"] > 0 and family not in DIFFUSE:
@@ -219,9 +220,10 @@ def residual_hints(out: dict) -> list[str]:
             hints.append(f"hint: the data lie above the {family} model far from the specular "
                          "direction (a diffuse floor): add a diffuse term, try --family "
                          "lambert+microfacet")
-    if pattern["retro"] > 0 and family != "oren-nayar":
-        hints.append("hint: the data lie above the model toward the source (retro-reflection, "
-                     "a rough matte surface): try --family oren-nayar")
+    if pattern["retro"] > max(pattern["floor"], 0.0) and not pattern["lobe"] \
+            and family != "oren-nayar":
+        hints.append("hint: the data lie above the model on the source's side (back-scatter "
+                     "of a rough matte surface): try --family oren-nayar")
     if pattern["lobe"] and family in LOBED:
         width = "wider" if pattern["lobe"] > 0 else "narrower"
         hints.append(f"hint: the model's lobe is {width} than the data's about the specular "
