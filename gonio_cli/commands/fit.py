@@ -209,8 +209,8 @@ def residual_hints(out: dict) -> list[str]:
     """Hints of a bad fit from where its residuals lie (calibration.fit.pattern): a diffuse
     floor suggests a diffuse term (multiple scattering when a rough microfacet fit's floor is
     not flat), an excess on the source's side beyond any floor Oren-Nayar (unless the lobe's
-    shape is off, whose tails lift it too), a lobe of the wrong width another distribution, a peak over a model
-    without a lobe a lobe."""
+    shape is off, whose tails lift it too), a lobe of the wrong width another distribution, a
+    peak over a model without a lobe a lobe."""
     pattern, family = out["residual_pattern"], out.get("family", "microfacet")
     hints = []
     if pattern["floor"] > 0 and family not in DIFFUSE:
