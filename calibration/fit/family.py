@@ -113,17 +113,17 @@ class FamilyProblem:
         return r
 
     def _level_parameter(self) -> str | None:
-        """The free parameter the BSDF is proportional to at the fitted points (doubling it
-        doubles f), if any: a scale factor beside it could not be told from it."""
+        """The free parameter the BSDF is proportional to at the fitted points (halving it
+        halves f), if any: a scale factor beside it could not be told from it."""
         x = self.default_start()
         base = self.predict(x, self.data)
         for k, p in enumerate(self.free):
             trial = x.copy()
-            doubled = 2.0 * self.values(x)[p.name]
-            if not p.lower <= doubled <= p.upper:
+            half = 0.5 * self.values(x)[p.name]
+            if not p.lower <= half <= p.upper:
                 continue
-            trial[k] = self._internal(p, doubled)
-            if np.allclose(self.predict(trial, self.data), 2.0 * base, rtol=1e-9, atol=0.0):
+            trial[k] = self._internal(p, half)
+            if np.allclose(self.predict(trial, self.data), 0.5 * base, rtol=1e-9, atol=0.0):
                 return p.name
         return None
 
