@@ -44,6 +44,15 @@ def _mean_if_significant(z: np.ndarray) -> float:
     return mean if abs(mean) > max(STANDARD_ERRORS * error, SIGNIFICANT) else 0.0
 
 
+def refracted(wi: np.ndarray, eta: float) -> np.ndarray:
+    """The directions light from wi (N, 3) takes into a medium of relative index eta (> 1 has
+    no total reflection from outside): t_xy = -wi_xy / eta, below the surface."""
+    t_xy = -wi[:, :2] / eta
+    return np.concatenate([t_xy, -np.sqrt(np.maximum(1.0 - np.sum(t_xy**2, axis=1,
+                                                                    keepdims=True), 0.0))],
+                          axis=1)
+
+
 def _difference_if_significant(a: np.ndarray, b: np.ndarray) -> float:
     """mean(a) - mean(b) if it stands out of their noise as _mean_if_significant asks, else 0;
     0 for fewer than MIN_POINTS in either."""
@@ -55,28 +64,32 @@ def _difference_if_significant(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def residual_pattern(data: ReducedData, result: Any) -> dict[str, Any]:
-    """The fitted model's residual pattern over the data's valid reflected points: `floor` the
-    mean whitened residual far from the mirror direction, `floor_flat` whether the excess there
+    """The fitted model's residual pattern over the data's valid points (transmitted ones where
+    the result has an index, about their refracted direction): `floor` the mean whitened
+    residual far from the mirror (or refracted) direction, `floor_flat` whether the excess there
     is flat, `retro` the mean there on the source's side less that forward (back-scatter, at
     oblique incidence), `lobe` the mean near the
     mirror direction nearer its centre minus that farther out (> 0: the model's lobe is too wide,
     < 0: too narrow), `peak` the mean nearer its centre alone; each 0 where it does not stand
     out of the noise."""
-    keep = data.valid & ~data.transmission & np.isfinite(data.bsdf) & (data.sigma > 0)
+    eta = float(getattr(result, "eta", math.nan))
+    keep = (data.valid & np.isfinite(data.bsdf) & (data.sigma > 0)
+            & (~data.transmission | math.isfinite(eta)))
     part = data.subset(keep)
     if not len(part.bsdf):
         return {"floor": 0.0, "floor_flat": False, "retro": 0.0, "lobe": 0.0, "peak": 0.0,
                 "n": 0}
     model = result.predict(part.wi, part.wo)
     z = (part.bsdf - model) / part.sigma
-    mirror = part.wi * np.array([-1.0, -1.0, 1.0])
-    from_mirror, from_source = _angle_deg(part.wo, mirror), _angle_deg(part.wo, part.wi)
+    specular = np.where(part.transmission[:, None], refracted(part.wi, eta),
+                        part.wi * np.array([-1.0, -1.0, 1.0]))
+    from_mirror, from_source = _angle_deg(part.wo, specular), _angle_deg(part.wo, part.wi)
     far = (from_mirror > FAR_DEG) & (from_source > RETRO_DEG)
     floor = _mean_if_significant(z[far])
     excess = (part.bsdf - model)[far]
     flat = bool(floor > 0 and np.mean(excess) > 0
                 and np.std(excess) < FLAT_SPREAD * np.mean(excess))
-    oblique = far & (part.theta_i_deg >= RETRO_MIN_THETA_I)
+    oblique = far & (part.theta_i_deg >= RETRO_MIN_THETA_I) & ~part.transmission
     toward = np.sum(part.wo[:, :2] * part.wi[:, :2], axis=1) > 0
     retro = _difference_if_significant(z[oblique & toward], z[oblique & ~toward])
     near = from_mirror <= FAR_DEG

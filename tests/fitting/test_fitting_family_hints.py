@@ -3,8 +3,8 @@ and fitted by another that lacks what they have get the hint that names it, and 
 
 import pytest
 
-from calibration.fit import FitOptions, select
-from calibration.synthetic import synthesize, synthesize_family
+from calibration.fit import FitOptions, build_model, select
+from calibration.synthetic import drawn, in_plane_directions, synthesize, synthesize_family
 from gonio_cli.commands.fit import fit_warnings
 
 COAT = {"rho": 0.5, "alpha": 0.15, "eta": 1.5}
@@ -49,3 +49,16 @@ def test_the_hint_names_what_the_residuals_show(name, data, families, distributi
 def test_a_good_fit_gets_no_hint():
     data = synthesize_family("oren-nayar", {"rho": 0.7, "sigma": 0.5}, seed=2)
     assert hints(data, ("oren-nayar",), ("ggx",)) == []
+
+
+def test_a_rough_glass_fitted_without_multiple_scattering_gets_that_hint():
+    """Light scattered more than once lifts a rough dielectric's data over a broad lobe, not a
+    flat floor: the hint is multiple scattering, not a diffuse term."""
+    model = build_model("ggx", 0.45, 1.51, "separable", walks=1 << 14, seed=1)
+    data = drawn(model, [in_plane_directions(t, 1.51, 0.45) for t in (0.0, 30.0, 60.0)],
+                 0.02, 1e6, 3, {"eta": 1.51, "kind": "hemisphere"})
+    out = select(data, FitOptions(distributions=("ggx",))).to_dict()
+    assert out["residual_pattern"]["floor"] > 0 and not out["residual_pattern"]["floor_flat"]
+    given = [line for line in fit_warnings(dict(out, run="r"), imported_from="data.csv")
+             if line.startswith("hint:")]
+    assert len(given) == 1 and MS in given[0] and "--family" not in given[0]
