@@ -110,11 +110,12 @@ def _family_fits(data: ReducedData, options: FitOptions, family: str, reporter: 
     positive = fit_data.subset(fit_data.bsdf > 0)
     optics = instrument_optics(data, options, initial_alpha(positive, eta0 or NOMINAL_ETA))
     results, refused = [], []
-    for settings in _setting_choices(cls, data, options):
+    choices = _setting_choices(cls, data, options)
+    for settings in choices:
         label = "/".join([family, *map(str, settings.values())])
         try:
             cls(**settings)
-        except ValueError as exc:  # a setting the family does not take (a phong coat)
+        except (TypeError, ValueError) as exc:  # a setting it does not take (a phong coat)
             refused.append(f"{label}: {exc}")
             continue
         try:
@@ -137,7 +138,7 @@ def _family_fits(data: ReducedData, options: FitOptions, family: str, reporter: 
             chi2_dof_fit=solution.chi2_dof, n_fit=int(in_fit.sum()), chi2_dof_heldout=held,
             n_heldout=n_held, preferred_by=None, optics=optics, family=family,
             settings=settings, fixed=problem.fixed))
-    if len(refused) == len(_setting_choices(cls, data, options)):
+    if len(refused) == len(choices):
         failures += refused
     return results
 
@@ -145,11 +146,13 @@ def _family_fits(data: ReducedData, options: FitOptions, family: str, reporter: 
 def _setting_choices(cls: type, data: ReducedData, options: FitOptions) -> list[dict]:
     """Every combination of a family's fixed settings: its distribution and masking each a
     candidate from the options' (as the microfacet fit's are), another setting the data's
-    meta entry of that name (a wavelength) or the family's default."""
+    meta entry of that name (a wavelength, the sample's index: the options' eta if given) or
+    the family's default."""
     choices = {"distribution": options.distributions, "masking": options.maskings}
     axes = [(name, choices[name]) for name in cls.SETTINGS if name in choices]
-    given = {name: data.meta[name] for name in cls.SETTINGS
-             if name not in choices and name in data.meta}
+    meta = {**data.meta, **({"eta": options.eta} if options.eta is not None else {})}
+    given = {name: meta[name] for name in cls.SETTINGS
+             if name not in choices and meta.get(name) is not None}
     names = [name for name, _ in axes]
     return [{**dict(zip(names, combo, strict=True)), **given}
             for combo in itertools.product(*(values for _, values in axes))]
