@@ -41,10 +41,15 @@ from calibration.formats.limits import (
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
-# the column names of reduced.csv as `gonio reduce` wrote it before it used write_reduced_csv
-ALIASES = {"bsdf_per_sr": "bsdf", "sigma_per_sr": "sigma"}
+# the column names of reduced.csv as `gonio reduce` wrote it before it used write_reduced_csv,
+# and a plain table's `value`
+ALIASES = {"bsdf_per_sr": "bsdf", "sigma_per_sr": "sigma", "value": "bsdf"}
 # the columns a CSV must have, by their bare names
 NEEDED = (*(a[:-4] for a in ANGLE_COLUMNS), "bsdf")
+# the columns a table of one incidence must have (theta_i from the option or a header line)
+SINGLE = ("theta_o", "bsdf")
+# the header line (`# theta_i_deg: 30`) giving a table of one incidence its theta_i
+INCIDENCE_KEY = "theta_i_deg"
 
 
 class MissingInputs(CalibrationError):
@@ -212,7 +217,8 @@ def from_csv(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     def column(name: str) -> np.ndarray:
         return np.frombuffer(columns[name], dtype=np.float64)
 
-    ti, pi, to, po, bsdf = (column(n) for n in NEEDED)
+    wi, wo = _directions(path, {n: column(n) for n in columns}, comments, options)
+    bsdf = column("bsdf")
     sigma = column("sigma") if "sigma" in index else None
     if "wavelength_nm" in index:
         wavelengths = np.unique(column("wavelength_nm"))
@@ -223,25 +229,65 @@ def from_csv(file: MeasuredFile, options: ImportOptions) -> ReducedData:
     if "flags" in index:
         meta["flags"] = np.array(flags)
     meta["components"] = {n[2:]: column(n) for n in names if n.startswith("u_")}
-    wi, wo = unit_vectors(ti, pi), unit_vectors(to, po)
     return _reduced(path, wi, wo, bsdf, sigma, wo[:, 2] < 0, meta, options)
 
 
 def _column_index(path: Path, names: list[str]) -> dict[str, int]:
     """Each column name's first position (a `_deg` name also under its bare name); one error
-    for too many columns or a needed one missing."""
+    for too many columns or a needed one missing (a table without theta_i is one of a single
+    incidence, which needs theta_o and bsdf only)."""
     check_count(path, len(names), "columns", MAX_COLUMNS)
     index: dict[str, int] = {}
     for k, name in enumerate(names):
         index.setdefault(name, k)
         if name.endswith("_deg"):
             index.setdefault(name[:-4], k)
-    missing = [n for n in NEEDED if n not in index]
+    missing = [n for n in (NEEDED if "theta_i" in index else SINGLE) if n not in index]
     if missing:
         raise CalibrationError(f"{path}: no column {', '.join(missing)} (columns: theta_i_deg, "
                                "phi_i_deg, theta_o_deg, phi_o_deg, bsdf, optional sigma, "
-                               "wavelength_nm)")
+                               "wavelength_nm; or, for one incidence, theta_o_deg[, phi_o_deg], "
+                               "value[, sigma])")
     return index
+
+
+def _directions(path: Path, columns: dict[str, np.ndarray], comments: list[str],
+                options: ImportOptions) -> tuple[np.ndarray, np.ndarray]:
+    """(wi, wo) of a CSV's rows. A table without theta_i is one of a single incidence: theta_i
+    from ImportOptions.incidence_deg or the header line `# theta_i_deg: DEG`, phi_i 0, and
+    without phi_o, theta_o the signed in-plane angle, positive on the specular side (away from
+    the source) and within (-90, 90): one error for an incidence missing, given twice or out
+    of range, or such a theta_o out of range."""
+    if "theta_i" in columns:
+        if options.incidence_deg is not None:
+            raise CalibrationError(f"{path}: the table has a theta_i column; --incidence-deg is "
+                                   "for a table of one incidence without one")
+        return (unit_vectors(columns["theta_i"], columns["phi_i"]),
+                unit_vectors(columns["theta_o"], columns["phi_o"]))
+    stated = _header(comments)[1].get(INCIDENCE_KEY)
+    if options.incidence_deg is not None and stated is not None:
+        raise CalibrationError(f"{path}: the incidence is given twice (--incidence-deg and the "
+                               f"header line `# {INCIDENCE_KEY}: {stated}`); give one")
+    theta_i = options.incidence_deg if options.incidence_deg is not None else stated
+    if theta_i is None:
+        raise CalibrationError(f"{path}: a table without a theta_i column is one of a single "
+                               "incidence: give --incidence-deg DEG or a header line "
+                               f"`# {INCIDENCE_KEY}: DEG`")
+    if isinstance(theta_i, bool) or not isinstance(theta_i, (int, float)) \
+            or not 0.0 <= theta_i < 90.0:
+        raise CalibrationError(f"{path}: the incidence must be a number of degrees in [0, 90), "
+                               f"got {theta_i!r}")
+    theta_o = columns["theta_o"]
+    if "phi_o" in columns:
+        phi_o = columns["phi_o"]
+    else:
+        if not np.all(np.abs(theta_o) < 90.0):
+            raise CalibrationError(f"{path}: theta_o without a phi_o column is the signed "
+                                   "in-plane angle and must lie within (-90, 90)")
+        phi_o = np.where(theta_o >= 0.0, 180.0, 0.0)
+        theta_o = np.abs(theta_o)
+    n = len(theta_o)
+    return unit_vectors(np.full(n, float(theta_i)), np.zeros(n)), unit_vectors(theta_o, phi_o)
 
 
 def _numeric(name: str) -> bool:

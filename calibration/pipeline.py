@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from calibration import calfile
-from calibration.fit import FitError, FitOptions, FitResult, fit
+from calibration.fit import FitError, FitOptions, FitResult, select
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
 
@@ -80,8 +80,9 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
     """`reduce_run` of some of a run's stored readings (READING_DTYPE): those stored so far,
     for the live view of a run in progress. When the run has angle uncertainties (the
     stages' repeatability, the calibration's offsets) and slope_options are given, the data
-    are fitted with them over every valid point (each incidence) and reduced again with the
-    fitted model's slope in the budget (meta["budget"]["slope"] names the fit); a failed fit
+    are fitted with them over every valid point (each incidence; the families the sample's
+    kind allows, calibration.fit.select) and reduced again with the fitted model's slope in
+    the budget (meta["budget"]["slope"] names the fit's family and distribution); a failed fit
     raises CalibrationError, unless angle_terms is False (--no-angle-terms: no fit, and
     meta["budget"]["angle_terms"] and its notes say that U excludes them). slope_options
     None (the live view): no fit, no angle terms, a note says so."""
@@ -117,13 +118,13 @@ def reduce_stored(run: Run, readings: np.ndarray, calibration_file: str | Path |
         budget["angle_terms"] = "excluded"
         return data
     try:
-        result = fit(data, slope_fit_options(slope_options))
+        result = select(data, slope_fit_options(slope_options))
     except FitError as exc:
         raise CalibrationError(f"cannot estimate the budget's angle terms: the fit of the "
                                f"model's slope failed ({exc}); --no-angle-terms reduces "
                                f"with U excluding them") from None
     data = reduced(result.predict)
-    data.meta["budget"]["slope"] = {"distribution": result.distribution,
+    data.meta["budget"]["slope"] = {"family": result.family, "distribution": result.distribution,
                                     "parameters": result.to_dict()["parameters"],
                                     "chi2_dof": result.chi2_dof_fit}
     data.meta["budget"]["notes"] += slope_fit_notes(result)
@@ -139,7 +140,8 @@ def slope_fit_notes(result: FitResult) -> list[str]:
 
     if not result.chi2_dof_fit > MAX_CHI2_DOF:
         return []
-    return [f"angle: the slope fit ({result.distribution}) has chi2/dof "
+    model = result.distribution if result.family == "microfacet" else result.family
+    return [f"angle: the slope fit ({model}) has chi2/dof "
             f"{result.chi2_dof_fit:.3g} > {MAX_CHI2_DOF:g}: the angle terms come from a model "
             "that does not describe the data"]
 
@@ -155,5 +157,5 @@ def fit_run(run_dir: str | Path | Run, options: FitOptions | None = None,
     options = options or FitOptions()
     data = reduce_run(run_dir, calibration_file, shot_noise_w, subtract_signature,
                       slope_options=options, angle_terms=angle_terms)
-    return data, fit(data, options, progress)
+    return data, select(data, options, progress)
 

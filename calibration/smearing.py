@@ -46,7 +46,10 @@ def _rim(w: np.ndarray, half_angle_rad: float, n: int) -> np.ndarray:
 
 def model_edges(model: Any) -> EdgeCircles | None:
     """The circles where a model.bsdf model jumps or kinks (EdgeCircles, lit from air), from the
-    candidate itself (its eta): a RoughDielectric's or a RoughConductor's; None for another."""
+    candidate itself (its eta): a RoughDielectric's or a RoughConductor's; None for another (a
+    model.bsdf.families one, a coat's eta included)."""
+    if getattr(model, "family", ""):
+        return None
     if hasattr(model, "eta_complex"):
         return EdgeCircles(1.0, 1.0, transmits=False)
     eta = getattr(model, "eta", None)

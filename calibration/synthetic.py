@@ -43,14 +43,42 @@ def synthesize(distribution: str, alpha: float, eta: float = 1.51,
     """ReducedData drawn from the model: sigma = relative_noise * f + peak / dynamic_range,
     Gaussian noise with that sigma; points below the floor stay valid (they carry the floor).
     With an aperture, f is the model averaged over it (a converged order-16 cap rule)."""
-    parts = [in_plane_directions(t, eta, alpha, n_uniform, n_peak, sides) for t in incidences_deg]
-    wi, wo, transmission = (np.concatenate([p[k] for p in parts]) for k in range(3))
     model = build_model(distribution, alpha, eta, masking)
-    f = aperture_average(model, wi, wo, aperture_half_angle_deg, 16)
-    sigma = relative_noise * f + f.max() / dynamic_range
-    rng = np.random.default_rng(seed)
-    measured = f + sigma * rng.standard_normal(len(f))
     meta = {"eta": eta, "aperture_half_angle_deg": aperture_half_angle_deg,
             "synthetic": {"distribution": distribution, "alpha": alpha, "masking": masking,
                           "seed": seed}}
+    return drawn(model, [in_plane_directions(t, eta, alpha, n_uniform, n_peak, sides)
+                         for t in incidences_deg], relative_noise, dynamic_range, seed, meta,
+                 aperture_half_angle_deg=aperture_half_angle_deg)
+
+
+def synthesize_family(family: str, values: dict[str, float], settings: dict | None = None,
+                      incidences_deg: tuple[float, ...] = (0.0, 30.0, 60.0),
+                      relative_noise: float = 0.02, dynamic_range: float = 1e6,
+                      seed: int = 0, scale: float = 1.0, eta: float = 1.5,
+                      lobe_alpha: float = 0.2, n_uniform: int = 36, n_peak: int = 24
+                      ) -> ReducedData:
+    """ReducedData of a model family (model.bsdf.families) in reflection, drawn as synthesize
+    draws them, times `scale` (data known up to a scale); `eta` is the sample's nominal index
+    the data carry, `lobe_alpha` sizes the patch of points across the specular peak."""
+    from model.bsdf.families import make_family
+
+    model = make_family(family, values, **(settings or {}))
+    meta = {"eta": eta, "aperture_half_angle_deg": 0.0,
+            "synthetic": {"family": family, **values, "scale": scale, "seed": seed}}
+    return drawn(model, [in_plane_directions(t, eta, lobe_alpha, n_uniform, n_peak,
+                                             ("reflection",)) for t in incidences_deg],
+                 relative_noise, dynamic_range, seed, meta, scale)
+
+
+def drawn(model, parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+          relative_noise: float, dynamic_range: float, seed: int, meta: dict,
+          scale: float = 1.0, aperture_half_angle_deg: float = 0.0) -> ReducedData:
+    """ReducedData of `scale` times the model at the (wi, wo, transmission) parts: sigma =
+    relative_noise * f + peak / dynamic_range, Gaussian noise with that sigma."""
+    wi, wo, transmission = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    f = scale * aperture_average(model, wi, wo, aperture_half_angle_deg, 16)
+    sigma = relative_noise * f + f.max() / dynamic_range
+    rng = np.random.default_rng(seed)
+    measured = f + sigma * rng.standard_normal(len(f))
     return ReducedData(wi, wo, measured, sigma, np.ones(len(f), bool), transmission, meta)

@@ -84,18 +84,19 @@ def family_of(result) -> str:
 
 def family_fit(result) -> FamilyFit | None:
     """The FamilyFit of a fit result (calibration.fit.FitResult) of a family, None for a
-    microfacet fit: its parameters by name (the scale apart), its settings from the result's
-    `settings` mapping or its attributes of the settings' names."""
+    microfacet fit: its parameters by name, fitted and held (the scale apart), its settings
+    from the result's `settings` mapping or its attributes of the settings' names."""
     family = family_of(result)
     if family == MICROFACET:
         return None
     cls = family_class(family)
     names = {p.name for p in cls.PARAMETERS}
-    values = {n: float(v) for n, v in zip(result.names, result.values, strict=True)
-              if n in names}
+    fitted = dict(zip(result.names, result.values, strict=True))
+    held = getattr(result, "fixed", None) or {}  # parameters the fit held (a coat's eta)
+    values = {n: float(v) for n, v in {**fitted, **held}.items() if n in names}
     given = getattr(result, "settings", None) or {}
     settings = {name: given.get(name, getattr(result, name, None)) for name in cls.SETTINGS}
-    scale = dict(zip(result.names, result.values, strict=True)).get("scale", 1.0)
+    scale = fitted.get("scale", 1.0)
     return FamilyFit(family, values, {k: v for k, v in settings.items() if v}, float(scale))
 
 

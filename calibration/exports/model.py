@@ -251,7 +251,9 @@ def _family_result(fitted: dict, family: str, names: tuple[str, ...], values: np
                        masking=fitted.get("masking") or "", names=names, values=values,
                        errors=errors, covariance=np.diag(errors ** 2),
                        eta=float(dict(zip(names, values, strict=True)).get("eta", 1.0)), k=None,
-                       family=family, **scores)
+                       family=family, settings=dict(fitted.get("settings") or {}),
+                       fixed={n: float(p["value"]) for n, p in fitted["parameters"].items()
+                              if p.get("fixed")}, **scores)
     try:
         family_fit(result).model()
     except ValueError as exc:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
+from calibration.candidates import DISTRIBUTION_NAMES, FAMILIES, MASKINGS
 from calibration.fit.model import DIFFRACTION_SAMPLES, Diffraction
 from calibration.reduced import ReducedData
 from gonio.errors import GonioError
@@ -52,6 +52,8 @@ class FitOptions:
     psd_exponent: float = 2.0
     wavelength_nm: float | None = None  # None: the data's meta["wavelength_nm"]
     diffraction_samples: int = DIFFRACTION_SAMPLES
+    families: tuple[str, ...] | None = None  # the families compared (calibration.fit.select);
+    #                                          None: those the data's sample kind allows
 
     def __post_init__(self) -> None:
         if self.diffraction:
@@ -70,6 +72,11 @@ class FitOptions:
             for value in given:
                 if value not in known:
                     raise FitError(f"fit: unknown {name} {value!r}; known: {', '.join(known)}")
+        for value in self.families or ():
+            if value not in FAMILIES:
+                raise FitError(f"fit: unknown family {value!r}; known: {', '.join(FAMILIES)}")
+        if self.families is not None and not self.families:
+            raise FitError("fit: at least one family is needed")
         if self.eta is not None and not ETA_BOUNDS[0] <= self.eta <= ETA_BOUNDS[1]:
             raise FitError(f"fit: eta must be in [{ETA_BOUNDS[0]}, {ETA_BOUNDS[1]}], "
                            f"got {self.eta!r}")

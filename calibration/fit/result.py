@@ -58,7 +58,11 @@ class FitResult:
     # transmitted pairs in reverse where better (higher_orders_at's both_ways)
     diffraction: Diffraction | None = None  # the two-scale term the fit used; None: off
     fit_time_s: float = 0.0  # wall time of fit()
-    family: str = "microfacet"  # the model family (model.bsdf.families), else the interface
+    family: str = "microfacet"  # model.bsdf.families' name of the model, or the microfacet one
+    settings: dict[str, Any] = field(default_factory=dict)  # a family's fixed settings
+    fixed: dict[str, float] = field(default_factory=dict)  # a family's parameters held fixed
+    criterion: str | None = None  # the information criterion a family selection ranked by
+    residual_pattern: dict[str, Any] | None = None  # calibration.fit.pattern's, of the choice
 
     @property
     def clearly_preferred(self) -> bool:
@@ -84,7 +88,13 @@ class FitResult:
 
     def model(self) -> Any:
         """The fitted model.bsdf model (without the scale factor), with the multiple-scattering
-        term the fit used, if any."""
+        term the fit used, if any; a family's model for a family fit."""
+        if self.family != "microfacet":
+            from model.bsdf.families import make_family
+
+            values = {n: float(v) for n, v in zip(self.names, self.values, strict=True)
+                      if n != "scale"}
+            return make_family(self.family, {**values, **self.fixed}, **self.settings)
         return build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
                            self.walks, self.seed, self.diffraction)
 
@@ -98,6 +108,9 @@ class FitResult:
                            ) -> tuple[np.ndarray, np.ndarray]:
         """predict() and its standard error: the Monte Carlo error of the walked
         multiple-scattering orders (0 without them), which the fit adds to each point's sigma."""
+        if self.family != "microfacet":
+            f = self.optics.average(self.model(), wi, wo)
+            return self.scale * f, np.zeros_like(f)
         single = build_model(self.distribution, self.alpha, self.eta, self.masking, self.k,
                              diffraction=self.diffraction)
         f = self.optics.average(single, wi, wo)
@@ -113,6 +126,10 @@ class FitResult:
         """A JSON-ready summary (what `gonio fit --json` prints)."""
         params = {n: {"value": float(v), "sigma": float(e)}
                   for n, v, e in zip(self.names, self.values, self.errors, strict=True)}
+        params.update({n: {"value": v, "sigma": 0.0, "fixed": True}
+                       for n, v in self.fixed.items()})
+        if self.family != "microfacet":
+            return self._summary(params)
         if "eta" not in params:
             params["eta"] = {"value": self.eta, "sigma": 0.0, "fixed": True}
         if self.k is not None:
@@ -120,7 +137,15 @@ class FitResult:
         if self.distribution == "phong":
             a = np.atleast_1d(self.alpha)
             params["phong_exponent"] = {"value": float(2.0 / (a[0] * a[-1]) - 2.0)}
+        return self._summary(params)
+
+    def _summary(self, params: dict[str, Any]) -> dict[str, Any]:
+        """to_dict's object with the parameters `params` (by name, value and sigma)."""
         return {
+            "family": self.family,
+            "settings": self.settings,
+            "criterion": self.criterion,
+            "residual_pattern": self.residual_pattern,
             "distribution": self.distribution,
             "masking": self.masking,
             "parameters": params,

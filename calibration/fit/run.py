@@ -47,24 +47,10 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         k = float(data.meta.get("k", 0.0))
     if k is not None and options.fit_eta:
         raise FitError("fit: eta of a conductor is held fixed (give it with k); drop fit_eta")
-    aperture = options.aperture_half_angle_deg
-    if aperture is None:
-        aperture = float(data.meta.get("aperture_half_angle_deg", 0.0))
-    in_fit = fit_subset_mask(data, options)
     n_params = (2 if options.anisotropic else 1) + options.fit_eta + options.fit_scale
-    if in_fit.sum() <= n_params:
-        raise FitError(f"fit: only {int(in_fit.sum())} usable points at incidence "
-                       f"{describe_subset(options)}; need more than {n_params}")
-    fit_data = data.subset(in_fit)
-    if not np.any(fit_data.bsdf > 0):
-        raise FitError("fit: no point of the fitted subset has a positive BSDF value")
+    in_fit, fit_data = fitted_subset(data, options, n_params)
     alpha0 = initial_alpha(fit_data.subset(fit_data.bsdf > 0), eta0)
-    divergence = options.beam_divergence_deg
-    if divergence is None:
-        divergence = float(data.meta.get("beam_divergence_deg", 0.0))
-    order = options.aperture_order
-    optics = Smearing(aperture, smearing_order(aperture, alpha0) if order is None else order,
-                      divergence, smearing_order(divergence, alpha0))
+    optics = instrument_optics(data, options, alpha0)
 
     ranking = _ranking(options)
     scored, failures = [], []
@@ -99,7 +85,7 @@ def fit(data: ReducedData, options: FitOptions | None = None,
     runner_up = min((s.chi2 for p, s in scored if p.distribution != problem.distribution),
                     default=None)
     reporter.stage(problem, "held-out points")
-    heldout = _heldout_chi2(data, ~in_fit, problem, best.x)
+    heldout = heldout_chi2(data, ~in_fit, problem, best.x)
     alpha, eta, _ = problem.unpack(best.x)
     return FitResult(
         distribution=problem.distribution, masking=problem.masking, names=problem.names,
@@ -118,6 +104,35 @@ def fit(data: ReducedData, options: FitOptions | None = None,
         slope_only=options.ms_slope_only,
         diffraction=diffraction, fit_time_s=time.perf_counter() - started,
     )
+
+
+def fitted_subset(data: ReducedData, options: FitOptions, n_params: int
+                  ) -> tuple[np.ndarray, ReducedData]:
+    """(mask, data) of the points a fit of n_params parameters uses; a FitError when they are
+    too few or none is positive."""
+    in_fit = fit_subset_mask(data, options)
+    if in_fit.sum() <= n_params:
+        raise FitError(f"fit: only {int(in_fit.sum())} usable points at incidence "
+                       f"{describe_subset(options)}; need more than {n_params}")
+    fit_data = data.subset(in_fit)
+    if not np.any(fit_data.bsdf > 0):
+        raise FitError("fit: no point of the fitted subset has a positive BSDF value")
+    return in_fit, fit_data
+
+
+def instrument_optics(data: ReducedData, options: FitOptions, alpha0: float) -> Smearing:
+    """What the fit's model of a reading averages over: the aperture and beam divergence the
+    options give (else the data's meta, else none), each cap's rule sized for a lobe of
+    roughness alpha0 (or the options' aperture order)."""
+    aperture = options.aperture_half_angle_deg
+    if aperture is None:
+        aperture = float(data.meta.get("aperture_half_angle_deg", 0.0))
+    divergence = options.beam_divergence_deg
+    if divergence is None:
+        divergence = float(data.meta.get("beam_divergence_deg", 0.0))
+    order = options.aperture_order
+    return Smearing(aperture, smearing_order(aperture, alpha0) if order is None else order,
+                    divergence, smearing_order(divergence, alpha0))
 
 
 def _ranking(options: FitOptions) -> FitOptions:
@@ -151,7 +166,7 @@ def _preferred(scored: list[tuple[Problem, Solution]],
     return min(tied, key=lambda item: (order.index(item[0].distribution), item[1].chi2))
 
 
-def _heldout_chi2(data: ReducedData, rest: np.ndarray, problem: Problem,
+def heldout_chi2(data: ReducedData, rest: np.ndarray, problem: Problem,
                   x: np.ndarray) -> tuple[float | None, int]:
     """Chi-square per point of the fitted model on the valid points not used by the fit, with
     the errors they share (the beam curve's) in its covariance and, with the fit's

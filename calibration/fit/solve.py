@@ -40,7 +40,7 @@ def solve(problem: Problem, alpha0: float) -> Solution:
         optimum = _solve_with_orders(problem, alpha0)
     else:
         optimum = _least_squares(problem, alpha0)
-    return _summary(problem, optimum)
+    return summarise(problem, optimum)
 
 
 def refine(problem: Problem, solution: Solution) -> Solution:
@@ -58,7 +58,7 @@ def refine(problem: Problem, solution: Solution) -> Solution:
         optimum = _least_squares(problem, alpha)
         if problem.orders.covers(problem.unpack(optimum.x)[0]):
             break
-    return _summary(problem, optimum)
+    return summarise(problem, optimum)
 
 
 def _least_squares(problem: Problem, alpha0: float) -> OptimizeResult:
@@ -66,9 +66,15 @@ def _least_squares(problem: Problem, alpha0: float) -> OptimizeResult:
     problem's sigma (with a table, its error added)."""
     problem.progress.stage(problem, "start" if problem.orders is None
                            else "start with the multiple-scattering table")
-    return least_squares(problem.residuals, problem.start(alpha0),
-                         bounds=(problem.lower, problem.upper), method="trf", x_scale="jac",
-                         xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
+    return optimise(problem, problem.start(alpha0))
+
+
+def optimise(problem, x0: np.ndarray) -> OptimizeResult:
+    """The optimiser's solution of a least-squares problem (a Problem, or any with its
+    residuals, lower and upper) from the internal parameters x0."""
+    return least_squares(problem.residuals, x0, bounds=(problem.lower, problem.upper),
+                         method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                         max_nfev=400)
 
 
 def recentre(problem: Problem, solution: Solution) -> Solution:
@@ -80,7 +86,7 @@ def recentre(problem: Problem, solution: Solution) -> Solution:
         if problem.orders.covers(alpha):
             break
         optimum = _table_fit(problem, alpha)
-    return solution if optimum is solution.optimum else _summary(problem, optimum)
+    return solution if optimum is solution.optimum else summarise(problem, optimum)
 
 
 def _table_fit(problem: Problem, centre: float) -> OptimizeResult:
@@ -105,8 +111,9 @@ def _solve_with_orders(problem: Problem, alpha0: float) -> OptimizeResult:
     return _table_fit(problem, single.unpack(_least_squares(single, alpha0).x)[0])
 
 
-def _summary(problem: Problem, optimum: OptimizeResult) -> Solution:
-    """Parameters, covariance and chi-square of an optimiser's solution."""
+def summarise(problem: Problem, optimum: OptimizeResult) -> Solution:
+    """Parameters, covariance and chi-square of an optimiser's solution (of a Problem, or of
+    any problem with its data, names, bounds, orders, external() and a `distribution` label)."""
     if not np.all(np.isfinite(optimum.x)) or optimum.status <= 0:
         raise FitError(f"fit {problem.distribution}: the optimiser did not converge "
                        f"({optimum.message})")

@@ -19,11 +19,12 @@ WHATS = ("raw", "reduced", "model")
 
 @dataclass(frozen=True)
 class ImportOptions:
-    """What a file may lack: the sample's index, and the relative standard uncertainty to
-    assume where the file has no uncertainties."""
+    """What a file may lack: the sample's index, the relative standard uncertainty to assume
+    where the file has no uncertainties, and the incidence of a CSV table of one incidence."""
 
     eta: float | None = None
     sigma_relative: float | None = None
+    incidence_deg: float | None = None  # theta_i of a plain CSV table of one incidence
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -8,8 +8,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 
-from calibration.candidates import DISTRIBUTION_NAMES, MASKINGS
+from calibration.candidates import DISTRIBUTION_NAMES, FAMILIES, MASKINGS
 from gonio_cli.commands.reduce import (
     add_angle_option,
     add_reduce_options,
@@ -115,6 +116,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("fit", help="fit the BSDF model to a run", description=__doc__)
     add_run_or_import(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.add_argument("--family", type=_list, metavar="NAME[,NAME...]",
+                   help=f"the model families compared: {', '.join(FAMILIES)} (default: those "
+                        "the sample's kind allows: hemisphere, slab, conductor the microfacet "
+                        "interface alone; diffuse, coated and reference their matte families; "
+                        "an imported file of no kind all of them)")
+    p.add_argument("--relative", action="store_true",
+                   help="the data are known up to a scale (relative to a reference): fit a "
+                        "free scale factor, reported with its uncertainty")
     add_fit_options(p)
     p.set_defaults(func=run, reads_run="run")
 
@@ -124,20 +133,26 @@ def run(args: argparse.Namespace) -> int:
     facts, their uncertainty budget (calibration.budget.summary), the run's completeness
     (gonio.completeness; None for an imported file) and the warnings)."""
     from calibration.budget import summary as budget_summary
-    from calibration.fit import fit
+    from calibration.fit import select
     from calibration.pipeline import fit_run
     from gonio.store import open_run
 
     data = imported(args)
     if data is None:
         sim = emulator_sim(args.run) if args.diffraction else None
-        data, result = fit_run(open_run(args.run, force=args.force), options_from(args, sim),
-                               args.calibration,
+        data, result = fit_run(open_run(args.run, force=args.force),
+                               _selection(options_from(args, sim), args), args.calibration,
                                args.shot_noise_w, args.subtract_signature, progress=_to_stderr,
                                angle_terms=not args.no_angle_terms)
         say_angle_terms(args)
     else:
-        result = fit(data, options_from(args), _to_stderr)
+        import numpy as np
+
+        options = _selection(options_from(args), args)
+        incidences = np.unique(np.round(data.theta_i_deg, 6))
+        if options.fit_incidence_deg == (0.0,) and len(incidences) == 1:
+            options = replace(options, fit_incidence_deg=(float(incidences[0]),))
+        result = select(data, options, _to_stderr)
     out = result.to_dict()
     out["run"] = str(args.run if data.meta.get("imported_from") is None else
                      data.meta["imported_from"])
@@ -158,6 +173,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _selection(options, args: argparse.Namespace):  # -> calibration.fit.FitOptions
+    """The options with `fit`'s own flags: the families compared (--family) and a free scale
+    (--relative)."""
+    return replace(options, families=args.family,
+                   fit_scale=options.fit_scale or args.relative)
+
+
 def fit_warnings(out: dict, imported_from: str | None = None, plotted: bool = False
                  ) -> list[str]:
     """Warnings of a fit result dict: a chi2/dof (fitted or held out) above the limit model
@@ -171,12 +193,61 @@ def fit_warnings(out: dict, imported_from: str | None = None, plotted: bool = Fa
     look = "" if imported_from or plotted else f" (see gonio plot {out['run']} --fit)"
     lines = [f"warning: chi2/dof {worst:.3g} is well above 1: the model does not describe the "
              f"points within their uncertainties{look}; model exports refuse this fit"]
-    alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
-    if alpha > ROUGH_ALPHA and not out.get("multiple_scattering"):
-        lines.append(f"hint: at alpha {alpha:.3g} light scatters more than once between "
-                     "microfacets, which single scattering leaves out: try "
-                     "--multiple-scattering")
+    if out.get("residual_pattern") is not None:
+        return lines + residual_hints(out)
+    if _rough_single_scattering(out) is not None:
+        lines.append(_multiple_scattering_hint(out))
     return lines
+
+
+#: Families with a lobe about the specular direction, and with a diffuse term (residual_hints).
+LOBED = ("microfacet", "lambert+microfacet", "abg", "rayleigh-rice")
+DIFFUSE = ("lambert", "oren-nayar", "lambert+microfacet")
+
+
+def residual_hints(out: dict) -> list[str]:
+    """Hints of a bad fit from where its residuals lie (calibration.fit.pattern): a diffuse
+    floor suggests a diffuse term (multiple scattering when a rough microfacet fit's floor is
+    not flat), an excess on the source's side beyond any floor Oren-Nayar (unless the lobe's
+    shape is off, whose tails lift it too), a lobe of the wrong width another distribution, a
+    peak over a model without a lobe a lobe."""
+    pattern, family = out["residual_pattern"], out.get("family", "microfacet")
+    hints = []
+    if pattern["floor"] > 0 and family not in DIFFUSE:
+        if not pattern["floor_flat"] and _rough_single_scattering(out) is not None:
+            hints.append(_multiple_scattering_hint(out))
+        else:
+            hints.append(f"hint: the data lie above the {family} model far from the specular "
+                         "direction (a diffuse floor): add a diffuse term, try --family "
+                         "lambert+microfacet")
+    if pattern["retro"] > max(pattern["floor"], 0.0) and not pattern["lobe"] \
+            and family != "oren-nayar":
+        hints.append("hint: the data lie above the model on the source's side (back-scatter "
+                     "of a rough matte surface): try --family oren-nayar")
+    if pattern["lobe"] and family in LOBED:
+        width = "wider" if pattern["lobe"] > 0 else "narrower"
+        hints.append(f"hint: the model's lobe is {width} than the data's about the specular "
+                     "direction: its shape is another distribution's, try --distribution "
+                     "with the others")
+    elif pattern["peak"] > 0 and family not in LOBED:
+        hints.append(f"hint: the data peak about the specular direction, which {family} does "
+                     "not: add a specular lobe, try --family lambert+microfacet")
+    return hints
+
+
+def _rough_single_scattering(out: dict) -> float | None:
+    """The largest alpha of a microfacet fit without multiple scattering above ROUGH_ALPHA,
+    else None."""
+    if out.get("family", "microfacet") != "microfacet" or out.get("multiple_scattering"):
+        return None
+    alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
+    return alpha if alpha > ROUGH_ALPHA else None
+
+
+def _multiple_scattering_hint(out: dict) -> str:
+    return (f"hint: at alpha {_rough_single_scattering(out):.3g} light scatters more than once "
+            "between microfacets, which single scattering leaves out: try "
+            "--multiple-scattering")
 
 
 def _to_stderr(line: str) -> None:
@@ -199,13 +270,40 @@ def chi2_lines(out: dict) -> list[str]:
               if ms else "")
     fitted = (f"  chi2/dof fitted {out['chi2_dof_fit']:.3g} ({out['n_fit']} points{walked}); "
               "held out " + ("n/a" if held is None else f"{held:.3g} ({out['n_heldout']} points)"))
+    verdict = ("clearly preferred" if out["clearly_preferred"]
+               else "not distinguishable from the runner-up")
+    if out.get("criterion"):
+        return [fitted, *family_lines(out), f"  -> {out['family']} by {out['criterion']}, "
+                f"{verdict}"]
     others = ", ".join(f"{c['distribution']}/{c['masking']} {c['chi2_dof_fit']:.3g}"
                        + (f" (refit {c['chi2_dof_refit']:.3g})" if "chi2_dof_refit" in c else "")
                        for c in out["candidates"] if "distribution" in c)
     ranked = f" fitted as ranked (multiple scattering by {ms['walks']} walks)" if ms else " fitted"
-    verdict = ("clearly preferred" if out["clearly_preferred"]
-               else "not distinguishable from the runner-up")
     return [fitted, f"  candidates chi2/dof{ranked}: {others} -> {verdict}"]
+
+
+def model_name(entry: dict) -> str:
+    """A fit's or candidate's model as the summary names it: the family with its settings
+    (`lambert+microfacet/ggx/separable`), or the microfacet distribution and masking."""
+    if entry.get("family", "microfacet") == "microfacet":
+        return f"microfacet/{entry['distribution']}/{entry['masking']}"
+    return "/".join([entry["family"], *map(str, entry.get("settings", {}).values())])
+
+
+def family_lines(out: dict) -> list[str]:
+    """One line per candidate of a family selection, best first: its BIC, chi2/dof fitted
+    and held out, and its parameters."""
+    lines = [f"  candidates by {out['criterion']} (chi2 + k ln n on the fitted points):"]
+    for c in out["candidates"]:
+        if "failed" in c:
+            continue
+        held = c["chi2_dof_heldout"]
+        params = ", ".join(f"{n} {p['value']:.4g} +- {p['sigma']:.2g}"
+                           for n, p in c["parameters"].items())
+        lines.append(f"    {model_name(c):<36} {out['criterion']} {c['bic']:.5g}  chi2/dof "
+                     f"{c['chi2_dof_fit']:.3g}, held out "
+                     + ("n/a" if held is None else f"{held:.3g}") + f"  ({params})")
+    return lines
 
 
 def summary(out: dict) -> str:
@@ -213,7 +311,9 @@ def summary(out: dict) -> str:
     sample = out.get("sample")
     measured = (f" sample {sample['id']} ({sample['kind']}, eta {sample['eta']:g}):"
                 if sample else "")
-    lines = [f"run {out['run']}:{measured} {out['distribution']} ({out['masking']} masking)"]
+    model = (f"{out['distribution']} ({out['masking']} masking)"
+             if out.get("family", "microfacet") == "microfacet" else model_name(out))
+    lines = [f"run {out['run']}:{measured} {model}"]
     if out.get("completeness") and not out["completeness"]["complete"]:
         from gonio.completeness import Completeness
 

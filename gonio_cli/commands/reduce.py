@@ -66,6 +66,11 @@ def add_run_or_import(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sigma-relative", type=float, metavar="FRACTION",
                    help="for an imported file without uncertainties: assume u = FRACTION * "
                         "|bsdf| (stated in the output)")
+    p.add_argument("--incidence-deg", type=float, metavar="DEG",
+                   help="for an imported CSV table of one incidence (columns theta_o_deg"
+                        "[, phi_o_deg], value[, sigma]; without phi_o, theta_o is signed, "
+                        "positive on the specular side): its theta_i, unless a header line "
+                        "`# theta_i_deg: DEG` gives it")
 
 
 def imported(args: argparse.Namespace):  # -> calibration.reduced.ReducedData | None
@@ -77,7 +82,8 @@ def imported(args: argparse.Namespace):  # -> calibration.reduced.ReducedData | 
         return None
     from calibration.imports import ImportOptions, read_measured
 
-    return read_measured(args.import_file, ImportOptions(args.eta, args.sigma_relative))
+    return read_measured(args.import_file, ImportOptions(args.eta, args.sigma_relative,
+                                                         args.incidence_deg))
 
 
 def add_reduce_options(p: argparse.ArgumentParser) -> None:

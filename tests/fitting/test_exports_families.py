@@ -373,3 +373,29 @@ def test_mitsuba_samples_and_renders_the_coated_plugin(tmp_path):
     # a painted sphere in a white furnace: it reflects a(i) + rho (1 - a(i)) of what comes in
     assert image.shape == (16, 16, 3) and np.isfinite(image).all()
     assert 0.5 < image.min() and image.mean() < 1.0
+
+
+@pytest.mark.parametrize("family, truth, settings, held", [
+    ("lambert+microfacet", {"rho": 0.5, "alpha": 0.15, "eta": 1.5}, {"distribution": "ggx"},
+     {"eta": 1.5}),  # the coat's index held at the sample's
+    ("lambert", {"rho": 0.6}, {}, {"rho": 0.8}),  # relative: rho held, the scale the level
+])
+def test_a_family_fit_with_held_parameters_exports_its_whole_model(tmp_path, family, truth,
+                                                                   settings, held):
+    from calibration.fit import FitOptions, select
+    from calibration.synthetic import synthesize_family
+
+    relative = family == "lambert"
+    data = synthesize_family(family, truth, settings, seed=3, scale=0.2 if relative else 1.0)
+    result = select(data, FitOptions(families=(family,), distributions=("ggx",),
+                                     fit_scale=relative, fit_incidence_deg=None))
+    assert result.fixed == held
+    loaded = saved(tmp_path, result.to_dict())[1]
+    exported = family_fit(loaded)
+    fitted = {n: float(v) for n, v in zip(result.names, result.values, strict=True)
+              if n != "scale"}
+    assert dict(exported.values) == pytest.approx({**fitted, **held}, rel=1e-12)
+    assert dict(exported.settings) == {k: v for k, v in result.settings.items() if v}
+    wi, wo = directions(30.0), directions(np.array([0.0, 20.0, 45.0]), 180.0)
+    np.testing.assert_allclose(exported.point_model()(wi, wo),
+                               result.scale * result.model().eval(wi, wo), rtol=1e-12)
