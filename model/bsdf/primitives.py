@@ -203,22 +203,30 @@ def g2_over_cosines(masking, ci, co, li, lo, transmitted):
 
 # --- Fresnel ------------------------------------------------------------------------------
 
-@scalar
-def fresnel_toward(c, e, em1):
-    """F at |cos_i| = c toward relative index e, em1 = e - 1 exact
-    (fresnel.reflectance_transmittance_toward's F); 1 under total internal reflection."""
+@inlined
+def fresnel_e_ct(c, e, em1):
+    """(F, e cos_t) at |cos_i| = c toward relative index e, em1 = e - 1 exact: fresnel_toward's
+    F and the transmitted cosine times e, sqrt(e^2 - 1 + c^2), which a refraction reuses;
+    (1, 0) under total internal reflection."""
     e_ct2 = em1 * (e + 1.0) + c * c
     if e_ct2 <= 0.0:
-        return 1.0
+        return 1.0, 0.0
     e_ct = math.sqrt(e_ct2)
     den_s = c + e_ct
     den_p = e * e * c + e_ct
     if den_s <= 0.0 or den_p <= 0.0:
-        return 1.0
+        return 1.0, e_ct
     e2m1 = em1 * (e + 1.0)
     rs = -e2m1 / (den_s * den_s)
     rp = e2m1 * (c * c * (e * e + 1.0) - 1.0) / (den_p * den_p)
-    return 0.5 * (rs * rs + rp * rp)
+    return 0.5 * (rs * rs + rp * rp), e_ct
+
+
+@scalar
+def fresnel_toward(c, e, em1):
+    """F at |cos_i| = c toward relative index e, em1 = e - 1 exact
+    (fresnel.reflectance_transmittance_toward's F); 1 under total internal reflection."""
+    return fresnel_e_ct(c, e, em1)[0]
 
 
 @scalar
@@ -274,11 +282,43 @@ def unit_slope_radius(ndf, u):
     return math.sqrt(-math.log1p(-u))
 
 
+#: fdlibm's minimax coefficients of sin t (t^3 to t^13) and cos t (t^4 to t^14) on |t| <= pi/4
+#: (k_sin.c, k_cos.c: below an ulp there).
+SIN_1, SIN_2, SIN_3, SIN_4, SIN_5, SIN_6 = (
+    -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+    2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10)
+COS_1, COS_2, COS_3, COS_4, COS_5, COS_6 = (
+    4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+    -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11)
+
+
+@inlined
+def cos_sin_2pi(u):
+    """(cos 2 pi u, sin 2 pi u) for 0 <= u <= 1 by quadrant and fdlibm's kernels, split in
+    halves (Estrin) so that the chain of dependent operations is short: within an ulp or two
+    of libm's, branch-free so that it vectorises, and in a scalar loop a fraction of libm's
+    cos and sin (20 ns a pair)."""
+    q = math.floor(4.0 * u + 0.5)
+    t = (2.0 * math.pi) * (u - 0.25 * q)  # exact difference, |t| <= pi / 4
+    z = t * t
+    w = z * z
+    r = SIN_2 + z * (SIN_3 + z * SIN_4) + z * w * (SIN_5 + z * SIN_6)
+    s = t + z * t * (SIN_1 + z * r)
+    r = z * (COS_1 + z * (COS_2 + z * COS_3)) + w * w * (COS_4 + z * (COS_5 + z * COS_6))
+    half = 0.5 * z
+    one_minus = 1.0 - half
+    c = one_minus + (((1.0 - one_minus) - half) + z * r)
+    quadrant = q - 4.0 * math.floor(0.25 * q)
+    odd = (quadrant == 1.0) | (quadrant == 3.0)
+    cq, sq = (s, c) if odd else (c, s)
+    return (-cq if (quadrant == 1.0) | (quadrant == 2.0) else cq,
+            -sq if (quadrant == 2.0) | (quadrant == 3.0) else sq)
+
+
 @inlined
 def ggx_visible_normal(ax, ay, ix, iy, iz, u1, u2):
     """GGX visible normal for wi (iz >= 0) from uniforms u1, u2 (Heitz 2018;
     GGX.sample_visible)."""
-    phi = 2.0 * math.pi * u2
     vx, vy, vz = ax * ix, ay * iy, iz
     n = math.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx / n, vy / n, vz / n
@@ -290,8 +330,9 @@ def ggx_visible_normal(ax, ay, ix, iy, iz, u1, u2):
         t1x, t1y = 1.0, 0.0
     t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # vh x t1, t1z = 0
     r = math.sqrt(u1)
-    p1 = r * math.cos(phi)
-    p2 = r * math.sin(phi)
+    cos_p, sin_p = cos_sin_2pi(u2)
+    p1 = r * cos_p
+    p2 = r * sin_p
     s = 0.5 * (1.0 + vz)
     p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
     p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))

@@ -50,7 +50,7 @@ from model.bsdf.multiple_scattering.random_kernel import (
     key_of_walk,
 )
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
-from model.bsdf.primitives import inlined, scalar, unit
+from model.bsdf.primitives import fresnel_e_ct, inlined, scalar, unit
 
 LOG_2 = math.log(2.0)
 
@@ -148,7 +148,7 @@ def branch_share(f, c, el, share):
     """The probability scatter reflects with at a dielectric facet of reflectance f and cosine
     c towards the relative index el: clip(f, share, 1 - share), f itself where only one branch
     exists (total internal reflection, f in {0, 1}) or share is 0."""
-    if (1.0 - c * c) / (el * el) >= 1.0 or not 0.0 < f < 1.0:
+    if share == 0.0 or not 0.0 < f < 1.0 or (1.0 - c * c) / (el * el) >= 1.0:
         return f
     return min(max(f, share), 1.0 - share)
 
@@ -164,14 +164,12 @@ def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
         return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
     el, elm1 = side_eta(s.eta, outside)
     c = min(max(c, 0.0), 1.0)
-    f = facet_fresnel(s, True, c, el, elm1)
+    f, e_ct = fresnel_e_ct(c, el, elm1)  # e_ct = el cos_t, 0 under total internal reflection
     q = branch_share(f, c, el, share)
-    sin2_t = (1.0 - c * c) / (el * el)
-    if u >= q and sin2_t < 1.0:
-        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-        inv = 1.0 / el  # one division for four
-        k = c * inv - cos_t
-        x, y, z = unit(k * mx - ix * inv, k * my - iy * inv, k * mz - iz * inv)
+    if u >= q and e_ct > 0.0:
+        # el times the refracted direction, (c / el - cos_t) m - i / el, normalised
+        k = c - e_ct
+        x, y, z = unit(k * mx - ix, k * my - iy, k * mz - iz)
         return x, y, z, (1.0 if q == f else (1.0 - f) / (1.0 - q)), True
     x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
     return x, y, z, (1.0 if q == f else f / q), False
