@@ -55,6 +55,9 @@ except ImportError:  # pragma: no cover - exercised only without the [fast] extr
 STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
 #: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
 SPLIT = 134217729.0
+#: The least normal double: Beckmann's D divides exp(-tan^2/alpha^2) by m_z^4 where both are
+#: at least this (full precision), else takes -4 log m_z into the exponent.
+MIN_NORMAL = 2.2250738585072014e-308
 
 
 # --- geometry -----------------------------------------------------------------------------
@@ -140,8 +143,12 @@ def normal_density(ndf, ax, ay, mx, my, mz):
     if ndf == Ndf.GGX:
         den = mz * mz + ((mx / ax) ** 2 + (my / ay) ** 2)
         return 1.0 / (math.pi * ax * ay * den * den)
-    expo = -((mx / ax) ** 2 + (my / ay) ** 2) / (mz * mz) - 4.0 * math.log(mz)
-    return math.exp(expo) / (math.pi * ax * ay)
+    mz2 = mz * mz
+    expo = -((mx / ax) ** 2 + (my / ay) ** 2) / mz2
+    g, m4 = math.exp(expo), mz2 * mz2
+    if g >= MIN_NORMAL and m4 >= MIN_NORMAL:  # 1 / mz^4 by a division (a log costs more)
+        return g / (math.pi * ax * ay * m4)
+    return math.exp(expo - 4.0 * math.log(mz)) / (math.pi * ax * ay)  # no subnormal between
 
 
 # --- masking ------------------------------------------------------------------------------
@@ -177,11 +184,13 @@ def log_beta(p, q):
 
 @scalar
 def beta_over_cosines(ci, co, li, lo):
-    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co): by
-    B itself where both arguments stay below STIRLING_FROM (B(1, b) = 1/b where a direction
-    is unmasked, as at normal incidence; else three lgamma), in log form beyond."""
+    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co): one
+    division where a direction is unmasked, as at normal incidence (B(1, b) = 1/b); else B by
+    three lgamma where both arguments stay below STIRLING_FROM, in log form beyond."""
     if not (ci > 0.0 and co > 0.0 and math.isfinite(li) and math.isfinite(lo)):
         return 0.0
+    if li == 0.0 or lo == 0.0:  # B(1, b) = 1/b, b = 1 + l/c of the other direction
+        return 1.0 / (ci * co + co * li + ci * lo)
     p, q = 1.0 + li / ci, 1.0 + lo / co
     a, b = min(p, q), max(p, q)
     if b < STIRLING_FROM:

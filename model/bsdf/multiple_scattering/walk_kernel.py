@@ -188,15 +188,20 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
     else all); out[j] (if out has rows) = the walk's outcome (EVENTS ... TRUNCATED; a walk of
     weight 0 is not walked). Evaluating, the roulette (unless late) comes after an event's
     score and before its facet normal, so an event it ends costs no normal and no
-    scattering."""
+    scattering. Consecutive walks from one direction share its Lambda, computed once."""
     has_given = given.shape[0] > 0
+    px = py = pz = start_lambda = math.nan  # the last start direction and its Lambda
     for j in range(scores.shape[0]):
-        if wi.shape[0]:
+        fresh = wi.shape[0] > 0
+        if fresh:
             r = j if wi.shape[0] > 1 else 0
             outside = wi[r, 2] > 0.0
             dx, dy, dz = -wi[r, 0], -wi[r, 1], -wi[r, 2] if outside else wi[r, 2]
             cur, k = 0.0, 0
             beta = 0.0 if s.conductor and not outside else 1.0
+            if not (dx == px and dy == py and dz == pz):  # once for walks from one direction
+                px, py, pz = dx, dy, dz
+                start_lambda = unsigned_lambda(s, dx, dy, dz)
         else:
             start = resumed[j]
             outside, dx, dy, dz, cur = start.outside, start.dx, start.dy, start.dz, start.cur
@@ -215,7 +220,8 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             k += 1
             given_here = k == 1 and has_given  # the caller's uniforms for event 1
             u = given[j, HEIGHT] if given_here else draw(state, walk_key, k, HEIGHT)
-            lam_up = unsigned_lambda(s, dx, dy, dz)
+            lam_up = start_lambda if fresh else unsigned_lambda(s, dx, dy, dz)
+            fresh = False
             lam_d = lam_up if dz >= 0.0 else -1.0 - lam_up
             p_hit = hit_probability(lam_d, cur) if rules.forced else 1.0
             beta *= p_hit
