@@ -29,6 +29,7 @@ from model.bsdf.primitives import (
     COMPILED,
     conductor_fresnel,
     cos_lambda,
+    cos_sin_2pi,
     dielectric_transmittance,
     fresnel_toward,
     g2_over_cosines,
@@ -471,31 +472,6 @@ if AVAILABLE:
                 wi, u, k, ndf, ax, ay, eta, masking, refl_on, trans_on, sampling)
         return wo, weight, pdf
 
-    #: Taylor coefficients of sin t / t and cos t in t^2 to t^16 and t^18 (|t| <= pi/4: the
-    #: truncation is below 1e-17 relative).
-    SIN_TERMS = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(8, -1, -1))
-    COS_TERMS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(9, -1, -1))
-
-    @compiled(error_model="numpy", inline="always")
-    def _cos_sin_2pi(u):
-        """(cos 2 pi u, sin 2 pi u) for 0 <= u <= 1 by quadrant and Taylor polynomials:
-        branch-free, so that it vectorises (math.cos and sin do not)."""
-        q = math.floor(4.0 * u + 0.5)
-        t = (2.0 * math.pi) * (u - 0.25 * q)  # exact difference, |t| <= pi / 4
-        t2 = t * t
-        s = 0.0
-        for a in SIN_TERMS:  # highest power first (Horner)
-            s = s * t2 + a
-        s = s * t
-        c = 0.0
-        for a in COS_TERMS:
-            c = c * t2 + a
-        quadrant = q - 4.0 * math.floor(0.25 * q)
-        odd = (quadrant == 1.0) | (quadrant == 3.0)
-        cq, sq = (s, c) if odd else (c, s)
-        return (-cq if (quadrant == 1.0) | (quadrant == 2.0) else cq,
-                -sq if (quadrant == 2.0) | (quadrant == 3.0) else sq)
-
     @compiled(error_model="numpy")
     def _ggx_visible_sample_block(fi, fu, ax, ay, eta, correlated, refl_on, trans_on, fwo,
                                   weight, pdf):
@@ -534,7 +510,7 @@ if AVAILABLE:
             vx, vy, vz = vx * inv_n, vy * inv_n, vz * inv_n
             t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x
             rad = math.sqrt(u1)
-            cos_p, sin_p = _cos_sin_2pi(u2)
+            cos_p, sin_p = cos_sin_2pi(u2)
             p1, p2 = rad * cos_p, rad * sin_p
             h = 0.5 * (1.0 + vz)
             p2 = (1.0 - h) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + h * p2

@@ -55,6 +55,9 @@ except ImportError:  # pragma: no cover - exercised only without the [fast] extr
 STIRLING_REVERSED = tuple(reversed(STIRLING_TERMS))
 #: Veltkamp's constant 2^27 + 1: splits a double into two halves whose products are exact.
 SPLIT = 134217729.0
+#: The least normal double: Beckmann's D divides exp(-tan^2/alpha^2) by m_z^4 where both are
+#: at least this (full precision), else takes -4 log m_z into the exponent.
+MIN_NORMAL = 2.2250738585072014e-308
 
 
 # --- geometry -----------------------------------------------------------------------------
@@ -140,8 +143,12 @@ def normal_density(ndf, ax, ay, mx, my, mz):
     if ndf == Ndf.GGX:
         den = mz * mz + ((mx / ax) ** 2 + (my / ay) ** 2)
         return 1.0 / (math.pi * ax * ay * den * den)
-    expo = -((mx / ax) ** 2 + (my / ay) ** 2) / (mz * mz) - 4.0 * math.log(mz)
-    return math.exp(expo) / (math.pi * ax * ay)
+    mz2 = mz * mz
+    expo = -((mx / ax) ** 2 + (my / ay) ** 2) / mz2
+    g, m4 = math.exp(expo), mz2 * mz2
+    if g >= MIN_NORMAL and m4 >= MIN_NORMAL:  # 1 / mz^4 by a division (a log costs more)
+        return g / (math.pi * ax * ay * m4)
+    return math.exp(expo - 4.0 * math.log(mz)) / (math.pi * ax * ay)  # no subnormal between
 
 
 # --- masking ------------------------------------------------------------------------------
@@ -177,11 +184,13 @@ def log_beta(p, q):
 
 @scalar
 def beta_over_cosines(ci, co, li, lo):
-    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co): by
-    B itself where both arguments stay below STIRLING_FROM (B(1, b) = 1/b where a direction
-    is unmasked, as at normal incidence; else three lgamma), in log form beyond."""
+    """Height-correlated transmission G2 / (ci co) = B(1 + li/ci, 1 + lo/co) / (ci co): one
+    division where a direction is unmasked, as at normal incidence (B(1, b) = 1/b); else B by
+    three lgamma where both arguments stay below STIRLING_FROM, in log form beyond."""
     if not (ci > 0.0 and co > 0.0 and math.isfinite(li) and math.isfinite(lo)):
         return 0.0
+    if li == 0.0 or lo == 0.0:  # B(1, b) = 1/b, b = 1 + l/c of the other direction
+        return 1.0 / (ci * co + co * li + ci * lo)
     p, q = 1.0 + li / ci, 1.0 + lo / co
     a, b = min(p, q), max(p, q)
     if b < STIRLING_FROM:
@@ -203,22 +212,30 @@ def g2_over_cosines(masking, ci, co, li, lo, transmitted):
 
 # --- Fresnel ------------------------------------------------------------------------------
 
-@scalar
-def fresnel_toward(c, e, em1):
-    """F at |cos_i| = c toward relative index e, em1 = e - 1 exact
-    (fresnel.reflectance_transmittance_toward's F); 1 under total internal reflection."""
+@inlined
+def fresnel_e_ct(c, e, em1):
+    """(F, e cos_t) at |cos_i| = c toward relative index e, em1 = e - 1 exact: fresnel_toward's
+    F and the transmitted cosine times e, sqrt(e^2 - 1 + c^2), which a refraction reuses;
+    (1, 0) under total internal reflection."""
     e_ct2 = em1 * (e + 1.0) + c * c
     if e_ct2 <= 0.0:
-        return 1.0
+        return 1.0, 0.0
     e_ct = math.sqrt(e_ct2)
     den_s = c + e_ct
     den_p = e * e * c + e_ct
     if den_s <= 0.0 or den_p <= 0.0:
-        return 1.0
+        return 1.0, e_ct
     e2m1 = em1 * (e + 1.0)
     rs = -e2m1 / (den_s * den_s)
     rp = e2m1 * (c * c * (e * e + 1.0) - 1.0) / (den_p * den_p)
-    return 0.5 * (rs * rs + rp * rp)
+    return 0.5 * (rs * rs + rp * rp), e_ct
+
+
+@scalar
+def fresnel_toward(c, e, em1):
+    """F at |cos_i| = c toward relative index e, em1 = e - 1 exact
+    (fresnel.reflectance_transmittance_toward's F); 1 under total internal reflection."""
+    return fresnel_e_ct(c, e, em1)[0]
 
 
 @scalar
@@ -274,11 +291,43 @@ def unit_slope_radius(ndf, u):
     return math.sqrt(-math.log1p(-u))
 
 
+#: fdlibm's minimax coefficients of sin t (t^3 to t^13) and cos t (t^4 to t^14) on |t| <= pi/4
+#: (k_sin.c, k_cos.c: below an ulp there).
+SIN_1, SIN_2, SIN_3, SIN_4, SIN_5, SIN_6 = (
+    -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+    2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10)
+COS_1, COS_2, COS_3, COS_4, COS_5, COS_6 = (
+    4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+    -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11)
+
+
+@inlined
+def cos_sin_2pi(u):
+    """(cos 2 pi u, sin 2 pi u) for 0 <= u <= 1 by quadrant and fdlibm's kernels, split in
+    halves (Estrin) so that the chain of dependent operations is short: within an ulp or two
+    of libm's, branch-free so that it vectorises, and in a scalar loop a fraction of libm's
+    cos and sin (20 ns a pair)."""
+    q = math.floor(4.0 * u + 0.5)
+    t = (2.0 * math.pi) * (u - 0.25 * q)  # exact difference, |t| <= pi / 4
+    z = t * t
+    w = z * z
+    r = SIN_2 + z * (SIN_3 + z * SIN_4) + z * w * (SIN_5 + z * SIN_6)
+    s = t + z * t * (SIN_1 + z * r)
+    r = z * (COS_1 + z * (COS_2 + z * COS_3)) + w * w * (COS_4 + z * (COS_5 + z * COS_6))
+    half = 0.5 * z
+    one_minus = 1.0 - half
+    c = one_minus + (((1.0 - one_minus) - half) + z * r)
+    quadrant = q - 4.0 * math.floor(0.25 * q)
+    odd = (quadrant == 1.0) | (quadrant == 3.0)
+    cq, sq = (s, c) if odd else (c, s)
+    return (-cq if (quadrant == 1.0) | (quadrant == 2.0) else cq,
+            -sq if (quadrant == 2.0) | (quadrant == 3.0) else sq)
+
+
 @inlined
 def ggx_visible_normal(ax, ay, ix, iy, iz, u1, u2):
     """GGX visible normal for wi (iz >= 0) from uniforms u1, u2 (Heitz 2018;
     GGX.sample_visible)."""
-    phi = 2.0 * math.pi * u2
     vx, vy, vz = ax * ix, ay * iy, iz
     n = math.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx / n, vy / n, vz / n
@@ -290,8 +339,9 @@ def ggx_visible_normal(ax, ay, ix, iy, iz, u1, u2):
         t1x, t1y = 1.0, 0.0
     t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # vh x t1, t1z = 0
     r = math.sqrt(u1)
-    p1 = r * math.cos(phi)
-    p2 = r * math.sin(phi)
+    cos_p, sin_p = cos_sin_2pi(u2)
+    p1 = r * cos_p
+    p2 = r * sin_p
     s = 0.5 * (1.0 + vz)
     p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
     p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))

@@ -20,6 +20,7 @@ from model.bsdf.multiple_scattering.visible_kernel import (
     visible_normal,
 )
 from model.bsdf.multiple_scattering.walk import Walker
+from model.bsdf.multiple_scattering.walk_kernel import scatter
 
 pytestmark = pytest.mark.skipif(not AVAILABLE, reason="the walk kernel needs numba (gonio[fast])")
 Z_MAX = 4.5
@@ -146,3 +147,27 @@ def test_the_walks_generator_is_uniform_and_follows_its_state():
     assert np.all((u >= 0.0) & (u < 1.0)) and kstest(u, "uniform").pvalue > 1e-3
     assert np.all(u * 2.0**53 == np.floor(u * 2.0**53))  # 53-bit draws
     assert uniform(again) == u[0] and abs(np.corrcoef(u[:-1], u[1:])[0, 1]) < 0.03
+
+
+@pytest.mark.parametrize("outside", [True, False])
+def test_scatter_refracts_and_reflects_as_the_numpy_phase_function(outside):
+    """The compiled scatter (Fresnel's e cos_t reused for the refraction) sends each w_in on
+    a facet m where micro.scatter (Snell's law as written) does, to rounding, on both sides
+    of glass and past total internal reflection."""
+    surface = Microsurface("ggx", 0.3, "dielectric", eta=1.51)
+    walker = RandomWalkBSDF(surface, walks=1).walker
+    s = Surface(int(walker.slopes.kernel), 0.3, 0.3, False, 1.51, False, 0j)
+    rng = np.random.default_rng(8)
+    m = rng.normal(size=(400, 3)) * [0.5, 0.5, 1.0]
+    m[:, 2] = np.abs(m[:, 2])
+    m /= np.linalg.norm(m, axis=-1, keepdims=True)
+    w_in = m + rng.normal(size=(400, 3))
+    w_in /= np.linalg.norm(w_in, axis=-1, keepdims=True)
+    facing = np.sum(w_in * m, axis=-1) > 0
+    w_in, m, u = w_in[facing], m[facing], rng.random(facing.sum())
+    side = np.full(len(u), outside)
+    ref, _, crossed = walker.micro.scatter(walker.slopes, w_in, m, side, u[None, :], False)
+    ours = np.array([scatter(s, outside, *w_in[k], *m[k], u[k], 0.0) for k in range(len(u))])
+    assert np.array_equal(ours[:, 4].astype(bool), crossed) and 0 < crossed.sum() < len(u)
+    np.testing.assert_allclose(ours[:, :3], ref, rtol=0, atol=1e-14)
+    assert np.all(ours[:, 3] == 1.0)  # branches drawn by F itself: factor 1

@@ -149,15 +149,16 @@ def sample(walk, wi: np.ndarray, u: np.ndarray,
     reflect, transmit = "reflection" in walk.lobes, "transmission" in walk.lobes
     nodes, shares = walk.share_nodes, walk.share_tables()
     state = rng.integers(0, 2**64, size=4, dtype=np.uint64)  # walk_all advances it
-    units, resumed = unit_rows(wi), paths(0)
+    one = len(wi) == 1
+    units, resumed = unit_rows(wi) if one else None, paths(0)
     block = min(n, BLOCK)
     outcome, lambdas, scores = np.empty((block, OUTCOMES)), np.empty(block), np.empty((block, 0))
     wo, weight, pdf = np.empty((n, 3)), np.empty(n), np.empty(n)
     for start in range(0, n, BLOCK):
         stop = min(n, start + BLOCK)
         m = stop - start
-        rows, rows_unit = ((wi, units) if len(wi) == 1 else
-                           (wi[start:stop], units[start:stop]))
+        rows = wi if one else wi[start:stop]
+        rows_unit = units if one else unit_rows(rows)  # a block at a time, while in cache
         walk_all(s, rules, rows_unit, resumed, np.uint64(0), 0, state, u[start:stop],
                  NO_TARGETS, NO_LAMBDAS, scores[:m], outcome[:m])
         finish(outcome[:m], rows, reflect, transmit, wo[start:stop], weight[start:stop],

@@ -19,6 +19,7 @@ import numpy as np
 from model.bsdf import beckmann_sphere
 from model.bsdf.constants import BECKMANN_CF_FROM, SQRT_PI, Ndf
 from model.bsdf.primitives import (
+    cos_sin_2pi,
     erfc_continued_fraction,
     exp_square,
     ggx_visible_normal,
@@ -179,7 +180,8 @@ def beckmann_visible_unit(vx, vy, vz, u1, u2):
     elif vz > 0.0:  # beckmann_sphere.vertical_slopes
         u1 = min(max(u1, 0.0), 1.0 - 2.0**-53)
         r = math.sqrt(-math.log1p(-u1))
-        return unit(-r * math.cos(2.0 * math.pi * u2), -r * math.sin(2.0 * math.pi * u2), 1.0)
+        cos_p, sin_p = cos_sin_2pi(u2)
+        return unit(-r * cos_p, -r * sin_p, 1.0)
     else:
         mu = 1e8 if vz > 0.0 else -1e4
         c, s = 1.0, 0.0

@@ -50,7 +50,7 @@ from model.bsdf.multiple_scattering.random_kernel import (
     key_of_walk,
 )
 from model.bsdf.multiple_scattering.visible_kernel import visible_normal
-from model.bsdf.primitives import inlined, scalar, unit
+from model.bsdf.primitives import fresnel_e_ct, inlined, scalar, unit
 
 LOG_2 = math.log(2.0)
 
@@ -148,7 +148,7 @@ def branch_share(f, c, el, share):
     """The probability scatter reflects with at a dielectric facet of reflectance f and cosine
     c towards the relative index el: clip(f, share, 1 - share), f itself where only one branch
     exists (total internal reflection, f in {0, 1}) or share is 0."""
-    if (1.0 - c * c) / (el * el) >= 1.0 or not 0.0 < f < 1.0:
+    if share == 0.0 or not 0.0 < f < 1.0 or (1.0 - c * c) / (el * el) >= 1.0:
         return f
     return min(max(f, share), 1.0 - share)
 
@@ -164,14 +164,12 @@ def scatter(s, outside, ix, iy, iz, mx, my, mz, u, share):
         return 2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz, f, False
     el, elm1 = side_eta(s.eta, outside)
     c = min(max(c, 0.0), 1.0)
-    f = facet_fresnel(s, True, c, el, elm1)
+    f, e_ct = fresnel_e_ct(c, el, elm1)  # e_ct = el cos_t, 0 under total internal reflection
     q = branch_share(f, c, el, share)
-    sin2_t = (1.0 - c * c) / (el * el)
-    if u >= q and sin2_t < 1.0:
-        cos_t = math.sqrt(max(0.0, 1.0 - sin2_t))
-        inv = 1.0 / el  # one division for four
-        k = c * inv - cos_t
-        x, y, z = unit(k * mx - ix * inv, k * my - iy * inv, k * mz - iz * inv)
+    if u >= q and e_ct > 0.0:
+        # el times the refracted direction, (c / el - cos_t) m - i / el, normalised
+        k = c - e_ct
+        x, y, z = unit(k * mx - ix, k * my - iy, k * mz - iz)
         return x, y, z, (1.0 if q == f else (1.0 - f) / (1.0 - q)), True
     x, y, z = unit(2.0 * c * mx - ix, 2.0 * c * my - iy, 2.0 * c * mz - iz)
     return x, y, z, (1.0 if q == f else f / q), False
@@ -190,15 +188,20 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
     else all); out[j] (if out has rows) = the walk's outcome (EVENTS ... TRUNCATED; a walk of
     weight 0 is not walked). Evaluating, the roulette (unless late) comes after an event's
     score and before its facet normal, so an event it ends costs no normal and no
-    scattering."""
+    scattering. Consecutive walks from one direction share its Lambda, computed once."""
     has_given = given.shape[0] > 0
+    px = py = pz = start_lambda = math.nan  # the last start direction and its Lambda
     for j in range(scores.shape[0]):
-        if wi.shape[0]:
+        fresh = wi.shape[0] > 0
+        if fresh:
             r = j if wi.shape[0] > 1 else 0
             outside = wi[r, 2] > 0.0
             dx, dy, dz = -wi[r, 0], -wi[r, 1], -wi[r, 2] if outside else wi[r, 2]
             cur, k = 0.0, 0
             beta = 0.0 if s.conductor and not outside else 1.0
+            if not (dx == px and dy == py and dz == pz):  # once for walks from one direction
+                px, py, pz = dx, dy, dz
+                start_lambda = unsigned_lambda(s, dx, dy, dz)
         else:
             start = resumed[j]
             outside, dx, dy, dz, cur = start.outside, start.dx, start.dy, start.dz, start.cur
@@ -217,7 +220,8 @@ def walk_all(s, rules, wi, resumed, key, first, state, given, directions, lam, s
             k += 1
             given_here = k == 1 and has_given  # the caller's uniforms for event 1
             u = given[j, HEIGHT] if given_here else draw(state, walk_key, k, HEIGHT)
-            lam_up = unsigned_lambda(s, dx, dy, dz)
+            lam_up = start_lambda if fresh else unsigned_lambda(s, dx, dy, dz)
+            fresh = False
             lam_d = lam_up if dz >= 0.0 else -1.0 - lam_up
             p_hit = hit_probability(lam_d, cur) if rules.forced else 1.0
             beta *= p_hit
