@@ -15,6 +15,7 @@ from budget_kit import spec_run, spec_scan
 
 from calibration import calfile, certificate
 from calibration.calfile import Calibration
+from calibration.calsummary import applied
 from calibration.reduce import optics_of, reduce_readings
 from calibration.reduced import ReducedData
 from calibration.reference import ReferenceScale, relative_azimuth_deg, scale_from
@@ -200,6 +201,9 @@ def test_a_calibration_file_records_its_reference_and_reads_it_back(tmp_path):
     cal = Calibration(created_utc="2026-12-08T01:00:00Z", reference=reference_scale(3e-4))
     back = calfile.load(calfile.save(cal, tmp_path / "cal.json"))
     assert back.reference == cal.reference
+    assert applied(back, "cal.json")[-1] == ("  reference: LAMBERT at 633 nm, solid angle "
+                                             "0.0003 +- 3e-07 sr, certificate u 0.40%")
+    assert applied(Calibration(created_utc="x"), "c.json")[-1] == "  reference: none"
     bad = cal.to_json()
     bad["reference"]["certificate_rel"] = "much"
     with pytest.raises(CalibrationError, match=r"x.json: \[reference\] certificate_rel: must "
