@@ -369,7 +369,7 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
     if cal is not None and cal.reference is not None:
         for name, errors in cal.reference.shared_errors(value).items():
             budget.add_shared(name, errors)
-            sources[name] = f"{COMPONENTS[name]} ({cal.reference.certificate['id']})"
+            sources[name] = f"{COMPONENTS[name]} ({cal.reference.source_of(name)})"
     elif measured_aperture(cal):
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
         sources["solid_angle"] = "the calibration's measured aperture"

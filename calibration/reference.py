@@ -87,6 +87,11 @@ class ReferenceScale:
                 f"and this run at {wavelength_nm:g} nm: a reference normalises runs at its own "
                 "wavelength only (build one from a reference run at this wavelength)")
 
+    def source_of(self, component: str) -> str:
+        """What a component (COMPONENTS) comes from: the certificate's id, or the run."""
+        return (f"certificate {self.certificate['id']}" if component == "reference_certificate"
+                else f"run {self.run}")
+
     def shared_errors(self, value: np.ndarray) -> dict[str, np.ndarray]:
         """The budget's shared components (COMPONENTS) of values normalised to the reference:
         each one error common to all points, value times its relative uncertainty."""
