@@ -174,12 +174,13 @@ def _not_angle_references(angle_runs: list[Run]) -> str:
 
 def _sample_eta(angle_runs: list[Run]) -> float | None:
     """The reference sample's index for the angle offsets when --eta is not given: the [sample]
-    eta of the angle runs, if they have one and agree (else None)."""
+    eta of the angle runs that state one, if they agree (else None)."""
     from calibration.values import CalibrationError
     from gonio.sample import sample_of_plan
 
     etas = {str(run.path): sample.eta for run in angle_runs
-            if (sample := sample_of_plan(run.plan, str(run.path))) is not None}
+            if (sample := sample_of_plan(run.plan, str(run.path))) is not None
+            and sample.eta is not None}
     if len(set(etas.values())) > 1:
         raise CalibrationError("the specular scans' [sample] eta differ ("
                                + ", ".join(f"{v:g} in {p}" for p, v in etas.items())
