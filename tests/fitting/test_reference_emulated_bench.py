@@ -20,12 +20,8 @@ from calibration import calfile
 from calibration.aperture import from_geometry
 from calibration.budget import expanded
 from calibration.pipeline import reduce_run
-from gonio.sample import KINDS
 from gonio.store import open_run
 from gonio_cli.main import main
-
-pytestmark = pytest.mark.skipif("reference" not in KINDS, reason="the bench's white reference "
-                                "panel ([sample] kind = \"reference\") is not merged yet")
 
 CERTIFICATE = ROOT / "examples" / "certificates" / "white-reference.toml"
 #: The bench's aperture and what its [optics] states of it (10 mm +- 0.05 mm).
