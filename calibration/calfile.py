@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from calibration.detector import correct_power
+from calibration.reference import ReferenceScale
 from calibration.values import CalibrationError, Measured
 from drivers.user_file import SETTINGS_FILE_CAP, read_user_file, user_text
 
@@ -41,6 +42,7 @@ class Calibration:
     aperture_half_angle_deg: Measured | None = None
     aperture_method: str | None = None  # "geometry" | "beam-scan"
     beam: list[dict[str, Any]] | None = None  # per source run: its beam readings' summary
+    reference: ReferenceScale | None = None  # a certified panel's run: the effective solid angle
     notes: list[str] = field(default_factory=list)  # what was not calibrated, bad fits
 
     def to_json(self) -> dict[str, Any]:
@@ -62,7 +64,9 @@ class Calibration:
             "aperture": {"solid_angle_sr": value(self.aperture_solid_angle_sr),
                          "half_angle_deg": value(self.aperture_half_angle_deg),
                          "method": self.aperture_method},
-            "beam": self.beam, "notes": self.notes,
+            "beam": self.beam,
+            "reference": None if self.reference is None else self.reference.to_json(),
+            "notes": self.notes,
         }
 
     @classmethod
@@ -106,6 +110,8 @@ class Calibration:
             aperture_half_angle_deg=value(ap, "half_angle_deg", "aperture"),
             aperture_method=ap.get("method"),
             beam=data.get("beam"),
+            reference=(None if data.get("reference") is None
+                       else ReferenceScale.from_json(data["reference"], where)),
             notes=[str(n) for n in data.get("notes", [])],
         )
 

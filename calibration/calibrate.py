@@ -7,7 +7,9 @@ What each part needs in the readings (several runs may be given together):
 - angles: a transmission scan across the refracted peak at normal incidence and a reflection
   scan across the specular peak at one or more sample angles, each point repeated (the scatter
   of repeats is the readings' noise);
-- beam: the interleaved straight-through readings (a summary of drift and noise).
+- beam: the interleaved straight-through readings (a summary of drift and noise);
+- reference: a certified panel's run, reduced and divided by its certificate
+  (calibration.reference, made by the command line, which reduces runs).
 
 Angles (architecture.md geometry, true = reported + offset, eta of the sample): the transmitted
 peak at reported sample 0 sits near reported arm 180 + ds (1 - 1/eta) - da, the specular peak at
@@ -32,6 +34,7 @@ from calibration.detector import (
     range_key,
     ranges_read_together,
 )
+from calibration.reference import ReferenceScale
 from calibration.routing import holds_specular_scan
 from calibration.values import CalibrationError, Measured
 from gonio.reading_flags import INVALID, flagged
@@ -44,7 +47,7 @@ STAGES = ("sample", "arm", "elevation", "azimuth")  # PeakScan's stage order
 # the fits scale their sigmas by sqrt(chi2/dof), which does not cover a biased value.
 CHI2_DOF_WARN = 3.0
 #: The parts of a calibration made by a fit with a chi2/dof, and what each fit is called.
-FITS = {"gains": "gain", "angles": "zero-offset"}
+FITS = {"gains": "gain", "angles": "zero-offset", "reference": "reference-scale"}
 
 
 def averaged_points(rows: np.ndarray, side: str, common_w: np.ndarray | None = None
@@ -188,7 +191,8 @@ def detector_notes(readings: np.ndarray, darks: dict[str, Measured],
 
 def fit_chi2_dof(cal: Calibration) -> dict[str, float]:
     """{part: chi2/dof} of the calibration's fits (FITS) that were made."""
-    fits = {"gains": cal.linearity, "angles": cal.angle_fit}
+    fits = {"gains": cal.linearity, "angles": cal.angle_fit,
+            "reference": None if cal.reference is None else cal.reference.to_json()}
     return {part: float(fit["chi2_dof"]) for part, fit in fits.items() if fit is not None}
 
 
@@ -213,20 +217,25 @@ def _ranges_text(keys: list[str]) -> str:
 
 def build(runs: list[np.ndarray], created_utc: str, source_runs: list[str],
           eta: float | None = None, aperture: tuple[Measured, Measured, str] | None = None,
-          divergence_deg: float = 0.0, angle_runs: list[bool] | None = None) -> Calibration:
+          divergence_deg: float = 0.0, angle_runs: list[bool] | None = None,
+          reference: ReferenceScale | None = None) -> Calibration:
     """Everything the runs' readings (one array per run) can determine: darks always; gains
     from the runs that read stage positions on several ranges, or on one fixed range each
     (an autoranged run reads a position on one range only);
     angle offsets, when eta is given, from the runs angle_runs flags (default: those holding a
     specular scan, routing.holds_specular_scan), each normalised by its own beam readings
     (times restart with every run), modelled with the aperture (if given) and the beam's
-    divergence half-angle; a beam summary per run. `notes` says what could not
+    divergence half-angle; a beam summary per run; the reference calibration given (made from
+    a reference run, calibration.reference). `notes` says what could not
     be calibrated and why, and which fit fits badly; a CalibrationError for what eta asks.
     Readings flagged invalid (the detector had none) are left out."""
     runs = [run[~flagged(run, INVALID)] for run in runs]
     readings = np.concatenate(runs)
     darks = dark_offsets(readings)
-    cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks)
+    cal = Calibration(created_utc=created_utc, source_runs=source_runs, dark_offsets_w=darks,
+                      reference=reference)
+    if reference is not None:
+        cal.notes += fit_warning("reference", reference.chi2_dof)
     fixed = [drift_free(run, darks) for run in runs if ranges_read_together(run)
              or len(np.unique(run["range_w"][run["kind"] == "sample"])) == 1]
     fixed_readings = np.concatenate(fixed) if fixed else readings[:0]

@@ -1,5 +1,6 @@
 """What a calibration file applies to a run, in a few lines: the file, the angle offsets, the
-darks and gains per range, the aperture (`gonio scan --calibration` prints them)."""
+darks and gains per range, the aperture, the reference (`gonio scan --calibration` prints
+them)."""
 
 from __future__ import annotations
 
@@ -19,8 +20,8 @@ def _per_range(values: dict[str, Measured] | None, unit: str = "") -> str:
 
 
 def applied(cal: Calibration, path: str) -> list[str]:
-    """One line each: the file, the angle offsets, the dark offsets, the gains, the aperture;
-    a part the file lacks is said to be none (reduction then does without it)."""
+    """One line each: the file, the angle offsets, the dark offsets, the gains, the aperture,
+    the reference; a part the file lacks is said to be none (reduction then does without it)."""
     angles = "none"
     if cal.sample_offset_deg is not None and cal.arm_offset_deg is not None:
         angles = (f"sample {_value(cal.sample_offset_deg, ' deg')}, arm "
@@ -36,4 +37,14 @@ def applied(cal: Calibration, path: str) -> list[str]:
             f"  angle offsets: {angles}",
             f"  dark offsets: {_per_range(cal.dark_offsets_w, ' W')}",
             f"  gains: {gains}",
-            f"  aperture: {aperture}"]
+            f"  aperture: {aperture}",
+            f"  reference: {_reference(cal)}"]
+
+
+def _reference(cal: Calibration) -> str:
+    """The reference a calibration normalises to: its certificate and effective solid angle."""
+    ref = cal.reference
+    if ref is None:
+        return "none"
+    return (f"{ref.certificate['id']} at {ref.wavelength_nm:g} nm, solid angle "
+            f"{_value(ref.solid_angle_sr, ' sr')}, certificate u {ref.certificate_rel:.2%}")

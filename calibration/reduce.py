@@ -15,8 +15,9 @@ flag, and on request subtract, what the bench adds (calibration.signature). Ever
 a named component of the value's GUM budget (ReducedData.components, calibration.budget), with
 the type-B ones (the calibration's range gains and solid angle, else the config's or the device
 kinds' declared figures and the aperture's tolerance: calibration.type_b; the detector's
-non-linearity) and the angle errors through a fitted model's slope (docs/fitting.md,
-"Uncertainty budget")."""
+non-linearity; a reference calibration's effective solid angle replaces the aperture's, and its
+certificate's and reference run's errors the solid angle's: calibration.reference) and the
+angle errors through a fitted model's slope (docs/fitting.md, "Uncertainty budget")."""
 
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ from calibration.dark import DarkModel
 from calibration.detector import range_key
 from calibration.emulator_truth import EmulatorTruth, run_config_errors, truth_of
 from calibration.reduced import ReducedData
+from calibration.reference import COMPONENTS
 from calibration.signature import DEFAULT_SHARE, apply_signature
 from calibration.type_b import detector_figures, solid_angle_figure
 from calibration.values import CalibrationError
@@ -212,7 +214,7 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     shot = optics.shot_variance_per_w
     shot_w = np.sqrt(shot * np.maximum(net, 0.0))
     noise = np.hypot(read, shot_w)
-    scale = phi * optics.aperture_sr * factor * np.abs(wo[:, 2])
+    scale = phi * reduction_solid_angle_sr(cal, optics) * factor * np.abs(wo[:, 2])
     signature = apply_signature(readings, rows, dark, beam, shot, net, noise, scale,
                                 signature_share, subtract_signature)
     net = signature.net_w
@@ -270,6 +272,8 @@ def reduce_readings(run, readings: np.ndarray, cal=None, optics: ReductionOptics
     }
     if signature.meta is not None:
         meta["signature"] = signature.meta
+    if cal is not None and cal.reference is not None:
+        meta["reference"] = cal.reference.to_json()
     return ReducedData(wi, w_eval, bsdf, sigma, valid, transmission, meta,
                        budget.shared_rel, flags.astype(str), budget.components)
 
@@ -339,7 +343,9 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
     range_gain (shared, a column per range on the sample's and the beam's range,
     `range_columns`: each range's sigma_g / g from the calibration's gains, 0 on its reference
     range, else each range's stated gain error) and solid_angle (shared by all points: the
-    calibration's measured aperture, else the aperture's tolerance); fills `sources` with where
+    calibration's measured aperture, else the aperture's tolerance), or with a reference
+    calibration, whose solid angle the reference run measured, its reference_certificate and
+    reference_run (shared by all points, calibration.reference); fills `sources` with where
     each comes from and returns notes on what the budget lacks."""
     value = np.abs(budget.bsdf)
     notes = []
@@ -360,7 +366,11 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
     else:
         notes.append(_zero_note("range_gain", optics, "range_gain: no calibration applied"
                                 if cal is None else "range_gain: the calibration has no gains"))
-    if measured_aperture(cal):
+    if cal is not None and cal.reference is not None:
+        for name, errors in cal.reference.shared_errors(value).items():
+            budget.add_shared(name, errors)
+            sources[name] = f"{COMPONENTS[name]} ({cal.reference.source_of(name)})"
+    elif measured_aperture(cal):
         budget.add_shared("solid_angle", value * _solid_angle_rel(cal))
         sources["solid_angle"] = "the calibration's measured aperture"
     elif optics.solid_angle_rel > 0:
@@ -370,6 +380,15 @@ def calibration_terms(budget: Budget, cal, range_w: np.ndarray, beam_range_w: np
         notes.append(_zero_note("solid_angle", optics, f"solid_angle: the "
                                 f"{optics.aperture_from} aperture states no uncertainty"))
     return notes
+
+
+def reduction_solid_angle_sr(cal, optics: ReductionOptics) -> float:
+    """The solid angle reduction divides by: a reference calibration's effective one (checked
+    to be of the run's wavelength), else the aperture's."""
+    if cal is None or cal.reference is None:
+        return optics.aperture_sr
+    cal.reference.check_wavelength(optics.wavelength_nm)
+    return cal.reference.solid_angle_sr.value
 
 
 def _zero_note(name: str, optics: ReductionOptics, unstated: str) -> str:

@@ -1,6 +1,7 @@
 """Which part of a calibration each run given to `gonio calibrate build` serves: by its plan's
-`calibrates` (angles | aperture | detector), else by what its readings hold; a run in a role it
-cannot serve is one CalibrationError naming the flag or the run it needs."""
+`calibrates` (angles | aperture | detector), a certified panel's run (its [sample] kind
+"reference") the reference, else by what its readings hold; a run in a role it cannot serve is
+one CalibrationError naming the flag or the run it needs."""
 
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ if TYPE_CHECKING:
 RETRACTED_DEG = 89.0
 #: The plan that makes an aperture scan.
 APERTURE_PLAN = "examples/plans/calib-aperture.toml"
+#: The [sample] kind of a certified reference panel, whose run serves the reference.
+REFERENCE_KIND = "reference"
 
 
 def holds_specular_scan(readings: np.ndarray) -> bool:
@@ -29,10 +32,13 @@ def holds_specular_scan(readings: np.ndarray) -> bool:
 
 def role_of(run: Run, readings: np.ndarray) -> str:
     """What a run calibrates: its plan's `calibrates`; a run without it (a plan of one's own)
-    serves the angles when it scans a specular peak, else the detector (darks, gains)."""
+    serves the reference when its [sample] is a reference panel, the angles when it scans a
+    specular peak, else the detector (darks, gains)."""
     stated = run.plan.get("calibrates")
     if stated is not None:
         return str(stated)
+    if (run.plan.get("sample") or {}).get("kind") == REFERENCE_KIND:
+        return "reference"
     return "angles" if holds_specular_scan(readings) else "detector"
 
 
@@ -48,22 +54,29 @@ def role_hint(run: Run) -> str:
 @dataclass
 class Routes:
     """The runs by role: `angles` flags the runs the angle fit takes (one per run given);
-    `aperture_scan` is the run to measure the aperture from (None: none given)."""
+    `aperture_scan` is the run to measure the aperture from, `reference` the reference panel's
+    run (None: none given)."""
 
     angles: list[bool]
     aperture_scan: Run | None
+    reference: Run | None = None
 
 
 def route(runs: list[Run], readings: list[np.ndarray], aperture_scan: Run | None,
-          geometry_given: bool) -> Routes:
+          geometry_given: bool, certificate_given: bool = False) -> Routes:
     """Route the runs given (with their readings) and the --aperture-scan run (if any): an
     aperture run given as a RUN is the aperture scan; two different aperture scans, or one
     with --aperture-geometry, are refused, and so is an arm scan across the beam whose plan
-    does not say so (an aperture scan only by --aperture-scan)."""
+    does not say so (an aperture scan only by --aperture-scan); a reference panel's run needs
+    its certificate (--reference), and the certificate one such run."""
     angles = []
+    references = []
     for run, r in zip(runs, readings, strict=True):
         role = role_of(run, r)
         angles.append(role == "angles")
+        if role == "reference":
+            references.append(run)
+            continue
         if role != "aperture":
             if run.plan.get("calibrates") is None and _beam_scan_only(r):
                 raise CalibrationError(
@@ -79,7 +92,22 @@ def route(runs: list[Run], readings: list[np.ndarray], aperture_scan: Run | None
             raise CalibrationError(f"{run.path} scans the aperture (its plan's calibrates = "
                                    '"aperture") and --aperture-geometry gives it too: drop one')
         aperture_scan = run
-    return Routes(angles, aperture_scan)
+    return Routes(angles, aperture_scan, _reference_run(references, certificate_given))
+
+
+def _reference_run(references: list[Run], certificate_given: bool) -> Run | None:
+    """The one reference panel's run when a certificate is given (else none may be)."""
+    if not certificate_given:
+        if references:
+            raise CalibrationError(f"{references[0].path} measures a reference panel (its "
+                                   f'[sample] kind = "{REFERENCE_KIND}"): give its certificate '
+                                   "with --reference CERT.toml")
+        return None
+    if len(references) != 1:
+        found = ", ".join(str(r.path) for r in references) or "none"
+        raise CalibrationError(f"--reference needs exactly one run of the reference panel (a "
+                               f'plan whose [sample] kind = "{REFERENCE_KIND}"); found {found}')
+    return references[0]
 
 
 def _beam_scan_only(readings: np.ndarray) -> bool:

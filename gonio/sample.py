@@ -11,10 +11,16 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from gonio.errors import PlanError
-from gonio.fields import Fields, stored_table
+from gonio.fields import REQUIRED, Fields, stored_table
 
+#: Opaque reflectors: reduction takes reflection only from them (the exit view's factor 1;
+#: model.optics.exit_face.OPAQUE_KINDS names the same). A matte or painted panel is "diffuse"
+#: or "coated" (a clear coat over a diffuse base), a reflectance standard "reference".
+OPAQUE_KINDS = ("conductor", "diffuse", "coated", "reference")
 #: Sample kinds as the bench knows them (sim.bench.sample.KINDS names the same).
-KINDS = ("hemisphere", "slab", "conductor")
+KINDS = ("hemisphere", "slab", *OPAQUE_KINDS)
+#: Kinds without a meaningful refractive index: [sample] eta is optional for them.
+WITHOUT_INDEX = ("diffuse", "reference")
 #: Which side the light comes from: the rough face's air side, or through the hemisphere.
 LIT_FROM = ("air", "hemisphere")
 #: What a reference sample is for: "angles", a smooth or mirror sample whose microfacet model
@@ -29,13 +35,14 @@ ETA_RANGE = (0.01, 10.0)
 
 @dataclass(frozen=True)
 class SampleInfo:
-    """[sample]: `eta` is the glass index (a conductor's real part, with `k` its extinction);
+    """[sample]: `eta` is the glass index (a conductor's real part, with `k` its extinction; a
+    coat's index), None for a diffuse or reference sample that states none;
     `azimuth_reference` says what the sample azimuth 0 is lined up with; `reference` what
     calibration the sample is a reference for (REFERENCES), empty for a sample measured."""
 
     id: str
     kind: str
-    eta: float
+    eta: float | None
     k: float = 0.0
     lit_from: str = "air"
     description: str = ""
@@ -61,14 +68,17 @@ class SampleInfo:
 
 
 def parse_sample(f: Fields) -> SampleInfo:
-    """Validate a [sample] table: id, kind and eta are required."""
+    """Validate a [sample] table: id and kind are required, and eta for every kind but those
+    WITHOUT_INDEX (a diffuse or reference panel has no index to state)."""
     sample_id = f.string("id")
     if not sample_id.strip():
         raise f.fail("id", "must not be empty")
+    kind = f.string("kind", choices=KINDS)
     sample = SampleInfo(
         id=sample_id,
-        kind=f.string("kind", choices=KINDS),
-        eta=f.number("eta", low=ETA_RANGE[0], high=ETA_RANGE[1]),
+        kind=kind,
+        eta=f.number("eta", None if kind in WITHOUT_INDEX else REQUIRED, low=ETA_RANGE[0],
+                     high=ETA_RANGE[1]),
         k=f.number("k", 0.0, low=0.0, high=20.0),
         lit_from=f.string("lit_from", "air", choices=LIT_FROM),
         description=f.string("description", ""),

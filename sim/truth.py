@@ -14,8 +14,8 @@ from model.optics.aperture import order_for
 from model.optics.directions import in_plane_directions
 from model.optics.quadrature import cap_rule
 from sim.bench import build_bench
-from sim.bench.config import informational, read_table
-from sim.bench.sample import Sample
+from sim.bench.config import read_sample
+from sim.bench.sample import MICROFACET, Sample, SampleSpec
 from sim.devices.photodiode import ELEMENTARY_CHARGE_C, PhotodiodeModel
 
 #: The legend label of the emulated bench's own BSDF (never "model": it is no fit).
@@ -32,15 +32,14 @@ class EmulatorTruth:
     def __init__(self, sim_config: Mapping, optics: Mapping | None = None,
                  sample: Mapping | None = None) -> None:
         self.sim_config, self.optics, self.described_sample = sim_config, optics, sample
-        table = read_table(sim_config, "sample", sample)
-        alpha = table["alpha"]
+        _, spec, _, stated = read_sample(sim_config, sample)
         #: The emulated sample: distribution, alpha (one value or (x, y)), eta, masking, and
         #: the single-scattering-equivalent alpha and its uncertainty where [sim.sample]
-        #: states them (sim.bench.config.INFORMATIONAL).
-        self.sample = {"distribution": table["distribution"],
-                       "alpha": alpha[0] if alpha[0] == alpha[1] else list(alpha),
-                       "eta": table["eta"], "masking": table["masking"],
-                       **informational(table)}
+        #: states them (sim.bench.config.INFORMATIONAL); for a model family's sample, its
+        #: `family` and its parameters and settings by name.
+        self.sample = truth_of_spec(spec) if spec.family != MICROFACET else {
+            "distribution": spec.distribution, "alpha": _alpha(spec), "eta": spec.eta,
+            "masking": spec.masking, **stated}
 
     def shot_noise_w(self, wavelength_nm: float) -> float:
         """Shot-noise variance of one sample of the emulated meter per watt of signal, W^2/W:
@@ -62,7 +61,6 @@ class EmulatorTruth:
         point values, and averaged over the aperture when its half-angle is given."""
         sample = self.bench_sample
         spec = sample.spec
-        alpha = spec.alpha if spec.alpha[0] != spec.alpha[1] else spec.alpha[0]
         theta = np.linspace(-89.5, 89.5, CURVE_POINTS)
         wi, wo = in_plane_directions(theta_i_deg, theta, transmission)
         theta_i = math.radians(theta_i_deg)
@@ -70,16 +68,46 @@ class EmulatorTruth:
             ("multiple scattering", sample.multiple_scattering_on(theta_i)),
             ("diffraction", sample.diffraction_on(theta_i, "transmission" if transmission
                                                   else "reflection"))) if on)
-        label = f"{spec.distribution} alpha {np.round(alpha, 4)}{extras}"
+        label = (f"{spec.distribution} alpha {np.round(_alpha(spec), 4)}{extras}"
+                 if spec.family == MICROFACET else family_label(spec))
         curves = {f"{TRUTH} ({label})": (theta, sample.bsdf(wi, wo))}
         half_angle = math.radians(aperture_half_angle_deg)
         if half_angle > 0:
-            # a transmitted lobe is about 0.3 alpha rad wide: resolve it across the aperture
-            order = order_for(half_angle / (0.3 * float(np.min(alpha))), 1e-3)
+            # a transmitted lobe is about 0.3 alpha rad wide, a family's lobe as wide as it
+            # is at its mirror direction: resolve it across the aperture
+            order = order_for(half_angle / _lobe_width(sample, wi[0]), 1e-3)
             nodes, weights = cap_rule(wo, half_angle, order)
             f = sample.bsdf(np.broadcast_to(wi[:, None, :], nodes.shape), nodes)
             curves[f"{TRUTH} through the aperture"] = (theta, f @ weights / weights.sum())
         return curves
+
+
+def _lobe_width(sample: Sample, wi: np.ndarray) -> float:
+    """The narrowest width (rad) of the sample's lobes at incidence wi: 0.3 alpha for the
+    microfacet interface, a family's own width at the mirror direction."""
+    if sample.spec.family == MICROFACET:
+        return 0.3 * min(sample.spec.alpha)
+    return sample.lobe_scales(wi, wi * np.array([-1.0, -1.0, 1.0])).width_o
+
+
+def _alpha(spec: SampleSpec) -> float | list[float]:
+    """The microsurface's alpha: one value, or [alpha_x, alpha_y]."""
+    return spec.alpha[0] if spec.alpha[0] == spec.alpha[1] else list(spec.alpha)
+
+
+def truth_of_spec(spec: SampleSpec) -> dict[str, object]:
+    """A model family's sample as the truth states it: `family`, then its parameters and fixed
+    settings by the names a fit reports."""
+    return {"family": spec.family, **dict(spec.family_parameters),
+            **dict(spec.family_settings)}
+
+
+def family_label(spec: SampleSpec) -> str:
+    """A family sample's truth in a legend: `lambert+microfacet rho 0.35, alpha 0.12, eta 1.5,
+    ggx`."""
+    values = ", ".join(f"{name} {value:.4g}" for name, value in spec.family_parameters)
+    settings = "".join(f", {value}" for _, value in spec.family_settings)
+    return f"{spec.family} {values}{settings}"
 
 
 def emulator_shot_noise_w(sim_detector: Mapping | None, wavelength_nm: float) -> float:

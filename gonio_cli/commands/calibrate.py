@@ -1,9 +1,10 @@
 """`gonio calibrate`: build a calibration file from calibration runs, record one in a run, show
 one. `build RUN [RUN...] --out CAL.json [--eta N] [--aperture-geometry D_MM DIST_MM |
---aperture-scan RUN] [--force]`; `use RUN CAL.json`; `show CAL.json`. Each RUN serves what its
-plan's `calibrates` says (calibration.routing); the aperture, the beam and its divergence come
-from the runs' [optics] where no option gives them; build says on stderr, one line each, what
-it could not calibrate, and refuses a fit the model does not describe unless --force."""
+--aperture-scan RUN] [--reference CERT.toml] [--force]`; `use RUN CAL.json`; `show CAL.json`.
+Each RUN serves what its plan's `calibrates` says (calibration.routing), a reference panel's run
+the reference whose certificate --reference gives; the aperture, the beam and its divergence
+come from the runs' [optics] where no option gives them; build says on stderr, one line each,
+what it could not calibrate, and refuses a fit the model does not describe unless --force."""
 
 from __future__ import annotations
 
@@ -15,7 +16,11 @@ from typing import TYPE_CHECKING
 from gonio_cli.incomplete import add_force_option
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from calibration.calfile import Calibration
+    from calibration.certificate import Certificate
+    from calibration.reference import ReferenceScale
     from calibration.values import Measured
     from gonio.store import Run
 
@@ -46,6 +51,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="beam diameter at the aperture for --aperture-scan (default: the "
                    "run's [optics] beam_diameter_mm widened by divergence_deg over "
                    "aperture_distance_mm; 0, a beam much smaller, without them)")
+    b.add_argument("--reference", metavar="CERT.toml",
+                   help="certificate of the reference panel that one RUN measures (its [sample] "
+                   'kind = "reference"): runs reduced with the calibration are normalised to '
+                   "it and carry the certificate's uncertainty (docs/calibration.md)")
     b.add_argument("--divergence-deg", type=_half_angle_deg, metavar="DEG",
                    help="beam divergence half-angle for the angle-offset fit (default: the "
                    "runs' [optics] divergence_deg, else 0)")
@@ -86,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
 def _build(args: argparse.Namespace) -> int:
     from calibration import calfile
     from calibration.calibrate import build
+    from calibration.certificate import load as load_certificate
     from calibration.routing import route
     from gonio.store import open_run, utc_now
     from gonio_cli.incomplete import incomplete_notes
@@ -97,12 +107,17 @@ def _build(args: argparse.Namespace) -> int:
     readings = [r.readings() for r in runs]
     aperture_run = open_run(args.aperture_scan, force=args.force) if args.aperture_scan \
         else None
-    routes = route(runs, readings, aperture_run, args.aperture_geometry is not None)
+    certificate = load_certificate(args.reference) if args.reference else None
+    routes = route(runs, readings, aperture_run, args.aperture_geometry is not None,
+                   certificate is not None)
     angle_runs = [run for run, take in zip(runs, routes.angles, strict=True) if take]
     eta = args.eta if args.eta is not None else _sample_eta(angle_runs)
     cal = build(readings, utc_now(), [str(r.path) for r in runs],
                 eta=eta, aperture=_aperture(args, runs, routes.aperture_scan),
-                divergence_deg=divergence, angle_runs=routes.angles)
+                divergence_deg=divergence, angle_runs=routes.angles,
+                reference=None if certificate is None
+                else _reference(routes.reference, readings[runs.index(routes.reference)],
+                                certificate))
     _refuse_or_warn(cal, angle_runs, args.force)
     for note in cal.notes:
         print(f"gonio calibrate: {note}", file=sys.stderr)
@@ -110,6 +125,20 @@ def _build(args: argparse.Namespace) -> int:
     cal.notes += incomplete_notes([*runs, *([aperture_run] if aperture_run else [])])
     print(calfile.save(cal, args.out))
     return 0
+
+
+def _reference(run: Run, readings: np.ndarray, certificate: Certificate) -> ReferenceScale:
+    """The reference calibration from the reference panel's run, reduced as `gonio reduce`
+    reduces it (its own dark and beam readings, the calibration it records; no angle terms)."""
+    from calibration.pipeline import reduce_stored
+    from calibration.reference import scale_from
+    from calibration.values import CalibrationError
+
+    try:
+        data = reduce_stored(run, readings, slope_options=None)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{run.path}: the reference run: {exc}") from None
+    return scale_from(data, certificate, str(run.path))
 
 
 def _refuse_or_warn(cal: Calibration, angle_runs: list[Run], force: bool) -> None:
@@ -145,12 +174,13 @@ def _not_angle_references(angle_runs: list[Run]) -> str:
 
 def _sample_eta(angle_runs: list[Run]) -> float | None:
     """The reference sample's index for the angle offsets when --eta is not given: the [sample]
-    eta of the angle runs, if they have one and agree (else None)."""
+    eta of the angle runs that state one, if they agree (else None)."""
     from calibration.values import CalibrationError
     from gonio.sample import sample_of_plan
 
     etas = {str(run.path): sample.eta for run in angle_runs
-            if (sample := sample_of_plan(run.plan, str(run.path))) is not None}
+            if (sample := sample_of_plan(run.plan, str(run.path))) is not None
+            and sample.eta is not None}
     if len(set(etas.values())) > 1:
         raise CalibrationError("the specular scans' [sample] eta differ ("
                                + ", ".join(f"{v:g} in {p}" for p, v in etas.items())

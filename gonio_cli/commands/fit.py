@@ -342,8 +342,13 @@ def summary(out: dict) -> str:
         lines.append(f"  noise: {out['noise_model']}")
     if out.get("emulator_truth"):
         t = out["emulator_truth"]
-        lines.append(f"  emulator truth ([sim.sample]): {t['distribution']} alpha {t['alpha']}, "
-                     f"eta {t['eta']:g}, {t['masking']} masking")
+        if "family" in t:  # a model family's sample: its parameters and settings by name
+            lines.append(f"  emulator truth ([sim.sample]): family {t['family']}, "
+                         + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                                     for k, v in t.items() if k != "family"))
+        else:
+            lines.append(f"  emulator truth ([sim.sample]): {t['distribution']} alpha "
+                         f"{t['alpha']}, eta {t['eta']:g}, {t['masking']} masking")
         if "single_scattering_alpha" in t:
             u = t.get("single_scattering_alpha_u")
             lines.append(f"  alpha {t['alpha']} is the microsurface's, under multiple scattering; "

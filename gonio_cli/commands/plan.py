@@ -35,7 +35,8 @@ def description(plan: Plan, cfg: InstrumentConfig) -> str:
     """What the run's record will say of the sample and the bench ([sample], [optics]), or
     where to add them: a run lacking either reduces only with a calibration's help."""
     sample, optics = plan.sample, cfg.optics
-    lines = [f"  sample: {sample.id!r}, {sample.kind}, eta {sample.eta:g}"
+    lines = [f"  sample: {sample.id!r}, {sample.kind}"
+             + (f", eta {sample.eta:g}" if sample.eta is not None else "")
              + (f", k {sample.k:g}" if sample.k else "") + f", lit from {sample.lit_from}"
              + (f", a reference for the {sample.reference}" if sample.reference else "")
              if sample else "  sample: none (add a [sample] table to the plan: id, kind, eta)"]

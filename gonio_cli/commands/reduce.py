@@ -215,6 +215,11 @@ def run(args: argparse.Namespace) -> int:
           f"{m['aperture_half_angle_deg']:.4g} deg ({m['aperture_sr']:.4g} sr, from "
           f"{m['aperture_from']}), beam {m['beam_mean_w']:.4g} W "
           f"(drift rms {m['beam_drift_rms']:.2%})")
+    if "reference" in m:
+        ref = m["reference"]
+        print(f"normalised to the reference {ref['certificate']['id']} (run {ref['run']}): "
+              f"solid angle {ref['solid_angle_sr']['value']:.5g} sr, "
+              f"{ref['scale']['value']:.5g} times the aperture's")
     print(f"noise: {m['noise_model']}")
     print("\n".join(summary(data)))
     print("\n".join(budget_summary(data)))

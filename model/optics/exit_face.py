@@ -1,6 +1,6 @@
 """What the detector sees of a sample's BSDF: the direction the BSDF is evaluated at and the
-faces' transmittance on the way out (hemisphere, slab or conductor); the bench integrates it
-and reduction divides by it."""
+faces' transmittance on the way out (hemisphere, slab or an opaque reflector); the bench
+integrates it and reduction divides by it."""
 
 from __future__ import annotations
 
@@ -10,13 +10,18 @@ import numpy as np
 
 from model.optics import smooth as optics
 
+#: Kinds of sample that only reflect: a conductor, a diffuse or coated panel, a reflectance
+#: standard (gonio.sample.OPAQUE_KINDS names the same).
+OPAQUE_KINDS = ("conductor", "diffuse", "coated", "reference")
+
 
 class SampleFaces(Protocol):
-    """The sample's faces as exit_view needs them: its kind ("hemisphere", "slab",
-    "conductor"), glass index and the side it is lit from ("air" or "hemisphere")."""
+    """The sample's faces as exit_view needs them: its kind ("hemisphere", "slab", or one of
+    OPAQUE_KINDS), glass index (None: an opaque sample without one) and the side it is lit
+    from ("air" or "hemisphere")."""
 
     kind: str
-    eta: float
+    eta: float | None
     lit_from: str
 
 
@@ -30,18 +35,19 @@ def exit_view(spec: SampleFaces, wi: np.ndarray, wo: np.ndarray) -> tuple[np.nda
     of Walter's eq. 21 integrates to the transmitted flux fraction, so no n^2: see
     docs/architecture.md, departures). Through a slab: f at the direction inside the glass
     that leaves the polished back face along wo, times that face's transmittance / n^2 (the
-    back face widens the cone by n^2). A conductor: 0.
+    back face widens the cone by n^2). An opaque reflector (OPAQUE_KINDS): reflection alone,
+    factor 1, transmission 0 (its eta, None for a diffuse or reference panel, is not read).
     """
     wi, wo = np.asarray(wi), np.asarray(wo)
     if wi.shape != wo.shape:
         wi, wo = np.broadcast_arrays(wi, wo)
     reflected = (wo[..., 2] > 0) == (wi[..., 2] > 0)
+    if spec.kind in OPAQUE_KINDS:  # no index needed: nothing crosses a face
+        return wo, np.where(reflected & (wo[..., 2] != 0), 1.0, 0.0)
     n = spec.eta
     t = optics.normal_transmittance(n)
     w_eval = wo
-    if spec.kind == "conductor":
-        transmitted = np.zeros(wo.shape[:-1])
-    elif spec.kind == "hemisphere":
+    if spec.kind == "hemisphere":
         transmitted = np.full(wo.shape[:-1], t)
     else:
         w_glass = optics.air_to_glass_direction(wo, n)

@@ -1,7 +1,8 @@
 """The [sim] section of an instrument config -> the emulated bench and its PowerSource.
 
 Reads the tables this package owns, [sim.source], [sim.sample] and the cabinet of samples
-[sim.samples.<id>] (a plan mounts the one named by its [sample] id), [sim.aperture],
+[sim.samples.<id>] (a plan mounts the one named by its [sample] id; a sample of a model family
+beside the microfacet interface: sim.bench.family_table), [sim.aperture],
 [sim.alignment], [sim.stray] and [sim.room] (docs/bench.md has the schema); every bad field
 raises one SimConfigError naming it. [sim.detector] belongs to sim.devices.photodiode, the
 other keys to the emulators.
@@ -19,7 +20,9 @@ from collections.abc import Callable, Mapping
 
 from model.bsdf.distributions import DISTRIBUTION_NAMES, WALKABLE
 from model.bsdf.masking import MASKINGS
-from sim.bench.sample import KINDS, LIT_FROM, Sample, SampleSpec
+from sim.bench.family_sample import FamilySample
+from sim.bench.family_table import FAMILY_CHOICES, FAMILY_KEYS, family_fields
+from sim.bench.sample import KINDS, LIT_FROM, MICROFACET, Sample, SampleSpec
 from sim.bench.scene import Alignment, Bench, BenchPowerSource
 from sim.bench.source import Dip, Source
 from sim.bench.stray import InstrumentScatter
@@ -68,6 +71,11 @@ def _alpha(where: str, value: object) -> tuple[float, float]:
 def _switch(where: str, value: object) -> bool | str:
     if not (isinstance(value, bool) or value == "auto"):
         raise SimConfigError(f'{where}: must be true, false or "auto", got {value!r}')
+    return value
+
+
+def _family_value(where: str, value: object) -> object:
+    """A family parameter or setting: checked by the family (sim.bench.family_table)."""
     return value
 
 
@@ -135,6 +143,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         # informational (INFORMATIONAL): what a single-scattering fit of this bench returns
         "single_scattering_alpha": (None, _optional(_number(*ALPHA_RANGE))),
         "single_scattering_alpha_u": (None, _optional(_number(0.0, open_low=True))),
+        # a model family's sample (sim.bench.family_table): its name, its own parameters
+        "family": (MICROFACET, _choice(FAMILY_CHOICES)),
+        **{key: (None, _family_value) for key in FAMILY_KEYS},
     },
     "aperture": {
         "diameter_mm": (10.0, _number(0.0, open_low=True)),
@@ -222,14 +233,40 @@ def _validated(table: object, where: str, name: str, described: Mapping | None =
         raise SimConfigError(
             f"[{where}]: unknown key {unknown[0]!r}; known: {', '.join(fields)}")
     source, keys = DESCRIBED.get(name, ("", {}))
-    base = {key: described[theirs] for key, theirs in keys.items()
-            if described is not None and theirs in described}
+    base = _described(name, described)
     out = {}
     for key, (default, check) in fields.items():
         field = f"[{where}] {key}" if key in table or key not in base \
             else f"[{source}] {keys[key]}"
         out[key] = check(field, table.get(key, base.get(key, default)))
     return out
+
+
+def _described(name: str, described: Mapping | None) -> dict[str, object]:
+    """[sim.<name>] keys the experimenter's description states (DESCRIBED; a None, such as a
+    diffuse sample's absent eta, states nothing)."""
+    _, keys = DESCRIBED.get(name, ("", {}))
+    return {key: described[theirs] for key, theirs in keys.items()
+            if described is not None and described.get(theirs) is not None}
+
+
+def read_sample(sim_config: Mapping, described: Mapping | None = None
+                ) -> tuple[str, SampleSpec, float, dict[str, object]]:
+    """(where, the SampleSpec, retracted_beyond_deg, the INFORMATIONAL keys stated) of the
+    mounted sample (mounted_sample) on the [sample] the experimenter describes."""
+    where, mounted = mounted_sample(sim_config, described)
+    table = _validated(mounted, where, "sample", described)
+    retracted = table.pop("retracted_beyond_deg")
+    stated = informational(table, where)
+    spec = SampleSpec(**family_fields(mounted, table, where, _described("sample", described)))
+    if spec.kind != "hemisphere" and spec.lit_from != "air":
+        raise SimConfigError(f'[{where}] lit_from: "hemisphere" needs kind = "hemisphere", '
+                             f"not {spec.kind!r}")
+    if spec.kind != "conductor" and spec.k != 0.0:
+        raise SimConfigError(f"[{where}] k: the extinction applies to kind = \"conductor\" "
+                             f"only, not {spec.kind!r}")
+    _check_switches(spec, where)
+    return where, spec, retracted, stated
 
 
 def _warn_polarisation(optics: Mapping | None) -> None:
@@ -250,23 +287,13 @@ def build_bench(sim_config: Mapping, optics: Mapping | None = None,
     defaults."""
     _warn_polarisation(optics)
     source = Source(**read_table(sim_config, "source", optics))
-    where, mounted = mounted_sample(sim_config, sample)
-    sample_table = _validated(mounted, where, "sample", sample)
+    _, spec, retracted, _ = read_sample(sim_config, sample)
     aperture = read_table(sim_config, "aperture", optics)
-    retracted = sample_table.pop("retracted_beyond_deg")
-    informational(sample_table, where)
-    spec = SampleSpec(**sample_table)
-    if spec.kind != "hemisphere" and spec.lit_from != "air":
-        raise SimConfigError(f'[{where}] lit_from: "hemisphere" needs kind = "hemisphere", '
-                             f"not {spec.kind!r}")
-    if spec.kind != "conductor" and spec.k != 0.0:
-        raise SimConfigError(f"[{where}] k: the extinction applies to kind = \"conductor\" "
-                             f"only, not {spec.kind!r}")
     if aperture["diameter_mm"] >= aperture["distance_mm"]:
         raise SimConfigError("[sim.aperture] diameter_mm: must be smaller than distance_mm")
-    _check_switches(spec, where)
-    sample = Sample(spec, source.wavelength_nm, _visible_fraction(sim_config, source, aperture),
-                    seed=int(sim_config.get("seed", 0) or 0))
+    kind = Sample if spec.family == MICROFACET else FamilySample
+    sample = kind(spec, source.wavelength_nm, _visible_fraction(sim_config, source, aperture),
+                  seed=int(sim_config.get("seed", 0) or 0))
     return Bench(
         source=source, sample=sample,
         aperture_diameter_mm=aperture["diameter_mm"], distance_mm=aperture["distance_mm"],

@@ -1,5 +1,6 @@
 """The sample on the bench: a rough interface on a hemisphere or a slab of the same glass, or an
 opaque conductor; the power reaching the detector per unit incident power and solid angle.
+(An opaque sample of another model family is sim.bench.family_sample's FamilySample.)
 
 `Sample.integrand(wi, wo)` is the radiometric integrand of the aperture integral,
 T_in * T_out * (eta_i / eta_o)^2 * f(wi, wo) * |cos o| (power BSDF times the faces the light
@@ -25,9 +26,11 @@ from model.bsdf.distributions import DISTRIBUTIONS
 from model.optics import smooth as optics
 from model.optics.aperture import LobeScales
 from model.optics.edges import EdgeCircles
-from model.optics.exit_face import exit_view
+from model.optics.exit_face import OPAQUE_KINDS, exit_view
 
-KINDS = ("hemisphere", "slab", "conductor")
+KINDS = ("hemisphere", "slab", *OPAQUE_KINDS)
+#: The model of a rough interface (this module's Sample), as fit results name it.
+MICROFACET = "microfacet"
 LIT_FROM = ("air", "hemisphere")
 #: Walks per pair of the per-pair random walk used for anisotropic samples, per table walk
 #: (a pair's walk costs about what scoring 16 table directions does).
@@ -40,7 +43,10 @@ DIFFRACTION_SAMPLES = 256
 class SampleSpec:
     """What the sample is. eta: glass index, or the conductor's real index with k its
     extinction; alpha: (alpha_x, alpha_y); lit_from "hemisphere" lights the rough face through
-    the hemisphere (from the glass side)."""
+    the hemisphere (from the glass side). family: the model, MICROFACET (the rough interface)
+    or a name of model.bsdf.families.FAMILIES, whose parameters and fixed settings by name
+    family_parameters and family_settings give (a coat's distribution, alpha, eta and masking
+    are also the fields above)."""
 
     kind: str = "hemisphere"
     distribution: str = "ggx"
@@ -55,6 +61,9 @@ class SampleSpec:
     correlation_length_um: float | None = None
     psd_exponent: float = 2.0
     ms_walks: int = 1 << 16  # random walks per incidence table of the multiple-scattering term
+    family: str = MICROFACET
+    family_parameters: tuple[tuple[str, float], ...] = ()
+    family_settings: tuple[tuple[str, str], ...] = ()
 
 
 def _tir_distance(w: np.ndarray, h: np.ndarray, eta_w: float, eta_other: float) -> float:
@@ -152,7 +161,7 @@ class Sample:
                  visible_fraction: float = 1e-3, seed: int = 0):
         self.spec = spec
         self.flipped = spec.lit_from == "hemisphere"
-        self.n_interior = spec.eta if spec.kind != "conductor" else 1.0
+        self.n_interior = spec.eta if spec.kind not in OPAQUE_KINDS else 1.0
         self.wavelength_m = wavelength_nm * 1e-9
         self.visible_fraction = visible_fraction
         self.seed = seed
@@ -318,10 +327,10 @@ class Sample:
     def peak_direction(self, wi: np.ndarray, reflection: bool) -> np.ndarray | None:
         """Where a lobe's specular peak leaves (as the detector sees it): the mirror direction,
         the refracted one (straight through for a slab), None under total internal reflection
-        or for a conductor's transmission."""
+        or for an opaque sample's transmission."""
         if reflection:
             return wi * np.array([-1.0, -1.0, 1.0])
-        if self.spec.kind == "conductor":
+        if self.spec.kind in OPAQUE_KINDS:
             return None
         if self.spec.kind == "slab":
             return -wi
@@ -371,4 +380,4 @@ class Sample:
         theta_i = float(np.arccos(min(1.0, abs(float(wi[2])))))
         if s.alpha[0] == s.alpha[1] and self.multiple_scattering_on(theta_i):
             from model.bsdf.multiple_scattering.lobe import THETA_STEP_DEG as step
-        return EdgeCircles(1.0, self.n_interior, s.kind != "conductor", step)
+        return EdgeCircles(1.0, self.n_interior, s.kind not in OPAQUE_KINDS, step)

@@ -5,6 +5,7 @@ import json
 import tomllib
 import warnings
 
+import numpy as np
 import pytest
 from gonio_testkit import EXAMPLES, fast_config, gonio_cli, one_line_error, run_dir_of, write_toml
 
@@ -12,7 +13,9 @@ from gonio.config import parse_config
 from gonio.errors import ConfigError, PlanError
 from gonio.optics import optics_of_config
 from gonio.plan import load_plan, parse_plan
-from gonio.sample import KINDS, LIT_FROM
+from gonio.sample import KINDS, LIT_FROM, OPAQUE_KINDS
+from model.optics.exit_face import OPAQUE_KINDS as OPTICS_OPAQUE_KINDS
+from model.optics.exit_face import exit_view
 from sim.bench import build_bench
 from sim.bench.sample import KINDS as SIM_KINDS
 from sim.bench.sample import LIT_FROM as SIM_LIT_FROM
@@ -29,6 +32,7 @@ def test_every_example_describes_its_bench_and_sample():
 
 def test_sample_kinds_name_the_benchs_kinds():
     assert KINDS == SIM_KINDS and LIT_FROM == SIM_LIT_FROM
+    assert OPAQUE_KINDS == OPTICS_OPAQUE_KINDS
 
 
 def test_receiver_solid_angle_from_the_aperture():
@@ -83,10 +87,31 @@ PLAN = {"name": "p", "grid": [{"theta_i_deg": 0.0, "theta_o_deg": 20.0}]}
     ({"id": "a", "kind": "slab", "eta": 1e-9}, "plan: \\[sample\\] eta: must be in"),
     ({"id": "a", "kind": "slab", "eta": 1.5, "reference": "mirror"},
      "plan: \\[sample\\] reference: must be one of angles, detector; got 'mirror'"),
+    ({"id": "a", "kind": "coated"}, "plan: \\[sample\\]: missing required key 'eta'"),
+    ({"id": "a", "kind": "diffuse", "eta": 0.0}, "plan: \\[sample\\] eta: must be in"),
+    ({"id": "a", "kind": "reference", "lit_from": "hemisphere"}, "needs kind"),
+    ({"id": "a", "kind": "diffuse", "k": 1.0}, "applies to kind = \"conductor\""),
 ])
 def test_bad_sample_is_one_error_naming_the_field(sample, message):
     with pytest.raises(PlanError, match=message):
         parse_plan({**PLAN, "sample": sample})
+
+
+@pytest.mark.parametrize("kind", ["diffuse", "reference"])
+def test_a_diffuse_or_reference_panel_states_no_index_and_reflects_only(kind):
+    sample = parse_plan({**PLAN, "sample": {"id": "panel", "kind": kind}}).sample
+    assert sample.kind == kind and sample.eta is None
+    assert parse_plan({**PLAN, "sample": {"id": "p", "kind": kind, "eta": 1.4}}).sample.eta == 1.4
+    # reduction's exit view: reflection alone, factor 1, whatever the index
+    wi = np.array([[0.0, 0.0, 1.0]] * 3)
+    wo = np.array([[0.6, 0.0, 0.8], [0.6, 0.0, -0.8], [1.0, 0.0, 0.0]])
+    w_eval, factor = exit_view(sample, wi, wo)
+    assert factor.tolist() == [1.0, 0.0, 0.0] and np.array_equal(w_eval, wo)
+
+
+def test_a_coated_sample_states_its_coat_index():
+    sample = parse_plan({**PLAN, "sample": {"id": "paint", "kind": "coated", "eta": 1.5}}).sample
+    assert (sample.kind, sample.eta) == ("coated", 1.5)
 
 
 def test_the_emulated_bench_takes_its_geometry_from_the_description():
