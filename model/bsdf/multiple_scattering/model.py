@@ -155,18 +155,19 @@ class RandomWalkBSDF:
         return tuple(getattr(self.parent, "lobes", ("reflection", "transmission")))
 
     def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
-                 walks: int | None = None) -> Estimate:
-        """BSDF estimate with its standard error and the order cap's leftover energy."""
-        value, err, trunc = self._pairs(wi, wo, order, False, rng, walks or self.walks)
+                 walks: int | None = None, min_order: int = 1) -> Estimate:
+        """BSDF estimate with its standard error and the order cap's leftover energy;
+        order=k counts the k-th scattering order only, min_order=k the orders from k on."""
+        if int(min_order) != min_order or min_order < 1:
+            raise ValueError(f"min_order must be a positive integer, got {min_order!r}")
+        value, err, trunc = self._pairs(wi, wo, order, False, rng, walks or self.walks,
+                                        int(min_order))
         return Estimate(value, err, trunc)
 
     def eval(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
              min_order: int = 1) -> np.ndarray:
-        """BSDF value f(wi, wo) in 1/sr, no cosine; order=k gives the k-th scattering order
-        only, min_order=k the orders from k on."""
-        if int(min_order) != min_order or min_order < 1:
-            raise ValueError(f"min_order must be a positive integer, got {min_order!r}")
-        return self._pairs(wi, wo, order, False, rng, self.walks, int(min_order))[0]
+        """BSDF value f(wi, wo) in 1/sr, no cosine; order and min_order as for estimate."""
+        return self.estimate(wi, wo, rng, order=order, min_order=min_order).value
 
     def pdf(self, wi, wo, rng: np.random.Generator) -> np.ndarray:
         """Density over solid angle of sample()'s wo: the walk's direction density, estimated
