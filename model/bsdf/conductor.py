@@ -79,6 +79,12 @@ class RoughConductor(MicrofacetModel):
             0.25 * self._fresnel(dot(wi, m)) * self.distribution.D(m)
             * self._g2_over_cosines(wi, wo)))
 
+    def _mueller_kernel(self, wi, wo, f):
+        from model.bsdf.mueller_kernel import conductor_muellers
+
+        n_c = 0j if self.eta_complex is None else self.eta_complex
+        return conductor_muellers(wi, wo, f, self.eta_complex is not None, n_c)
+
     def _mueller_shape(self, wi, wo):
         """eval_mueller / eval (n, 4, 4): the facet at the half vector, Fresnel amplitudes of
         n + ik, or of a perfect conductor (r_s = -1, r_p = 1) when eta_complex is None."""

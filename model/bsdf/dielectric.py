@@ -126,6 +126,11 @@ class RoughDielectric(MicrofacetModel):
 
     # --- Mueller ----------------------------------------------------------------------------
 
+    def _mueller_kernel(self, wi, wo, f):
+        from model.bsdf.mueller_kernel import dielectric_muellers
+
+        return dielectric_muellers(wi, wo, f, self.eta, self.reflection, self.transmission)
+
     def _mueller_shape(self, wi, wo):
         """eval_mueller / eval (n, 4, 4): one facet, at the reflection half vector with the
         complex Fresnel amplitudes (total internal reflection keeps its phase), or at

@@ -65,11 +65,15 @@ class MicrofacetModel:
         multiple_scattering (rng= needed) the walk's orders >= 2 are added to M00 alone, as
         unpolarised light (an ideal depolariser)."""
         single = self._pairs(wi, wo, want_pdf=False)
-        wi_u, wo_u = directions(wi, wo)
         shape = single.shape
-        with np.errstate(divide="ignore", invalid="ignore"):  # pairs outside the lobes masked
-            polarised = self._mueller_shape(wi_u.reshape(-1, 3), wo_u.reshape(-1, 3))
-        out = single.reshape(-1)[:, None, None] * polarised
+        if self.backend == "numba":
+            flat = (a.reshape(-1, 3) for a in direction_arrays(wi, wo))
+            out = self._mueller_kernel(*flat, single.reshape(-1))
+        else:
+            wi_u, wo_u = directions(wi, wo)
+            with np.errstate(divide="ignore", invalid="ignore"):  # pairs outside lobes masked
+                polarised = self._mueller_shape(wi_u.reshape(-1, 3), wo_u.reshape(-1, 3))
+            out = single.reshape(-1)[:, None, None] * polarised
         if self._random_walk is not None:
             higher = self._random_walk.eval(wi, wo, self._need_rng(rng), min_order=2)
             out[:, 0, 0] += higher.reshape(-1)
