@@ -7,7 +7,6 @@ path. Only imported when numba is (model.bsdf.kernels.AVAILABLE)."""
 
 from __future__ import annotations
 
-import cmath
 import math
 
 import numpy as np
@@ -15,7 +14,7 @@ from numba import prange
 
 from model.bsdf.constants import COS_HORIZON
 from model.bsdf.kernels import launch
-from model.bsdf.primitives import inlined, unit
+from model.bsdf.primitives import fresnel_amplitudes, inlined, unit
 from model.kernel_cache import compiled
 
 #: mueller.S_AT_NORMAL's y (x and z are 0).
@@ -47,20 +46,6 @@ def _double_angle(cos, sin):
         return 1.0, 0.0
     cos, sin = cos / r, sin / r
     return cos * cos - sin * sin, 2.0 * cos * sin
-
-
-@inlined
-def _amplitudes(c, n, n2m1):
-    """fresnel.fresnel_amplitudes for one cosine: complex (r_s, r_p) toward index n."""
-    root = cmath.sqrt(n2m1 + c * c)
-    n2 = n * n
-    den_s = c + root
-    den_p = n2 * c + root
-    if den_s == 0 or den_p == 0:
-        return complex(-1.0, 0.0), complex(-1.0, 0.0)
-    if n2m1 == 0:
-        return complex(0.0, 0.0), complex(0.0, 0.0)
-    return -n2m1 / den_s / den_s, n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
 
 
 @inlined
@@ -114,7 +99,7 @@ def _identity(out, f):
 def _reflection(out, f, ix, iy, iz, ox, oy, oz, n, n2m1):
     """The facet at the reflection half vector with the amplitudes toward index n."""
     mx, my, mz = unit(ix + ox, iy + oy, iz + oz)
-    r_s, r_p = _amplitudes(abs(ix * mx + iy * my + iz * mz), n, n2m1)
+    r_s, r_p = fresnel_amplitudes(abs(ix * mx + iy * my + iz * mz), n, n2m1)
     _facet(out, f, ix, iy, iz, ox, oy, oz, mx, my, mz, r_s, r_p)
 
 
