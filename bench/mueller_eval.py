@@ -40,8 +40,8 @@ def throughput() -> None:
             model.eval_mueller(wi[:10], wo[:10])  # compile (or load) outside the timing
             a, b = wi[:n], wo[:n]
             scale = N / n  # rate() counts N items
-            ev = [r / scale for r in rate(lambda m=model: m.eval(a, b), 5)]
-            mu = [r / scale for r in rate(lambda m=model: m.eval_mueller(a, b), 5)]
+            ev = [r / scale for r in rate(lambda m=model, a=a, b=b: m.eval(a, b), 5)]
+            mu = [r / scale for r in rate(lambda m=model, a=a, b=b: m.eval_mueller(a, b), 5)]
             rows.append((name, model.backend, ev, mu))
     print(f"{N:,} random pairs (numpy rows: {NUMPY_PAIRS:,}), float64; load average "
           f"{load_before:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} cores")
