@@ -9,8 +9,9 @@ import cmath
 import numpy as np
 
 from model.bsdf.constants import COS_HORIZON
-from model.bsdf.fresnel import fresnel_conductor
-from model.bsdf.microfacet import MicrofacetModel, half_vector, reflect
+from model.bsdf.fresnel import fresnel_amplitudes, fresnel_conductor
+from model.bsdf.microfacet import MicrofacetModel, half_vector, identity_muellers, reflect
+from model.bsdf.mueller import facet_mueller
 from model.bsdf.vectors import dot, unit
 
 
@@ -77,6 +78,28 @@ class RoughConductor(MicrofacetModel):
         return self._over_live_pairs(wi, wo, lambda wi, wo, m: (
             0.25 * self._fresnel(dot(wi, m)) * self.distribution.D(m)
             * self._g2_over_cosines(wi, wo)))
+
+    def _mueller_kernel(self, wi, wo, f):
+        from model.bsdf.mueller_kernel import conductor_muellers
+
+        n_c = 0j if self.eta_complex is None else self.eta_complex
+        return conductor_muellers(wi, wo, f, self.eta_complex is not None, n_c)
+
+    def _mueller_shape(self, wi, wo):
+        """eval_mueller / eval (n, 4, 4): the facet at the half vector, Fresnel amplitudes of
+        n + ik, or of a perfect conductor (r_s = -1, r_p = 1) when eta_complex is None."""
+        out = identity_muellers(wi.shape[0])
+        live = (wi[:, 2] > COS_HORIZON) & (wo[:, 2] > COS_HORIZON)
+        if live.any():
+            wi, wo = wi[live], wo[live]
+            m = half_vector(wi, wo)
+            if self.eta_complex is None:
+                r_s, r_p = -np.ones(len(m)), np.ones(len(m))
+            else:
+                n = self.eta_complex
+                r_s, r_p = fresnel_amplitudes(dot(wi, m), n, (n - 1.0) * (n + 1.0))
+            out[live] = facet_mueller(wi, wo, m, r_s, r_p)
+        return out
 
     def _pdf(self, wi, wo):
         return self._over_live_pairs(

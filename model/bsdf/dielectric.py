@@ -12,8 +12,13 @@ import math
 import numpy as np
 
 from model.bsdf.constants import COS_HORIZON
-from model.bsdf.fresnel import dielectric_transmittance, reflectance_transmittance_toward
-from model.bsdf.microfacet import MicrofacetModel, half_vector, reflect
+from model.bsdf.fresnel import (
+    dielectric_transmittance,
+    fresnel_amplitudes,
+    reflectance_transmittance_toward,
+)
+from model.bsdf.microfacet import MicrofacetModel, half_vector, identity_muellers, reflect
+from model.bsdf.mueller import facet_mueller
 from model.bsdf.vectors import dot, unit
 
 LOBES = ("reflection", "transmission")
@@ -118,6 +123,36 @@ class RoughDielectric(MicrofacetModel):
         val = (im * om * e * e * ft * self.distribution.D(m)
                * self._g2_over_cosines(wi, wo) / np.where(valid, n2, 1.0))
         return np.where(valid, val, 0.0)
+
+    # --- Mueller ----------------------------------------------------------------------------
+
+    def _mueller_kernel(self, wi, wo, f):
+        from model.bsdf.mueller_kernel import dielectric_muellers
+
+        return dielectric_muellers(wi, wo, f, self.eta, self.reflection, self.transmission)
+
+    def _mueller_shape(self, wi, wo):
+        """eval_mueller / eval (n, 4, 4): one facet, at the reflection half vector with the
+        complex Fresnel amplitudes (total internal reflection keeps its phase), or at
+        Walter's transmission normal with the transmitted amplitudes, whose ratio
+        t_p / t_s = (c + e cos_t) e / (e^2 c + e cos_t) is all the normalised matrix needs."""
+        wi_up, wo_up, e, em1, flip = self._mirror(wi, wo)
+        refl, trans = self._lobe_masks(wi_up, wo_up)
+        out = identity_muellers(wi.shape[0])
+        if refl.any():
+            wi_r, wo_r, e_r = wi[refl], wo[refl], e[refl]
+            m = half_vector(wi_r, wo_r)
+            r_s, r_p = fresnel_amplitudes(dot(wi_r, m), e_r, em1[refl] * (e_r + 1.0))
+            out[refl] = facet_mueller(wi_r, wo_r, m, r_s, r_p)
+        if trans.any():
+            m, _, valid = self._transmission_normal(wi_up[trans], wo_up[trans], em1[trans])
+            e_t = e[trans]
+            c, e_ct = dot(wi_up[trans], m), -e_t * dot(wo_up[trans], m)
+            den_s = np.where(valid, c + e_ct, 1.0)
+            den_p = np.where(valid, e_t * e_t * c + e_ct, 1.0)
+            out[trans] = facet_mueller(wi[trans], wo[trans], m * flip[trans], 1.0 / den_s,
+                                       e_t / den_p)
+        return out
 
     # --- pdf --------------------------------------------------------------------------------
 

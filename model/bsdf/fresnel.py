@@ -1,4 +1,5 @@
-"""Exact unpolarised Fresnel reflectance: dielectric (with total internal reflection) and conductor.
+"""Exact Fresnel reflectance, dielectric (with total internal reflection) and conductor, and the
+complex s/p amplitudes behind it (for the Mueller matrices).
 
 Written without cancellation so that the transmittance 1 - F stays accurate near grazing and
 near the critical angle, and the relative index may be 1 +- 1e-12."""
@@ -86,18 +87,36 @@ def fresnel_conductor(cos_i: np.ndarray, eta_complex: complex | np.ndarray) -> n
     Exact for any complex index (a real index gives the dielectric value); cos_i is taken
     as |cos_i| since light reaches a conductor only from the exterior.
     """
-    c = np.abs(np.asarray(cos_i, dtype=np.float64))
     n = np.asarray(eta_complex, dtype=np.complex128)
+    rs, rp = fresnel_amplitudes(cos_i, n, (n - 1.0) * (n + 1.0))
+    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+
+
+def fresnel_amplitudes(
+    cos_i: np.ndarray, n: np.ndarray | complex, n2_minus_1: np.ndarray | complex
+) -> tuple[np.ndarray, np.ndarray]:
+    """Complex reflection amplitudes (r_s, r_p) toward a medium of relative index n (n + ik,
+    k >= 0, fields ~ exp(-i omega t)); n2_minus_1 = n^2 - 1, exact (no cancellation near 1).
+
+    r_s = (c - n cos_t)/(c + n cos_t), r_p = (n c - cos_t)/(n c + cos_t): the amplitudes in
+    right-handed (s, p, k) frames of both beams with one s, so r_p = -r_s at normal incidence
+    and r_p = 0 at Brewster's angle. n cos_t = sqrt(n^2 - 1 + c^2) on the principal branch,
+    which is the evanescent wave under total internal reflection (|r_s| = |r_p| = 1 there).
+    c = |cos_i|; where both denominators vanish (n = 1 at grazing) r_s = r_p = -1, the
+    grazing limit.
+    """
+    c = np.abs(np.asarray(cos_i, dtype=np.float64))
+    n = np.asarray(n, dtype=np.complex128)
+    n2m1 = np.asarray(n2_minus_1, dtype=np.complex128)
     n2 = n * n
-    n2m1 = (n - 1.0) * (n + 1.0)  # n^2 - 1 without cancellation for n near 1
-    root = np.sqrt(n2m1 + c * c)  # n cos_t = sqrt(n^2 - sin^2), principal branch (Re >= 0)
+    root = np.sqrt(n2m1 + c * c)  # n cos_t
     den_s = c + root
     den_p = n2 * c + root
-    ok = (den_s != 0) & (den_p != 0)  # both vanish only for n = 1 at grazing: F = 1 there
+    ok = (den_s != 0) & (den_p != 0)
     matched = n2m1 == 0  # n = 1: rs = rp = 0 exactly; no complex 0 / 1e-320 (it overflows)
     den_s = np.where(ok & ~matched, den_s, 1.0)
     den_p = np.where(ok & ~matched, den_p, 1.0)
     # (c - n cos_t) / (c + n cos_t); divided twice, as den^2 underflows for den ~ 1e-300
     rs = -n2m1 / den_s / den_s
     rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
-    return np.where(ok, 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), 1.0)
+    return np.where(ok, rs, -1.0), np.where(ok, rp, -1.0)

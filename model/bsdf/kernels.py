@@ -345,7 +345,7 @@ if AVAILABLE:
                                              want_pdf)
         return out
 
-    def _launch(kernel, n: int, *args):
+    def launch(kernel, n: int, *args):
         """kernel(*args) over n pairs: on the calling thread alone below SERIAL_BELOW pairs
         (numba's thread count is per calling thread, so other threads keep theirs)."""
         return kernel(*args) if n >= SERIAL_BELOW else run_with_one_kernel_thread(kernel, *args)
@@ -362,12 +362,12 @@ if AVAILABLE:
         if ndf == Ndf.GGX and not want_pdf:
             mode = (DielectricBlock.CORRELATED_EVAL if masking == Masking.CORRELATED
                     else DielectricBlock.SEPARABLE_EVAL)
-            return _launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta, int(mode), refl,
+            return launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta, int(mode), refl,
                            trans)
         if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
-            return _launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta,
+            return launch(_ggx_dielectric, len(wi), wi, wo, ax, ay, eta,
                            int(DielectricBlock.VISIBLE_PDF), refl, trans)
-        return _launch(_dielectric, len(wi), wi, wo, int(ndf), ax, ay, eta, int(masking), refl,
+        return launch(_dielectric, len(wi), wi, wo, int(ndf), ax, ay, eta, int(masking), refl,
                        trans, int(sampling), want_pdf)
 
     def conductor(wi: np.ndarray, wo: np.ndarray, ndf: Ndf, ax: float, ay: float, has_f: bool,
@@ -375,7 +375,7 @@ if AVAILABLE:
                   want_pdf: bool) -> np.ndarray:
         """eval (want_pdf False) or pdf of RoughConductor for pairs of shape (N, 3); has_f
         False: F = 1 (n_c unused)."""
-        return _launch(_conductor, len(wi), wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking),
+        return launch(_conductor, len(wi), wi, wo, int(ndf), ax, ay, has_f, n_c, int(masking),
                        int(sampling), want_pdf)
 
     @compiled(error_model="numpy")
@@ -610,14 +610,14 @@ if AVAILABLE:
         """sample() of RoughDielectric: (wo, weight, pdf), failed samples all zero; GGX with
         visible normals in SIMD blocks, the rest pair by pair."""
         if ndf == Ndf.GGX and sampling == Sampling.VISIBLE:
-            return _launch(_ggx_visible_sample, len(wi), wi, u, ax, ay, eta,
+            return launch(_ggx_visible_sample, len(wi), wi, u, ax, ay, eta,
                            masking == Masking.CORRELATED, refl_on, trans_on)
-        return _launch(_dielectric_sample, len(wi), wi, u, int(ndf), ax, ay, eta, int(masking),
+        return launch(_dielectric_sample, len(wi), wi, u, int(ndf), ax, ay, eta, int(masking),
                        refl_on, trans_on, int(sampling))
 
     def conductor_sample(wi: np.ndarray, u: np.ndarray, ndf: Ndf, ax: float, ay: float,
                          has_f: bool, n_c: complex, masking: Masking,
                          sampling: Sampling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """sample() of RoughConductor: (wo, weight, pdf), failed samples all zero."""
-        return _launch(_conductor_sample, len(wi), wi, u, int(ndf), ax, ay, has_f, n_c,
+        return launch(_conductor_sample, len(wi), wi, u, int(ndf), ax, ay, has_f, n_c,
                        int(masking), int(sampling))

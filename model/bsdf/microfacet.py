@@ -59,6 +59,26 @@ class MicrofacetModel:
             return self._random_walk.pdf(wi, wo, self._need_rng(rng))
         return self._pairs(wi, wo, want_pdf=True)
 
+    def eval_mueller(self, wi, wo, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Mueller BSDF (..., 4, 4) in 1/sr, no cosine, in the Stokes frames of docs/bsdf.md
+        (Polarisation): single scattering, M00 = the single-scattering eval. With
+        multiple_scattering (rng= needed) the walk's orders >= 2 are added to M00 alone, as
+        unpolarised light (an ideal depolariser)."""
+        single = self._pairs(wi, wo, want_pdf=False)
+        shape = single.shape
+        if self.backend == "numba":
+            flat = (a.reshape(-1, 3) for a in direction_arrays(wi, wo))
+            out = self._mueller_kernel(*flat, single.reshape(-1))
+        else:
+            wi_u, wo_u = directions(wi, wo)
+            with np.errstate(divide="ignore", invalid="ignore"):  # pairs outside lobes masked
+                polarised = self._mueller_shape(wi_u.reshape(-1, 3), wo_u.reshape(-1, 3))
+            out = single.reshape(-1)[:, None, None] * polarised
+        if self._random_walk is not None:
+            higher = self._random_walk.eval(wi, wo, self._need_rng(rng), min_order=2)
+            out[:, 0, 0] += higher.reshape(-1)
+        return out.reshape(shape + (4, 4))
+
     def sample(self, wi, u, rng: np.random.Generator | None = None):
         """(wo, weight, pdf) from uniforms u (..., 3); weight = f |cos o| / pdf.
 
@@ -175,6 +195,11 @@ class MicrofacetModel:
         d_s = np.where(ok, d_s, 1.0)
         mz = np.where(ok, m[..., 2], 1.0)
         return np.where(ok, self.distribution.D(m) / d_s * dot(wi_up, m) * co * g2oc / mz, 0.0)
+
+
+def identity_muellers(n: int) -> np.ndarray:
+    """n 4x4 identity matrices, the shape a Mueller matrix takes where the BSDF is 0."""
+    return np.tile(np.eye(4), (n, 1, 1))
 
 
 def reflect(w: np.ndarray, m: np.ndarray) -> np.ndarray:

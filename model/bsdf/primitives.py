@@ -260,18 +260,23 @@ def conductor_fresnel(c, has_f, n_c):
     (has_f False: a perfect mirror)."""
     if not has_f:
         return 1.0
-    n2 = n_c * n_c
-    n2m1 = (n_c - 1.0) * (n_c + 1.0)
-    if n2m1 == 0:
-        return 0.0 if c != 0 else 1.0
-    root = np.sqrt(n2m1 + c * c)  # principal branch, as numpy's in fresnel_conductor
+    rs, rp = fresnel_amplitudes(c, n_c, (n_c - 1.0) * (n_c + 1.0))
+    return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+
+
+@scalar
+def fresnel_amplitudes(c, n, n2m1):
+    """fresnel.fresnel_amplitudes for one cosine c >= 0: complex (r_s, r_p) toward the
+    complex index n, n2m1 = n^2 - 1 exact; (-1, -1) where both denominators vanish."""
+    root = np.sqrt(n2m1 + c * c)  # principal branch, as numpy's in fresnel_amplitudes
+    n2 = n * n
     den_s = c + root
     den_p = n2 * c + root
     if den_s == 0 or den_p == 0:
-        return 1.0
-    rs = -n2m1 / den_s / den_s
-    rp = n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
-    return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+        return complex(-1.0, 0.0), complex(-1.0, 0.0)
+    if n2m1 == 0:
+        return complex(0.0, 0.0), complex(0.0, 0.0)
+    return -n2m1 / den_s / den_s, n2m1 * ((n2 + 1.0) * c * c - 1.0) / den_p / den_p
 
 
 # --- normal sampling ----------------------------------------------------------------------

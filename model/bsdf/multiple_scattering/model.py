@@ -114,8 +114,9 @@ class RandomWalkBSDF:
         self._shares: dict[bool, np.ndarray] = {}
         self.share_nodes = np.array(MASS_NODES_DEG, dtype=np.float64)
 
-    def _pairs(self, wi, wo, order, unit, rng, walks) -> tuple[np.ndarray, ...]:
-        """Mean, standard error and truncated energy per pair, walking in batches of BATCH."""
+    def _pairs(self, wi, wo, order, unit, rng, walks, min_order=1) -> tuple[np.ndarray, ...]:
+        """Mean, standard error and truncated energy per pair, walking in batches of BATCH;
+        orders below min_order are not counted."""
         wi, wo = directions(wi, wo)
         if order is not None and (int(order) != order or order < 1):
             raise ValueError(f"order must be None or a positive integer, got {order!r}")
@@ -128,7 +129,7 @@ class RandomWalkBSDF:
         while done < walks:
             k = min(per_round, walks - done)
             res = self.walker.run(np.repeat(wi, k, axis=0), rng, np.repeat(wo, k, axis=0),
-                                   order=order, max_order=cap, unit=unit)
+                                   order=order, max_order=cap, unit=unit, min_order=min_order)
             v = res.value.reshape(-1, k)
             total += [v.sum(axis=1), (v * v).sum(axis=1), res.truncated.reshape(-1, k).sum(axis=1)]
             done += k
@@ -154,14 +155,19 @@ class RandomWalkBSDF:
         return tuple(getattr(self.parent, "lobes", ("reflection", "transmission")))
 
     def estimate(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
-                 walks: int | None = None) -> Estimate:
-        """BSDF estimate with its standard error and the order cap's leftover energy."""
-        value, err, trunc = self._pairs(wi, wo, order, False, rng, walks or self.walks)
+                 walks: int | None = None, min_order: int = 1) -> Estimate:
+        """BSDF estimate with its standard error and the order cap's leftover energy;
+        order=k counts the k-th scattering order only, min_order=k the orders from k on."""
+        if int(min_order) != min_order or min_order < 1:
+            raise ValueError(f"min_order must be a positive integer, got {min_order!r}")
+        value, err, trunc = self._pairs(wi, wo, order, False, rng, walks or self.walks,
+                                        int(min_order))
         return Estimate(value, err, trunc)
 
-    def eval(self, wi, wo, rng: np.random.Generator, *, order: int | None = None) -> np.ndarray:
-        """BSDF value f(wi, wo) in 1/sr, no cosine; order=k gives the k-th scattering order only."""
-        return self._pairs(wi, wo, order, False, rng, self.walks)[0]
+    def eval(self, wi, wo, rng: np.random.Generator, *, order: int | None = None,
+             min_order: int = 1) -> np.ndarray:
+        """BSDF value f(wi, wo) in 1/sr, no cosine; order and min_order as for estimate."""
+        return self.estimate(wi, wo, rng, order=order, min_order=min_order).value
 
     def pdf(self, wi, wo, rng: np.random.Generator) -> np.ndarray:
         """Density over solid angle of sample()'s wo: the walk's direction density, estimated
