@@ -5,9 +5,12 @@ From the FW102C manual (Rev H, 5.2.3 Keywords): lower-case `keyword=argument` co
 and then shows its prompt `> `, so one request gets one reply `echo CR [answer CR] > `: the
 transport reads up to the prompt (`read_eol` CR `> `, the CR between echo and answer allowed
 inside the reply). The echo must repeat the request and the answer must have its shape (a
-position's digits), else the reply is garbled: a dropped or corrupted byte never passes as
-another position. `Command error CMD_NOT_DEFINED` / `CMD_ARG_INVALID` in place of an answer is
-a DeviceError. Queries are retried after a timeout or a garbled reply; `pos=n` is sent once
+position's digits), else the reply is garbled. The one dropped byte that keeps that shape is
+a digit of position 10, 11 or 12 of a 12-position wheel (read as 1 or 2), so on such a wheel
+a reply of 1 or 2 is asked again and must agree. `Command error CMD_NOT_DEFINED` /
+`CMD_ARG_INVALID` in place of an answer is a DeviceError.
+
+Queries are retried after a timeout or a garbled reply; `pos=n` is sent once
 (drivers.lost_reply), and when its reply is lost the position read back settles it. The wheel
 answers a move when it is in place, so a move's reply is waited for as long as a half turn
 takes at the slow speed, beside the reply timeout. After a timeout `*idn?` (whose answer no
@@ -21,9 +24,8 @@ wavelength turns to the one filter centred on it.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
-from dataclasses import dataclass
-from typing import Unpack
+from collections.abc import Callable, Iterable
+from typing import NamedTuple, TypeVar, Unpack
 
 from drivers.base import DeviceError, DriverError, ProtocolError
 from drivers.byte_link import LinkOptions
@@ -39,9 +41,12 @@ _ERRORS = {"CMD_NOT_DEFINED": "no such command or query",
            "CMD_ARG_INVALID": "argument wrong or out of range"}
 
 
-@dataclass(frozen=True)
-class Filter:
-    """The filter at one wheel position: its centre wavelength and passband width, nm."""
+T = TypeVar("T")
+
+
+class Filter(NamedTuple):
+    """The filter at one wheel position: its centre wavelength and passband width, nm (a
+    config gives it as the triple)."""
 
     position: int
     centre_nm: float
@@ -62,6 +67,13 @@ def answer_of(request: str, reply: str) -> str | None:
     return answer
 
 
+def text(answer: str | None) -> str:
+    """A query's answer as it is (ProtocolError when the reply has none)."""
+    if not answer:
+        raise ProtocolError("no answer")
+    return answer
+
+
 def integer(text: str | None) -> int:
     """A setting's or position's digits (ProtocolError for any other shape)."""
     if text is None or _DIGITS.fullmatch(text) is None:
@@ -73,15 +85,17 @@ class Fw102cWheel:
     """An FW102C (6 positions) or FW212C (12) on a serial port (or a VISA resource: LinkOptions)
     as a WavelengthSelector.
 
-    filters: the filters in the wheel; positions: the wheel type the config expects (the wheel's
-    pcount must agree); speed: "high" or "slow", set when it opens.
+    filters: the filters in the wheel (Filter, or (position, centre_nm, bandwidth_nm));
+    positions: the wheel type the config expects (the wheel's pcount must agree); speed:
+    "high" or "slow", set when it opens.
     """
 
-    def __init__(self, port: str | None = None, *, filters: Iterable[Filter], positions: int = 6,
+    def __init__(self, port: str | None = None, *, filters: Iterable[tuple[int, float, float]],
+                 positions: int = 6,
                  speed: str = "high", name: str = "fw102c", baudrate: int = 115200,
                  timeout_s: float = 1.0, retries: int = 2, **link: Unpack[LinkOptions]):
         self.name = name
-        self.filters = {f.position: f for f in filters}
+        self.filters = {int(entry[0]): Filter(*entry) for entry in filters}
         if not self.filters:
             raise ValueError(f"{name}: no filters given")
         if speed not in SPEEDS:
@@ -92,7 +106,7 @@ class Fw102cWheel:
             line_breaks=b"\r", timeout_s=timeout_s, retries=retries,
             sync=SyncQuery("*idn?", self._is_idn), **link)
         try:
-            self.idn = self.query("*idn?", str)
+            self.idn = self.query("*idn?", text)
             self._check_wheel(positions)
             self.command(f"speed={SPEEDS[speed]}", lambda: self.query("speed?") == SPEEDS[speed])
         except BaseException:
@@ -107,7 +121,7 @@ class Fw102cWheel:
         return reply == f"*idn?\r{self.idn}"
 
     def _check_wheel(self, positions: int) -> None:
-        count = self.query("pcount?")
+        self.count = count = self.query("pcount?")
         if count != positions:
             raise DriverError(f"{self.name}: the wheel has {count} positions (pcount?), the "
                               f"config says {positions}")
@@ -117,7 +131,7 @@ class Fw102cWheel:
                               f"wheel's {count} positions")
 
     # -- exchanges --------------------------------------------------------------
-    def query(self, request: str, read=integer):
+    def query(self, request: str, read: Callable[[str | None], T] = integer) -> T:
         """Ask a query (retried after a timeout or a garbled reply); its answer read by
         `read` (a ProtocolError from it is a garbled reply, asked again)."""
         return self.transport.query(request, lambda reply: read(self._answer(request, reply)))
@@ -130,7 +144,7 @@ class Fw102cWheel:
         except ProtocolError as exc:
             raise ProtocolError(f"{self.name}: {exc}") from None
 
-    def command(self, request: str, taken) -> None:
+    def command(self, request: str, taken: Callable[[], bool]) -> None:
         """Send a command once; if its reply is lost or garbled, taken() reads the wheel back
         (DriverError when it did not take it: never re-sent)."""
         sent_once(lambda: self._answer(request, self.transport.exchange(request)), taken,
@@ -138,8 +152,14 @@ class Fw102cWheel:
 
     # -- the wheel --------------------------------------------------------------
     def position(self) -> int:
-        """pos?: the position the wheel is at."""
-        return self.query("pos?")
+        """pos?: the position the wheel is at (on a 12-position wheel a 1 or 2, which a
+        dropped digit of 10-12 also gives, asked again: ProtocolError if they differ)."""
+        found = self.query("pos?")
+        if self.count > 9 and found < self.count - 9:
+            again = self.query("pos?")
+            if again != found:
+                raise ProtocolError(f"{self.name}: pos? answered {found}, then {again}")
+        return found
 
     def move_to_position(self, position: int) -> None:
         """pos=n: turn to position n; returns once the wheel is there (it answers then)."""
