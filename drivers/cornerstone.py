@@ -15,8 +15,9 @@ command is done (a move's end). When the error code's reply is lost or garbled i
 asked again (the first ask reset it): the device's state read back (WAVE?, GRAT?, SHUTTER?,
 UNITS?) settles whether the command was taken. Queries are retried after a timeout or a
 garbled reply; numeric answers must have the device's shape (digits, a point and up to three
-decimals). After a timeout INFO? (whose answer, the model and firmware, no other query has)
-brings late replies back in step.
+decimals), and since a dropped digit keeps that shape (632.8 read as 62.8), a wavelength is
+taken once two reads in a row agree (drivers.agreed_read). After a timeout INFO? (whose
+answer, the model and firmware, no other query has) brings late replies back in step.
 """
 
 from __future__ import annotations
@@ -25,9 +26,10 @@ import re
 from collections.abc import Callable
 from typing import Unpack
 
-from drivers.base import DeviceError, ProtocolError
+from drivers.agreed_read import agreed
+from drivers.base import DeviceError, DriverError, ProtocolError
 from drivers.byte_link import LinkOptions
-from drivers.lost_reply import not_resent, sent_once
+from drivers.lost_reply import LOST, not_resent, sent_once
 from drivers.serial_transport import SerialLineTransport, SyncQuery
 
 ERRORS = {1: "command not understood", 2: "bad parameter used in command",
@@ -47,7 +49,7 @@ def wavelength(text: str) -> float:
     return float(text)
 
 
-def error_code(text: str) -> int:
+def code_of(text: str) -> int:
     """An ERROR? answer."""
     if _CODE.fullmatch(text) is None:
         raise ProtocolError(f"garbled error code {text!r}")
@@ -88,7 +90,7 @@ class CornerstoneMonochromator:
             sync=SyncQuery("INFO?", self._is_info), **link)
         try:
             self.info = self.query("INFO?", str)
-            self.query("ERROR?", error_code)  # start from no error
+            self.query("ERROR?", code_of)  # start from no error
             self.command("UNITS NM", lambda: self.query("UNITS?", str) == "NM")
             if grating is not None:
                 self.select_grating(grating)
@@ -117,24 +119,25 @@ class CornerstoneMonochromator:
         ProtocolError; the command may have been taken, and is never re-sent)."""
         self.transport.send(statement)
 
-    def settle(self, statement: str, taken: Callable[[], bool]) -> None:
-        """After `statement`: its error code (ERROR?, asked once: DeviceError if not 0); if
-        that answer is lost, taken() reads the state back (DriverError: not confirmed)."""
-        code = sent_once(lambda: self._code(self.transport.exchange("ERROR?")), taken,
-                         not_resent(self.name, statement))
-        if code:
-            raise DeviceError(self.name, code, ERRORS.get(code, "error"))
-
-    def _code(self, text: str) -> int:
+    def error_code(self) -> int:
+        """ERROR?, asked once (it resets the code): the latest error code, 0 for none."""
         try:
-            return error_code(text)
+            return code_of(self.transport.exchange("ERROR?"))
         except ProtocolError as exc:
             raise ProtocolError(f"{self.name}: reply to 'ERROR?': {exc}") from None
 
+    def _raise_for(self, code: int | None) -> None:
+        if code:
+            raise DeviceError(self.name, code, ERRORS.get(code, "error"))
+
     def command(self, statement: str, taken: Callable[[], bool]) -> None:
-        """Send a command once and settle it by its error code or, that lost, by taken()."""
-        self.send(statement)
-        self.settle(statement, taken)
+        """Send a command once, then its error code (DeviceError if not 0); when the echo or
+        the code is lost, taken() reads the state back (DriverError: not confirmed)."""
+        def sent() -> int:
+            self.send(statement)
+            return self.error_code()
+
+        self._raise_for(sent_once(sent, taken, not_resent(self.name, statement)))
 
     # -- the monochromator ------------------------------------------------------
     def select_grating(self, number: int) -> None:
@@ -155,28 +158,39 @@ class CornerstoneMonochromator:
 
     # -- WavelengthSelector -----------------------------------------------------
     def move_to_nm(self, wavelength_nm: float) -> None:
-        """GOWAVE: start the drive toward wavelength_nm (returns at once; wait() settles it)."""
+        """GOWAVE: start the drive toward wavelength_nm (returns at once; wait() settles it,
+        a lost echo too: the move is never sent twice)."""
         if not wavelength_nm > 0:
             raise ValueError(f"{self.name}: wavelength must be > 0 nm, got {wavelength_nm!r}")
-        statement = f"GOWAVE {wavelength_nm:.3f}"
         self._target_nm = round(wavelength_nm, 3)
-        self.send(statement)
+        try:
+            self.send(f"GOWAVE {self._target_nm:.3f}")
+        except LOST:
+            pass
 
     def wait(self, timeout_s: float) -> float:
-        """Until the drive has reached the wavelength of the last move_to_nm (its error code
-        answers then: DeviceError 3 for a wavelength the grating cannot reach): the
-        wavelength it reports."""
-        target = self._target_nm
-        if target is not None:
+        """Until the drive is done with the last move_to_nm (its error code answers then:
+        DeviceError 3 for a wavelength the grating cannot reach); the wavelength it reports,
+        which must be the one asked for (DriverError: the move was not taken)."""
+        target, self._target_nm = self._target_nm, None
+        if target is None:
+            return self.wavelength_nm()
+        statement = f"GOWAVE {target:.3f}"
+        try:
             with self.transport.longer_replies(timeout_s):
-                self.settle(f"GOWAVE {target:.3f}",
-                            lambda: abs(self.wavelength_nm() - target) <= WAVELENGTH_UNIT_NM / 2)
-            self._target_nm = None
-        return self.wavelength_nm()
+                self._raise_for(self.error_code())
+        except LOST:
+            pass  # the code is gone with its reply: the drive read back settles the move
+        reached = self.wavelength_nm()
+        if abs(reached - target) > WAVELENGTH_UNIT_NM / 2:
+            raise DriverError(f"{self.name}: {statement!r} not taken: the drive is at "
+                              f"{reached:g} nm; not re-sent")
+        return reached
 
     def wavelength_nm(self) -> float:
-        """WAVE?: the wavelength the drive is at, nm."""
-        return self.query("WAVE?")
+        """WAVE?: the wavelength the drive is at, nm (two reads in a row that agree)."""
+        return agreed(lambda: self.query("WAVE?"), self.name, "WAVE?",
+                      reads=2 + self.transport.retries)
 
     def identity(self) -> dict[str, str]:
         """The monochromator's INFO? answer (model and firmware)."""

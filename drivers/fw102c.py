@@ -7,8 +7,8 @@ transport reads up to the prompt (`read_eol` CR `> `, the CR between echo and an
 inside the reply). The echo must repeat the request and the answer must have its shape (a
 position's digits), else the reply is garbled. The one dropped byte that keeps that shape is
 a digit of position 10, 11 or 12 of a 12-position wheel (read as 1 or 2), so on such a wheel
-a reply of 1 or 2 is asked again and must agree. `Command error CMD_NOT_DEFINED` /
-`CMD_ARG_INVALID` in place of an answer is a DeviceError.
+a reply of 1 or 2 is asked twice more and the two must agree (drivers.agreed_read).
+`Command error CMD_NOT_DEFINED` / `CMD_ARG_INVALID` in place of an answer is a DeviceError.
 
 Queries are retried after a timeout or a garbled reply; `pos=n` is sent once
 (drivers.lost_reply), and when its reply is lost the position read back settles it. The wheel
@@ -27,6 +27,7 @@ import re
 from collections.abc import Callable, Iterable
 from typing import NamedTuple, TypeVar, Unpack
 
+from drivers.agreed_read import agreed
 from drivers.base import DeviceError, DriverError, ProtocolError
 from drivers.byte_link import LinkOptions
 from drivers.lost_reply import not_resent, sent_once
@@ -87,14 +88,16 @@ class Fw102cWheel:
 
     filters: the filters in the wheel (Filter, or (position, centre_nm, bandwidth_nm));
     positions: the wheel type the config expects (the wheel's pcount must agree); speed:
-    "high" or "slow", set when it opens.
+    "high" or "slow", set when it opens; move_s: how much longer than timeout_s a move's reply
+    may take (default: a half turn at the slow speed).
     """
 
     def __init__(self, port: str | None = None, *, filters: Iterable[tuple[int, float, float]],
                  positions: int = 6,
-                 speed: str = "high", name: str = "fw102c", baudrate: int = 115200,
+                 speed: str = "high", move_s: float = SLOWEST_HALF_TURN_S,
+                 name: str = "fw102c", baudrate: int = 115200,
                  timeout_s: float = 1.0, retries: int = 2, **link: Unpack[LinkOptions]):
-        self.name = name
+        self.name, self.move_s = name, float(move_s)
         self.filters = {int(entry[0]): Filter(*entry) for entry in filters}
         if not self.filters:
             raise ValueError(f"{name}: no filters given")
@@ -153,12 +156,10 @@ class Fw102cWheel:
     # -- the wheel --------------------------------------------------------------
     def position(self) -> int:
         """pos?: the position the wheel is at (on a 12-position wheel a 1 or 2, which a
-        dropped digit of 10-12 also gives, asked again: ProtocolError if they differ)."""
+        dropped digit of 10-12 also gives, asked twice more: ProtocolError if they differ)."""
         found = self.query("pos?")
         if self.count > 9 and found < self.count - 9:
-            again = self.query("pos?")
-            if again != found:
-                raise ProtocolError(f"{self.name}: pos? answered {found}, then {again}")
+            return agreed(lambda: self.query("pos?"), self.name, "pos?", reads=2)
         return found
 
     def move_to_position(self, position: int) -> None:
@@ -166,7 +167,7 @@ class Fw102cWheel:
         if position not in self.filters:
             raise ValueError(f"{self.name}: no filter at position {position!r} (filters at "
                              f"{', '.join(map(str, sorted(self.filters)))})")
-        with self.transport.longer_replies(SLOWEST_HALF_TURN_S):
+        with self.transport.longer_replies(self.move_s):
             self.command(f"pos={position}", lambda: self.position() == position)
 
     def filter_for(self, wavelength_nm: float) -> Filter:

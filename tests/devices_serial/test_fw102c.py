@@ -54,6 +54,21 @@ class DropDigitOnce(FaultInjector):
         return super().reply(data, keep_tail, crc_bytes)
 
 
+class DropDigitEvery(FaultInjector):
+    """Drops the first digit of every other reply that says position 12, the first one too."""
+
+    def __init__(self):
+        super().__init__(FaultSpec())
+        self.seen = 0
+
+    def reply(self, data, keep_tail=0, crc_bytes=0):
+        if b"\r12\r" in data:
+            self.seen += 1
+            if self.seen % 2 == 1:
+                return data.replace(b"\r12\r", b"\r2\r")
+        return super().reply(data, keep_tail, crc_bytes)
+
+
 @pytest.fixture
 def wheel(start_pair):
     """make(positions=6, speed="high", faults=None, **driver options) -> (emulator, driver),
@@ -178,7 +193,7 @@ def test_a_device_error_names_the_manuals_code(wheel):
 
 
 def test_a_move_whose_reply_is_lost_is_sent_once_and_settled_by_the_position(wheel):
-    emu, drv = wheel(timeout_s=0.1)
+    emu, drv = wheel(timeout_s=0.1, move_s=0.1)
     seen = spy_lines(emu)
     emu.server.faults = StallNext(1)
     drv.move_to_nm(532.0)  # taken; its reply lost: the position read back confirms it
@@ -191,7 +206,7 @@ def test_a_move_whose_reply_is_lost_is_sent_once_and_settled_by_the_position(whe
 
 
 def test_a_move_the_wheel_never_took_is_an_error_and_not_resent(wheel):
-    emu, drv = wheel(timeout_s=0.1)
+    emu, drv = wheel(timeout_s=0.1, move_s=0.1)
     handle = emu.server.handler
     emu.server.handler = lambda line: None if line == b"pos=2" else handle(line)  # lost
     seen = spy_lines(emu)
@@ -218,9 +233,12 @@ def test_a_12_position_wheel_asks_again_when_a_dropped_digit_could_read_as_1_or_
     drv.move_to_nm(700.0)
     seen = spy_lines(emu)
     emu.server.faults = DropDigitOnce()
-    with pytest.raises(ProtocolError, match=r"fw102c: pos\? answered 2, then 12"):
+    assert drv.position() == 12  # 2, then 12 and 12: two that agree
+    assert seen == ["pos?", "pos?", "pos?"]
+    emu.server.faults = DropDigitEvery()
+    with pytest.raises(ProtocolError, match=r"fw102c: pos\? answered 12, then 2"):
         drv.position()
-    assert seen == ["pos?", "pos?"]
+    emu.server.faults = FaultInjector(FaultSpec())
     assert drv.position() == 12 and drv.wavelength_nm() == 700.0
 
 
