@@ -6,10 +6,7 @@ command sent once and settled by a read-back, queries asked again)."""
 import math
 
 import pytest
-import serial
-from test_fw102c import GarbleNext
-from test_serial_settings_readback import StallNext, spy_lines
-from waiting import HANG_S
+from reply_faults import GarbleNext, StallNext, spy_lines
 
 from drivers.base import DeviceError, DriverError, WavelengthSelector
 from drivers.cornerstone import CornerstoneMonochromator
@@ -37,17 +34,13 @@ def mono(start_pair):
 
 
 @pytest.fixture
-def rs232(opened):
+def rs232(plain_port):
     """start(**emulator options) -> (emulator, port): the monochromator on a pty and a plain
-    pyserial session with it (reads wait HANG_S at most: a hang guard)."""
+    pyserial session with it."""
 
     def start(**options):
         emu = CornerstoneEmulator(VirtualClock(math.inf), **options)
-        emu.start()
-        opened.append(emu)
-        port = serial.Serial(emu.endpoint, 9600, timeout=HANG_S)
-        opened.append(port)
-        return emu, port
+        return emu, plain_port(emu, 9600)
 
     return start
 

@@ -6,9 +6,7 @@ pylablib's FW driver (a third-party client) driving the emulator."""
 import math
 
 import pytest
-import serial
-from test_serial_settings_readback import StallNext, spy_lines
-from waiting import HANG_S
+from reply_faults import GarbleNext, StallNext, spy_lines
 
 from drivers.base import (
     DeviceError,
@@ -23,21 +21,6 @@ from sim.devices.fw102c import IDN, Fw102cConfigError, Fw102cEmulator
 from sim.devices.motion import VirtualClock
 
 FILTERS = [(1, 450.0, 10.0), (2, 532.0, 3.0), (4, 632.8, 1.0)]
-
-
-class GarbleNext(FaultInjector):
-    """Sets the high bit of the first byte of the next `n` replies (the device acts on the
-    lines; its answers arrive garbled)."""
-
-    def __init__(self, n):
-        super().__init__(FaultSpec())
-        self.left = n
-
-    def reply(self, data, keep_tail=0, crc_bytes=0):
-        if self.left:
-            self.left -= 1
-            return bytes([data[0] | 0x80]) + data[1:]
-        return super().reply(data, keep_tail, crc_bytes)
 
 
 class DropDigitOnce(FaultInjector):
@@ -84,16 +67,13 @@ def wheel(start_pair):
 
 
 @pytest.fixture
-def terminal(opened):
+def terminal(plain_port):
     """start(**emulator options) -> (emulator, ask): the wheel on a pty and ask(line) -> the
     bytes it sends back up to and with its prompt, as a terminal program sees them."""
 
     def start(**options):
         emu = Fw102cEmulator(VirtualClock(math.inf), **options)
-        emu.start()
-        opened.append(emu)
-        port = serial.Serial(emu.endpoint, 115200, timeout=HANG_S)
-        opened.append(port)
+        port = plain_port(emu, 115200)
 
         def ask(line):
             port.write(line.encode("ascii") + b"\r")
