@@ -47,3 +47,14 @@ def spy_lines(emu) -> list[str]:
 
     emu.server.handler = spy
     return seen
+
+
+def read_through_faults(emu, read: Callable[[], object], count: int, seed: int) -> list:
+    """`count` values of read() while the emulator's replies meet seeded corrupted, dropped
+    and stalled bytes (each kind of fault met at least once: checked)."""
+    emu.server.faults = FaultInjector(FaultSpec(corrupt_prob=0.15, drop_prob=0.15,
+                                                stall_prob=0.05, seed=seed))
+    values = [read() for _ in range(count)]
+    met = emu.server.faults.counts
+    assert met["corrupt"] > 0 and met["drop"] > 0 and met["stall"] > 0, met
+    return values

@@ -6,7 +6,7 @@ command sent once and settled by a read-back, queries asked again)."""
 import math
 
 import pytest
-from reply_faults import GarbleNext, StallNext, spy_lines
+from reply_faults import GarbleNext, StallNext, read_through_faults, spy_lines
 
 from drivers.base import DeviceError, DriverError, WavelengthSelector
 from drivers.cornerstone import CornerstoneMonochromator
@@ -16,7 +16,7 @@ from sim.devices.cornerstone import (
     CornerstoneConfigError,
     CornerstoneEmulator,
 )
-from sim.devices.faults import FaultInjector, FaultSpec
+from sim.devices.faults import FaultSpec
 from sim.devices.motion import VirtualClock
 
 
@@ -195,8 +195,4 @@ def test_garbled_and_stalled_queries_are_asked_again_and_never_misread(mono):
     emu, drv = mono(timeout_s=0.1, retries=8)
     drv.move_to_nm(632.8)
     drv.wait(10.0)
-    emu.server.faults = FaultInjector(FaultSpec(corrupt_prob=0.15, drop_prob=0.15,
-                                                stall_prob=0.05, seed=5))
-    assert [drv.wavelength_nm() for _ in range(40)] == [632.8] * 40
-    counts = emu.server.faults.counts
-    assert counts["corrupt"] > 0 and counts["drop"] > 0 and counts["stall"] > 0
+    assert read_through_faults(emu, drv.wavelength_nm, 40, seed=5) == [632.8] * 40

@@ -6,7 +6,7 @@ pylablib's FW driver (a third-party client) driving the emulator."""
 import math
 
 import pytest
-from reply_faults import GarbleNext, StallNext, spy_lines
+from reply_faults import GarbleNext, StallNext, read_through_faults, spy_lines
 
 from drivers.base import (
     DeviceError,
@@ -198,11 +198,7 @@ def test_a_move_the_wheel_never_took_is_an_error_and_not_resent(wheel):
 def test_garbled_and_stalled_queries_are_asked_again_and_never_misread(wheel):
     emu, drv = wheel(timeout_s=0.1, retries=8)
     drv.move_to_position(4)
-    emu.server.faults = FaultInjector(FaultSpec(corrupt_prob=0.15, drop_prob=0.15,
-                                                stall_prob=0.05, seed=9))
-    assert [drv.position() for _ in range(40)] == [4] * 40
-    counts = emu.server.faults.counts
-    assert counts["corrupt"] > 0 and counts["drop"] > 0 and counts["stall"] > 0
+    assert read_through_faults(emu, drv.position, 40, seed=9) == [4] * 40
     emu.server.faults = FaultInjector(FaultSpec(stall_prob=1.0))
     with pytest.raises(DeviceTimeout, match="fw102c: timeout after 0.1 s"):
         drv.position()
