@@ -6,6 +6,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from gonio_testkit import fast_config, gonio_cli, write_toml
 
 from drivers.base import WavelengthSelector
 from gonio.config import parse_config
@@ -113,3 +114,17 @@ def test_sim_serves_both_and_the_kinds_open_them_as_wavelength_selectors():
         assert bench.emulators["mono"].grating == 2
     finally:
         bench.stop()
+
+
+def test_gonio_devices_sim_identifies_both(tmp_path):
+    cfg = fast_config("sim-serial")
+    cfg["devices"].update(tomllib.loads(SELECTORS)["devices"])
+    proc = gonio_cli("devices", "--sim", write_toml(tmp_path / "spectral.toml", cfg))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    wheel = next(line for line in lines if line.startswith("device wheel "))
+    mono = next(line for line in lines if line.startswith("device mono "))
+    assert wheel.startswith("device wheel (fw102c at /dev/pts/")
+    assert wheel.endswith("): idn: THORLABS FW102C/FW212C Filter Wheel version 1.07")
+    assert mono.startswith("device mono (cornerstone at /dev/pts/")
+    assert mono.endswith("): info: CS130B V2.00")
