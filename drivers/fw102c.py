@@ -75,11 +75,11 @@ def text(answer: str | None) -> str:
     return answer
 
 
-def integer(text: str | None) -> int:
+def integer(answer: str | None) -> int:
     """A setting's or position's digits (ProtocolError for any other shape)."""
-    if text is None or _DIGITS.fullmatch(text) is None:
-        raise ProtocolError(f"garbled number {text!r}")
-    return int(text)
+    if answer is None or _DIGITS.fullmatch(answer) is None:
+        raise ProtocolError(f"garbled number {answer!r}")
+    return int(answer)
 
 
 class Fw102cWheel:
@@ -93,11 +93,11 @@ class Fw102cWheel:
     """
 
     def __init__(self, port: str | None = None, *, filters: Iterable[tuple[int, float, float]],
-                 positions: int = 6,
-                 speed: str = "high", move_s: float = SLOWEST_HALF_TURN_S,
-                 name: str = "fw102c", baudrate: int = 115200,
-                 timeout_s: float = 1.0, retries: int = 2, **link: Unpack[LinkOptions]):
+                 positions: int = 6, speed: str = "high", move_s: float = SLOWEST_HALF_TURN_S,
+                 name: str = "fw102c", baudrate: int = 115200, timeout_s: float = 1.0,
+                 retries: int = 2, **link: Unpack[LinkOptions]):
         self.name, self.move_s = name, float(move_s)
+        self.count = positions  # the wheel's positions, as its pcount? tells once it opens
         self.filters = {int(entry[0]): Filter(*entry) for entry in filters}
         if not self.filters:
             raise ValueError(f"{name}: no filters given")
@@ -137,7 +137,14 @@ class Fw102cWheel:
     def query(self, request: str, read: Callable[[str | None], T] = integer) -> T:
         """Ask a query (retried after a timeout or a garbled reply); its answer read by
         `read` (a ProtocolError from it is a garbled reply, asked again)."""
-        return self.transport.query(request, lambda reply: read(self._answer(request, reply)))
+        def parse(reply: str) -> T:
+            answer = self._answer(request, reply)
+            try:
+                return read(answer)
+            except ProtocolError as exc:
+                raise ProtocolError(f"{self.name}: reply to {request!r}: {exc}") from None
+
+        return self.transport.query(request, parse)
 
     def _answer(self, request: str, reply: str) -> str | None:
         try:
