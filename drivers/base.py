@@ -1,7 +1,7 @@
 """The small interface every driver gives the scan engine, and the errors it raises.
 
-An engine only ever sees `Axis` and `Detector`; which protocol and transport sit
-behind them is the config's business.
+An engine only ever sees `Axis`, `Detector` and `WavelengthSelector`; which protocol and
+transport sit behind them is the config's business.
 """
 
 from __future__ import annotations
@@ -81,6 +81,31 @@ class Axis(Protocol):
     def identity(self) -> dict[str, str]:
         """The device's identity as it reports it (model, serial, firmware...; {} if it
         reports none). Axes of one controller report the controller's identity."""
+
+
+@runtime_checkable
+class WavelengthSelector(Protocol):
+    """A device that selects the light's wavelength, in nm: a filter wheel (the filter centred
+    on it) or a monochromator (its grating turned to it)."""
+
+    name: str
+
+    def move_to_nm(self, wavelength_nm: float) -> None:
+        """Start selecting wavelength_nm (ValueError for one the device is not set up to
+        select, as far as the driver knows; a device's refusal may come with wait())."""
+
+    def wait(self, timeout_s: float) -> float:
+        """Block until the selection is done (DeviceTimeout past timeout_s); return the
+        wavelength the device reports, nm."""
+
+    def wavelength_nm(self) -> float:
+        """The wavelength selected now, nm."""
+
+    def identity(self) -> dict[str, str]:
+        """The device's identity as it reports it ({} if it reports none)."""
+
+    def close(self) -> None:
+        """Release the connection."""
 
 
 @runtime_checkable

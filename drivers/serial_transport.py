@@ -38,6 +38,15 @@ which the reply machine recovers from, rather than a wrong reply. Bytes still in
 or a USB adaptor when the input is taken come after the write (tcflush does not drop them
 either); a line they begin arrives whole and is sorted by its content (`is_unsolicited`) and by
 the reply machine, as a late reply is.
+
+Two device habits are the transport's to handle, each an option. A device that echoes every
+line it is sent before it answers (the Cornerstone monochromator's RS-232 port: `echo`) has
+the echo read right after the write and checked against the line sent: a garbled, cut or
+missing echo ends the exchange as a garbled or lost reply (the line then out of step, since
+the answer may still come), and an echo that came whole confirms that the device took a
+silent command. A device whose reply is several lines ended by a prompt (the FW102C filter
+wheel's echo, answer and `> `: `read_eol` the prompt) has the bytes between those lines
+allowed inside one reply (`line_breaks`), so one request gets one reply unit.
 """
 
 from __future__ import annotations
@@ -130,7 +139,9 @@ class SerialLineTransport:
     device sends unprompted, never a reply (None: every line may be one). baudrate and the
     LinkOptions' parity, stopbits, rtscts and xonxoff set a serial port's or an ASRL
     resource's line. `name` is the device its errors name, unless an exchange names another
-    (`device=`: a device of a chain sharing the transport).
+    (`device=`: a device of a chain sharing the transport). echo: the device echoes every line
+    before answering it (the module doc); line_breaks: bytes a reply may hold between its
+    lines (a reply of several lines ended by a prompt).
     """
 
     def __init__(
@@ -145,6 +156,8 @@ class SerialLineTransport:
         retries: int = 2,
         sync: SyncQuery | None = None,
         is_unsolicited: Callable[[str], bool] | None = None,
+        echo: bool = False,
+        line_breaks: bytes = b"",
         **link: Unpack[LinkOptions],
     ):
         if not timeout_s > 0:
@@ -158,6 +171,7 @@ class SerialLineTransport:
         self.write_eol, self.read_eol = write_eol, read_eol
         self.timeout_s, self.retries = float(timeout_s), int(retries)
         self.sync, self.is_unsolicited = sync, is_unsolicited
+        self.echo, self._allowed = echo, PRINTABLE + line_breaks
         self.replies = ReplySync()  # which request each line answers
         self.resyncs = 0  # sync queries answered (how often replies were out of step)
         self.unsolicited = 0  # unprompted lines read, set aside
@@ -216,12 +230,28 @@ class SerialLineTransport:
         """Bring replies back in step if a reply was missed (DeviceTimeout naming `what`
         if that fails), set stale input aside, then write one line (terminator added) that
         gets no reply (a silent command)."""
+        what = what or repr(line)
         with self.lock, self._for(device):
             try:
-                self._in_step(what or repr(line))
+                self._in_step(what)
                 self._write(line, request=False)
+                if self.echo:
+                    try:
+                        self._take_echo(line, what, time.monotonic() + self.timeout_s)
+                    except (DeviceTimeout, ProtocolError):
+                        self.replies.send_request()  # the echo may still come: the line is
+                        self.replies.timeout()  # out of step until a sync query's answer
+                        raise
             finally:
                 self._abandon_wait()
+
+    def _take_echo(self, line: str, what: str, deadline: float) -> None:
+        """Read the device's echo of the line just written: it must repeat the line, else
+        ProtocolError (a garbled echo); DeviceTimeout if none comes by the deadline."""
+        body = self._read_line(f"the echo of {what}", deadline)
+        if body != line.encode("ascii"):
+            raise ProtocolError(f"{self._speaker}: garbled echo of {what}: "
+                                f"{body + self.read_eol!r}")
 
     def _in_step(self, what: str) -> None:
         """Out of step: send the sync query and drop every line before its reply, or, with no
@@ -318,9 +348,9 @@ class SerialLineTransport:
             return  # the late replies came, only the sync reply did not
         self.resyncs += 1
 
-    def _reply(self, what: str) -> str:
-        """The reply to the line just sent: the next line the machine takes for it."""
-        deadline = time.monotonic() + self.timeout_s
+    def _reply(self, what: str, deadline: float) -> str:
+        """The reply to the line just sent, by the deadline: the next line the machine takes
+        for it."""
         while True:
             event = self._next_unit(what, deadline)
             if type(event) is Reply:
@@ -340,7 +370,7 @@ class SerialLineTransport:
         text = _text(body)
         if self._count_if_unsolicited(text):
             return self.replies.receive(UnitKind.FOREIGN, text)
-        if body.translate(None, PRINTABLE):  # any byte left is not printable ASCII
+        if body.translate(None, self._allowed):  # a byte left is not printable ASCII
             garbled = ProtocolError(f"{self._speaker}: garbled reply to {what}: "
                                     f"{body + self.read_eol!r}")
             return self.replies.receive(UnitKind.GARBLED, garbled)
@@ -382,7 +412,10 @@ class SerialLineTransport:
             try:
                 self._in_step(what)
                 self._write(line, request=True)
-                return self._reply(what)
+                deadline = time.monotonic() + self.timeout_s
+                if self.echo:
+                    self._take_echo(line, what, deadline)
+                return self._reply(what, deadline)
             finally:
                 self._abandon_wait()
 

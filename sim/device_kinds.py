@@ -1,7 +1,8 @@
 """The device kinds sim emulates, each declared once: its name (a config's `protocol`),
-stage, detector or environment sensor, the factory that starts its emulator, the fault keys
-only it acts on and the [sim.devices.<name>] keys that say what its emulator is (a PM100's
-console and head, a Zaber product's device id, firmware and saved comm.alert).
+stage, detector, environment sensor, filter wheel or monochromator, the factory that starts
+its emulator, the fault keys only it acts on and the [sim.devices.<name>] keys that say what
+its emulator is (a PM100's console and head, a Zaber product's device id, firmware and saved
+comm.alert).
 
 gonio.device_kinds declares the same names with the same roles (how the real devices are
 configured and opened); sim never imports it, and tests/test_device_kinds.py checks that the
@@ -15,8 +16,10 @@ from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from sim.devices.cornerstone import CornerstoneEmulator
 from sim.devices.esp import EspEmulator
 from sim.devices.faults import KIND_FAULTS
+from sim.devices.fw102c import Fw102cEmulator
 from sim.devices.photodiode import SimConfigError
 from sim.devices.pm100 import Pm100Emulator
 from sim.devices.pm100_models import CONSOLES, HEADS
@@ -25,6 +28,7 @@ from sim.devices.zaber_device import IDENTITY_CHECKS
 from sim.emulator_factories import (
     DetectorFactory,
     EnvironmentFactory,
+    SelectorFactory,
     StageFactory,
     chain_on_pty,
     controller_on_pty,
@@ -33,6 +37,7 @@ from sim.emulator_factories import (
     modbus_detector_unit,
     modbus_environment_unit,
     modbus_stage_units,
+    selector_on_pty,
 )
 
 #: a [sim.devices.<name>] key's check of its value: None, or what is wrong with it
@@ -87,7 +92,24 @@ class EnvironmentEmulator(_Kind):
     start: EnvironmentFactory
 
 
-EmulatorKind = StageEmulator | DetectorEmulator | EnvironmentEmulator
+@dataclass(frozen=True, kw_only=True)
+class FilterWheelEmulator(_Kind):
+    """An emulated filter-wheel kind: `start` serves a device's emulator."""
+
+    role: ClassVar[str] = "filter_wheel"
+    start: SelectorFactory
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonochromatorEmulator(_Kind):
+    """An emulated monochromator kind: `start` serves a device's emulator."""
+
+    role: ClassVar[str] = "monochromator"
+    start: SelectorFactory
+
+
+SelectorEmulator = FilterWheelEmulator | MonochromatorEmulator
+EmulatorKind = StageEmulator | DetectorEmulator | EnvironmentEmulator | SelectorEmulator
 
 KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
     StageEmulator(name="esp", start=controller_on_pty(EspEmulator, "estop"),
@@ -101,6 +123,8 @@ KINDS: dict[str, EmulatorKind] = {kind.name: kind for kind in (
     StageEmulator(name="zaber", start=chain_on_pty(ZaberEmulator), chained=True,
                   settings=IDENTITY_CHECKS),
     EnvironmentEmulator(name="modbus-environment", start=modbus_environment_unit),
+    FilterWheelEmulator(name="fw102c", start=selector_on_pty(Fw102cEmulator, "positions")),
+    MonochromatorEmulator(name="cornerstone", start=selector_on_pty(CornerstoneEmulator)),
 )}
 
 

@@ -37,6 +37,7 @@ from sim.device_kinds import (
     EmulatorKind,
     EnvironmentEmulator,
     LineKey,
+    SelectorEmulator,
     StageEmulator,
     check_faults,
     check_settings,
@@ -305,6 +306,13 @@ class _Builder:
             if isinstance(kind, EnvironmentEmulator):
                 kind.start(self._device(name), room)
 
+    def wavelength_selectors(self) -> None:
+        """Emulators of the chosen filter wheels and monochromators."""
+        for name in self.chosen:
+            kind = self.kinds[name]
+            if isinstance(kind, SelectorEmulator):
+                kind.start(self._device(name))
+
     def serve_modbus(self) -> None:
         """One Modbus server per bus or TCP endpoint, with all its collected units."""
         for (transport, _), units in self.modbus.items():
@@ -358,6 +366,7 @@ def start(config: Mapping[str, Any], devices: Iterable[str] | None = None,
                      run_time or bench.command_time, line_key)
     try:
         build.stages()
+        build.wavelength_selectors()
         missing = set(config["axes"]) - set(build.readers)
         detectors = [n for n in chosen if isinstance(kinds[n], DetectorEmulator)]
         if missing and positions is None and detectors:

@@ -1,6 +1,6 @@
 """Starting one device's emulator from its config tables: what a kind's factory is handed
 (`EmulatedDevice`, a detector's `Light`, an environment sensor's room), and the factories of
-the kinds sim serves.
+the kinds sim serves (stages, detectors, environment sensors, wavelength selectors).
 
 sim.device_kinds points each kind at one of these. A factory builds the emulator, hands it
 to `serve` (a pty or socket of its own, shared with the device's `mates` on a daisy chain) or
@@ -68,6 +68,7 @@ DetectorFactory = Callable[[EmulatedDevice, Light], PhotodiodeModel]
 #: the room an environment sensor reads: (deg C, relative humidity 0..1) now
 RoomNow = Callable[[], tuple[float, float]]
 EnvironmentFactory = Callable[[EmulatedDevice, RoomNow], None]
+SelectorFactory = Callable[[EmulatedDevice], None]
 
 
 def home_deg(limits: Any) -> float:
@@ -173,6 +174,17 @@ def meter_on_pty(emulator: type) -> DetectorFactory:
                        place=light.place, clock=device.clock, **device.settings)
         device.serve(emu)
         return emu.photodiode
+    return start
+
+
+def selector_on_pty(emulator: type, *table_keys: str) -> SelectorFactory:
+    """A filter wheel or monochromator served on a pty of its own, built as `emulator(clock,
+    faults=, seed=, **the keys `table_keys` of its [devices] table that it has (a wheel's
+    `positions`), **its [sim.devices.<name>] settings)`."""
+    def start(device: EmulatedDevice) -> None:
+        given = {key: device.table[key] for key in table_keys if key in device.table}
+        device.serve(emulator(device.clock, faults=device.faults, seed=device.seed, **given,
+                              **device.settings))
     return start
 
 

@@ -17,7 +17,8 @@ from sim.devices.faults import KIND_FAULTS
 from sim.devices.photodiode import SimConfigError
 from sim.emulate import start
 
-KIND_NAMES = "esp, pm100, modbus-stage, modbus-detector, zaber, modbus-environment"
+KIND_NAMES = ("esp, pm100, modbus-stage, modbus-detector, zaber, modbus-environment, fw102c, "
+              "cornerstone")
 SIM_SERIAL = Path(__file__).resolve().parents[1] / "examples" / "instruments" / "sim-serial.toml"
 UNKNOWN_KIND = SIM_SERIAL.read_text().replace('protocol = "pm100"', 'protocol = "pm400"', 1)
 
@@ -25,7 +26,8 @@ UNKNOWN_KIND = SIM_SERIAL.read_text().replace('protocol = "pm100"', 'protocol = 
 def test_both_registries_name_the_same_kinds_in_the_same_roles():
     roles = {name: kind.role for name, kind in gonio.device_kinds.KINDS.items()}
     assert roles == {name: kind.role for name, kind in sim.device_kinds.KINDS.items()}
-    assert set(roles.values()) == {"stage", "detector", "environment"}
+    assert set(roles.values()) == {"stage", "detector", "environment", "filter_wheel",
+                                   "monochromator"}
 
 
 def test_every_kind_fault_is_taken_by_some_kind_and_only_kind_faults_are_own():

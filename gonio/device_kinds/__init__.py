@@ -1,5 +1,6 @@
 """The device kinds an instrument config may name as a device's `protocol`, each declared
-once: stage, detector or environment sensor, its settings, how it opens, its own config checks.
+once: stage, detector, environment sensor, filter wheel or monochromator, its settings, how it
+opens, its own config checks.
 
 Config parsing (gonio.config) reads a device's settings from its kind, instrument building
 (gonio.instrument) opens it through its kind. sim.device_kinds declares the emulator of
@@ -17,6 +18,8 @@ from gonio.device_kinds.kind import (
     DeviceConfig,
     DeviceKind,
     EnvironmentKind,
+    FilterWheelKind,
+    MonochromatorKind,
     StageKind,
     all_checks,
 )
@@ -29,7 +32,7 @@ from gonio.device_kinds.modbus import (
     map_full_scales_w,
     modbus_unit,
 )
-from gonio.device_kinds.serial_line import serial_device
+from gonio.device_kinds.serial_line import check_filter_positions, serial_device
 from gonio.device_kinds.settings import Setting, serial_settings
 from gonio.device_kinds.specs import ESP, PM100, ZABER, DeviceSpec, fixed, register_map_spec
 
@@ -67,6 +70,18 @@ KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (
                     check=all_checks(check_room_registers, MODBUS_LINK), bus="unit",
                     spec=register_map_spec,
                     open=modbus_unit("drivers.modbus_environment:ModbusEnvironment")),
+    # a Thorlabs FW102C (6 positions) or FW212C (12): 115200 baud; its filters by position
+    FilterWheelKind(name="fw102c", open=serial_device("drivers.fw102c:Fw102cWheel"),
+                    check=all_checks(check_line, check_filter_positions),
+                    settings=serial_settings(
+                        Setting("positions", "integer", 6, choices=(6, 12)),
+                        Setting("speed", "string", "high", choices=("high", "slow")),
+                        Setting("filters", "filters"), baudrate=115200)),
+    # a Newport Cornerstone 130 (2 gratings) or 260 (3): 9600 baud; the grating to use
+    MonochromatorKind(name="cornerstone", check=check_line,
+                      open=serial_device("drivers.cornerstone:CornerstoneMonochromator"),
+                      settings=serial_settings(Setting("grating", "integer", 1, low=1, high=3),
+                                               baudrate=9600)),
 )}
 
 
@@ -86,4 +101,5 @@ def endpoint_keys() -> tuple[str, ...]:
 
 
 __all__ = ["KINDS", "DetectorKind", "DeviceConfig", "DeviceKind", "DeviceSpec",
-           "EnvironmentKind", "Setting", "StageKind", "device_spec", "endpoint_keys"]
+           "EnvironmentKind", "FilterWheelKind", "MonochromatorKind", "Setting", "StageKind",
+           "device_spec", "endpoint_keys"]

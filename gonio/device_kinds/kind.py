@@ -1,10 +1,10 @@
-"""What a device kind is (`StageKind`, `DetectorKind`, `EnvironmentKind`), a device of a
-config (`DeviceConfig`: its name, its kind and the values of the kind's settings) and an axis
-of one (`AxisConfig`).
+"""What a device kind is (`StageKind`, `DetectorKind`, `EnvironmentKind`, `FilterWheelKind`,
+`MonochromatorKind`), a device of a config (`DeviceConfig`: its name, its kind and the values
+of the kind's settings) and an axis of one (`AxisConfig`).
 
 A kind says once what the rest of gonio asks of a protocol: its config settings, how a
-device of it opens as `Axis` drivers, a `Detector` or an `EnvironmentSensor`, and its own
-config checks.
+device of it opens as `Axis` drivers, a `Detector`, an `EnvironmentSensor` or a
+`WavelengthSelector`, and its own config checks.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
-from drivers.base import Axis, Detector, EnvironmentSensor
+from drivers.base import Axis, Detector, EnvironmentSensor, WavelengthSelector
 from drivers.port_identity import port_key
 from gonio.device_kinds.endpoints import LINK_TYPES, socket_resource
 from gonio.device_kinds.settings import Setting
@@ -107,7 +107,24 @@ class EnvironmentKind(_Kind):
     open: Callable[[DeviceConfig], EnvironmentSensor]
 
 
-DeviceKind = StageKind | DetectorKind | EnvironmentKind
+@dataclass(frozen=True, kw_only=True)
+class FilterWheelKind(_Kind):
+    """A kind of motorised filter wheel: it selects a wavelength by turning the filter centred
+    on it (the config's `filters`) into the beam."""
+
+    role: ClassVar[str] = "filter_wheel"
+    open: Callable[[DeviceConfig], WavelengthSelector]
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonochromatorKind(_Kind):
+    """A kind of monochromator: it selects a wavelength by turning its grating."""
+
+    role: ClassVar[str] = "monochromator"
+    open: Callable[[DeviceConfig], WavelengthSelector]
+
+
+DeviceKind = StageKind | DetectorKind | EnvironmentKind | FilterWheelKind | MonochromatorKind
 
 
 @dataclass(frozen=True)

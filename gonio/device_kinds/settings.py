@@ -17,15 +17,18 @@ from typing import Any
 
 from drivers import byte_link
 from gonio.device_kinds.endpoints import LINK_TYPES, read_link
+from gonio.device_kinds.filters import read_filters
 from gonio.fields import REQUIRED, Fields
 
 #: "string" (one of `choices` if given), "integer" and "number" (within low..high, or one of
 #: `choices`), "boolean", "file" (a path relative to the config's folder, made absolute; it
 #: must exist), "host" (a device's network address; a wildcard listen address is refused),
 #: "port" (a serial port, not a VISA resource string) and "resource" (a VISA resource string
-#: of a line device, as PyVISA parses it: gonio.device_kinds.endpoints). file and host are
-#: required.
-TYPES = ("string", "integer", "number", "boolean", "file", "host", "port", "resource")
+#: of a line device, as PyVISA parses it: gonio.device_kinds.endpoints), "filters" (a filter
+#: wheel's table of filters by position: gonio.device_kinds.filters). file, host and filters
+#: are required.
+TYPES = ("string", "integer", "number", "boolean", "file", "host", "port", "resource",
+         "filters")
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,8 @@ class Setting:
             return value
         if self.type == "boolean":
             return f.boolean(self.key, self.default)
+        if self.type == "filters":
+            return read_filters(f, self.key)
         value = f.string(self.key, self.default, self.choices)
         if self.type == "file":
             return _existing_file(f, self.key, value, base)

@@ -88,6 +88,21 @@ def start_pair(opened):
 
 
 @pytest.fixture
+def plain_port(opened):
+    """serve(emulator, baudrate) -> a plain pyserial session with the emulator, started on a
+    pty (reads wait HANG_S at most: a hang guard), both closed after the test."""
+
+    def serve(emulator, baudrate):
+        emulator.start()
+        opened.append(emulator)
+        port = serial.Serial(emulator.endpoint, baudrate, timeout=HANG_S)
+        opened.append(port)
+        return port
+
+    return serve
+
+
+@pytest.fixture
 def pm_pair(start_pair):
     """make(power_w, faults, timeout_s, retries, detector) -> (emulator, driver)."""
 

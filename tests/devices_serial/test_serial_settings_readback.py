@@ -3,36 +3,9 @@ over a real pty with the emulators' faults: the command is never sent twice, a r
 is not the requested value is an error, and one that is (to the reply's precision) is not."""
 
 import pytest
+from reply_faults import StallNext, spy_lines
 
 from drivers.base import DeviceTimeout, DriverError
-from sim.devices.faults import FaultInjector, FaultSpec
-
-
-class StallNext(FaultInjector):
-    """Swallows the next `n` replies (the device acts on the lines, its answers are lost)."""
-
-    def __init__(self, n):
-        super().__init__(FaultSpec())
-        self.left = n
-
-    def reply(self, data, keep_tail=0, crc_bytes=0):
-        if self.left:
-            self.left -= 1
-            return None
-        return super().reply(data, keep_tail, crc_bytes)
-
-
-def spy_lines(emu):
-    """The lines the meter receives, recorded on the emulator's side of the pty."""
-    seen = []
-    handle = emu.server.handler
-
-    def spy(line):
-        seen.append(line.decode())
-        return handle(line)
-
-    emu.server.handler = spy
-    return seen
 
 
 def test_a_fixed_range_never_sent_is_not_taken_for_the_one_asked(pm_pair):
