@@ -211,8 +211,8 @@ def chi2_lines(out: dict) -> list[str]:
 def summary(out: dict) -> str:
     """Human-readable lines of a fit result dict."""
     sample = out.get("sample")
-    measured = (f" sample {sample['id']} ({sample['kind']}, eta {sample['eta']:g}):"
-                if sample else "")
+    eta = f", eta {sample['eta']:g}" if sample and sample["eta"] is not None else ""
+    measured = f" sample {sample['id']} ({sample['kind']}{eta}):" if sample else ""
     lines = [f"run {out['run']}:{measured} {out['distribution']} ({out['masking']} masking)"]
     if out.get("completeness") and not out["completeness"]["complete"]:
         from gonio.completeness import Completeness
