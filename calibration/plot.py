@@ -130,12 +130,15 @@ ANGLE_TERMS_LEFT_OUT = ("U excludes the angle terms (--no-angle-terms): the stag
 
 
 def plot_title(name: str, meta: dict) -> str:
-    """The run's name and what was measured: the [sample] id and nominal eta; a line for an
+    """The run's name and what was measured: the [sample] id and nominal eta (none for a panel
+    without one); a line for an
     incomplete run (meta["completeness"], completeness_line) and one when U excludes the
     angle terms (meta["budget"]["angle_terms"], calibration.pipeline)."""
     sample = meta.get("sample") or {}
     excluded = (meta.get("budget") or {}).get("angle_terms") == "excluded"
-    return (f"{name}: sample {sample.get('id', '?')}, eta {meta.get('eta', float('nan')):g}"
+    eta = meta.get("eta", float("nan"))
+    return (f"{name}: sample {sample.get('id', '?')}"
+            + (f", eta {eta:g}" if eta is not None else "")
             + completeness_line(meta.get("completeness"))
             + ("\n" + ANGLE_TERMS_LEFT_OUT if excluded else ""))
 

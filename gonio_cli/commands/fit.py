@@ -309,8 +309,8 @@ def family_lines(out: dict) -> list[str]:
 def summary(out: dict) -> str:
     """Human-readable lines of a fit result dict."""
     sample = out.get("sample")
-    measured = (f" sample {sample['id']} ({sample['kind']}, eta {sample['eta']:g}):"
-                if sample else "")
+    eta = f", eta {sample['eta']:g}" if sample and sample["eta"] is not None else ""
+    measured = f" sample {sample['id']} ({sample['kind']}{eta}):" if sample else ""
     model = (f"{out['distribution']} ({out['masking']} masking)"
              if out.get("family", "microfacet") == "microfacet" else model_name(out))
     lines = [f"run {out['run']}:{measured} {model}"]

@@ -211,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
     out = write_reduced_csv(data, Path(args.out) if args.out else Path(args.run) / "reduced.csv",
                             record_lines(run_record(stored)))
     m = data.meta
-    print(f"run {args.run}: sample {m['sample']['id']}, eta {m['eta']:g}, aperture "
+    eta = f", eta {m['eta']:g}" if m["eta"] is not None else ""
+    print(f"run {args.run}: sample {m['sample']['id']}{eta}, aperture "
           f"{m['aperture_half_angle_deg']:.4g} deg ({m['aperture_sr']:.4g} sr, from "
           f"{m['aperture_from']}), beam {m['beam_mean_w']:.4g} W "
           f"(drift rms {m['beam_drift_rms']:.2%})")

@@ -51,14 +51,17 @@ def _coat(sample: FamilySample, wi: np.ndarray, wo: np.ndarray) -> tuple[float, 
 
 
 def _abg(sample: FamilySample, wi: np.ndarray, wo: np.ndarray) -> tuple[float, float]:
-    """ABg: the knee B^(1/g) plus |x| = |wo_xy + wi_xy| over |g|, in the plane of beta; an
-    angle moves beta by at most as much, so it is a width in wi and wo alike."""
+    """ABg, in the plane of beta at |x| = |wo_xy + wi_xy| from the peak: for g > 0 the knee
+    B^(1/g) plus |x|, over g; for g < 0 (f ~ |x|^-g up to the knee, flat beyond) the lesser
+    of the two, over -g. An angle moves beta by at most as much, so it is a width in wi and
+    wo alike."""
     model = sample.family
     if model.g == 0.0:
         return COSINE_WIDTH, COSINE_WIDTH
     x = float(np.hypot(wo[0] + wi[0], wo[1] + wi[1]))
     knee = math.exp(min(math.log(model.B) / model.g, 0.0))
-    width = max(min(ABG_SHARE * (knee + x) / abs(model.g), COSINE_WIDTH), 1e-9)
+    reach = knee + x if model.g > 0 else min(knee, x)
+    width = max(min(ABG_SHARE * reach / abs(model.g), COSINE_WIDTH), 1e-9)
     return width, width
 
 
