@@ -2,13 +2,15 @@
 
 Walter's ground glass and acid-etched glass are scanned afresh at normal incidence (as in
 bench/ms_model_error.py). At each fit point this prints the orders >= 3 as a share of f and in
-data sigma, and the per-walk coefficient of variation of two unbiased estimators of them:
-forward, the keyed shared-path walk from wi that scores every distinct polar angle at once (what
-the fit walks), and reverse, the same walk started from the target towards wi alone
+units of the data's noise (ms_model_error's NOISE_COMPONENTS: the run's own noise, without the
+budget's stated type-B terms, the scale of issue 19's goal), and the per-walk coefficient of
+variation of two unbiased estimators of them: forward, the keyed shared-path walk from wi that
+scores every distinct polar angle at once (what the fit walks), and reverse, the same walk
+started from the target towards wi alone
 (reciprocity: f(wi, wo) / n_o^2 = f(wo, wi) / n_i^2). From those it works out the walks and CPU
-seconds per fit-table alpha that would put the standard error at 0.45 data sigma at the median
-point (a median |error| of 0.3 sigma) and at 0.67 sigma at every point (the worst of 133 points
-x 4 seeds then near 2 sigma): forward, the walks the hardest point needs (all points share
+seconds per fit-table alpha that would put the standard error at 0.45 of the noise at the
+median point (a median |error| of 0.3) and at 0.67 of it at every point (the worst of 133 points
+x 4 seeds then near 2): forward, the walks the hardest point needs (all points share
 them); reverse, each distinct polar angle its own walks. Every walk is drawn from --seeds seeds
 (SEEDS): each figure is the median over them, the coefficients of variation and the walks and
 seconds the goals need with their [min, max] (the worst point's need rests on the few walks
@@ -35,8 +37,8 @@ from calibration.fit import MS_CENTRE_WALKS, FitOptions  # noqa: E402
 from model.bsdf.multiple_scattering.keyed import keyed_walk_to_targets  # noqa: E402
 
 NORMAL = np.array([0.0, 0.0, 1.0])
-#: Standard error / data sigma for a median |error| of 0.3 sigma, and for the worst of ~530
-#: errors (133 points x 4 seeds) near 2 sigma.
+#: Standard error / data noise for a median |error| of 0.3, and for the worst of ~530 errors
+#: (133 points x 4 seeds) near 2.
 MEDIAN_GOAL, WORST_GOAL = 0.3 / 0.674, 2.0 / 3.0
 #: Walks of the fit table's centre alpha (calibration.fit: ms_walks x MS_CENTRE_WALKS).
 CENTRE = FitOptions().ms_walks * MS_CENTRE_WALKS
@@ -77,7 +79,7 @@ def main() -> None:
           f"{args.reverse_walks} walks per point, each from {args.seeds} seeds: the median over "
           f"them [min, max]; CV: per-walk coefficient of variation")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, alpha, wo, sigma, f in fit_points(Path(tmp)):
+        for name, alpha, wo, _, noise, f in fit_points(Path(tmp)):
             walker = glass(alpha).walker
             targets, index = distinct_polar(wo)
             per_walk(walker, NORMAL, targets[:2], 64, 0)  # compile outside the timings
@@ -87,11 +89,11 @@ def main() -> None:
             s_fwd = np.array([run[4] for run in runs])
             polar = np.degrees(np.arccos(wo[:, 2]))
             distinct = np.unique(index, return_index=True)[1]
-            share = mean / np.abs(wo[:, 2]) / sigma  # orders >= 3 in data sigma, per seed
+            share = mean / np.abs(wo[:, 2]) / noise  # orders >= 3 in data noise, per seed
             print(f"\n{name} (GGX {alpha}, {len(wo)} points): forward "
                   f"{np.median(s_fwd) * 1e6:.2f} us per walk (every polar angle), reverse "
                   f"{np.median(s_rev) * 1e6:.2f} us (one)")
-            print(f"{'theta_o':>8} {'o3 / f':>8} {'o3 / sigma':>10} {'CV fwd':>18} "
+            print(f"{'theta_o':>8} {'o3 / f':>8} {'o3 / noise':>10} {'CV fwd':>18} "
                   f"{'CV rev':>18}")
             for deg in SHOWN_DEG:
                 t = int(np.argmin(np.abs(polar - deg)))
@@ -103,10 +105,10 @@ def main() -> None:
             worst = need_fwd.max(axis=1) / WORST_GOAL ** 2
             reverse = np.sum(((share * cv_rev / WORST_GOAL) ** 2 * s_rev)[:, distinct], axis=1)
             print(f"  per table alpha: the fit's centre now {CENTRE} forward walks = "
-                  f"{CENTRE * np.median(s_fwd):.2f} CPU s; {MEDIAN_GOAL:.2f} sigma at the median "
+                  f"{CENTRE * np.median(s_fwd):.2f} CPU s; {MEDIAN_GOAL:.2f} noise at the median "
                   f"point: {median_range(median, '.3g')} forward walks = "
                   f"{median_range(median * s_fwd, '.1f')} s")
-            print(f"  {WORST_GOAL:.2f} sigma at every point: {median_range(worst, '.3g')} forward "
+            print(f"  {WORST_GOAL:.2f} noise at every point: {median_range(worst, '.3g')} forward "
                   f"walks = {median_range(worst * s_fwd, '.0f')} s, or reverse walks per point "
                   f"{median_range(reverse, '.0f')} s")
 
