@@ -32,7 +32,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from _seeds import SEEDS, median_range
@@ -81,15 +83,27 @@ def scan_normal_incidence(name: str, out: Path) -> Path:
     return Path(lines[-1])
 
 
-def fit_points(tmp: Path):
-    """For each of SAMPLES, scanned afresh at normal incidence under tmp: (name, truth alpha,
-    wo (n, 3), data sigma (n,), data noise (n,)) at its normal-incidence points."""
+class FitPoints(NamedTuple):
+    """One sample's normal-incidence fit points: wo (n, 3), data sigma, data noise and the
+    reduced BSDF f (n,) each."""
+
+    name: str
+    alpha: float
+    wo: np.ndarray
+    sigma: np.ndarray
+    noise: np.ndarray
+    f: np.ndarray
+
+
+def fit_points(tmp: Path) -> Iterator[FitPoints]:
+    """For each of SAMPLES, scanned afresh at normal incidence under tmp, its fit points (the
+    truth alpha with them)."""
     for name, alpha in SAMPLES:
         data = reduce_run(scan_normal_incidence(name, tmp))
         rows = np.flatnonzero(data.wi[:, 2] > np.cos(np.radians(0.05)))
         noise = np.sqrt(sum(data.components[c][rows] ** 2 for c in NOISE_COMPONENTS
                             if c in data.components))
-        yield name, alpha, data.wo[rows], data.sigma[rows], noise
+        yield FitPoints(name, alpha, data.wo[rows], data.sigma[rows], noise, data.bsdf[rows])
 
 
 def glass(alpha: float) -> RandomWalkBSDF:
@@ -158,7 +172,7 @@ def main() -> None:
     print(f"{'sample':>13} {'estimator':>26} {'walks':>8} {'table s':>7} {'wall s':>7} "
           f"{'median point':>20} {'worst point':>23}")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, alpha, wo, sigma, noise in fit_points(Path(tmp)):
+        for name, alpha, wo, sigma, noise, _ in fit_points(Path(tmp)):
             print(f"{name:>13} data sigma / data noise: median {np.median(sigma / noise):.1f}, "
                   f"smallest {np.min(sigma / noise):.1f}")
             walk = glass(alpha)
