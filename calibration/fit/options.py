@@ -4,7 +4,7 @@ optional terms (multiple scattering, the two-scale diffraction settings), checke
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,6 +23,10 @@ class FitError(GonioError):
     """A fit failed, is ill-conditioned, or was asked of data that cannot support it."""
 
 
+#: The fitted incidence by default (at_measured_incidence moves it where the data hold none).
+NORMAL = (0.0,)
+
+
 @dataclass(frozen=True)
 class FitOptions:
     """What to fit: the candidate distributions and masking forms (the best is reported),
@@ -36,7 +40,7 @@ class FitOptions:
     eta: float | None = None  # fixed (or starting) eta; None: the data's meta["eta"]
     k: float | None = None  # conductor extinction (fixed); None: meta["k"] if meta["kind"] is
     #                         "conductor", else a dielectric
-    fit_incidence_deg: tuple[float, ...] | None = (0.0,)  # None: fit every valid point
+    fit_incidence_deg: tuple[float, ...] | None = NORMAL  # None: fit every valid point
     incidence_tol_deg: float = 0.5
     aperture_half_angle_deg: float | None = None  # None: meta's, if any; 0: point model
     aperture_order: int | None = None  # radial nodes of the aperture rule; None: from the lobe
@@ -132,6 +136,19 @@ def fit_subset_mask(data: ReducedData, options: FitOptions) -> np.ndarray:
     for angle in options.fit_incidence_deg:
         near |= np.abs(theta_i - abs(angle)) <= options.incidence_tol_deg
     return usable & near
+
+
+def at_measured_incidence(options: FitOptions, data: ReducedData) -> FitOptions:
+    """The options, with a fit at the default normal incidence moved to the lowest incidence
+    the data hold usable points at when they hold none at 0 deg (a plan that starts at 10 deg,
+    a table of one incidence); any other choice of incidences as given."""
+    if options.fit_incidence_deg != NORMAL or fit_subset_mask(data, options).any():
+        return options
+    usable = fit_subset_mask(data, replace(options, fit_incidence_deg=None))
+    if not usable.any():
+        return options
+    lowest = float(np.min(np.abs(data.theta_i_deg[usable])))
+    return replace(options, fit_incidence_deg=(round(lowest, 6),))
 
 
 def describe_subset(options: FitOptions) -> str:

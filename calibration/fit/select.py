@@ -16,7 +16,7 @@ import numpy as np
 
 from calibration.candidates import FAMILIES, MICROFACET
 from calibration.fit.family import FamilyProblem, solve_family
-from calibration.fit.options import FitError, FitOptions
+from calibration.fit.options import FitError, FitOptions, at_measured_incidence
 from calibration.fit.pattern import residual_pattern
 from calibration.fit.problem import initial_alpha
 from calibration.fit.progress import Progress
@@ -57,9 +57,10 @@ def select(data: ReducedData, options: FitOptions | None = None,
     """Fit every family the data's kind allows (families_for) and return the preferred one:
     the lowest BIC among the candidates whose held-out chi2/dof is within MAX_CHI2_DOF (all of
     them when none is, or nothing is held out). The microfacet interface alone is fitted by
-    calibration.fit.fit, unchanged."""
+    calibration.fit.fit, unchanged. A fit at the default normal incidence of data that hold
+    none there is made at their lowest incidence (at_measured_incidence)."""
     started = time.perf_counter()
-    options = options or FitOptions()
+    options = at_measured_incidence(options or FitOptions(), data)
     families = families_for(data, options)
     if families == (MICROFACET,):
         return with_pattern(fit(data, options, progress), data)

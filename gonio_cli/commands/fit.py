@@ -146,13 +146,7 @@ def run(args: argparse.Namespace) -> int:
                                angle_terms=not args.no_angle_terms)
         say_angle_terms(args)
     else:
-        import numpy as np
-
-        options = _selection(options_from(args), args)
-        incidences = np.unique(np.round(data.theta_i_deg, 6))
-        if options.fit_incidence_deg == (0.0,) and len(incidences) == 1:
-            options = replace(options, fit_incidence_deg=(float(incidences[0]),))
-        result = select(data, options, _to_stderr)
+        result = select(data, _selection(options_from(args), args), _to_stderr)
     out = result.to_dict()
     out["run"] = str(args.run if data.meta.get("imported_from") is None else
                      data.meta["imported_from"])

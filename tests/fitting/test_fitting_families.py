@@ -149,3 +149,13 @@ def test_gonio_fit_json_names_the_family_of_a_relative_single_incidence_table(tm
     assert summary.returncode == 0, summary.stderr
     assert f"run {table}: lambert+microfacet/ggx/separable" in summary.stdout
     assert "-> lambert+microfacet by BIC" in summary.stdout
+
+
+def test_a_fit_at_the_default_incidence_of_data_without_it_takes_their_lowest():
+    data = synthesize_family("abg", {"A": 0.02, "B": 0.01, "g": 2.0}, seed=7,
+                             incidences_deg=(10.0, 45.0))
+    result = select(data, FitOptions(families=("abg",)))  # fit_incidence_deg left at 0
+    assert result.n_fit == int(np.sum(np.abs(data.theta_i_deg - 10.0) < 0.5))
+    assert result.n_heldout == int(np.sum(np.abs(data.theta_i_deg - 45.0) < 0.5))
+    with pytest.raises(FitError, match="only 0 usable points at incidence 30 deg"):
+        select(data, FitOptions(families=("abg",), fit_incidence_deg=(30.0,)))  # as asked
