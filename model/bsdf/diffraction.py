@@ -36,6 +36,9 @@ from model.bsdf.vectors import directions
 FRACTION_NODES = 48
 #: P(o') is tabulated against |o'_xy| on this many points per evaluation, then interpolated.
 FRACTION_TABLE = 257
+#: Direction pairs whose lobe integrals are evaluated together (each pair holds `samples`
+#: points in every array): bounds the memory of a fit's aperture average of a narrow lobe.
+PAIRS_PER_BLOCK = 8192
 
 
 class KCorrelationPSD:
@@ -214,8 +217,10 @@ class TwoScaleDiffraction:
             for side in (1.0, -1.0) if self.eta is not None else (1.0,):
                 use = (wi[:, 2] * lit > 0.0) & (wo[:, 2] * side > 0.0)
                 lobe = "reflection" if lit == side else "transmission"
-                if use.any():
-                    f[use] = self._lobe(wi[use], wo[use], wavelength_m, side, lobe)
+                pairs = np.flatnonzero(use)
+                for start in range(0, len(pairs), PAIRS_PER_BLOCK):
+                    block = pairs[start:start + PAIRS_PER_BLOCK]
+                    f[block] = self._lobe(wi[block], wo[block], wavelength_m, side, lobe)
         return f.reshape(shape)
 
     def _lobe(self, wi, wo, lam0, side, lobe) -> np.ndarray:

@@ -287,3 +287,20 @@ def test_flat_micro_geometry_gives_the_scalar_diffraction_lobe(from_glass):
             sigma**2 * lam_o**2)
         got = m.eval(np.broadcast_to(wi, wo.shape), wo, LAMBDA)
         assert np.allclose(got, expected, rtol=1e-3), (n_o, got / expected)  # seen: 1.2e-4
+
+
+def test_pairs_evaluated_in_blocks_give_what_one_block_gives(monkeypatch):
+    # a fit's aperture average of a narrow lobe asks for ~1e6 pairs at once: evaluated in
+    # blocks of PAIRS_PER_BLOCK, each pair's value must not depend on its neighbours
+    import model.bsdf.diffraction as diffraction
+
+    rng = np.random.default_rng(1)
+    wi, wo = rng.normal(size=(2, 301, 3))
+    wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    model = diffraction.TwoScaleDiffraction(RoughDielectric("ggx", 0.01, eta=ETA),
+                                            diffraction.KCorrelationPSD(2e-9, 5e-6, 2.0), 256)
+    whole = model.eval(wi, wo, LAMBDA)
+    monkeypatch.setattr(diffraction, "PAIRS_PER_BLOCK", 7)
+    assert np.array_equal(model.eval(wi, wo, LAMBDA), whole)
+    assert np.count_nonzero(whole) > 250
