@@ -6,6 +6,7 @@ has no truth curve. `--fit` hands over to calibration.fitplot's overlay."""
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -15,6 +16,9 @@ import numpy as np
 from calibration.emulator_truth import EmulatorTruth, truth_of
 from calibration.reduced import ReducedData
 from calibration.values import CalibrationError
+
+#: Characters per line of a legend label (a panel is 3.4 inches wide at 7 pt).
+LEGEND_WIDTH = 44
 
 if TYPE_CHECKING:
     from gonio.store import Run
@@ -115,7 +119,10 @@ def plot_reduced(data: ReducedData, out_png: str | Path, title: str = "") -> Pat
                 ax.set_ylabel("BSDF (1/sr)")
             if y_lim is not None:
                 ax.set_ylim(*y_lim)
-    axes[0, 0].legend(fontsize=7, loc="lower left")
+    handles, labels = axes[0, 0].get_legend_handles_labels()  # wrapped to the panel's width:
+    # a family's truth names all its parameters, and tight_layout would widen the gaps for it
+    axes[0, 0].legend(handles, [textwrap.fill(label, LEGEND_WIDTH) for label in labels],
+                      fontsize=7, loc="lower left")
     fig.suptitle(title or "measured BSDF", fontsize=10)
     fig.tight_layout()
     out_png = Path(out_png)
