@@ -202,14 +202,18 @@ DIFFUSE = ("lambert", "oren-nayar", "lambert+microfacet")
 def residual_hints(out: dict) -> list[str]:
     """Hints of a bad fit from where its residuals lie (calibration.fit.pattern): a diffuse
     floor suggests a diffuse term (multiple scattering when a rough microfacet fit's floor is
-    not flat), an excess on the source's side beyond any floor Oren-Nayar (unless the lobe's
-    shape is off, whose tails lift it too), a lobe of the wrong width another distribution, a
-    peak over a model without a lobe a lobe."""
+    not flat, diffraction when a polished one's is not), an excess on the source's side beyond
+    any floor Oren-Nayar (unless the lobe's shape is off, whose tails lift it too), a lobe of
+    the wrong width another distribution, a peak over a model without a lobe a lobe."""
     pattern, family = out["residual_pattern"], out.get("family", "microfacet")
     hints = []
     if pattern["floor"] > 0 and family not in DIFFUSE:
         if not pattern["floor_flat"] and _rough_single_scattering(out) is not None:
             hints.append(_multiple_scattering_hint(out))
+        elif not pattern["floor_flat"] and _smooth_without_diffraction(out) is not None:
+            hints.append(f"hint: at alpha {_smooth_without_diffraction(out):.3g} the data's "
+                         "floor falls away from the specular direction, as a polished "
+                         "surface's nano-roughness halo does: try --diffraction")
         else:
             hints.append(f"hint: the data lie above the {family} model far from the specular "
                          "direction (a diffuse floor): add a diffuse term, try --family "
@@ -238,6 +242,15 @@ def _rough_single_scattering(out: dict) -> float | None:
     return alpha if alpha > ROUGH_ALPHA else None
 
 
+def _smooth_without_diffraction(out: dict) -> float | None:
+    """The largest alpha of a microfacet fit without the diffraction term below SMOOTH_ALPHA
+    (a polished surface, whose halo is diffraction), else None."""
+    if out.get("family", "microfacet") != "microfacet" or out.get("diffraction"):
+        return None
+    alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
+    return alpha if alpha < SMOOTH_ALPHA else None
+
+
 def _multiple_scattering_hint(out: dict) -> str:
     return (f"hint: at alpha {_rough_single_scattering(out):.3g} light scatters more than once "
             "between microfacets, which single scattering leaves out: try "
@@ -251,6 +264,8 @@ def _to_stderr(line: str) -> None:
 
 #: Above this alpha, multiple scattering is a visible part of a rough dielectric's lobe.
 ROUGH_ALPHA = 0.1
+#: Below this alpha a surface is polished: a halo beside its lobe is diffraction's.
+SMOOTH_ALPHA = 0.05
 
 
 def chi2_lines(out: dict) -> list[str]:

@@ -62,3 +62,21 @@ def test_a_rough_glass_fitted_without_multiple_scattering_gets_that_hint():
     given = [line for line in fit_warnings(dict(out, run="r"), imported_from="data.csv")
              if line.startswith("hint:")]
     assert len(given) == 1 and MS in given[0] and "--family" not in given[0]
+
+
+def test_a_polished_metal_fitted_without_diffraction_gets_that_hint():
+    """A polished surface's nano-roughness halo lifts the data beside a narrow lobe, falling
+    away from it: the hint is the two-scale diffraction term, not a diffuse one."""
+    from calibration.fit import Diffraction
+
+    model = build_model("ggx", 0.003, 1.37, "separable", 7.62,
+                        diffraction=Diffraction(5.0, 5.0, 2.0, 632.8))
+    data = drawn(model, [in_plane_directions(t, 1.37, 0.05, sides=("reflection",))
+                         for t in (0.0, 30.0, 60.0)], 0.02, 1e9, 3,
+                 {"eta": 1.37, "k": 7.62, "kind": "conductor", "wavelength_nm": 632.8})
+    out = select(data, FitOptions(distributions=("ggx",))).to_dict()
+    assert out["residual_pattern"]["floor"] > 0 and not out["residual_pattern"]["floor_flat"]
+    given = [line for line in fit_warnings(dict(out, run="r"), imported_from="data.csv")
+             if line.startswith("hint:")]
+    assert any("try --diffraction" in line for line in given), given
+    assert not any(FLOOR in line or MS in line for line in given), given
