@@ -233,22 +233,26 @@ def residual_hints(out: dict) -> list[str]:
     return hints
 
 
+def _microfacet_alpha(out: dict, without: str) -> float | None:
+    """The largest alpha of a microfacet fit made without the term `without` names
+    ("multiple_scattering", "diffraction"), else None."""
+    if out.get("family", "microfacet") != "microfacet" or out.get(without):
+        return None
+    return max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
+
+
 def _rough_single_scattering(out: dict) -> float | None:
     """The largest alpha of a microfacet fit without multiple scattering above ROUGH_ALPHA,
     else None."""
-    if out.get("family", "microfacet") != "microfacet" or out.get("multiple_scattering"):
-        return None
-    alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
-    return alpha if alpha > ROUGH_ALPHA else None
+    alpha = _microfacet_alpha(out, "multiple_scattering")
+    return alpha if alpha is not None and alpha > ROUGH_ALPHA else None
 
 
 def _smooth_without_diffraction(out: dict) -> float | None:
     """The largest alpha of a microfacet fit without the diffraction term below SMOOTH_ALPHA
     (a polished surface, whose halo is diffraction), else None."""
-    if out.get("family", "microfacet") != "microfacet" or out.get("diffraction"):
-        return None
-    alpha = max(p["value"] for name, p in out["parameters"].items() if name.startswith("alpha"))
-    return alpha if alpha < SMOOTH_ALPHA else None
+    alpha = _microfacet_alpha(out, "diffraction")
+    return alpha if alpha is not None and alpha < SMOOTH_ALPHA else None
 
 
 def _multiple_scattering_hint(out: dict) -> str:
