@@ -35,10 +35,24 @@ def fit_warning(result: FitResult) -> str:
             "describe the data within their uncertainties")
 
 
+def fitted_model_name(result: FitResult) -> str:
+    """The fitted model as the overlay's legend names it: a family, or the distribution."""
+    return result.distribution if result.family == "microfacet" else result.family
+
+
 def fit_title(data: ReducedData, result: FitResult, title: str = "") -> str:
     """The overlay's title: the run's (title: its name, sample and nominal eta), then the fitted
     parameters, eta only where it tells something new (fitted, or held at another value),
     then chi2/dof on the fitted and held-out points, and fit_warning's line for a bad fit."""
+    held = "–" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.4g}"
+    lines = [title] if title else []
+    chi2 = f"χ²/dof fitted {result.chi2_dof_fit:.4g}, held out {held}"
+    warning = fit_warning(result)
+    if result.family != "microfacet":  # a model family's parameters by name, held ones too
+        from calibration.exports.family_fit import family_fit
+
+        lines += [f"{family_fit(result).describe()} fit", chi2]
+        return "\n".join([*lines, warning] if warning else lines)
     a = np.atleast_1d(result.alpha)
     eta = ""
     if "eta" in result.names:
@@ -46,11 +60,7 @@ def fit_title(data: ReducedData, result: FitResult, title: str = "") -> str:
         eta = f", η = {value:.4g} ± {sigma:.2g} (fitted)"
     elif data.meta.get("eta") is None or abs(result.eta - data.meta["eta"]) > 1e-12:
         eta = f", η = {result.eta:.4g} (held)"
-    held = "–" if result.chi2_dof_heldout is None else f"{result.chi2_dof_heldout:.4g}"
-    lines = [title] if title else []
-    lines += [f"{result.distribution} fit α = {', '.join(f'{v:.4g}' for v in a)}{eta}",
-              f"χ²/dof fitted {result.chi2_dof_fit:.4g}, held out {held}"]
-    warning = fit_warning(result)
+    lines += [f"{result.distribution} fit α = {', '.join(f'{v:.4g}' for v in a)}{eta}", chi2]
     return "\n".join([*lines, warning] if warning else lines)
 
 
@@ -87,7 +97,7 @@ def plot_fit(data: ReducedData, result: FitResult, out_png: str | Path,
                                  fmt=style, ms=3, lw=0.8, label=label)
                     bottom.plot(data.theta_o_deg[mask], -residual[mask], style, ms=3)
             angle, curve = model_curve(result, float(t), bool(side))
-            top.plot(angle, curve, "k-", lw=1, label=f"{result.distribution} fit")
+            top.plot(angle, curve, "k-", lw=1, label=f"{fitted_model_name(result)} fit")
             top.set_yscale("log")
             positive = data.bsdf[sel][data.bsdf[sel] > 0]
             if positive.size:

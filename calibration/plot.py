@@ -190,10 +190,10 @@ def plot_run(run_dir: str | Path | Run, out_png: str | Path | None = None, fit: 
                       angle_terms=angle_terms)
     title = plot_title(run_dir.name, data.meta)
     if fit:
-        from calibration.fit import fit as fit_model
+        from calibration.fit import select
         from calibration.fitplot import plot_fit
 
-        result = fit_model(data, fit_options)
+        result = select(data, fit_options)
         if fitted is not None:
             fitted(result)
         return plot_fit(data, result, out_png or run_dir / "plot-fit.png", fit_options,

@@ -32,7 +32,7 @@ from calibration.exports.mitsuba import (
     write_plugin_beside,
 )
 from calibration.exports.zemax import tabulate, write_zemax
-from calibration.fit import FitOptions, FitResult, fit
+from calibration.fit import FitOptions, FitResult, select
 from calibration.fit.result import MAX_CHI2_DOF, worst_chi2_dof
 from calibration.reduced import ReducedData
 from calibration.smearing import Smearing, smearing_order
@@ -294,8 +294,9 @@ def check_describes(result: FitResult, force: bool, from_file: bool = False) -> 
 
 def fit_for_export(data: ReducedData, options: FitOptions | None, fit_file: str | Path | None,
                    force: bool) -> tuple[FitResult, list[str]]:
-    """The fit to export (from `fit_file`, else fitted with `options`) and its notes."""
-    result = load_fit(fit_file) if fit_file is not None else fit(data, options)
+    """The fit to export (from `fit_file`, else fitted with `options`: the families the
+    sample's kind allows, as `gonio fit` fits) and its notes."""
+    result = load_fit(fit_file) if fit_file is not None else select(data, options)
     return result, check_describes(result, force, from_file=fit_file is not None)
 
 

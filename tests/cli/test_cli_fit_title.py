@@ -52,3 +52,19 @@ def test_an_incomplete_run_says_so_under_the_run_line():
              "stored_readings": 588}
     assert plot_title("run", {**DATA.meta, "sample": {}, "completeness": whole}) == \
         "run: sample ?, eta 1.51"
+
+
+def test_a_family_fit_overlays_under_its_family_with_its_held_parameters(tmp_path):
+    from calibration.fit import select
+    from calibration.fitplot import plot_fit
+    from calibration.synthetic import synthesize_family
+
+    data = synthesize_family("lambert+microfacet", {"rho": 0.5, "alpha": 0.15, "eta": 1.5},
+                             {"distribution": "ggx"}, seed=3)
+    result = select(data, FitOptions(families=("lambert+microfacet",),
+                                     distributions=("ggx",)))
+    title = fit_title(data, result, "run")
+    assert title.splitlines()[1].startswith("lambert+microfacet (rho = ")
+    assert "eta = 1.5" in title.splitlines()[1]  # held at the sample's index, still shown
+    png = plot_fit(data, result, tmp_path / "fit.png", FitOptions(), title="run")
+    assert png.stat().st_size > 0
